@@ -1,0 +1,21 @@
+#pragma once
+// Reading JSON input with errors that name the file and the field ("frames.json: frames[3].T_O_C:
+// expected 16 numbers").
+#include <filesystem>
+#include <nlohmann/json.hpp>
+#include <string>
+
+namespace inhand {
+
+using Json = nlohmann::json;
+
+// Parses a JSON file; throws Error naming the file (and line/column for syntax errors).
+Json readJsonFile(const std::filesystem::path& path);
+
+// `where` is the context for messages, e.g. "frames.json: frames[3]".
+const Json& requireField(const Json& obj, const std::string& key, const std::string& where);
+double requireNumber(const Json& obj, const std::string& key, const std::string& where);
+int requireInt(const Json& obj, const std::string& key, const std::string& where);
+std::string requireString(const Json& obj, const std::string& key, const std::string& where);
+
+}  // namespace inhand

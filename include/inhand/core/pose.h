@@ -1,0 +1,28 @@
+#pragma once
+#include <array>
+#include <optional>
+#include <string>
+
+#include "inhand/core/types.h"
+
+namespace inhand {
+
+// Camera pose T_W_C (camera frame C: x right, y down, z forward, the OpenCV/ROS optical frame)
+// at eye_W looking at target_W. up_W is the approximate world "up" that maps to −y in the image.
+// Falls back to another up vector when the viewing direction is parallel to up_W.
+Iso3 lookAt(const Vec3& eye_W, const Vec3& target_W, const Vec3& up_W = Vec3::UnitZ());
+
+// Builds a pose from 16 row-major numbers. Returns nullopt with a reason in *why when the matrix
+// is not a rigid transform (rotation not orthonormal within tol, det != +1, bottom row not 0 0 0 1,
+// non-finite entries).
+std::optional<Iso3> poseFromRowMajor(const std::array<double, 16>& m, std::string* why,
+                                     double tol = 1e-4);
+std::array<double, 16> poseToRowMajor(const Iso3& T);
+
+// Re-orthonormalises the rotation part (nearest rotation, via SVD).
+Iso3 orthonormalized(const Iso3& T);
+
+// Unit vectors spread evenly on the sphere (Fibonacci lattice); deterministic.
+std::vector<Vec3> fibonacciSphere(int count);
+
+}  // namespace inhand

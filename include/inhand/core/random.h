@@ -1,0 +1,34 @@
+#pragma once
+// Deterministic random streams. Each parallel work item derives its own generator from
+// (seed, item index), so results do not depend on thread count or scheduling.
+#include <cstdint>
+#include <cmath>
+#include <random>
+
+namespace inhand {
+
+// SplitMix64 finaliser: a good 64-bit mix of a seed and a stream index.
+inline uint64_t mixSeed(uint64_t seed, uint64_t stream) {
+  uint64_t z = seed + 0x9E3779B97F4A7C15ull * (stream + 1);
+  z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
+  z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
+  return z ^ (z >> 31);
+}
+
+using Rng = std::mt19937_64;
+inline Rng makeRng(uint64_t seed, uint64_t stream = 0) { return Rng(mixSeed(seed, stream)); }
+
+}  // namespace inhand
+
+namespace inhand {
+
+// Counter-based standard normal sample: the same (seed, index) always gives the same value, at no
+// set-up cost, so per-pixel noise is reproducible under any parallel schedule (Box–Muller).
+inline double gaussianAt(uint64_t seed, uint64_t index) {
+  uint64_t a = mixSeed(seed, 2 * index), b = mixSeed(seed, 2 * index + 1);
+  double u1 = (double(a >> 11) + 0.5) * (1.0 / 9007199254740992.0);  // (0, 1)
+  double u2 = double(b >> 11) * (1.0 / 9007199254740992.0);          // [0, 1)
+  return std::sqrt(-2.0 * std::log(u1)) * std::cos(6.283185307179586 * u2);
+}
+
+}  // namespace inhand

@@ -1,0 +1,36 @@
+#pragma once
+#include <array>
+#include <filesystem>
+#include <map>
+#include <string>
+#include <vector>
+
+#include "inhand/geometry/triangle_mesh.h"
+
+namespace inhand {
+
+// Imports a mesh file with assimp (OBJ, PLY, STL, OFF, glTF, DAE, 3DS, … everything assimp reads).
+// Missing material files are ignored; all sub-meshes are merged with their node transforms applied;
+// vertices are welded. Coordinates are taken as metres. Throws Error naming the file on failure.
+TriangleMesh importMesh(const std::filesystem::path& path);
+
+// Per-vertex colour from variance (m²), the paper's convention: grey where confident, through
+// shades of pink for low confidence, to red for never-observed (hole-filled, σ ≥ 5 cm) surface.
+std::array<uint8_t, 3> confidenceColor(float variance_m2);
+
+struct PlyData {
+  TriangleMesh mesh;
+  std::map<std::string, std::vector<float>> vertexProperties;  // other than x, y, z
+};
+
+// Writes binary little-endian PLY with float x, y, z; a float `variance` (m²) per vertex when
+// given (size must match); and uchar red, green, blue per vertex (confidenceColor of the variance)
+// when variance is given. Atomic: the file appears whole or not at all. Throws Error on failure.
+void writePly(const std::filesystem::path& path, const TriangleMesh& mesh,
+              const std::vector<float>* variance_m2 = nullptr);
+
+// Reads a PLY file (binary little-endian or ASCII) keeping every per-vertex scalar property.
+// Faces must be a list property; polygons are fan-triangulated. Throws Error naming the file.
+PlyData readPly(const std::filesystem::path& path);
+
+}  // namespace inhand

@@ -1,0 +1,61 @@
+#pragma once
+// Embree 3 ray-casting scene. Batches are cast as 16-ray packets (rtcIntersect16 /
+// rtcOccluded16) spread over both cores; a scalar one-ray path is kept as the reference.
+// After commit() every query is const and thread-safe.
+#include <embree3/rtcore.h>
+
+#include <cstdint>
+#include <limits>
+#include <memory>
+#include <vector>
+
+#include "inhand/geometry/triangle_mesh.h"
+
+namespace inhand {
+
+struct Ray {
+  Vec3f origin = Vec3f::Zero();
+  Vec3f dir = Vec3f::UnitZ();  // need not be unit; t is in units of |dir|
+  float tnear = 0.f;
+  float tfar = std::numeric_limits<float>::infinity();
+};
+
+struct Hit {
+  float t = std::numeric_limits<float>::infinity();
+  int geometry = -1;  // id returned by addMesh; -1 when the ray hit nothing
+  int triangle = -1;
+  float u = 0.f, v = 0.f;        // barycentrics: point = (1-u-v)·v0 + u·v1 + v·v2
+  Vec3f normal = Vec3f::Zero();  // geometric normal (v1−v0)×(v2−v0), not normalised
+  bool valid() const { return geometry >= 0; }
+};
+
+class RayScene {
+ public:
+  RayScene();
+  ~RayScene();
+  RayScene(const RayScene&) = delete;
+  RayScene& operator=(const RayScene&) = delete;
+  RayScene(RayScene&&) noexcept;
+  RayScene& operator=(RayScene&&) noexcept;
+
+  // Adds a copy of `mesh` transformed by T; returns its geometry id (0, 1, 2, … in call order).
+  int addMesh(const TriangleMesh& mesh, const Iso3& T = Iso3::Identity());
+  // Builds the BVH. Must be called after the last addMesh and before any query.
+  void commit();
+  bool committed() const { return committed_; }
+  int geometryCount() const { return geometryCount_; }
+
+  // Closest hit of each ray: packets of 16 consecutive rays, in parallel.
+  void intersect(const Ray* rays, Hit* hits, size_t count) const;
+  // blocked[i] = 1 when something lies on ray i within [tnear, tfar].
+  void occluded(const Ray* rays, uint8_t* blocked, size_t count) const;
+  // Scalar reference path (rtcIntersect1), one ray.
+  Hit intersectOne(const Ray& ray) const;
+
+ private:
+  RTCScene scene_ = nullptr;
+  int geometryCount_ = 0;
+  bool committed_ = false;
+};
+
+}  // namespace inhand

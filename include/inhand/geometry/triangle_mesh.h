@@ -1,0 +1,54 @@
+#pragma once
+// Indexed triangle mesh in metres. Vertices are float (what Embree consumes); triangles are
+// counter-clockwise seen from outside, so face normals point out of closed meshes.
+#include <array>
+#include <string>
+#include <vector>
+
+#include "inhand/core/types.h"
+
+namespace inhand {
+
+using Tri = Eigen::Vector3i;
+
+struct Aabb {
+  Vec3 min = Vec3::Constant(std::numeric_limits<double>::infinity());
+  Vec3 max = Vec3::Constant(-std::numeric_limits<double>::infinity());
+  void extend(const Vec3& p) {
+    min = min.cwiseMin(p);
+    max = max.cwiseMax(p);
+  }
+  bool empty() const { return !(min.array() <= max.array()).all(); }
+  Vec3 center() const { return 0.5 * (min + max); }
+  Vec3 size() const { return max - min; }
+};
+
+struct TriangleMesh {
+  std::vector<Vec3f> vertices;
+  std::vector<Tri> triangles;
+
+  bool empty() const { return triangles.empty(); }
+  Aabb bounds() const;
+  double area() const;
+  // Signed enclosed volume (positive for a closed, outward-oriented mesh).
+  double signedVolume() const;
+  Vec3 faceNormal(int tri) const;  // unit; zero for degenerate triangles
+  double triangleArea(int tri) const;
+  // Appends another mesh (indices shifted).
+  void append(const TriangleMesh& other);
+  // Every undirected edge used by exactly two triangles, in opposite directions.
+  bool isClosed() const;
+  // Number of edges used by only one triangle.
+  int boundaryEdgeCount() const;
+};
+
+TriangleMesh transformed(const TriangleMesh& mesh, const Iso3& T);
+
+// Merges vertices with identical coordinates (after rounding to `tolerance_m`), drops triangles
+// that become degenerate. STL files come unwelded; this makes them indexed.
+TriangleMesh welded(const TriangleMesh& mesh, double tolerance_m = 1e-7);
+
+// Checks indices and finite coordinates; returns an empty string when valid, else the problem.
+std::string validateMesh(const TriangleMesh& mesh);
+
+}  // namespace inhand

@@ -1,0 +1,39 @@
+#pragma once
+// S_obj of Alg. 1: one closed surface from the TsdfVolume (paper §III-B). The scalar field is the
+// fused signed distance on observed voxels, +μ on empty voxels and −μ on unknown voxels (and +μ
+// on a one-voxel border around the grid, so the surface closes at the volume's edge). Its zero
+// set is the maximum-likelihood surface where measured, extended over the empty/unknown boundary
+// elsewhere. Vertex variance: 1/Σw interpolated between observed voxels; σ = hole_sigma_m
+// (5 cm) for vertices on an edge touching an unknown voxel (never observed).
+#include <string>
+#include <vector>
+
+#include "inhand/geometry/triangle_mesh.h"
+#include "inhand/volume/tsdf_volume.h"
+
+namespace inhand {
+
+struct MeshOptions {
+  double hole_sigma_m = 0.05;  // σ assigned to hole-filling (empty/unknown boundary) vertices, m
+  std::string validate() const;
+};
+
+struct ObjectModel {
+  TriangleMesh mesh;            // object frame O, outward-oriented
+  std::vector<float> variance;  // per vertex, m²
+  std::vector<uint8_t> observed;  // per vertex: 1 from measurements, 0 hole-filled
+
+  // Paper Fig. 5: mean over vertices of ½ ln(2πe σ²), nats.
+  double meanEntropy() const;
+  // Area fraction of triangles whose three vertices are observed.
+  double observedAreaFraction() const;
+  // Area (m²) of triangles with at least one hole-filled vertex.
+  double holeArea() const;
+};
+
+ObjectModel extractModel(const TsdfVolume& volume, const MeshOptions& options = {});
+
+// ½ ln(2πe σ²) for a Gaussian of variance σ² (nats).
+double gaussianEntropy(double variance);
+
+}  // namespace inhand

@@ -1,0 +1,37 @@
+#pragma once
+// A directory of depth frames with known camera poses: DIR/frames.json plus one 16-bit PNG per
+// frame. This is what `inhand render` writes and `inhand fuse` reads, and what a user records
+// from a real robot:
+//   { "depth_scale_m": 0.001,
+//     "intrinsics": { "width": 640, "height": 480, "fx": 525, "fy": 525, "cx": 319.5, "cy": 239.5 },
+//     "frames": [ { "file": "depth_0000.png", "T_O_C": [16 numbers, row-major] }, … ] }
+// T_O_C is the camera pose in the object frame (maps camera points into the object frame).
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "inhand/sensor/depth_camera.h"
+#include "inhand/sensor/depth_image.h"
+
+namespace inhand {
+
+struct FrameRecord {
+  std::string file;  // PNG path relative to the directory
+  Iso3 T_O_C = Iso3::Identity();
+};
+
+struct FrameSet {
+  CameraIntrinsics intrinsics;
+  double depth_scale_m = 0.001;  // metres per PNG unit
+  std::vector<FrameRecord> frames;
+};
+
+// Reads and validates DIR/frames.json (every field; poses must be rigid; every PNG must exist).
+// Throws Error naming the file and field.
+FrameSet readFrameSet(const std::filesystem::path& dir);
+// Loads frame i's depth image, checking its size against the intrinsics.
+DepthImage loadFrameDepth(const std::filesystem::path& dir, const FrameSet& set, size_t i);
+// Writes DIR/frames.json atomically.
+void writeFrameSet(const std::filesystem::path& dir, const FrameSet& set);
+
+}  // namespace inhand

@@ -1,0 +1,30 @@
+#pragma once
+// Simulated depth images: Embree ray casting of a scene, with the sensor's failure modes
+// (miss, out of range, too oblique, projector shadow) and seeded noise (lateral jitter, axial
+// Gaussian, disparity quantisation).
+#include <cstdint>
+
+#include "inhand/geometry/ray_scene.h"
+#include "inhand/sensor/depth_camera.h"
+#include "inhand/sensor/depth_image.h"
+#include "inhand/sensor/noise_model.h"
+
+namespace inhand {
+
+struct RenderOptions {
+  bool noise = true;    // false: exact depth of the first hit (failure modes still apply)
+  uint64_t seed = 1;    // noise seed; the same seed gives the same image on any thread count
+};
+
+// Renders the depth image seen by a camera at T_S_C (camera pose in the scene's frame S).
+// If `geometry_out` is given it receives, per pixel, the scene geometry id that produced the
+// return (−1 for no return).
+DepthImage renderDepth(const RayScene& scene, const Iso3& T_S_C, const DepthCameraOptions& camera,
+                       const NoiseModelOptions& noise, const RenderOptions& options,
+                       std::vector<int>* geometry_out = nullptr);
+
+// Scalar single-threaded reference of renderDepth with noise off (rtcIntersect1 per pixel).
+DepthImage renderDepthReference(const RayScene& scene, const Iso3& T_S_C,
+                                const DepthCameraOptions& camera);
+
+}  // namespace inhand

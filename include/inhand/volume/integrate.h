@@ -1,0 +1,43 @@
+#pragma once
+// Fusing depth images into the TsdfVolume (paper §III-B). For each voxel, projected into the
+// image, with d = D − z (measured depth minus voxel depth along the optical axis; positive in
+// front of the surface) and band half-width μ:
+//   d > μ        the ray passed through: an unknown voxel becomes empty;
+//   |d| ≤ μ      Σw·d += w·d, Σw += w with w = 1/σ² of the pixel; the voxel becomes observed;
+//   d < −μ       behind the band: unchanged (stays unknown if never seen).
+// Pixels flagged carve-only (measurements of the robot's own hand, §IV) only mark empty space.
+#include <cstdint>
+#include <vector>
+
+#include "inhand/sensor/depth_camera.h"
+#include "inhand/sensor/depth_image.h"
+#include "inhand/sensor/noise_model.h"
+#include "inhand/volume/tsdf_volume.h"
+
+namespace inhand {
+
+struct IntegrationStats {
+  int64_t visited = 0;  // voxels whose centre projected onto a pixel with a depth
+  int64_t updated = 0;  // voxels whose state or sums changed
+};
+
+// Per-pixel measurement σ (m) of a depth image: the axial noise model at the pixel's depth and its
+// incidence angle (normal estimated from neighbouring pixels), multiplied by
+// noise.discontinuity_factor next to depth discontinuities and missing returns. 0 where no depth.
+std::vector<float> measurementSigma(const DepthImage& depth, const CameraIntrinsics& K,
+                                    const NoiseModelOptions& noise);
+
+// Optimised kernel: both cores, rows of voxels clipped analytically to the camera frustum.
+// `sigma_m` is measurementSigma's output; `carve_only` (optional, width·height) flags pixels that
+// may only carve.
+IntegrationStats integrate(const DepthImage& depth, const Iso3& T_O_C, const CameraIntrinsics& K,
+                           const std::vector<float>& sigma_m, TsdfVolume* volume,
+                           const std::vector<uint8_t>* carve_only = nullptr);
+
+// Simple reference: single thread, every voxel transformed independently in double precision.
+IntegrationStats integrateReference(const DepthImage& depth, const Iso3& T_O_C,
+                                    const CameraIntrinsics& K, const std::vector<float>& sigma_m,
+                                    TsdfVolume* volume,
+                                    const std::vector<uint8_t>* carve_only = nullptr);
+
+}  // namespace inhand

@@ -1,0 +1,220 @@
+#include "commands.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+
+#include <unistd.h>
+
+#include "inhand/core/error.h"
+#include "inhand/core/file_util.h"
+#include "inhand/core/json_util.h"
+#include "inhand/core/pose.h"
+#include "inhand/core/random.h"
+#include "inhand/geometry/builtin_objects.h"
+#include "inhand/geometry/mesh_io.h"
+#include "inhand/geometry/ray_scene.h"
+#include "inhand/mesh/extract.h"
+#include "inhand/sensor/frame_set.h"
+#include "inhand/sensor/render.h"
+#include "inhand/volume/integrate.h"
+
+namespace inhand::app {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double secondsSince(Clock::time_point t0) {
+  return std::chrono::duration<double>(Clock::now() - t0).count();
+}
+
+// Progress on the terminal: rewritten in place on a TTY, every 10th step otherwise.
+void progress(const char* what, size_t done, size_t total) {
+  static const bool tty = isatty(fileno(stderr));
+  if (tty) {
+    std::fprintf(stderr, "\r%s: %zu/%zu", what, done, total);
+    if (done == total) std::fprintf(stderr, "\n");
+  } else if (done == total || done % 10 == 0) {
+    std::fprintf(stderr, "%s: %zu/%zu\n", what, done, total);
+  }
+}
+
+}  // namespace
+
+int runRender(const RenderArgs& args) {
+  if (args.views < 1 || args.views > 100000) throw Error("--views must be in 1..100000");
+  DepthCameraOptions camera;
+  if (!(args.range_m >= camera.min_range_m && args.range_m <= camera.max_range_m))
+    throw Error("--range must be within the sensor's range [" + std::to_string(camera.min_range_m) +
+                ", " + std::to_string(camera.max_range_m) + "] m");
+  auto t0 = Clock::now();
+  TriangleMesh object = loadObject(args.object);
+  Aabb box = object.bounds();
+  if (box.size().maxCoeff() > 1.0)
+    throw Error(args.object + ": the object is " + std::to_string(box.size().maxCoeff()) +
+                " m across; inhand expects metres and objects under 1 m (is the file in mm?)");
+  StagedDirectory out(args.out);
+  RayScene scene;
+  scene.addMesh(object);
+  scene.commit();
+  NoiseModelOptions noise;
+  FrameSet set;
+  set.intrinsics = camera.intrinsics;
+  const Vec3 centre = box.center();
+  std::vector<Vec3> dirs = fibonacciSphere(args.views);
+  for (int i = 0; i < args.views; ++i) {
+    Iso3 T_O_C = lookAt(centre + args.range_m * dirs[i], centre, Vec3::UnitZ());
+    RenderOptions ro;
+    ro.noise = args.noise;
+    ro.seed = mixSeed(args.seed, uint64_t(i));
+    DepthImage depth = renderDepth(scene, T_O_C, camera, noise, ro);
+    char name[32];
+    std::snprintf(name, sizeof(name), "depth_%04d.png", i);
+    writeDepthPng(out.path() / name, depth, set.depth_scale_m);
+    set.frames.push_back({name, T_O_C});
+    progress("render: views", size_t(i + 1), size_t(args.views));
+  }
+  writeFrameSet(out.path(), set);
+  writePly(out.path() / "object.ply", object);
+  out.commit();
+  std::printf("render: %d depth images of %s (%zu triangles, %.3f x %.3f x %.3f m) at %.2f m in %s "
+              "(%.2f s)\n",
+              args.views, args.object.c_str(), object.triangles.size(), box.size().x(),
+              box.size().y(), box.size().z(), args.range_m, args.out.c_str(), secondsSince(t0));
+  return 0;
+}
+
+namespace {
+
+// Bounds of the measured points in the object frame (0.1 / 99.9 percentiles, so a few stray
+// pixels do not blow the volume up), plus a margin.
+Aabb autoBounds(const fs::path& dir, const FrameSet& set, double margin) {
+  std::vector<double> xs, ys, zs;
+  for (size_t i = 0; i < set.frames.size(); ++i) {
+    DepthImage d = loadFrameDepth(dir, set, i);
+    const Iso3& T = set.frames[i].T_O_C;
+    for (int v = 0; v < d.height; v += 2)
+      for (int u = 0; u < d.width; u += 2) {
+        float z = d.at(u, v);
+        if (!(z > 0)) continue;
+        Vec3 p = T * (set.intrinsics.rayZ1(u, v) * double(z));
+        xs.push_back(p.x());
+        ys.push_back(p.y());
+        zs.push_back(p.z());
+      }
+  }
+  if (xs.empty()) throw Error((dir / "frames.json").string() + ": no frame has any depth return");
+  auto pct = [](std::vector<double>& v, double q) {
+    size_t k = std::min(v.size() - 1, size_t(q * double(v.size() - 1)));
+    std::nth_element(v.begin(), v.begin() + long(k), v.end());
+    return v[k];
+  };
+  Aabb box;
+  box.min = Vec3(pct(xs, 0.001), pct(ys, 0.001), pct(zs, 0.001)) - Vec3::Constant(margin);
+  box.max = Vec3(pct(xs, 0.999), pct(ys, 0.999), pct(zs, 0.999)) + Vec3::Constant(margin);
+  return box;
+}
+
+}  // namespace
+
+int runFuse(const FuseArgs& args) {
+  auto t0 = Clock::now();
+  if (args.out.empty()) throw Error("--out is required");
+  fs::path outPath(args.out);
+  if (outPath.extension() != ".ply") throw Error("--out " + args.out + ": must end in .ply");
+  fs::path summaryPath = args.summary.empty() ? fs::path(outPath).replace_extension(".json")
+                                              : fs::path(args.summary);
+  if (!(args.margin_m >= 0)) throw Error("--margin must be >= 0");
+  VolumeOptions vo;
+  vo.voxel_size_m = args.voxel_m;
+  vo.truncation_m = args.truncation_m;
+  vo.memory_budget_mb = args.memory_mb;
+  if (std::string p = vo.validate(); !p.empty()) throw Error("volume options: " + p);
+  MeshOptions mo;
+  mo.hole_sigma_m = args.hole_sigma_m;
+  if (std::string p = mo.validate(); !p.empty()) throw Error("--hole-sigma: " + p);
+  for (const fs::path& p : {outPath, summaryPath}) {
+    fs::path parent = fs::absolute(p).parent_path();
+    if (!fs::is_directory(parent))
+      throw Error(p.string() + ": the directory " + parent.string() + " does not exist");
+  }
+
+  const fs::path dir(args.frames);
+  FrameSet set = readFrameSet(dir);
+  Aabb box;
+  if (args.bounds) {
+    const auto& b = *args.bounds;
+    box.min = Vec3(b[0], b[1], b[2]);
+    box.max = Vec3(b[3], b[4], b[5]);
+    if (!(box.min.array() < box.max.array()).all())
+      throw Error("--bounds: each min must be below its max (xmin ymin zmin xmax ymax zmax)");
+  } else {
+    box = autoBounds(dir, set, args.margin_m);
+  }
+  TsdfVolume volume(box, vo);
+  std::fprintf(stderr, "fuse: volume %d x %d x %d voxels of %.1f mm (%.0f MiB)\n", volume.dims().x(),
+               volume.dims().y(), volume.dims().z(), vo.voxel_size_m * 1000,
+               TsdfVolume::megabytesFor(volume.dims()));
+  NoiseModelOptions noise;
+  auto tIntegrate = Clock::now();
+  double integrateS = 0;
+  int64_t updated = 0;
+  for (size_t i = 0; i < set.frames.size(); ++i) {
+    DepthImage depth = loadFrameDepth(dir, set, i);
+    auto ti = Clock::now();
+    std::vector<float> sigma = measurementSigma(depth, set.intrinsics, noise);
+    updated += integrate(depth, set.frames[i].T_O_C, set.intrinsics, sigma, &volume).updated;
+    integrateS += secondsSince(ti);
+    progress("fuse: frames", i + 1, set.frames.size());
+  }
+  double loadAndIntegrateS = secondsSince(tIntegrate);
+  auto tMesh = Clock::now();
+  ObjectModel model = extractModel(volume, mo);
+  double meshS = secondsSince(tMesh);
+  if (model.mesh.empty())
+    throw Error(dir.string() + ": the frames produced no surface inside the bounds; check the "
+                               "poses (T_O_C is camera-to-object) and --bounds");
+
+  Json summary;
+  summary["model"] = fs::path(outPath).filename().string();
+  summary["frames"] = set.frames.size();
+  summary["vertices"] = model.mesh.vertices.size();
+  summary["triangles"] = model.mesh.triangles.size();
+  summary["closed"] = model.mesh.isClosed();
+  summary["mean_entropy"] = model.meanEntropy();
+  summary["observed_fraction"] = model.observedAreaFraction();
+  summary["surface_area_m2"] = model.mesh.area();
+  summary["hole_area_m2"] = model.holeArea();
+  summary["volume"] = {
+      {"voxel_size_m", volume.voxelSize()},
+      {"truncation_m", volume.truncation()},
+      {"dims", {volume.dims().x(), volume.dims().y(), volume.dims().z()}},
+      {"origin_m", {volume.origin().x(), volume.origin().y(), volume.origin().z()}},
+      {"voxels_observed", volume.countState(VoxelState::kObserved)},
+      {"voxels_empty", volume.countState(VoxelState::kEmpty)},
+      {"voxels_unknown", volume.countState(VoxelState::kUnknown)},
+      {"voxel_updates", updated}};
+  summary["timing_s"] = {{"integrate", integrateS},
+                         {"load_and_integrate", loadAndIntegrateS},
+                         {"mesh", meshS},
+                         {"total", secondsSince(t0)}};
+  writePly(outPath, model.mesh, &model.variance);
+  try {
+    writeTextAtomically(summaryPath, summary.dump(2) + "\n");
+  } catch (...) {
+    std::error_code ec;
+    fs::remove(outPath, ec);  // no half-finished result
+    throw;
+  }
+  std::printf("fuse: %zu frames -> %s: %zu vertices, %zu triangles, observed %.1f%% of the "
+              "surface, mean entropy %.3f nats (%.2f s; summary %s)\n",
+              set.frames.size(), outPath.c_str(), model.mesh.vertices.size(),
+              model.mesh.triangles.size(), 100 * model.observedAreaFraction(), model.meanEntropy(),
+              secondsSince(t0), summaryPath.c_str());
+  return 0;
+}
+
+}  // namespace inhand::app

@@ -1,0 +1,34 @@
+#pragma once
+// The `inhand` subcommands, apart from the CLI parsing (kept in main.cc: CLI11 is slow to compile).
+#include <array>
+#include <cstdint>
+#include <optional>
+#include <string>
+
+namespace inhand::app {
+
+struct RenderArgs {
+  std::string object;          // builtin:NAME or a mesh file
+  int views = 40;              // number of depth images, directions spread over the sphere
+  std::string out;             // output directory (must not exist, or be empty)
+  double range_m = 0.7;        // camera distance from the object's centre
+  uint64_t seed = 1;           // noise seed
+  bool noise = true;           // false: exact depths
+};
+
+struct FuseArgs {
+  std::string frames;          // directory with frames.json
+  std::string out;             // MODEL.ply
+  std::string summary;         // summary JSON; empty: MODEL.json beside MODEL.ply
+  double voxel_m = 0.002;      // voxel size
+  double truncation_m = 0.0;   // band half-width; 0: 4 voxels
+  std::optional<std::array<double, 6>> bounds;  // xmin ymin zmin xmax ymax zmax in O; else auto
+  double margin_m = 0.02;      // auto bounds: margin around the measured points
+  double memory_mb = 2048;     // volume memory budget
+  double hole_sigma_m = 0.05;  // σ of never-observed surface
+};
+
+int runRender(const RenderArgs& args);
+int runFuse(const FuseArgs& args);
+
+}  // namespace inhand::app

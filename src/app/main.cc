@@ -1,0 +1,69 @@
+// The `inhand` command line. CLI11 is included in this translation unit only (it is slow to
+// compile); the commands live in commands.cc.
+#include <CLI/CLI.hpp>
+#include <cstdio>
+#include <new>
+
+#include "commands.h"
+#include "inhand/core/error.h"
+
+int main(int argc, char** argv) {
+  CLI::App app{"inhand: autonomous in-hand 3D modelling of unknown objects (Krainin et al. 2011)"};
+  app.require_subcommand(1);
+
+  inhand::app::RenderArgs render;
+  auto* r = app.add_subcommand("render", "render noisy depth images of an object from all around");
+  r->add_option("--object", render.object, "builtin:NAME or a mesh file (OBJ, PLY, STL, ...)")->required();
+  r->add_option("--views", render.views, "number of views, spread evenly over the sphere")
+      ->capture_default_str();
+  r->add_option("--out", render.out, "output directory (new or empty)")->required();
+  r->add_option("--range", render.range_m, "camera distance from the object centre, m")
+      ->capture_default_str();
+  r->add_option("--seed", render.seed, "noise seed")->capture_default_str();
+  r->add_flag("!--no-noise", render.noise, "render exact depths (no sensor noise)");
+
+  inhand::app::FuseArgs fuse;
+  std::vector<double> bounds;
+  auto* f = app.add_subcommand("fuse", "fuse a directory of depth frames into a model");
+  f->add_option("--frames", fuse.frames, "directory with frames.json and depth PNGs")->required();
+  f->add_option("--out", fuse.out, "output model, .ply")->required();
+  f->add_option("--summary", fuse.summary, "summary JSON (default: MODEL.json)");
+  f->add_option("--voxel", fuse.voxel_m, "voxel size, m")->capture_default_str();
+  f->add_option("--truncation", fuse.truncation_m, "signed-distance band half-width, m (0: 4 voxels)")
+      ->capture_default_str();
+  f->add_option("--bounds", bounds, "volume bounds in the object frame: xmin ymin zmin xmax ymax zmax (m)")
+      ->expected(6);
+  f->add_option("--margin", fuse.margin_m, "margin around the measured points for automatic bounds, m")
+      ->capture_default_str();
+  f->add_option("--memory-budget", fuse.memory_mb, "refuse volumes larger than this, MiB")
+      ->capture_default_str();
+  f->add_option("--hole-sigma", fuse.hole_sigma_m, "sigma of never-observed surface, m")
+      ->capture_default_str();
+
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e);
+  }
+  try {
+    if (*r) return inhand::app::runRender(render);
+    if (*f) {
+      if (!bounds.empty()) {
+        std::array<double, 6> b{};
+        std::copy(bounds.begin(), bounds.end(), b.begin());
+        fuse.bounds = b;
+      }
+      return inhand::app::runFuse(fuse);
+    }
+  } catch (const inhand::Error& e) {
+    std::fprintf(stderr, "inhand: error: %s\n", e.what());
+    return 1;
+  } catch (const std::bad_alloc&) {
+    std::fprintf(stderr, "inhand: error: out of memory\n");
+    return 1;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "inhand: error: %s\n", e.what());
+    return 1;
+  }
+  return 0;
+}

@@ -1,0 +1,143 @@
+#include "inhand/geometry/contour.h"
+
+#include <bit>
+
+#include "inhand/core/error.h"
+#include "inhand/core/parallel.h"
+
+namespace inhand {
+
+namespace {
+
+// The 6 tetrahedra of the Kuhn split: corner codes (bit 0 = +x, bit 1 = +y, bit 2 = +z) along the
+// monotone paths 0 → 7. Along each path the corners only gain bits, so every tetrahedron edge
+// runs from a corner c to a superset corner c' and is owned by corner c with direction c' ^ c.
+constexpr int kTets[6][4] = {{0, 1, 3, 7}, {0, 1, 5, 7}, {0, 2, 3, 7},
+                             {0, 2, 6, 7}, {0, 4, 5, 7}, {0, 4, 6, 7}};
+
+inline bool inside(float f) { return f < 0.f; }
+
+}  // namespace
+
+ContourResult contour(const ScalarGrid& grid) {
+  const int nx = grid.dims.x(), ny = grid.dims.y(), nz = grid.dims.z();
+  INHAND_CHECK(grid.values.size() == size_t(nx) * ny * nz, "grid value count mismatch");
+  ContourResult result;
+  if (nx < 2 || ny < 2 || nz < 2) return result;
+  const size_t n = grid.values.size();
+  const size_t sx = 1, sy = size_t(nx), sz = size_t(nx) * ny;
+  const float* f = grid.values.data();
+
+  // Pass 1: which of the 7 edges leaving each sample (towards +x,+y,+z combinations) cross 0.
+  std::vector<uint8_t> mask(n, 0);
+  std::vector<uint32_t> sliceCount(nz, 0);
+  parallelFor(0, nz, [&](int z) {
+    uint32_t count = 0;
+    for (int y = 0; y < ny; ++y)
+      for (int x = 0; x < nx; ++x) {
+        size_t i = grid.index(x, y, z);
+        bool in = inside(f[i]);
+        uint8_t m = 0;
+        for (int dir = 1; dir < 8; ++dir) {
+          int dx = dir & 1, dy = (dir >> 1) & 1, dz = (dir >> 2) & 1;
+          if (x + dx >= nx || y + dy >= ny || z + dz >= nz) continue;
+          if (inside(f[i + dx * sx + dy * sy + dz * sz]) != in) m |= uint8_t(1u << (dir - 1));
+        }
+        mask[i] = m;
+        count += uint32_t(std::popcount(m));
+      }
+    sliceCount[z] = count;
+  });
+
+  // Pass 2: vertex id of each sample's first edge (exclusive prefix sum, slice by slice).
+  std::vector<uint32_t> sliceBase(nz + 1, 0);
+  for (int z = 0; z < nz; ++z) sliceBase[z + 1] = sliceBase[z] + sliceCount[z];
+  const uint32_t vertexCount = sliceBase[nz];
+  std::vector<uint32_t> offset(n);
+  result.mesh.vertices.resize(vertexCount);
+  result.sources.resize(vertexCount);
+  parallelFor(0, nz, [&](int z) {
+    uint32_t next = sliceBase[z];
+    for (int y = 0; y < ny; ++y)
+      for (int x = 0; x < nx; ++x) {
+        size_t i = grid.index(x, y, z);
+        offset[i] = next;
+        uint8_t m = mask[i];
+        if (!m) continue;
+        Vec3 p = grid.point(x, y, z);
+        for (int dir = 1; dir < 8; ++dir) {
+          if (!(m & (1u << (dir - 1)))) continue;
+          int dx = dir & 1, dy = (dir >> 1) & 1, dz = (dir >> 2) & 1;
+          size_t j = i + dx * sx + dy * sy + dz * sz;
+          float t = f[i] / (f[i] - f[j]);
+          Vec3 q = p + grid.spacing * t * Vec3(dx, dy, dz);
+          result.mesh.vertices[next] = q.cast<float>();
+          result.sources[next] = {uint32_t(i), uint32_t(j), t};
+          ++next;
+        }
+      }
+  });
+
+  auto edgeVertex = [&](size_t owner, int dir) {
+    return int(offset[owner] + uint32_t(std::popcount(uint32_t(mask[owner]) & ((1u << (dir - 1)) - 1))));
+  };
+
+  // Pass 3: triangles, per slice of cubes, concatenated in slice order (deterministic).
+  std::vector<std::vector<Tri>> sliceTris(nz - 1);
+  const auto& V = result.mesh.vertices;
+  parallelFor(0, nz - 1, [&](int z) {
+    std::vector<Tri>& out = sliceTris[z];
+    for (int y = 0; y + 1 < ny; ++y)
+      for (int x = 0; x + 1 < nx; ++x) {
+        size_t base = grid.index(x, y, z);
+        size_t corner[8];
+        uint8_t in = 0;
+        for (int c = 0; c < 8; ++c) {
+          corner[c] = base + (c & 1) * sx + ((c >> 1) & 1) * sy + ((c >> 2) & 1) * sz;
+          if (inside(f[corner[c]])) in |= uint8_t(1u << c);
+        }
+        if (in == 0 || in == 0xff) continue;
+        for (const auto& tet : kTets) {
+          int insideList[4], outsideList[4], ni = 0, no = 0;
+          for (int k = 0; k < 4; ++k) {
+            if (in & (1u << tet[k])) insideList[ni++] = tet[k];
+            else outsideList[no++] = tet[k];
+          }
+          if (ni == 0 || no == 0) continue;
+          auto vid = [&](int ca, int cb) {
+            int lo = ca < cb ? ca : cb, hi = ca < cb ? cb : ca;  // lo ⊂ hi along the Kuhn path
+            return edgeVertex(corner[lo], hi ^ lo);
+          };
+          Vec3 inC = Vec3::Zero(), outC = Vec3::Zero();
+          for (int k = 0; k < ni; ++k)
+            inC += Vec3(insideList[k] & 1, (insideList[k] >> 1) & 1, (insideList[k] >> 2) & 1);
+          for (int k = 0; k < no; ++k)
+            outC += Vec3(outsideList[k] & 1, (outsideList[k] >> 1) & 1, (outsideList[k] >> 2) & 1);
+          Vec3 outward = outC / no - inC / ni;
+          auto emit = [&](int a, int b, int c) {
+            Vec3 pa = V[a].cast<double>(), pb = V[b].cast<double>(), pc = V[c].cast<double>();
+            if ((pb - pa).cross(pc - pa).dot(outward) < 0) std::swap(b, c);
+            out.emplace_back(a, b, c);
+          };
+          if (ni == 1 || no == 1) {
+            int lone = ni == 1 ? insideList[0] : outsideList[0];
+            const int* others = ni == 1 ? outsideList : insideList;
+            emit(vid(lone, others[0]), vid(lone, others[1]), vid(lone, others[2]));
+          } else {
+            int a = vid(insideList[0], outsideList[0]), b = vid(insideList[0], outsideList[1]);
+            int c = vid(insideList[1], outsideList[1]), d = vid(insideList[1], outsideList[0]);
+            emit(a, b, c);
+            emit(a, c, d);
+          }
+        }
+      }
+  });
+  size_t total = 0;
+  for (const auto& s : sliceTris) total += s.size();
+  result.mesh.triangles.reserve(total);
+  for (const auto& s : sliceTris)
+    result.mesh.triangles.insert(result.mesh.triangles.end(), s.begin(), s.end());
+  return result;
+}
+
+}  // namespace inhand

@@ -1,0 +1,238 @@
+#include "inhand/geometry/mesh_io.h"
+
+#include <assimp/DefaultLogger.hpp>
+#include <assimp/Importer.hpp>
+#include <assimp/postprocess.h>
+#include <assimp/scene.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <fstream>
+#include <functional>
+#include <sstream>
+
+#include "inhand/core/error.h"
+#include "inhand/core/file_util.h"
+
+namespace inhand {
+
+namespace fs = std::filesystem;
+
+TriangleMesh importMesh(const fs::path& path) {
+  std::error_code ec;
+  if (!fs::exists(path, ec)) throw Error(path.string() + ": no such mesh file");
+  if (fs::is_directory(path, ec)) throw Error(path.string() + ": is a directory, not a mesh file");
+  if (fs::file_size(path, ec) == 0) throw Error(path.string() + ": mesh file is empty");
+  Assimp::Importer importer;
+  importer.SetPropertyInteger(AI_CONFIG_PP_RVC_FLAGS, aiComponent_NORMALS | aiComponent_COLORS |
+                                                          aiComponent_TEXCOORDS |
+                                                          aiComponent_TANGENTS_AND_BITANGENTS |
+                                                          aiComponent_MATERIALS);
+  importer.SetPropertyInteger(AI_CONFIG_PP_SBP_REMOVE, aiPrimitiveType_POINT | aiPrimitiveType_LINE);
+  const aiScene* scene = importer.ReadFile(
+      path.string(), aiProcess_Triangulate | aiProcess_RemoveComponent |
+                         aiProcess_JoinIdenticalVertices | aiProcess_SortByPType |
+                         aiProcess_FindDegenerates);
+  if (!scene || !scene->mRootNode)
+    throw Error(path.string() + ": cannot read mesh (" + importer.GetErrorString() + ")");
+  TriangleMesh out;
+  std::function<void(const aiNode*, const aiMatrix4x4&)> visit = [&](const aiNode* node,
+                                                                     const aiMatrix4x4& parent) {
+    aiMatrix4x4 T = parent * node->mTransformation;
+    for (unsigned k = 0; k < node->mNumMeshes; ++k) {
+      const aiMesh* m = scene->mMeshes[node->mMeshes[k]];
+      if (!(m->mPrimitiveTypes & aiPrimitiveType_TRIANGLE)) continue;
+      int base = static_cast<int>(out.vertices.size());
+      for (unsigned i = 0; i < m->mNumVertices; ++i) {
+        aiVector3D v = T * m->mVertices[i];
+        out.vertices.emplace_back(v.x, v.y, v.z);
+      }
+      for (unsigned i = 0; i < m->mNumFaces; ++i) {
+        const aiFace& f = m->mFaces[i];
+        if (f.mNumIndices != 3) continue;
+        out.triangles.emplace_back(base + int(f.mIndices[0]), base + int(f.mIndices[1]),
+                                   base + int(f.mIndices[2]));
+      }
+    }
+    for (unsigned c = 0; c < node->mNumChildren; ++c) visit(node->mChildren[c], T);
+  };
+  visit(scene->mRootNode, aiMatrix4x4());
+  std::string problem = validateMesh(out);
+  if (!problem.empty()) throw Error(path.string() + ": mesh " + problem);
+  return welded(out);
+}
+
+std::array<uint8_t, 3> confidenceColor(float variance_m2) {
+  // Log-scale blend between σ = 0.3 mm (grey) and σ = 5 cm (red).
+  constexpr double kSigmaGrey = 0.0003, kSigmaRed = 0.05;
+  double sigma = std::sqrt(std::max(0.f, variance_m2));
+  double s = sigma <= kSigmaGrey ? 0.0
+                                 : std::log(sigma / kSigmaGrey) / std::log(kSigmaRed / kSigmaGrey);
+  s = std::clamp(s, 0.0, 1.0);
+  const double grey[3] = {170, 170, 170}, red[3] = {220, 20, 20};
+  std::array<uint8_t, 3> c;
+  for (int k = 0; k < 3; ++k) c[k] = uint8_t(std::lround(grey[k] + s * (red[k] - grey[k])));
+  return c;
+}
+
+void writePly(const fs::path& path, const TriangleMesh& mesh, const std::vector<float>* variance) {
+  if (variance && variance->size() != mesh.vertices.size())
+    throw Error(path.string() + ": variance count does not match vertex count");
+  writeFileAtomically(path, [&](const fs::path& tmp) {
+    std::ofstream out(tmp, std::ios::binary);
+    if (!out) throw Error(path.string() + ": cannot open for writing");
+    out << "ply\nformat binary_little_endian 1.0\ncomment written by inhand; units: metres\n";
+    out << "element vertex " << mesh.vertices.size() << "\n";
+    out << "property float x\nproperty float y\nproperty float z\n";
+    if (variance) {
+      out << "comment variance: per-vertex surface variance in m^2 (sigma = 5 cm: never observed)\n";
+      out << "property float variance\n";
+      out << "property uchar red\nproperty uchar green\nproperty uchar blue\n";
+    }
+    out << "element face " << mesh.triangles.size() << "\n";
+    out << "property list uchar int vertex_indices\nend_header\n";
+    const size_t stride = 12 + (variance ? 7 : 0);
+    std::vector<char> buf(mesh.vertices.size() * stride);
+    for (size_t i = 0; i < mesh.vertices.size(); ++i) {
+      char* p = buf.data() + i * stride;
+      std::memcpy(p, mesh.vertices[i].data(), 12);
+      if (variance) {
+        float v = (*variance)[i];
+        std::memcpy(p + 12, &v, 4);
+        auto c = confidenceColor(v);
+        std::memcpy(p + 16, c.data(), 3);
+      }
+    }
+    out.write(buf.data(), std::streamsize(buf.size()));
+    std::vector<char> fbuf(mesh.triangles.size() * 13);
+    for (size_t t = 0; t < mesh.triangles.size(); ++t) {
+      char* p = fbuf.data() + t * 13;
+      p[0] = 3;
+      std::memcpy(p + 1, mesh.triangles[t].data(), 12);
+    }
+    out.write(fbuf.data(), std::streamsize(fbuf.size()));
+    out.close();
+    if (!out) throw Error(path.string() + ": write failed (disk full?)");
+  });
+}
+
+namespace {
+
+struct PlyProperty {
+  std::string name, type, countType;  // countType non-empty for list properties
+};
+struct PlyElement {
+  std::string name;
+  size_t count = 0;
+  std::vector<PlyProperty> props;
+};
+
+int typeSize(const std::string& t) {
+  if (t == "char" || t == "uchar" || t == "int8" || t == "uint8") return 1;
+  if (t == "short" || t == "ushort" || t == "int16" || t == "uint16") return 2;
+  if (t == "int" || t == "uint" || t == "float" || t == "int32" || t == "uint32" ||
+      t == "float32")
+    return 4;
+  if (t == "double" || t == "float64") return 8;
+  return 0;
+}
+
+double decode(const char* p, const std::string& t) {
+  auto get = [&](auto v) {
+    std::memcpy(&v, p, sizeof(v));
+    return double(v);
+  };
+  if (t == "char" || t == "int8") return get(int8_t{});
+  if (t == "uchar" || t == "uint8") return get(uint8_t{});
+  if (t == "short" || t == "int16") return get(int16_t{});
+  if (t == "ushort" || t == "uint16") return get(uint16_t{});
+  if (t == "int" || t == "int32") return get(int32_t{});
+  if (t == "uint" || t == "uint32") return get(uint32_t{});
+  if (t == "float" || t == "float32") return get(float{});
+  return get(double{});
+}
+
+}  // namespace
+
+PlyData readPly(const fs::path& path) {
+  std::string data = readTextFile(path);
+  const std::string where = path.string();
+  size_t headerEnd = data.find("end_header");
+  if (data.rfind("ply", 0) != 0 || headerEnd == std::string::npos)
+    throw Error(where + ": not a PLY file (no 'ply' magic or 'end_header')");
+  size_t bodyStart = data.find('\n', headerEnd);
+  if (bodyStart == std::string::npos) throw Error(where + ": PLY header is not terminated");
+  ++bodyStart;
+  std::istringstream header(data.substr(0, headerEnd));
+  std::string line, format;
+  std::vector<PlyElement> elements;
+  while (std::getline(header, line)) {
+    std::istringstream ls(line);
+    std::string word;
+    ls >> word;
+    if (word == "format") {
+      ls >> format;
+    } else if (word == "element") {
+      PlyElement e;
+      ls >> e.name >> e.count;
+      if (!ls) throw Error(where + ": malformed PLY element line '" + line + "'");
+      elements.push_back(e);
+    } else if (word == "property") {
+      if (elements.empty()) throw Error(where + ": PLY property before any element");
+      PlyProperty p;
+      ls >> p.type;
+      if (p.type == "list") ls >> p.countType >> p.type;
+      ls >> p.name;
+      if (!ls || typeSize(p.type) == 0 || (!p.countType.empty() && typeSize(p.countType) == 0))
+        throw Error(where + ": unsupported PLY property line '" + line + "'");
+      elements.back().props.push_back(p);
+    }
+  }
+  if (format != "binary_little_endian" && format != "ascii")
+    throw Error(where + ": PLY format '" + format + "' is not supported (binary_little_endian, ascii)");
+  const bool ascii = format == "ascii";
+  PlyData out;
+  size_t pos = bodyStart;
+  std::istringstream text(ascii ? data.substr(bodyStart) : std::string());
+  auto readValue = [&](const std::string& type) -> double {
+    if (ascii) {
+      double v;
+      if (!(text >> v)) throw Error(where + ": PLY body ends early or has a non-number");
+      return v;
+    }
+    int n = typeSize(type);
+    if (pos + size_t(n) > data.size()) throw Error(where + ": PLY body is truncated");
+    double v = decode(data.data() + pos, type);
+    pos += size_t(n);
+    return v;
+  };
+  for (const PlyElement& e : elements) {
+    const bool isVertex = e.name == "vertex", isFace = e.name == "face";
+    for (size_t i = 0; i < e.count; ++i) {
+      Vec3f v = Vec3f::Zero();
+      for (const PlyProperty& p : e.props) {
+        if (!p.countType.empty()) {
+          int n = int(readValue(p.countType));
+          std::vector<int> idx(std::max(n, 0));
+          for (int k = 0; k < n; ++k) idx[k] = int(readValue(p.type));
+          if (isFace && (p.name == "vertex_indices" || p.name == "vertex_index"))
+            for (int k = 1; k + 1 < n; ++k) out.mesh.triangles.emplace_back(idx[0], idx[k], idx[k + 1]);
+          continue;
+        }
+        double value = readValue(p.type);
+        if (!isVertex) continue;
+        if (p.name == "x") v.x() = float(value);
+        else if (p.name == "y") v.y() = float(value);
+        else if (p.name == "z") v.z() = float(value);
+        else out.vertexProperties[p.name].push_back(float(value));
+      }
+      if (isVertex) out.mesh.vertices.push_back(v);
+    }
+  }
+  std::string problem = validateMesh(out.mesh);
+  if (!problem.empty()) throw Error(where + ": mesh " + problem);
+  return out;
+}
+
+}  // namespace inhand

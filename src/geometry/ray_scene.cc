@@ -1,0 +1,200 @@
+#include "inhand/geometry/ray_scene.h"
+
+#include <cstdio>
+#include <mutex>
+
+#include "inhand/core/error.h"
+#include "inhand/core/parallel.h"
+
+namespace inhand {
+
+namespace {
+
+void onEmbreeError(void*, RTCError code, const char* str) {
+  std::fprintf(stderr, "inhand: embree error %d: %s\n", int(code), str ? str : "");
+}
+
+// One Embree device for the process (it owns the thread pool and ISA dispatch).
+RTCDevice device() {
+  static RTCDevice dev = [] {
+    RTCDevice d = rtcNewDevice(nullptr);
+    INHAND_CHECK(d != nullptr, "cannot create an Embree device");
+    rtcSetDeviceErrorFunction(d, onEmbreeError, nullptr);
+    return d;
+  }();
+  return dev;
+}
+
+constexpr unsigned kAllMask = 0xFFFFFFFFu;  // Debian's Embree has ray masks on: mask 0 hits nothing
+
+}  // namespace
+
+RayScene::RayScene() { scene_ = rtcNewScene(device()); }
+
+RayScene::~RayScene() {
+  if (scene_) rtcReleaseScene(scene_);
+}
+
+RayScene::RayScene(RayScene&& o) noexcept
+    : scene_(o.scene_), geometryCount_(o.geometryCount_), committed_(o.committed_) {
+  o.scene_ = nullptr;
+}
+
+RayScene& RayScene::operator=(RayScene&& o) noexcept {
+  if (this != &o) {
+    if (scene_) rtcReleaseScene(scene_);
+    scene_ = o.scene_;
+    geometryCount_ = o.geometryCount_;
+    committed_ = o.committed_;
+    o.scene_ = nullptr;
+  }
+  return *this;
+}
+
+int RayScene::addMesh(const TriangleMesh& mesh, const Iso3& T) {
+  INHAND_CHECK(!committed_, "addMesh after commit");
+  RTCGeometry geom = rtcNewGeometry(device(), RTC_GEOMETRY_TYPE_TRIANGLE);
+  auto* v = static_cast<float*>(rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0,
+                                                        RTC_FORMAT_FLOAT3, 3 * sizeof(float),
+                                                        mesh.vertices.size()));
+  for (size_t i = 0; i < mesh.vertices.size(); ++i) {
+    Vec3f p = (T * mesh.vertices[i].cast<double>()).cast<float>();
+    v[3 * i] = p.x();
+    v[3 * i + 1] = p.y();
+    v[3 * i + 2] = p.z();
+  }
+  auto* idx = static_cast<unsigned*>(rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_INDEX, 0,
+                                                             RTC_FORMAT_UINT3, 3 * sizeof(unsigned),
+                                                             mesh.triangles.size()));
+  const bool flip = T.linear().determinant() < 0;
+  for (size_t t = 0; t < mesh.triangles.size(); ++t) {
+    const Tri& f = mesh.triangles[t];
+    idx[3 * t] = unsigned(f[0]);
+    idx[3 * t + 1] = unsigned(flip ? f[2] : f[1]);
+    idx[3 * t + 2] = unsigned(flip ? f[1] : f[2]);
+  }
+  rtcSetGeometryMask(geom, kAllMask);
+  rtcCommitGeometry(geom);
+  unsigned id = rtcAttachGeometry(scene_, geom);
+  rtcReleaseGeometry(geom);
+  INHAND_CHECK(int(id) == geometryCount_, "unexpected Embree geometry id");
+  return geometryCount_++;
+}
+
+void RayScene::commit() {
+  rtcSetSceneBuildQuality(scene_, RTC_BUILD_QUALITY_MEDIUM);
+  rtcCommitScene(scene_);
+  committed_ = true;
+}
+
+namespace {
+constexpr size_t kPacket = 16;
+
+void loadPacket(const Ray* rays, size_t n, RTCRay16& r, int* valid) {
+  for (size_t k = 0; k < kPacket; ++k) {
+    const Ray& ray = rays[k < n ? k : 0];
+    valid[k] = k < n ? -1 : 0;
+    r.org_x[k] = ray.origin.x();
+    r.org_y[k] = ray.origin.y();
+    r.org_z[k] = ray.origin.z();
+    r.dir_x[k] = ray.dir.x();
+    r.dir_y[k] = ray.dir.y();
+    r.dir_z[k] = ray.dir.z();
+    r.tnear[k] = ray.tnear;
+    r.tfar[k] = ray.tfar;
+    r.time[k] = 0.f;
+    r.mask[k] = kAllMask;
+    r.id[k] = unsigned(k);
+    r.flags[k] = 0;
+  }
+}
+}  // namespace
+
+void RayScene::intersect(const Ray* rays, Hit* hits, size_t count) const {
+  INHAND_CHECK(committed_, "intersect before commit");
+  const int packets = int((count + kPacket - 1) / kPacket);
+  parallelFor(
+      0, packets,
+      [&](int p) {
+        size_t first = size_t(p) * kPacket;
+        size_t n = std::min(kPacket, count - first);
+        alignas(64) RTCRayHit16 rh;
+        alignas(64) int valid[kPacket];
+        loadPacket(rays + first, n, rh.ray, valid);
+        for (size_t k = 0; k < kPacket; ++k) {
+          rh.hit.geomID[k] = RTC_INVALID_GEOMETRY_ID;
+          rh.hit.instID[0][k] = RTC_INVALID_GEOMETRY_ID;
+        }
+        RTCIntersectContext ctx;
+        rtcInitIntersectContext(&ctx);
+        ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
+        rtcIntersect16(valid, scene_, &ctx, &rh);
+        for (size_t k = 0; k < n; ++k) {
+          Hit& h = hits[first + k];
+          if (rh.hit.geomID[k] == RTC_INVALID_GEOMETRY_ID) {
+            h = Hit{};
+            continue;
+          }
+          h.t = rh.ray.tfar[k];
+          h.geometry = int(rh.hit.geomID[k]);
+          h.triangle = int(rh.hit.primID[k]);
+          h.u = rh.hit.u[k];
+          h.v = rh.hit.v[k];
+          h.normal = Vec3f(rh.hit.Ng_x[k], rh.hit.Ng_y[k], rh.hit.Ng_z[k]);
+        }
+      },
+      8);
+}
+
+void RayScene::occluded(const Ray* rays, uint8_t* blocked, size_t count) const {
+  INHAND_CHECK(committed_, "occluded before commit");
+  const int packets = int((count + kPacket - 1) / kPacket);
+  parallelFor(
+      0, packets,
+      [&](int p) {
+        size_t first = size_t(p) * kPacket;
+        size_t n = std::min(kPacket, count - first);
+        alignas(64) RTCRay16 r;
+        alignas(64) int valid[kPacket];
+        loadPacket(rays + first, n, r, valid);
+        RTCIntersectContext ctx;
+        rtcInitIntersectContext(&ctx);
+        rtcOccluded16(valid, scene_, &ctx, &r);
+        // Embree sets tfar to −inf for occluded rays.
+        for (size_t k = 0; k < n; ++k) blocked[first + k] = r.tfar[k] < 0.f ? 1 : 0;
+      },
+      8);
+}
+
+Hit RayScene::intersectOne(const Ray& ray) const {
+  INHAND_CHECK(committed_, "intersect before commit");
+  RTCRayHit rh;
+  rh.ray.org_x = ray.origin.x();
+  rh.ray.org_y = ray.origin.y();
+  rh.ray.org_z = ray.origin.z();
+  rh.ray.dir_x = ray.dir.x();
+  rh.ray.dir_y = ray.dir.y();
+  rh.ray.dir_z = ray.dir.z();
+  rh.ray.tnear = ray.tnear;
+  rh.ray.tfar = ray.tfar;
+  rh.ray.time = 0.f;
+  rh.ray.mask = kAllMask;
+  rh.ray.id = 0;
+  rh.ray.flags = 0;
+  rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+  rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+  RTCIntersectContext ctx;
+  rtcInitIntersectContext(&ctx);
+  rtcIntersect1(scene_, &ctx, &rh);
+  Hit h;
+  if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) return h;
+  h.t = rh.ray.tfar;
+  h.geometry = int(rh.hit.geomID);
+  h.triangle = int(rh.hit.primID);
+  h.u = rh.hit.u;
+  h.v = rh.hit.v;
+  h.normal = Vec3f(rh.hit.Ng_x, rh.hit.Ng_y, rh.hit.Ng_z);
+  return h;
+}
+
+}  // namespace inhand

@@ -1,0 +1,128 @@
+#include "inhand/geometry/triangle_mesh.h"
+
+#include <algorithm>
+#include <cmath>
+#include <unordered_map>
+
+namespace inhand {
+
+Aabb TriangleMesh::bounds() const {
+  Aabb box;
+  for (const Vec3f& v : vertices) box.extend(v.cast<double>());
+  return box;
+}
+
+double TriangleMesh::triangleArea(int t) const {
+  const Tri& f = triangles[t];
+  Vec3 a = vertices[f[0]].cast<double>(), b = vertices[f[1]].cast<double>(),
+       c = vertices[f[2]].cast<double>();
+  return 0.5 * (b - a).cross(c - a).norm();
+}
+
+double TriangleMesh::area() const {
+  double sum = 0;
+  for (int t = 0; t < static_cast<int>(triangles.size()); ++t) sum += triangleArea(t);
+  return sum;
+}
+
+double TriangleMesh::signedVolume() const {
+  double sum = 0;
+  for (const Tri& f : triangles) {
+    Vec3 a = vertices[f[0]].cast<double>(), b = vertices[f[1]].cast<double>(),
+         c = vertices[f[2]].cast<double>();
+    sum += a.dot(b.cross(c));
+  }
+  return sum / 6.0;
+}
+
+Vec3 TriangleMesh::faceNormal(int t) const {
+  const Tri& f = triangles[t];
+  Vec3 a = vertices[f[0]].cast<double>(), b = vertices[f[1]].cast<double>(),
+       c = vertices[f[2]].cast<double>();
+  Vec3 n = (b - a).cross(c - a);
+  double len = n.norm();
+  return len > 0 ? Vec3(n / len) : Vec3::Zero();
+}
+
+void TriangleMesh::append(const TriangleMesh& other) {
+  int base = static_cast<int>(vertices.size());
+  vertices.insert(vertices.end(), other.vertices.begin(), other.vertices.end());
+  for (const Tri& f : other.triangles) triangles.push_back(f + Tri::Constant(base));
+}
+
+namespace {
+uint64_t edgeKey(int a, int b) { return (uint64_t(uint32_t(a)) << 32) | uint32_t(b); }
+}  // namespace
+
+bool TriangleMesh::isClosed() const {
+  if (triangles.empty()) return false;
+  std::unordered_map<uint64_t, int> directed;
+  directed.reserve(triangles.size() * 3);
+  for (const Tri& f : triangles)
+    for (int k = 0; k < 3; ++k) ++directed[edgeKey(f[k], f[(k + 1) % 3])];
+  for (const auto& [key, count] : directed) {
+    if (count != 1) return false;
+    int a = int(key >> 32), b = int(key & 0xffffffffu);
+    auto it = directed.find(edgeKey(b, a));
+    if (it == directed.end() || it->second != 1) return false;
+  }
+  return true;
+}
+
+int TriangleMesh::boundaryEdgeCount() const {
+  std::unordered_map<uint64_t, int> undirected;
+  for (const Tri& f : triangles)
+    for (int k = 0; k < 3; ++k) {
+      int a = f[k], b = f[(k + 1) % 3];
+      ++undirected[edgeKey(std::min(a, b), std::max(a, b))];
+    }
+  int n = 0;
+  for (const auto& kv : undirected) n += kv.second == 1;
+  return n;
+}
+
+TriangleMesh transformed(const TriangleMesh& mesh, const Iso3& T) {
+  TriangleMesh out = mesh;
+  for (Vec3f& v : out.vertices) v = (T * v.cast<double>()).cast<float>();
+  if (T.linear().determinant() < 0)
+    for (Tri& f : out.triangles) std::swap(f[1], f[2]);
+  return out;
+}
+
+TriangleMesh welded(const TriangleMesh& mesh, double tolerance_m) {
+  struct KeyHash {
+    size_t operator()(const std::array<int64_t, 3>& k) const {
+      return size_t(k[0] * 73856093 ^ k[1] * 19349663 ^ k[2] * 83492791);
+    }
+  };
+  std::unordered_map<std::array<int64_t, 3>, int, KeyHash> index;
+  index.reserve(mesh.vertices.size());
+  TriangleMesh out;
+  std::vector<int> remap(mesh.vertices.size());
+  for (size_t i = 0; i < mesh.vertices.size(); ++i) {
+    const Vec3f& v = mesh.vertices[i];
+    std::array<int64_t, 3> key{std::llround(v.x() / tolerance_m), std::llround(v.y() / tolerance_m),
+                               std::llround(v.z() / tolerance_m)};
+    auto [it, inserted] = index.emplace(key, static_cast<int>(out.vertices.size()));
+    if (inserted) out.vertices.push_back(v);
+    remap[i] = it->second;
+  }
+  for (const Tri& f : mesh.triangles) {
+    Tri g(remap[f[0]], remap[f[1]], remap[f[2]]);
+    if (g[0] != g[1] && g[1] != g[2] && g[0] != g[2]) out.triangles.push_back(g);
+  }
+  return out;
+}
+
+std::string validateMesh(const TriangleMesh& mesh) {
+  if (mesh.triangles.empty()) return "has no triangles";
+  for (const Vec3f& v : mesh.vertices)
+    if (!v.allFinite()) return "has a vertex with a non-finite coordinate";
+  const int n = static_cast<int>(mesh.vertices.size());
+  for (const Tri& f : mesh.triangles)
+    for (int k = 0; k < 3; ++k)
+      if (f[k] < 0 || f[k] >= n) return "has a triangle with an out-of-range vertex index";
+  return {};
+}
+
+}  // namespace inhand

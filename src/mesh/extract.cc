@@ -1,0 +1,108 @@
+#include "inhand/mesh/extract.h"
+
+#include <cmath>
+
+#include "inhand/core/parallel.h"
+#include "inhand/geometry/contour.h"
+
+namespace inhand {
+
+std::string MeshOptions::validate() const {
+  if (!(hole_sigma_m > 0 && std::isfinite(hole_sigma_m))) return "hole_sigma_m must be > 0";
+  return {};
+}
+
+double gaussianEntropy(double variance) { return 0.5 * std::log(2.0 * M_PI * M_E * variance); }
+
+double ObjectModel::meanEntropy() const {
+  if (variance.empty()) return 0.0;
+  double sum = 0;
+  for (float v : variance) sum += gaussianEntropy(v);
+  return sum / double(variance.size());
+}
+
+double ObjectModel::observedAreaFraction() const {
+  double total = 0, seen = 0;
+  for (int t = 0; t < int(mesh.triangles.size()); ++t) {
+    double a = mesh.triangleArea(t);
+    total += a;
+    const Tri& f = mesh.triangles[t];
+    if (observed[f[0]] && observed[f[1]] && observed[f[2]]) seen += a;
+  }
+  return total > 0 ? seen / total : 0.0;
+}
+
+double ObjectModel::holeArea() const {
+  double hole = 0;
+  for (int t = 0; t < int(mesh.triangles.size()); ++t) {
+    const Tri& f = mesh.triangles[t];
+    if (!(observed[f[0]] && observed[f[1]] && observed[f[2]])) hole += mesh.triangleArea(t);
+  }
+  return hole;
+}
+
+ObjectModel extractModel(const TsdfVolume& volume, const MeshOptions& options) {
+  const Vec3i d = volume.dims();
+  const float mu = float(volume.truncation());
+  // Padded grid: one extra sample on each side, treated as empty.
+  ScalarGrid grid;
+  grid.dims = d + Vec3i::Constant(2);
+  grid.origin = volume.origin() - Vec3::Constant(volume.voxelSize());
+  grid.spacing = volume.voxelSize();
+  grid.values.assign(size_t(grid.dims.prod()), mu);
+  std::vector<uint32_t> voxelOf(grid.values.size(), UINT32_MAX);  // padded sample → voxel index
+  parallelFor(0, d.z(), [&](int z) {
+    for (int y = 0; y < d.y(); ++y)
+      for (int x = 0; x < d.x(); ++x) {
+        size_t i = volume.index(x, y, z);
+        size_t g = grid.index(x + 1, y + 1, z + 1);
+        voxelOf[g] = uint32_t(i);
+        switch (volume.state(i)) {
+          case VoxelState::kObserved: {
+            float s = volume.distance(i);
+            grid.values[g] = s == 0.f ? 1e-7f : s;  // keep exact zeros off the surface's corners
+            break;
+          }
+          case VoxelState::kEmpty: grid.values[g] = mu; break;
+          case VoxelState::kUnknown: grid.values[g] = -mu; break;
+        }
+      }
+  });
+  ContourResult c = contour(grid);
+  ObjectModel model;
+  model.mesh = std::move(c.mesh);
+  const size_t nv = model.mesh.vertices.size();
+  model.variance.resize(nv);
+  model.observed.resize(nv);
+  const float holeVar = float(options.hole_sigma_m * options.hole_sigma_m);
+  parallelFor(
+      0, int(nv),
+      [&](int k) {
+        const EdgeVertex& e = c.sources[k];
+        uint32_t va = voxelOf[e.a], vb = voxelOf[e.b];
+        auto stateOf = [&](uint32_t v) {
+          return v == UINT32_MAX ? VoxelState::kEmpty : volume.state(v);
+        };
+        VoxelState sa = stateOf(va), sb = stateOf(vb);
+        if (sa == VoxelState::kUnknown || sb == VoxelState::kUnknown) {
+          model.variance[k] = holeVar;
+          model.observed[k] = 0;
+          return;
+        }
+        float var;
+        if (sa == VoxelState::kObserved && sb == VoxelState::kObserved)
+          var = (1 - e.t) * volume.variance(va) + e.t * volume.variance(vb);
+        else if (sa == VoxelState::kObserved)
+          var = volume.variance(va);
+        else if (sb == VoxelState::kObserved)
+          var = volume.variance(vb);
+        else
+          var = holeVar;  // empty next to empty cannot cross zero; kept for safety
+        model.variance[k] = std::min(var, holeVar);
+        model.observed[k] = var < holeVar;
+      },
+      4096);
+  return model;
+}
+
+}  // namespace inhand

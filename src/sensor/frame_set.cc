@@ -1,0 +1,79 @@
+#include "inhand/sensor/frame_set.h"
+
+#include "inhand/core/error.h"
+#include "inhand/core/file_util.h"
+#include "inhand/core/json_util.h"
+#include "inhand/core/pose.h"
+
+namespace inhand {
+
+namespace fs = std::filesystem;
+
+FrameSet readFrameSet(const fs::path& dir) {
+  std::error_code ec;
+  if (!fs::is_directory(dir, ec)) throw Error(dir.string() + ": no such frames directory");
+  const fs::path path = dir / "frames.json";
+  const std::string name = path.string();
+  Json j = readJsonFile(path);
+  if (!j.is_object()) throw Error(name + ": expected a JSON object at the top level");
+  FrameSet set;
+  if (j.contains("depth_scale_m")) {
+    set.depth_scale_m = requireNumber(j, "depth_scale_m", name);
+    if (!(set.depth_scale_m > 0)) throw Error(name + ": depth_scale_m must be > 0");
+  }
+  const Json& K = requireField(j, "intrinsics", name);
+  const std::string kw = name + ": intrinsics";
+  set.intrinsics.width = requireInt(K, "width", kw);
+  set.intrinsics.height = requireInt(K, "height", kw);
+  set.intrinsics.fx = requireNumber(K, "fx", kw);
+  set.intrinsics.fy = requireNumber(K, "fy", kw);
+  set.intrinsics.cx = requireNumber(K, "cx", kw);
+  set.intrinsics.cy = requireNumber(K, "cy", kw);
+  std::string problem = set.intrinsics.validate();
+  if (!problem.empty()) throw Error(name + ": intrinsics." + problem);
+  const Json& frames = requireField(j, "frames", name);
+  if (!frames.is_array()) throw Error(name + ": frames: expected an array");
+  if (frames.empty()) throw Error(name + ": frames: the array is empty");
+  for (size_t i = 0; i < frames.size(); ++i) {
+    const std::string where = name + ": frames[" + std::to_string(i) + "]";
+    FrameRecord rec;
+    rec.file = requireString(frames[i], "file", where);
+    if (rec.file.empty()) throw Error(where + ".file: empty file name");
+    if (!fs::is_regular_file(dir / rec.file, ec))
+      throw Error(where + ".file: " + (dir / rec.file).string() + " does not exist");
+    const Json& T = requireField(frames[i], "T_O_C", where);
+    if (!T.is_array() || T.size() != 16)
+      throw Error(where + ".T_O_C: expected an array of 16 numbers (row-major 4x4)");
+    std::array<double, 16> m{};
+    for (size_t k = 0; k < 16; ++k) {
+      if (!T[k].is_number()) throw Error(where + ".T_O_C[" + std::to_string(k) + "]: not a number");
+      m[k] = T[k].get<double>();
+    }
+    std::string why;
+    auto pose = poseFromRowMajor(m, &why);
+    if (!pose) throw Error(where + ".T_O_C: not a rigid transform: " + why);
+    rec.T_O_C = *pose;
+    set.frames.push_back(rec);
+  }
+  return set;
+}
+
+DepthImage loadFrameDepth(const fs::path& dir, const FrameSet& set, size_t i) {
+  return readDepthPng(dir / set.frames.at(i).file, set.depth_scale_m, set.intrinsics.width,
+                      set.intrinsics.height);
+}
+
+void writeFrameSet(const fs::path& dir, const FrameSet& set) {
+  Json j;
+  j["depth_scale_m"] = set.depth_scale_m;
+  j["intrinsics"] = {{"width", set.intrinsics.width}, {"height", set.intrinsics.height},
+                     {"fx", set.intrinsics.fx},       {"fy", set.intrinsics.fy},
+                     {"cx", set.intrinsics.cx},       {"cy", set.intrinsics.cy}};
+  Json frames = Json::array();
+  for (const FrameRecord& f : set.frames)
+    frames.push_back({{"file", f.file}, {"T_O_C", poseToRowMajor(f.T_O_C)}});
+  j["frames"] = frames;
+  writeTextAtomically(dir / "frames.json", j.dump(2) + "\n");
+}
+
+}  // namespace inhand

@@ -1,0 +1,148 @@
+#include "inhand/sensor/render.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "inhand/core/parallel.h"
+#include "inhand/core/random.h"
+
+namespace inhand {
+
+namespace {
+
+constexpr double kSurfaceOffset_m = 2e-4;  // shadow rays start this far off the surface
+
+// Pixels are cast in 4×4 tiles so each 16-ray packet is coherent.
+std::vector<int> tileOrder(int w, int h) {
+  std::vector<int> order;
+  order.reserve(size_t(w) * h);
+  for (int ty = 0; ty < h; ty += 4)
+    for (int tx = 0; tx < w; tx += 4)
+      for (int y = ty; y < std::min(ty + 4, h); ++y)
+        for (int x = tx; x < std::min(tx + 4, w); ++x) order.push_back(y * w + x);
+  return order;
+}
+
+Ray pixelRay(const Iso3& T_S_C, const CameraIntrinsics& K, double u, double v) {
+  Ray r;
+  r.origin = T_S_C.translation().cast<float>();
+  r.dir = (T_S_C.linear() * K.rayZ1(u, v)).cast<float>();  // camera z = 1, so t is the depth z
+  return r;
+}
+
+// Angle (rad) between a surface normal and a direction, two-sided.
+double incidence(const Vec3& normal, const Vec3& dir) {
+  double nn = normal.norm(), dn = dir.norm();
+  if (nn == 0 || dn == 0) return M_PI / 2;
+  return std::acos(std::min(1.0, std::abs(normal.dot(dir)) / (nn * dn)));
+}
+
+// The geometric part of whether the sensor returns a depth for this hit: in range, not too oblique
+// for the camera or the projector. Returns the shadow ray towards the projector when it does.
+bool acceptHit(const Hit& hit, const Ray& ray, const Vec3& projector_S,
+               const DepthCameraOptions& cam, Ray* shadow) {
+  if (!hit.valid()) return false;
+  double z = hit.t;
+  if (z < cam.min_range_m || z > cam.max_range_m) return false;
+  Vec3 n = hit.normal.cast<double>();
+  if (incidence(n, ray.dir.cast<double>()) > cam.max_incidence_deg * M_PI / 180) return false;
+  Vec3 x = (ray.origin + hit.t * ray.dir).cast<double>();
+  Vec3 toProjector = projector_S - x;
+  if (incidence(n, toProjector) > cam.max_projector_incidence_deg * M_PI / 180) return false;
+  double dist = toProjector.norm();
+  shadow->origin = x.cast<float>();
+  shadow->dir = (toProjector / dist).cast<float>();
+  shadow->tnear = float(kSurfaceOffset_m);
+  shadow->tfar = float(dist - kSurfaceOffset_m);
+  return true;
+}
+
+}  // namespace
+
+DepthImage renderDepth(const RayScene& scene, const Iso3& T_S_C, const DepthCameraOptions& camera,
+                       const NoiseModelOptions& noise, const RenderOptions& options,
+                       std::vector<int>* geometry_out) {
+  const CameraIntrinsics& K = camera.intrinsics;
+  const int w = K.width, h = K.height, n = w * h;
+  const std::vector<int> order = tileOrder(w, h);
+  const Vec3 projector_S = T_S_C * camera.projector_C;
+  std::vector<Ray> rays(n);
+  std::vector<Hit> hits(n);
+  parallelFor(
+      0, n, [&](int i) { rays[i] = pixelRay(T_S_C, K, order[i] % w, order[i] / w); }, 4096);
+  scene.intersect(rays.data(), hits.data(), n);
+
+  if (options.noise) {
+    // Lateral noise: the return comes from a point displaced by N(0, σ_L(θ)) pixels, so re-cast
+    // through the displaced sub-pixel position (this also makes ragged, mixed depth edges).
+    parallelFor(
+        0, n,
+        [&](int i) {
+          if (!hits[i].valid()) return;
+          int p = order[i];
+          double theta = incidence(hits[i].normal.cast<double>(), rays[i].dir.cast<double>());
+          double s = lateralSigmaPx(noise, theta);
+          double du = s * gaussianAt(options.seed, 3 * uint64_t(p));
+          double dv = s * gaussianAt(options.seed, 3 * uint64_t(p) + 1);
+          rays[i] = pixelRay(T_S_C, K, p % w + du, p / w + dv);
+        },
+        4096);
+    scene.intersect(rays.data(), hits.data(), n);
+  }
+
+  std::vector<Ray> shadows(n);
+  std::vector<uint8_t> ok(n, 0), blocked(n, 0);
+  parallelFor(
+      0, n, [&](int i) { ok[i] = acceptHit(hits[i], rays[i], projector_S, camera, &shadows[i]); },
+      4096);
+  // Compact the shadow rays so packets stay full.
+  std::vector<int> shadowIndex;
+  shadowIndex.reserve(n);
+  for (int i = 0; i < n; ++i)
+    if (ok[i]) shadowIndex.push_back(i);
+  std::vector<Ray> compact(shadowIndex.size());
+  for (size_t k = 0; k < shadowIndex.size(); ++k) compact[k] = shadows[shadowIndex[k]];
+  std::vector<uint8_t> compactBlocked(shadowIndex.size());
+  scene.occluded(compact.data(), compactBlocked.data(), compact.size());
+  for (size_t k = 0; k < shadowIndex.size(); ++k) blocked[shadowIndex[k]] = compactBlocked[k];
+
+  DepthImage out(w, h);
+  if (geometry_out) geometry_out->assign(n, -1);
+  const double f = K.fx;
+  parallelFor(
+      0, n,
+      [&](int i) {
+        if (!ok[i] || blocked[i]) return;
+        int p = order[i];
+        double z = hits[i].t;
+        if (options.noise) {
+          double theta = incidence(hits[i].normal.cast<double>(), rays[i].dir.cast<double>());
+          z += axialSigma(noise, z, theta) * gaussianAt(options.seed, 3 * uint64_t(p) + 2);
+          if (noise.quantize) z = quantizeDepth(z, f, camera.baseline_m(), noise.disparity_step_px);
+          if (z < camera.min_range_m || z > camera.max_range_m) return;
+        }
+        out.depth_m[p] = float(z);
+        if (geometry_out) (*geometry_out)[p] = hits[i].geometry;
+      },
+      4096);
+  return out;
+}
+
+DepthImage renderDepthReference(const RayScene& scene, const Iso3& T_S_C,
+                                const DepthCameraOptions& camera) {
+  const CameraIntrinsics& K = camera.intrinsics;
+  const Vec3 projector_S = T_S_C * camera.projector_C;
+  DepthImage out(K.width, K.height);
+  for (int v = 0; v < K.height; ++v)
+    for (int u = 0; u < K.width; ++u) {
+      Ray ray = pixelRay(T_S_C, K, u, v);
+      Hit hit = scene.intersectOne(ray);
+      Ray shadow;
+      if (!acceptHit(hit, ray, projector_S, camera, &shadow)) continue;
+      if (scene.intersectOne(shadow).valid()) continue;  // projector cannot see the point
+      out.at(u, v) = hit.t;
+    }
+  return out;
+}
+
+}  // namespace inhand

@@ -1,0 +1,182 @@
+#include "inhand/volume/integrate.h"
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+
+#include "inhand/core/error.h"
+#include "inhand/core/parallel.h"
+
+namespace inhand {
+
+std::vector<float> measurementSigma(const DepthImage& depth, const CameraIntrinsics& K,
+                                    const NoiseModelOptions& noise) {
+  const int w = depth.width, h = depth.height;
+  std::vector<float> sigma(size_t(w) * h, 0.f);
+  auto point = [&](int u, int v) { return Vec3(K.rayZ1(u, v) * double(depth.at(u, v))); };
+  parallelFor(0, h, [&](int v) {
+    for (int u = 0; u < w; ++u) {
+      double D = depth.at(u, v);
+      if (!(D > 0)) continue;
+      const Vec3 P = point(u, v);
+      bool edge = false;
+      // Tangent along each image axis from the neighbours that lie on the same surface.
+      auto tangent = [&](int du, int dv) -> Vec3 {
+        Vec3 t = Vec3::Zero();
+        int used = 0;
+        for (int s : {-1, 1}) {
+          int uu = u + s * du, vv = v + s * dv;
+          if (uu < 0 || vv < 0 || uu >= w || vv >= h) continue;
+          double Dn = depth.at(uu, vv);
+          if (!(Dn > 0) || std::abs(Dn - D) > noise.discontinuity_jump_m) {
+            edge = true;
+            continue;
+          }
+          t += s * (point(uu, vv) - P);
+          ++used;
+        }
+        return used ? t : Vec3(Vec3::Zero());
+      };
+      Vec3 tu = tangent(1, 0), tv = tangent(0, 1);
+      Vec3 n = tu.cross(tv);
+      double theta = 0.0;
+      if (n.norm() > 0) theta = std::acos(std::min(1.0, std::abs(n.normalized().dot(P.normalized()))));
+      double s = axialSigma(noise, D, theta);
+      if (edge) s *= noise.discontinuity_factor;
+      sigma[size_t(v) * w + u] = float(s);
+    }
+  });
+  return sigma;
+}
+
+namespace {
+
+void checkInputs(const DepthImage& depth, const CameraIntrinsics& K,
+                 const std::vector<float>& sigma, const std::vector<uint8_t>* carve) {
+  INHAND_CHECK(depth.width == K.width && depth.height == K.height, "depth size != intrinsics");
+  INHAND_CHECK(sigma.size() == depth.depth_m.size(), "sigma size != depth size");
+  INHAND_CHECK(!carve || carve->size() == depth.depth_m.size(), "carve mask size != depth size");
+}
+
+// The per-voxel update rule shared by both kernels. Returns whether the voxel changed.
+inline bool updateVoxel(float d, float mu, float weight, bool carveOnly, float* sumWD, float* sumW,
+                        uint8_t* state) {
+  if (d > mu) {
+    if (*state == uint8_t(VoxelState::kUnknown)) {
+      *state = uint8_t(VoxelState::kEmpty);
+      return true;
+    }
+    return false;
+  }
+  if (d < -mu || carveOnly) return false;
+  *sumWD += weight * d;
+  *sumW += weight;
+  *state = uint8_t(VoxelState::kObserved);
+  return true;
+}
+
+// Interval of x (real) where a + b·x >= 0, intersected into [lo, hi].
+inline void clipLinear(double a, double b, double* lo, double* hi) {
+  if (b > 0) *lo = std::max(*lo, -a / b);
+  else if (b < 0) *hi = std::min(*hi, -a / b);
+  else if (a < 0) *hi = -1;  // never satisfied
+}
+
+}  // namespace
+
+IntegrationStats integrate(const DepthImage& depth, const Iso3& T_O_C, const CameraIntrinsics& K,
+                           const std::vector<float>& sigma_m, TsdfVolume* volume,
+                           const std::vector<uint8_t>* carve_only) {
+  checkInputs(depth, K, sigma_m, carve_only);
+  const int w = K.width, h = K.height;
+  // Weight image w = 1/σ² (0 where no depth), so the kernel reads one float per voxel.
+  std::vector<float> weight(sigma_m.size());
+  for (size_t i = 0; i < weight.size(); ++i)
+    weight[i] = sigma_m[i] > 0 ? 1.f / (sigma_m[i] * sigma_m[i]) : 0.f;
+  const Iso3 T_C_O = T_O_C.inverse();
+  const Mat3 R = T_C_O.linear();
+  const Vec3 step = R.col(0) * volume->voxelSize();  // camera-frame step along voxel x
+  const Vec3i dims = volume->dims();
+  const float mu = float(volume->truncation());
+  const float fx = float(K.fx), fy = float(K.fy), cx = float(K.cx), cy = float(K.cy);
+  const float* D = depth.depth_m.data();
+  const uint8_t* carve = carve_only ? carve_only->data() : nullptr;
+  float* sumWD = volume->sumWD();
+  float* sumW = volume->sumW();
+  uint8_t* state = volume->states();
+  std::atomic<int64_t> visited{0}, updated{0};
+  const int rows = dims.y() * dims.z();
+  tbb::parallel_for(tbb::blocked_range<int>(0, rows, 64), [&](const tbb::blocked_range<int>& r) {
+    int64_t myVisited = 0, myUpdated = 0;
+    for (int row = r.begin(); row != r.end(); ++row) {
+      const int y = row % dims.y(), z = row / dims.y();
+      const Vec3 a = T_C_O * volume->point(0, y, z);  // camera coords of voxel x = 0
+      // Clip x to where the voxel is in front of the camera and projects inside the image:
+      // z > 0 and −0.5 ≤ fx·X/Z + cx < w − 0.5 (same for v) are linear in x once multiplied by Z.
+      double lo = 0, hi = dims.x() - 1;
+      clipLinear(a.z() - 1e-6, step.z(), &lo, &hi);
+      clipLinear(K.fx * a.x() + (K.cx + 0.5) * a.z(), K.fx * step.x() + (K.cx + 0.5) * step.z(), &lo, &hi);
+      clipLinear(-K.fx * a.x() + (w - 0.5 - K.cx) * a.z(), -K.fx * step.x() + (w - 0.5 - K.cx) * step.z(), &lo, &hi);
+      clipLinear(K.fy * a.y() + (K.cy + 0.5) * a.z(), K.fy * step.y() + (K.cy + 0.5) * step.z(), &lo, &hi);
+      clipLinear(-K.fy * a.y() + (h - 0.5 - K.cy) * a.z(), -K.fy * step.y() + (h - 0.5 - K.cy) * step.z(), &lo, &hi);
+      if (lo > hi) continue;
+      const int x0 = std::max(0, int(std::floor(lo)) - 1), x1 = std::min(dims.x() - 1, int(std::ceil(hi)) + 1);
+      const float ax = float(a.x()), ay = float(a.y()), az = float(a.z());
+      const float sx = float(step.x()), sy = float(step.y()), sz = float(step.z());
+      const size_t base = volume->index(0, y, z);
+      for (int x = x0; x <= x1; ++x) {
+        const float Z = az + float(x) * sz;
+        if (Z <= 0.f) continue;
+        const float inv = 1.f / Z;
+        const int u = int(std::floor(fx * (ax + float(x) * sx) * inv + cx + 0.5f));
+        const int v = int(std::floor(fy * (ay + float(x) * sy) * inv + cy + 0.5f));
+        if (unsigned(u) >= unsigned(w) || unsigned(v) >= unsigned(h)) continue;
+        const int p = v * w + u;
+        const float Dm = D[p];
+        if (!(Dm > 0.f)) continue;
+        const float d = Dm - Z;
+        if (d < -mu) continue;
+        ++myVisited;
+        const size_t i = base + size_t(x);
+        myUpdated += updateVoxel(d, mu, weight[p], carve && carve[p], &sumWD[i], &sumW[i], &state[i]);
+      }
+    }
+    visited += myVisited;
+    updated += myUpdated;
+  });
+  return {visited.load(), updated.load()};
+}
+
+IntegrationStats integrateReference(const DepthImage& depth, const Iso3& T_O_C,
+                                    const CameraIntrinsics& K, const std::vector<float>& sigma_m,
+                                    TsdfVolume* volume, const std::vector<uint8_t>* carve_only) {
+  checkInputs(depth, K, sigma_m, carve_only);
+  const Iso3 T_C_O = T_O_C.inverse();
+  const Vec3i dims = volume->dims();
+  const float mu = float(volume->truncation());
+  IntegrationStats stats;
+  for (int z = 0; z < dims.z(); ++z)
+    for (int y = 0; y < dims.y(); ++y)
+      for (int x = 0; x < dims.x(); ++x) {
+        Vec3 p_C = T_C_O * volume->point(x, y, z);
+        if (p_C.z() <= 0) continue;
+        Vec2 uv = K.project(p_C);
+        int u = int(std::floor(uv.x() + 0.5)), v = int(std::floor(uv.y() + 0.5));
+        if (u < 0 || v < 0 || u >= K.width || v >= K.height) continue;
+        float Dm = depth.at(u, v);
+        if (!(Dm > 0)) continue;
+        float d = float(Dm - p_C.z());
+        if (d < -mu) continue;
+        ++stats.visited;
+        size_t i = volume->index(x, y, z);
+        size_t p = size_t(v) * K.width + u;
+        float s = sigma_m[p];
+        float wgt = s > 0 ? 1.f / (s * s) : 0.f;
+        bool carve = carve_only && (*carve_only)[p];
+        stats.updated += updateVoxel(d, mu, wgt, carve, &volume->sumWD()[i], &volume->sumW()[i],
+                                     &volume->states()[i]);
+      }
+  return stats;
+}
+
+}  // namespace inhand
