@@ -16,6 +16,7 @@
 #include "inhand/geometry/mesh_io.h"
 #include "inhand/geometry/ray_scene.h"
 #include "inhand/mesh/extract.h"
+#include "inhand/report/snapshot.h"
 #include "inhand/sensor/frame_set.h"
 #include "inhand/sensor/render.h"
 #include "inhand/volume/integrate.h"
@@ -214,6 +215,31 @@ int runFuse(const FuseArgs& args) {
               set.frames.size(), outPath.c_str(), model.mesh.vertices.size(),
               model.mesh.triangles.size(), 100 * model.observedAreaFraction(), model.meanEntropy(),
               secondsSince(t0), summaryPath.c_str());
+  return 0;
+}
+
+int runSnapshot(const SnapshotArgs& args) {
+  if (args.size_px < 16 || args.size_px > 4096) throw Error("--size must be in 16..4096");
+  fs::path in(args.model);
+  TriangleMesh mesh;
+  std::vector<std::array<uint8_t, 3>> colors;
+  if (in.extension() == ".ply") {
+    PlyData ply = readPly(in);
+    mesh = std::move(ply.mesh);
+    auto& p = ply.vertexProperties;
+    if (p.count("red") && p.count("green") && p.count("blue")) {
+      for (size_t i = 0; i < mesh.vertices.size(); ++i)
+        colors.push_back({uint8_t(p["red"][i]), uint8_t(p["green"][i]), uint8_t(p["blue"][i])});
+    } else if (p.count("variance")) {
+      for (float v : p["variance"]) colors.push_back(confidenceColor(v));
+    }
+  } else {
+    mesh = loadObject(args.model);
+  }
+  SnapshotOptions so;
+  so.tile_px = args.size_px;
+  writeRgbPng(args.out, renderSnapshot(mesh, colors, so));
+  std::printf("snapshot: %s -> %s\n", args.model.c_str(), args.out.c_str());
   return 0;
 }
 

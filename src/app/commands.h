@@ -28,6 +28,13 @@ struct FuseArgs {
   double hole_sigma_m = 0.05;  // σ of never-observed surface
 };
 
+struct SnapshotArgs {
+  std::string model;  // PLY (colours per vertex used when present) or any mesh file
+  std::string out;    // PNG
+  int size_px = 400;  // per view
+};
+
+int runSnapshot(const SnapshotArgs& args);
 int runRender(const RenderArgs& args);
 int runFuse(const FuseArgs& args);
 

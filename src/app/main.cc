@@ -40,12 +40,19 @@ int main(int argc, char** argv) {
   f->add_option("--hole-sigma", fuse.hole_sigma_m, "sigma of never-observed surface, m")
       ->capture_default_str();
 
+  inhand::app::SnapshotArgs snap;
+  auto* s = app.add_subcommand("snapshot", "render a model (PLY with colours or variance) to a PNG");
+  s->add_option("model", snap.model, "model .ply, mesh file or builtin:NAME")->required();
+  s->add_option("--out", snap.out, "output PNG")->required();
+  s->add_option("--size", snap.size_px, "pixels per view")->capture_default_str();
+
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
     return app.exit(e);
   }
   try {
+    if (*s) return inhand::app::runSnapshot(snap);
     if (*r) return inhand::app::runRender(render);
     if (*f) {
       if (!bounds.empty()) {

@@ -41,8 +41,55 @@ double ObjectModel::holeArea() const {
   return hole;
 }
 
+namespace {
+
+// Marks (1) the unknown voxels 6-connected through unknown voxels to an observed voxel.
+std::vector<uint8_t> unknownAttachedToObserved(const TsdfVolume& volume) {
+  const Vec3i d = volume.dims();
+  const size_t n = volume.voxelCount();
+  std::vector<uint8_t> keep(n, 0);
+  std::vector<size_t> stack;
+  const long step[3] = {1, d.x(), long(d.x()) * d.y()};
+  auto visitNeighbours = [&](size_t i, auto&& fn) {
+    int x = int(i % size_t(d.x())), y = int((i / size_t(d.x())) % size_t(d.y())),
+        z = int(i / (size_t(d.x()) * d.y()));
+    const int c[3] = {x, y, z};
+    for (int axis = 0; axis < 3; ++axis) {
+      if (c[axis] > 0) fn(i - size_t(step[axis]));
+      if (c[axis] + 1 < d[axis]) fn(i + size_t(step[axis]));
+    }
+  };
+  for (size_t i = 0; i < n; ++i) {
+    if (volume.state(i) != VoxelState::kObserved) continue;
+    visitNeighbours(i, [&](size_t j) {
+      if (volume.state(j) == VoxelState::kUnknown && !keep[j]) {
+        keep[j] = 1;
+        stack.push_back(j);
+      }
+    });
+  }
+  while (!stack.empty()) {
+    size_t i = stack.back();
+    stack.pop_back();
+    visitNeighbours(i, [&](size_t j) {
+      if (volume.state(j) == VoxelState::kUnknown && !keep[j]) {
+        keep[j] = 1;
+        stack.push_back(j);
+      }
+    });
+  }
+  return keep;
+}
+
+}  // namespace
+
 ObjectModel extractModel(const TsdfVolume& volume, const MeshOptions& options) {
   const Vec3i d = volume.dims();
+  std::vector<uint8_t> attached;
+  if (options.drop_floating_unknown) attached = unknownAttachedToObserved(volume);
+  auto isUnknown = [&](uint32_t v) {
+    return volume.state(v) == VoxelState::kUnknown && (attached.empty() || attached[v]);
+  };
   const float mu = float(volume.truncation());
   // Padded grid: one extra sample on each side, treated as empty.
   ScalarGrid grid;
@@ -57,7 +104,9 @@ ObjectModel extractModel(const TsdfVolume& volume, const MeshOptions& options) {
         size_t i = volume.index(x, y, z);
         size_t g = grid.index(x + 1, y + 1, z + 1);
         voxelOf[g] = uint32_t(i);
-        switch (volume.state(i)) {
+        VoxelState st = volume.state(i);
+        if (st == VoxelState::kUnknown && !isUnknown(uint32_t(i))) st = VoxelState::kEmpty;
+        switch (st) {
           case VoxelState::kObserved: {
             float s = volume.distance(i);
             grid.values[g] = s == 0.f ? 1e-7f : s;  // keep exact zeros off the surface's corners
@@ -81,7 +130,9 @@ ObjectModel extractModel(const TsdfVolume& volume, const MeshOptions& options) {
         const EdgeVertex& e = c.sources[k];
         uint32_t va = voxelOf[e.a], vb = voxelOf[e.b];
         auto stateOf = [&](uint32_t v) {
-          return v == UINT32_MAX ? VoxelState::kEmpty : volume.state(v);
+          if (v == UINT32_MAX) return VoxelState::kEmpty;
+          VoxelState st = volume.state(v);
+          return (st == VoxelState::kUnknown && !isUnknown(v)) ? VoxelState::kEmpty : st;
         };
         VoxelState sa = stateOf(va), sb = stateOf(vb);
         if (sa == VoxelState::kUnknown || sb == VoxelState::kUnknown) {

@@ -66,6 +66,13 @@ inline bool updateVoxel(float d, float mu, float weight, bool carveOnly, float* 
       *state = uint8_t(VoxelState::kEmpty);
       return true;
     }
+    if (*state == uint8_t(VoxelState::kObserved) && !carveOnly) {
+      // Seen through after having been in a band (a flying pixel, a mis-registered edge): add the
+      // truncated value +μ so free-space evidence pulls the distance back out of the surface.
+      *sumWD += weight * mu;
+      *sumW += weight;
+      return true;
+    }
     return false;
   }
   if (d < -mu || carveOnly) return false;

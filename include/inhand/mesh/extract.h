@@ -15,6 +15,10 @@ namespace inhand {
 
 struct MeshOptions {
   double hole_sigma_m = 0.05;  // σ assigned to hole-filling (empty/unknown boundary) vertices, m
+  // Treat unknown regions (6-connected) that touch no observed voxel as empty: pockets of free
+  // space that no ray happened to cross (e.g. seen only against no-return background) carry no
+  // evidence of a surface, and the held object is one connected body.
+  bool drop_floating_unknown = true;
   std::string validate() const;
 };
 

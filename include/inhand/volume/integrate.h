@@ -2,7 +2,9 @@
 // Fusing depth images into the TsdfVolume (paper §III-B). For each voxel, projected into the
 // image, with d = D − z (measured depth minus voxel depth along the optical axis; positive in
 // front of the surface) and band half-width μ:
-//   d > μ        the ray passed through: an unknown voxel becomes empty;
+//   d > μ        the ray passed through: an unknown voxel becomes empty; an observed voxel gets
+//                the truncated value +μ with weight w (KinectFusion-style), so free space seen
+//                later corrects flying pixels;
 //   |d| ≤ μ      Σw·d += w·d, Σw += w with w = 1/σ² of the pixel; the voxel becomes observed;
 //   d < −μ       behind the band: unchanged (stays unknown if never seen).
 // Pixels flagged carve-only (measurements of the robot's own hand, §IV) only mark empty space.
