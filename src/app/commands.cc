@@ -14,6 +14,7 @@
 #include "inhand/core/random.h"
 #include "inhand/geometry/builtin_objects.h"
 #include "inhand/geometry/mesh_io.h"
+#include "inhand/geometry/primitives.h"
 #include "inhand/geometry/ray_scene.h"
 #include "inhand/mesh/extract.h"
 #include "inhand/report/snapshot.h"
@@ -58,13 +59,18 @@ int runRender(const RenderArgs& args) {
     throw Error(args.object + ": the object is " + std::to_string(box.size().maxCoeff()) +
                 " m across; inhand expects metres and objects under 1 m (is the file in mm?)");
   StagedDirectory out(args.out);
+  if (args.room_m != 0 && !(args.room_m > args.range_m + 0.05))
+    throw Error("--room must be 0 (no background) or larger than --range");
+  const Vec3 centre = box.center();
   RayScene scene;
   scene.addMesh(object);
+  if (args.room_m > 0)  // background: the inside of a sphere around the object
+    scene.addMesh(makeSphere(args.room_m, 4), Iso3(Eigen::Translation3d(centre)));
   scene.commit();
   NoiseModelOptions noise;
   FrameSet set;
   set.intrinsics = camera.intrinsics;
-  const Vec3 centre = box.center();
+  set.bounds_O = Aabb{box.min - Vec3::Constant(0.02), box.max + Vec3::Constant(0.02)};
   std::vector<Vec3> dirs = fibonacciSphere(args.views);
   for (int i = 0; i < args.views; ++i) {
     Iso3 T_O_C = lookAt(centre + args.range_m * dirs[i], centre, Vec3::UnitZ());
@@ -152,6 +158,8 @@ int runFuse(const FuseArgs& args) {
     box.max = Vec3(b[3], b[4], b[5]);
     if (!(box.min.array() < box.max.array()).all())
       throw Error("--bounds: each min must be below its max (xmin ymin zmin xmax ymax zmax)");
+  } else if (set.bounds_O) {
+    box = *set.bounds_O;
   } else {
     box = autoBounds(dir, set, args.margin_m);
   }

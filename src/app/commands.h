@@ -14,6 +14,8 @@ struct RenderArgs {
   double range_m = 0.7;        // camera distance from the object's centre
   uint64_t seed = 1;           // noise seed
   bool noise = true;           // false: exact depths
+  double room_m = 1.5;         // radius of a spherical room around the object (background
+                               // returns, as a real lab gives); 0: no background
 };
 
 struct FuseArgs {

@@ -20,6 +20,10 @@ int main(int argc, char** argv) {
   r->add_option("--range", render.range_m, "camera distance from the object centre, m")
       ->capture_default_str();
   r->add_option("--seed", render.seed, "noise seed")->capture_default_str();
+  r->add_option("--room", render.room_m,
+                 "radius of a spherical room around the object that gives background returns, m "
+                 "(0: none)")
+      ->capture_default_str();
   r->add_flag("!--no-noise", render.noise, "render exact depths (no sensor noise)");
 
   inhand::app::FuseArgs fuse;
@@ -31,7 +35,7 @@ int main(int argc, char** argv) {
   f->add_option("--voxel", fuse.voxel_m, "voxel size, m")->capture_default_str();
   f->add_option("--truncation", fuse.truncation_m, "signed-distance band half-width, m (0: 4 voxels)")
       ->capture_default_str();
-  f->add_option("--bounds", bounds, "volume bounds in the object frame: xmin ymin zmin xmax ymax zmax (m)")
+  f->add_option("--bounds", bounds, "volume bounds in the object frame: xmin ymin zmin xmax ymax zmax (m); default: frames.json bounds_O, else the measured points")
       ->expected(6);
   f->add_option("--margin", fuse.margin_m, "margin around the measured points for automatic bounds, m")
       ->capture_default_str();

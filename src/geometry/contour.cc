@@ -84,7 +84,6 @@ ContourResult contour(const ScalarGrid& grid) {
 
   // Pass 3: triangles, per slice of cubes, concatenated in slice order (deterministic).
   std::vector<std::vector<Tri>> sliceTris(nz - 1);
-  const auto& V = result.mesh.vertices;
   parallelFor(0, nz - 1, [&](int z) {
     std::vector<Tri>& out = sliceTris[z];
     for (int y = 0; y + 1 < ny; ++y)
@@ -108,26 +107,37 @@ ContourResult contour(const ScalarGrid& grid) {
             int lo = ca < cb ? ca : cb, hi = ca < cb ? cb : ca;  // lo ⊂ hi along the Kuhn path
             return edgeVertex(corner[lo], hi ^ lo);
           };
-          Vec3 inC = Vec3::Zero(), outC = Vec3::Zero();
-          for (int k = 0; k < ni; ++k)
-            inC += Vec3(insideList[k] & 1, (insideList[k] >> 1) & 1, (insideList[k] >> 2) & 1);
-          for (int k = 0; k < no; ++k)
-            outC += Vec3(outsideList[k] & 1, (outsideList[k] >> 1) & 1, (outsideList[k] >> 2) & 1);
-          Vec3 outward = outC / no - inC / ni;
-          auto emit = [&](int a, int b, int c) {
-            Vec3 pa = V[a].cast<double>(), pb = V[b].cast<double>(), pc = V[c].cast<double>();
-            if ((pb - pa).cross(pc - pa).dot(outward) < 0) std::swap(b, c);
-            out.emplace_back(a, b, c);
+          // Orientation is decided combinatorially (exactly), not from the interpolated vertex
+          // positions: within a tetrahedron the linear iso-surface is a planar, convex polygon
+          // whose facing follows from the orientation of the corners.
+          auto corner3 = [](int c) { return Vec3(c & 1, (c >> 1) & 1, (c >> 2) & 1); };
+          auto det = [&](int o, int p, int q, int r) {
+            Vec3 base = corner3(o);
+            Mat3 m;
+            m.col(0) = corner3(p) - base;
+            m.col(1) = corner3(q) - base;
+            m.col(2) = corner3(r) - base;
+            return m.determinant();
           };
           if (ni == 1 || no == 1) {
             int lone = ni == 1 ? insideList[0] : outsideList[0];
             const int* others = ni == 1 ? outsideList : insideList;
-            emit(vid(lone, others[0]), vid(lone, others[1]), vid(lone, others[2]));
+            int a = vid(lone, others[0]), b = vid(lone, others[1]), c = vid(lone, others[2]);
+            // The triangle's normal points away from `lone` iff det(e_j, e_k, e_l) > 0; it must
+            // point away from an inside lone corner and towards an outside one.
+            double s = det(lone, others[0], others[1], others[2]);
+            if ((ni == 1) != (s > 0)) std::swap(b, c);
+            out.emplace_back(a, b, c);
           } else {
             int a = vid(insideList[0], outsideList[0]), b = vid(insideList[0], outsideList[1]);
             int c = vid(insideList[1], outsideList[1]), d = vid(insideList[1], outsideList[0]);
-            emit(a, b, c);
-            emit(a, c, d);
+            if (det(insideList[0], insideList[1], outsideList[0], outsideList[1]) > 0) {
+              out.emplace_back(a, b, c);
+              out.emplace_back(a, c, d);
+            } else {
+              out.emplace_back(a, c, b);
+              out.emplace_back(a, d, c);
+            }
           }
         }
       }

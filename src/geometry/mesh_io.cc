@@ -24,6 +24,14 @@ TriangleMesh importMesh(const fs::path& path) {
   if (!fs::exists(path, ec)) throw Error(path.string() + ": no such mesh file");
   if (fs::is_directory(path, ec)) throw Error(path.string() + ": is a directory, not a mesh file");
   if (fs::file_size(path, ec) == 0) throw Error(path.string() + ": mesh file is empty");
+  std::string ext = path.extension().string();
+  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return std::tolower(c); });
+  if (ext == ".ply") {
+    // Our own reader: assimp 5.2's PLY importer crashes on files with extra per-vertex
+    // properties (such as inhand's variance + colour models). Big-endian PLY still goes to assimp.
+    if (readTextFile(path).find("format binary_big_endian") == std::string::npos)
+      return welded(readPly(path).mesh);
+  }
   Assimp::Importer importer;
   importer.SetPropertyInteger(AI_CONFIG_PP_RVC_FLAGS, aiComponent_NORMALS | aiComponent_COLORS |
                                                           aiComponent_TEXCOORDS |

@@ -1,5 +1,6 @@
 #include "inhand/mesh/extract.h"
 
+#include <algorithm>
 #include <cmath>
 
 #include "inhand/core/parallel.h"
@@ -9,6 +10,8 @@ namespace inhand {
 
 std::string MeshOptions::validate() const {
   if (!(hole_sigma_m > 0 && std::isfinite(hole_sigma_m))) return "hole_sigma_m must be > 0";
+  if (!(min_component_fraction >= 0 && min_component_fraction <= 1))
+    return "min_component_fraction must be in [0, 1]";
   return {};
 }
 
@@ -79,6 +82,47 @@ std::vector<uint8_t> unknownAttachedToObserved(const TsdfVolume& volume) {
     });
   }
   return keep;
+}
+
+// Keeps the triangles of connected pieces with at least `fraction` of the largest piece's
+// triangles, and the vertices they use (with their per-vertex data).
+void dropSmallComponents(ObjectModel* m, double fraction) {
+  const size_t nv = m->mesh.vertices.size();
+  std::vector<uint32_t> parent(nv);
+  for (size_t i = 0; i < nv; ++i) parent[i] = uint32_t(i);
+  auto find = [&](uint32_t x) {
+    while (parent[x] != x) x = parent[x] = parent[parent[x]];
+    return x;
+  };
+  for (const Tri& f : m->mesh.triangles) {
+    uint32_t a = find(uint32_t(f[0]));
+    for (int k = 1; k < 3; ++k) {
+      uint32_t b = find(uint32_t(f[k]));
+      if (a != b) parent[b] = a;
+    }
+  }
+  std::vector<uint32_t> count(nv, 0);
+  for (const Tri& f : m->mesh.triangles) ++count[find(uint32_t(f[0]))];
+  uint32_t largest = count.empty() ? 0 : *std::max_element(count.begin(), count.end());
+  const double keepFrom = fraction * largest;
+  std::vector<int> remap(nv, -1);
+  ObjectModel out;
+  for (const Tri& f : m->mesh.triangles) {
+    if (count[find(uint32_t(f[0]))] < keepFrom) continue;
+    Tri g;
+    for (int k = 0; k < 3; ++k) {
+      int& r = remap[f[k]];
+      if (r < 0) {
+        r = int(out.mesh.vertices.size());
+        out.mesh.vertices.push_back(m->mesh.vertices[f[k]]);
+        out.variance.push_back(m->variance[f[k]]);
+        out.observed.push_back(m->observed[f[k]]);
+      }
+      g[k] = r;
+    }
+    out.mesh.triangles.push_back(g);
+  }
+  *m = std::move(out);
 }
 
 }  // namespace
@@ -153,6 +197,7 @@ ObjectModel extractModel(const TsdfVolume& volume, const MeshOptions& options) {
         model.observed[k] = var < holeVar;
       },
       4096);
+  if (options.min_component_fraction > 0) dropSmallComponents(&model, options.min_component_fraction);
   return model;
 }
 

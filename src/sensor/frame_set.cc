@@ -31,6 +31,22 @@ FrameSet readFrameSet(const fs::path& dir) {
   set.intrinsics.cy = requireNumber(K, "cy", kw);
   std::string problem = set.intrinsics.validate();
   if (!problem.empty()) throw Error(name + ": intrinsics." + problem);
+  if (j.contains("bounds_O")) {
+    const Json& b = j["bounds_O"];
+    const std::string bw = name + ": bounds_O";
+    Aabb box;
+    for (const char* key : {"min", "max"}) {
+      const Json& v = requireField(b, key, bw);
+      if (!v.is_array() || v.size() != 3 || !v[0].is_number() || !v[1].is_number() ||
+          !v[2].is_number())
+        throw Error(bw + "." + key + ": expected an array of 3 numbers");
+      box.extend(Vec3(v[0].get<double>(), v[1].get<double>(), v[2].get<double>()));
+    }
+    if (!(Vec3(b["min"][0], b["min"][1], b["min"][2]).array() <
+          Vec3(b["max"][0], b["max"][1], b["max"][2]).array()).all())
+      throw Error(bw + ": each min must be below its max");
+    set.bounds_O = box;
+  }
   const Json& frames = requireField(j, "frames", name);
   if (!frames.is_array()) throw Error(name + ": frames: expected an array");
   if (frames.empty()) throw Error(name + ": frames: the array is empty");
@@ -73,6 +89,9 @@ void writeFrameSet(const fs::path& dir, const FrameSet& set) {
   for (const FrameRecord& f : set.frames)
     frames.push_back({{"file", f.file}, {"T_O_C", poseToRowMajor(f.T_O_C)}});
   j["frames"] = frames;
+  if (set.bounds_O)
+    j["bounds_O"] = {{"min", {set.bounds_O->min.x(), set.bounds_O->min.y(), set.bounds_O->min.z()}},
+                     {"max", {set.bounds_O->max.x(), set.bounds_O->max.y(), set.bounds_O->max.z()}}};
   writeTextAtomically(dir / "frames.json", j.dump(2) + "\n");
 }
 

@@ -19,6 +19,9 @@ struct MeshOptions {
   // space that no ray happened to cross (e.g. seen only against no-return background) carry no
   // evidence of a surface, and the held object is one connected body.
   bool drop_floating_unknown = true;
+  // Drop connected surface pieces with fewer triangles than this fraction of the largest piece
+  // (specks from flying pixels at depth edges); 0 keeps everything.
+  double min_component_fraction = 0.01;
   std::string validate() const;
 };
 

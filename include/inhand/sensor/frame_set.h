@@ -4,12 +4,15 @@
 // from a real robot:
 //   { "depth_scale_m": 0.001,
 //     "intrinsics": { "width": 640, "height": 480, "fx": 525, "fy": 525, "cx": 319.5, "cy": 239.5 },
-//     "frames": [ { "file": "depth_0000.png", "T_O_C": [16 numbers, row-major] }, … ] }
+//     "frames": [ { "file": "depth_0000.png", "T_O_C": [16 numbers, row-major] }, … ],
+//     "bounds_O": { "min": [x, y, z], "max": [x, y, z] } }   (optional)
 // T_O_C is the camera pose in the object frame (maps camera points into the object frame).
 #include <filesystem>
+#include <optional>
 #include <string>
 #include <vector>
 
+#include "inhand/geometry/triangle_mesh.h"
 #include "inhand/sensor/depth_camera.h"
 #include "inhand/sensor/depth_image.h"
 
@@ -24,6 +27,9 @@ struct FrameSet {
   CameraIntrinsics intrinsics;
   double depth_scale_m = 0.001;  // metres per PNG unit
   std::vector<FrameRecord> frames;
+  // Optional "bounds_O": {"min": [x,y,z], "max": [x,y,z]}: where the object is, in O (m). fuse
+  // uses it for the volume unless --bounds is given.
+  std::optional<Aabb> bounds_O;
 };
 
 // Reads and validates DIR/frames.json (every field; poses must be rigid; every PNG must exist).

@@ -1,0 +1,89 @@
+// End-to-end runs of the `inhand` binary: the commands a user types, their outputs and errors.
+#include <gtest/gtest.h>
+
+#include <cstdlib>
+#include <fstream>
+
+#include "inhand/core/file_util.h"
+#include "inhand/core/json_util.h"
+#include "inhand/geometry/mesh_io.h"
+#include "test_util.h"
+
+using namespace inhand;
+
+namespace {
+struct Result {
+  int code;
+  std::string output;
+};
+Result run(const std::string& args, const test::TempDir& dir) {
+  fs::path log = dir.path() / "log.txt";
+  std::string cmd = std::string(INHAND_BINARY) + " " + args + " > " + log.string() + " 2>&1";
+  int status = std::system(cmd.c_str());
+  Result r{WIFEXITED(status) ? WEXITSTATUS(status) : -1, readTextFile(log)};
+  fs::remove(log);
+  return r;
+}
+}  // namespace
+
+TEST(Cli, RenderThenFuseMakesAClosedColouredModel) {
+  test::TempDir dir;
+  fs::path frames = dir.path() / "frames";
+  Result r = run("render --object builtin:pill_bottle --views 12 --out " + frames.string(), dir);
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_TRUE(fs::exists(frames / "frames.json"));
+  EXPECT_TRUE(fs::exists(frames / "depth_0011.png"));
+  fs::path model = dir.path() / "model.ply";
+  r = run("fuse --frames " + frames.string() + " --out " + model.string(), dir);
+  ASSERT_EQ(r.code, 0) << r.output;
+  Json summary = readJsonFile(dir.path() / "model.json");
+  EXPECT_TRUE(summary["closed"].get<bool>());
+  EXPECT_GT(summary["observed_fraction"].get<double>(), 0.9);
+  EXPECT_GT(summary["vertices"].get<int>(), 1000);
+  PlyData ply = readPly(model);
+  EXPECT_EQ(ply.mesh.vertices.size(), summary["vertices"].get<size_t>());
+  EXPECT_EQ(ply.vertexProperties.count("variance"), 1u);
+  // The model lies on the pill bottle (Ø 40 × 80 mm, centred).
+  Aabb b = ply.mesh.bounds();
+  EXPECT_NEAR(b.size().z(), 0.080, 0.006);
+  EXPECT_NEAR(b.size().x(), 0.040, 0.006);
+}
+
+TEST(Cli, BadInputIsNamedAndLeavesNoOutput) {
+  test::TempDir dir;
+  auto expectError = [&](const std::string& args, const std::string& needle) {
+    Result r = run(args, dir);
+    EXPECT_NE(r.code, 0) << args;
+    EXPECT_NE(r.output.find(needle), std::string::npos) << args << "\n" << r.output;
+  };
+  expectError("render --object builtin:teapot --views 3 --out " + (dir.path() / "a").string(), "teapot");
+  expectError("render --object /nonexistent/x.obj --views 3 --out " + (dir.path() / "a").string(),
+              "/nonexistent/x.obj");
+  expectError("render --object builtin:mug --views 0 --out " + (dir.path() / "a").string(), "--views");
+  expectError("render --object builtin:mug --views 3 --range 0.1 --out " + (dir.path() / "a").string(),
+              "--range");
+  expectError("fuse --frames " + (dir.path() / "none").string() + " --out " + (dir.path() / "m.ply").string(),
+              "none");
+  fs::create_directories(dir.path() / "broken");
+  writeTextAtomically(dir.path() / "broken" / "frames.json", "{\"frames\": 3}");
+  expectError("fuse --frames " + (dir.path() / "broken").string() + " --out " + (dir.path() / "m.ply").string(),
+              "frames.json");
+  expectError("fuse --frames x --out m.txt", ".ply");
+  expectError("render --object builtin:mug --views 3", "--out");  // CLI11 usage error
+  // Nothing was left behind: only the broken input directory.
+  std::vector<std::string> left;
+  for (const auto& e : fs::directory_iterator(dir.path())) left.push_back(e.path().filename().string());
+  EXPECT_EQ(left, std::vector<std::string>{"broken"});
+}
+
+TEST(Cli, VolumeOverBudgetIsRefusedWithSize) {
+  test::TempDir dir;
+  fs::path frames = dir.path() / "frames";
+  ASSERT_EQ(run("render --object builtin:coffee_can --views 2 --no-noise --out " + frames.string(), dir).code, 0);
+  Result r = run("fuse --frames " + frames.string() + " --voxel 0.0005 --memory-budget 10 --out " +
+                     (dir.path() / "m.ply").string(), dir);
+  EXPECT_NE(r.code, 0);
+  EXPECT_NE(r.output.find("would need"), std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(dir.path() / "m.ply"));
+  EXPECT_FALSE(fs::exists(dir.path() / "m.json"));
+}

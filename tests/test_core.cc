@@ -1,0 +1,120 @@
+#include <gtest/gtest.h>
+
+#include <fstream>
+
+#include "inhand/core/error.h"
+#include "inhand/core/file_util.h"
+#include "inhand/core/json_util.h"
+#include "inhand/core/pose.h"
+#include "inhand/core/random.h"
+#include "test_util.h"
+
+using namespace inhand;
+
+TEST(Pose, LookAtPutsTargetOnOpticalAxis) {
+  Rng rng = makeRng(3);
+  std::uniform_real_distribution<double> U(-1, 1);
+  for (int i = 0; i < 200; ++i) {
+    Vec3 eye(U(rng), U(rng), U(rng)), target(U(rng), U(rng), U(rng));
+    Iso3 T_W_C = lookAt(eye, target);
+    Vec3 p_C = T_W_C.inverse() * target;
+    EXPECT_NEAR(p_C.x(), 0, 1e-12);
+    EXPECT_NEAR(p_C.y(), 0, 1e-12);
+    EXPECT_NEAR(p_C.z(), (target - eye).norm(), 1e-12);
+    EXPECT_NEAR(T_W_C.linear().determinant(), 1.0, 1e-12);
+  }
+}
+
+TEST(Pose, RowMajorRoundTripAndRejection) {
+  Iso3 T = lookAt(Vec3(0.3, -0.2, 0.5), Vec3::Zero());
+  std::string why;
+  auto back = poseFromRowMajor(poseToRowMajor(T), &why);
+  ASSERT_TRUE(back);
+  EXPECT_TRUE(back->isApprox(T, 1e-12));
+  std::array<double, 16> singular{};
+  singular[15] = 1;
+  EXPECT_FALSE(poseFromRowMajor(singular, &why));
+  EXPECT_NE(why.find("singular"), std::string::npos);
+  auto reflect = poseToRowMajor(Iso3::Identity());
+  reflect[0] = -1;
+  EXPECT_FALSE(poseFromRowMajor(reflect, &why));
+  auto scaled = poseToRowMajor(Iso3::Identity());
+  scaled[5] = 2;
+  EXPECT_FALSE(poseFromRowMajor(scaled, &why));
+  EXPECT_NE(why.find("orthonormal"), std::string::npos);
+}
+
+TEST(Pose, FibonacciSphereIsEven) {
+  auto d = fibonacciSphere(500);
+  ASSERT_EQ(d.size(), 500u);
+  Vec3 mean = Vec3::Zero();
+  for (const Vec3& v : d) {
+    EXPECT_NEAR(v.norm(), 1.0, 1e-12);
+    mean += v;
+  }
+  EXPECT_LT((mean / 500).norm(), 0.01);
+}
+
+TEST(Random, GaussianAtHasUnitMomentsAndIsReproducible) {
+  double s = 0, s2 = 0;
+  const int n = 200000;
+  for (int i = 0; i < n; ++i) {
+    double g = gaussianAt(42, i);
+    s += g;
+    s2 += g * g;
+  }
+  EXPECT_NEAR(s / n, 0.0, 0.01);
+  EXPECT_NEAR(s2 / n, 1.0, 0.01);
+  EXPECT_EQ(gaussianAt(42, 17), gaussianAt(42, 17));
+  EXPECT_NE(gaussianAt(42, 17), gaussianAt(43, 17));
+}
+
+TEST(FileUtil, AtomicWriteLeavesNothingOnFailure) {
+  test::TempDir dir;
+  fs::path p = dir.path() / "out.txt";
+  EXPECT_THROW(writeFileAtomically(p, [](const fs::path& tmp) {
+                 std::ofstream(tmp) << "partial";
+                 throw Error("boom");
+               }),
+               Error);
+  EXPECT_TRUE(fs::is_empty(dir.path()));
+  writeTextAtomically(p, "whole");
+  EXPECT_EQ(readTextFile(p), "whole");
+}
+
+TEST(FileUtil, StagedDirectoryCommitsOrVanishes) {
+  test::TempDir dir;
+  fs::path target = dir.path() / "frames";
+  {
+    StagedDirectory s(target);
+    writeTextAtomically(s.path() / "a.txt", "x");
+  }
+  EXPECT_FALSE(fs::exists(target));
+  EXPECT_TRUE(fs::is_empty(dir.path()));
+  {
+    StagedDirectory s(target);
+    writeTextAtomically(s.path() / "a.txt", "x");
+    s.commit();
+  }
+  EXPECT_TRUE(fs::exists(target / "a.txt"));
+  EXPECT_THROW(StagedDirectory{target}, Error);  // not empty
+}
+
+TEST(Json, ErrorsNameFileAndField) {
+  test::TempDir dir;
+  fs::path p = dir.path() / "bad.json";
+  writeTextAtomically(p, "{ \"a\": 1, ");
+  try {
+    readJsonFile(p);
+    FAIL();
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("bad.json"), std::string::npos);
+  }
+  Json j = Json::parse(R"({"n": "x"})");
+  try {
+    requireNumber(j, "n", "cfg.json: camera");
+    FAIL();
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("cfg.json: camera.n"), std::string::npos);
+  }
+}

@@ -1,0 +1,219 @@
+#include <gtest/gtest.h>
+
+#include <fstream>
+#include <map>
+
+#include "inhand/core/error.h"
+#include "inhand/core/random.h"
+#include "inhand/geometry/builtin_objects.h"
+#include "inhand/geometry/contour.h"
+#include "inhand/geometry/mesh_io.h"
+#include "inhand/geometry/primitives.h"
+#include "inhand/geometry/ray_scene.h"
+#include "test_util.h"
+
+using namespace inhand;
+
+TEST(Primitives, ClosedWithExactVolumes) {
+  TriangleMesh box = makeBox(Vec3(0.1, 0.2, 0.3));
+  EXPECT_TRUE(box.isClosed());
+  EXPECT_NEAR(box.signedVolume(), 0.006, 1e-8);
+  EXPECT_NEAR(box.area(), 2 * (0.02 + 0.03 + 0.06), 1e-7);
+  TriangleMesh cyl = makeCylinder(0.05, 0.1, 256);
+  EXPECT_TRUE(cyl.isClosed());
+  EXPECT_NEAR(cyl.signedVolume(), M_PI * 0.0025 * 0.1, 2e-4 * M_PI * 0.0025 * 0.1 * 10);
+  TriangleMesh sphere = makeSphere(0.1, 5);
+  EXPECT_TRUE(sphere.isClosed());
+  EXPECT_NEAR(sphere.signedVolume(), 4.0 / 3.0 * M_PI * 1e-3, 1e-5);
+}
+
+TEST(Contour, ImplicitSphereIsWatertightAndAccurate) {
+  Aabb box;
+  box.extend(Vec3::Constant(-0.06));
+  box.extend(Vec3::Constant(0.06));
+  TriangleMesh m = meshImplicit([](const Vec3& p) { return p.norm() - 0.05; }, box, 0.002);
+  EXPECT_TRUE(m.isClosed());
+  EXPECT_EQ(m.boundaryEdgeCount(), 0);
+  double maxErr = 0;
+  for (const Vec3f& v : m.vertices) maxErr = std::max(maxErr, std::abs(v.cast<double>().norm() - 0.05));
+  EXPECT_LT(maxErr, 1e-4);  // linear interpolation of an exact distance field
+  EXPECT_NEAR(m.signedVolume(), 4.0 / 3.0 * M_PI * 1.25e-4, 0.01 * 4.0 / 3.0 * M_PI * 1.25e-4);
+}
+
+TEST(Contour, TwoSeparateBlobsBothClosed) {
+  Aabb box;
+  box.extend(Vec3(-0.1, -0.05, -0.05));
+  box.extend(Vec3(0.1, 0.05, 0.05));
+  auto f = [](const Vec3& p) {
+    return std::min((p - Vec3(-0.05, 0, 0)).norm() - 0.03, (p - Vec3(0.05, 0, 0)).norm() - 0.03);
+  };
+  TriangleMesh m = meshImplicit(f, box, 0.003);
+  EXPECT_TRUE(m.isClosed());
+  EXPECT_GT(m.signedVolume(), 0);
+}
+
+TEST(BuiltinObjects, ClosedAtRealSize) {
+  std::map<std::string, Vec3> size = {{"cracker_box", {0.060, 0.158, 0.210}},
+                                      {"coffee_can", {0.102, 0.102, 0.139}},
+                                      {"pill_bottle", {0.040, 0.040, 0.080}}};
+  for (const std::string& name : builtinObjectNames()) {
+    SCOPED_TRACE(name);
+    TriangleMesh m = loadObject("builtin:" + name);
+    EXPECT_TRUE(m.isClosed());
+    EXPECT_GT(m.signedVolume(), 0);
+    EXPECT_LT(m.bounds().center().norm(), 1e-6);
+    if (size.count(name)) {
+      EXPECT_LT((m.bounds().size() - size[name]).cwiseAbs().maxCoeff(), 1e-4);
+    }
+  }
+  // Juice bottle: about one litre.
+  double litres = loadObject("builtin:juice_bottle").signedVolume() * 1000;
+  EXPECT_GT(litres, 0.9);
+  EXPECT_LT(litres, 1.3);
+  EXPECT_THROW(loadObject("builtin:teapot"), Error);
+}
+
+TEST(BuiltinObjects, MugHandleHasAThroughHole) {
+  TriangleMesh mug = loadObject("builtin:mug");
+  RayScene scene;
+  scene.addMesh(mug);
+  scene.commit();
+  // A ray along y through the middle of the handle's opening (between the cup wall and the
+  // handle's far side) must pass; rays through the cup body must hit.
+  Aabb b = mug.bounds();
+  const double cupRight = b.min.x() + 0.080;  // cup is Ø 80 mm, the handle sticks out in +x
+  Ray through;
+  through.origin = Vec3f(float(cupRight + 0.012), -0.2f, float(b.center().z()));
+  through.dir = Vec3f(0, 1, 0);
+  EXPECT_FALSE(scene.intersectOne(through).valid());
+  Ray body = through;
+  body.origin.x() = float(b.min.x() + 0.04);
+  EXPECT_TRUE(scene.intersectOne(body).valid());
+  Ray handle = through;
+  handle.origin.z() = float(b.center().z() + 0.026);  // the top of the ring
+  EXPECT_TRUE(scene.intersectOne(handle).valid());
+}
+
+TEST(MeshIo, PlyRoundTripKeepsVarianceAndColour) {
+  test::TempDir dir;
+  TriangleMesh m = makeSphere(0.05, 2);
+  std::vector<float> var(m.vertices.size());
+  for (size_t i = 0; i < var.size(); ++i) var[i] = float(1e-7 * (i + 1));
+  var[0] = 0.0025f;
+  writePly(dir.path() / "m.ply", m, &var);
+  PlyData back = readPly(dir.path() / "m.ply");
+  ASSERT_EQ(back.mesh.vertices.size(), m.vertices.size());
+  ASSERT_EQ(back.mesh.triangles.size(), m.triangles.size());
+  for (size_t i = 0; i < var.size(); ++i) {
+    EXPECT_EQ(back.mesh.vertices[i], m.vertices[i]);
+    EXPECT_EQ(back.vertexProperties["variance"][i], var[i]);
+  }
+  EXPECT_EQ(back.mesh.triangles, m.triangles);
+  EXPECT_EQ(back.vertexProperties["red"][0], 220);  // σ = 5 cm: red
+  EXPECT_EQ(back.vertexProperties["green"][0], 20);
+  // assimp reads the same file.
+  TriangleMesh viaAssimp = importMesh(dir.path() / "m.ply");
+  EXPECT_EQ(viaAssimp.triangles.size(), m.triangles.size());
+}
+
+TEST(MeshIo, ConfidenceColourRunsGreyToRed) {
+  auto grey = confidenceColor(1e-8f), red = confidenceColor(0.0025f), mid = confidenceColor(1e-5f);
+  EXPECT_EQ(grey[0], grey[1]);
+  EXPECT_EQ(red[0], 220);
+  EXPECT_GT(mid[0], mid[1]);
+  EXPECT_LT(mid[0], 220);
+}
+
+TEST(MeshIo, StlIsWeldedAndBadFilesNamed) {
+  test::TempDir dir;
+  // ASCII STL of a tetrahedron: 4 facets, 12 corner copies of 4 points.
+  std::ofstream stl(dir.path() / "t.stl");
+  const char* facets[4][3] = {{"0 0 0", "0 1 0", "1 0 0"}, {"0 0 0", "1 0 0", "0 0 1"},
+                              {"0 0 0", "0 0 1", "0 1 0"}, {"1 0 0", "0 1 0", "0 0 1"}};
+  stl << "solid t\n";
+  for (auto& f : facets) {
+    stl << "facet normal 0 0 0\nouter loop\n";
+    for (auto* v : f) stl << "vertex " << v << "\n";
+    stl << "endloop\nendfacet\n";
+  }
+  stl << "endsolid t\n";
+  stl.close();
+  TriangleMesh t = importMesh(dir.path() / "t.stl");
+  EXPECT_EQ(t.vertices.size(), 4u);
+  EXPECT_TRUE(t.isClosed());
+  std::ofstream(dir.path() / "garbage.obj") << "this is not a mesh\n";
+  EXPECT_THROW(importMesh(dir.path() / "garbage.obj"), Error);
+  try {
+    importMesh(dir.path() / "missing.obj");
+    FAIL();
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("missing.obj"), std::string::npos);
+  }
+}
+
+// Every shared mesh loads with the bounding box SOURCES.md lists.
+TEST(MeshIo, SharedObjectsLoadWithListedBoundingBoxes) {
+  const std::filesystem::path dir = INHAND_SHARED_OBJECTS;
+  if (!std::filesystem::is_directory(dir))
+    GTEST_SKIP() << "shared objects not found at " << dir << " (they are not part of the project)";
+  const std::map<std::string, Vec3> listed = {
+      {"002_master_chef_can.obj", {0.1023, 0.1024, 0.1401}},
+      {"003_cracker_box.obj", {0.0717, 0.1640, 0.2135}},
+      {"005_tomato_soup_can.obj", {0.0679, 0.0678, 0.1020}},
+      {"006_mustard_bottle.obj", {0.0964, 0.0581, 0.1915}},
+      {"009_gelatin_box.obj", {0.0715, 0.0675, 0.0892}},
+      {"010_potted_meat_can.obj", {0.1011, 0.0900, 0.0845}},
+      {"035_power_drill.obj", {0.1630, 0.1232, 0.1874}},
+      {"019_pitcher_base.obj", {0.1887, 0.1331, 0.2424}},
+      {"021_bleach_cleanser.obj", {0.0677, 0.1024, 0.2506}},
+      {"025_mug.obj", {0.1169, 0.0932, 0.0813}},
+      {"stanford_bunny.obj", {0.1557, 0.1543, 0.1207}}};
+  int found = 0;
+  for (const auto& entry : std::filesystem::directory_iterator(dir)) {
+    if (entry.path().extension() != ".obj") continue;
+    const std::string name = entry.path().filename().string();
+    SCOPED_TRACE(name);
+    ASSERT_TRUE(listed.count(name)) << "not listed in this test";
+    TriangleMesh m = importMesh(entry.path());
+    EXPECT_GT(m.triangles.size(), 10000u);
+    EXPECT_LT((m.bounds().size() - listed.at(name)).cwiseAbs().maxCoeff(), 1e-4);
+    ++found;
+  }
+  EXPECT_EQ(found, int(listed.size()));
+}
+
+TEST(RayScene, PacketsMatchScalarReferenceAndAnalyticSphere) {
+  const double r = 0.1;
+  RayScene scene;
+  scene.addMesh(makeSphere(r, 6));
+  scene.commit();
+  Rng rng = makeRng(11);
+  std::uniform_real_distribution<double> U(-1, 1);
+  std::vector<Ray> rays(5000);
+  for (Ray& ray : rays) {
+    Vec3 o = Vec3(U(rng), U(rng), U(rng)).normalized() * 0.5;
+    Vec3 target = Vec3(U(rng), U(rng), U(rng)) * 0.12;
+    ray.origin = o.cast<float>();
+    ray.dir = (target - o).normalized().cast<float>();
+  }
+  std::vector<Hit> hits(rays.size());
+  scene.intersect(rays.data(), hits.data(), rays.size());
+  int hitCount = 0;
+  for (size_t i = 0; i < rays.size(); ++i) {
+    Hit ref = scene.intersectOne(rays[i]);
+    ASSERT_EQ(hits[i].valid(), ref.valid());
+    if (!ref.valid()) continue;
+    ++hitCount;
+    EXPECT_EQ(hits[i].triangle, ref.triangle);
+    EXPECT_FLOAT_EQ(hits[i].t, ref.t);
+    // Analytic ray–sphere intersection (the mesh is inscribed: error < r(1 − cos(edge angle/2))).
+    Vec3 o = rays[i].origin.cast<double>(), d = rays[i].dir.cast<double>();
+    double b = o.dot(d), c = o.squaredNorm() - r * r, disc = b * b - c;
+    if (disc < 0.04 * r * r) continue;  // near grazing: the tessellation decides
+    EXPECT_NEAR(ref.t, -b - std::sqrt(disc), 1e-4);
+  }
+  EXPECT_GT(hitCount, 1000);
+  std::vector<uint8_t> blocked(rays.size());
+  scene.occluded(rays.data(), blocked.data(), rays.size());
+  for (size_t i = 0; i < rays.size(); ++i) EXPECT_EQ(bool(blocked[i]), hits[i].valid());
+}

@@ -1,0 +1,46 @@
+#include "test_util.h"
+
+#include <unistd.h>
+
+#include <atomic>
+
+#include "inhand/core/pose.h"
+
+namespace inhand::test {
+
+TempDir::TempDir() {
+  static std::atomic<int> counter{0};
+  path_ = std::filesystem::temp_directory_path() /
+          ("inhand_test_" + std::to_string(getpid()) + "_" + std::to_string(counter++));
+  std::filesystem::remove_all(path_);
+  std::filesystem::create_directories(path_);
+}
+
+TempDir::~TempDir() {
+  std::error_code ec;
+  std::filesystem::remove_all(path_, ec);
+}
+
+void renderAndFuse(const TriangleMesh& mesh, const std::vector<Iso3>& poses, bool noise,
+                   TsdfVolume* volume) {
+  RayScene scene;
+  scene.addMesh(mesh);
+  scene.commit();
+  DepthCameraOptions cam;
+  NoiseModelOptions nm;
+  for (size_t i = 0; i < poses.size(); ++i) {
+    RenderOptions ro;
+    ro.noise = noise;
+    ro.seed = 7 + i;
+    DepthImage d = renderDepth(scene, poses[i], cam, nm, ro);
+    integrate(d, poses[i], cam.intrinsics, measurementSigma(d, cam.intrinsics, nm), volume);
+  }
+}
+
+std::vector<Iso3> viewsAround(int count, double range_m) {
+  std::vector<Iso3> poses;
+  for (const Vec3& d : fibonacciSphere(count)) poses.push_back(lookAt(range_m * d, Vec3::Zero()));
+  return poses;
+}
+
+}  // namespace inhand::test

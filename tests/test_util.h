@@ -1,0 +1,32 @@
+#pragma once
+// Shared helpers for the tests: temp directories and fusing rendered views.
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "inhand/geometry/ray_scene.h"
+#include "inhand/mesh/extract.h"
+#include "inhand/sensor/render.h"
+#include "inhand/volume/integrate.h"
+
+namespace inhand::test {
+
+// A fresh temporary directory, removed with its contents on destruction.
+class TempDir {
+ public:
+  TempDir();
+  ~TempDir();
+  const std::filesystem::path& path() const { return path_; }
+
+ private:
+  std::filesystem::path path_;
+};
+
+// Renders `mesh` from each camera pose (T_O_C) and fuses the images into `volume`.
+void renderAndFuse(const TriangleMesh& mesh, const std::vector<Iso3>& poses, bool noise,
+                   TsdfVolume* volume);
+
+// Cameras on a sphere of `range` around the origin, looking at it.
+std::vector<Iso3> viewsAround(int count, double range_m);
+
+}  // namespace inhand::test
