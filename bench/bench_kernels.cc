@@ -42,10 +42,11 @@ void BM_IntegrateFrame(benchmark::State& state) {
   Scenario& s = scenario();
   TsdfVolume vol(s.box, VolumeOptions{});
   int64_t updated = 0;
-  for (auto _ : state) updated += integrate(s.depth, s.T_O_C, s.camera.intrinsics, s.sigma, &vol).updated;
+  for (auto _ : state)
+    updated += integrate(s.depth, s.T_O_C, s.camera.intrinsics, s.sigma, &vol).updated;
   state.counters["voxels_M"] = double(vol.voxelCount()) / 1e6;
-  state.counters["volume_Mvox_per_s"] =
-      benchmark::Counter(double(vol.voxelCount()) * double(state.iterations()) / 1e6, benchmark::Counter::kIsRate);
+  state.counters["volume_Mvox_per_s"] = benchmark::Counter(
+      double(vol.voxelCount()) * double(state.iterations()) / 1e6, benchmark::Counter::kIsRate);
   state.counters["updated_Mvox_per_s"] =
       benchmark::Counter(double(updated) / 1e6, benchmark::Counter::kIsRate);
 }
@@ -55,14 +56,15 @@ void BM_IntegrateFrameReference(benchmark::State& state) {
   Scenario& s = scenario();
   TsdfVolume vol(s.box, VolumeOptions{});
   for (auto _ : state) integrateReference(s.depth, s.T_O_C, s.camera.intrinsics, s.sigma, &vol);
-  state.counters["volume_Mvox_per_s"] =
-      benchmark::Counter(double(vol.voxelCount()) * double(state.iterations()) / 1e6, benchmark::Counter::kIsRate);
+  state.counters["volume_Mvox_per_s"] = benchmark::Counter(
+      double(vol.voxelCount()) * double(state.iterations()) / 1e6, benchmark::Counter::kIsRate);
 }
 BENCHMARK(BM_IntegrateFrameReference)->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(3);
 
 void BM_MeasurementSigma(benchmark::State& state) {
   Scenario& s = scenario();
-  for (auto _ : state) benchmark::DoNotOptimize(measurementSigma(s.depth, s.camera.intrinsics, s.noise));
+  for (auto _ : state)
+    benchmark::DoNotOptimize(measurementSigma(s.depth, s.camera.intrinsics, s.noise));
 }
 BENCHMARK(BM_MeasurementSigma)->Unit(benchmark::kMillisecond)->UseRealTime();
 
@@ -70,7 +72,8 @@ void BM_RenderFrame(benchmark::State& state) {
   Scenario& s = scenario();
   RenderOptions ro;
   ro.noise = state.range(0) != 0;
-  for (auto _ : state) benchmark::DoNotOptimize(renderDepth(s.scene, s.T_O_C, s.camera, s.noise, ro));
+  for (auto _ : state)
+    benchmark::DoNotOptimize(renderDepth(s.scene, s.T_O_C, s.camera, s.noise, ro));
   state.SetLabel(ro.noise ? "noisy" : "noise-free");
 }
 BENCHMARK(BM_RenderFrame)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond)->UseRealTime();
@@ -91,7 +94,8 @@ void BM_ExtractMesh(benchmark::State& state) {
     RenderOptions ro;
     ro.seed = uint64_t(++i);
     DepthImage depth = renderDepth(s.scene, T, s.camera, s.noise, ro);
-    integrate(depth, T, s.camera.intrinsics, measurementSigma(depth, s.camera.intrinsics, s.noise), &vol);
+    integrate(depth, T, s.camera.intrinsics, measurementSigma(depth, s.camera.intrinsics, s.noise),
+              &vol);
   }
   size_t tris = 0;
   for (auto _ : state) tris = extractModel(vol).mesh.triangles.size();

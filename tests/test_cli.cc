@@ -56,32 +56,42 @@ TEST(Cli, BadInputIsNamedAndLeavesNoOutput) {
     EXPECT_NE(r.code, 0) << args;
     EXPECT_NE(r.output.find(needle), std::string::npos) << args << "\n" << r.output;
   };
-  expectError("render --object builtin:teapot --views 3 --out " + (dir.path() / "a").string(), "teapot");
+  expectError("render --object builtin:teapot --views 3 --out " + (dir.path() / "a").string(),
+              "teapot");
   expectError("render --object /nonexistent/x.obj --views 3 --out " + (dir.path() / "a").string(),
               "/nonexistent/x.obj");
-  expectError("render --object builtin:mug --views 0 --out " + (dir.path() / "a").string(), "--views");
-  expectError("render --object builtin:mug --views 3 --range 0.1 --out " + (dir.path() / "a").string(),
-              "--range");
-  expectError("fuse --frames " + (dir.path() / "none").string() + " --out " + (dir.path() / "m.ply").string(),
+  expectError("render --object builtin:mug --views 0 --out " + (dir.path() / "a").string(),
+              "--views");
+  expectError(
+      "render --object builtin:mug --views 3 --range 0.1 --out " + (dir.path() / "a").string(),
+      "--range");
+  expectError("fuse --frames " + (dir.path() / "none").string() + " --out " +
+                  (dir.path() / "m.ply").string(),
               "none");
   fs::create_directories(dir.path() / "broken");
   writeTextAtomically(dir.path() / "broken" / "frames.json", "{\"frames\": 3}");
-  expectError("fuse --frames " + (dir.path() / "broken").string() + " --out " + (dir.path() / "m.ply").string(),
+  expectError("fuse --frames " + (dir.path() / "broken").string() + " --out " +
+                  (dir.path() / "m.ply").string(),
               "frames.json");
   expectError("fuse --frames x --out m.txt", ".ply");
   expectError("render --object builtin:mug --views 3", "--out");  // CLI11 usage error
   // Nothing was left behind: only the broken input directory.
   std::vector<std::string> left;
-  for (const auto& e : fs::directory_iterator(dir.path())) left.push_back(e.path().filename().string());
+  for (const auto& e : fs::directory_iterator(dir.path()))
+    left.push_back(e.path().filename().string());
   EXPECT_EQ(left, std::vector<std::string>{"broken"});
 }
 
 TEST(Cli, VolumeOverBudgetIsRefusedWithSize) {
   test::TempDir dir;
   fs::path frames = dir.path() / "frames";
-  ASSERT_EQ(run("render --object builtin:coffee_can --views 2 --no-noise --out " + frames.string(), dir).code, 0);
+  ASSERT_EQ(
+      run("render --object builtin:coffee_can --views 2 --no-noise --out " + frames.string(), dir)
+          .code,
+      0);
   Result r = run("fuse --frames " + frames.string() + " --voxel 0.0005 --memory-budget 10 --out " +
-                     (dir.path() / "m.ply").string(), dir);
+                     (dir.path() / "m.ply").string(),
+                 dir);
   EXPECT_NE(r.code, 0);
   EXPECT_NE(r.output.find("would need"), std::string::npos) << r.output;
   EXPECT_FALSE(fs::exists(dir.path() / "m.ply"));

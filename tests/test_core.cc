@@ -72,10 +72,11 @@ TEST(Random, GaussianAtHasUnitMomentsAndIsReproducible) {
 TEST(FileUtil, AtomicWriteLeavesNothingOnFailure) {
   test::TempDir dir;
   fs::path p = dir.path() / "out.txt";
-  EXPECT_THROW(writeFileAtomically(p, [](const fs::path& tmp) {
-                 std::ofstream(tmp) << "partial";
-                 throw Error("boom");
-               }),
+  EXPECT_THROW(writeFileAtomically(p,
+                                   [](const fs::path& tmp) {
+                                     std::ofstream(tmp) << "partial";
+                                     throw Error("boom");
+                                   }),
                Error);
   EXPECT_TRUE(fs::is_empty(dir.path()));
   writeTextAtomically(p, "whole");

@@ -35,7 +35,8 @@ TEST(Contour, ImplicitSphereIsWatertightAndAccurate) {
   EXPECT_TRUE(m.isClosed());
   EXPECT_EQ(m.boundaryEdgeCount(), 0);
   double maxErr = 0;
-  for (const Vec3f& v : m.vertices) maxErr = std::max(maxErr, std::abs(v.cast<double>().norm() - 0.05));
+  for (const Vec3f& v : m.vertices)
+    maxErr = std::max(maxErr, std::abs(v.cast<double>().norm() - 0.05));
   EXPECT_LT(maxErr, 1e-4);  // linear interpolation of an exact distance field
   EXPECT_NEAR(m.signedVolume(), 4.0 / 3.0 * M_PI * 1.25e-4, 0.01 * 4.0 / 3.0 * M_PI * 1.25e-4);
 }
@@ -128,8 +129,10 @@ TEST(MeshIo, StlIsWeldedAndBadFilesNamed) {
   test::TempDir dir;
   // ASCII STL of a tetrahedron: 4 facets, 12 corner copies of 4 points.
   std::ofstream stl(dir.path() / "t.stl");
-  const char* facets[4][3] = {{"0 0 0", "0 1 0", "1 0 0"}, {"0 0 0", "1 0 0", "0 0 1"},
-                              {"0 0 0", "0 0 1", "0 1 0"}, {"1 0 0", "0 1 0", "0 0 1"}};
+  const char* facets[4][3] = {{"0 0 0", "0 1 0", "1 0 0"},
+                              {"0 0 0", "1 0 0", "0 0 1"},
+                              {"0 0 0", "0 0 1", "0 1 0"},
+                              {"1 0 0", "0 1 0", "0 0 1"}};
   stl << "solid t\n";
   for (auto& f : facets) {
     stl << "facet normal 0 0 0\nouter loop\n";
@@ -156,18 +159,17 @@ TEST(MeshIo, SharedObjectsLoadWithListedBoundingBoxes) {
   const std::filesystem::path dir = INHAND_SHARED_OBJECTS;
   if (!std::filesystem::is_directory(dir))
     GTEST_SKIP() << "shared objects not found at " << dir << " (they are not part of the project)";
-  const std::map<std::string, Vec3> listed = {
-      {"002_master_chef_can.obj", {0.1023, 0.1024, 0.1401}},
-      {"003_cracker_box.obj", {0.0717, 0.1640, 0.2135}},
-      {"005_tomato_soup_can.obj", {0.0679, 0.0678, 0.1020}},
-      {"006_mustard_bottle.obj", {0.0964, 0.0581, 0.1915}},
-      {"009_gelatin_box.obj", {0.0715, 0.0675, 0.0892}},
-      {"010_potted_meat_can.obj", {0.1011, 0.0900, 0.0845}},
-      {"035_power_drill.obj", {0.1630, 0.1232, 0.1874}},
-      {"019_pitcher_base.obj", {0.1887, 0.1331, 0.2424}},
-      {"021_bleach_cleanser.obj", {0.0677, 0.1024, 0.2506}},
-      {"025_mug.obj", {0.1169, 0.0932, 0.0813}},
-      {"stanford_bunny.obj", {0.1557, 0.1543, 0.1207}}};
+  const std::map<std::string, Vec3> listed = {{"002_master_chef_can.obj", {0.1023, 0.1024, 0.1401}},
+                                              {"003_cracker_box.obj", {0.0717, 0.1640, 0.2135}},
+                                              {"005_tomato_soup_can.obj", {0.0679, 0.0678, 0.1020}},
+                                              {"006_mustard_bottle.obj", {0.0964, 0.0581, 0.1915}},
+                                              {"009_gelatin_box.obj", {0.0715, 0.0675, 0.0892}},
+                                              {"010_potted_meat_can.obj", {0.1011, 0.0900, 0.0845}},
+                                              {"035_power_drill.obj", {0.1630, 0.1232, 0.1874}},
+                                              {"019_pitcher_base.obj", {0.1887, 0.1331, 0.2424}},
+                                              {"021_bleach_cleanser.obj", {0.0677, 0.1024, 0.2506}},
+                                              {"025_mug.obj", {0.1169, 0.0932, 0.0813}},
+                                              {"stanford_bunny.obj", {0.1557, 0.1543, 0.1207}}};
   int found = 0;
   for (const auto& entry : std::filesystem::directory_iterator(dir)) {
     if (entry.path().extension() != ".obj") continue;

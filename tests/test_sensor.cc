@@ -18,7 +18,8 @@ TEST(NoiseModel, AxialSigmaMatchesNguyen) {
   EXPECT_NEAR(axialSigma(o, 1.0, 0.0), 0.0012 + 0.0019 * 0.36, 1e-12);
   EXPECT_EQ(axialSigma(o, 1.0, 50 * M_PI / 180), axialSigma(o, 1.0, 0.0));  // below 60°: flat
   double t = 70 * M_PI / 180;
-  EXPECT_NEAR(axialSigma(o, 1.0, t), 0.0012 + 0.0019 * 0.36 + 0.0001 * t * t / std::pow(M_PI / 2 - t, 2), 1e-12);
+  EXPECT_NEAR(axialSigma(o, 1.0, t),
+              0.0012 + 0.0019 * 0.36 + 0.0001 * t * t / std::pow(M_PI / 2 - t, 2), 1e-12);
   EXPECT_NEAR(lateralSigmaPx(o, 0.0), 0.8, 1e-12);
   // Disparity step z²/(8 f b): 1.14 mm at 0.6 m for f = 525 px, b = 7.5 cm.
   double z = 0.6, step = z * z / (8 * 525 * 0.075);
@@ -155,7 +156,8 @@ TEST(Render, ProjectorShadowMatchesAnalyticOcclusion) {
       Vec3 wall = ray * 1.0;
       // Skip pixels within a pixel of the shadow edge (sub-pixel geometry decides).
       bool inShadow = segmentHitsBox(wall, projector, lo, hi);
-      Vec3 wallR = cam.intrinsics.rayZ1(u + 1, v) * 1.0, wallL = cam.intrinsics.rayZ1(u - 1, v) * 1.0;
+      Vec3 wallR = cam.intrinsics.rayZ1(u + 1, v) * 1.0,
+           wallL = cam.intrinsics.rayZ1(u - 1, v) * 1.0;
       if (segmentHitsBox(wallR, projector, lo, hi) != inShadow ||
           segmentHitsBox(wallL, projector, lo, hi) != inShadow)
         continue;
@@ -173,17 +175,20 @@ TEST(Render, RangeLimits) {
   scene.commit();
   RenderOptions ro;
   ro.noise = false;
-  DepthImage d = renderDepth(scene, Iso3::Identity(), DepthCameraOptions{}, NoiseModelOptions{}, ro);
+  DepthImage d =
+      renderDepth(scene, Iso3::Identity(), DepthCameraOptions{}, NoiseModelOptions{}, ro);
   EXPECT_EQ(d.validCount(), 0);  // nearer than 0.5 m
 }
 
 TEST(DepthImage, PngRoundTripInMillimetres) {
   test::TempDir dir;
   DepthImage img(640, 480);
-  for (size_t i = 0; i < img.depth_m.size(); ++i) img.depth_m[i] = (i % 7 == 0) ? 0.f : 0.5f + 0.001f * float(i % 3000);
+  for (size_t i = 0; i < img.depth_m.size(); ++i)
+    img.depth_m[i] = (i % 7 == 0) ? 0.f : 0.5f + 0.001f * float(i % 3000);
   writeDepthPng(dir.path() / "d.png", img);
   DepthImage back = readDepthPng(dir.path() / "d.png", 0.001, 640, 480);
-  for (size_t i = 0; i < img.depth_m.size(); ++i) EXPECT_NEAR(back.depth_m[i], img.depth_m[i], 0.0005);
+  for (size_t i = 0; i < img.depth_m.size(); ++i)
+    EXPECT_NEAR(back.depth_m[i], img.depth_m[i], 0.0005);
 }
 
 TEST(DepthImage, BadFilesAreNamed) {
@@ -226,14 +231,20 @@ TEST(FrameSet, WriteReadAndValidation) {
       EXPECT_NE(std::string(e.what()).find(needle), std::string::npos) << e.what();
     }
   };
-  const std::string K = R"("intrinsics": {"width": 640, "height": 480, "fx": 525, "fy": 525, "cx": 319.5, "cy": 239.5})";
+  const std::string K =
+      R"("intrinsics": {"width": 640, "height": 480, "fx": 525, "fy": 525, "cx": 319.5, "cy": 239.5})";
   expectError("{", "malformed JSON");
   expectError("{" + K + "}", "missing field \"frames\"");
-  expectError("{" + K + R"(, "frames": [{"file": "a.png", "T_O_C": [0,0,0,0, 0,0,0,0, 0,0,0,0, 0,0,0,1]}]})",
-              "frames[0].T_O_C: not a rigid transform");
-  expectError("{" + K + R"(, "frames": [{"file": "missing.png", "T_O_C": [1,0,0,0, 0,1,0,0, 0,0,1,0, 0,0,0,1]}]})",
-              "frames[0].file");
+  expectError(
+      "{" + K +
+          R"(, "frames": [{"file": "a.png", "T_O_C": [0,0,0,0, 0,0,0,0, 0,0,0,0, 0,0,0,1]}]})",
+      "frames[0].T_O_C: not a rigid transform");
+  expectError(
+      "{" + K +
+          R"(, "frames": [{"file": "missing.png", "T_O_C": [1,0,0,0, 0,1,0,0, 0,0,1,0, 0,0,0,1]}]})",
+      "frames[0].file");
   expectError("{" + K + R"(, "frames": [{"file": "a.png", "T_O_C": [1,0,0]}]})", "16 numbers");
-  expectError(R"({"intrinsics": {"width": 640, "height": 480, "fx": -1, "fy": 525, "cx": 319.5, "cy": 239.5}, "frames": []})",
-              "intrinsics.fx");
+  expectError(
+      R"({"intrinsics": {"width": 640, "height": 480, "fx": -1, "fy": 525, "cx": 319.5, "cy": 239.5}, "frames": []})",
+      "intrinsics.fx");
 }

@@ -87,10 +87,11 @@ int runRender(const RenderArgs& args) {
   writeFrameSet(out.path(), set);
   writePly(out.path() / "object.ply", object);
   out.commit();
-  std::printf("render: %d depth images of %s (%zu triangles, %.3f x %.3f x %.3f m) at %.2f m in %s "
-              "(%.2f s)\n",
-              args.views, args.object.c_str(), object.triangles.size(), box.size().x(),
-              box.size().y(), box.size().z(), args.range_m, args.out.c_str(), secondsSince(t0));
+  std::printf(
+      "render: %d depth images of %s (%zu triangles, %.3f x %.3f x %.3f m) at %.2f m in %s "
+      "(%.2f s)\n",
+      args.views, args.object.c_str(), object.triangles.size(), box.size().x(), box.size().y(),
+      box.size().z(), args.range_m, args.out.c_str(), secondsSince(t0));
   return 0;
 }
 
@@ -132,8 +133,8 @@ int runFuse(const FuseArgs& args) {
   if (args.out.empty()) throw Error("--out is required");
   fs::path outPath(args.out);
   if (outPath.extension() != ".ply") throw Error("--out " + args.out + ": must end in .ply");
-  fs::path summaryPath = args.summary.empty() ? fs::path(outPath).replace_extension(".json")
-                                              : fs::path(args.summary);
+  fs::path summaryPath =
+      args.summary.empty() ? fs::path(outPath).replace_extension(".json") : fs::path(args.summary);
   if (!(args.margin_m >= 0)) throw Error("--margin must be >= 0");
   VolumeOptions vo;
   vo.voxel_size_m = args.voxel_m;
@@ -164,8 +165,8 @@ int runFuse(const FuseArgs& args) {
     box = autoBounds(dir, set, args.margin_m);
   }
   TsdfVolume volume(box, vo);
-  std::fprintf(stderr, "fuse: volume %d x %d x %d voxels of %.1f mm (%.0f MiB)\n", volume.dims().x(),
-               volume.dims().y(), volume.dims().z(), vo.voxel_size_m * 1000,
+  std::fprintf(stderr, "fuse: volume %d x %d x %d voxels of %.1f mm (%.0f MiB)\n",
+               volume.dims().x(), volume.dims().y(), volume.dims().z(), vo.voxel_size_m * 1000,
                TsdfVolume::megabytesFor(volume.dims()));
   NoiseModelOptions noise;
   auto tIntegrate = Clock::now();
@@ -184,8 +185,9 @@ int runFuse(const FuseArgs& args) {
   ObjectModel model = extractModel(volume, mo);
   double meshS = secondsSince(tMesh);
   if (model.mesh.empty())
-    throw Error(dir.string() + ": the frames produced no surface inside the bounds; check the "
-                               "poses (T_O_C is camera-to-object) and --bounds");
+    throw Error(dir.string() +
+                ": the frames produced no surface inside the bounds; check the "
+                "poses (T_O_C is camera-to-object) and --bounds");
 
   Json summary;
   summary["model"] = fs::path(outPath).filename().string();
@@ -218,11 +220,12 @@ int runFuse(const FuseArgs& args) {
     fs::remove(outPath, ec);  // no half-finished result
     throw;
   }
-  std::printf("fuse: %zu frames -> %s: %zu vertices, %zu triangles, observed %.1f%% of the "
-              "surface, mean entropy %.3f nats (%.2f s; summary %s)\n",
-              set.frames.size(), outPath.c_str(), model.mesh.vertices.size(),
-              model.mesh.triangles.size(), 100 * model.observedAreaFraction(), model.meanEntropy(),
-              secondsSince(t0), summaryPath.c_str());
+  std::printf(
+      "fuse: %zu frames -> %s: %zu vertices, %zu triangles, observed %.1f%% of the "
+      "surface, mean entropy %.3f nats (%.2f s; summary %s)\n",
+      set.frames.size(), outPath.c_str(), model.mesh.vertices.size(), model.mesh.triangles.size(),
+      100 * model.observedAreaFraction(), model.meanEntropy(), secondsSince(t0),
+      summaryPath.c_str());
   return 0;
 }
 

@@ -8,26 +8,26 @@
 namespace inhand::app {
 
 struct RenderArgs {
-  std::string object;          // builtin:NAME or a mesh file
-  int views = 40;              // number of depth images, directions spread over the sphere
-  std::string out;             // output directory (must not exist, or be empty)
-  double range_m = 0.7;        // camera distance from the object's centre
-  uint64_t seed = 1;           // noise seed
-  bool noise = true;           // false: exact depths
-  double room_m = 1.5;         // radius of a spherical room around the object (background
-                               // returns, as a real lab gives); 0: no background
+  std::string object;    // builtin:NAME or a mesh file
+  int views = 40;        // number of depth images, directions spread over the sphere
+  std::string out;       // output directory (must not exist, or be empty)
+  double range_m = 0.7;  // camera distance from the object's centre
+  uint64_t seed = 1;     // noise seed
+  bool noise = true;     // false: exact depths
+  double room_m = 1.5;   // radius of a spherical room around the object (background
+                         // returns, as a real lab gives); 0: no background
 };
 
 struct FuseArgs {
-  std::string frames;          // directory with frames.json
-  std::string out;             // MODEL.ply
-  std::string summary;         // summary JSON; empty: MODEL.json beside MODEL.ply
-  double voxel_m = 0.002;      // voxel size
-  double truncation_m = 0.0;   // band half-width; 0: 4 voxels
+  std::string frames;                           // directory with frames.json
+  std::string out;                              // MODEL.ply
+  std::string summary;                          // summary JSON; empty: MODEL.json beside MODEL.ply
+  double voxel_m = 0.002;                       // voxel size
+  double truncation_m = 0.0;                    // band half-width; 0: 4 voxels
   std::optional<std::array<double, 6>> bounds;  // xmin ymin zmin xmax ymax zmax in O; else auto
-  double margin_m = 0.02;      // auto bounds: margin around the measured points
-  double memory_mb = 2048;     // volume memory budget
-  double hole_sigma_m = 0.05;  // σ of never-observed surface
+  double margin_m = 0.02;                       // auto bounds: margin around the measured points
+  double memory_mb = 2048;                      // volume memory budget
+  double hole_sigma_m = 0.05;                   // σ of never-observed surface
 };
 
 struct SnapshotArgs {

@@ -13,7 +13,8 @@ int main(int argc, char** argv) {
 
   inhand::app::RenderArgs render;
   auto* r = app.add_subcommand("render", "render noisy depth images of an object from all around");
-  r->add_option("--object", render.object, "builtin:NAME or a mesh file (OBJ, PLY, STL, ...)")->required();
+  r->add_option("--object", render.object, "builtin:NAME or a mesh file (OBJ, PLY, STL, ...)")
+      ->required();
   r->add_option("--views", render.views, "number of views, spread evenly over the sphere")
       ->capture_default_str();
   r->add_option("--out", render.out, "output directory (new or empty)")->required();
@@ -21,8 +22,8 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   r->add_option("--seed", render.seed, "noise seed")->capture_default_str();
   r->add_option("--room", render.room_m,
-                 "radius of a spherical room around the object that gives background returns, m "
-                 "(0: none)")
+                "radius of a spherical room around the object that gives background returns, m "
+                "(0: none)")
       ->capture_default_str();
   r->add_flag("!--no-noise", render.noise, "render exact depths (no sensor noise)");
 
@@ -33,11 +34,15 @@ int main(int argc, char** argv) {
   f->add_option("--out", fuse.out, "output model, .ply")->required();
   f->add_option("--summary", fuse.summary, "summary JSON (default: MODEL.json)");
   f->add_option("--voxel", fuse.voxel_m, "voxel size, m")->capture_default_str();
-  f->add_option("--truncation", fuse.truncation_m, "signed-distance band half-width, m (0: 4 voxels)")
+  f->add_option("--truncation", fuse.truncation_m,
+                "signed-distance band half-width, m (0: 4 voxels)")
       ->capture_default_str();
-  f->add_option("--bounds", bounds, "volume bounds in the object frame: xmin ymin zmin xmax ymax zmax (m); default: frames.json bounds_O, else the measured points")
+  f->add_option("--bounds", bounds,
+                "volume bounds in the object frame: xmin ymin zmin xmax ymax zmax (m); default: "
+                "frames.json bounds_O, else the measured points")
       ->expected(6);
-  f->add_option("--margin", fuse.margin_m, "margin around the measured points for automatic bounds, m")
+  f->add_option("--margin", fuse.margin_m,
+                "margin around the measured points for automatic bounds, m")
       ->capture_default_str();
   f->add_option("--memory-budget", fuse.memory_mb, "refuse volumes larger than this, MiB")
       ->capture_default_str();
@@ -45,7 +50,8 @@ int main(int argc, char** argv) {
       ->capture_default_str();
 
   inhand::app::SnapshotArgs snap;
-  auto* s = app.add_subcommand("snapshot", "render a model (PLY with colours or variance) to a PNG");
+  auto* s =
+      app.add_subcommand("snapshot", "render a model (PLY with colours or variance) to a PNG");
   s->add_option("model", snap.model, "model .ply, mesh file or builtin:NAME")->required();
   s->add_option("--out", snap.out, "output PNG")->required();
   s->add_option("--size", snap.size_px, "pixels per view")->capture_default_str();

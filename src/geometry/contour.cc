@@ -79,7 +79,8 @@ ContourResult contour(const ScalarGrid& grid) {
   });
 
   auto edgeVertex = [&](size_t owner, int dir) {
-    return int(offset[owner] + uint32_t(std::popcount(uint32_t(mask[owner]) & ((1u << (dir - 1)) - 1))));
+    return int(offset[owner] +
+               uint32_t(std::popcount(uint32_t(mask[owner]) & ((1u << (dir - 1)) - 1))));
   };
 
   // Pass 3: triangles, per slice of cubes, concatenated in slice order (deterministic).
@@ -99,8 +100,10 @@ ContourResult contour(const ScalarGrid& grid) {
         for (const auto& tet : kTets) {
           int insideList[4], outsideList[4], ni = 0, no = 0;
           for (int k = 0; k < 4; ++k) {
-            if (in & (1u << tet[k])) insideList[ni++] = tet[k];
-            else outsideList[no++] = tet[k];
+            if (in & (1u << tet[k]))
+              insideList[ni++] = tet[k];
+            else
+              outsideList[no++] = tet[k];
           }
           if (ni == 0 || no == 0) continue;
           auto vid = [&](int ca, int cb) {

@@ -1,9 +1,9 @@
 #include "inhand/geometry/mesh_io.h"
 
-#include <assimp/DefaultLogger.hpp>
-#include <assimp/Importer.hpp>
 #include <assimp/postprocess.h>
 #include <assimp/scene.h>
+#include <assimp/DefaultLogger.hpp>
+#include <assimp/Importer.hpp>
 
 #include <algorithm>
 #include <cmath>
@@ -25,7 +25,8 @@ TriangleMesh importMesh(const fs::path& path) {
   if (fs::is_directory(path, ec)) throw Error(path.string() + ": is a directory, not a mesh file");
   if (fs::file_size(path, ec) == 0) throw Error(path.string() + ": mesh file is empty");
   std::string ext = path.extension().string();
-  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return std::tolower(c); });
+  std::transform(ext.begin(), ext.end(), ext.begin(),
+                 [](unsigned char c) { return std::tolower(c); });
   if (ext == ".ply") {
     // Our own reader: assimp 5.2's PLY importer crashes on files with extra per-vertex
     // properties (such as inhand's variance + colour models). Big-endian PLY still goes to assimp.
@@ -33,15 +34,15 @@ TriangleMesh importMesh(const fs::path& path) {
       return welded(readPly(path).mesh);
   }
   Assimp::Importer importer;
-  importer.SetPropertyInteger(AI_CONFIG_PP_RVC_FLAGS, aiComponent_NORMALS | aiComponent_COLORS |
-                                                          aiComponent_TEXCOORDS |
-                                                          aiComponent_TANGENTS_AND_BITANGENTS |
-                                                          aiComponent_MATERIALS);
-  importer.SetPropertyInteger(AI_CONFIG_PP_SBP_REMOVE, aiPrimitiveType_POINT | aiPrimitiveType_LINE);
-  const aiScene* scene = importer.ReadFile(
-      path.string(), aiProcess_Triangulate | aiProcess_RemoveComponent |
-                         aiProcess_JoinIdenticalVertices | aiProcess_SortByPType |
-                         aiProcess_FindDegenerates);
+  importer.SetPropertyInteger(AI_CONFIG_PP_RVC_FLAGS,
+                              aiComponent_NORMALS | aiComponent_COLORS | aiComponent_TEXCOORDS |
+                                  aiComponent_TANGENTS_AND_BITANGENTS | aiComponent_MATERIALS);
+  importer.SetPropertyInteger(AI_CONFIG_PP_SBP_REMOVE,
+                              aiPrimitiveType_POINT | aiPrimitiveType_LINE);
+  const aiScene* scene =
+      importer.ReadFile(path.string(), aiProcess_Triangulate | aiProcess_RemoveComponent |
+                                           aiProcess_JoinIdenticalVertices | aiProcess_SortByPType |
+                                           aiProcess_FindDegenerates);
   if (!scene || !scene->mRootNode)
     throw Error(path.string() + ": cannot read mesh (" + importer.GetErrorString() + ")");
   TriangleMesh out;
@@ -75,8 +76,8 @@ std::array<uint8_t, 3> confidenceColor(float variance_m2) {
   // Log-scale blend between σ = 0.3 mm (grey) and σ = 5 cm (red).
   constexpr double kSigmaGrey = 0.0003, kSigmaRed = 0.05;
   double sigma = std::sqrt(std::max(0.f, variance_m2));
-  double s = sigma <= kSigmaGrey ? 0.0
-                                 : std::log(sigma / kSigmaGrey) / std::log(kSigmaRed / kSigmaGrey);
+  double s =
+      sigma <= kSigmaGrey ? 0.0 : std::log(sigma / kSigmaGrey) / std::log(kSigmaRed / kSigmaGrey);
   s = std::clamp(s, 0.0, 1.0);
   const double grey[3] = {170, 170, 170}, red[3] = {220, 20, 20};
   std::array<uint8_t, 3> c;
@@ -94,7 +95,8 @@ void writePly(const fs::path& path, const TriangleMesh& mesh, const std::vector<
     out << "element vertex " << mesh.vertices.size() << "\n";
     out << "property float x\nproperty float y\nproperty float z\n";
     if (variance) {
-      out << "comment variance: per-vertex surface variance in m^2 (sigma = 5 cm: never observed)\n";
+      out << "comment variance: per-vertex surface variance in m^2 (sigma = 5 cm: never "
+             "observed)\n";
       out << "property float variance\n";
       out << "property uchar red\nproperty uchar green\nproperty uchar blue\n";
     }
@@ -139,8 +141,7 @@ struct PlyElement {
 int typeSize(const std::string& t) {
   if (t == "char" || t == "uchar" || t == "int8" || t == "uint8") return 1;
   if (t == "short" || t == "ushort" || t == "int16" || t == "uint16") return 2;
-  if (t == "int" || t == "uint" || t == "float" || t == "int32" || t == "uint32" ||
-      t == "float32")
+  if (t == "int" || t == "uint" || t == "float" || t == "int32" || t == "uint32" || t == "float32")
     return 4;
   if (t == "double" || t == "float64") return 8;
   return 0;
@@ -198,7 +199,8 @@ PlyData readPly(const fs::path& path) {
     }
   }
   if (format != "binary_little_endian" && format != "ascii")
-    throw Error(where + ": PLY format '" + format + "' is not supported (binary_little_endian, ascii)");
+    throw Error(where + ": PLY format '" + format +
+                "' is not supported (binary_little_endian, ascii)");
   const bool ascii = format == "ascii";
   PlyData out;
   size_t pos = bodyStart;
@@ -225,15 +227,20 @@ PlyData readPly(const fs::path& path) {
           std::vector<int> idx(std::max(n, 0));
           for (int k = 0; k < n; ++k) idx[k] = int(readValue(p.type));
           if (isFace && (p.name == "vertex_indices" || p.name == "vertex_index"))
-            for (int k = 1; k + 1 < n; ++k) out.mesh.triangles.emplace_back(idx[0], idx[k], idx[k + 1]);
+            for (int k = 1; k + 1 < n; ++k)
+              out.mesh.triangles.emplace_back(idx[0], idx[k], idx[k + 1]);
           continue;
         }
         double value = readValue(p.type);
         if (!isVertex) continue;
-        if (p.name == "x") v.x() = float(value);
-        else if (p.name == "y") v.y() = float(value);
-        else if (p.name == "z") v.z() = float(value);
-        else out.vertexProperties[p.name].push_back(float(value));
+        if (p.name == "x")
+          v.x() = float(value);
+        else if (p.name == "y")
+          v.y() = float(value);
+        else if (p.name == "z")
+          v.z() = float(value);
+        else
+          out.vertexProperties[p.name].push_back(float(value));
       }
       if (isVertex) out.mesh.vertices.push_back(v);
     }

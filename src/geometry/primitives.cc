@@ -45,8 +45,7 @@ TriangleMesh makeRevolution(const std::vector<Vec2>& profile, int segments) {
     const Vec2& p = profile[r + 1];
     for (int s = 0; s < segments; ++s) {
       double a = 2.0 * M_PI * s / segments;
-      m.vertices.emplace_back(float(p.x() * std::cos(a)), float(p.x() * std::sin(a)),
-                              float(p.y()));
+      m.vertices.emplace_back(float(p.x() * std::cos(a)), float(p.x() * std::sin(a)), float(p.y()));
     }
   }
   const int top = static_cast<int>(m.vertices.size());
@@ -71,8 +70,8 @@ TriangleMesh makeCylinder(double radius_m, double height_m, int segments) {
 
 TriangleMesh makeSphere(double radius_m, int subdivisions) {
   const double t = (1.0 + std::sqrt(5.0)) / 2.0;
-  std::vector<Vec3> v = {{-1, t, 0}, {1, t, 0}, {-1, -t, 0}, {1, -t, 0}, {0, -1, t}, {0, 1, t},
-                         {0, -1, -t}, {0, 1, -t}, {t, 0, -1}, {t, 0, 1}, {-t, 0, -1}, {-t, 0, 1}};
+  std::vector<Vec3> v = {{-1, t, 0},  {1, t, 0},  {-1, -t, 0}, {1, -t, 0}, {0, -1, t},  {0, 1, t},
+                         {0, -1, -t}, {0, 1, -t}, {t, 0, -1},  {t, 0, 1},  {-t, 0, -1}, {-t, 0, 1}};
   for (Vec3& p : v) p.normalize();
   std::vector<Tri> f = {{0, 11, 5}, {0, 5, 1},  {0, 1, 7},   {0, 7, 10}, {0, 10, 11},
                         {1, 5, 9},  {5, 11, 4}, {11, 10, 2}, {10, 7, 6}, {7, 1, 8},

@@ -54,9 +54,8 @@ RayScene& RayScene::operator=(RayScene&& o) noexcept {
 int RayScene::addMesh(const TriangleMesh& mesh, const Iso3& T) {
   INHAND_CHECK(!committed_, "addMesh after commit");
   RTCGeometry geom = rtcNewGeometry(device(), RTC_GEOMETRY_TYPE_TRIANGLE);
-  auto* v = static_cast<float*>(rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0,
-                                                        RTC_FORMAT_FLOAT3, 3 * sizeof(float),
-                                                        mesh.vertices.size()));
+  auto* v = static_cast<float*>(rtcSetNewGeometryBuffer(
+      geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 3 * sizeof(float), mesh.vertices.size()));
   for (size_t i = 0; i < mesh.vertices.size(); ++i) {
     Vec3f p = (T * mesh.vertices[i].cast<double>()).cast<float>();
     v[3 * i] = p.x();

@@ -156,8 +156,12 @@ ObjectModel extractModel(const TsdfVolume& volume, const MeshOptions& options) {
             grid.values[g] = s == 0.f ? 1e-7f : s;  // keep exact zeros off the surface's corners
             break;
           }
-          case VoxelState::kEmpty: grid.values[g] = mu; break;
-          case VoxelState::kUnknown: grid.values[g] = -mu; break;
+          case VoxelState::kEmpty:
+            grid.values[g] = mu;
+            break;
+          case VoxelState::kUnknown:
+            grid.values[g] = -mu;
+            break;
         }
       }
   });
@@ -197,7 +201,8 @@ ObjectModel extractModel(const TsdfVolume& volume, const MeshOptions& options) {
         model.observed[k] = var < holeVar;
       },
       4096);
-  if (options.min_component_fraction > 0) dropSmallComponents(&model, options.min_component_fraction);
+  if (options.min_component_fraction > 0)
+    dropSmallComponents(&model, options.min_component_fraction);
   return model;
 }
 

@@ -59,7 +59,8 @@ RgbImage renderSnapshot(const TriangleMesh& mesh, const std::vector<std::array<u
         if (!colors.empty()) {
           double w[3] = {1.0 - h.u - h.v, h.u, h.v};
           for (int ch = 0; ch < 3; ++ch)
-            c[ch] = w[0] * colors[tri[0]][ch] + w[1] * colors[tri[1]][ch] + w[2] * colors[tri[2]][ch];
+            c[ch] =
+                w[0] * colors[tri[0]][ch] + w[1] * colors[tri[1]][ch] + w[2] * colors[tri[2]][ch];
         }
         Vec3 nrm = h.normal.cast<double>().normalized();
         double lambert = std::abs(nrm.dot(rays[size_t(v) * T + u].dir.cast<double>().normalized()));
@@ -78,7 +79,8 @@ void writeRgbPng(const std::filesystem::path& path, const RgbImage& image) {
     png_structp png = png_create_write_struct(PNG_LIBPNG_VER_STRING, nullptr, nullptr, nullptr);
     png_infop info = png ? png_create_info_struct(png) : nullptr;
     bool ok = png && info;
-    if (ok && setjmp(png_jmpbuf(png))) ok = false;
+    if (ok && setjmp(png_jmpbuf(png)))
+      ok = false;
     else if (ok) {
       png_init_io(png, fp);
       png_set_IHDR(png, info, png_uint_32(image.width), png_uint_32(image.height), 8,

@@ -20,7 +20,8 @@ std::string DepthCameraOptions::validate() const {
   if (!projector_C.allFinite()) return "projector_C must be finite";
   if (!(min_range_m > 0)) return "min_range_m must be > 0";
   if (!(max_range_m > min_range_m)) return "max_range_m must be > min_range_m";
-  if (!(max_incidence_deg > 0 && max_incidence_deg < 90)) return "max_incidence_deg must be in (0, 90)";
+  if (!(max_incidence_deg > 0 && max_incidence_deg < 90))
+    return "max_incidence_deg must be in (0, 90)";
   if (!(max_projector_incidence_deg > 0 && max_projector_incidence_deg < 90))
     return "max_projector_incidence_deg must be in (0, 90)";
   return {};

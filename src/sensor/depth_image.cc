@@ -46,7 +46,8 @@ void writeDepthPng(const std::filesystem::path& path, const DepthImage& image, d
     FilePtr fp(std::fopen(tmp.c_str(), "wb"));
     if (!fp) throw Error(path.string() + ": cannot open for writing");
     std::string message = path.string();
-    png_structp png = png_create_write_struct(PNG_LIBPNG_VER_STRING, &message, pngError, pngWarning);
+    png_structp png =
+        png_create_write_struct(PNG_LIBPNG_VER_STRING, &message, pngError, pngWarning);
     png_infop info = png ? png_create_info_struct(png) : nullptr;
     if (!png || !info) {
       png_destroy_write_struct(&png, &info);
@@ -76,8 +77,8 @@ namespace {
 enum class PngProblem { kNone, kCorrupt, kBitDepth, kColour, kSize };
 
 // The setjmp-protected part of reading, with only trivially destructible locals.
-PngProblem readPngRows(FILE* fp, std::string* message, int expectedW, int expectedH, int* w,
-                       int* h, int* bitDepth, std::vector<uint16_t>* rows) {
+PngProblem readPngRows(FILE* fp, std::string* message, int expectedW, int expectedH, int* w, int* h,
+                       int* bitDepth, std::vector<uint16_t>* rows) {
   png_structp png = png_create_read_struct(PNG_LIBPNG_VER_STRING, message, pngError, pngWarning);
   png_infop info = png ? png_create_info_struct(png) : nullptr;
   if (!png || !info) {
@@ -95,14 +96,18 @@ PngProblem readPngRows(FILE* fp, std::string* message, int expectedW, int expect
   *h = int(png_get_image_height(png, info));
   *bitDepth = png_get_bit_depth(png, info);
   PngProblem result = PngProblem::kNone;
-  if (*bitDepth != 16) result = PngProblem::kBitDepth;
-  else if (png_get_color_type(png, info) != PNG_COLOR_TYPE_GRAY) result = PngProblem::kColour;
-  else if (expectedW > 0 && (*w != expectedW || *h != expectedH)) result = PngProblem::kSize;
+  if (*bitDepth != 16)
+    result = PngProblem::kBitDepth;
+  else if (png_get_color_type(png, info) != PNG_COLOR_TYPE_GRAY)
+    result = PngProblem::kColour;
+  else if (expectedW > 0 && (*w != expectedW || *h != expectedH))
+    result = PngProblem::kSize;
   if (result == PngProblem::kNone) {
     png_set_swap(png);
     rows->resize(size_t(*w) * size_t(*h));
     for (int v = 0; v < *h; ++v)
-      png_read_row(png, reinterpret_cast<png_bytep>(rows->data() + size_t(v) * size_t(*w)), nullptr);
+      png_read_row(png, reinterpret_cast<png_bytep>(rows->data() + size_t(v) * size_t(*w)),
+                   nullptr);
   }
   png_destroy_read_struct(&png, &info, nullptr);
   return result;
@@ -124,12 +129,15 @@ DepthImage readDepthPng(const std::filesystem::path& path, double scale, int exp
   std::vector<uint16_t> rows;
   int w = 0, h = 0, bitDepth = 0;
   switch (readPngRows(fp.get(), &message, expectedW, expectedH, &w, &h, &bitDepth, &rows)) {
-    case PngProblem::kNone: break;
-    case PngProblem::kCorrupt: throw Error(message + " (corrupt or truncated PNG)");
+    case PngProblem::kNone:
+      break;
+    case PngProblem::kCorrupt:
+      throw Error(message + " (corrupt or truncated PNG)");
     case PngProblem::kBitDepth:
       throw Error(where + ": depth PNG must be 16-bit, this one is " + std::to_string(bitDepth) +
                   "-bit");
-    case PngProblem::kColour: throw Error(where + ": depth PNG must be single-channel grey");
+    case PngProblem::kColour:
+      throw Error(where + ": depth PNG must be single-channel grey");
     case PngProblem::kSize:
       throw Error(where + ": depth PNG is " + std::to_string(w) + "x" + std::to_string(h) +
                   ", expected " + std::to_string(expectedW) + "x" + std::to_string(expectedH) +

@@ -43,7 +43,8 @@ FrameSet readFrameSet(const fs::path& dir) {
       box.extend(Vec3(v[0].get<double>(), v[1].get<double>(), v[2].get<double>()));
     }
     if (!(Vec3(b["min"][0], b["min"][1], b["min"][2]).array() <
-          Vec3(b["max"][0], b["max"][1], b["max"][2]).array()).all())
+          Vec3(b["max"][0], b["max"][1], b["max"][2]).array())
+             .all())
       throw Error(bw + ": each min must be below its max");
     set.bounds_O = box;
   }
@@ -90,8 +91,9 @@ void writeFrameSet(const fs::path& dir, const FrameSet& set) {
     frames.push_back({{"file", f.file}, {"T_O_C", poseToRowMajor(f.T_O_C)}});
   j["frames"] = frames;
   if (set.bounds_O)
-    j["bounds_O"] = {{"min", {set.bounds_O->min.x(), set.bounds_O->min.y(), set.bounds_O->min.z()}},
-                     {"max", {set.bounds_O->max.x(), set.bounds_O->max.y(), set.bounds_O->max.z()}}};
+    j["bounds_O"] = {
+        {"min", {set.bounds_O->min.x(), set.bounds_O->min.y(), set.bounds_O->min.z()}},
+        {"max", {set.bounds_O->max.x(), set.bounds_O->max.y(), set.bounds_O->max.z()}}};
   writeTextAtomically(dir / "frames.json", j.dump(2) + "\n");
 }
 

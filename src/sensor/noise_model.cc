@@ -9,13 +9,15 @@ std::string NoiseModelOptions::validate() const {
   if (!(axial_c0_m >= 0)) return "axial_c0_m must be >= 0";
   if (!(axial_c1 >= 0)) return "axial_c1 must be >= 0";
   if (!(grazing_c_m >= 0)) return "grazing_c_m must be >= 0";
-  if (!(grazing_start_deg >= 0 && grazing_start_deg < 90)) return "grazing_start_deg must be in [0, 90)";
+  if (!(grazing_start_deg >= 0 && grazing_start_deg < 90))
+    return "grazing_start_deg must be in [0, 90)";
   if (!(lateral_c0_px >= 0)) return "lateral_c0_px must be >= 0";
   if (!(lateral_c1_px >= 0)) return "lateral_c1_px must be >= 0";
   if (!(disparity_step_px > 0)) return "disparity_step_px must be > 0";
   if (!(discontinuity_jump_m > 0)) return "discontinuity_jump_m must be > 0";
   if (!(discontinuity_factor >= 1)) return "discontinuity_factor must be >= 1";
-  if (!(max_incidence_deg > 0 && max_incidence_deg < 90)) return "max_incidence_deg must be in (0, 90)";
+  if (!(max_incidence_deg > 0 && max_incidence_deg < 90))
+    return "max_incidence_deg must be in (0, 90)";
   if (axial_c0_m + axial_c1 == 0) return "axial_c0_m and axial_c1 cannot both be 0";
   return {};
 }

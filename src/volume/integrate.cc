@@ -40,7 +40,8 @@ std::vector<float> measurementSigma(const DepthImage& depth, const CameraIntrins
       Vec3 tu = tangent(1, 0), tv = tangent(0, 1);
       Vec3 n = tu.cross(tv);
       double theta = 0.0;
-      if (n.norm() > 0) theta = std::acos(std::min(1.0, std::abs(n.normalized().dot(P.normalized()))));
+      if (n.norm() > 0)
+        theta = std::acos(std::min(1.0, std::abs(n.normalized().dot(P.normalized()))));
       double s = axialSigma(noise, D, theta);
       if (edge) s *= noise.discontinuity_factor;
       sigma[size_t(v) * w + u] = float(s);
@@ -84,9 +85,12 @@ inline bool updateVoxel(float d, float mu, float weight, bool carveOnly, float* 
 
 // Interval of x (real) where a + b·x >= 0, intersected into [lo, hi].
 inline void clipLinear(double a, double b, double* lo, double* hi) {
-  if (b > 0) *lo = std::max(*lo, -a / b);
-  else if (b < 0) *hi = std::min(*hi, -a / b);
-  else if (a < 0) *hi = -1;  // never satisfied
+  if (b > 0)
+    *lo = std::max(*lo, -a / b);
+  else if (b < 0)
+    *hi = std::min(*hi, -a / b);
+  else if (a < 0)
+    *hi = -1;  // never satisfied
 }
 
 }  // namespace
@@ -122,12 +126,17 @@ IntegrationStats integrate(const DepthImage& depth, const Iso3& T_O_C, const Cam
       // z > 0 and −0.5 ≤ fx·X/Z + cx < w − 0.5 (same for v) are linear in x once multiplied by Z.
       double lo = 0, hi = dims.x() - 1;
       clipLinear(a.z() - 1e-6, step.z(), &lo, &hi);
-      clipLinear(K.fx * a.x() + (K.cx + 0.5) * a.z(), K.fx * step.x() + (K.cx + 0.5) * step.z(), &lo, &hi);
-      clipLinear(-K.fx * a.x() + (w - 0.5 - K.cx) * a.z(), -K.fx * step.x() + (w - 0.5 - K.cx) * step.z(), &lo, &hi);
-      clipLinear(K.fy * a.y() + (K.cy + 0.5) * a.z(), K.fy * step.y() + (K.cy + 0.5) * step.z(), &lo, &hi);
-      clipLinear(-K.fy * a.y() + (h - 0.5 - K.cy) * a.z(), -K.fy * step.y() + (h - 0.5 - K.cy) * step.z(), &lo, &hi);
+      clipLinear(K.fx * a.x() + (K.cx + 0.5) * a.z(), K.fx * step.x() + (K.cx + 0.5) * step.z(),
+                 &lo, &hi);
+      clipLinear(-K.fx * a.x() + (w - 0.5 - K.cx) * a.z(),
+                 -K.fx * step.x() + (w - 0.5 - K.cx) * step.z(), &lo, &hi);
+      clipLinear(K.fy * a.y() + (K.cy + 0.5) * a.z(), K.fy * step.y() + (K.cy + 0.5) * step.z(),
+                 &lo, &hi);
+      clipLinear(-K.fy * a.y() + (h - 0.5 - K.cy) * a.z(),
+                 -K.fy * step.y() + (h - 0.5 - K.cy) * step.z(), &lo, &hi);
       if (lo > hi) continue;
-      const int x0 = std::max(0, int(std::floor(lo)) - 1), x1 = std::min(dims.x() - 1, int(std::ceil(hi)) + 1);
+      const int x0 = std::max(0, int(std::floor(lo)) - 1),
+                x1 = std::min(dims.x() - 1, int(std::ceil(hi)) + 1);
       const float ax = float(a.x()), ay = float(a.y()), az = float(a.z());
       const float sx = float(step.x()), sy = float(step.y()), sz = float(step.z());
       const size_t base = volume->index(0, y, z);
@@ -149,7 +158,8 @@ IntegrationStats integrate(const DepthImage& depth, const Iso3& T_O_C, const Cam
         if (d < -mu) continue;
         ++myVisited;
         const size_t i = base + size_t(x);
-        myUpdated += updateVoxel(d, mu, weight[p], carve && carve[p], &sumWD[i], &sumW[i], &state[i]);
+        myUpdated +=
+            updateVoxel(d, mu, weight[p], carve && carve[p], &sumWD[i], &sumW[i], &state[i]);
       }
     }
     visited += myVisited;

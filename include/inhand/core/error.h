@@ -17,7 +17,7 @@ class Error : public std::runtime_error {
 }  // namespace inhand
 
 // Aborts with file and line when an internal invariant is broken (never for user input).
-#define INHAND_CHECK(cond, msg)                                                 \
-  do {                                                                          \
-    if (!(cond)) ::inhand::abortInvariant(#cond, __FILE__, __LINE__, (msg));    \
+#define INHAND_CHECK(cond, msg)                                              \
+  do {                                                                       \
+    if (!(cond)) ::inhand::abortInvariant(#cond, __FILE__, __LINE__, (msg)); \
   } while (0)

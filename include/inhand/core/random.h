@@ -1,8 +1,8 @@
 #pragma once
 // Deterministic random streams. Each parallel work item derives its own generator from
 // (seed, item index), so results do not depend on thread count or scheduling.
-#include <cstdint>
 #include <cmath>
+#include <cstdint>
 #include <random>
 
 namespace inhand {

@@ -26,8 +26,8 @@ struct MeshOptions {
 };
 
 struct ObjectModel {
-  TriangleMesh mesh;            // object frame O, outward-oriented
-  std::vector<float> variance;  // per vertex, m²
+  TriangleMesh mesh;              // object frame O, outward-oriented
+  std::vector<float> variance;    // per vertex, m²
   std::vector<uint8_t> observed;  // per vertex: 1 from measurements, 0 hole-filled
 
   // Paper Fig. 5: mean over vertices of ½ ln(2πe σ²), nats.

@@ -15,10 +15,10 @@ struct RgbImage {
 };
 
 struct SnapshotOptions {
-  int tile_px = 400;        // size of each view, pixels
-  int columns = 3;          // views per row
+  int tile_px = 400;          // size of each view, pixels
+  int columns = 3;            // views per row
   double elevation_deg = 25;  // camera elevation above the object's x–y plane
-  int views = 6;            // azimuths spread over 360°, plus one from below when views > 4
+  int views = 6;              // azimuths spread over 360°, plus one from below when views > 4
 };
 
 // Renders `mesh` (colours per vertex, or uniform grey when empty) from several directions.

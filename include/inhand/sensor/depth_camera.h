@@ -8,12 +8,12 @@
 namespace inhand {
 
 struct CameraIntrinsics {
-  int width = 640;     // pixels
-  int height = 480;    // pixels
-  double fx = 525.0;   // focal length, pixels
-  double fy = 525.0;   // focal length, pixels
-  double cx = 319.5;   // principal point, pixels
-  double cy = 239.5;   // principal point, pixels
+  int width = 640;    // pixels
+  int height = 480;   // pixels
+  double fx = 525.0;  // focal length, pixels
+  double fy = 525.0;  // focal length, pixels
+  double cx = 319.5;  // principal point, pixels
+  double cy = 239.5;  // principal point, pixels
 
   // Direction of the ray through pixel (u, v) with z = 1 (so a hit's t is its depth z).
   Vec3 rayZ1(double u, double v) const { return Vec3((u - cx) / fx, (v - cy) / fy, 1.0); }
@@ -27,10 +27,11 @@ struct CameraIntrinsics {
 
 struct DepthCameraOptions {
   CameraIntrinsics intrinsics;
-  Vec3 projector_C{0.075, 0.0, 0.0};   // projector centre in the camera frame, m (7.5 cm baseline)
-  double min_range_m = 0.5;            // no return nearer than this depth z, m
-  double max_range_m = 5.0;            // no return farther than this depth z, m
-  double max_incidence_deg = 80.0;     // no return when the camera ray meets the surface more obliquely
+  Vec3 projector_C{0.075, 0.0, 0.0};  // projector centre in the camera frame, m (7.5 cm baseline)
+  double min_range_m = 0.5;           // no return nearer than this depth z, m
+  double max_range_m = 5.0;           // no return farther than this depth z, m
+  double max_incidence_deg =
+      80.0;  // no return when the camera ray meets the surface more obliquely
   double max_projector_incidence_deg = 80.0;  // same for the projector's ray (stereo effects)
 
   double baseline_m() const { return projector_C.norm(); }

@@ -3,8 +3,8 @@
 // frame. This is what `inhand render` writes and `inhand fuse` reads, and what a user records
 // from a real robot:
 //   { "depth_scale_m": 0.001,
-//     "intrinsics": { "width": 640, "height": 480, "fx": 525, "fy": 525, "cx": 319.5, "cy": 239.5 },
-//     "frames": [ { "file": "depth_0000.png", "T_O_C": [16 numbers, row-major] }, … ],
+//     "intrinsics": { "width": 640, "height": 480, "fx": 525, "fy": 525, "cx": 319.5, "cy": 239.5
+//     }, "frames": [ { "file": "depth_0000.png", "T_O_C": [16 numbers, row-major] }, … ],
 //     "bounds_O": { "min": [x, y, z], "max": [x, y, z] } }   (optional)
 // T_O_C is the camera pose in the object frame (maps camera points into the object frame).
 #include <filesystem>

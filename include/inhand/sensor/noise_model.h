@@ -8,10 +8,10 @@
 namespace inhand {
 
 struct NoiseModelOptions {
-  double axial_c0_m = 0.0012;          // σ_z constant term, m
-  double axial_c1 = 0.0019;            // σ_z quadratic coefficient, 1/m
-  double axial_z0_m = 0.4;             // σ_z quadratic centre, m
-  double grazing_c_m = 0.0001;         // σ_z grazing term coefficient (· 1/√z · θ²/(π/2−θ)²)
+  double axial_c0_m = 0.0012;   // σ_z constant term, m
+  double axial_c1 = 0.0019;     // σ_z quadratic coefficient, 1/m
+  double axial_z0_m = 0.4;      // σ_z quadratic centre, m
+  double grazing_c_m = 0.0001;  // σ_z grazing term coefficient (· 1/√z · θ²/(π/2−θ)²)
   double grazing_start_deg = 60.0;     // grazing term applies beyond this incidence angle
   double lateral_c0_px = 0.8;          // σ_L constant term, pixels
   double lateral_c1_px = 0.035;        // σ_L coefficient of θ/(π/2−θ), pixels

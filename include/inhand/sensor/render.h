@@ -12,8 +12,8 @@
 namespace inhand {
 
 struct RenderOptions {
-  bool noise = true;    // false: exact depth of the first hit (failure modes still apply)
-  uint64_t seed = 1;    // noise seed; the same seed gives the same image on any thread count
+  bool noise = true;  // false: exact depth of the first hit (failure modes still apply)
+  uint64_t seed = 1;  // noise seed; the same seed gives the same image on any thread count
 };
 
 // Renders the depth image seen by a camera at T_S_C (camera pose in the scene's frame S).

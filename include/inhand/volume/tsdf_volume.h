@@ -14,9 +14,9 @@ namespace inhand {
 enum class VoxelState : uint8_t { kUnknown = 0, kEmpty = 1, kObserved = 2 };
 
 struct VolumeOptions {
-  double voxel_size_m = 0.002;      // edge of a voxel, m
-  double truncation_m = 0.0;        // half-width μ of the signed-distance band, m; 0: 4 voxels
-  double memory_budget_mb = 2048;   // a volume needing more memory than this is refused, MiB
+  double voxel_size_m = 0.002;     // edge of a voxel, m
+  double truncation_m = 0.0;       // half-width μ of the signed-distance band, m; 0: 4 voxels
+  double memory_budget_mb = 2048;  // a volume needing more memory than this is refused, MiB
 
   double truncation() const { return truncation_m > 0 ? truncation_m : 4.0 * voxel_size_m; }
   std::string validate() const;  // empty when valid, else names the field
@@ -32,7 +32,9 @@ class TsdfVolume {
   TsdfVolume(const Aabb& box_O, const VolumeOptions& options);
 
   static Vec3i dimsFor(const Aabb& box_O, double voxel_size_m);
-  static double megabytesFor(const Vec3i& dims) { return double(dims.prod()) * kBytesPerVoxel / (1 << 20); }
+  static double megabytesFor(const Vec3i& dims) {
+    return double(dims.prod()) * kBytesPerVoxel / (1 << 20);
+  }
 
   const Vec3i& dims() const { return dims_; }
   const Vec3& origin() const { return origin_; }
