@@ -18,6 +18,7 @@
 #include "inhand/geometry/ray_scene.h"
 #include "inhand/mesh/extract.h"
 #include "inhand/report/snapshot.h"
+#include "inhand/robot/reachability.h"
 #include "inhand/sensor/frame_set.h"
 #include "inhand/sensor/render.h"
 #include "inhand/volume/integrate.h"
@@ -226,6 +227,52 @@ int runFuse(const FuseArgs& args) {
       set.frames.size(), outPath.c_str(), model.mesh.vertices.size(), model.mesh.triangles.size(),
       100 * model.observedAreaFraction(), model.meanEntropy(), secondsSince(t0),
       summaryPath.c_str());
+  return 0;
+}
+
+int runRobot(const RobotArgs& args) {
+  auto t0 = Clock::now();
+  RobotModel model = RobotModel::load(args.config, args.urdf);
+  std::printf("robot %s: %d movable joints, arm chain %s -> %s with %d DOF\n", model.name().c_str(),
+              model.variableCount(), model.links()[model.baseLink()].name.c_str(),
+              model.links()[model.tipLink()].name.c_str(), model.armDof());
+  std::printf("  %-14s %-10s %10s %10s %12s\n", "joint", "type", "lower", "upper", "speed");
+  for (int v : model.armVariables()) {
+    const JointInfo& j = model.variable(v);
+    const char* type = j.type == JointInfo::Type::kPrismatic ? "prismatic" : "revolute";
+    std::printf("  %-14s %-10s %10.3f %10.3f %12.3f\n", j.name.c_str(), type, j.lower, j.upper,
+                j.velocity);
+  }
+  std::printf("hand: %zu links, %zu fingers", model.handLinks().size(), model.fingers().size());
+  for (const FingerInfo& f : model.fingers())
+    std::printf(" [%s %.3f..%.3f]", model.variable(f.variable).name.c_str(), f.open, f.closed);
+  std::printf("%s%s\n", model.spreadVariable() >= 0 ? ", spread " : "",
+              model.spreadVariable() >= 0 ? model.variable(model.spreadVariable()).name.c_str() : "");
+  ReachabilityOptions ro;
+  ro.directions = args.directions;
+  ro.rolls = args.rolls;
+  ro.grid = args.grid;
+  ro.range_m = args.range_m;
+  if (std::string p = ro.validate(); !p.empty()) throw Error("reachability: " + p);
+  std::printf("reachability: object held %.2f m in front of the palm, camera at %.2f m, %d directions "
+              "x %d rolls per position\n",
+              model.graspOffset(), ro.range_m, ro.directions, ro.rolls);
+  std::printf("  %8s %8s   %-26s %s\n", "pan deg", "tilt deg", "object position (base, m)",
+              "reachable directions");
+  int reachable = 0, total = 0;
+  for (const ReachabilityCell& c : reachabilityMap(model, ro)) {
+    std::printf("  %8.1f %8.1f   (%6.3f, %6.3f, %6.3f)      ", c.pan_deg, c.tilt_deg, c.object_B.x(),
+                c.object_B.y(), c.object_B.z());
+    if (!c.aimable) {
+      std::printf("camera cannot aim there\n");
+      continue;
+    }
+    std::printf("%5.1f%%\n", 100.0 * c.reachable / c.total);
+    reachable += c.reachable;
+    total += c.total;
+  }
+  std::printf("overall: %.1f%% of viewing directions reachable (%.2f s)\n",
+              total ? 100.0 * reachable / total : 0.0, secondsSince(t0));
   return 0;
 }
 

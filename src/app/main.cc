@@ -56,12 +56,22 @@ int main(int argc, char** argv) {
   s->add_option("--out", snap.out, "output PNG")->required();
   s->add_option("--size", snap.size_px, "pixels per view")->capture_default_str();
 
+  inhand::app::RobotArgs robot;
+  auto* rb = app.add_subcommand("robot", "check a robot: chain, limits, speeds, reachability map");
+  rb->add_option("--config", robot.config, "robot config JSON (names the URDF)")->required();
+  rb->add_option("--urdf", robot.urdf, "URDF file (default: the one the config names)");
+  rb->add_option("--directions", robot.directions, "viewing directions per position")->capture_default_str();
+  rb->add_option("--rolls", robot.rolls, "rolls tried per direction")->capture_default_str();
+  rb->add_option("--grid", robot.grid, "grid x grid object positions")->capture_default_str();
+  rb->add_option("--range", robot.range_m, "camera-to-object distance, m")->capture_default_str();
+
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
     return app.exit(e);
   }
   try {
+    if (*rb) return inhand::app::runRobot(robot);
     if (*s) return inhand::app::runSnapshot(snap);
     if (*r) return inhand::app::runRender(render);
     if (*f) {

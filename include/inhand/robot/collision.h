@@ -1,0 +1,68 @@
+#pragma once
+// Collision checks with FCL: the arm, the hand and a held object against the table and the
+// robot's own static base, at a configuration or along a joint-space path. Self-collision between
+// arm links is not checked (links adjacent to the base are listed in the config and skipped
+// against it).
+#include <memory>
+#include <string>
+
+#include "inhand/robot/robot_model.h"
+
+namespace inhand {
+
+class CollisionChecker {
+ public:
+  explicit CollisionChecker(const RobotModel& model);
+  ~CollisionChecker();
+  CollisionChecker(CollisionChecker&&) noexcept;
+
+  // Attaches an object (mesh in its own frame O) rigidly to the tip at T_tip_O.
+  void setHeldObject(const TriangleMesh& mesh_O, const Iso3& T_tip_O);
+  void clearHeldObject();
+
+  // True when something collides at q; `what` (optional) says which pair. Thread-safe.
+  bool inCollision(const JointVector& q, std::string* what = nullptr) const;
+  // Checks straight-line joint-space motion a → b at steps of at most `step_rad` per joint.
+  bool pathFree(const JointVector& a, const JointVector& b, double step_rad = 0.02,
+                std::string* what = nullptr) const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+// Hand geometry (S_hand of Alg. 1) at given hand joint values (the arm part of q is ignored),
+// placed by the palm pose T_F_palm in any frame F.
+class HandGeometry {
+ public:
+  HandGeometry(const RobotModel& model, const JointVector& q, const Iso3& T_F_palm);
+  // All hand links' collision geometry as one mesh in F (closed pieces, may overlap).
+  TriangleMesh mesh() const;
+  // Whether p_F lies inside any hand link's geometry (exact for boxes, cylinders, spheres).
+  bool contains(const Vec3& p_F) const;
+  // Link poses T_F_link of the hand links, in handLinks() order.
+  const std::vector<Iso3>& linkPoses() const { return T_F_link_; }
+
+ private:
+  const RobotModel* model_;
+  std::vector<Iso3> T_F_link_;
+};
+
+struct FingerClosing {
+  double value = 0;      // the finger joint's value where it stopped
+  bool contact = false;  // stopped by touching the object (else it reached `closed`)
+};
+
+struct ClosingResult {
+  JointVector q;  // q with the finger joints (and their couplings) at the stopping values
+  std::vector<FingerClosing> fingers;  // one per RobotModel::fingers()
+};
+
+// Closes each finger from its `open` value towards `closed` until its links touch the object
+// (mesh in frame O; palm at T_O_palm), refining the contact by bisection to `tolerance` (rad or
+// m). Other hand joints (spread) are taken from q.
+ClosingResult closeFingers(const RobotModel& model, const JointVector& q, const Iso3& T_O_palm,
+                           const TriangleMesh& object_O, double step = 0.02,
+                           double tolerance = 1e-4);
+
+}  // namespace inhand

@@ -1,0 +1,61 @@
+#pragma once
+// Inverse kinematics of the arm chain for a 6-D target: KDL's Levenberg–Marquardt solver (LMA)
+// from the given seed, then from seeded random restarts; LMA ignores joint limits, so revolute
+// solutions are wrapped by ±2π into the limits where possible and rejected otherwise. Every
+// returned solution is verified by forward kinematics.
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "inhand/core/random.h"
+#include "inhand/robot/robot_model.h"
+
+namespace KDL {
+class ChainIkSolverPos_LMA;
+class ChainFkSolverPos_recursive;
+}  // namespace KDL
+
+namespace inhand {
+
+struct IkOptions {
+  int random_restarts = 40;             // attempts from random seeds after the given seed fails
+  int max_iterations = 300;             // LMA iterations per attempt
+  double position_tolerance_m = 1e-5;   // accepted position error, m
+  double orientation_tolerance_rad = 1e-4;  // accepted orientation error, rad
+  std::string validate() const;
+};
+
+// Not thread-safe (it owns KDL solver state): use one per thread. Cheap to construct.
+class IkSolver {
+ public:
+  IkSolver(const RobotModel& model, const IkOptions& options = {});
+  ~IkSolver();
+  IkSolver(IkSolver&&) noexcept;
+
+  // Arm joint values (armDof(), chain order) putting the tip at T_B_tip, or nullopt.
+  std::optional<Eigen::VectorXd> solve(const Iso3& T_B_tip, const Eigen::VectorXd& seedArm,
+                                       Rng* rng);
+  // Tip pose of arm values by KDL forward kinematics (a second, independent FK).
+  Iso3 fk(const Eigen::VectorXd& arm) const;
+
+ private:
+  bool attempt(const Iso3& target, const Eigen::VectorXd& seed, Eigen::VectorXd* out);
+  const RobotModel* model_;
+  IkOptions options_;
+  std::unique_ptr<KDL::ChainIkSolverPos_LMA> lma_;
+  std::unique_ptr<KDL::ChainFkSolverPos_recursive> fk_;
+  Eigen::VectorXd lower_, upper_;
+};
+
+// Solves many targets on both cores (one solver per thread); result i for target i. Each target
+// gets its own random stream from (seed, i), so results do not depend on scheduling.
+std::vector<std::optional<Eigen::VectorXd>> solveIkBatch(const RobotModel& model,
+                                                         const std::vector<Iso3>& targets,
+                                                         const Eigen::VectorXd& seedArm,
+                                                         uint64_t seed, const IkOptions& options = {});
+
+// Position and orientation error between two poses (m, rad).
+std::pair<double, double> poseError(const Iso3& a, const Iso3& b);
+
+}  // namespace inhand

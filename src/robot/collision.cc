@@ -1,0 +1,217 @@
+#include "inhand/robot/collision.h"
+
+#include <fcl/fcl.h>
+
+#include <map>
+#include <set>
+
+#include "inhand/core/error.h"
+
+namespace inhand {
+
+namespace {
+
+using GeomPtr = std::shared_ptr<fcl::CollisionGeometryd>;
+
+GeomPtr bvhOf(const TriangleMesh& mesh) {
+  auto model = std::make_shared<fcl::BVHModel<fcl::OBBRSSd>>();
+  std::vector<fcl::Vector3d> v;
+  v.reserve(mesh.vertices.size());
+  for (const Vec3f& p : mesh.vertices) v.push_back(p.cast<double>());
+  std::vector<fcl::Triangle> t;
+  t.reserve(mesh.triangles.size());
+  for (const Tri& f : mesh.triangles) t.emplace_back(size_t(f[0]), size_t(f[1]), size_t(f[2]));
+  model->beginModel();
+  model->addSubModel(v, t);
+  model->endModel();
+  return model;
+}
+
+GeomPtr fclOf(const Primitive& p) {
+  switch (p.type) {
+    case Primitive::Type::kBox: return std::make_shared<fcl::Boxd>(p.size.x(), p.size.y(), p.size.z());
+    case Primitive::Type::kCylinder: return std::make_shared<fcl::Cylinderd>(p.size.x(), p.size.z());
+    case Primitive::Type::kSphere: return std::make_shared<fcl::Sphered>(p.size.x());
+    case Primitive::Type::kMesh: return bvhOf(*p.mesh);
+  }
+  return nullptr;
+}
+
+struct Part {
+  int link;
+  GeomPtr geom;
+  Iso3 T_link_geom;
+};
+
+bool collide(const GeomPtr& a, const Iso3& Ta, const GeomPtr& b, const Iso3& Tb) {
+  fcl::CollisionObjectd oa(a, Ta), ob(b, Tb);
+  fcl::CollisionRequestd req;
+  fcl::CollisionResultd res;
+  fcl::collide(&oa, &ob, req, res);
+  return res.isCollision();
+}
+
+}  // namespace
+
+struct CollisionChecker::Impl {
+  const RobotModel* model;
+  std::vector<Part> moving, fixed;  // fixed: links that no joint moves (the robot's base)
+  GeomPtr table;
+  GeomPtr held;
+  Iso3 T_tip_held = Iso3::Identity();
+  std::set<int> adjacent;
+};
+
+CollisionChecker::CollisionChecker(const RobotModel& model) : impl_(std::make_unique<Impl>()) {
+  impl_->model = &model;
+  // A link is static when no movable joint lies between it and the root.
+  std::vector<int> isStatic(model.links().size(), 1);
+  for (int li = 0; li < int(model.links().size()); ++li)
+    for (int ji = model.links()[li].parentJoint; ji >= 0; ji = model.links()[model.joints()[ji].parentLink].parentJoint)
+      if (model.joints()[ji].variable >= 0) {
+        isStatic[li] = 0;
+        break;
+      }
+  for (int li = 0; li < int(model.links().size()); ++li)
+    for (const Primitive& p : model.links()[li].collision)
+      (isStatic[li] ? impl_->fixed : impl_->moving).push_back({li, fclOf(p), p.T_link_geom});
+  const TableInfo& t = model.table();
+  impl_->table = std::make_shared<fcl::Boxd>(t.size.x(), t.size.y(), t.size.z());
+  impl_->adjacent.insert(model.baseAdjacentLinks().begin(), model.baseAdjacentLinks().end());
+}
+
+CollisionChecker::~CollisionChecker() = default;
+CollisionChecker::CollisionChecker(CollisionChecker&&) noexcept = default;
+
+void CollisionChecker::setHeldObject(const TriangleMesh& mesh_O, const Iso3& T_tip_O) {
+  impl_->held = bvhOf(mesh_O);
+  impl_->T_tip_held = T_tip_O;
+}
+
+void CollisionChecker::clearHeldObject() { impl_->held.reset(); }
+
+bool CollisionChecker::inCollision(const JointVector& q, std::string* what) const {
+  const RobotModel& m = *impl_->model;
+  std::vector<Iso3> T = m.linkPoses(q);
+  Iso3 T_table = Iso3(Eigen::Translation3d(m.table().center_B));
+  auto say = [&](const std::string& s) {
+    if (what) *what = s;
+    return true;
+  };
+  for (const Part& p : impl_->moving) {
+    Iso3 Tp = T[p.link] * p.T_link_geom;
+    if (collide(p.geom, Tp, impl_->table, T_table))
+      return say("link " + m.links()[p.link].name + " hits the table");
+    if (impl_->adjacent.count(p.link)) continue;
+    for (const Part& f : impl_->fixed)
+      if (collide(p.geom, Tp, f.geom, T[f.link] * f.T_link_geom))
+        return say("link " + m.links()[p.link].name + " hits the robot's base (" + m.links()[f.link].name + ")");
+  }
+  if (impl_->held) {
+    Iso3 To = T[m.tipLink()] * impl_->T_tip_held;
+    if (collide(impl_->held, To, impl_->table, T_table)) return say("the held object hits the table");
+    for (const Part& f : impl_->fixed)
+      if (collide(impl_->held, To, f.geom, T[f.link] * f.T_link_geom))
+        return say("the held object hits the robot's base (" + m.links()[f.link].name + ")");
+  }
+  return false;
+}
+
+bool CollisionChecker::pathFree(const JointVector& a, const JointVector& b, double step,
+                                std::string* what) const {
+  INHAND_CHECK(step > 0, "path step must be positive");
+  int n = std::max(1, int(std::ceil((b - a).cwiseAbs().maxCoeff() / step)));
+  for (int i = 0; i <= n; ++i)
+    if (inCollision(a + (b - a) * (double(i) / n), what)) return false;
+  return true;
+}
+
+// ---- hand ---------------------------------------------------------------------------------------
+
+HandGeometry::HandGeometry(const RobotModel& model, const JointVector& q, const Iso3& T_F_palm)
+    : model_(&model) {
+  std::vector<Iso3> T = model.linkPoses(q);
+  Iso3 T_F_B = T_F_palm * T[model.tipLink()].inverse();
+  for (int li : model.handLinks()) T_F_link_.push_back(T_F_B * T[li]);
+}
+
+TriangleMesh HandGeometry::mesh() const {
+  TriangleMesh out;
+  for (size_t k = 0; k < T_F_link_.size(); ++k)
+    for (const Primitive& p : model_->links()[model_->handLinks()[k]].collision)
+      out.append(transformed(p.toMesh(), T_F_link_[k]));
+  return out;
+}
+
+bool HandGeometry::contains(const Vec3& p_F) const {
+  for (size_t k = 0; k < T_F_link_.size(); ++k) {
+    Vec3 p_link = T_F_link_[k].inverse() * p_F;
+    for (const Primitive& p : model_->links()[model_->handLinks()[k]].collision)
+      if (p.contains(p_link)) return true;
+  }
+  return false;
+}
+
+ClosingResult closeFingers(const RobotModel& model, const JointVector& qIn, const Iso3& T_O_palm,
+                           const TriangleMesh& object_O, double step, double tolerance) {
+  INHAND_CHECK(step > 0 && tolerance > 0, "closing step and tolerance must be positive");
+  GeomPtr object = bvhOf(object_O);
+  const Iso3 I = Iso3::Identity();
+  // Finger links as triangle meshes: mesh–mesh checks are exact triangle–triangle tests, while
+  // FCL's primitive–mesh path (GJK) can miss penetrations of a fraction of a millimetre, which
+  // would let the bisection stop slightly inside the object.
+  std::map<std::pair<int, int>, GeomPtr> fingerMesh;
+  for (const FingerInfo& f : model.fingers())
+    for (int li : f.links)
+      for (int k = 0; k < int(model.links()[li].collision.size()); ++k) {
+        const Primitive& p = model.links()[li].collision[k];
+        fingerMesh[{li, k}] = bvhOf(transformed(p.toMesh(), p.T_link_geom.inverse()));
+      }
+  ClosingResult result;
+  result.q = qIn;
+  for (const FingerInfo& f : model.fingers()) {
+    // Collision of this finger's links at finger value v (other joints as in result.q).
+    auto touches = [&](double v) {
+      JointVector q = result.q;
+      q[f.variable] = v;
+      model.applyCouplings(&q);
+      std::vector<Iso3> T = model.linkPoses(q);
+      Iso3 T_O_B = T_O_palm * T[model.tipLink()].inverse();
+      for (int li : f.links)
+        for (int k = 0; k < int(model.links()[li].collision.size()); ++k)
+          if (collide(fingerMesh.at({li, k}), T_O_B * T[li] * model.links()[li].collision[k].T_link_geom,
+                      object, I))
+            return true;
+      return false;
+    };
+    FingerClosing fc;
+    const double dir = f.closed >= f.open ? 1.0 : -1.0, span = std::abs(f.closed - f.open);
+    double free = f.open;
+    fc.value = f.closed;
+    if (touches(f.open)) {
+      fc.value = f.open;
+      fc.contact = true;
+    } else {
+      for (double s = step; s < span + step; s += step) {
+        double v = f.open + dir * std::min(s, span);
+        if (touches(v)) {
+          double hit = v;
+          while (std::abs(hit - free) > tolerance) {
+            double mid = 0.5 * (hit + free);
+            (touches(mid) ? hit : free) = mid;
+          }
+          fc.value = free;  // the last value without penetration
+          fc.contact = true;
+          break;
+        }
+        free = v;
+      }
+    }
+    result.q[f.variable] = fc.value;
+    model.applyCouplings(&result.q);
+    result.fingers.push_back(fc);
+  }
+  return result;
+}
+
+}  // namespace inhand

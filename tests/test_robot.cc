@@ -1,0 +1,425 @@
+#include <gtest/gtest.h>
+
+#include <fstream>
+
+#include "inhand/core/error.h"
+#include "inhand/core/file_util.h"
+#include "inhand/core/json_util.h"
+#include "inhand/core/pose.h"
+#include "inhand/core/random.h"
+#include "inhand/geometry/primitives.h"
+#include "inhand/robot/collision.h"
+#include "inhand/robot/ik.h"
+#include "inhand/robot/reachability.h"
+#include "test_util.h"
+
+using namespace inhand;
+
+namespace {
+
+const fs::path kWam = fs::path(INHAND_SOURCE_DIR) / "data/robots/wam_barretthand.json";
+const fs::path kArm6 = fs::path(INHAND_SOURCE_DIR) / "tests/data/arm6_gripper.json";
+
+const RobotModel& wam() {
+  static RobotModel m = RobotModel::load(kWam);
+  return m;
+}
+const RobotModel& arm6() {
+  static RobotModel m = RobotModel::load(kArm6);
+  return m;
+}
+
+struct Dh {
+  double alpha, a, d;
+};
+// Independent forward kinematics from a standard DH table: T = Π Rz(θ) Tz(d) Tx(a) Rx(α),
+// written out as the textbook matrix. Returns the frames 1..n (origin frame 0 at `T_B_0`).
+std::vector<Mat4> dhFrames(const std::vector<Dh>& table, const Eigen::VectorXd& q, const Mat4& T_B_0) {
+  std::vector<Mat4> out;
+  Mat4 T = T_B_0;
+  for (size_t i = 0; i < table.size(); ++i) {
+    double ct = std::cos(q[i]), st = std::sin(q[i]), ca = std::cos(table[i].alpha),
+           sa = std::sin(table[i].alpha);
+    Mat4 A;
+    A << ct, -st * ca, st * sa, table[i].a * ct,  //
+        st, ct * ca, -ct * sa, table[i].a * st,   //
+        0, sa, ca, table[i].d,                    //
+        0, 0, 0, 1;
+    T = T * A;
+    out.push_back(T);
+  }
+  return out;
+}
+
+const std::vector<Dh> kWamDh = {{-M_PI / 2, 0, 0},     {M_PI / 2, 0, 0},  {-M_PI / 2, 0.045, 0.55},
+                                {M_PI / 2, -0.045, 0}, {-M_PI / 2, 0, 0.3}, {M_PI / 2, 0, 0},
+                                {-M_PI / 2, 0, 0.0609}};
+const std::vector<Dh> kArm6Dh = {{M_PI / 2, 0, 0.089159}, {0, -0.425, 0},        {0, -0.39225, 0},
+                                 {M_PI / 2, 0, 0.10915},  {-M_PI / 2, 0, 0.09465}, {0, 0, 0.0823}};
+
+Eigen::VectorXd randomArm(const RobotModel& m, Rng& rng) {
+  std::uniform_real_distribution<double> U(0, 1);
+  Eigen::VectorXd lo = m.armLower(), hi = m.armUpper(), q(m.armDof());
+  for (int i = 0; i < q.size(); ++i) q[i] = lo[i] + U(rng) * (hi[i] - lo[i]);
+  return q;
+}
+
+// Checks the model's FK against the DH table: the frame of DH row i is the child frame of the
+// link named `frames[i]` (link i+1 in the URDF, or the final DH link).
+void checkFkAgainstDh(const RobotModel& m, const std::vector<Dh>& dh,
+                      const std::vector<std::string>& frames, double base_z) {
+  Rng rng = makeRng(21);
+  Mat4 T0 = Mat4::Identity();
+  T0(2, 3) = base_z;
+  IkSolver ik(m);
+  for (int n = 0; n < 2000; ++n) {
+    Eigen::VectorXd arm = randomArm(m, rng);
+    JointVector q = m.withArm(m.home(), arm);
+    std::vector<Iso3> T = m.linkPoses(q);
+    std::vector<Mat4> ref = dhFrames(dh, arm, T0);
+    for (size_t i = 0; i < frames.size(); ++i) {
+      int li = m.linkIndex(frames[i]);
+      ASSERT_GE(li, 0) << frames[i];
+      ASSERT_LT((T[li].translation() - ref[i].topRightCorner<3, 1>()).norm(), 1e-9)
+          << frames[i] << " at sample " << n;
+    }
+    // The last DH frame agrees in orientation too.
+    int last = m.linkIndex(frames.back());
+    ASSERT_LT((T[last].linear() - ref.back().topLeftCorner<3, 3>()).cwiseAbs().maxCoeff(), 1e-9);
+    // KDL's chain FK (used by IK) agrees with the tree FK.
+    auto [dp, dr] = poseError(ik.fk(arm), m.tipPose(q));
+    ASSERT_LT(dp, 1e-9);
+    ASSERT_LT(dr, 1e-9);
+  }
+}
+
+void checkIkRoundTrip(const RobotModel& m, int samples, double minSuccess) {
+  Rng rng = makeRng(99);
+  std::vector<Eigen::VectorXd> truth;
+  std::vector<Iso3> targets;
+  IkSolver fk(m);
+  for (int n = 0; n < samples; ++n) {
+    truth.push_back(randomArm(m, rng));
+    targets.push_back(fk.fk(truth.back()));
+  }
+  auto sols = solveIkBatch(m, targets, m.arm(m.home()), 5);
+  int ok = 0;
+  for (int n = 0; n < samples; ++n) {
+    if (!sols[n]) continue;
+    ++ok;
+    const Eigen::VectorXd& q = *sols[n];
+    ASSERT_TRUE(m.withinLimits(m.withArm(m.home(), q)));
+    auto [dp, dr] = poseError(fk.fk(q), targets[n]);
+    ASSERT_LE(dp, 1e-5);
+    ASSERT_LE(dr, 1e-4);
+  }
+  EXPECT_GE(double(ok) / samples, minSuccess) << ok << " of " << samples;
+}
+
+}  // namespace
+
+TEST(Robot, WamLoadsWithDesignFigures) {
+  const RobotModel& m = wam();
+  EXPECT_EQ(m.armDof(), 7);
+  Eigen::VectorXd lo(7), hi(7), v(7);
+  lo << -2.6, -2.0, -2.8, -0.9, -4.76, -1.6, -3.0;
+  hi << 2.6, 2.0, 2.8, 3.1, 1.24, 1.6, 3.0;
+  v << 1.571, 1.047, 2.094, 2.094, 4.189, 4.189, 1.047;
+  EXPECT_EQ(m.armLower(), lo);
+  EXPECT_EQ(m.armUpper(), hi);
+  EXPECT_EQ(m.armVelocity(), v);
+  EXPECT_EQ(m.fingers().size(), 3u);
+  EXPECT_GE(m.spreadVariable(), 0);
+}
+
+TEST(Robot, WamForwardKinematicsMatchesDhTable) {
+  checkFkAgainstDh(wam(), kWamDh,
+                   {"wam_link2", "wam_link3", "wam_link4", "wam_link5", "wam_link6", "wam_link7", "wam_dh7"},
+                   0.346);
+}
+
+TEST(Robot, SecondRobotForwardKinematicsMatchesItsDhTable) {
+  checkFkAgainstDh(arm6(), kArm6Dh,
+                   {"arm_link2", "arm_link3", "arm_link4", "arm_link5", "arm_link6", "arm_dh6"}, 0.0);
+}
+
+TEST(Robot, WamIkRoundTripTenThousand) { checkIkRoundTrip(wam(), 10000, 0.99); }
+
+TEST(Robot, SecondRobotIkRoundTrip) { checkIkRoundTrip(arm6(), 3000, 0.99); }
+
+TEST(Robot, IkReportsUnreachableAsNoSolution) {
+  IkSolver ik(wam());
+  Rng rng = makeRng(1);
+  Iso3 far = Iso3(Eigen::Translation3d(3.0, 0, 0.5));
+  EXPECT_FALSE(ik.solve(far, wam().arm(wam().home()), &rng));
+}
+
+TEST(Robot, TrajectoryTimeIsSlowestJoint) {
+  const RobotModel& m = wam();
+  Eigen::VectorXd a = Eigen::VectorXd::Zero(7), b = a;
+  b[0] = 1.571;  // 1 s at 1.571 rad/s
+  b[6] = 0.5;    // 0.478 s at 1.047 rad/s
+  EXPECT_NEAR(trajectoryTime(m, a, b), 1.0, 1e-12);
+  b[6] = 2.094;  // 2 s
+  EXPECT_NEAR(trajectoryTime(m, a, b), 2.0, 1e-12);
+}
+
+TEST(Robot, CouplingsFollowTheirLeaders) {
+  const RobotModel& m = wam();
+  JointVector q = m.home();
+  q[m.variableIndex("bh_j12")] = 1.2;
+  q[m.variableIndex("bh_j11")] = 0.4;
+  m.applyCouplings(&q);
+  EXPECT_NEAR(q[m.variableIndex("bh_j13")], 1.2 / 3 + 42 * M_PI / 180, 1e-12);
+  EXPECT_NEAR(q[m.variableIndex("bh_j21")], 0.4, 1e-12);
+}
+
+namespace {
+// Brute-force point-in-closed-mesh by ray parity (Möller–Trumbore over every triangle).
+bool bruteInside(const TriangleMesh& mesh, const Vec3& p) {
+  const Vec3 dir = Vec3(0.31, 0.47, 0.83).normalized();
+  int crossings = 0;
+  for (const Tri& f : mesh.triangles) {
+    Vec3 a = mesh.vertices[f[0]].cast<double>(), e1 = mesh.vertices[f[1]].cast<double>() - a,
+         e2 = mesh.vertices[f[2]].cast<double>() - a;
+    Vec3 h = dir.cross(e2);
+    double det = e1.dot(h);
+    if (std::abs(det) < 1e-14) continue;
+    Vec3 s = p - a;
+    double u = s.dot(h) / det;
+    Vec3 qv = s.cross(e1);
+    double v = dir.dot(qv) / det;
+    if (u < 0 || v < 0 || u + v > 1) continue;
+    if (e2.dot(qv) / det > 0) ++crossings;
+  }
+  return crossings & 1;
+}
+
+void checkInsideAgainstBruteForce(const RobotModel& m, const JointVector& q) {
+  Iso3 T_F_palm = lookAt(Vec3(0.1, 0.2, 0.3), Vec3::Zero());
+  HandGeometry hand(m, q, T_F_palm);
+  std::vector<TriangleMesh> linkMeshes;
+  for (size_t k = 0; k < m.handLinks().size(); ++k)
+    for (const Primitive& p : m.links()[m.handLinks()[k]].collision)
+      linkMeshes.push_back(transformed(p.toMesh(), hand.linkPoses()[k]));
+  Aabb box = hand.mesh().bounds();
+  Rng rng = makeRng(8);
+  std::uniform_real_distribution<double> U(0, 1);
+  int inside = 0, compared = 0;
+  for (int n = 0; n < 20000; ++n) {
+    Vec3 p = box.min + box.size().cwiseProduct(Vec3(U(rng), U(rng), U(rng)));
+    // The palm cylinder's mesh is a 32-gon: skip points within 0.5 mm of its curved side.
+    Vec3 p_palm = T_F_palm.inverse() * p;
+    if (m.name() == "wam_barretthand" && std::abs(std::hypot(p_palm.x(), p_palm.y()) - 0.0445) < 5e-4) continue;
+    bool brute = false;
+    for (const TriangleMesh& lm : linkMeshes) brute = brute || bruteInside(lm, p);
+    ASSERT_EQ(hand.contains(p), brute) << p.transpose();
+    inside += brute;
+    ++compared;
+  }
+  EXPECT_GT(inside, 200);
+  EXPECT_GT(compared, 15000);
+}
+}  // namespace
+
+TEST(Hand, InsideTestAgreesWithBruteForce) {
+  JointVector q = wam().home();
+  q[wam().variableIndex("bh_j12")] = 0.8;
+  q[wam().variableIndex("bh_j22")] = 1.4;
+  q[wam().variableIndex("bh_j11")] = 0.6;
+  checkInsideAgainstBruteForce(wam(), q);
+  checkInsideAgainstBruteForce(arm6(), arm6().home());
+}
+
+TEST(Hand, MeshIsInTheRequestedFrame) {
+  const RobotModel& m = wam();
+  Iso3 T = Iso3(Eigen::Translation3d(1, 2, 3));
+  Aabb b = HandGeometry(m, m.home(), T).mesh().bounds();
+  // Palm (Ø 89 × 90 mm) plus straight fingers up to 0.09 + 0.07 + 0.05 along z.
+  EXPECT_NEAR(b.min.z(), 3.0, 1e-6);
+  EXPECT_GT(b.max.z(), 3.0 + 0.17);
+  EXPECT_NEAR(b.center().x(), 1.0, 0.03);
+}
+
+namespace {
+bool boxContains(const Vec3& p, const Vec3& c, const Vec3& size, double tol = 0) {
+  return ((p - c).cwiseAbs().array() < 0.5 * size.array() - tol).all();
+}
+// After closing, no finger geometry penetrates the object; a little further closed, it does.
+template <typename Inside>
+void checkClosing(const RobotModel& m, const JointVector& q0, const TriangleMesh& object,
+                  Inside objectContains, int expectContacts) {
+  ClosingResult r = closeFingers(m, q0, Iso3::Identity(), object, 0.01, 1e-5);
+  int contacts = 0;
+  for (size_t i = 0; i < r.fingers.size(); ++i) {
+    const FingerInfo& f = m.fingers()[i];
+    const FingerClosing& fc = r.fingers[i];
+    if (!fc.contact) continue;
+    ++contacts;
+    std::string why;
+    auto penetrates = [&](double v) {
+      JointVector q = r.q;
+      q[f.variable] = v;
+      m.applyCouplings(&q);
+      HandGeometry hand(m, q, Iso3::Identity());
+      // Dense samples of both surfaces (a barycentric grid on every triangle), so that
+      // edge-on-edge contacts are seen too.
+      auto samples = [](const TriangleMesh& mesh, int n, auto&& fn) {
+        for (const Tri& t : mesh.triangles)
+          for (int i = 0; i <= n; ++i)
+            for (int j = 0; i + j <= n; ++j) {
+              double a = double(i) / n, b = double(j) / n;
+              Vec3 p = (1 - a - b) * mesh.vertices[t[0]].cast<double>() +
+                       a * mesh.vertices[t[1]].cast<double>() + b * mesh.vertices[t[2]].cast<double>();
+              if (fn(p)) return true;
+            }
+        return false;
+      };
+      if (samples(hand.mesh(), 24, objectContains)) {
+        why = "a point of the hand's surface is inside the object";
+        return true;
+      }
+      const Vec3 centre = object.bounds().center();  // shrink by 0.01 %: touching is not inside
+      if (samples(object, object.triangles.size() > 100 ? 6 : 24,
+                  [&](const Vec3& p) { return hand.contains(centre + 0.9999 * (p - centre)); })) {
+        why = "a point of the object's surface is inside the hand";
+        return true;
+      }
+      return false;
+    };
+    double further = fc.value + (f.closed > f.open ? 1 : -1) * 0.03;
+    EXPECT_FALSE(penetrates(fc.value)) << "finger " << i << " at " << fc.value << ": " << why;
+    EXPECT_TRUE(penetrates(further)) << "finger " << i;
+  }
+  EXPECT_EQ(contacts, expectContacts);
+}
+}  // namespace
+
+TEST(Hand, BarrettFingersStopAtContactOnBoxAndCylinder) {
+  const RobotModel& m = wam();
+  // Box between the fingers, below the inward-bent distal links of the open hand.
+  // (Above the knuckles, which end 20 mm over the palm, and clear of the open hand.)
+  const Vec3 c(0, 0, 0.14), size(0.04, 0.09, 0.05);
+  TriangleMesh box = transformed(makeBox(size), Iso3(Eigen::Translation3d(c)));
+  checkClosing(m, m.home(), box, [&](const Vec3& p) { return boxContains(p, c, size, 1e-5); }, 3);
+  // Cylinder (Ø 50 mm, axis along y) between the fingers.
+  TriangleMesh cyl = makeCylinder(0.025, 0.12, 128);
+  Iso3 T = Iso3(Eigen::Translation3d(0, 0, 0.14)) * Eigen::AngleAxisd(M_PI / 2, Vec3::UnitX());
+  cyl = transformed(cyl, T);
+  checkClosing(m, m.home(), cyl, [&](const Vec3& p) {
+    Vec3 l = T.inverse() * p;
+    return std::hypot(l.x(), l.y()) < 0.025 * std::cos(M_PI / 128) - 1e-5 && std::abs(l.z()) < 0.06;
+  }, 3);
+  // Nothing between the fingers: they close fully without contact.
+  TriangleMesh far = transformed(makeBox(Vec3(0.02, 0.02, 0.02)), Iso3(Eigen::Translation3d(1, 1, 1)));
+  ClosingResult r = closeFingers(m, m.home(), Iso3::Identity(), far);
+  for (const FingerClosing& fc : r.fingers) {
+    EXPECT_FALSE(fc.contact);
+    EXPECT_NEAR(fc.value, 2.443460952792061, 1e-12);
+  }
+}
+
+TEST(Hand, ParallelJawStopsAtContact) {
+  const RobotModel& m = arm6();
+  const Vec3 c(0, 0, 0.07), size(0.03, 0.04, 0.03);
+  TriangleMesh box = transformed(makeBox(size), Iso3(Eigen::Translation3d(c)));
+  checkClosing(m, m.home(), box, [&](const Vec3& p) { return boxContains(p, c, size, 1e-5); }, 1);
+  ClosingResult r = closeFingers(m, m.home(), Iso3::Identity(), box, 0.002, 1e-6);
+  EXPECT_NEAR(r.fingers[0].value, 0.02, 1e-5);  // jaws stop at the box's 40 mm width
+}
+
+TEST(Collision, TableAndBaseAreDetected) {
+  const RobotModel& m = wam();
+  CollisionChecker checker(m);
+  std::string what;
+  EXPECT_FALSE(checker.inCollision(m.home(), &what)) << what;
+  // Shoulder pitched forward and down, elbow straight: the arm goes into the table.
+  JointVector down = m.home();
+  down[m.variableIndex("wam_j2")] = 1.9;
+  down[m.variableIndex("wam_j4")] = 0.0;
+  EXPECT_TRUE(checker.inCollision(down, &what));
+  EXPECT_NE(what.find("table"), std::string::npos) << what;
+  EXPECT_FALSE(checker.pathFree(m.home(), down, 0.02, &what));
+  // Palm facing down 0.25 m above the table's centre: free. A held object hanging from the hand
+  // that reaches 1 cm into the table collides; one that stops 1 cm above it does not.
+  const double top = m.table().topZ();
+  Iso3 T_B_palm = Iso3(Eigen::Translation3d(m.table().center_B.x() - 0.1, 0, top + 0.25)) *
+                  Eigen::AngleAxisd(M_PI, Vec3::UnitX());
+  IkSolver ik(m);
+  Rng rng = makeRng(3);
+  auto arm = ik.solve(T_B_palm, m.arm(m.home()), &rng);
+  ASSERT_TRUE(arm);
+  JointVector low = m.withArm(m.home(), *arm);
+  ASSERT_FALSE(checker.inCollision(low, &what)) << what;
+  for (double reach : {0.01, -0.01}) {
+    double z0 = top + 0.15, z1 = top - reach;  // from 10 cm below the palm down to z1
+    Vec3 centre(T_B_palm.translation().x(), 0, 0.5 * (z0 + z1));
+    checker.setHeldObject(makeBox(Vec3(0.03, 0.03, z0 - z1)),
+                          T_B_palm.inverse() * Iso3(Eigen::Translation3d(centre)));
+    EXPECT_EQ(checker.inCollision(low, &what), reach > 0) << what;
+    if (reach > 0) {
+      EXPECT_NE(what.find("held object"), std::string::npos) << what;
+    }
+  }
+  checker.clearHeldObject();
+  EXPECT_FALSE(checker.inCollision(low));
+}
+
+TEST(Reachability, PresentationPoseShowsTheRequestedSide) {
+  Rng rng = makeRng(4);
+  std::uniform_real_distribution<double> U(-1, 1);
+  for (int n = 0; n < 100; ++n) {
+    Vec3 obj(U(rng), U(rng), U(rng)), cam(U(rng), U(rng), U(rng) + 3), dir = Vec3(U(rng), U(rng), U(rng)).normalized();
+    Iso3 T_B_palm = presentationPalmPose(obj, cam, dir, U(rng) * M_PI, 0.1);
+    Iso3 T_B_O = T_B_palm * Iso3(Eigen::Translation3d(0, 0, 0.1));
+    EXPECT_LT((T_B_O.translation() - obj).norm(), 1e-12);
+    EXPECT_LT((T_B_O.linear() * dir - (obj - cam).normalized()).norm(), 1e-9);
+  }
+  ReachabilityOptions o;
+  o.directions = 20;
+  o.rolls = 4;
+  o.grid = 2;
+  auto cells = reachabilityMap(wam(), o);
+  ASSERT_EQ(cells.size(), 4u);
+  int reachable = 0;
+  for (const auto& c : cells) reachable += c.reachable;
+  EXPECT_GT(reachable, 0);
+}
+
+TEST(RobotConfig, ErrorsNameTheField) {
+  test::TempDir dir;
+  Json base = readJsonFile(kWam);
+  base["urdf"] = (fs::path(INHAND_SOURCE_DIR) / "data/robots/wam_barretthand.urdf").string();
+  auto expectError = [&](Json cfg, const std::string& needle) {
+    writeTextAtomically(dir.path() / "r.json", cfg.dump());
+    try {
+      RobotModel::load(dir.path() / "r.json");
+      ADD_FAILURE() << "no error, expected " << needle;
+    } catch (const Error& e) {
+      EXPECT_NE(std::string(e.what()).find(needle), std::string::npos) << e.what();
+    }
+  };
+  Json c = base;
+  c["tip_link"] = "bh_plam";
+  expectError(c, "tip_link: no link named 'bh_plam'");
+  c = base;
+  c["tip_link"] = "wam_base";
+  c["base_link"] = "bh_palm";
+  expectError(c, "does not connect");
+  c = base;
+  c["table"]["size_xyz"] = "big";
+  expectError(c, "table.size_xyz");
+  c = base;
+  c["hand"]["fingers"][0]["joint"] = 3;
+  expectError(c, "hand.fingers[0].joint: expected a string");
+  c = base;
+  c["colour"] = "red";
+  expectError(c, "unknown field \"colour\"");
+  c = base;
+  c["urdf"] = (dir.path() / "missing.urdf").string();
+  expectError(c, "missing.urdf");
+  std::ofstream(dir.path() / "bad.urdf") << "<robot name='x'><link name='a'/><joint name='j' type='revolute'>";
+  c = base;
+  c["urdf"] = (dir.path() / "bad.urdf").string();
+  expectError(c, "malformed URDF");
+}
