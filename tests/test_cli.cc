@@ -97,3 +97,23 @@ TEST(Cli, VolumeOverBudgetIsRefusedWithSize) {
   EXPECT_FALSE(fs::exists(dir.path() / "m.ply"));
   EXPECT_FALSE(fs::exists(dir.path() / "m.json"));
 }
+
+TEST(Cli, RobotCommandPrintsChainAndReachability) {
+  test::TempDir dir;
+  const std::string cfg = std::string(INHAND_SOURCE_DIR) + "/data/robots/wam_barretthand.json";
+  Result r = run("robot --config " + cfg + " --directions 12 --rolls 3 --grid 1", dir);
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_NE(r.output.find("7 DOF"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("wam_j4"), std::string::npos);
+  EXPECT_NE(r.output.find("reachable"), std::string::npos);
+  Json bad = readJsonFile(cfg);
+  bad["urdf"] = std::string(INHAND_SOURCE_DIR) + "/data/robots/wam_barretthand.urdf";
+  bad["base_link"] = "wam_bse";
+  writeTextAtomically(dir.path() / "bad.json", bad.dump());
+  r = run("robot --config " + (dir.path() / "bad.json").string(), dir);
+  EXPECT_EQ(r.code, 1);
+  EXPECT_NE(r.output.find("base_link: no link named 'wam_bse'"), std::string::npos) << r.output;
+  r = run("robot --config " + cfg + " --rolls 0", dir);
+  EXPECT_EQ(r.code, 1);
+  EXPECT_NE(r.output.find("rolls"), std::string::npos) << r.output;
+}

@@ -34,7 +34,8 @@ struct Dh {
 };
 // Independent forward kinematics from a standard DH table: T = Π Rz(θ) Tz(d) Tx(a) Rx(α),
 // written out as the textbook matrix. Returns the frames 1..n (origin frame 0 at `T_B_0`).
-std::vector<Mat4> dhFrames(const std::vector<Dh>& table, const Eigen::VectorXd& q, const Mat4& T_B_0) {
+std::vector<Mat4> dhFrames(const std::vector<Dh>& table, const Eigen::VectorXd& q,
+                           const Mat4& T_B_0) {
   std::vector<Mat4> out;
   Mat4 T = T_B_0;
   for (size_t i = 0; i < table.size(); ++i) {
@@ -51,10 +52,10 @@ std::vector<Mat4> dhFrames(const std::vector<Dh>& table, const Eigen::VectorXd& 
   return out;
 }
 
-const std::vector<Dh> kWamDh = {{-M_PI / 2, 0, 0},     {M_PI / 2, 0, 0},  {-M_PI / 2, 0.045, 0.55},
-                                {M_PI / 2, -0.045, 0}, {-M_PI / 2, 0, 0.3}, {M_PI / 2, 0, 0},
-                                {-M_PI / 2, 0, 0.0609}};
-const std::vector<Dh> kArm6Dh = {{M_PI / 2, 0, 0.089159}, {0, -0.425, 0},        {0, -0.39225, 0},
+const std::vector<Dh> kWamDh = {
+    {-M_PI / 2, 0, 0},   {M_PI / 2, 0, 0}, {-M_PI / 2, 0.045, 0.55}, {M_PI / 2, -0.045, 0},
+    {-M_PI / 2, 0, 0.3}, {M_PI / 2, 0, 0}, {-M_PI / 2, 0, 0.0609}};
+const std::vector<Dh> kArm6Dh = {{M_PI / 2, 0, 0.089159}, {0, -0.425, 0},          {0, -0.39225, 0},
                                  {M_PI / 2, 0, 0.10915},  {-M_PI / 2, 0, 0.09465}, {0, 0, 0.0823}};
 
 Eigen::VectorXd randomArm(const RobotModel& m, Rng& rng) {
@@ -133,14 +134,16 @@ TEST(Robot, WamLoadsWithDesignFigures) {
 }
 
 TEST(Robot, WamForwardKinematicsMatchesDhTable) {
-  checkFkAgainstDh(wam(), kWamDh,
-                   {"wam_link2", "wam_link3", "wam_link4", "wam_link5", "wam_link6", "wam_link7", "wam_dh7"},
-                   0.346);
+  checkFkAgainstDh(
+      wam(), kWamDh,
+      {"wam_link2", "wam_link3", "wam_link4", "wam_link5", "wam_link6", "wam_link7", "wam_dh7"},
+      0.346);
 }
 
 TEST(Robot, SecondRobotForwardKinematicsMatchesItsDhTable) {
   checkFkAgainstDh(arm6(), kArm6Dh,
-                   {"arm_link2", "arm_link3", "arm_link4", "arm_link5", "arm_link6", "arm_dh6"}, 0.0);
+                   {"arm_link2", "arm_link3", "arm_link4", "arm_link5", "arm_link6", "arm_dh6"},
+                   0.0);
 }
 
 TEST(Robot, WamIkRoundTripTenThousand) { checkIkRoundTrip(wam(), 10000, 0.99); }
@@ -210,7 +213,9 @@ void checkInsideAgainstBruteForce(const RobotModel& m, const JointVector& q) {
     Vec3 p = box.min + box.size().cwiseProduct(Vec3(U(rng), U(rng), U(rng)));
     // The palm cylinder's mesh is a 32-gon: skip points within 0.5 mm of its curved side.
     Vec3 p_palm = T_F_palm.inverse() * p;
-    if (m.name() == "wam_barretthand" && std::abs(std::hypot(p_palm.x(), p_palm.y()) - 0.0445) < 5e-4) continue;
+    if (m.name() == "wam_barretthand" &&
+        std::abs(std::hypot(p_palm.x(), p_palm.y()) - 0.0445) < 5e-4)
+      continue;
     bool brute = false;
     for (const TriangleMesh& lm : linkMeshes) brute = brute || bruteInside(lm, p);
     ASSERT_EQ(hand.contains(p), brute) << p.transpose();
@@ -270,7 +275,8 @@ void checkClosing(const RobotModel& m, const JointVector& q0, const TriangleMesh
             for (int j = 0; i + j <= n; ++j) {
               double a = double(i) / n, b = double(j) / n;
               Vec3 p = (1 - a - b) * mesh.vertices[t[0]].cast<double>() +
-                       a * mesh.vertices[t[1]].cast<double>() + b * mesh.vertices[t[2]].cast<double>();
+                       a * mesh.vertices[t[1]].cast<double>() +
+                       b * mesh.vertices[t[2]].cast<double>();
               if (fn(p)) return true;
             }
         return false;
@@ -301,17 +307,23 @@ TEST(Hand, BarrettFingersStopAtContactOnBoxAndCylinder) {
   // (Above the knuckles, which end 20 mm over the palm, and clear of the open hand.)
   const Vec3 c(0, 0, 0.14), size(0.04, 0.09, 0.05);
   TriangleMesh box = transformed(makeBox(size), Iso3(Eigen::Translation3d(c)));
-  checkClosing(m, m.home(), box, [&](const Vec3& p) { return boxContains(p, c, size, 1e-5); }, 3);
+  checkClosing(
+      m, m.home(), box, [&](const Vec3& p) { return boxContains(p, c, size, 1e-5); }, 3);
   // Cylinder (Ø 50 mm, axis along y) between the fingers.
   TriangleMesh cyl = makeCylinder(0.025, 0.12, 128);
   Iso3 T = Iso3(Eigen::Translation3d(0, 0, 0.14)) * Eigen::AngleAxisd(M_PI / 2, Vec3::UnitX());
   cyl = transformed(cyl, T);
-  checkClosing(m, m.home(), cyl, [&](const Vec3& p) {
-    Vec3 l = T.inverse() * p;
-    return std::hypot(l.x(), l.y()) < 0.025 * std::cos(M_PI / 128) - 1e-5 && std::abs(l.z()) < 0.06;
-  }, 3);
+  checkClosing(
+      m, m.home(), cyl,
+      [&](const Vec3& p) {
+        Vec3 l = T.inverse() * p;
+        return std::hypot(l.x(), l.y()) < 0.025 * std::cos(M_PI / 128) - 1e-5 &&
+               std::abs(l.z()) < 0.06;
+      },
+      3);
   // Nothing between the fingers: they close fully without contact.
-  TriangleMesh far = transformed(makeBox(Vec3(0.02, 0.02, 0.02)), Iso3(Eigen::Translation3d(1, 1, 1)));
+  TriangleMesh far =
+      transformed(makeBox(Vec3(0.02, 0.02, 0.02)), Iso3(Eigen::Translation3d(1, 1, 1)));
   ClosingResult r = closeFingers(m, m.home(), Iso3::Identity(), far);
   for (const FingerClosing& fc : r.fingers) {
     EXPECT_FALSE(fc.contact);
@@ -323,7 +335,8 @@ TEST(Hand, ParallelJawStopsAtContact) {
   const RobotModel& m = arm6();
   const Vec3 c(0, 0, 0.07), size(0.03, 0.04, 0.03);
   TriangleMesh box = transformed(makeBox(size), Iso3(Eigen::Translation3d(c)));
-  checkClosing(m, m.home(), box, [&](const Vec3& p) { return boxContains(p, c, size, 1e-5); }, 1);
+  checkClosing(
+      m, m.home(), box, [&](const Vec3& p) { return boxContains(p, c, size, 1e-5); }, 1);
   ClosingResult r = closeFingers(m, m.home(), Iso3::Identity(), box, 0.002, 1e-6);
   EXPECT_NEAR(r.fingers[0].value, 0.02, 1e-5);  // jaws stop at the box's 40 mm width
 }
@@ -369,7 +382,8 @@ TEST(Reachability, PresentationPoseShowsTheRequestedSide) {
   Rng rng = makeRng(4);
   std::uniform_real_distribution<double> U(-1, 1);
   for (int n = 0; n < 100; ++n) {
-    Vec3 obj(U(rng), U(rng), U(rng)), cam(U(rng), U(rng), U(rng) + 3), dir = Vec3(U(rng), U(rng), U(rng)).normalized();
+    Vec3 obj(U(rng), U(rng), U(rng)), cam(U(rng), U(rng), U(rng) + 3),
+        dir = Vec3(U(rng), U(rng), U(rng)).normalized();
     Iso3 T_B_palm = presentationPalmPose(obj, cam, dir, U(rng) * M_PI, 0.1);
     Iso3 T_B_O = T_B_palm * Iso3(Eigen::Translation3d(0, 0, 0.1));
     EXPECT_LT((T_B_O.translation() - obj).norm(), 1e-12);
@@ -418,7 +432,8 @@ TEST(RobotConfig, ErrorsNameTheField) {
   c = base;
   c["urdf"] = (dir.path() / "missing.urdf").string();
   expectError(c, "missing.urdf");
-  std::ofstream(dir.path() / "bad.urdf") << "<robot name='x'><link name='a'/><joint name='j' type='revolute'>";
+  std::ofstream(dir.path() / "bad.urdf")
+      << "<robot name='x'><link name='a'/><joint name='j' type='revolute'>";
   c = base;
   c["urdf"] = (dir.path() / "bad.urdf").string();
   expectError(c, "malformed URDF");

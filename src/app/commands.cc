@@ -246,23 +246,25 @@ int runRobot(const RobotArgs& args) {
   std::printf("hand: %zu links, %zu fingers", model.handLinks().size(), model.fingers().size());
   for (const FingerInfo& f : model.fingers())
     std::printf(" [%s %.3f..%.3f]", model.variable(f.variable).name.c_str(), f.open, f.closed);
-  std::printf("%s%s\n", model.spreadVariable() >= 0 ? ", spread " : "",
-              model.spreadVariable() >= 0 ? model.variable(model.spreadVariable()).name.c_str() : "");
+  std::printf(
+      "%s%s\n", model.spreadVariable() >= 0 ? ", spread " : "",
+      model.spreadVariable() >= 0 ? model.variable(model.spreadVariable()).name.c_str() : "");
   ReachabilityOptions ro;
   ro.directions = args.directions;
   ro.rolls = args.rolls;
   ro.grid = args.grid;
   ro.range_m = args.range_m;
   if (std::string p = ro.validate(); !p.empty()) throw Error("reachability: " + p);
-  std::printf("reachability: object held %.2f m in front of the palm, camera at %.2f m, %d directions "
-              "x %d rolls per position\n",
-              model.graspOffset(), ro.range_m, ro.directions, ro.rolls);
+  std::printf(
+      "reachability: object held %.2f m in front of the palm, camera at %.2f m, %d directions "
+      "x %d rolls per position\n",
+      model.graspOffset(), ro.range_m, ro.directions, ro.rolls);
   std::printf("  %8s %8s   %-26s %s\n", "pan deg", "tilt deg", "object position (base, m)",
               "reachable directions");
   int reachable = 0, total = 0;
   for (const ReachabilityCell& c : reachabilityMap(model, ro)) {
-    std::printf("  %8.1f %8.1f   (%6.3f, %6.3f, %6.3f)      ", c.pan_deg, c.tilt_deg, c.object_B.x(),
-                c.object_B.y(), c.object_B.z());
+    std::printf("  %8.1f %8.1f   (%6.3f, %6.3f, %6.3f)      ", c.pan_deg, c.tilt_deg,
+                c.object_B.x(), c.object_B.y(), c.object_B.z());
     if (!c.aimable) {
       std::printf("camera cannot aim there\n");
       continue;

@@ -37,12 +37,12 @@ struct SnapshotArgs {
 };
 
 struct RobotArgs {
-  std::string config;      // robot config JSON
-  std::string urdf;        // overrides the config's "urdf" when given
-  int directions = 100;    // reachability: viewing directions per position
-  int rolls = 8;           // reachability: rolls per direction
-  int grid = 3;            // reachability: grid × grid positions
-  double range_m = 0.7;    // reachability: camera-to-object distance
+  std::string config;    // robot config JSON
+  std::string urdf;      // overrides the config's "urdf" when given
+  int directions = 100;  // reachability: viewing directions per position
+  int rolls = 8;         // reachability: rolls per direction
+  int grid = 3;          // reachability: grid × grid positions
+  double range_m = 0.7;  // reachability: camera-to-object distance
 };
 
 int runRobot(const RobotArgs& args);

@@ -60,7 +60,8 @@ int main(int argc, char** argv) {
   auto* rb = app.add_subcommand("robot", "check a robot: chain, limits, speeds, reachability map");
   rb->add_option("--config", robot.config, "robot config JSON (names the URDF)")->required();
   rb->add_option("--urdf", robot.urdf, "URDF file (default: the one the config names)");
-  rb->add_option("--directions", robot.directions, "viewing directions per position")->capture_default_str();
+  rb->add_option("--directions", robot.directions, "viewing directions per position")
+      ->capture_default_str();
   rb->add_option("--rolls", robot.rolls, "rolls tried per direction")->capture_default_str();
   rb->add_option("--grid", robot.grid, "grid x grid object positions")->capture_default_str();
   rb->add_option("--range", robot.range_m, "camera-to-object distance, m")->capture_default_str();

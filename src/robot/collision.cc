@@ -29,10 +29,14 @@ GeomPtr bvhOf(const TriangleMesh& mesh) {
 
 GeomPtr fclOf(const Primitive& p) {
   switch (p.type) {
-    case Primitive::Type::kBox: return std::make_shared<fcl::Boxd>(p.size.x(), p.size.y(), p.size.z());
-    case Primitive::Type::kCylinder: return std::make_shared<fcl::Cylinderd>(p.size.x(), p.size.z());
-    case Primitive::Type::kSphere: return std::make_shared<fcl::Sphered>(p.size.x());
-    case Primitive::Type::kMesh: return bvhOf(*p.mesh);
+    case Primitive::Type::kBox:
+      return std::make_shared<fcl::Boxd>(p.size.x(), p.size.y(), p.size.z());
+    case Primitive::Type::kCylinder:
+      return std::make_shared<fcl::Cylinderd>(p.size.x(), p.size.z());
+    case Primitive::Type::kSphere:
+      return std::make_shared<fcl::Sphered>(p.size.x());
+    case Primitive::Type::kMesh:
+      return bvhOf(*p.mesh);
   }
   return nullptr;
 }
@@ -67,7 +71,8 @@ CollisionChecker::CollisionChecker(const RobotModel& model) : impl_(std::make_un
   // A link is static when no movable joint lies between it and the root.
   std::vector<int> isStatic(model.links().size(), 1);
   for (int li = 0; li < int(model.links().size()); ++li)
-    for (int ji = model.links()[li].parentJoint; ji >= 0; ji = model.links()[model.joints()[ji].parentLink].parentJoint)
+    for (int ji = model.links()[li].parentJoint; ji >= 0;
+         ji = model.links()[model.joints()[ji].parentLink].parentJoint)
       if (model.joints()[ji].variable >= 0) {
         isStatic[li] = 0;
         break;
@@ -105,11 +110,13 @@ bool CollisionChecker::inCollision(const JointVector& q, std::string* what) cons
     if (impl_->adjacent.count(p.link)) continue;
     for (const Part& f : impl_->fixed)
       if (collide(p.geom, Tp, f.geom, T[f.link] * f.T_link_geom))
-        return say("link " + m.links()[p.link].name + " hits the robot's base (" + m.links()[f.link].name + ")");
+        return say("link " + m.links()[p.link].name + " hits the robot's base (" +
+                   m.links()[f.link].name + ")");
   }
   if (impl_->held) {
     Iso3 To = T[m.tipLink()] * impl_->T_tip_held;
-    if (collide(impl_->held, To, impl_->table, T_table)) return say("the held object hits the table");
+    if (collide(impl_->held, To, impl_->table, T_table))
+      return say("the held object hits the table");
     for (const Part& f : impl_->fixed)
       if (collide(impl_->held, To, f.geom, T[f.link] * f.T_link_geom))
         return say("the held object hits the robot's base (" + m.links()[f.link].name + ")");
@@ -179,8 +186,8 @@ ClosingResult closeFingers(const RobotModel& model, const JointVector& qIn, cons
       Iso3 T_O_B = T_O_palm * T[model.tipLink()].inverse();
       for (int li : f.links)
         for (int k = 0; k < int(model.links()[li].collision.size()); ++k)
-          if (collide(fingerMesh.at({li, k}), T_O_B * T[li] * model.links()[li].collision[k].T_link_geom,
-                      object, I))
+          if (collide(fingerMesh.at({li, k}),
+                      T_O_B * T[li] * model.links()[li].collision[k].T_link_geom, object, I))
             return true;
       return false;
     };

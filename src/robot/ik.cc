@@ -47,8 +47,8 @@ IkSolver::IkSolver(const RobotModel& model, const IkOptions& options)
   if (!p.empty()) throw Error("IK options: " + p);
   Eigen::Matrix<double, 6, 1> L;
   L << 1, 1, 1, 0.5, 0.5, 0.5;  // position (m) vs orientation (rad) weights
-  lma_ = std::make_unique<KDL::ChainIkSolverPos_LMA>(model.chain(), L, 1e-12, options.max_iterations,
-                                                     1e-15);
+  lma_ = std::make_unique<KDL::ChainIkSolverPos_LMA>(model.chain(), L, 1e-12,
+                                                     options.max_iterations, 1e-15);
   fk_ = std::make_unique<KDL::ChainFkSolverPos_recursive>(model.chain());
   lower_ = model.armLower();
   upper_ = model.armUpper();

@@ -60,7 +60,8 @@ std::vector<ReachabilityCell> reachabilityMap(const RobotModel& model,
         for (int r = 0; r < o.rolls; ++r)
           targets.push_back(presentationPalmPose(c.object_B, cam.panTilt_B, dir,
                                                  2 * M_PI * r / o.rolls, model.graspOffset()));
-      auto sols = solveIkBatch(model, targets, seedArm, mixSeed(o.seed, uint64_t(cells.size())), o.ik);
+      auto sols =
+          solveIkBatch(model, targets, seedArm, mixSeed(o.seed, uint64_t(cells.size())), o.ik);
       const JointVector home = model.home();
       for (size_t k = 0; k < dirs.size(); ++k)
         for (int r = 0; r < o.rolls; ++r) {

@@ -1,8 +1,8 @@
 #include "inhand/robot/robot_model.h"
 
+#include <urdf_parser/urdf_parser.h>
 #include <kdl/chain.hpp>
 #include <kdl/frames.hpp>
-#include <urdf_parser/urdf_parser.h>
 
 #include <cmath>
 #include <functional>
@@ -24,10 +24,18 @@ namespace fs = std::filesystem;
 TriangleMesh Primitive::toMesh() const {
   TriangleMesh m;
   switch (type) {
-    case Type::kBox: m = makeBox(size); break;
-    case Type::kCylinder: m = makeCylinder(size.x(), size.z(), 32); break;
-    case Type::kSphere: m = makeSphere(size.x(), 3); break;
-    case Type::kMesh: m = *mesh; break;
+    case Type::kBox:
+      m = makeBox(size);
+      break;
+    case Type::kCylinder:
+      m = makeCylinder(size.x(), size.z(), 32);
+      break;
+    case Type::kSphere:
+      m = makeSphere(size.x(), 3);
+      break;
+    case Type::kMesh:
+      m = *mesh;
+      break;
   }
   return transformed(m, T_link_geom);
 }
@@ -58,11 +66,14 @@ bool parityInside(const TriangleMesh& mesh, const Vec3& p) {
 bool Primitive::contains(const Vec3& p_link) const {
   Vec3 p = T_link_geom.inverse() * p_link;
   switch (type) {
-    case Type::kBox: return (p.cwiseAbs().array() <= 0.5 * size.array()).all();
+    case Type::kBox:
+      return (p.cwiseAbs().array() <= 0.5 * size.array()).all();
     case Type::kCylinder:
       return std::hypot(p.x(), p.y()) <= size.x() && std::abs(p.z()) <= 0.5 * size.z();
-    case Type::kSphere: return p.norm() <= size.x();
-    case Type::kMesh: return parityInside(*mesh, p);
+    case Type::kSphere:
+      return p.norm() <= size.x();
+    case Type::kMesh:
+      return parityInside(*mesh, p);
   }
   return false;
 }
@@ -109,8 +120,7 @@ KDL::Frame toKdl(const Iso3& T) {
 
 Vec3 readVec3(const Json& obj, const std::string& key, const std::string& where) {
   const Json& v = requireField(obj, key, where);
-  if (!v.is_array() || v.size() != 3 || !v[0].is_number() || !v[1].is_number() ||
-      !v[2].is_number())
+  if (!v.is_array() || v.size() != 3 || !v[0].is_number() || !v[1].is_number() || !v[2].is_number())
     throw Error(where + "." + key + ": expected an array of 3 numbers");
   return Vec3(v[0].get<double>(), v[1].get<double>(), v[2].get<double>());
 }
@@ -131,9 +141,9 @@ RobotModel RobotModel::load(const fs::path& configPath, const fs::path& urdfOver
   const std::string cfgName = configPath.string();
   Json cfg = readJsonFile(configPath);
   if (!cfg.is_object()) throw Error(cfgName + ": expected a JSON object");
-  static const std::set<std::string> known = {"urdf", "base_link", "tip_link", "hand",
-                                              "joint_speeds_rad_s", "home", "camera", "table",
-                                              "base_adjacent_links"};
+  static const std::set<std::string> known = {
+      "urdf",   "base_link", "tip_link",           "hand", "joint_speeds_rad_s", "home",
+      "camera", "table",     "base_adjacent_links"};
   for (const auto& [key, value] : cfg.items())
     if (!known.count(key)) throw Error(cfgName + ": unknown field \"" + key + "\"");
   fs::path urdfPath = urdfOverride;
@@ -182,8 +192,10 @@ RobotModel RobotModel::load(const fs::path& configPath, const fs::path& urdfOver
           std::string file = mg.filename;
           if (file.rfind("file://", 0) == 0) file = file.substr(7);
           if (file.rfind("package://", 0) == 0)
-            throw Error(where + ": package:// mesh paths need ROS; use a path relative to the URDF");
-          fs::path mp = fs::path(file).is_relative() ? urdfPath.parent_path() / file : fs::path(file);
+            throw Error(where +
+                        ": package:// mesh paths need ROS; use a path relative to the URDF");
+          fs::path mp =
+              fs::path(file).is_relative() ? urdfPath.parent_path() / file : fs::path(file);
           TriangleMesh mesh = importMesh(mp);
           for (Vec3f& v : mesh.vertices)
             v = v.cwiseProduct(Vec3f(float(mg.scale.x), float(mg.scale.y), float(mg.scale.z)));
@@ -206,12 +218,21 @@ RobotModel RobotModel::load(const fs::path& configPath, const fs::path& urdfOver
     j.T_parent_joint = toIso(joint->parent_to_joint_origin_transform);
     Vec3 axis(joint->axis.x, joint->axis.y, joint->axis.z);
     switch (joint->type) {
-      case urdf::Joint::REVOLUTE: j.type = JointInfo::Type::kRevolute; break;
-      case urdf::Joint::CONTINUOUS: j.type = JointInfo::Type::kContinuous; break;
-      case urdf::Joint::PRISMATIC: j.type = JointInfo::Type::kPrismatic; break;
-      case urdf::Joint::FIXED: j.type = JointInfo::Type::kFixed; break;
+      case urdf::Joint::REVOLUTE:
+        j.type = JointInfo::Type::kRevolute;
+        break;
+      case urdf::Joint::CONTINUOUS:
+        j.type = JointInfo::Type::kContinuous;
+        break;
+      case urdf::Joint::PRISMATIC:
+        j.type = JointInfo::Type::kPrismatic;
+        break;
+      case urdf::Joint::FIXED:
+        j.type = JointInfo::Type::kFixed;
+        break;
       default:
-        throw Error(urdfName + ": joint " + name + ": floating and planar joints are not supported");
+        throw Error(urdfName + ": joint " + name +
+                    ": floating and planar joints are not supported");
     }
     if (j.type != JointInfo::Type::kFixed) {
       if (axis.norm() < 1e-9) throw Error(urdfName + ": joint " + name + ": zero axis");
@@ -285,8 +306,9 @@ RobotModel RobotModel::load(const fs::path& configPath, const fs::path& urdfOver
   for (int link = m.tipLink_; link != m.baseLink_;) {
     int ji = m.links_[link].parentJoint;
     if (ji < 0)
-      throw Error(cfgName + ": tip_link '" + m.links_[m.tipLink_].name + "' is not below base_link '" +
-                  m.links_[m.baseLink_].name + "' in " + urdfName + ": the chain does not connect");
+      throw Error(cfgName + ": tip_link '" + m.links_[m.tipLink_].name +
+                  "' is not below base_link '" + m.links_[m.baseLink_].name + "' in " + urdfName +
+                  ": the chain does not connect");
     chainJoints.push_back(ji);
     link = m.joints_[ji].parentLink;
   }
@@ -297,8 +319,10 @@ RobotModel RobotModel::load(const fs::path& configPath, const fs::path& urdfOver
     KDL::Frame F = toKdl(j.T_parent_joint);
     KDL::Vector axis = F.M * KDL::Vector(j.axis.x(), j.axis.y(), j.axis.z());
     KDL::Joint kj(j.name + "_fixed", KDL::Joint::Fixed);
-    if (j.type == JointInfo::Type::kPrismatic) kj = KDL::Joint(j.name, F.p, axis, KDL::Joint::TransAxis);
-    else if (j.type != JointInfo::Type::kFixed) kj = KDL::Joint(j.name, F.p, axis, KDL::Joint::RotAxis);
+    if (j.type == JointInfo::Type::kPrismatic)
+      kj = KDL::Joint(j.name, F.p, axis, KDL::Joint::TransAxis);
+    else if (j.type != JointInfo::Type::kFixed)
+      kj = KDL::Joint(j.name, F.p, axis, KDL::Joint::RotAxis);
     m.chain_->addSegment(KDL::Segment(m.links_[j.childLink].name, kj, F));
     if (j.variable >= 0) {
       if (j.mimicOf >= 0)
@@ -306,14 +330,16 @@ RobotModel RobotModel::load(const fs::path& configPath, const fs::path& urdfOver
       m.armVariables_.push_back(j.variable);
     }
   }
-  if (m.armVariables_.empty()) throw Error(cfgName + ": the chain base_link → tip_link has no joints");
+  if (m.armVariables_.empty())
+    throw Error(cfgName + ": the chain base_link → tip_link has no joints");
 
   if (cfg.contains("joint_speeds_rad_s")) {
     const Json& s = cfg["joint_speeds_rad_s"];
     if (!s.is_object()) throw Error(cfgName + ": joint_speeds_rad_s: expected an object");
     for (const auto& [name, v] : s.items()) {
       int ji = m.jointIndex(name);
-      if (ji < 0) throw Error(cfgName + ": joint_speeds_rad_s." + name + ": no such joint in " + urdfName);
+      if (ji < 0)
+        throw Error(cfgName + ": joint_speeds_rad_s." + name + ": no such joint in " + urdfName);
       if (!v.is_number() || !(v.get<double>() > 0))
         throw Error(cfgName + ": joint_speeds_rad_s." + name + ": expected a positive number");
       m.joints_[ji].velocity = v.get<double>();
@@ -333,7 +359,8 @@ RobotModel RobotModel::load(const fs::path& configPath, const fs::path& urdfOver
     if (!h.is_object()) throw Error(cfgName + ": home: expected an object of joint values");
     for (const auto& [name, v] : h.items()) {
       int var = m.variableIndex(name);
-      if (var < 0) throw Error(cfgName + ": home." + name + ": no such movable joint in " + urdfName);
+      if (var < 0)
+        throw Error(cfgName + ": home." + name + ": no such movable joint in " + urdfName);
       if (!v.is_number()) throw Error(cfgName + ": home." + name + ": expected a number");
       m.homeValues_[var] = v.get<double>();
     }
@@ -342,13 +369,15 @@ RobotModel RobotModel::load(const fs::path& configPath, const fs::path& urdfOver
   const Json& hand = requireField(cfg, "hand", cfgName);
   const std::string hw = cfgName + ": hand";
   const Json& hl = requireField(hand, "links", hw);
-  if (!hl.is_array() || hl.empty()) throw Error(hw + ".links: expected a non-empty array of link names");
+  if (!hl.is_array() || hl.empty())
+    throw Error(hw + ".links: expected a non-empty array of link names");
   for (size_t i = 0; i < hl.size(); ++i) {
-    if (!hl[i].is_string()) throw Error(hw + ".links[" + std::to_string(i) + "]: expected a string");
+    if (!hl[i].is_string())
+      throw Error(hw + ".links[" + std::to_string(i) + "]: expected a string");
     int li = m.linkIndex(hl[i].get<std::string>());
     if (li < 0)
-      throw Error(hw + ".links[" + std::to_string(i) + "]: no link named '" + hl[i].get<std::string>() +
-                  "' in " + urdfName);
+      throw Error(hw + ".links[" + std::to_string(i) + "]: no link named '" +
+                  hl[i].get<std::string>() + "' in " + urdfName);
     m.handLinks_.push_back(li);
   }
   if (hand.contains("couplings")) {
@@ -374,8 +403,8 @@ RobotModel RobotModel::load(const fs::path& configPath, const fs::path& urdfOver
     const JointInfo& j = m.variable(f.variable);
     for (double val : {f.open, f.closed})
       if (val < j.lower - 1e-9 || val > j.upper + 1e-9)
-        throw Error(fw + ": open/closed value outside the joint's limits [" + std::to_string(j.lower) +
-                    ", " + std::to_string(j.upper) + "]");
+        throw Error(fw + ": open/closed value outside the joint's limits [" +
+                    std::to_string(j.lower) + ", " + std::to_string(j.upper) + "]");
     // Links that move with the finger: below the finger joint or any joint that follows it.
     std::set<int> moving;
     for (int ji = 0; ji < int(m.joints_.size()); ++ji) {
@@ -398,13 +427,15 @@ RobotModel RobotModel::load(const fs::path& configPath, const fs::path& urdfOver
   if (hand.contains("spread_joint")) m.spreadVariable_ = needVariable(hand, "spread_joint", hw);
   if (hand.contains("grasp_offset_m")) {
     m.graspOffset_ = requireNumber(hand, "grasp_offset_m", hw);
-    if (!(m.graspOffset_ > 0 && m.graspOffset_ < 1)) throw Error(hw + ".grasp_offset_m: must be in (0, 1) m");
+    if (!(m.graspOffset_ > 0 && m.graspOffset_ < 1))
+      throw Error(hw + ".grasp_offset_m: must be in (0, 1) m");
   }
   const Json& cam = requireField(cfg, "camera", cfgName);
   const std::string camw = cfgName + ": camera";
   m.camera_.panTilt_B = readVec3(cam, "pan_tilt_xyz", camw);
   m.camera_.lookAt_B = readVec3(cam, "look_at_xyz", camw);
-  std::tie(m.camera_.panMin, m.camera_.panMax) = readRangeDeg(cam, "pan_range_deg", camw, {-M_PI, M_PI});
+  std::tie(m.camera_.panMin, m.camera_.panMax) =
+      readRangeDeg(cam, "pan_range_deg", camw, {-M_PI, M_PI});
   std::tie(m.camera_.tiltMin, m.camera_.tiltMax) =
       readRangeDeg(cam, "tilt_range_deg", camw, {-M_PI / 2, M_PI / 2});
   if (!m.camera_.aimAt(m.camera_.lookAt_B))
@@ -412,13 +443,16 @@ RobotModel RobotModel::load(const fs::path& configPath, const fs::path& urdfOver
   const Json& table = requireField(cfg, "table", cfgName);
   m.table_.center_B = readVec3(table, "center_xyz", cfgName + ": table");
   m.table_.size = readVec3(table, "size_xyz", cfgName + ": table");
-  if (!(m.table_.size.array() > 0).all()) throw Error(cfgName + ": table.size_xyz: must be positive");
+  if (!(m.table_.size.array() > 0).all())
+    throw Error(cfgName + ": table.size_xyz: must be positive");
   if (cfg.contains("base_adjacent_links")) {
     const Json& a = cfg["base_adjacent_links"];
-    if (!a.is_array()) throw Error(cfgName + ": base_adjacent_links: expected an array of link names");
+    if (!a.is_array())
+      throw Error(cfgName + ": base_adjacent_links: expected an array of link names");
     for (size_t i = 0; i < a.size(); ++i) {
       if (!a[i].is_string() || m.linkIndex(a[i].get<std::string>()) < 0)
-        throw Error(cfgName + ": base_adjacent_links[" + std::to_string(i) + "]: no such link in " + urdfName);
+        throw Error(cfgName + ": base_adjacent_links[" + std::to_string(i) + "]: no such link in " +
+                    urdfName);
       m.baseAdjacent_.push_back(m.linkIndex(a[i].get<std::string>()));
     }
   }
@@ -459,7 +493,8 @@ Eigen::VectorXd RobotModel::armVelocity() const {
 }
 
 JointVector RobotModel::home() const {
-  JointVector q = Eigen::Map<const Eigen::VectorXd>(homeValues_.data(), Eigen::Index(homeValues_.size()));
+  JointVector q =
+      Eigen::Map<const Eigen::VectorXd>(homeValues_.data(), Eigen::Index(homeValues_.size()));
   applyCouplings(&q);
   return q;
 }
@@ -498,8 +533,10 @@ std::vector<Iso3> RobotModel::linkPoses(const JointVector& qIn) const {
     Iso3 motion = Iso3::Identity();
     if (j.variable >= 0) {
       double v = q[j.variable];
-      if (j.type == JointInfo::Type::kPrismatic) motion.translation() = v * j.axis;
-      else motion.linear() = Eigen::AngleAxisd(v, j.axis).toRotationMatrix();
+      if (j.type == JointInfo::Type::kPrismatic)
+        motion.translation() = v * j.axis;
+      else
+        motion.linear() = Eigen::AngleAxisd(v, j.axis).toRotationMatrix();
     }
     T[j.childLink] = T[j.parentLink] * j.T_parent_joint * motion;
   }

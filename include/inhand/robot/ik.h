@@ -19,9 +19,9 @@ class ChainFkSolverPos_recursive;
 namespace inhand {
 
 struct IkOptions {
-  int random_restarts = 40;             // attempts from random seeds after the given seed fails
-  int max_iterations = 300;             // LMA iterations per attempt
-  double position_tolerance_m = 1e-5;   // accepted position error, m
+  int random_restarts = 40;                 // attempts from random seeds after the given seed fails
+  int max_iterations = 300;                 // LMA iterations per attempt
+  double position_tolerance_m = 1e-5;       // accepted position error, m
   double orientation_tolerance_rad = 1e-4;  // accepted orientation error, rad
   std::string validate() const;
 };
@@ -53,7 +53,8 @@ class IkSolver {
 std::vector<std::optional<Eigen::VectorXd>> solveIkBatch(const RobotModel& model,
                                                          const std::vector<Iso3>& targets,
                                                          const Eigen::VectorXd& seedArm,
-                                                         uint64_t seed, const IkOptions& options = {});
+                                                         uint64_t seed,
+                                                         const IkOptions& options = {});
 
 // Position and orientation error between two poses (m, rad).
 std::pair<double, double> poseError(const Iso3& a, const Iso3& b);

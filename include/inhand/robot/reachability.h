@@ -11,12 +11,12 @@
 namespace inhand {
 
 struct ReachabilityOptions {
-  double range_m = 0.7;        // camera-to-object distance, m (the paper's view range)
-  int directions = 100;        // viewing directions over the sphere
-  int rolls = 8;               // rolls about the optical axis tried per direction
-  int grid = 3;                // grid × grid object positions
-  double grid_step_deg = 15;   // pan/tilt spacing of the grid, degrees
-  uint64_t seed = 1;           // IK restarts
+  double range_m = 0.7;       // camera-to-object distance, m (the paper's view range)
+  int directions = 100;       // viewing directions over the sphere
+  int rolls = 8;              // rolls about the optical axis tried per direction
+  int grid = 3;               // grid × grid object positions
+  double grid_step_deg = 15;  // pan/tilt spacing of the grid, degrees
+  uint64_t seed = 1;          // IK restarts
   IkOptions ik{8, 300, 1e-5, 1e-4};
   std::string validate() const;
 };

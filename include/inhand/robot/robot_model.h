@@ -25,13 +25,13 @@ using JointVector = Eigen::VectorXd;
 
 struct Primitive {
   enum class Type { kBox, kCylinder, kSphere, kMesh } type = Type::kBox;
-  Vec3 size = Vec3::Zero();           // box: edges; cylinder: (radius, radius, length) along z;
-                                      // sphere: (radius, radius, radius)
+  Vec3 size = Vec3::Zero();  // box: edges; cylinder: (radius, radius, length) along z;
+                             // sphere: (radius, radius, radius)
   Iso3 T_link_geom = Iso3::Identity();
   std::shared_ptr<const TriangleMesh> mesh;  // kMesh only, in the geometry frame (scaled)
 
-  TriangleMesh toMesh() const;                // in the link frame
-  bool contains(const Vec3& p_link) const;    // exact for box, cylinder, sphere; parity for meshes
+  TriangleMesh toMesh() const;              // in the link frame
+  bool contains(const Vec3& p_link) const;  // exact for box, cylinder, sphere; parity for meshes
 };
 
 struct LinkInfo {
@@ -45,22 +45,22 @@ struct JointInfo {
   std::string name;
   int parentLink = -1, childLink = -1;
   Iso3 T_parent_joint = Iso3::Identity();
-  Vec3 axis = Vec3::UnitZ();       // in the joint frame, unit
-  double lower = 0, upper = 0;     // rad or m
-  double velocity = 0;             // max speed, rad/s or m/s (config overrides the URDF)
-  int variable = -1;               // index in JointVector; -1 for fixed joints
-  int mimicOf = -1;                // variable this joint follows (q = m·q_leader + offset), or -1
+  Vec3 axis = Vec3::UnitZ();    // in the joint frame, unit
+  double lower = 0, upper = 0;  // rad or m
+  double velocity = 0;          // max speed, rad/s or m/s (config overrides the URDF)
+  int variable = -1;            // index in JointVector; -1 for fixed joints
+  int mimicOf = -1;             // variable this joint follows (q = m·q_leader + offset), or -1
   double mimicMultiplier = 1, mimicOffset = 0;
 };
 
 struct FingerInfo {
-  int variable = -1;   // the finger's driven joint
+  int variable = -1;  // the finger's driven joint
   double open = 0, closed = 0;
   std::vector<int> links;  // links that move with this finger
 };
 
 struct CameraMount {
-  Vec3 panTilt_B = Vec3::Zero();   // pan-tilt unit centre in the base frame, m
+  Vec3 panTilt_B = Vec3::Zero();  // pan-tilt unit centre in the base frame, m
   double panMin = -M_PI, panMax = M_PI, tiltMin = -M_PI / 2, tiltMax = M_PI / 2;  // rad
   Vec3 lookAt_B = Vec3(0.6, 0, 0.5);  // nominal point where objects are presented, m
   // Camera pose looking at `target_B` (optical frame), or nullopt when pan/tilt cannot aim there.
@@ -124,8 +124,8 @@ class RobotModel {
   std::string name_;
   std::vector<LinkInfo> links_;
   std::vector<JointInfo> joints_;
-  std::vector<int> jointOrder_;      // joints in topological order (parents first)
-  std::vector<int> variableJoint_;   // variable → joint
+  std::vector<int> jointOrder_;     // joints in topological order (parents first)
+  std::vector<int> variableJoint_;  // variable → joint
   std::vector<double> homeValues_;
   int rootLink_ = -1, baseLink_ = -1, tipLink_ = -1;
   std::vector<int> armVariables_;
