@@ -219,3 +219,35 @@ TEST(RayScene, PacketsMatchScalarReferenceAndAnalyticSphere) {
   scene.occluded(rays.data(), blocked.data(), rays.size());
   for (size_t i = 0; i < rays.size(); ++i) EXPECT_EQ(bool(blocked[i]), hits[i].valid());
 }
+
+TEST(RayScene, InstanceMatchesTransformedCopy) {
+  TriangleMesh box = makeBox(Vec3(0.1, 0.2, 0.3));
+  Iso3 T = Iso3(Eigen::Translation3d(0.3, -0.1, 0.2)) * Eigen::AngleAxisd(0.7, Vec3(1, 2, 3).normalized());
+  RayScene inner;
+  inner.addMesh(box);
+  inner.commit();
+  RayScene viaInstance, viaCopy;
+  viaInstance.addMesh(makeSphere(0.01, 1), Iso3(Eigen::Translation3d(5, 5, 5)));  // id 0
+  EXPECT_EQ(viaInstance.addInstance(inner, T), 1);
+  viaInstance.commit();
+  viaCopy.addMesh(box, T);
+  viaCopy.commit();
+  Rng rng = makeRng(2);
+  std::uniform_real_distribution<double> U(-1, 1);
+  int hits = 0;
+  for (int i = 0; i < 2000; ++i) {
+    Ray r;
+    r.origin = Vec3f(1.0f, float(U(rng)) * 0.1f, float(U(rng)) * 0.1f);
+    r.dir = (T.translation().cast<float>() + Vec3f(float(U(rng)), float(U(rng)), float(U(rng))) * 0.1f - r.origin).normalized();
+    Hit a = viaInstance.intersectOne(r), b = viaCopy.intersectOne(r);
+    ASSERT_EQ(a.valid(), b.valid());
+    if (!a.valid()) continue;
+    ++hits;
+    EXPECT_EQ(a.geometry, 1);
+    EXPECT_EQ(a.inner, 0);
+    EXPECT_EQ(a.triangle, b.triangle);
+    EXPECT_NEAR(a.t, b.t, 1e-5);
+    EXPECT_GT(a.normal.normalized().dot(b.normal.normalized()), 0.9999f);
+  }
+  EXPECT_GT(hits, 500);
+}

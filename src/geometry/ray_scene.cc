@@ -36,7 +36,10 @@ RayScene::~RayScene() {
 }
 
 RayScene::RayScene(RayScene&& o) noexcept
-    : scene_(o.scene_), geometryCount_(o.geometryCount_), committed_(o.committed_) {
+    : scene_(o.scene_),
+      instanceRotation_(std::move(o.instanceRotation_)),
+      geometryCount_(o.geometryCount_),
+      committed_(o.committed_) {
   o.scene_ = nullptr;
 }
 
@@ -44,6 +47,7 @@ RayScene& RayScene::operator=(RayScene&& o) noexcept {
   if (this != &o) {
     if (scene_) rtcReleaseScene(scene_);
     scene_ = o.scene_;
+    instanceRotation_ = std::move(o.instanceRotation_);
     geometryCount_ = o.geometryCount_;
     committed_ = o.committed_;
     o.scene_ = nullptr;
@@ -77,7 +81,46 @@ int RayScene::addMesh(const TriangleMesh& mesh, const Iso3& T) {
   unsigned id = rtcAttachGeometry(scene_, geom);
   rtcReleaseGeometry(geom);
   INHAND_CHECK(int(id) == geometryCount_, "unexpected Embree geometry id");
+  instanceRotation_.push_back(Eigen::Matrix3f::Identity());
   return geometryCount_++;
+}
+
+int RayScene::addInstance(const RayScene& inner, const Iso3& T) {
+  INHAND_CHECK(!committed_, "addInstance after commit");
+  INHAND_CHECK(inner.committed_, "instanced scene must be committed");
+  RTCGeometry geom = rtcNewGeometry(device(), RTC_GEOMETRY_TYPE_INSTANCE);
+  rtcSetGeometryInstancedScene(geom, inner.scene_);
+  float xfm[12];  // 3×4, column major
+  const Eigen::Matrix<double, 3, 4> M = T.matrix().topRows<3>();
+  for (int c = 0; c < 4; ++c)
+    for (int r = 0; r < 3; ++r) xfm[c * 3 + r] = float(M(r, c));
+  rtcSetGeometryTransform(geom, 0, RTC_FORMAT_FLOAT3X4_COLUMN_MAJOR, xfm);
+  rtcSetGeometryMask(geom, kAllMask);
+  rtcCommitGeometry(geom);
+  unsigned id = rtcAttachGeometry(scene_, geom);
+  rtcReleaseGeometry(geom);
+  INHAND_CHECK(int(id) == geometryCount_, "unexpected Embree geometry id");
+  instanceRotation_.push_back(T.linear().cast<float>());
+  return geometryCount_++;
+}
+
+Hit RayScene::makeHit(float t, unsigned geomID, unsigned instID, unsigned primID, float u, float v,
+                      const Vec3f& Ng) const {
+  Hit h;
+  if (geomID == RTC_INVALID_GEOMETRY_ID) return h;
+  h.t = t;
+  h.triangle = int(primID);
+  h.u = u;
+  h.v = v;
+  if (instID != RTC_INVALID_GEOMETRY_ID) {
+    h.geometry = int(instID);
+    h.inner = int(geomID);
+    h.normal = instanceRotation_[instID] * Ng;  // Embree reports Ng in the instance's space
+  } else {
+    h.geometry = int(geomID);
+    h.normal = Ng;
+  }
+  return h;
 }
 
 void RayScene::commit() {
@@ -128,19 +171,10 @@ void RayScene::intersect(const Ray* rays, Hit* hits, size_t count) const {
         rtcInitIntersectContext(&ctx);
         ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
         rtcIntersect16(valid, scene_, &ctx, &rh);
-        for (size_t k = 0; k < n; ++k) {
-          Hit& h = hits[first + k];
-          if (rh.hit.geomID[k] == RTC_INVALID_GEOMETRY_ID) {
-            h = Hit{};
-            continue;
-          }
-          h.t = rh.ray.tfar[k];
-          h.geometry = int(rh.hit.geomID[k]);
-          h.triangle = int(rh.hit.primID[k]);
-          h.u = rh.hit.u[k];
-          h.v = rh.hit.v[k];
-          h.normal = Vec3f(rh.hit.Ng_x[k], rh.hit.Ng_y[k], rh.hit.Ng_z[k]);
-        }
+        for (size_t k = 0; k < n; ++k)
+          hits[first + k] = makeHit(rh.ray.tfar[k], rh.hit.geomID[k], rh.hit.instID[0][k],
+                                    rh.hit.primID[k], rh.hit.u[k], rh.hit.v[k],
+                                    Vec3f(rh.hit.Ng_x[k], rh.hit.Ng_y[k], rh.hit.Ng_z[k]));
       },
       8);
 }
@@ -185,15 +219,8 @@ Hit RayScene::intersectOne(const Ray& ray) const {
   RTCIntersectContext ctx;
   rtcInitIntersectContext(&ctx);
   rtcIntersect1(scene_, &ctx, &rh);
-  Hit h;
-  if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) return h;
-  h.t = rh.ray.tfar;
-  h.geometry = int(rh.hit.geomID);
-  h.triangle = int(rh.hit.primID);
-  h.u = rh.hit.u;
-  h.v = rh.hit.v;
-  h.normal = Vec3f(rh.hit.Ng_x, rh.hit.Ng_y, rh.hit.Ng_z);
-  return h;
+  return makeHit(rh.ray.tfar, rh.hit.geomID, rh.hit.instID[0], rh.hit.primID, rh.hit.u, rh.hit.v,
+                 Vec3f(rh.hit.Ng_x, rh.hit.Ng_y, rh.hit.Ng_z));
 }
 
 }  // namespace inhand

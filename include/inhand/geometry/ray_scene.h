@@ -22,10 +22,11 @@ struct Ray {
 
 struct Hit {
   float t = std::numeric_limits<float>::infinity();
-  int geometry = -1;  // id returned by addMesh; -1 when the ray hit nothing
+  int geometry = -1;  // id returned by addMesh/addInstance; -1 when the ray hit nothing
+  int inner = -1;     // for hits through an instance: the geometry id inside the instanced scene
   int triangle = -1;
   float u = 0.f, v = 0.f;        // barycentrics: point = (1-u-v)·v0 + u·v1 + v·v2
-  Vec3f normal = Vec3f::Zero();  // geometric normal (v1−v0)×(v2−v0), not normalised
+  Vec3f normal = Vec3f::Zero();  // geometric normal in this scene's frame, not normalised
   bool valid() const { return geometry >= 0; }
 };
 
@@ -40,6 +41,9 @@ class RayScene {
 
   // Adds a copy of `mesh` transformed by T; returns its geometry id (0, 1, 2, … in call order).
   int addMesh(const TriangleMesh& mesh, const Iso3& T = Iso3::Identity());
+  // Adds `inner` (committed; must outlive this scene) placed by T, without copying or rebuilding
+  // its BVH (Embree instancing). Returns its geometry id; hits report inner's geometry in `inner`.
+  int addInstance(const RayScene& inner, const Iso3& T);
   // Builds the BVH. Must be called after the last addMesh and before any query.
   void commit();
   bool committed() const { return committed_; }
@@ -53,7 +57,10 @@ class RayScene {
   Hit intersectOne(const Ray& ray) const;
 
  private:
+  Hit makeHit(float t, unsigned geomID, unsigned instID, unsigned primID, float u, float v,
+              const Vec3f& Ng) const;
   RTCScene scene_ = nullptr;
+  std::vector<Eigen::Matrix3f> instanceRotation_;  // per geometry id (identity for meshes)
   int geometryCount_ = 0;
   bool committed_ = false;
 };
