@@ -152,12 +152,10 @@ void loadPacket(const Ray* rays, size_t n, RTCRay16& r, int* valid) {
 }
 }  // namespace
 
-void RayScene::intersect(const Ray* rays, Hit* hits, size_t count) const {
+void RayScene::intersect(const Ray* rays, Hit* hits, size_t count, bool parallel) const {
   INHAND_CHECK(committed_, "intersect before commit");
   const int packets = int((count + kPacket - 1) / kPacket);
-  parallelFor(
-      0, packets,
-      [&](int p) {
+  auto packet = [&](int p) {
         size_t first = size_t(p) * kPacket;
         size_t n = std::min(kPacket, count - first);
         alignas(64) RTCRayHit16 rh;
@@ -175,16 +173,16 @@ void RayScene::intersect(const Ray* rays, Hit* hits, size_t count) const {
           hits[first + k] = makeHit(rh.ray.tfar[k], rh.hit.geomID[k], rh.hit.instID[0][k],
                                     rh.hit.primID[k], rh.hit.u[k], rh.hit.v[k],
                                     Vec3f(rh.hit.Ng_x[k], rh.hit.Ng_y[k], rh.hit.Ng_z[k]));
-      },
-      8);
+  };
+  if (parallel) parallelFor(0, packets, packet, 8);
+  else
+    for (int p = 0; p < packets; ++p) packet(p);
 }
 
-void RayScene::occluded(const Ray* rays, uint8_t* blocked, size_t count) const {
+void RayScene::occluded(const Ray* rays, uint8_t* blocked, size_t count, bool parallel) const {
   INHAND_CHECK(committed_, "occluded before commit");
   const int packets = int((count + kPacket - 1) / kPacket);
-  parallelFor(
-      0, packets,
-      [&](int p) {
+  auto packet = [&](int p) {
         size_t first = size_t(p) * kPacket;
         size_t n = std::min(kPacket, count - first);
         alignas(64) RTCRay16 r;
@@ -195,8 +193,10 @@ void RayScene::occluded(const Ray* rays, uint8_t* blocked, size_t count) const {
         rtcOccluded16(valid, scene_, &ctx, &r);
         // Embree sets tfar to −inf for occluded rays.
         for (size_t k = 0; k < n; ++k) blocked[first + k] = r.tfar[k] < 0.f ? 1 : 0;
-      },
-      8);
+  };
+  if (parallel) parallelFor(0, packets, packet, 8);
+  else
+    for (int p = 0; p < packets; ++p) packet(p);
 }
 
 Hit RayScene::intersectOne(const Ray& ray) const {

@@ -2,6 +2,7 @@
 
 #include <fcl/fcl.h>
 
+#include <limits>
 #include <map>
 #include <set>
 
@@ -157,6 +158,34 @@ bool HandGeometry::contains(const Vec3& p_F) const {
       if (p.contains(p_link)) return true;
   }
   return false;
+}
+
+double HandGeometry::distance(const Vec3& p_F) const {
+  double best = std::numeric_limits<double>::infinity();
+  for (size_t k = 0; k < T_F_link_.size(); ++k) {
+    const Vec3 p_link = T_F_link_[k].inverse() * p_F;
+    for (const Primitive& p : model_->links()[model_->handLinks()[k]].collision) {
+      Vec3 q = p.T_link_geom.inverse() * p_link;
+      double d;
+      switch (p.type) {
+        case Primitive::Type::kBox: {
+          Vec3 e = q.cwiseAbs() - 0.5 * p.size;
+          d = e.cwiseMax(0.0).norm() + std::min(e.maxCoeff(), 0.0);
+          break;
+        }
+        case Primitive::Type::kCylinder: {
+          Vec2 e(std::hypot(q.x(), q.y()) - p.size.x(), std::abs(q.z()) - 0.5 * p.size.z());
+          d = e.cwiseMax(0.0).norm() + std::min(e.maxCoeff(), 0.0);
+          break;
+        }
+        case Primitive::Type::kSphere: d = q.norm() - p.size.x(); break;
+        case Primitive::Type::kMesh:
+        default: d = p.contains(p_link) ? 0.0 : std::numeric_limits<double>::infinity(); break;
+      }
+      best = std::min(best, d);
+    }
+  }
+  return best;
 }
 
 ClosingResult closeFingers(const RobotModel& model, const JointVector& qIn, const Iso3& T_O_palm,

@@ -49,10 +49,11 @@ class RayScene {
   bool committed() const { return committed_; }
   int geometryCount() const { return geometryCount_; }
 
-  // Closest hit of each ray: packets of 16 consecutive rays, in parallel.
-  void intersect(const Ray* rays, Hit* hits, size_t count) const;
+  // Closest hit of each ray: packets of 16 consecutive rays, on both cores unless `parallel` is
+  // false (for callers that already run one task per core).
+  void intersect(const Ray* rays, Hit* hits, size_t count, bool parallel = true) const;
   // blocked[i] = 1 when something lies on ray i within [tnear, tfar].
-  void occluded(const Ray* rays, uint8_t* blocked, size_t count) const;
+  void occluded(const Ray* rays, uint8_t* blocked, size_t count, bool parallel = true) const;
   // Scalar reference path (rtcIntersect1), one ray.
   Hit intersectOne(const Ray& ray) const;
 

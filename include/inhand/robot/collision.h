@@ -40,6 +40,9 @@ class HandGeometry {
   TriangleMesh mesh() const;
   // Whether p_F lies inside any hand link's geometry (exact for boxes, cylinders, spheres).
   bool contains(const Vec3& p_F) const;
+  // Signed distance (m) from p_F to the hand: negative inside. Exact for boxes, cylinders and
+  // spheres; mesh links give 0 inside and +infinity outside.
+  double distance(const Vec3& p_F) const;
   // Link poses T_F_link of the hand links, in handLinks() order.
   const std::vector<Iso3>& linkPoses() const { return T_F_link_; }
 

@@ -1,0 +1,119 @@
+#pragma once
+// View quality, the paper's eq. 9: for a candidate camera pose z, ray-cast a virtual 640×480
+// depth map of S_obj (the current model, vertex variances σ_t²) among the robot's own surfaces,
+// and sum over pixels
+//     G(z) = ½ Σ ln(1 + σ_t²/σ_z²) · d² / (f² |n_z|)
+// with σ_t² interpolated on the hit triangle, σ_z² from the noise model at the virtual depth d
+// and incidence angle, and d²/(f²|n_z|) the surface area the pixel covers. A pixel counts only
+// when (§III-B): the ray hits S_obj; no robot surface (hand, wrist, forearm, …, table) is hit
+// first; the hit is farther than t_hand from the hand; the camera ray is not too oblique; and
+// the projector sees the point, not too obliquely.
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "inhand/geometry/ray_scene.h"
+#include "inhand/mesh/extract.h"
+#include "inhand/robot/collision.h"
+#include "inhand/sensor/depth_camera.h"
+#include "inhand/sensor/noise_model.h"
+
+namespace inhand {
+
+struct ViewQualityOptions {
+  double t_hand_m = 0.01;                    // hits this close to the hand are skipped, m
+  double max_incidence_deg = 75.0;           // camera ray vs surface normal
+  double max_projector_incidence_deg = 75.0; // projector ray vs surface normal
+  double near_hand_cell_m = 0.002;           // resolution of the precomputed near-hand grid, m
+  std::string validate() const;
+};
+
+// Per-pixel outcome counts of one evaluation (for tests and diagnostics).
+struct ViewQualityStats {
+  int cast = 0;               // pixels whose ray was cast (inside the model's projected box)
+  int missed = 0;             // no S_obj and no robot surface hit
+  int robot_first = 0;        // a robot surface hit before S_obj (or instead of it)
+  int near_hand = 0;          // S_obj hit within t_hand of the hand
+  int too_oblique = 0;        // camera incidence too large
+  int projector_oblique = 0;  // projector incidence too large
+  int projector_blocked = 0;  // projector's ray to the point blocked
+  int counted = 0;            // pixels that contribute to G
+};
+
+// Cells within t_hand of the hand, precomputed once per grasp in the object frame.
+class NearHandGrid {
+ public:
+  NearHandGrid() = default;
+  NearHandGrid(const HandGeometry& hand_O, double t_hand_m, double cell_m);
+  bool near(const Vec3& p_O) const;
+
+ private:
+  Vec3 origin_ = Vec3::Zero();
+  double cell_ = 1.0;
+  Vec3i dims_ = Vec3i::Zero();
+  std::vector<uint8_t> flags_;
+};
+
+// A committed scene placed in the object frame: something that can block the view of S_obj.
+struct Occluder {
+  const RayScene* scene;
+  Iso3 T_O_scene;
+};
+
+// One robot's links as Embree scenes in their link frames, built once and instanced per view.
+class RobotOccluders {
+ public:
+  explicit RobotOccluders(const RobotModel& model);
+  // Every link with geometry at q, and the table, placed in frame O by T_O_B.
+  std::vector<Occluder> at(const JointVector& q, const Iso3& T_O_B) const;
+
+ private:
+  const RobotModel* model_;
+  std::vector<int> links_;
+  std::vector<std::unique_ptr<RayScene>> scenes_;
+  std::unique_ptr<RayScene> table_;
+};
+
+// S_obj (mesh + variances) ready for many evaluations. Thread-safe after construction.
+class ViewQualityScene {
+ public:
+  ViewQualityScene(const ObjectModel& model, const DepthCameraOptions& camera,
+                   const NoiseModelOptions& noise, const ViewQualityOptions& options);
+
+  // Sets the grasp's near-hand grid (no grid: no t_hand rule).
+  void setNearHand(std::shared_ptr<const NearHandGrid> grid) { nearHand_ = std::move(grid); }
+
+  // eq. 9 for a camera at T_O_C among `occluders` (robot surfaces in frame O). Casts only the
+  // pixels inside the projection of the model's bounding box (no pixel outside can hit S_obj),
+  // in coherent 4×4 packets, on the calling thread.
+  double quality(const Iso3& T_O_C, const std::vector<Occluder>& occluders = {},
+                 ViewQualityStats* stats = nullptr) const;
+
+  // Brute-force reference: every pixel of the full image, one ray at a time (rtcIntersect1).
+  double qualityReference(const Iso3& T_O_C, const std::vector<Occluder>& occluders = {},
+                          ViewQualityStats* stats = nullptr) const;
+
+  const ObjectModel& model() const { return model_; }
+  Vec3 centre() const { return model_.mesh.bounds().center(); }
+
+ private:
+  RayScene buildScene(const std::vector<Occluder>& occluders) const;
+  // Per-pixel rule given the first hit; returns the gain or 0, and the shadow ray when the pixel
+  // still needs the projector visibility test.
+  double pixelGain(const Hit& hit, const Ray& ray, const Iso3& T_O_C, Ray* shadow,
+                   ViewQualityStats* stats) const;
+
+  ObjectModel model_;
+  DepthCameraOptions camera_;
+  NoiseModelOptions noise_;
+  ViewQualityOptions options_;
+  RayScene objectScene_;
+  std::shared_ptr<const NearHandGrid> nearHand_;
+};
+
+// Camera pose in the object frame looking along dir_O at centre_O from `range_m`, rolled by
+// roll_rad about the optical axis (roll 0: image x axis as perpendicular to dir_O and the
+// object's z axis as possible).
+Iso3 cameraPoseInObject(const Vec3& centre_O, const Vec3& dir_O, double range_m, double roll_rad);
+
+}  // namespace inhand

@@ -1,0 +1,258 @@
+#include "inhand/planning/view_quality.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "inhand/core/error.h"
+#include "inhand/core/parallel.h"
+#include "inhand/geometry/primitives.h"
+
+namespace inhand {
+
+std::string ViewQualityOptions::validate() const {
+  if (!(t_hand_m >= 0)) return "t_hand_m must be >= 0";
+  if (!(max_incidence_deg > 0 && max_incidence_deg < 90)) return "max_incidence_deg must be in (0, 90)";
+  if (!(max_projector_incidence_deg > 0 && max_projector_incidence_deg < 90))
+    return "max_projector_incidence_deg must be in (0, 90)";
+  if (!(near_hand_cell_m > 0)) return "near_hand_cell_m must be > 0";
+  return {};
+}
+
+Iso3 cameraPoseInObject(const Vec3& centre_O, const Vec3& dir_O, double range_m, double roll_rad) {
+  Vec3 z = dir_O.normalized();
+  Vec3 ref = std::abs(z.z()) < 0.95 ? Vec3::UnitZ() : Vec3::UnitX();
+  Vec3 x0 = z.cross(ref).normalized();
+  Vec3 y0 = z.cross(x0);
+  Vec3 x = std::cos(roll_rad) * x0 + std::sin(roll_rad) * y0;
+  Iso3 T = Iso3::Identity();
+  T.linear().col(0) = x;
+  T.linear().col(1) = z.cross(x);
+  T.linear().col(2) = z;
+  T.translation() = centre_O - range_m * z;
+  return T;
+}
+
+// ---- near-hand grid -----------------------------------------------------------------------------
+
+NearHandGrid::NearHandGrid(const HandGeometry& hand, double t_hand, double cell) : cell_(cell) {
+  Aabb box = hand.mesh().bounds();
+  origin_ = box.min - Vec3::Constant(t_hand + cell);
+  Vec3 extent = box.size() + Vec3::Constant(2 * (t_hand + cell));
+  dims_ = Vec3i(int(std::ceil(extent.x() / cell)) + 1, int(std::ceil(extent.y() / cell)) + 1,
+                int(std::ceil(extent.z() / cell)) + 1);
+  flags_.assign(size_t(dims_.prod()), 0);
+  parallelFor(0, dims_.z(), [&](int z) {
+    for (int y = 0; y < dims_.y(); ++y)
+      for (int x = 0; x < dims_.x(); ++x)
+        flags_[(size_t(z) * dims_.y() + y) * dims_.x() + x] =
+            hand.distance(origin_ + cell_ * Vec3(x, y, z)) < t_hand;
+  });
+}
+
+bool NearHandGrid::near(const Vec3& p) const {
+  if (flags_.empty()) return false;
+  Vec3 g = (p - origin_) / cell_;
+  int x = int(std::lround(g.x())), y = int(std::lround(g.y())), z = int(std::lround(g.z()));
+  if (x < 0 || y < 0 || z < 0 || x >= dims_.x() || y >= dims_.y() || z >= dims_.z()) return false;
+  return flags_[(size_t(z) * dims_.y() + y) * dims_.x() + x];
+}
+
+// ---- robot occluders ----------------------------------------------------------------------------
+
+RobotOccluders::RobotOccluders(const RobotModel& model) : model_(&model) {
+  for (int li = 0; li < int(model.links().size()); ++li) {
+    const auto& col = model.links()[li].collision;
+    if (col.empty()) continue;
+    TriangleMesh m;
+    for (const Primitive& p : col) m.append(p.toMesh());
+    auto scene = std::make_unique<RayScene>();
+    scene->addMesh(m);
+    scene->commit();
+    links_.push_back(li);
+    scenes_.push_back(std::move(scene));
+  }
+  table_ = std::make_unique<RayScene>();
+  table_->addMesh(makeBox(model.table().size));
+  table_->commit();
+}
+
+std::vector<Occluder> RobotOccluders::at(const JointVector& q, const Iso3& T_O_B) const {
+  std::vector<Iso3> T = model_->linkPoses(q);
+  std::vector<Occluder> out;
+  for (size_t k = 0; k < links_.size(); ++k) out.push_back({scenes_[k].get(), T_O_B * T[links_[k]]});
+  out.push_back({table_.get(), T_O_B * Iso3(Eigen::Translation3d(model_->table().center_B))});
+  return out;
+}
+
+// ---- quality ------------------------------------------------------------------------------------
+
+ViewQualityScene::ViewQualityScene(const ObjectModel& model, const DepthCameraOptions& camera,
+                                   const NoiseModelOptions& noise, const ViewQualityOptions& options)
+    : model_(model), camera_(camera), noise_(noise), options_(options) {
+  std::string p = options.validate();
+  if (!p.empty()) throw Error("view quality options: " + p);
+  INHAND_CHECK(model.variance.size() == model.mesh.vertices.size(), "variance per vertex");
+  objectScene_.addMesh(model_.mesh);
+  objectScene_.commit();
+}
+
+RayScene ViewQualityScene::buildScene(const std::vector<Occluder>& occluders) const {
+  RayScene s;
+  s.addInstance(objectScene_, Iso3::Identity());  // geometry 0: S_obj
+  for (const Occluder& o : occluders) s.addInstance(*o.scene, o.T_O_scene);
+  s.commit();
+  return s;
+}
+
+double ViewQualityScene::pixelGain(const Hit& hit, const Ray& ray, const Iso3& T_O_C, Ray* shadow,
+                                   ViewQualityStats* st) const {
+  if (!hit.valid()) {
+    ++st->missed;
+    return 0;
+  }
+  if (hit.geometry != 0) {
+    ++st->robot_first;
+    return 0;
+  }
+  const Vec3 dir = ray.dir.cast<double>();
+  const Vec3 p = ray.origin.cast<double>() + double(hit.t) * dir;
+  if (nearHand_ && nearHand_->near(p)) {
+    ++st->near_hand;
+    return 0;
+  }
+  const Vec3 n = hit.normal.cast<double>().normalized();
+  const double cosInc = std::abs(n.dot(dir)) / dir.norm();
+  if (cosInc < std::cos(options_.max_incidence_deg * M_PI / 180)) {
+    ++st->too_oblique;
+    return 0;
+  }
+  const Vec3 projector = T_O_C * camera_.projector_C;
+  Vec3 toP = projector - p;
+  const double dist = toP.norm();
+  toP /= dist;
+  if (std::abs(n.dot(toP)) < std::cos(options_.max_projector_incidence_deg * M_PI / 180)) {
+    ++st->projector_oblique;
+    return 0;
+  }
+  shadow->origin = p.cast<float>();
+  shadow->dir = toP.cast<float>();
+  shadow->tnear = 2e-4f;
+  shadow->tfar = float(dist - 2e-4);
+  const Tri& f = model_.mesh.triangles[hit.triangle];
+  const double var = (1.0 - hit.u - hit.v) * model_.variance[f[0]] + hit.u * model_.variance[f[1]] +
+                     hit.v * model_.variance[f[2]];
+  const double d = hit.t;  // the ray has camera z = 1, so t is the depth
+  const double sz = axialSigma(noise_, d, std::acos(std::min(1.0, cosInc)));
+  const double nz = std::max(0.05, std::abs((T_O_C.linear().transpose() * n).z()));
+  const CameraIntrinsics& K = camera_.intrinsics;
+  return 0.5 * std::log1p(var / (sz * sz)) * d * d / (K.fx * K.fy * nz);
+}
+
+double ViewQualityScene::quality(const Iso3& T_O_C, const std::vector<Occluder>& occluders,
+                                 ViewQualityStats* stats) const {
+  ViewQualityStats local;
+  ViewQualityStats& st = stats ? *stats : local;
+  st = ViewQualityStats{};
+  const CameraIntrinsics& K = camera_.intrinsics;
+  // Pixel box covering the projection of the model's bounding box.
+  const Aabb box = model_.mesh.bounds();
+  const Iso3 T_C_O = T_O_C.inverse();
+  int u0 = 0, v0 = 0, u1 = K.width - 1, v1 = K.height - 1;
+  bool bounded = true;
+  double umin = 1e30, umax = -1e30, vmin = 1e30, vmax = -1e30;
+  for (int c = 0; c < 8; ++c) {
+    Vec3 corner((c & 1) ? box.max.x() : box.min.x(), (c & 2) ? box.max.y() : box.min.y(),
+                (c & 4) ? box.max.z() : box.min.z());
+    Vec3 pc = T_C_O * corner;
+    if (pc.z() < 1e-3) {
+      bounded = false;
+      break;
+    }
+    Vec2 uv = K.project(pc);
+    umin = std::min(umin, uv.x());
+    umax = std::max(umax, uv.x());
+    vmin = std::min(vmin, uv.y());
+    vmax = std::max(vmax, uv.y());
+  }
+  if (bounded) {
+    u0 = std::max(0, int(std::floor(umin)) - 1);
+    v0 = std::max(0, int(std::floor(vmin)) - 1);
+    u1 = std::min(K.width - 1, int(std::ceil(umax)) + 1);
+    v1 = std::min(K.height - 1, int(std::ceil(vmax)) + 1);
+    if (u0 > u1 || v0 > v1) return 0.0;
+  }
+  RayScene scene = buildScene(occluders);
+  thread_local std::vector<Ray> rays, shadows;
+  thread_local std::vector<Hit> hits;
+  thread_local std::vector<double> gains;
+  thread_local std::vector<uint8_t> blocked;
+  rays.clear();
+  const Vec3f origin = T_O_C.translation().cast<float>();
+  const Mat3 R = T_O_C.linear();
+  for (int ty = v0; ty <= v1; ty += 4)
+    for (int tx = u0; tx <= u1; tx += 4)
+      for (int v = ty; v < std::min(ty + 4, v1 + 1); ++v)
+        for (int u = tx; u < std::min(tx + 4, u1 + 1); ++u) {
+          Ray r;
+          r.origin = origin;
+          r.dir = (R * K.rayZ1(u, v)).cast<float>();
+          rays.push_back(r);
+        }
+  st.cast = int(rays.size());
+  hits.resize(rays.size());
+  scene.intersect(rays.data(), hits.data(), rays.size(), /*parallel=*/false);
+  shadows.clear();
+  gains.clear();
+  for (size_t i = 0; i < rays.size(); ++i) {
+    Ray shadow;
+    shadow.tfar = std::numeric_limits<float>::infinity();
+    double g = pixelGain(hits[i], rays[i], T_O_C, &shadow, &st);
+    if (shadow.tfar != std::numeric_limits<float>::infinity()) {  // passed the other rules
+      shadows.push_back(shadow);
+      gains.push_back(g);
+    }
+  }
+  blocked.resize(shadows.size());
+  scene.occluded(shadows.data(), blocked.data(), shadows.size(), /*parallel=*/false);
+  double G = 0;
+  for (size_t i = 0; i < shadows.size(); ++i) {
+    if (blocked[i]) {
+      ++st.projector_blocked;
+      continue;
+    }
+    ++st.counted;
+    G += gains[i];
+  }
+  return G;
+}
+
+double ViewQualityScene::qualityReference(const Iso3& T_O_C, const std::vector<Occluder>& occluders,
+                                          ViewQualityStats* stats) const {
+  ViewQualityStats local;
+  ViewQualityStats& st = stats ? *stats : local;
+  st = ViewQualityStats{};
+  const CameraIntrinsics& K = camera_.intrinsics;
+  RayScene scene = buildScene(occluders);
+  double G = 0;
+  for (int v = 0; v < K.height; ++v)
+    for (int u = 0; u < K.width; ++u) {
+      Ray r;
+      r.origin = T_O_C.translation().cast<float>();
+      r.dir = (T_O_C.linear() * K.rayZ1(u, v)).cast<float>();
+      ++st.cast;
+      Hit h = scene.intersectOne(r);
+      Ray shadow;
+      shadow.tfar = std::numeric_limits<float>::infinity();
+      double g = pixelGain(h, r, T_O_C, &shadow, &st);
+      if (shadow.tfar == std::numeric_limits<float>::infinity()) continue;
+      if (scene.intersectOne(shadow).valid()) {
+        ++st.projector_blocked;
+        continue;
+      }
+      ++st.counted;
+      G += g;
+    }
+  return G;
+}
+
+}  // namespace inhand

@@ -1,0 +1,247 @@
+#include <gtest/gtest.h>
+
+#include "inhand/core/pose.h"
+#include "inhand/core/random.h"
+#include "inhand/geometry/builtin_objects.h"
+#include "inhand/geometry/primitives.h"
+#include "inhand/planning/view_quality.h"
+#include "test_util.h"
+
+using namespace inhand;
+namespace fs = std::filesystem;
+
+namespace {
+
+const RobotModel& wam() {
+  static RobotModel m = RobotModel::load(fs::path(INHAND_SOURCE_DIR) / "data/robots/wam_barretthand.json");
+  return m;
+}
+
+// Each triangle with its own three vertices, so variance can differ per face.
+ObjectModel unweldedModel(const TriangleMesh& mesh, const std::function<float(const Vec3&)>& varianceOfNormal) {
+  ObjectModel m;
+  for (int t = 0; t < int(mesh.triangles.size()); ++t) {
+    Vec3 n = mesh.faceNormal(t);
+    int base = int(m.mesh.vertices.size());
+    for (int k = 0; k < 3; ++k) {
+      m.mesh.vertices.push_back(mesh.vertices[mesh.triangles[t][k]]);
+      m.variance.push_back(varianceOfNormal(n));
+      m.observed.push_back(1);
+    }
+    m.mesh.triangles.emplace_back(base, base + 1, base + 2);
+  }
+  return m;
+}
+
+RayScene sceneOf(const TriangleMesh& m) {
+  RayScene s;
+  s.addMesh(m);
+  s.commit();
+  return s;
+}
+
+bool segmentHitsBox(const Vec3& a, const Vec3& b, const Vec3& lo, const Vec3& hi) {
+  double t0 = 0, t1 = 1;
+  Vec3 d = b - a;
+  for (int k = 0; k < 3; ++k) {
+    if (std::abs(d[k]) < 1e-15) {
+      if (a[k] < lo[k] || a[k] > hi[k]) return false;
+      continue;
+    }
+    double ta = (lo[k] - a[k]) / d[k], tb = (hi[k] - a[k]) / d[k];
+    if (ta > tb) std::swap(ta, tb);
+    t0 = std::max(t0, ta);
+    t1 = std::min(t1, tb);
+    if (t0 > t1) return false;
+  }
+  return true;
+}
+
+const float kHoleVar = 0.05f * 0.05f;
+
+}  // namespace
+
+TEST(ViewQuality, HoleFilledFaceScoresHigherThanObservedFace) {
+  ObjectModel m = unweldedModel(makeBox(Vec3(0.1, 0.1, 0.1)),
+                                [](const Vec3& n) { return n.x() > 0.9 ? kHoleVar : 1e-7f; });
+  ViewQualityScene vq(m, DepthCameraOptions{}, NoiseModelOptions{}, ViewQualityOptions{});
+  double holeSide = vq.quality(cameraPoseInObject(Vec3::Zero(), Vec3(-1, 0, 0), 0.7, 0));
+  double seenSide = vq.quality(cameraPoseInObject(Vec3::Zero(), Vec3(1, 0, 0), 0.7, 0));
+  EXPECT_GT(holeSide, 20 * seenSide);
+  // The hole face alone: 0.01 m² of σ = 5 cm surface seen head-on at 0.7 m.
+  double sz = axialSigma(NoiseModelOptions{}, 0.65, 0);
+  double expected = 0.5 * std::log1p(kHoleVar / (sz * sz)) * 0.01 +
+                    0 /* the other faces are edge-on: too oblique */;
+  EXPECT_NEAR(holeSide, expected + seenSide * 0, 0.03 * expected);
+}
+
+TEST(ViewQuality, HandCoveringTheRegionLowersTheScore) {
+  const RobotModel& r = wam();
+  ObjectModel m = unweldedModel(makeBox(Vec3(0.1, 0.1, 0.1)),
+                                [](const Vec3& n) { return n.x() > 0.9 ? kHoleVar : 1e-7f; });
+  ViewQualityScene vq(m, DepthCameraOptions{}, NoiseModelOptions{}, ViewQualityOptions{});
+  Iso3 T_O_C = cameraPoseInObject(Vec3::Zero(), Vec3(-1, 0, 0), 0.7, 0.3);
+  double free = vq.quality(T_O_C);
+  // Palm against the +x face (palm z pointing −x), fingers open.
+  Iso3 T_O_palm = Iso3(Eigen::Translation3d(0.05 + 0.09, 0, 0)) * Eigen::AngleAxisd(-M_PI / 2, Vec3::UnitY());
+  HandGeometry hand(r, r.home(), T_O_palm);
+  RayScene handScene = sceneOf(hand.mesh());
+  vq.setNearHand(std::make_shared<NearHandGrid>(hand, 0.01, 0.002));
+  ViewQualityStats st;
+  double covered = vq.quality(T_O_C, {{&handScene, Iso3::Identity()}}, &st);
+  EXPECT_LT(covered, 0.7 * free);
+  EXPECT_GT(st.robot_first, 1000);
+  EXPECT_GT(st.near_hand, 100);
+}
+
+// A plane facing the camera, a box between camera and plane, projector beside the camera: every
+// pixel's fate is computed here independently (ray–plane and segment–box tests).
+TEST(ViewQuality, ExclusionRulesRemoveExactlyTheirPixels) {
+  DepthCameraOptions cam;
+  const CameraIntrinsics& K = cam.intrinsics;
+  // Off-centre and with edges between pixel centres, so no ray grazes an edge or the diagonal.
+  const double zPlane = 0.7, half = 0.1513, x0 = 0.0123;
+  TriangleMesh plane;
+  plane.vertices = {Vec3f(x0 - half, -half, zPlane), Vec3f(x0 + half, -half, zPlane),
+                    Vec3f(x0 + half, half, zPlane), Vec3f(x0 - half, half, zPlane)};
+  plane.triangles = {Tri(0, 2, 1), Tri(0, 3, 2)};
+  ObjectModel m;
+  m.mesh = plane;
+  m.variance.assign(4, 1e-4f);
+  m.observed.assign(4, 1);
+  // Occluder box whose x/y edges project exactly between pixel centres (no ties).
+  const double zb0 = 0.495, zb1 = 0.505;
+  const Vec3 lo(0.5 * (300 - K.cx) / K.fx, 0.5 * (200 - K.cy) / K.fy, zb0),
+      hi(0.5 * (330 - K.cx) / K.fx, 0.5 * (260 - K.cy) / K.fy, zb1);
+  RayScene occ = sceneOf(transformed(makeBox(hi - lo), Iso3(Eigen::Translation3d(0.5 * (lo + hi)))));
+  ViewQualityScene vq(m, cam, NoiseModelOptions{}, ViewQualityOptions{});
+  ViewQualityStats st;
+  double G = vq.quality(Iso3::Identity(), {{&occ, Iso3::Identity()}}, &st);
+  // Independent expectation.
+  int robot = 0, blocked = 0, counted = 0, missed = 0;
+  double expectG = 0;
+  const double sz = axialSigma(NoiseModelOptions{}, zPlane, 0.0);
+  for (int v = 0; v < K.height; ++v)
+    for (int u = 0; u < K.width; ++u) {
+      Vec3 dir = K.rayZ1(u, v);
+      // Camera ray through the occluder? (z = 1 ray: the box spans z in [zb0, zb1])
+      if (segmentHitsBox(Vec3::Zero(), dir * 0.6, lo, hi)) {
+        ++robot;
+        continue;
+      }
+      Vec3 p = dir * zPlane;
+      if (std::abs(p.x() - x0) > half || std::abs(p.y()) > half) {
+        ++missed;
+        continue;
+      }
+      if (segmentHitsBox(p, cam.projector_C, lo, hi)) {
+        ++blocked;
+        continue;
+      }
+      ++counted;
+      expectG += 0.5 * std::log1p(1e-4 / (sz * sz)) * zPlane * zPlane / (K.fx * K.fy);
+    }
+  EXPECT_EQ(st.robot_first, robot);
+  EXPECT_EQ(st.projector_blocked, blocked);
+  EXPECT_EQ(st.counted, counted);
+  EXPECT_EQ(st.near_hand + st.too_oblique + st.projector_oblique, 0);
+  EXPECT_GT(blocked, 100);
+  EXPECT_NEAR(G, expectG, 1e-6 * expectG);  // float hit distances
+  // Pixels outside the model's projected box are not cast at all; the reference casts all.
+  ViewQualityStats ref;
+  EXPECT_NEAR(vq.qualityReference(Iso3::Identity(), {{&occ, Iso3::Identity()}}, &ref), G, 1e-9 * G);
+  EXPECT_EQ(ref.missed, missed);
+  EXPECT_EQ(ref.counted, counted);
+}
+
+TEST(ViewQuality, ObliqueSurfacesAreExcludedForCameraAndProjector) {
+  DepthCameraOptions cam;
+  const CameraIntrinsics& K = cam.intrinsics;
+  ViewQualityOptions opt;
+  for (double tiltDeg : {70.0, 73.0, 78.0}) {
+    SCOPED_TRACE(tiltDeg);
+    // A plane through (0, 0, 0.7), tilted about the camera's y axis.
+    const double a = tiltDeg * M_PI / 180;
+    const Vec3 n(std::sin(a), 0, -std::cos(a)), c(0, 0, 0.7);
+    Vec3 e1 = Vec3::UnitY(), e2 = n.cross(e1).normalized();
+    TriangleMesh plane;
+    for (Vec3 p : std::vector<Vec3>{c - 0.1 * e1 - 0.1 * e2, c + 0.1 * e1 - 0.1 * e2,
+                                    c + 0.1 * e1 + 0.1 * e2, c - 0.1 * e1 + 0.1 * e2})
+      plane.vertices.push_back(p.cast<float>());
+    plane.triangles = {Tri(0, 1, 2), Tri(0, 2, 3)};
+    ObjectModel m;
+    m.mesh = plane;
+    m.variance.assign(4, 1e-4f);
+    m.observed.assign(4, 1);
+    ViewQualityScene vq(m, cam, NoiseModelOptions{}, opt);
+    ViewQualityStats st;
+    vq.qualityReference(Iso3::Identity(), {}, &st);
+    int oblique = 0, projOblique = 0, counted = 0;
+    const double cmax = std::cos(opt.max_incidence_deg * M_PI / 180),
+                 pmax = std::cos(opt.max_projector_incidence_deg * M_PI / 180);
+    for (int v = 0; v < K.height; ++v)
+      for (int u = 0; u < K.width; ++u) {
+        Vec3 dir = K.rayZ1(u, v);
+        double t = n.dot(c) / n.dot(dir);
+        Vec3 p = t * dir;
+        if (std::abs((p - c).dot(e1)) > 0.1 || std::abs((p - c).dot(e2)) > 0.1) continue;
+        if (std::abs(n.dot(dir.normalized())) < cmax) ++oblique;
+        else if (std::abs(n.dot((cam.projector_C - p).normalized())) < pmax) ++projOblique;
+        else ++counted;
+      }
+    EXPECT_EQ(st.too_oblique, oblique);
+    EXPECT_EQ(st.projector_oblique, projOblique);
+    EXPECT_EQ(st.counted, counted);
+  }
+}
+
+TEST(ViewQuality, NearHandRuleUsesDistanceToTheHand) {
+  const RobotModel& r = wam();
+  Iso3 T_O_palm = Iso3(Eigen::Translation3d(0, 0, 0.05 + 0.09)) * Eigen::AngleAxisd(M_PI, Vec3::UnitX());
+  HandGeometry hand(r, r.home(), T_O_palm);
+  NearHandGrid grid(hand, 0.01, 0.002);
+  Rng rng = makeRng(12);
+  std::uniform_real_distribution<double> U(-0.15, 0.25);
+  int agree = 0, n = 0;
+  for (int i = 0; i < 20000; ++i) {
+    Vec3 p(U(rng) * 0.6, U(rng) * 0.6, U(rng));
+    double d = hand.distance(p);
+    if (std::abs(d - 0.01) < 0.002) continue;  // within a grid cell of the threshold
+    ++n;
+    agree += grid.near(p) == (d < 0.01);
+  }
+  EXPECT_EQ(agree, n);
+  EXPECT_GT(n, 10000);
+}
+
+TEST(ViewQuality, OptimisedMatchesReferenceOnAFusedModelWithTheRobot) {
+  const RobotModel& r = wam();
+  // A juice bottle seen from one side: observed front, σ = 5 cm back.
+  TriangleMesh bottle = loadObject("builtin:juice_bottle");
+  Aabb b = bottle.bounds();
+  TsdfVolume vol(Aabb{b.min - Vec3::Constant(0.03), b.max + Vec3::Constant(0.03)}, VolumeOptions{});
+  test::renderAndFuse(bottle, {lookAt(Vec3(0.7, 0.1, 0.1), Vec3::Zero())}, true, &vol);
+  ObjectModel model = extractModel(vol);
+  ViewQualityScene vq(model, DepthCameraOptions{}, NoiseModelOptions{}, ViewQualityOptions{});
+  // Held from the side; the robot at home, placed so the palm is at its grasp.
+  Iso3 T_O_palm = Iso3(Eigen::Translation3d(0, -0.044 - 0.09, 0)) * Eigen::AngleAxisd(-M_PI / 2, Vec3::UnitX());
+  JointVector q = r.home();
+  Iso3 T_O_B = T_O_palm * r.tipPose(q).inverse();
+  HandGeometry hand(r, q, T_O_palm);
+  vq.setNearHand(std::make_shared<NearHandGrid>(hand, 0.01, 0.002));
+  RobotOccluders occ(r);
+  auto occluders = occ.at(q, T_O_B);
+  int compared = 0;
+  for (const Vec3& d : fibonacciSphere(8)) {
+    Iso3 T_O_C = cameraPoseInObject(b.center(), d, 0.7, 0.5);
+    ViewQualityStats a, ref;
+    double g = vq.quality(T_O_C, occluders, &a), gRef = vq.qualityReference(T_O_C, occluders, &ref);
+    EXPECT_NEAR(g, gRef, 1e-9 * std::max(1e-12, gRef));
+    EXPECT_EQ(a.counted, ref.counted);
+    EXPECT_LE(a.robot_first, ref.robot_first);  // the reference also counts pixels off the model
+    EXPECT_EQ(a.near_hand, ref.near_hand);
+    EXPECT_EQ(a.projector_blocked, ref.projector_blocked);
+    compared += gRef > 0;
+  }
+  EXPECT_GT(compared, 4);
+}
