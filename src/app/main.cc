@@ -66,12 +66,24 @@ int main(int argc, char** argv) {
   rb->add_option("--grid", robot.grid, "grid x grid object positions")->capture_default_str();
   rb->add_option("--range", robot.range_m, "camera-to-object distance, m")->capture_default_str();
 
+  inhand::app::ScanArgs scan;
+  auto* sc = app.add_subcommand("scan", "simulated autonomous scan of an object held by the robot");
+  sc->add_option("--object", scan.object, "builtin:NAME or a mesh file")->required();
+  sc->add_option("--out", scan.out, "output directory (new or empty)")->required();
+  sc->add_option("--robot", scan.robot, "robot config JSON (default: data/robots/wam_barretthand.json)");
+  sc->add_option("--config", scan.config, "JSON file of scan options (see README)");
+  sc->add_option("--max-grasps", scan.max_grasps, "grasps (only 1 so far)")->capture_default_str();
+  sc->add_option("--max-views", scan.max_views, "next-best views per grasp at most");
+  sc->add_option("--hand-mode", scan.hand_mode, "naive | carve | carve-empty (paper Fig. 3 a, b, c)");
+  sc->add_option("--seed", scan.seed, "noise and IK seed")->capture_default_str();
+
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
     return app.exit(e);
   }
   try {
+    if (*sc) return inhand::app::runScan(scan);
     if (*rb) return inhand::app::runRobot(robot);
     if (*s) return inhand::app::runSnapshot(snap);
     if (*r) return inhand::app::runRender(render);

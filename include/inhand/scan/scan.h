@@ -1,0 +1,70 @@
+#pragma once
+// The autonomous scan against the robot and sensor interfaces (nothing here sees simulator state):
+// the object is held at a known grasp; a simple initial trajectory, then Alg. 1 view after view
+// until no view reaches t_q or a view limit; every depth frame along every trajectory is fused
+// with the pose the robot reports (T_O_C = T_O_palm · T_palm_B(q) · T_B_C), hand-aware (§IV).
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "inhand/mesh/extract.h"
+#include "inhand/planning/view_selection.h"
+#include "inhand/robot/robot_interface.h"
+#include "inhand/sensor/depth_sensor.h"
+#include "inhand/volume/integrate.h"
+
+namespace inhand {
+
+// How measurements near the robot's own hand are used (paper Fig. 3).
+enum class HandMode {
+  kNaive,          // (a) all measurements add surface
+  kCarveOnly,      // (b) measurements within t_hand of the robot only carve free space
+  kCarveAndEmpty,  // (c) as (b), and voxels inside the hand are marked empty
+};
+std::string handModeName(HandMode m);
+bool parseHandMode(const std::string& s, HandMode* out);
+
+struct ScanOptions {
+  double voxel_m = 0.002;          // volume voxel size, m
+  double volume_size_m = 0.34;     // edge of the cubic volume around the grasped object, m
+  double t_hand_m = 0.01;          // measurements this close to the robot only carve (§IV), m
+  HandMode hand_mode = HandMode::kCarveAndEmpty;
+  int initial_views = 4;           // the simple initial trajectory: this many directions
+  int max_views = 20;              // Alg. 1 views per grasp at most (after the initial ones)
+  ViewPlannerOptions planner;
+  MeshOptions mesh;
+  VolumeOptions volume_budget;     // memory budget (voxel size above wins)
+  std::string validate() const;
+};
+
+struct ViewRecord {
+  bool initial = false;            // part of the initial trajectory (not chosen by Alg. 1)
+  Vec3 dir_O = Vec3::Zero();
+  double quality = 0, cost_s = 0, score = 0;
+  double mean_entropy = 0;         // of the model after the view's frames
+  double observed_fraction = 0;
+  int frames = 0;                  // depth frames fused along the way
+  int candidates = 0;              // quality evaluations in the Alg. 1 pass that chose it
+  double planning_s = 0;
+};
+
+struct ScanProgress {
+  std::function<void(const std::string&)> log;  // one line per event (may be empty)
+};
+
+struct ScanResult {
+  ObjectModel model;                 // final S_obj, object frame
+  std::vector<ViewRecord> views;
+  std::string termination;           // no_view_above_threshold | max_views | no_reachable_view
+  int view_evaluations = 0;
+  double planning_s = 0, fusion_s = 0, motion_frames = 0, total_s = 0;
+  int frames = 0;
+};
+
+// Scans with the object held at T_O_palm (palm pose in the object frame); the robot must be
+// holding it already. `centre_O` is where the volume is centred (the object's expected centre).
+ScanResult scanSingleGrasp(RobotInterface& robot, DepthSensor& sensor, const Iso3& T_O_palm,
+                           const Vec3& centre_O, const ScanOptions& options,
+                           const NoiseModelOptions& noise, const ScanProgress& progress = {});
+
+}  // namespace inhand

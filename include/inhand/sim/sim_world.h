@@ -1,0 +1,82 @@
+#pragma once
+// The simulator: a table, an object held rigidly in the robot's hand, the robot, a depth camera on
+// its pan-tilt unit and a room around them. SimRobot and SimSensor implement the interfaces the
+// scan uses; only they see the true object.
+#include <memory>
+
+#include "inhand/geometry/ray_scene.h"
+#include "inhand/planning/view_quality.h"
+#include "inhand/robot/robot_interface.h"
+#include "inhand/sensor/depth_sensor.h"
+#include "inhand/sensor/noise_model.h"
+#include "inhand/sensor/render.h"
+
+namespace inhand {
+
+struct SimOptions {
+  double frame_rate_hz = 30.0;  // sensor frame rate along trajectories
+  int frame_subsample = 3;      // integrate every n-th frame
+  bool noise = true;            // sensor noise
+  uint64_t seed = 1;            // noise seed
+  double room_radius_m = 2.5;   // background: a room around the camera (0: none)
+  std::string validate() const;
+};
+
+class SimWorld {
+ public:
+  // `object_O`: the true object mesh; T_O_palm: the grasp (palm pose in the object frame).
+  SimWorld(const RobotModel& model, const TriangleMesh& object_O, const Iso3& T_O_palm,
+           const DepthCameraOptions& camera, const NoiseModelOptions& noise,
+           const SimOptions& options);
+
+  const RobotModel& model() const { return *model_; }
+  const SimOptions& options() const { return options_; }
+  JointVector q;       // the robot's state
+  Iso3 T_B_C;          // the camera's pose
+  Iso3 T_O_palm;       // the grasp
+  // Depth image at the current state, seeded by the frame counter.
+  DepthImage render();
+  Iso3 objectPose() const;  // T_B_O at the current state
+
+ private:
+  const RobotModel* model_;
+  DepthCameraOptions camera_;
+  NoiseModelOptions noise_;
+  SimOptions options_;
+  RayScene object_, room_;
+  RobotOccluders robot_;
+  uint64_t frame_ = 0;
+};
+
+class SimRobot : public RobotInterface {
+ public:
+  explicit SimRobot(SimWorld* world) : world_(world) {}
+  const RobotModel& model() const override { return world_->model(); }
+  JointVector joints() const override { return world_->q; }
+  // Synchronous joint-space motion at the joint speed limits (the trajectory-time model).
+  void execute(const std::vector<JointVector>& waypoints,
+               const std::function<void(const JointVector&)>& on_state) override;
+
+ private:
+  SimWorld* world_;
+};
+
+class SimSensor : public DepthSensor {
+ public:
+  SimSensor(SimWorld* world, const DepthCameraOptions& camera) : world_(world), camera_(camera) {}
+  const DepthCameraOptions& camera() const override { return camera_; }
+  void setPose(const Iso3& T_B_C) override { world_->T_B_C = T_B_C; }
+  Iso3 pose() const override { return world_->T_B_C; }
+  DepthImage capture() override { return world_->render(); }
+
+ private:
+  SimWorld* world_;
+  DepthCameraOptions camera_;
+};
+
+// A default side grasp for simulation: the palm against the face across the object's
+// middle-length axis, fingers closing across its shortest axis, then closed to contact.
+// Returns T_O_palm and the joint vector (home arm, fingers at contact).
+std::pair<Iso3, JointVector> defaultGrasp(const RobotModel& model, const TriangleMesh& object_O);
+
+}  // namespace inhand

@@ -1,0 +1,253 @@
+// `inhand scan`: the single-grasp autonomous scan of a simulated object.
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <set>
+
+#include "commands.h"
+#include "inhand/core/error.h"
+#include "inhand/core/file_util.h"
+#include "inhand/core/json_util.h"
+#include "inhand/core/pose.h"
+#include "inhand/geometry/builtin_objects.h"
+#include "inhand/geometry/mesh_io.h"
+#include "inhand/scan/scan.h"
+#include "inhand/geometry/primitives.h"
+#include "inhand/sim/sim_world.h"
+
+namespace inhand::app {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+// Reads JSON options into existing values; every key must be known and of the right type.
+class OptionReader {
+ public:
+  OptionReader(const Json& j, std::string where) : j_(j), where_(std::move(where)) {
+    if (!j.is_object()) throw Error(where_ + ": expected an object");
+  }
+  ~OptionReader() noexcept(false) {
+    if (std::uncaught_exceptions()) return;
+    for (const auto& [key, value] : j_.items())
+      if (!seen_.count(key)) throw Error(where_ + ": unknown option \"" + key + "\"");
+  }
+  void num(const char* key, double* v) {
+    if (!take(key)) return;
+    if (!j_[key].is_number()) throw Error(where_ + "." + key + ": expected a number");
+    *v = j_[key].get<double>();
+  }
+  void integer(const char* key, int* v) {
+    if (!take(key)) return;
+    if (!j_[key].is_number_integer()) throw Error(where_ + "." + key + ": expected an integer");
+    *v = j_[key].get<int>();
+  }
+  void boolean(const char* key, bool* v) {
+    if (!take(key)) return;
+    if (!j_[key].is_boolean()) throw Error(where_ + "." + key + ": expected true or false");
+    *v = j_[key].get<bool>();
+  }
+  void numbers(const char* key, std::vector<double>* v) {
+    if (!take(key)) return;
+    const Json& a = j_[key];
+    if (!a.is_array()) throw Error(where_ + "." + key + ": expected an array of numbers");
+    v->clear();
+    for (const Json& x : a) {
+      if (!x.is_number()) throw Error(where_ + "." + key + ": expected an array of numbers");
+      v->push_back(x.get<double>());
+    }
+  }
+  void string(const char* key, std::string* v) {
+    if (!take(key)) return;
+    if (!j_[key].is_string()) throw Error(where_ + "." + key + ": expected a string");
+    *v = j_[key].get<std::string>();
+  }
+  std::optional<OptionReader> object(const char* key) {
+    if (!take(key)) return std::nullopt;
+    return std::optional<OptionReader>(std::in_place, j_[key], where_ + "." + key);
+  }
+
+ private:
+  bool take(const char* key) {
+    seen_.insert(key);
+    return j_.contains(key);
+  }
+  const Json& j_;
+  std::string where_;
+  std::set<std::string> seen_;
+};
+
+struct AllOptions {
+  ScanOptions scan;
+  SimOptions sim;
+  std::string robot;
+};
+
+void readOptions(const fs::path& file, AllOptions* o) {
+  Json j = readJsonFile(file);
+  OptionReader r(j, file.string());
+  r.string("robot", &o->robot);
+  r.num("voxel_m", &o->scan.voxel_m);
+  r.num("volume_size_m", &o->scan.volume_size_m);
+  r.num("t_hand_m", &o->scan.t_hand_m);
+  std::string mode;
+  r.string("hand_mode", &mode);
+  if (!mode.empty() && !parseHandMode(mode, &o->scan.hand_mode))
+    throw Error(file.string() + ".hand_mode: must be naive, carve or carve-empty");
+  r.integer("initial_views", &o->scan.initial_views);
+  r.integer("max_views", &o->scan.max_views);
+  if (auto p = r.object("planner")) {
+    ViewPlannerOptions& v = o->scan.planner;
+    p->integer("directions", &v.directions);
+    p->num("min_angle_deg", &v.min_angle_deg);
+    p->num("range_m", &v.range_m);
+    p->numbers("fallback_ranges_m", &v.fallback_ranges_m);
+    p->integer("rolls", &v.rolls);
+    p->num("alpha_cost", &v.alpha_cost);
+    p->num("t_q", &v.t_q);
+    p->boolean("use_cost", &v.use_cost);
+    p->boolean("hand_occlusion", &v.hand_occlusion);
+    p->boolean("check_collisions", &v.check_collisions);
+    p->integer("ik_restarts", &v.ik_restarts);
+    if (auto q = p->object("quality")) {
+      q->num("t_hand_m", &v.quality.t_hand_m);
+      q->num("max_incidence_deg", &v.quality.max_incidence_deg);
+      q->num("max_projector_incidence_deg", &v.quality.max_projector_incidence_deg);
+      q->num("near_hand_cell_m", &v.quality.near_hand_cell_m);
+    }
+  }
+  if (auto mo = r.object("mesh")) {
+    mo->num("hole_sigma_m", &o->scan.mesh.hole_sigma_m);
+    mo->boolean("drop_floating_unknown", &o->scan.mesh.drop_floating_unknown);
+    mo->num("min_component_fraction", &o->scan.mesh.min_component_fraction);
+  }
+  if (auto s = r.object("sim")) {
+    s->num("frame_rate_hz", &o->sim.frame_rate_hz);
+    s->integer("frame_subsample", &o->sim.frame_subsample);
+    s->boolean("noise", &o->sim.noise);
+    s->num("room_radius_m", &o->sim.room_radius_m);
+  }
+}
+
+Json optionsJson(const AllOptions& o) {
+  const ViewPlannerOptions& v = o.scan.planner;
+  return {{"robot", o.robot},
+          {"voxel_m", o.scan.voxel_m},
+          {"volume_size_m", o.scan.volume_size_m},
+          {"t_hand_m", o.scan.t_hand_m},
+          {"hand_mode", handModeName(o.scan.hand_mode)},
+          {"initial_views", o.scan.initial_views},
+          {"max_views", o.scan.max_views},
+          {"planner",
+           {{"directions", v.directions},
+            {"min_angle_deg", v.min_angle_deg},
+            {"range_m", v.range_m},
+            {"fallback_ranges_m", v.fallback_ranges_m},
+            {"rolls", v.rolls},
+            {"alpha_cost", v.alpha_cost},
+            {"t_q", v.t_q},
+            {"use_cost", v.use_cost},
+            {"hand_occlusion", v.hand_occlusion},
+            {"check_collisions", v.check_collisions},
+            {"ik_restarts", v.ik_restarts},
+            {"quality",
+             {{"t_hand_m", v.quality.t_hand_m},
+              {"max_incidence_deg", v.quality.max_incidence_deg},
+              {"max_projector_incidence_deg", v.quality.max_projector_incidence_deg},
+              {"near_hand_cell_m", v.quality.near_hand_cell_m}}}}},
+          {"mesh",
+           {{"hole_sigma_m", o.scan.mesh.hole_sigma_m},
+            {"drop_floating_unknown", o.scan.mesh.drop_floating_unknown},
+            {"min_component_fraction", o.scan.mesh.min_component_fraction}}},
+          {"sim",
+           {{"frame_rate_hz", o.sim.frame_rate_hz},
+            {"frame_subsample", o.sim.frame_subsample},
+            {"noise", o.sim.noise},
+            {"room_radius_m", o.sim.room_radius_m}}}};
+}
+
+}  // namespace
+
+int runScan(const ScanArgs& args) {
+  const auto t0 = std::chrono::steady_clock::now();
+  if (args.max_grasps != 1)
+    throw Error("--max-grasps: only single-grasp scans (1) are implemented so far; re-grasping "
+                "is not built yet");
+  AllOptions o;
+  o.robot = args.robot;
+  if (!args.config.empty()) readOptions(args.config, &o);
+  if (!args.robot.empty()) o.robot = args.robot;
+  if (o.robot.empty()) o.robot = INHAND_DATA_DIR "/robots/wam_barretthand.json";
+  if (args.max_views >= 0) o.scan.max_views = args.max_views;
+  if (!args.hand_mode.empty() && !parseHandMode(args.hand_mode, &o.scan.hand_mode))
+    throw Error("--hand-mode: must be naive, carve or carve-empty");
+  o.scan.planner.seed = args.seed;
+  o.sim.seed = args.seed;
+  if (std::string p = o.scan.validate(); !p.empty()) throw Error("scan options: " + p);
+  if (std::string p = o.sim.validate(); !p.empty()) throw Error("simulation options: " + p);
+
+  RobotModel model = RobotModel::load(o.robot);
+  TriangleMesh object = loadObject(args.object);
+  if (object.bounds().size().maxCoeff() > o.scan.volume_size_m - 0.02)
+    throw Error(args.object + ": the object (" + std::to_string(object.bounds().size().maxCoeff()) +
+                " m across) does not fit the scan volume (volume_size_m = " +
+                std::to_string(o.scan.volume_size_m) + " m)");
+  StagedDirectory out(args.out);
+
+  DepthCameraOptions camera;
+  NoiseModelOptions noise;
+  auto [T_O_palm, qGrasp] = defaultGrasp(model, object);
+  SimWorld world(model, object, T_O_palm, camera, noise, o.sim);
+  world.q = qGrasp;
+  SimRobot robot(&world);
+  SimSensor sensor(&world, camera);
+  ScanProgress progress;
+  progress.log = [](const std::string& s) { std::fprintf(stderr, "scan: %s\n", s.c_str()); };
+  // The volume is centred where the robot expects a held object: grasp_offset_m in front of the
+  // palm (from the robot config; the scan is not told the object's shape or size).
+  const Vec3 expected = T_O_palm * Vec3(0, 0, model.graspOffset());
+  ScanResult r = scanSingleGrasp(robot, sensor, T_O_palm, expected, o.scan, noise, progress);
+
+  writePly(out.path() / "model.ply", r.model.mesh, &r.model.variance);
+  Json views = Json::array();
+  for (const ViewRecord& v : r.views)
+    views.push_back({{"initial", v.initial},
+                     {"direction_O", {v.dir_O.x(), v.dir_O.y(), v.dir_O.z()}},
+                     {"quality", v.quality},
+                     {"cost_s", v.cost_s},
+                     {"score", v.score},
+                     {"mean_entropy", v.mean_entropy},
+                     {"observed_fraction", v.observed_fraction},
+                     {"frames", v.frames},
+                     {"candidates", v.candidates},
+                     {"planning_s", v.planning_s}});
+  Json summary;
+  summary["object"] = args.object;
+  summary["robot"] = o.robot;
+  summary["seed"] = args.seed;
+  summary["termination"] = r.termination;
+  summary["views"] = views;
+  summary["grasps"] = Json::array({{{"T_O_palm", poseToRowMajor(T_O_palm)},
+                                     {"views", r.views.size()},
+                                     {"termination", r.termination}}});
+  summary["view_evaluations"] = r.view_evaluations;
+  summary["view_evaluations_per_s"] = r.planning_s > 0 ? r.view_evaluations / r.planning_s : 0.0;
+  summary["frames"] = r.frames;
+  summary["mean_entropy"] = r.model.meanEntropy();
+  summary["observed_fraction"] = r.model.observedAreaFraction();
+  summary["vertices"] = r.model.mesh.vertices.size();
+  summary["triangles"] = r.model.mesh.triangles.size();
+  summary["timing_s"] = {{"total", std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count()},
+                         {"planning", r.planning_s},
+                         {"fusion", r.fusion_s}};
+  summary["options"] = optionsJson(o);
+  writeTextAtomically(out.path() / "summary.json", summary.dump(2) + "\n");
+  out.commit();
+  std::printf("scan: %s: %zu views, %d frames, %s; observed %.1f%% of the surface, mean entropy %.3f "
+              "(%.1f s) -> %s\n",
+              args.object.c_str(), r.views.size(), r.frames, r.termination.c_str(),
+              100 * r.model.observedAreaFraction(), r.model.meanEntropy(), r.total_s, args.out.c_str());
+  return r.termination == "no_reachable_view" ? 3 : 0;
+}
+
+}  // namespace inhand::app

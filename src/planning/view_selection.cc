@@ -1,0 +1,175 @@
+#include "inhand/planning/view_selection.h"
+
+#include <tbb/enumerable_thread_specific.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+
+#include "inhand/core/error.h"
+#include "inhand/core/parallel.h"
+#include "inhand/core/pose.h"
+#include "inhand/geometry/primitives.h"
+
+namespace inhand {
+
+std::string ViewPlannerOptions::validate() const {
+  if (directions < 1) return "directions must be >= 1";
+  if (!(min_angle_deg >= 0 && min_angle_deg < 180)) return "min_angle_deg must be in [0, 180)";
+  if (!(range_m > 0)) return "range_m must be > 0";
+  for (double r : fallback_ranges_m)
+    if (!(r > 0)) return "fallback_ranges_m must be positive";
+  if (rolls < 1) return "rolls must be >= 1";
+  if (!(alpha_cost >= 0)) return "alpha_cost must be >= 0";
+  if (!(t_q >= 0)) return "t_q must be >= 0";
+  if (ik_restarts < 0) return "ik_restarts must be >= 0";
+  std::string q = quality.validate();
+  return q.empty() ? "" : "quality." + q;
+}
+
+ViewPlanner::ViewPlanner(const RobotModel& model, const DepthCameraOptions& camera,
+                         const NoiseModelOptions& noise, const ViewPlannerOptions& options)
+    : model_(&model), camera_(camera), noise_(noise), options_(options), occluders_(model) {
+  std::string p = options.validate();
+  if (!p.empty()) throw Error("view planner options: " + p);
+}
+
+Iso3 ViewPlanner::cameraPose(double range) const {
+  const CameraMount& cam = model_->camera();
+  Vec3 target = cam.panTilt_B + range * (cam.lookAt_B - cam.panTilt_B).normalized();
+  auto T = cam.aimAt(target);
+  INHAND_CHECK(T.has_value(), "presentation point outside pan/tilt range (checked at load)");
+  return *T;
+}
+
+Iso3 ViewPlanner::objectPoseFor(const Iso3& T_O_C, double range) const {
+  return cameraPose(range) * T_O_C.inverse();
+}
+
+std::vector<std::optional<ViewCandidate>> ViewPlanner::reach(const std::vector<Vec3>& dirs,
+                                                             const Vec3& centre, const Aabb& box,
+                                                             const GraspState& grasp) const {
+  const ViewPlannerOptions& o = options_;
+  // IK for every (direction, roll) at the preferred range, then the fallback ranges for the
+  // directions with no solution; keep the cheapest collision-free roll.
+  const Eigen::VectorXd current = model_->arm(grasp.q);
+  IkOptions ik;
+  ik.random_restarts = o.ik_restarts;
+  CollisionChecker checker(*model_);
+  if (o.check_collisions)  // the held object as its current bounding box
+    checker.setHeldObject(transformed(makeBox(box.size()), Iso3(Eigen::Translation3d(box.center()))),
+                          grasp.T_O_palm.inverse());
+  std::vector<std::optional<ViewCandidate>> chosen(dirs.size());
+  std::vector<double> ranges{o.range_m};
+  ranges.insert(ranges.end(), o.fallback_ranges_m.begin(), o.fallback_ranges_m.end());
+  for (size_t ri = 0; ri < ranges.size(); ++ri) {
+    std::vector<size_t> open;
+    for (size_t k = 0; k < dirs.size(); ++k)
+      if (!chosen[k]) open.push_back(k);
+    if (open.empty()) break;
+    std::vector<Iso3> targets;
+    std::vector<ViewCandidate> cands;
+    for (size_t k : open)
+      for (int r = 0; r < o.rolls; ++r) {
+        ViewCandidate c;
+        c.dir_O = dirs[k];
+        c.range_m = ranges[ri];
+        c.roll_rad = 2 * M_PI * r / o.rolls;
+        c.T_O_C = cameraPoseInObject(centre, dirs[k], c.range_m, c.roll_rad);
+        c.T_B_O = objectPoseFor(c.T_O_C, c.range_m);
+        targets.push_back(c.T_B_O * grasp.T_O_palm);
+        cands.push_back(c);
+      }
+    auto sols = solveIkBatch(*model_, targets, current, mixSeed(o.seed, ri), ik);
+    std::vector<uint8_t> free(sols.size(), 0);
+    parallelFor(0, int(sols.size()), [&](int i) {
+      if (!sols[i]) return;
+      free[i] = !o.check_collisions || !checker.inCollision(model_->withArm(grasp.q, *sols[i]));
+    });
+    for (size_t j = 0; j < open.size(); ++j)
+      for (int r = 0; r < o.rolls; ++r) {
+        size_t i = j * o.rolls + r;
+        if (!free[i]) continue;
+        ViewCandidate c = cands[i];
+        c.arm = *sols[i];
+        c.cost_s = trajectoryTime(*model_, current, c.arm);
+        auto& best = chosen[open[j]];
+        if (!best || c.cost_s < best->cost_s) best = c;
+      }
+  }
+  return chosen;
+}
+
+ViewSelection ViewPlanner::select(const ObjectModel& S_obj, const GraspState& grasp,
+                                  const std::vector<Vec3>& used,
+                                  std::shared_ptr<const NearHandGrid> nearHand) const {
+  using Clock = std::chrono::steady_clock;
+  auto secs = [](Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); };
+  const auto t0 = Clock::now();
+  const ViewPlannerOptions& o = options_;
+  ViewSelection out;
+  if (S_obj.mesh.empty()) return out;
+  const Vec3 centre = S_obj.mesh.bounds().center();
+
+  // Line 5: directions at least t_θ from every used view.
+  const double cosMin = std::cos(o.min_angle_deg * M_PI / 180);
+  std::vector<Vec3> dirs;
+  for (const Vec3& d : fibonacciSphere(o.directions)) {
+    bool far = true;
+    for (const Vec3& u : used)
+      if (d.dot(u.normalized()) > cosMin) {
+        far = false;
+        break;
+      }
+    if (far) dirs.push_back(d);
+  }
+  out.directions = int(dirs.size());
+
+  // Line 7: free DOFs.
+  const auto tIk = Clock::now();
+  std::vector<std::optional<ViewCandidate>> chosen = reach(dirs, centre, S_obj.mesh.bounds(), grasp);
+  out.ik_s = secs(tIk);
+  CollisionChecker checker(*model_);
+  if (o.check_collisions) {
+    Aabb b = S_obj.mesh.bounds();
+    checker.setHeldObject(transformed(makeBox(b.size()), Iso3(Eigen::Translation3d(b.center()))),
+                          grasp.T_O_palm.inverse());
+  }
+
+  // Lines 11–14: quality and score of each reachable candidate, one candidate per core at a time.
+  const auto tQ = Clock::now();
+  ViewQualityScene scene(S_obj, camera_, noise_, o.quality);
+  scene.setNearHand(std::move(nearHand));
+  std::vector<size_t> reachable;
+  for (size_t k = 0; k < chosen.size(); ++k)
+    if (chosen[k]) reachable.push_back(k);
+  out.reachable = int(reachable.size());
+  parallelFor(0, int(reachable.size()), [&](int i) {
+    ViewCandidate& c = *chosen[reachable[i]];
+    std::vector<Occluder> occ;
+    if (o.hand_occlusion)
+      occ = occluders_.at(model_->withArm(grasp.q, c.arm), c.T_B_O.inverse());
+    c.quality = scene.quality(c.T_O_C, occ);
+    c.score = c.quality - (o.use_cost ? o.alpha_cost * c.cost_s : 0.0);
+  });
+  out.evaluated = int(reachable.size());
+  out.quality_s = secs(tQ);
+  for (size_t k : reachable) out.candidates.push_back(*chosen[k]);
+  // Best score among q ≥ t_q whose joint-space path is collision-free.
+  std::vector<const ViewCandidate*> order;
+  for (const ViewCandidate& c : out.candidates)
+    if (c.quality >= o.t_q) order.push_back(&c);
+  std::sort(order.begin(), order.end(), [](const ViewCandidate* a, const ViewCandidate* b) {
+    return a->score != b->score ? a->score > b->score : a->dir_O.x() < b->dir_O.x();
+  });
+  for (const ViewCandidate* c : order) {
+    if (o.check_collisions && !checker.pathFree(grasp.q, model_->withArm(grasp.q, c->arm), 0.05))
+      continue;
+    out.best = *c;
+    break;
+  }
+  out.total_s = secs(t0);
+  return out;
+}
+
+}  // namespace inhand

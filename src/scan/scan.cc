@@ -1,0 +1,197 @@
+#include "inhand/scan/scan.h"
+
+#include <chrono>
+
+#include "inhand/core/error.h"
+#include "inhand/core/parallel.h"
+#include "inhand/core/pose.h"
+#include "inhand/robot/collision.h"
+#include "inhand/sensor/render.h"
+
+namespace inhand {
+
+std::string handModeName(HandMode m) {
+  switch (m) {
+    case HandMode::kNaive: return "naive";
+    case HandMode::kCarveOnly: return "carve";
+    case HandMode::kCarveAndEmpty: return "carve-empty";
+  }
+  return "?";
+}
+
+bool parseHandMode(const std::string& s, HandMode* out) {
+  for (HandMode m : {HandMode::kNaive, HandMode::kCarveOnly, HandMode::kCarveAndEmpty})
+    if (s == handModeName(m)) {
+      *out = m;
+      return true;
+    }
+  return false;
+}
+
+std::string ScanOptions::validate() const {
+  if (!(voxel_m > 0 && voxel_m < 0.05)) return "voxel_m must be in (0, 0.05) m";
+  if (!(volume_size_m > 10 * voxel_m && volume_size_m < 2)) return "volume_size_m must be in (10 voxels, 2 m)";
+  if (!(t_hand_m >= 0)) return "t_hand_m must be >= 0";
+  if (initial_views < 0) return "initial_views must be >= 0";
+  if (max_views < 0) return "max_views must be >= 0";
+  std::string p = planner.validate();
+  if (!p.empty()) return "planner." + p;
+  p = mesh.validate();
+  if (!p.empty()) return "mesh." + p;
+  return {};
+}
+
+namespace {
+using Clock = std::chrono::steady_clock;
+double secondsSince(Clock::time_point t) {
+  return std::chrono::duration<double>(Clock::now() - t).count();
+}
+}  // namespace
+
+ScanResult scanSingleGrasp(RobotInterface& robot, DepthSensor& sensor, const Iso3& T_O_palm,
+                           const Vec3& centre_O, const ScanOptions& options,
+                           const NoiseModelOptions& noise, const ScanProgress& progress) {
+  const auto t0 = Clock::now();
+  std::string problem = options.validate();
+  if (!problem.empty()) throw Error("scan options: " + problem);
+  auto log = [&](const std::string& s) {
+    if (progress.log) progress.log(s);
+  };
+  const RobotModel& m = robot.model();
+  const CameraIntrinsics& K = sensor.camera().intrinsics;
+  ScanResult result;
+
+  Aabb box;
+  box.extend(centre_O - Vec3::Constant(0.5 * options.volume_size_m));
+  box.extend(centre_O + Vec3::Constant(0.5 * options.volume_size_m));
+  VolumeOptions vo = options.volume_budget;
+  vo.voxel_size_m = options.voxel_m;
+  TsdfVolume volume(box, vo);
+
+  ViewPlanner planner(m, sensor.camera(), noise, options.planner);
+  sensor.setPose(planner.cameraPose(options.planner.range_m));
+  const HandGeometry hand(m, robot.joints(), T_O_palm);
+  auto nearHand = std::make_shared<NearHandGrid>(hand, options.planner.quality.t_hand_m,
+                                                 options.planner.quality.near_hand_cell_m);
+  // Voxels inside the hand (Fig. 3 c): fixed in the object frame for the whole grasp.
+  std::vector<size_t> insideHand;
+  if (options.hand_mode == HandMode::kCarveAndEmpty) {
+    Aabb hb = hand.mesh().bounds();
+    Vec3i lo = ((hb.min - volume.origin()) / volume.voxelSize()).array().floor().cast<int>().max(0);
+    Vec3i hi = ((hb.max - volume.origin()) / volume.voxelSize()).array().ceil().cast<int>().min(
+        volume.dims().array() - 1);
+    for (int z = lo.z(); z <= hi.z(); ++z)
+      for (int y = lo.y(); y <= hi.y(); ++y)
+        for (int x = lo.x(); x <= hi.x(); ++x)
+          if (hand.contains(volume.point(x, y, z))) insideHand.push_back(volume.index(x, y, z));
+  }
+  const RobotOccluders robotScenes(m);
+
+  // Fuses the sensor's current frame with the pose the robot reports.
+  auto fuse = [&](const JointVector& q) {
+    const auto tf = Clock::now();
+    DepthImage depth = sensor.capture();
+    const Iso3 T_B_C = sensor.pose();
+    const Iso3 T_O_B = T_O_palm * m.tipPose(q).inverse();
+    const Iso3 T_O_C = T_O_B * T_B_C;
+    std::vector<uint8_t> carve;
+    if (options.hand_mode != HandMode::kNaive) {
+      // Where the robot's own surfaces are, measurements only carve (§IV).
+      RayScene robotScene;
+      for (const Occluder& o : robotScenes.at(q, Iso3::Identity()))
+        robotScene.addInstance(*o.scene, o.T_O_scene);
+      robotScene.commit();
+      RenderOptions exact;
+      exact.noise = false;
+      DepthCameraOptions cam = sensor.camera();
+      cam.max_incidence_deg = 89;
+      cam.max_projector_incidence_deg = 89;
+      cam.projector_C = Vec3(1e-6, 0, 0);
+      DepthImage robotDepth = renderDepth(robotScene, T_B_C, cam, noise, exact);
+      carve.assign(depth.depth_m.size(), 0);
+      for (size_t i = 0; i < carve.size(); ++i)
+        carve[i] = depth.depth_m[i] > 0 && robotDepth.depth_m[i] > 0 &&
+                   std::abs(depth.depth_m[i] - robotDepth.depth_m[i]) < options.t_hand_m;
+    }
+    integrate(depth, T_O_C, K, measurementSigma(depth, K, noise), &volume,
+              carve.empty() ? nullptr : &carve);
+    for (size_t i : insideHand) {
+      volume.states()[i] = uint8_t(VoxelState::kEmpty);
+      volume.sumW()[i] = 0;
+      volume.sumWD()[i] = 0;
+    }
+    ++result.frames;
+    result.fusion_s += secondsSince(tf);
+  };
+  auto moveTo = [&](const ViewCandidate& c) {
+    const int before = result.frames;
+    JointVector q0 = robot.joints();
+    robot.execute({q0, m.withArm(q0, c.arm)}, fuse);
+    return result.frames - before;
+  };
+
+  std::vector<Vec3> used;
+  // The simple initial trajectory: a few directions spread over the sphere.
+  if (options.initial_views > 0) {
+    GraspState g{T_O_palm, robot.joints()};
+    Aabb guess;
+    guess.extend(centre_O - Vec3::Constant(0.05));
+    guess.extend(centre_O + Vec3::Constant(0.05));
+    auto initial = planner.reach(fibonacciSphere(options.initial_views), centre_O, guess, g);
+    for (const auto& c : initial) {
+      if (!c) continue;
+      ViewRecord rec;
+      rec.initial = true;
+      rec.dir_O = c->dir_O;
+      rec.cost_s = trajectoryTime(m, m.arm(robot.joints()), c->arm);
+      rec.frames = moveTo(*c);
+      ObjectModel model = extractModel(volume, options.mesh);
+      rec.mean_entropy = model.meanEntropy();
+      rec.observed_fraction = model.observedAreaFraction();
+      used.push_back(c->dir_O);
+      result.views.push_back(rec);
+      log("initial view " + std::to_string(result.views.size()) + ": " + std::to_string(rec.frames) +
+          " frames, mean entropy " + std::to_string(rec.mean_entropy));
+    }
+  }
+
+  result.termination = "max_views";
+  for (int v = 0; v < options.max_views; ++v) {
+    ObjectModel model = extractModel(volume, options.mesh);
+    const auto tp = Clock::now();
+    ViewSelection sel = planner.select(model, GraspState{T_O_palm, robot.joints()}, used, nearHand);
+    result.planning_s += secondsSince(tp);
+    result.view_evaluations += sel.evaluated;
+    if (!sel.best) {
+      result.termination = sel.reachable == 0 ? "no_reachable_view" : "no_view_above_threshold";
+      log("no view reaches t_q (" + std::to_string(sel.evaluated) + " candidates): done");
+      break;
+    }
+    const ViewCandidate& c = *sel.best;
+    ViewRecord rec;
+    rec.dir_O = c.dir_O;
+    rec.quality = c.quality;
+    rec.cost_s = c.cost_s;
+    rec.score = c.score;
+    rec.candidates = sel.evaluated;
+    rec.planning_s = sel.total_s;
+    rec.frames = moveTo(c);
+    ObjectModel after = extractModel(volume, options.mesh);
+    rec.mean_entropy = after.meanEntropy();
+    rec.observed_fraction = after.observedAreaFraction();
+    used.push_back(c.dir_O);
+    result.views.push_back(rec);
+    char line[200];
+    std::snprintf(line, sizeof(line),
+                  "view %d: quality %.4f, cost %.2f s, %d candidates (%.2f s), %d frames, "
+                  "mean entropy %.3f",
+                  v + 1, rec.quality, rec.cost_s, rec.candidates, rec.planning_s, rec.frames,
+                  rec.mean_entropy);
+    log(line);
+  }
+  result.model = extractModel(volume, options.mesh);
+  result.total_s = secondsSince(t0);
+  return result;
+}
+
+}  // namespace inhand

@@ -1,0 +1,98 @@
+#include "inhand/sim/sim_world.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "inhand/core/error.h"
+#include "inhand/core/random.h"
+#include "inhand/geometry/primitives.h"
+#include "inhand/robot/collision.h"
+
+namespace inhand {
+
+std::string SimOptions::validate() const {
+  if (!(frame_rate_hz > 0)) return "frame_rate_hz must be > 0";
+  if (frame_subsample < 1) return "frame_subsample must be >= 1";
+  if (!(room_radius_m >= 0)) return "room_radius_m must be >= 0";
+  return {};
+}
+
+SimWorld::SimWorld(const RobotModel& model, const TriangleMesh& object_O, const Iso3& grasp,
+                   const DepthCameraOptions& camera, const NoiseModelOptions& noise,
+                   const SimOptions& options)
+    : q(model.home()),
+      T_B_C(Iso3::Identity()),
+      T_O_palm(grasp),
+      model_(&model),
+      camera_(camera),
+      noise_(noise),
+      options_(options),
+      robot_(model) {
+  std::string p = options.validate();
+  if (!p.empty()) throw Error("simulation options: " + p);
+  object_.addMesh(object_O);
+  object_.commit();
+  if (options.room_radius_m > 0) room_.addMesh(makeSphere(options.room_radius_m, 3));
+  room_.commit();
+}
+
+Iso3 SimWorld::objectPose() const { return model_->tipPose(q) * T_O_palm.inverse(); }
+
+DepthImage SimWorld::render() {
+  RayScene scene;
+  scene.addInstance(object_, objectPose());
+  for (const Occluder& o : robot_.at(q, Iso3::Identity())) scene.addInstance(*o.scene, o.T_O_scene);
+  if (options_.room_radius_m > 0)
+    scene.addInstance(room_, Iso3(Eigen::Translation3d(model_->camera().panTilt_B)));
+  scene.commit();
+  RenderOptions ro;
+  ro.noise = options_.noise;
+  ro.seed = mixSeed(options_.seed, frame_++);
+  return renderDepth(scene, T_B_C, camera_, noise_, ro);
+}
+
+void SimRobot::execute(const std::vector<JointVector>& waypoints,
+                       const std::function<void(const JointVector&)>& on_state) {
+  const RobotModel& m = world_->model();
+  const SimOptions& o = world_->options();
+  int tick = 0;
+  for (size_t w = 1; w < waypoints.size(); ++w) {
+    const JointVector& a = waypoints[w - 1];
+    const JointVector& b = waypoints[w];
+    double duration = trajectoryTime(m, m.arm(a), m.arm(b));
+    int steps = std::max(1, int(std::ceil(duration * o.frame_rate_hz)));
+    for (int s = 1; s <= steps; ++s) {
+      world_->q = a + (b - a) * (double(s) / steps);
+      if (++tick % o.frame_subsample == 0 || (w + 1 == waypoints.size() && s == steps))
+        on_state(world_->q);
+    }
+  }
+}
+
+std::pair<Iso3, JointVector> defaultGrasp(const RobotModel& model, const TriangleMesh& object) {
+  const Aabb b = object.bounds();
+  const Vec3 size = b.size();
+  int axes[3] = {0, 1, 2};
+  std::sort(axes, axes + 3, [&](int i, int j) { return size[i] < size[j]; });
+  const int shortest = axes[0], middle = axes[1];
+  Vec3 approach = Vec3::Zero(), across = Vec3::Zero();
+  approach[middle] = 1;  // palm comes from +middle, pointing −middle
+  across[shortest] = 1;
+  Iso3 T = Iso3::Identity();
+  T.linear().col(2) = -approach;
+  T.linear().col(0) = across;
+  T.linear().col(1) = (-approach).cross(across);
+  // Palm face (the top of the palm link's geometry along palm z) just touching the object's face.
+  double palmHeight = 0;
+  for (const Primitive& p : model.links()[model.tipLink()].collision)
+    palmHeight = std::max(palmHeight, p.toMesh().bounds().max.z());
+  T.translation() = b.center() + (0.5 * size[middle] + palmHeight + 0.002) * approach;
+  JointVector q = model.home();
+  for (const FingerInfo& f : model.fingers()) q[f.variable] = f.open;
+  if (model.spreadVariable() >= 0) q[model.spreadVariable()] = 0.0;
+  model.applyCouplings(&q);
+  ClosingResult r = closeFingers(model, q, T, object);
+  return {T, r.q};
+}
+
+}  // namespace inhand
