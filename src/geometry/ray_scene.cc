@@ -1,6 +1,7 @@
 #include "inhand/geometry/ray_scene.h"
 
 #include <cstdio>
+#include <cstdlib>
 #include <mutex>
 
 #include "inhand/core/error.h"
@@ -17,7 +18,7 @@ void onEmbreeError(void*, RTCError code, const char* str) {
 // One Embree device for the process (it owns the thread pool and ISA dispatch).
 RTCDevice device() {
   static RTCDevice dev = [] {
-    RTCDevice d = rtcNewDevice(nullptr);
+    RTCDevice d = rtcNewDevice(std::getenv("INHAND_EMBREE_CONFIG"));
     INHAND_CHECK(d != nullptr, "cannot create an Embree device");
     rtcSetDeviceErrorFunction(d, onEmbreeError, nullptr);
     return d;
@@ -130,9 +131,9 @@ void RayScene::commit() {
 }
 
 namespace {
-constexpr size_t kPacket = 16;
+constexpr size_t kPacket = 8;  // native width on AVX2 (rtcIntersect16 falls back to the stream path there)
 
-void loadPacket(const Ray* rays, size_t n, RTCRay16& r, int* valid) {
+void loadPacket(const Ray* rays, size_t n, RTCRay8& r, int* valid) {
   for (size_t k = 0; k < kPacket; ++k) {
     const Ray& ray = rays[k < n ? k : 0];
     valid[k] = k < n ? -1 : 0;
@@ -152,13 +153,52 @@ void loadPacket(const Ray* rays, size_t n, RTCRay16& r, int* valid) {
 }
 }  // namespace
 
+void RayScene::intersectStream(const Ray* rays, Hit* hits, size_t count, bool parallel) const {
+  INHAND_CHECK(committed_, "intersect before commit");
+  constexpr size_t kChunk = 64;
+  const int chunks = int((count + kChunk - 1) / kChunk);
+  auto chunk = [&](int c) {
+    size_t first = size_t(c) * kChunk, n = std::min(kChunk, count - first);
+    RTCRayHit rh[kChunk];
+    for (size_t k = 0; k < n; ++k) {
+      const Ray& ray = rays[first + k];
+      RTCRayHit& r = rh[k];
+      r.ray.org_x = ray.origin.x();
+      r.ray.org_y = ray.origin.y();
+      r.ray.org_z = ray.origin.z();
+      r.ray.dir_x = ray.dir.x();
+      r.ray.dir_y = ray.dir.y();
+      r.ray.dir_z = ray.dir.z();
+      r.ray.tnear = ray.tnear;
+      r.ray.tfar = ray.tfar;
+      r.ray.time = 0.f;
+      r.ray.mask = kAllMask;
+      r.ray.id = unsigned(k);
+      r.ray.flags = 0;
+      r.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+      r.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+    }
+    RTCIntersectContext ctx;
+    rtcInitIntersectContext(&ctx);
+    ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
+    rtcIntersect1M(scene_, &ctx, rh, unsigned(n), sizeof(RTCRayHit));
+    for (size_t k = 0; k < n; ++k)
+      hits[first + k] = makeHit(rh[k].ray.tfar, rh[k].hit.geomID, rh[k].hit.instID[0], rh[k].hit.primID,
+                                rh[k].hit.u, rh[k].hit.v,
+                                Vec3f(rh[k].hit.Ng_x, rh[k].hit.Ng_y, rh[k].hit.Ng_z));
+  };
+  if (parallel) parallelFor(0, chunks, chunk, 4);
+  else
+    for (int c = 0; c < chunks; ++c) chunk(c);
+}
+
 void RayScene::intersect(const Ray* rays, Hit* hits, size_t count, bool parallel) const {
   INHAND_CHECK(committed_, "intersect before commit");
   const int packets = int((count + kPacket - 1) / kPacket);
   auto packet = [&](int p) {
         size_t first = size_t(p) * kPacket;
         size_t n = std::min(kPacket, count - first);
-        alignas(64) RTCRayHit16 rh;
+        alignas(64) RTCRayHit8 rh;
         alignas(64) int valid[kPacket];
         loadPacket(rays + first, n, rh.ray, valid);
         for (size_t k = 0; k < kPacket; ++k) {
@@ -168,7 +208,7 @@ void RayScene::intersect(const Ray* rays, Hit* hits, size_t count, bool parallel
         RTCIntersectContext ctx;
         rtcInitIntersectContext(&ctx);
         ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
-        rtcIntersect16(valid, scene_, &ctx, &rh);
+        rtcIntersect8(valid, scene_, &ctx, &rh);
         for (size_t k = 0; k < n; ++k)
           hits[first + k] = makeHit(rh.ray.tfar[k], rh.hit.geomID[k], rh.hit.instID[0][k],
                                     rh.hit.primID[k], rh.hit.u[k], rh.hit.v[k],
@@ -185,12 +225,12 @@ void RayScene::occluded(const Ray* rays, uint8_t* blocked, size_t count, bool pa
   auto packet = [&](int p) {
         size_t first = size_t(p) * kPacket;
         size_t n = std::min(kPacket, count - first);
-        alignas(64) RTCRay16 r;
+        alignas(64) RTCRay8 r;
         alignas(64) int valid[kPacket];
         loadPacket(rays + first, n, r, valid);
         RTCIntersectContext ctx;
         rtcInitIntersectContext(&ctx);
-        rtcOccluded16(valid, scene_, &ctx, &r);
+        rtcOccluded8(valid, scene_, &ctx, &r);
         // Embree sets tfar to −inf for occluded rays.
         for (size_t k = 0; k < n; ++k) blocked[first + k] = r.tfar[k] < 0.f ? 1 : 0;
   };

@@ -12,6 +12,7 @@ std::string MeshOptions::validate() const {
   if (!(hole_sigma_m > 0 && std::isfinite(hole_sigma_m))) return "hole_sigma_m must be > 0";
   if (!(min_component_fraction >= 0 && min_component_fraction <= 1))
     return "min_component_fraction must be in [0, 1]";
+  if (stride < 1 || stride > 8) return "stride must be in 1..8";
   return {};
 }
 
@@ -135,18 +136,20 @@ ObjectModel extractModel(const TsdfVolume& volume, const MeshOptions& options) {
     return volume.state(v) == VoxelState::kUnknown && (attached.empty() || attached[v]);
   };
   const float mu = float(volume.truncation());
+  const int k = std::max(1, options.stride);
+  const Vec3i n((d.x() + k - 1) / k, (d.y() + k - 1) / k, (d.z() + k - 1) / k);  // samples used
   // Padded grid: one extra sample on each side, treated as empty.
   ScalarGrid grid;
-  grid.dims = d + Vec3i::Constant(2);
-  grid.origin = volume.origin() - Vec3::Constant(volume.voxelSize());
-  grid.spacing = volume.voxelSize();
+  grid.dims = n + Vec3i::Constant(2);
+  grid.spacing = k * volume.voxelSize();
+  grid.origin = volume.origin() - Vec3::Constant(grid.spacing);
   grid.values.assign(size_t(grid.dims.prod()), mu);
   std::vector<uint32_t> voxelOf(grid.values.size(), UINT32_MAX);  // padded sample → voxel index
-  parallelFor(0, d.z(), [&](int z) {
-    for (int y = 0; y < d.y(); ++y)
-      for (int x = 0; x < d.x(); ++x) {
-        size_t i = volume.index(x, y, z);
-        size_t g = grid.index(x + 1, y + 1, z + 1);
+  parallelFor(0, n.z(), [&](int zs) {
+    for (int ys = 0; ys < n.y(); ++ys)
+      for (int xs = 0; xs < n.x(); ++xs) {
+        size_t i = volume.index(xs * k, ys * k, zs * k);
+        size_t g = grid.index(xs + 1, ys + 1, zs + 1);
         voxelOf[g] = uint32_t(i);
         VoxelState st = volume.state(i);
         if (st == VoxelState::kUnknown && !isUnknown(uint32_t(i))) st = VoxelState::kEmpty;

@@ -92,6 +92,10 @@ ViewQualityScene::ViewQualityScene(const ObjectModel& model, const DepthCameraOp
   std::string p = options.validate();
   if (!p.empty()) throw Error("view quality options: " + p);
   INHAND_CHECK(model.variance.size() == model.mesh.vertices.size(), "variance per vertex");
+  bounds_ = model_.mesh.bounds();
+  cosMaxIncidence_ = std::cos(options.max_incidence_deg * M_PI / 180);
+  cosMaxProjector_ = std::cos(options.max_projector_incidence_deg * M_PI / 180);
+  cosGrazing_ = std::cos(noise.grazing_start_deg * M_PI / 180);
   objectScene_.addMesh(model_.mesh);
   objectScene_.commit();
 }
@@ -122,7 +126,7 @@ double ViewQualityScene::pixelGain(const Hit& hit, const Ray& ray, const Iso3& T
   }
   const Vec3 n = hit.normal.cast<double>().normalized();
   const double cosInc = std::abs(n.dot(dir)) / dir.norm();
-  if (cosInc < std::cos(options_.max_incidence_deg * M_PI / 180)) {
+  if (cosInc < cosMaxIncidence_) {
     ++st->too_oblique;
     return 0;
   }
@@ -130,7 +134,7 @@ double ViewQualityScene::pixelGain(const Hit& hit, const Ray& ray, const Iso3& T
   Vec3 toP = projector - p;
   const double dist = toP.norm();
   toP /= dist;
-  if (std::abs(n.dot(toP)) < std::cos(options_.max_projector_incidence_deg * M_PI / 180)) {
+  if (std::abs(n.dot(toP)) < cosMaxProjector_) {
     ++st->projector_oblique;
     return 0;
   }
@@ -142,7 +146,9 @@ double ViewQualityScene::pixelGain(const Hit& hit, const Ray& ray, const Iso3& T
   const double var = (1.0 - hit.u - hit.v) * model_.variance[f[0]] + hit.u * model_.variance[f[1]] +
                      hit.v * model_.variance[f[2]];
   const double d = hit.t;  // the ray has camera z = 1, so t is the depth
-  const double sz = axialSigma(noise_, d, std::acos(std::min(1.0, cosInc)));
+  // θ is only needed beyond the grazing threshold (the axial model is flat below it).
+  const double sz = cosInc >= cosGrazing_ ? axialSigma(noise_, d, 0.0)
+                                          : axialSigma(noise_, d, std::acos(std::min(1.0, cosInc)));
   const double nz = std::max(0.05, std::abs((T_O_C.linear().transpose() * n).z()));
   const CameraIntrinsics& K = camera_.intrinsics;
   return 0.5 * std::log1p(var / (sz * sz)) * d * d / (K.fx * K.fy * nz);
@@ -155,7 +161,7 @@ double ViewQualityScene::quality(const Iso3& T_O_C, const std::vector<Occluder>&
   st = ViewQualityStats{};
   const CameraIntrinsics& K = camera_.intrinsics;
   // Pixel box covering the projection of the model's bounding box.
-  const Aabb box = model_.mesh.bounds();
+  const Aabb& box = bounds_;
   const Iso3 T_C_O = T_O_C.inverse();
   int u0 = 0, v0 = 0, u1 = K.width - 1, v1 = K.height - 1;
   bool bounded = true;

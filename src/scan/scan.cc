@@ -73,18 +73,47 @@ ScanResult scanSingleGrasp(RobotInterface& robot, DepthSensor& sensor, const Iso
   const HandGeometry hand(m, robot.joints(), T_O_palm);
   auto nearHand = std::make_shared<NearHandGrid>(hand, options.planner.quality.t_hand_m,
                                                  options.planner.quality.near_hand_cell_m);
-  // Voxels inside the hand (Fig. 3 c): fixed in the object frame for the whole grasp.
-  std::vector<size_t> insideHand;
-  if (options.hand_mode == HandMode::kCarveAndEmpty) {
-    Aabb hb = hand.mesh().bounds();
-    Vec3i lo = ((hb.min - volume.origin()) / volume.voxelSize()).array().floor().cast<int>().max(0);
-    Vec3i hi = ((hb.max - volume.origin()) / volume.voxelSize()).array().ceil().cast<int>().min(
-        volume.dims().array() - 1);
-    for (int z = lo.z(); z <= hi.z(); ++z)
-      for (int y = lo.y(); y <= hi.y(); ++y)
-        for (int x = lo.x(); x <= hi.x(); ++x)
-          if (hand.contains(volume.point(x, y, z))) insideHand.push_back(volume.index(x, y, z));
-  }
+  // Fig. 3 (c): voxels inside the robot are empty. The paper marks the hand; we mark every link
+  // (the wrist and forearm too), at each frame's joint state: nothing of the object can be there.
+  std::vector<Aabb> linkBox(m.links().size());
+  for (size_t li = 0; li < m.links().size(); ++li)
+    for (const Primitive& p : m.links()[li].collision) {
+      Aabb b = p.toMesh().bounds();
+      linkBox[li].extend(b.min);
+      linkBox[li].extend(b.max);
+    }
+  auto emptyInsideRobot = [&](const JointVector& q, const Iso3& T_O_B) {
+    std::vector<Iso3> T = m.linkPoses(q);
+    for (size_t li = 0; li < m.links().size(); ++li) {
+      if (m.links()[li].collision.empty()) continue;
+      const Iso3 T_O_link = T_O_B * T[li];
+      Aabb b;  // the link's box in O
+      for (int c = 0; c < 8; ++c)
+        b.extend(T_O_link * Vec3((c & 1) ? linkBox[li].max.x() : linkBox[li].min.x(),
+                                 (c & 2) ? linkBox[li].max.y() : linkBox[li].min.y(),
+                                 (c & 4) ? linkBox[li].max.z() : linkBox[li].min.z()));
+      Vec3 lo = ((b.min - volume.origin()) / volume.voxelSize()).array().ceil();
+      Vec3 hi = ((b.max - volume.origin()) / volume.voxelSize()).array().floor();
+      lo = lo.cwiseMax(Vec3::Zero());
+      hi = hi.cwiseMin((volume.dims().cast<double>().array() - 1).matrix());
+      if ((lo.array() > hi.array()).any()) continue;
+      const Iso3 T_link_O = T_O_link.inverse();
+      parallelFor(int(lo.z()), int(hi.z()) + 1, [&](int z) {
+        for (int y = int(lo.y()); y <= int(hi.y()); ++y)
+          for (int x = int(lo.x()); x <= int(hi.x()); ++x) {
+            Vec3 p = T_link_O * volume.point(x, y, z);
+            for (const Primitive& prim : m.links()[li].collision)
+              if (prim.contains(p)) {
+                size_t i = volume.index(x, y, z);
+                volume.states()[i] = uint8_t(VoxelState::kEmpty);
+                volume.sumW()[i] = 0;
+                volume.sumWD()[i] = 0;
+                break;
+              }
+          }
+      });
+    }
+  };
   const RobotOccluders robotScenes(m);
 
   // Fuses the sensor's current frame with the pose the robot reports.
@@ -115,11 +144,7 @@ ScanResult scanSingleGrasp(RobotInterface& robot, DepthSensor& sensor, const Iso
     }
     integrate(depth, T_O_C, K, measurementSigma(depth, K, noise), &volume,
               carve.empty() ? nullptr : &carve);
-    for (size_t i : insideHand) {
-      volume.states()[i] = uint8_t(VoxelState::kEmpty);
-      volume.sumW()[i] = 0;
-      volume.sumWD()[i] = 0;
-    }
+    if (options.hand_mode == HandMode::kCarveAndEmpty) emptyInsideRobot(q, T_O_B);
     ++result.frames;
     result.fusion_s += secondsSince(tf);
   };
@@ -181,12 +206,12 @@ ScanResult scanSingleGrasp(RobotInterface& robot, DepthSensor& sensor, const Iso
     rec.observed_fraction = after.observedAreaFraction();
     used.push_back(c.dir_O);
     result.views.push_back(rec);
-    char line[200];
+    char line[240];
     std::snprintf(line, sizeof(line),
-                  "view %d: quality %.4f, cost %.2f s, %d candidates (%.2f s), %d frames, "
-                  "mean entropy %.3f",
-                  v + 1, rec.quality, rec.cost_s, rec.candidates, rec.planning_s, rec.frames,
-                  rec.mean_entropy);
+                  "view %d: quality %.4f, cost %.2f s, %d candidates (%.2f s: IK %.2f, quality "
+                  "%.2f), %d frames, mean entropy %.3f",
+                  v + 1, rec.quality, rec.cost_s, rec.candidates, rec.planning_s, sel.ik_s,
+                  sel.quality_s, rec.frames, rec.mean_entropy);
     log(line);
   }
   result.model = extractModel(volume, options.mesh);

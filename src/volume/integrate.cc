@@ -62,12 +62,21 @@ void checkInputs(const DepthImage& depth, const CameraIntrinsics& K,
 // The per-voxel update rule shared by both kernels. Returns whether the voxel changed.
 inline bool updateVoxel(float d, float mu, float weight, bool carveOnly, float* sumWD, float* sumW,
                         uint8_t* state) {
+  // A carve-only measurement is of a known surface (the robot's own): the space in front of it
+  // is free right up to it, not only beyond the band.
+  if (carveOnly) {
+    if (d > 0.25f * mu && *state == uint8_t(VoxelState::kUnknown)) {
+      *state = uint8_t(VoxelState::kEmpty);
+      return true;
+    }
+    return false;
+  }
   if (d > mu) {
     if (*state == uint8_t(VoxelState::kUnknown)) {
       *state = uint8_t(VoxelState::kEmpty);
       return true;
     }
-    if (*state == uint8_t(VoxelState::kObserved) && !carveOnly) {
+    if (*state == uint8_t(VoxelState::kObserved)) {
       // Seen through after having been in a band (a flying pixel, a mis-registered edge): add the
       // truncated value +μ so free-space evidence pulls the distance back out of the surface.
       *sumWD += weight * mu;
@@ -76,7 +85,7 @@ inline bool updateVoxel(float d, float mu, float weight, bool carveOnly, float* 
     }
     return false;
   }
-  if (d < -mu || carveOnly) return false;
+  if (d < -mu) return false;
   *sumWD += weight * d;
   *sumW += weight;
   *state = uint8_t(VoxelState::kObserved);

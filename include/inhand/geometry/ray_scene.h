@@ -1,6 +1,6 @@
 #pragma once
-// Embree 3 ray-casting scene. Batches are cast as 16-ray packets (rtcIntersect16 /
-// rtcOccluded16) spread over both cores; a scalar one-ray path is kept as the reference.
+// Embree 3 ray-casting scene. Batches are cast as 8-ray packets (rtcIntersect8 /
+// rtcOccluded8) spread over both cores; a scalar one-ray path is kept as the reference.
 // After commit() every query is const and thread-safe.
 #include <embree3/rtcore.h>
 
@@ -49,9 +49,11 @@ class RayScene {
   bool committed() const { return committed_; }
   int geometryCount() const { return geometryCount_; }
 
-  // Closest hit of each ray: packets of 16 consecutive rays, on both cores unless `parallel` is
+  // Closest hit of each ray: packets of 8 consecutive rays, on both cores unless `parallel` is
   // false (for callers that already run one task per core).
   void intersect(const Ray* rays, Hit* hits, size_t count, bool parallel = true) const;
+  // Same result through Embree's coherent stream API (rtcIntersect1M, chunks of 64 rays).
+  void intersectStream(const Ray* rays, Hit* hits, size_t count, bool parallel = true) const;
   // blocked[i] = 1 when something lies on ray i within [tnear, tfar].
   void occluded(const Ray* rays, uint8_t* blocked, size_t count, bool parallel = true) const;
   // Scalar reference path (rtcIntersect1), one ray.

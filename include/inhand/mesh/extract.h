@@ -22,6 +22,9 @@ struct MeshOptions {
   // Drop connected surface pieces with fewer triangles than this fraction of the largest piece
   // (specks from flying pixels at depth edges); 0 keeps everything.
   double min_component_fraction = 0.01;
+  // Use every stride-th voxel along each axis (1: full resolution). Planning can use a coarser
+  // S_obj than the model written out.
+  int stride = 1;
   std::string validate() const;
 };
 

@@ -94,7 +94,7 @@ class ViewQualityScene {
                           ViewQualityStats* stats = nullptr) const;
 
   const ObjectModel& model() const { return model_; }
-  Vec3 centre() const { return model_.mesh.bounds().center(); }
+  Vec3 centre() const { return bounds_.center(); }
 
  private:
   RayScene buildScene(const std::vector<Occluder>& occluders) const;
@@ -104,6 +104,8 @@ class ViewQualityScene {
                    ViewQualityStats* stats) const;
 
   ObjectModel model_;
+  Aabb bounds_;
+  double cosMaxIncidence_ = 0, cosMaxProjector_ = 0, cosGrazing_ = 0;
   DepthCameraOptions camera_;
   NoiseModelOptions noise_;
   ViewQualityOptions options_;

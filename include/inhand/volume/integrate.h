@@ -7,7 +7,8 @@
 //                later corrects flying pixels;
 //   |d| ≤ μ      Σw·d += w·d, Σw += w with w = 1/σ² of the pixel; the voxel becomes observed;
 //   d < −μ       behind the band: unchanged (stays unknown if never seen).
-// Pixels flagged carve-only (measurements of the robot's own hand, §IV) only mark empty space.
+// Pixels flagged carve-only (measurements of the robot's own hand, §IV) only mark empty space,
+// up to μ/4 in front of the measured surface (it is a known surface, not the object's).
 #include <cstdint>
 #include <vector>
 
