@@ -96,6 +96,7 @@ void readOptions(const fs::path& file, AllOptions* o) {
     throw Error(file.string() + ".hand_mode: must be naive, carve or carve-empty");
   r.integer("initial_views", &o->scan.initial_views);
   r.integer("max_views", &o->scan.max_views);
+  r.integer("planning_stride", &o->scan.planning_stride);
   if (auto p = r.object("planner")) {
     ViewPlannerOptions& v = o->scan.planner;
     p->integer("directions", &v.directions);
@@ -138,6 +139,7 @@ Json optionsJson(const AllOptions& o) {
           {"hand_mode", handModeName(o.scan.hand_mode)},
           {"initial_views", o.scan.initial_views},
           {"max_views", o.scan.max_views},
+          {"planning_stride", o.scan.planning_stride},
           {"planner",
            {{"directions", v.directions},
             {"min_angle_deg", v.min_angle_deg},

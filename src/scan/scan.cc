@@ -34,6 +34,7 @@ std::string ScanOptions::validate() const {
   if (!(t_hand_m >= 0)) return "t_hand_m must be >= 0";
   if (initial_views < 0) return "initial_views must be >= 0";
   if (max_views < 0) return "max_views must be >= 0";
+  if (planning_stride < 1 || planning_stride > 4) return "planning_stride must be in 1..4";
   std::string p = planner.validate();
   if (!p.empty()) return "planner." + p;
   p = mesh.validate();
@@ -181,8 +182,10 @@ ScanResult scanSingleGrasp(RobotInterface& robot, DepthSensor& sensor, const Iso
   }
 
   result.termination = "max_views";
+  MeshOptions planningMesh = options.mesh;
+  planningMesh.stride = options.planning_stride;
   for (int v = 0; v < options.max_views; ++v) {
-    ObjectModel model = extractModel(volume, options.mesh);
+    ObjectModel model = extractModel(volume, planningMesh);
     const auto tp = Clock::now();
     ViewSelection sel = planner.select(model, GraspState{T_O_palm, robot.joints()}, used, nearHand);
     result.planning_s += secondsSince(tp);

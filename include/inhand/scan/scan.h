@@ -31,6 +31,7 @@ struct ScanOptions {
   HandMode hand_mode = HandMode::kCarveAndEmpty;
   int initial_views = 4;           // the simple initial trajectory: this many directions
   int max_views = 20;              // Alg. 1 views per grasp at most (after the initial ones)
+  int planning_stride = 2;         // S_obj for planning from every n-th voxel (output: full res)
   ViewPlannerOptions planner;
   MeshOptions mesh;
   VolumeOptions volume_budget;     // memory budget (voxel size above wins)
