@@ -1,0 +1,103 @@
+// The scan loop in the simulator: the paper's Fig. 3 hand handling, termination, determinism.
+#include <gtest/gtest.h>
+
+#include "inhand/geometry/builtin_objects.h"
+#include "inhand/scan/scan.h"
+#include "inhand/sim/sim_world.h"
+
+using namespace inhand;
+namespace fs = std::filesystem;
+
+namespace {
+
+const RobotModel& wam() {
+  static RobotModel m = RobotModel::load(fs::path(INHAND_SOURCE_DIR) / "data/robots/wam_barretthand.json");
+  return m;
+}
+
+// A fast configuration for tests: coarser voxels and candidate sets than the defaults.
+ScanOptions testOptions() {
+  ScanOptions o;
+  o.voxel_m = 0.003;
+  o.planner.directions = 80;
+  o.planner.rolls = 4;
+  return o;
+}
+
+struct ScanRun {
+  ScanResult result;
+  Iso3 T_O_palm;
+  JointVector q;
+};
+
+ScanRun scanCan(const ScanOptions& o, uint64_t seed = 1) {
+  TriangleMesh can = loadObject("builtin:coffee_can");
+  auto [T_O_palm, q] = defaultGrasp(wam(), can);
+  SimOptions so;
+  so.seed = seed;
+  so.frame_subsample = 4;
+  SimWorld world(wam(), can, T_O_palm, DepthCameraOptions{}, NoiseModelOptions{}, so);
+  world.q = q;
+  SimRobot robot(&world);
+  SimSensor sensor(&world, DepthCameraOptions{});
+  ScanOptions opt = o;
+  opt.planner.seed = seed;
+  ScanRun r{scanSingleGrasp(robot, sensor, T_O_palm, T_O_palm * Vec3(0, 0, wam().graspOffset()), opt,
+                        NoiseModelOptions{}),
+        T_O_palm, q};
+  return r;
+}
+
+// Distance to the coffee can (a cylinder Ø 102 × 139 mm centred at the origin, axis z).
+double canDistance(const Vec3& p) {
+  Vec2 e(std::hypot(p.x(), p.y()) - 0.051, std::abs(p.z()) - 0.0695);
+  return e.cwiseMax(0.0).norm() + std::min(e.maxCoeff(), 0.0);
+}
+
+}  // namespace
+
+// Paper Fig. 3: (a) fusing every measurement grows finger-shaped surface on the model; (c)
+// carving with hand measurements and emptying the hand's volume leaves none, and the surface
+// under the fingers stays uncertain (hole-filled).
+TEST(Scan, HandAwareFusionRemovesFingersAndKeepsUncertaintyUnderThem) {
+  ScanOptions o = testOptions();
+  o.max_views = 0;  // the initial trajectory is enough to see the hand from all round
+  int farObserved[2] = {0, 0}, holesNearHand[2] = {0, 0};
+  const HandMode modes[2] = {HandMode::kNaive, HandMode::kCarveAndEmpty};
+  for (int k = 0; k < 2; ++k) {
+    o.hand_mode = modes[k];
+    ScanRun run = scanCan(o);
+    HandGeometry hand(wam(), run.q, run.T_O_palm);
+    const ObjectModel& m = run.result.model;
+    for (size_t i = 0; i < m.mesh.vertices.size(); ++i) {
+      Vec3 p = m.mesh.vertices[i].cast<double>();
+      if (m.observed[i] && canDistance(p) > 0.006 && hand.distance(p) < 0.01) ++farObserved[k];
+      if (!m.observed[i] && hand.distance(p) < 0.01 && std::abs(canDistance(p)) < 0.01) ++holesNearHand[k];
+    }
+  }
+  EXPECT_GT(farObserved[0], 500) << "naive fusion should put the hand's surface on the model";
+  // Measured: about 23.5 k against 2.2 k (stray edge pixels along the arm remain).
+  EXPECT_LT(farObserved[1], farObserved[0] / 5) << "hand-aware fusion leaves hand-shaped surface";
+  EXPECT_GT(holesNearHand[1], 5 * holesNearHand[0]) << "the surface under the hand should stay uncertain";
+}
+
+TEST(Scan, EndsOnItsOwnAndIsDeterministic) {
+  ScanOptions o = testOptions();
+  o.max_views = 25;
+  ScanRun a = scanCan(o, 7), b = scanCan(o, 7);
+  EXPECT_EQ(a.result.termination, "no_view_above_threshold");
+  ASSERT_EQ(a.result.views.size(), b.result.views.size());
+  for (size_t i = 0; i < a.result.views.size(); ++i) {
+    EXPECT_EQ(a.result.views[i].dir_O, b.result.views[i].dir_O) << i;
+    EXPECT_EQ(a.result.views[i].quality, b.result.views[i].quality) << i;
+  }
+  // Entropy falls from the first view to the last, and the chosen views met t_q.
+  const auto& v = a.result.views;
+  ASSERT_GE(v.size(), 5u);
+  EXPECT_LT(v.back().mean_entropy, v.front().mean_entropy);
+  for (const ViewRecord& r : v)
+    if (!r.initial) {
+      EXPECT_GE(r.quality, o.planner.t_q);
+    }
+  EXPECT_GT(a.result.model.observedAreaFraction(), 0.6);
+}
