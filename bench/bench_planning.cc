@@ -17,7 +17,8 @@ using namespace inhand;
 namespace {
 
 struct Scenario {
-  RobotModel model = RobotModel::load(std::string(INHAND_SOURCE_DIR) + "/data/robots/wam_barretthand.json");
+  RobotModel model =
+      RobotModel::load(std::string(INHAND_SOURCE_DIR) + "/data/robots/wam_barretthand.json");
   TriangleMesh object = loadObject("builtin:juice_bottle");
   Iso3 T_O_palm;
   JointVector q;
@@ -26,7 +27,8 @@ struct Scenario {
   Scenario() {
     std::tie(T_O_palm, q) = defaultGrasp(model, object);
     Aabb b = object.bounds();
-    TsdfVolume vol(Aabb{b.min - Vec3::Constant(0.04), b.max + Vec3::Constant(0.04)}, VolumeOptions{});
+    TsdfVolume vol(Aabb{b.min - Vec3::Constant(0.04), b.max + Vec3::Constant(0.04)},
+                   VolumeOptions{});
     RayScene scene;
     scene.addMesh(object);
     scene.commit();
@@ -80,7 +82,8 @@ void BM_ViewQualityReference(benchmark::State& state) {
   Scenario& s = scenario();
   ViewQualityScene vq(s.S_obj, DepthCameraOptions{}, NoiseModelOptions{}, ViewQualityOptions{});
   vq.setNearHand(s.nearHand);
-  Iso3 T_O_C = cameraPoseInObject(s.S_obj.mesh.bounds().center(), Vec3(1, 0.2, 0.1).normalized(), 0.7, 0);
+  Iso3 T_O_C =
+      cameraPoseInObject(s.S_obj.mesh.bounds().center(), Vec3(1, 0.2, 0.1).normalized(), 0.7, 0);
   for (auto _ : state) benchmark::DoNotOptimize(vq.qualityReference(T_O_C));
 }
 BENCHMARK(BM_ViewQualityReference)->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(3);

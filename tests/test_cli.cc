@@ -117,3 +117,47 @@ TEST(Cli, RobotCommandPrintsChainAndReachability) {
   EXPECT_EQ(r.code, 1);
   EXPECT_NE(r.output.find("rolls"), std::string::npos) << r.output;
 }
+
+TEST(Cli, ScanWritesModelAndSummaryAndRejectsBadConfig) {
+  test::TempDir dir;
+  writeTextAtomically(
+      dir.path() / "fast.json",
+      R"({"voxel_m": 0.003, "initial_views": 2, "planner": {"directions": 40, "rolls": 4}})");
+  fs::path out = dir.path() / "scan";
+  Result r = run("scan --object builtin:coffee_can --max-views 1 --config " +
+                     (dir.path() / "fast.json").string() + " --out " + out.string(),
+                 dir);
+  ASSERT_EQ(r.code, 0) << r.output;
+  Json s = readJsonFile(out / "summary.json");
+  for (const char* key :
+       {"termination", "views", "grasps", "view_evaluations", "view_evaluations_per_s", "timing_s"})
+    EXPECT_TRUE(s.contains(key)) << key;
+  EXPECT_TRUE(s["timing_s"].contains("total"));
+  ASSERT_GE(s["views"].size(), 2u);
+  for (const char* key : {"quality", "cost_s", "score", "mean_entropy"})
+    EXPECT_TRUE(s["views"][0].contains(key)) << key;
+  EXPECT_EQ(s["options"]["planner"]["directions"].get<int>(), 40);
+  PlyData ply = readPly(out / "model.ply");
+  EXPECT_EQ(ply.vertexProperties.count("variance"), 1u);
+  // The model lies on the can (object frame = the mesh's own frame): Ø 102 × 139 mm about the
+  // origin.
+  Aabb b = ply.mesh.bounds();
+  EXPECT_NEAR(b.center().z(), 0.0, 0.03);
+
+  writeTextAtomically(dir.path() / "bad.json", R"({"planner": {"directons": 10}})");
+  r = run("scan --object builtin:coffee_can --config " + (dir.path() / "bad.json").string() +
+              " --out " + (dir.path() / "x").string(),
+          dir);
+  EXPECT_EQ(r.code, 1);
+  EXPECT_NE(r.output.find("planner: unknown option \"directons\""), std::string::npos) << r.output;
+  writeTextAtomically(dir.path() / "bad.json", R"({"planner": {"t_q": -1}})");
+  r = run("scan --object builtin:coffee_can --config " + (dir.path() / "bad.json").string() +
+              " --out " + (dir.path() / "x").string(),
+          dir);
+  EXPECT_EQ(r.code, 1);
+  EXPECT_NE(r.output.find("t_q"), std::string::npos) << r.output;
+  r = run("scan --object builtin:coffee_can --max-grasps 2 --out " + (dir.path() / "x").string(),
+          dir);
+  EXPECT_EQ(r.code, 1);
+  EXPECT_FALSE(fs::exists(dir.path() / "x"));
+}

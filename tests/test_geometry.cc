@@ -222,7 +222,8 @@ TEST(RayScene, PacketsMatchScalarReferenceAndAnalyticSphere) {
 
 TEST(RayScene, InstanceMatchesTransformedCopy) {
   TriangleMesh box = makeBox(Vec3(0.1, 0.2, 0.3));
-  Iso3 T = Iso3(Eigen::Translation3d(0.3, -0.1, 0.2)) * Eigen::AngleAxisd(0.7, Vec3(1, 2, 3).normalized());
+  Iso3 T = Iso3(Eigen::Translation3d(0.3, -0.1, 0.2)) *
+           Eigen::AngleAxisd(0.7, Vec3(1, 2, 3).normalized());
   RayScene inner;
   inner.addMesh(box);
   inner.commit();
@@ -238,7 +239,9 @@ TEST(RayScene, InstanceMatchesTransformedCopy) {
   for (int i = 0; i < 2000; ++i) {
     Ray r;
     r.origin = Vec3f(1.0f, float(U(rng)) * 0.1f, float(U(rng)) * 0.1f);
-    r.dir = (T.translation().cast<float>() + Vec3f(float(U(rng)), float(U(rng)), float(U(rng))) * 0.1f - r.origin).normalized();
+    r.dir = (T.translation().cast<float>() +
+             Vec3f(float(U(rng)), float(U(rng)), float(U(rng))) * 0.1f - r.origin)
+                .normalized();
     Hit a = viaInstance.intersectOne(r), b = viaCopy.intersectOne(r);
     ASSERT_EQ(a.valid(), b.valid());
     if (!a.valid()) continue;

@@ -13,12 +13,14 @@ namespace fs = std::filesystem;
 namespace {
 
 const RobotModel& wam() {
-  static RobotModel m = RobotModel::load(fs::path(INHAND_SOURCE_DIR) / "data/robots/wam_barretthand.json");
+  static RobotModel m =
+      RobotModel::load(fs::path(INHAND_SOURCE_DIR) / "data/robots/wam_barretthand.json");
   return m;
 }
 
 // Each triangle with its own three vertices, so variance can differ per face.
-ObjectModel unweldedModel(const TriangleMesh& mesh, const std::function<float(const Vec3&)>& varianceOfNormal) {
+ObjectModel unweldedModel(const TriangleMesh& mesh,
+                          const std::function<float(const Vec3&)>& varianceOfNormal) {
   ObjectModel m;
   for (int t = 0; t < int(mesh.triangles.size()); ++t) {
     Vec3 n = mesh.faceNormal(t);
@@ -83,7 +85,8 @@ TEST(ViewQuality, HandCoveringTheRegionLowersTheScore) {
   Iso3 T_O_C = cameraPoseInObject(Vec3::Zero(), Vec3(-1, 0, 0), 0.7, 0.3);
   double free = vq.quality(T_O_C);
   // Palm against the +x face (palm z pointing −x), fingers open.
-  Iso3 T_O_palm = Iso3(Eigen::Translation3d(0.05 + 0.09, 0, 0)) * Eigen::AngleAxisd(-M_PI / 2, Vec3::UnitY());
+  Iso3 T_O_palm =
+      Iso3(Eigen::Translation3d(0.05 + 0.09, 0, 0)) * Eigen::AngleAxisd(-M_PI / 2, Vec3::UnitY());
   HandGeometry hand(r, r.home(), T_O_palm);
   RayScene handScene = sceneOf(hand.mesh());
   vq.setNearHand(std::make_shared<NearHandGrid>(hand, 0.01, 0.002));
@@ -113,7 +116,8 @@ TEST(ViewQuality, ExclusionRulesRemoveExactlyTheirPixels) {
   const double zb0 = 0.495, zb1 = 0.505;
   const Vec3 lo(0.5 * (300 - K.cx) / K.fx, 0.5 * (200 - K.cy) / K.fy, zb0),
       hi(0.5 * (330 - K.cx) / K.fx, 0.5 * (260 - K.cy) / K.fy, zb1);
-  RayScene occ = sceneOf(transformed(makeBox(hi - lo), Iso3(Eigen::Translation3d(0.5 * (lo + hi)))));
+  RayScene occ =
+      sceneOf(transformed(makeBox(hi - lo), Iso3(Eigen::Translation3d(0.5 * (lo + hi)))));
   ViewQualityScene vq(m, cam, NoiseModelOptions{}, ViewQualityOptions{});
   ViewQualityStats st;
   double G = vq.quality(Iso3::Identity(), {{&occ, Iso3::Identity()}}, &st);
@@ -185,9 +189,12 @@ TEST(ViewQuality, ObliqueSurfacesAreExcludedForCameraAndProjector) {
         double t = n.dot(c) / n.dot(dir);
         Vec3 p = t * dir;
         if (std::abs((p - c).dot(e1)) > 0.1 || std::abs((p - c).dot(e2)) > 0.1) continue;
-        if (std::abs(n.dot(dir.normalized())) < cmax) ++oblique;
-        else if (std::abs(n.dot((cam.projector_C - p).normalized())) < pmax) ++projOblique;
-        else ++counted;
+        if (std::abs(n.dot(dir.normalized())) < cmax)
+          ++oblique;
+        else if (std::abs(n.dot((cam.projector_C - p).normalized())) < pmax)
+          ++projOblique;
+        else
+          ++counted;
       }
     EXPECT_EQ(st.too_oblique, oblique);
     EXPECT_EQ(st.projector_oblique, projOblique);
@@ -197,7 +204,8 @@ TEST(ViewQuality, ObliqueSurfacesAreExcludedForCameraAndProjector) {
 
 TEST(ViewQuality, NearHandRuleUsesDistanceToTheHand) {
   const RobotModel& r = wam();
-  Iso3 T_O_palm = Iso3(Eigen::Translation3d(0, 0, 0.05 + 0.09)) * Eigen::AngleAxisd(M_PI, Vec3::UnitX());
+  Iso3 T_O_palm =
+      Iso3(Eigen::Translation3d(0, 0, 0.05 + 0.09)) * Eigen::AngleAxisd(M_PI, Vec3::UnitX());
   HandGeometry hand(r, r.home(), T_O_palm);
   NearHandGrid grid(hand, 0.01, 0.002);
   Rng rng = makeRng(12);
@@ -224,7 +232,8 @@ TEST(ViewQuality, OptimisedMatchesReferenceOnAFusedModelWithTheRobot) {
   ObjectModel model = extractModel(vol);
   ViewQualityScene vq(model, DepthCameraOptions{}, NoiseModelOptions{}, ViewQualityOptions{});
   // Held from the side; the robot at home, placed so the palm is at its grasp.
-  Iso3 T_O_palm = Iso3(Eigen::Translation3d(0, -0.044 - 0.09, 0)) * Eigen::AngleAxisd(-M_PI / 2, Vec3::UnitX());
+  Iso3 T_O_palm =
+      Iso3(Eigen::Translation3d(0, -0.044 - 0.09, 0)) * Eigen::AngleAxisd(-M_PI / 2, Vec3::UnitX());
   JointVector q = r.home();
   Iso3 T_O_B = T_O_palm * r.tipPose(q).inverse();
   HandGeometry hand(r, q, T_O_palm);

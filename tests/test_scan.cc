@@ -11,7 +11,8 @@ namespace fs = std::filesystem;
 namespace {
 
 const RobotModel& wam() {
-  static RobotModel m = RobotModel::load(fs::path(INHAND_SOURCE_DIR) / "data/robots/wam_barretthand.json");
+  static RobotModel m =
+      RobotModel::load(fs::path(INHAND_SOURCE_DIR) / "data/robots/wam_barretthand.json");
   return m;
 }
 
@@ -42,9 +43,9 @@ ScanRun scanCan(const ScanOptions& o, uint64_t seed = 1) {
   SimSensor sensor(&world, DepthCameraOptions{});
   ScanOptions opt = o;
   opt.planner.seed = seed;
-  ScanRun r{scanSingleGrasp(robot, sensor, T_O_palm, T_O_palm * Vec3(0, 0, wam().graspOffset()), opt,
-                        NoiseModelOptions{}),
-        T_O_palm, q};
+  ScanRun r{scanSingleGrasp(robot, sensor, T_O_palm, T_O_palm * Vec3(0, 0, wam().graspOffset()),
+                            opt, NoiseModelOptions{}),
+            T_O_palm, q};
   return r;
 }
 
@@ -72,13 +73,15 @@ TEST(Scan, HandAwareFusionRemovesFingersAndKeepsUncertaintyUnderThem) {
     for (size_t i = 0; i < m.mesh.vertices.size(); ++i) {
       Vec3 p = m.mesh.vertices[i].cast<double>();
       if (m.observed[i] && canDistance(p) > 0.006 && hand.distance(p) < 0.01) ++farObserved[k];
-      if (!m.observed[i] && hand.distance(p) < 0.01 && std::abs(canDistance(p)) < 0.01) ++holesNearHand[k];
+      if (!m.observed[i] && hand.distance(p) < 0.01 && std::abs(canDistance(p)) < 0.01)
+        ++holesNearHand[k];
     }
   }
   EXPECT_GT(farObserved[0], 500) << "naive fusion should put the hand's surface on the model";
   // Measured: about 23.5 k against 2.2 k (stray edge pixels along the arm remain).
   EXPECT_LT(farObserved[1], farObserved[0] / 5) << "hand-aware fusion leaves hand-shaped surface";
-  EXPECT_GT(holesNearHand[1], 5 * holesNearHand[0]) << "the surface under the hand should stay uncertain";
+  EXPECT_GT(holesNearHand[1], 5 * holesNearHand[0])
+      << "the surface under the hand should stay uncertain";
 }
 
 TEST(Scan, EndsOnItsOwnAndIsDeterministic) {

@@ -70,11 +70,13 @@ int main(int argc, char** argv) {
   auto* sc = app.add_subcommand("scan", "simulated autonomous scan of an object held by the robot");
   sc->add_option("--object", scan.object, "builtin:NAME or a mesh file")->required();
   sc->add_option("--out", scan.out, "output directory (new or empty)")->required();
-  sc->add_option("--robot", scan.robot, "robot config JSON (default: data/robots/wam_barretthand.json)");
+  sc->add_option("--robot", scan.robot,
+                 "robot config JSON (default: data/robots/wam_barretthand.json)");
   sc->add_option("--config", scan.config, "JSON file of scan options (see README)");
   sc->add_option("--max-grasps", scan.max_grasps, "grasps (only 1 so far)")->capture_default_str();
   sc->add_option("--max-views", scan.max_views, "next-best views per grasp at most");
-  sc->add_option("--hand-mode", scan.hand_mode, "naive | carve | carve-empty (paper Fig. 3 a, b, c)");
+  sc->add_option("--hand-mode", scan.hand_mode,
+                 "naive | carve | carve-empty (paper Fig. 3 a, b, c)");
   sc->add_option("--seed", scan.seed, "noise and IK seed")->capture_default_str();
 
   try {

@@ -11,8 +11,8 @@
 #include "inhand/core/pose.h"
 #include "inhand/geometry/builtin_objects.h"
 #include "inhand/geometry/mesh_io.h"
-#include "inhand/scan/scan.h"
 #include "inhand/geometry/primitives.h"
+#include "inhand/scan/scan.h"
 #include "inhand/sim/sim_world.h"
 
 namespace inhand::app {
@@ -27,8 +27,8 @@ class OptionReader {
   OptionReader(const Json& j, std::string where) : j_(j), where_(std::move(where)) {
     if (!j.is_object()) throw Error(where_ + ": expected an object");
   }
-  ~OptionReader() noexcept(false) {
-    if (std::uncaught_exceptions()) return;
+  // Call after reading every known key: any other key is an error that names it.
+  void finish() const {
     for (const auto& [key, value] : j_.items())
       if (!seen_.count(key)) throw Error(where_ + ": unknown option \"" + key + "\"");
   }
@@ -115,19 +115,24 @@ void readOptions(const fs::path& file, AllOptions* o) {
       q->num("max_incidence_deg", &v.quality.max_incidence_deg);
       q->num("max_projector_incidence_deg", &v.quality.max_projector_incidence_deg);
       q->num("near_hand_cell_m", &v.quality.near_hand_cell_m);
+      q->finish();
     }
+    p->finish();
   }
   if (auto mo = r.object("mesh")) {
     mo->num("hole_sigma_m", &o->scan.mesh.hole_sigma_m);
     mo->boolean("drop_floating_unknown", &o->scan.mesh.drop_floating_unknown);
     mo->num("min_component_fraction", &o->scan.mesh.min_component_fraction);
+    mo->finish();
   }
   if (auto s = r.object("sim")) {
     s->num("frame_rate_hz", &o->sim.frame_rate_hz);
     s->integer("frame_subsample", &o->sim.frame_subsample);
     s->boolean("noise", &o->sim.noise);
     s->num("room_radius_m", &o->sim.room_radius_m);
+    s->finish();
   }
+  r.finish();
 }
 
 Json optionsJson(const AllOptions& o) {
@@ -173,8 +178,9 @@ Json optionsJson(const AllOptions& o) {
 int runScan(const ScanArgs& args) {
   const auto t0 = std::chrono::steady_clock::now();
   if (args.max_grasps != 1)
-    throw Error("--max-grasps: only single-grasp scans (1) are implemented so far; re-grasping "
-                "is not built yet");
+    throw Error(
+        "--max-grasps: only single-grasp scans (1) are implemented so far; re-grasping "
+        "is not built yet");
   AllOptions o;
   o.robot = args.robot;
   if (!args.config.empty()) readOptions(args.config, &o);
@@ -230,8 +236,8 @@ int runScan(const ScanArgs& args) {
   summary["termination"] = r.termination;
   summary["views"] = views;
   summary["grasps"] = Json::array({{{"T_O_palm", poseToRowMajor(T_O_palm)},
-                                     {"views", r.views.size()},
-                                     {"termination", r.termination}}});
+                                    {"views", r.views.size()},
+                                    {"termination", r.termination}}});
   summary["view_evaluations"] = r.view_evaluations;
   summary["view_evaluations_per_s"] = r.planning_s > 0 ? r.view_evaluations / r.planning_s : 0.0;
   summary["frames"] = r.frames;
@@ -239,16 +245,18 @@ int runScan(const ScanArgs& args) {
   summary["observed_fraction"] = r.model.observedAreaFraction();
   summary["vertices"] = r.model.mesh.vertices.size();
   summary["triangles"] = r.model.mesh.triangles.size();
-  summary["timing_s"] = {{"total", std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count()},
-                         {"planning", r.planning_s},
-                         {"fusion", r.fusion_s}};
+  summary["timing_s"] = {
+      {"total", std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count()},
+      {"planning", r.planning_s},
+      {"fusion", r.fusion_s}};
   summary["options"] = optionsJson(o);
   writeTextAtomically(out.path() / "summary.json", summary.dump(2) + "\n");
   out.commit();
-  std::printf("scan: %s: %zu views, %d frames, %s; observed %.1f%% of the surface, mean entropy %.3f "
-              "(%.1f s) -> %s\n",
-              args.object.c_str(), r.views.size(), r.frames, r.termination.c_str(),
-              100 * r.model.observedAreaFraction(), r.model.meanEntropy(), r.total_s, args.out.c_str());
+  std::printf(
+      "scan: %s: %zu views, %d frames, %s; observed %.1f%% of the surface, mean entropy %.3f "
+      "(%.1f s) -> %s\n",
+      args.object.c_str(), r.views.size(), r.frames, r.termination.c_str(),
+      100 * r.model.observedAreaFraction(), r.model.meanEntropy(), r.total_s, args.out.c_str());
   return r.termination == "no_reachable_view" ? 3 : 0;
 }
 

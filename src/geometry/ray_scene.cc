@@ -131,7 +131,8 @@ void RayScene::commit() {
 }
 
 namespace {
-constexpr size_t kPacket = 8;  // native width on AVX2 (rtcIntersect16 falls back to the stream path there)
+constexpr size_t kPacket =
+    8;  // native width on AVX2 (rtcIntersect16 falls back to the stream path there)
 
 void loadPacket(const Ray* rays, size_t n, RTCRay8& r, int* valid) {
   for (size_t k = 0; k < kPacket; ++k) {
@@ -183,11 +184,12 @@ void RayScene::intersectStream(const Ray* rays, Hit* hits, size_t count, bool pa
     ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
     rtcIntersect1M(scene_, &ctx, rh, unsigned(n), sizeof(RTCRayHit));
     for (size_t k = 0; k < n; ++k)
-      hits[first + k] = makeHit(rh[k].ray.tfar, rh[k].hit.geomID, rh[k].hit.instID[0], rh[k].hit.primID,
-                                rh[k].hit.u, rh[k].hit.v,
-                                Vec3f(rh[k].hit.Ng_x, rh[k].hit.Ng_y, rh[k].hit.Ng_z));
+      hits[first + k] =
+          makeHit(rh[k].ray.tfar, rh[k].hit.geomID, rh[k].hit.instID[0], rh[k].hit.primID,
+                  rh[k].hit.u, rh[k].hit.v, Vec3f(rh[k].hit.Ng_x, rh[k].hit.Ng_y, rh[k].hit.Ng_z));
   };
-  if (parallel) parallelFor(0, chunks, chunk, 4);
+  if (parallel)
+    parallelFor(0, chunks, chunk, 4);
   else
     for (int c = 0; c < chunks; ++c) chunk(c);
 }
@@ -196,25 +198,26 @@ void RayScene::intersect(const Ray* rays, Hit* hits, size_t count, bool parallel
   INHAND_CHECK(committed_, "intersect before commit");
   const int packets = int((count + kPacket - 1) / kPacket);
   auto packet = [&](int p) {
-        size_t first = size_t(p) * kPacket;
-        size_t n = std::min(kPacket, count - first);
-        alignas(64) RTCRayHit8 rh;
-        alignas(64) int valid[kPacket];
-        loadPacket(rays + first, n, rh.ray, valid);
-        for (size_t k = 0; k < kPacket; ++k) {
-          rh.hit.geomID[k] = RTC_INVALID_GEOMETRY_ID;
-          rh.hit.instID[0][k] = RTC_INVALID_GEOMETRY_ID;
-        }
-        RTCIntersectContext ctx;
-        rtcInitIntersectContext(&ctx);
-        ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
-        rtcIntersect8(valid, scene_, &ctx, &rh);
-        for (size_t k = 0; k < n; ++k)
-          hits[first + k] = makeHit(rh.ray.tfar[k], rh.hit.geomID[k], rh.hit.instID[0][k],
-                                    rh.hit.primID[k], rh.hit.u[k], rh.hit.v[k],
-                                    Vec3f(rh.hit.Ng_x[k], rh.hit.Ng_y[k], rh.hit.Ng_z[k]));
+    size_t first = size_t(p) * kPacket;
+    size_t n = std::min(kPacket, count - first);
+    alignas(64) RTCRayHit8 rh;
+    alignas(64) int valid[kPacket];
+    loadPacket(rays + first, n, rh.ray, valid);
+    for (size_t k = 0; k < kPacket; ++k) {
+      rh.hit.geomID[k] = RTC_INVALID_GEOMETRY_ID;
+      rh.hit.instID[0][k] = RTC_INVALID_GEOMETRY_ID;
+    }
+    RTCIntersectContext ctx;
+    rtcInitIntersectContext(&ctx);
+    ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
+    rtcIntersect8(valid, scene_, &ctx, &rh);
+    for (size_t k = 0; k < n; ++k)
+      hits[first + k] =
+          makeHit(rh.ray.tfar[k], rh.hit.geomID[k], rh.hit.instID[0][k], rh.hit.primID[k],
+                  rh.hit.u[k], rh.hit.v[k], Vec3f(rh.hit.Ng_x[k], rh.hit.Ng_y[k], rh.hit.Ng_z[k]));
   };
-  if (parallel) parallelFor(0, packets, packet, 8);
+  if (parallel)
+    parallelFor(0, packets, packet, 8);
   else
     for (int p = 0; p < packets; ++p) packet(p);
 }
@@ -223,18 +226,19 @@ void RayScene::occluded(const Ray* rays, uint8_t* blocked, size_t count, bool pa
   INHAND_CHECK(committed_, "occluded before commit");
   const int packets = int((count + kPacket - 1) / kPacket);
   auto packet = [&](int p) {
-        size_t first = size_t(p) * kPacket;
-        size_t n = std::min(kPacket, count - first);
-        alignas(64) RTCRay8 r;
-        alignas(64) int valid[kPacket];
-        loadPacket(rays + first, n, r, valid);
-        RTCIntersectContext ctx;
-        rtcInitIntersectContext(&ctx);
-        rtcOccluded8(valid, scene_, &ctx, &r);
-        // Embree sets tfar to −inf for occluded rays.
-        for (size_t k = 0; k < n; ++k) blocked[first + k] = r.tfar[k] < 0.f ? 1 : 0;
+    size_t first = size_t(p) * kPacket;
+    size_t n = std::min(kPacket, count - first);
+    alignas(64) RTCRay8 r;
+    alignas(64) int valid[kPacket];
+    loadPacket(rays + first, n, r, valid);
+    RTCIntersectContext ctx;
+    rtcInitIntersectContext(&ctx);
+    rtcOccluded8(valid, scene_, &ctx, &r);
+    // Embree sets tfar to −inf for occluded rays.
+    for (size_t k = 0; k < n; ++k) blocked[first + k] = r.tfar[k] < 0.f ? 1 : 0;
   };
-  if (parallel) parallelFor(0, packets, packet, 8);
+  if (parallel)
+    parallelFor(0, packets, packet, 8);
   else
     for (int p = 0; p < packets; ++p) packet(p);
 }

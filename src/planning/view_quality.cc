@@ -11,7 +11,8 @@ namespace inhand {
 
 std::string ViewQualityOptions::validate() const {
   if (!(t_hand_m >= 0)) return "t_hand_m must be >= 0";
-  if (!(max_incidence_deg > 0 && max_incidence_deg < 90)) return "max_incidence_deg must be in (0, 90)";
+  if (!(max_incidence_deg > 0 && max_incidence_deg < 90))
+    return "max_incidence_deg must be in (0, 90)";
   if (!(max_projector_incidence_deg > 0 && max_projector_incidence_deg < 90))
     return "max_projector_incidence_deg must be in (0, 90)";
   if (!(near_hand_cell_m > 0)) return "near_hand_cell_m must be > 0";
@@ -79,7 +80,8 @@ RobotOccluders::RobotOccluders(const RobotModel& model) : model_(&model) {
 std::vector<Occluder> RobotOccluders::at(const JointVector& q, const Iso3& T_O_B) const {
   std::vector<Iso3> T = model_->linkPoses(q);
   std::vector<Occluder> out;
-  for (size_t k = 0; k < links_.size(); ++k) out.push_back({scenes_[k].get(), T_O_B * T[links_[k]]});
+  for (size_t k = 0; k < links_.size(); ++k)
+    out.push_back({scenes_[k].get(), T_O_B * T[links_[k]]});
   out.push_back({table_.get(), T_O_B * Iso3(Eigen::Translation3d(model_->table().center_B))});
   return out;
 }
@@ -87,7 +89,8 @@ std::vector<Occluder> RobotOccluders::at(const JointVector& q, const Iso3& T_O_B
 // ---- quality ------------------------------------------------------------------------------------
 
 ViewQualityScene::ViewQualityScene(const ObjectModel& model, const DepthCameraOptions& camera,
-                                   const NoiseModelOptions& noise, const ViewQualityOptions& options)
+                                   const NoiseModelOptions& noise,
+                                   const ViewQualityOptions& options)
     : model_(model), camera_(camera), noise_(noise), options_(options) {
   std::string p = options.validate();
   if (!p.empty()) throw Error("view quality options: " + p);

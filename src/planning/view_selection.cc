@@ -57,8 +57,9 @@ std::vector<std::optional<ViewCandidate>> ViewPlanner::reach(const std::vector<V
   ik.random_restarts = o.ik_restarts;
   CollisionChecker checker(*model_);
   if (o.check_collisions)  // the held object as its current bounding box
-    checker.setHeldObject(transformed(makeBox(box.size()), Iso3(Eigen::Translation3d(box.center()))),
-                          grasp.T_O_palm.inverse());
+    checker.setHeldObject(
+        transformed(makeBox(box.size()), Iso3(Eigen::Translation3d(box.center()))),
+        grasp.T_O_palm.inverse());
   std::vector<std::optional<ViewCandidate>> chosen(dirs.size());
   std::vector<double> ranges{o.range_m};
   ranges.insert(ranges.end(), o.fallback_ranges_m.begin(), o.fallback_ranges_m.end());
@@ -104,7 +105,9 @@ ViewSelection ViewPlanner::select(const ObjectModel& S_obj, const GraspState& gr
                                   const std::vector<Vec3>& used,
                                   std::shared_ptr<const NearHandGrid> nearHand) const {
   using Clock = std::chrono::steady_clock;
-  auto secs = [](Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); };
+  auto secs = [](Clock::time_point t) {
+    return std::chrono::duration<double>(Clock::now() - t).count();
+  };
   const auto t0 = Clock::now();
   const ViewPlannerOptions& o = options_;
   ViewSelection out;
@@ -127,7 +130,8 @@ ViewSelection ViewPlanner::select(const ObjectModel& S_obj, const GraspState& gr
 
   // Line 7: free DOFs.
   const auto tIk = Clock::now();
-  std::vector<std::optional<ViewCandidate>> chosen = reach(dirs, centre, S_obj.mesh.bounds(), grasp);
+  std::vector<std::optional<ViewCandidate>> chosen =
+      reach(dirs, centre, S_obj.mesh.bounds(), grasp);
   out.ik_s = secs(tIk);
   CollisionChecker checker(*model_);
   if (o.check_collisions) {
@@ -147,8 +151,7 @@ ViewSelection ViewPlanner::select(const ObjectModel& S_obj, const GraspState& gr
   parallelFor(0, int(reachable.size()), [&](int i) {
     ViewCandidate& c = *chosen[reachable[i]];
     std::vector<Occluder> occ;
-    if (o.hand_occlusion)
-      occ = occluders_.at(model_->withArm(grasp.q, c.arm), c.T_B_O.inverse());
+    if (o.hand_occlusion) occ = occluders_.at(model_->withArm(grasp.q, c.arm), c.T_B_O.inverse());
     c.quality = scene.quality(c.T_O_C, occ);
     c.score = c.quality - (o.use_cost ? o.alpha_cost * c.cost_s : 0.0);
   });

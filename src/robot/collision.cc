@@ -178,9 +178,13 @@ double HandGeometry::distance(const Vec3& p_F) const {
           d = e.cwiseMax(0.0).norm() + std::min(e.maxCoeff(), 0.0);
           break;
         }
-        case Primitive::Type::kSphere: d = q.norm() - p.size.x(); break;
+        case Primitive::Type::kSphere:
+          d = q.norm() - p.size.x();
+          break;
         case Primitive::Type::kMesh:
-        default: d = p.contains(p_link) ? 0.0 : std::numeric_limits<double>::infinity(); break;
+        default:
+          d = p.contains(p_link) ? 0.0 : std::numeric_limits<double>::infinity();
+          break;
       }
       best = std::min(best, d);
     }

@@ -12,9 +12,12 @@ namespace inhand {
 
 std::string handModeName(HandMode m) {
   switch (m) {
-    case HandMode::kNaive: return "naive";
-    case HandMode::kCarveOnly: return "carve";
-    case HandMode::kCarveAndEmpty: return "carve-empty";
+    case HandMode::kNaive:
+      return "naive";
+    case HandMode::kCarveOnly:
+      return "carve";
+    case HandMode::kCarveAndEmpty:
+      return "carve-empty";
   }
   return "?";
 }
@@ -30,7 +33,8 @@ bool parseHandMode(const std::string& s, HandMode* out) {
 
 std::string ScanOptions::validate() const {
   if (!(voxel_m > 0 && voxel_m < 0.05)) return "voxel_m must be in (0, 0.05) m";
-  if (!(volume_size_m > 10 * voxel_m && volume_size_m < 2)) return "volume_size_m must be in (10 voxels, 2 m)";
+  if (!(volume_size_m > 10 * voxel_m && volume_size_m < 2))
+    return "volume_size_m must be in (10 voxels, 2 m)";
   if (!(t_hand_m >= 0)) return "t_hand_m must be >= 0";
   if (initial_views < 0) return "initial_views must be >= 0";
   if (max_views < 0) return "max_views must be >= 0";
@@ -176,8 +180,8 @@ ScanResult scanSingleGrasp(RobotInterface& robot, DepthSensor& sensor, const Iso
       rec.observed_fraction = model.observedAreaFraction();
       used.push_back(c->dir_O);
       result.views.push_back(rec);
-      log("initial view " + std::to_string(result.views.size()) + ": " + std::to_string(rec.frames) +
-          " frames, mean entropy " + std::to_string(rec.mean_entropy));
+      log("initial view " + std::to_string(result.views.size()) + ": " +
+          std::to_string(rec.frames) + " frames, mean entropy " + std::to_string(rec.mean_entropy));
     }
   }
 

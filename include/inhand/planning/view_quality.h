@@ -21,10 +21,10 @@
 namespace inhand {
 
 struct ViewQualityOptions {
-  double t_hand_m = 0.01;                    // hits this close to the hand are skipped, m
-  double max_incidence_deg = 75.0;           // camera ray vs surface normal
-  double max_projector_incidence_deg = 75.0; // projector ray vs surface normal
-  double near_hand_cell_m = 0.002;           // resolution of the precomputed near-hand grid, m
+  double t_hand_m = 0.01;                     // hits this close to the hand are skipped, m
+  double max_incidence_deg = 75.0;            // camera ray vs surface normal
+  double max_projector_incidence_deg = 75.0;  // projector ray vs surface normal
+  double near_hand_cell_m = 0.002;            // resolution of the precomputed near-hand grid, m
   std::string validate() const;
 };
 

@@ -18,18 +18,18 @@
 namespace inhand {
 
 struct ViewPlannerOptions {
-  int directions = 500;               // candidate directions on the unit sphere
-  double min_angle_deg = 10.0;        // t_θ: minimum angle to every used view
-  double range_m = 0.7;               // preferred camera-to-object-centre distance
+  int directions = 500;         // candidate directions on the unit sphere
+  double min_angle_deg = 10.0;  // t_θ: minimum angle to every used view
+  double range_m = 0.7;         // preferred camera-to-object-centre distance
   std::vector<double> fallback_ranges_m{0.6, 0.8, 0.9};  // tried only where range_m has no IK
-  int rolls = 8;                      // rolls swept about the viewing direction
-  double alpha_cost = 0.0005;         // α_cost: quality units per second of trajectory
-  double t_q = 0.005;                 // t_q: minimum quality of a view that counts
-  bool use_cost = true;               // false: score = q (ablation)
-  bool hand_occlusion = true;         // false: eq. 9 without the robot as occluder (ablation)
-  bool check_collisions = true;       // reject candidates whose arm, hand or object hit table/base
-  int ik_restarts = 1;                // random restarts per IK target after the seeded attempt
-  uint64_t seed = 1;                  // IK restarts
+  int rolls = 8;                                         // rolls swept about the viewing direction
+  double alpha_cost = 0.0005;    // α_cost: quality units per second of trajectory
+  double t_q = 0.005;            // t_q: minimum quality of a view that counts
+  bool use_cost = true;          // false: score = q (ablation)
+  bool hand_occlusion = true;    // false: eq. 9 without the robot as occluder (ablation)
+  bool check_collisions = true;  // reject candidates whose arm, hand or object hit table/base
+  int ik_restarts = 1;           // random restarts per IK target after the seeded attempt
+  uint64_t seed = 1;             // IK restarts
   ViewQualityOptions quality;
   std::string validate() const;
 };
@@ -37,9 +37,9 @@ struct ViewPlannerOptions {
 struct ViewCandidate {
   Vec3 dir_O = Vec3::UnitZ();  // viewing direction in the object frame (camera → object)
   double range_m = 0, roll_rad = 0;
-  Iso3 T_O_C = Iso3::Identity();   // camera pose in the object frame
-  Iso3 T_B_O = Iso3::Identity();   // object pose in the base frame there
-  Eigen::VectorXd arm;             // IK solution
+  Iso3 T_O_C = Iso3::Identity();  // camera pose in the object frame
+  Iso3 T_B_O = Iso3::Identity();  // object pose in the base frame there
+  Eigen::VectorXd arm;            // IK solution
   double cost_s = 0, quality = 0, score = 0;
 };
 

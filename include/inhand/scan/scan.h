@@ -25,27 +25,27 @@ std::string handModeName(HandMode m);
 bool parseHandMode(const std::string& s, HandMode* out);
 
 struct ScanOptions {
-  double voxel_m = 0.002;          // volume voxel size, m
-  double volume_size_m = 0.34;     // edge of the cubic volume around the grasped object, m
-  double t_hand_m = 0.01;          // measurements this close to the robot only carve (§IV), m
+  double voxel_m = 0.002;       // volume voxel size, m
+  double volume_size_m = 0.34;  // edge of the cubic volume around the grasped object, m
+  double t_hand_m = 0.01;       // measurements this close to the robot only carve (§IV), m
   HandMode hand_mode = HandMode::kCarveAndEmpty;
-  int initial_views = 4;           // the simple initial trajectory: this many directions
-  int max_views = 20;              // Alg. 1 views per grasp at most (after the initial ones)
-  int planning_stride = 2;         // S_obj for planning from every n-th voxel (output: full res)
+  int initial_views = 4;    // the simple initial trajectory: this many directions
+  int max_views = 20;       // Alg. 1 views per grasp at most (after the initial ones)
+  int planning_stride = 2;  // S_obj for planning from every n-th voxel (output: full res)
   ViewPlannerOptions planner;
   MeshOptions mesh;
-  VolumeOptions volume_budget;     // memory budget (voxel size above wins)
+  VolumeOptions volume_budget;  // memory budget (voxel size above wins)
   std::string validate() const;
 };
 
 struct ViewRecord {
-  bool initial = false;            // part of the initial trajectory (not chosen by Alg. 1)
+  bool initial = false;  // part of the initial trajectory (not chosen by Alg. 1)
   Vec3 dir_O = Vec3::Zero();
   double quality = 0, cost_s = 0, score = 0;
-  double mean_entropy = 0;         // of the model after the view's frames
+  double mean_entropy = 0;  // of the model after the view's frames
   double observed_fraction = 0;
-  int frames = 0;                  // depth frames fused along the way
-  int candidates = 0;              // quality evaluations in the Alg. 1 pass that chose it
+  int frames = 0;      // depth frames fused along the way
+  int candidates = 0;  // quality evaluations in the Alg. 1 pass that chose it
   double planning_s = 0;
 };
 
@@ -54,9 +54,9 @@ struct ScanProgress {
 };
 
 struct ScanResult {
-  ObjectModel model;                 // final S_obj, object frame
+  ObjectModel model;  // final S_obj, object frame
   std::vector<ViewRecord> views;
-  std::string termination;           // no_view_above_threshold | max_views | no_reachable_view
+  std::string termination;  // no_view_above_threshold | max_views | no_reachable_view
   int view_evaluations = 0;
   double planning_s = 0, fusion_s = 0, motion_frames = 0, total_s = 0;
   int frames = 0;

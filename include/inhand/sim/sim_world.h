@@ -31,9 +31,9 @@ class SimWorld {
 
   const RobotModel& model() const { return *model_; }
   const SimOptions& options() const { return options_; }
-  JointVector q;       // the robot's state
-  Iso3 T_B_C;          // the camera's pose
-  Iso3 T_O_palm;       // the grasp
+  JointVector q;  // the robot's state
+  Iso3 T_B_C;     // the camera's pose
+  Iso3 T_O_palm;  // the grasp
   // Depth image at the current state, seeded by the frame counter.
   DepthImage render();
   Iso3 objectPose() const;  // T_B_O at the current state
