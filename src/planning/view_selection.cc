@@ -148,7 +148,7 @@ ViewSelection ViewPlanner::select(const ObjectModel& S_obj, const GraspState& gr
   for (size_t k = 0; k < chosen.size(); ++k)
     if (chosen[k]) reachable.push_back(k);
   out.reachable = int(reachable.size());
-  parallelFor(0, int(reachable.size()), [&](int i) {
+  parallelForThreads(0, int(reachable.size()), [&](int i) {
     ViewCandidate& c = *chosen[reachable[i]];
     std::vector<Occluder> occ;
     if (o.hand_occlusion) occ = occluders_.at(model_->withArm(grasp.q, c.arm), c.T_B_O.inverse());

@@ -222,6 +222,7 @@ ScanResult scanSingleGrasp(RobotInterface& robot, DepthSensor& sensor, const Iso
     log(line);
   }
   result.model = extractModel(volume, options.mesh);
+  result.planning_model = extractModel(volume, planningMesh);
   result.total_s = secondsSince(t0);
   return result;
 }

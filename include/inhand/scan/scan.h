@@ -54,7 +54,8 @@ struct ScanProgress {
 };
 
 struct ScanResult {
-  ObjectModel model;  // final S_obj, object frame
+  ObjectModel model;           // final S_obj, object frame
+  ObjectModel planning_model;  // the same at the planning stride (what Alg. 1 would see next)
   std::vector<ViewRecord> views;
   std::string termination;  // no_view_above_threshold | max_views | no_reachable_view
   int view_evaluations = 0;
