@@ -12,11 +12,7 @@ namespace fs = std::filesystem;
 
 namespace {
 
-const RobotModel& wam() {
-  static RobotModel m =
-      RobotModel::load(fs::path(INHAND_SOURCE_DIR) / "data/robots/wam_barretthand.json");
-  return m;
-}
+using test::wam;
 
 // Each triangle with its own three vertices, so variance can differ per face.
 ObjectModel unweldedModel(const TriangleMesh& mesh,
@@ -40,23 +36,6 @@ RayScene sceneOf(const TriangleMesh& m) {
   s.addMesh(m);
   s.commit();
   return s;
-}
-
-bool segmentHitsBox(const Vec3& a, const Vec3& b, const Vec3& lo, const Vec3& hi) {
-  double t0 = 0, t1 = 1;
-  Vec3 d = b - a;
-  for (int k = 0; k < 3; ++k) {
-    if (std::abs(d[k]) < 1e-15) {
-      if (a[k] < lo[k] || a[k] > hi[k]) return false;
-      continue;
-    }
-    double ta = (lo[k] - a[k]) / d[k], tb = (hi[k] - a[k]) / d[k];
-    if (ta > tb) std::swap(ta, tb);
-    t0 = std::max(t0, ta);
-    t1 = std::min(t1, tb);
-    if (t0 > t1) return false;
-  }
-  return true;
 }
 
 const float kHoleVar = 0.05f * 0.05f;
@@ -129,7 +108,7 @@ TEST(ViewQuality, ExclusionRulesRemoveExactlyTheirPixels) {
     for (int u = 0; u < K.width; ++u) {
       Vec3 dir = K.rayZ1(u, v);
       // Camera ray through the occluder? (z = 1 ray: the box spans z in [zb0, zb1])
-      if (segmentHitsBox(Vec3::Zero(), dir * 0.6, lo, hi)) {
+      if (test::segmentHitsBox(Vec3::Zero(), dir * 0.6, lo, hi)) {
         ++robot;
         continue;
       }
@@ -138,7 +117,7 @@ TEST(ViewQuality, ExclusionRulesRemoveExactlyTheirPixels) {
         ++missed;
         continue;
       }
-      if (segmentHitsBox(p, cam.projector_C, lo, hi)) {
+      if (test::segmentHitsBox(p, cam.projector_C, lo, hi)) {
         ++blocked;
         continue;
       }

@@ -4,17 +4,14 @@
 #include "inhand/geometry/builtin_objects.h"
 #include "inhand/scan/scan.h"
 #include "inhand/sim/sim_world.h"
+#include "test_util.h"
 
 using namespace inhand;
 namespace fs = std::filesystem;
 
 namespace {
 
-const RobotModel& wam() {
-  static RobotModel m =
-      RobotModel::load(fs::path(INHAND_SOURCE_DIR) / "data/robots/wam_barretthand.json");
-  return m;
-}
+using test::wam;
 
 // A fast configuration for tests: coarser voxels and candidate sets than the defaults.
 ScanOptions testOptions() {

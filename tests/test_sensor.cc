@@ -115,26 +115,6 @@ TEST(Render, OptimisedMatchesScalarReference) {
   EXPECT_GT(returns, 5000);
 }
 
-namespace {
-// Segment–box overlap by the slab method (independent of Embree).
-bool segmentHitsBox(const Vec3& a, const Vec3& b, const Vec3& lo, const Vec3& hi) {
-  double t0 = 0, t1 = 1;
-  Vec3 d = b - a;
-  for (int k = 0; k < 3; ++k) {
-    if (std::abs(d[k]) < 1e-15) {
-      if (a[k] < lo[k] || a[k] > hi[k]) return false;
-      continue;
-    }
-    double ta = (lo[k] - a[k]) / d[k], tb = (hi[k] - a[k]) / d[k];
-    if (ta > tb) std::swap(ta, tb);
-    t0 = std::max(t0, ta);
-    t1 = std::min(t1, tb);
-    if (t0 > t1) return false;
-  }
-  return true;
-}
-}  // namespace
-
 // A box in front of a wall casts a projector shadow on the wall: exactly the wall pixels whose
 // point the projector cannot see return nothing.
 TEST(Render, ProjectorShadowMatchesAnalyticOcclusion) {
@@ -152,14 +132,14 @@ TEST(Render, ProjectorShadowMatchesAnalyticOcclusion) {
   for (int v = 0; v < 480; v += 2)
     for (int u = 0; u < 640; u += 2) {
       Vec3 ray = cam.intrinsics.rayZ1(u, v);
-      if (segmentHitsBox(Vec3::Zero(), ray * 1.0, lo, hi)) continue;  // camera sees the box
+      if (test::segmentHitsBox(Vec3::Zero(), ray * 1.0, lo, hi)) continue;  // camera sees the box
       Vec3 wall = ray * 1.0;
       // Skip pixels within a pixel of the shadow edge (sub-pixel geometry decides).
-      bool inShadow = segmentHitsBox(wall, projector, lo, hi);
+      bool inShadow = test::segmentHitsBox(wall, projector, lo, hi);
       Vec3 wallR = cam.intrinsics.rayZ1(u + 1, v) * 1.0,
            wallL = cam.intrinsics.rayZ1(u - 1, v) * 1.0;
-      if (segmentHitsBox(wallR, projector, lo, hi) != inShadow ||
-          segmentHitsBox(wallL, projector, lo, hi) != inShadow)
+      if (test::segmentHitsBox(wallR, projector, lo, hi) != inShadow ||
+          test::segmentHitsBox(wallL, projector, lo, hi) != inShadow)
         continue;
       ++checked;
       shadowed += inShadow;

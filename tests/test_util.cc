@@ -43,4 +43,27 @@ std::vector<Iso3> viewsAround(int count, double range_m) {
   return poses;
 }
 
+bool segmentHitsBox(const Vec3& a, const Vec3& b, const Vec3& lo, const Vec3& hi) {
+  double t0 = 0, t1 = 1;
+  Vec3 d = b - a;
+  for (int k = 0; k < 3; ++k) {
+    if (std::abs(d[k]) < 1e-15) {
+      if (a[k] < lo[k] || a[k] > hi[k]) return false;
+      continue;
+    }
+    double ta = (lo[k] - a[k]) / d[k], tb = (hi[k] - a[k]) / d[k];
+    if (ta > tb) std::swap(ta, tb);
+    t0 = std::max(t0, ta);
+    t1 = std::min(t1, tb);
+    if (t0 > t1) return false;
+  }
+  return true;
+}
+
+const RobotModel& wam() {
+  static RobotModel m = RobotModel::load(std::filesystem::path(INHAND_SOURCE_DIR) /
+                                         "data/robots/wam_barretthand.json");
+  return m;
+}
+
 }  // namespace inhand::test

@@ -6,6 +6,7 @@
 
 #include "inhand/geometry/ray_scene.h"
 #include "inhand/mesh/extract.h"
+#include "inhand/robot/robot_model.h"
 #include "inhand/sensor/render.h"
 #include "inhand/volume/integrate.h"
 
@@ -28,5 +29,11 @@ void renderAndFuse(const TriangleMesh& mesh, const std::vector<Iso3>& poses, boo
 
 // Cameras on a sphere of `range` around the origin, looking at it.
 std::vector<Iso3> viewsAround(int count, double range_m);
+
+// Segment–box overlap by the slab method (independent of Embree).
+bool segmentHitsBox(const Vec3& a, const Vec3& b, const Vec3& lo, const Vec3& hi);
+
+// The paper's robot from data/robots (loaded once).
+const RobotModel& wam();
 
 }  // namespace inhand::test
