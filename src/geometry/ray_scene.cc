@@ -154,46 +154,6 @@ void loadPacket(const Ray* rays, size_t n, RTCRay8& r, int* valid) {
 }
 }  // namespace
 
-void RayScene::intersectStream(const Ray* rays, Hit* hits, size_t count, bool parallel) const {
-  INHAND_CHECK(committed_, "intersect before commit");
-  constexpr size_t kChunk = 64;
-  const int chunks = int((count + kChunk - 1) / kChunk);
-  auto chunk = [&](int c) {
-    size_t first = size_t(c) * kChunk, n = std::min(kChunk, count - first);
-    RTCRayHit rh[kChunk];
-    for (size_t k = 0; k < n; ++k) {
-      const Ray& ray = rays[first + k];
-      RTCRayHit& r = rh[k];
-      r.ray.org_x = ray.origin.x();
-      r.ray.org_y = ray.origin.y();
-      r.ray.org_z = ray.origin.z();
-      r.ray.dir_x = ray.dir.x();
-      r.ray.dir_y = ray.dir.y();
-      r.ray.dir_z = ray.dir.z();
-      r.ray.tnear = ray.tnear;
-      r.ray.tfar = ray.tfar;
-      r.ray.time = 0.f;
-      r.ray.mask = kAllMask;
-      r.ray.id = unsigned(k);
-      r.ray.flags = 0;
-      r.hit.geomID = RTC_INVALID_GEOMETRY_ID;
-      r.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
-    }
-    RTCIntersectContext ctx;
-    rtcInitIntersectContext(&ctx);
-    ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
-    rtcIntersect1M(scene_, &ctx, rh, unsigned(n), sizeof(RTCRayHit));
-    for (size_t k = 0; k < n; ++k)
-      hits[first + k] =
-          makeHit(rh[k].ray.tfar, rh[k].hit.geomID, rh[k].hit.instID[0], rh[k].hit.primID,
-                  rh[k].hit.u, rh[k].hit.v, Vec3f(rh[k].hit.Ng_x, rh[k].hit.Ng_y, rh[k].hit.Ng_z));
-  };
-  if (parallel)
-    parallelFor(0, chunks, chunk, 4);
-  else
-    for (int c = 0; c < chunks; ++c) chunk(c);
-}
-
 void RayScene::intersect(const Ray* rays, Hit* hits, size_t count, bool parallel) const {
   INHAND_CHECK(committed_, "intersect before commit");
   const int packets = int((count + kPacket - 1) / kPacket);

@@ -52,8 +52,6 @@ class RayScene {
   // Closest hit of each ray: packets of 8 consecutive rays, on both cores unless `parallel` is
   // false (for callers that already run one task per core).
   void intersect(const Ray* rays, Hit* hits, size_t count, bool parallel = true) const;
-  // Same result through Embree's coherent stream API (rtcIntersect1M, chunks of 64 rays).
-  void intersectStream(const Ray* rays, Hit* hits, size_t count, bool parallel = true) const;
   // blocked[i] = 1 when something lies on ray i within [tnear, tfar].
   void occluded(const Ray* rays, uint8_t* blocked, size_t count, bool parallel = true) const;
   // Scalar reference path (rtcIntersect1), one ray.
