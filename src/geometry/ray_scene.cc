@@ -7,6 +7,8 @@
 #include "inhand/core/error.h"
 #include "inhand/core/parallel.h"
 
+#include <tbb/task_arena.h>
+
 namespace inhand {
 
 namespace {

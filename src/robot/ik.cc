@@ -1,7 +1,6 @@
 #include "inhand/robot/ik.h"
 
-#include <tbb/enumerable_thread_specific.h>
-
+#include <kdl/chain.hpp>
 #include <kdl/chainfksolverpos_recursive.hpp>
 #include <kdl/chainiksolverpos_lma.hpp>
 #include <kdl/jntarray.hpp>
@@ -47,9 +46,12 @@ IkSolver::IkSolver(const RobotModel& model, const IkOptions& options)
   if (!p.empty()) throw Error("IK options: " + p);
   Eigen::Matrix<double, 6, 1> L;
   L << 1, 1, 1, 0.5, 0.5, 0.5;  // position (m) vs orientation (rad) weights
-  lma_ = std::make_unique<KDL::ChainIkSolverPos_LMA>(model.chain(), L, 1e-12,
-                                                     options.max_iterations, 1e-15);
-  fk_ = std::make_unique<KDL::ChainFkSolverPos_recursive>(model.chain());
+  // Our own copy of the chain: KDL's Joint::pose caches its last angle in mutable members, so a
+  // chain shared between threads is a data race (it made batch IK answers vary from run to run).
+  chain_ = std::make_unique<KDL::Chain>(model.chain());
+  lma_ =
+      std::make_unique<KDL::ChainIkSolverPos_LMA>(*chain_, L, 1e-12, options.max_iterations, 1e-15);
+  fk_ = std::make_unique<KDL::ChainFkSolverPos_recursive>(*chain_);
   lower_ = model.armLower();
   upper_ = model.armUpper();
 }
@@ -107,10 +109,12 @@ std::vector<std::optional<Eigen::VectorXd>> solveIkBatch(const RobotModel& model
                                                          const Eigen::VectorXd& seedArm,
                                                          uint64_t seed, const IkOptions& options) {
   std::vector<std::optional<Eigen::VectorXd>> out(targets.size());
-  tbb::enumerable_thread_specific<IkSolver> solvers([&] { return IkSolver(model, options); });
+  // A fresh solver per target: KDL's LMA solver also carries state from one CartToJnt call to the
+  // next, so reusing one per thread made answers depend on scheduling.
   parallelFor(0, int(targets.size()), [&](int i) {
     Rng rng = makeRng(seed, uint64_t(i));
-    out[i] = solvers.local().solve(targets[i], seedArm, &rng);
+    IkSolver solver(model, options);
+    out[i] = solver.solve(targets[i], seedArm, &rng);
   });
   return out;
 }

@@ -12,6 +12,7 @@
 #include "inhand/robot/robot_model.h"
 
 namespace KDL {
+class Chain;
 class ChainIkSolverPos_LMA;
 class ChainFkSolverPos_recursive;
 }  // namespace KDL
@@ -26,7 +27,8 @@ struct IkOptions {
   std::string validate() const;
 };
 
-// Not thread-safe (it owns KDL solver state): use one per thread. Cheap to construct.
+// Not thread-safe (it owns KDL solver state and its own copy of the chain): use one per thread.
+// Cheap to construct.
 class IkSolver {
  public:
   IkSolver(const RobotModel& model, const IkOptions& options = {});
@@ -43,6 +45,7 @@ class IkSolver {
   bool attempt(const Iso3& target, const Eigen::VectorXd& seed, Eigen::VectorXd* out);
   const RobotModel* model_;
   IkOptions options_;
+  std::unique_ptr<KDL::Chain> chain_;  // declared before the solvers that refer to it
   std::unique_ptr<KDL::ChainIkSolverPos_LMA> lma_;
   std::unique_ptr<KDL::ChainFkSolverPos_recursive> fk_;
   Eigen::VectorXd lower_, upper_;
