@@ -21,7 +21,8 @@ using namespace inhand;
 namespace {
 
 struct Scenario {
-  RobotModel model = RobotModel::load(std::string(INHAND_SOURCE_DIR) + "/data/robots/wam_barretthand.json");
+  RobotModel model =
+      RobotModel::load(std::string(INHAND_SOURCE_DIR) + "/data/robots/wam_barretthand.json");
   TriangleMesh object = loadObject("builtin:cracker_box");  // 60 × 158 × 210 mm
   Iso3 T_O_palm;
   JointVector q;
@@ -30,17 +31,36 @@ struct Scenario {
   Scenario() {
     // S_obj as the scan's Alg. 1 sees it after the initial trajectory (planning stride 2).
     std::tie(T_O_palm, q) = defaultGrasp(model, object);
-    SimWorld world(model, object, T_O_palm, DepthCameraOptions{}, NoiseModelOptions{}, SimOptions{});
+    SimWorld world(model, object, T_O_palm, DepthCameraOptions{}, NoiseModelOptions{},
+                   SimOptions{});
     world.q = q;
     SimRobot robot(&world);
     SimSensor sensor(&world, DepthCameraOptions{});
     ScanOptions o;
     o.max_views = 0;
-    ScanResult r = scanSingleGrasp(robot, sensor, T_O_palm, T_O_palm * Vec3(0, 0, model.graspOffset()), o,
-                                   NoiseModelOptions{});
+    ScanResult r =
+        scanSingleGrasp(robot, sensor, T_O_palm, T_O_palm * Vec3(0, 0, model.graspOffset()), o,
+                        NoiseModelOptions{});
     S_obj = r.planning_model;
     q = robot.joints();
     nearHand = std::make_shared<NearHandGrid>(HandGeometry(model, q, T_O_palm), 0.01, 0.002);
+    // 64 candidate views over the sphere, with the robot where it would be for each.
+    RobotOccluders occ(model);
+    ViewPlanner planner(model, DepthCameraOptions{}, NoiseModelOptions{}, ViewPlannerOptions{});
+    for (const Vec3& d : fibonacciSphere(64)) {
+      Iso3 T_O_C = cameraPoseInObject(S_obj.mesh.bounds().center(), d, 0.7, 0);
+      poses.push_back(T_O_C);
+      occluders.push_back(occ.at(q, planner.objectPoseFor(T_O_C, 0.7).inverse()));
+    }
+    robot_ = std::make_unique<RobotOccluders>(std::move(occ));
+  }
+  std::vector<Iso3> poses;
+  std::vector<std::vector<Occluder>> occluders;
+  std::unique_ptr<RobotOccluders> robot_;  // owns the link scenes the occluders point to
+  ViewQualityScene qualityScene() const {
+    ViewQualityScene vq(S_obj, DepthCameraOptions{}, NoiseModelOptions{}, ViewQualityOptions{});
+    vq.setNearHand(nearHand);
+    return vq;
   }
 };
 Scenario& scenario() {
@@ -52,18 +72,9 @@ Scenario& scenario() {
 // candidate per core at a time, as Alg. 1 runs them).
 void BM_ViewQuality(benchmark::State& state) {
   Scenario& s = scenario();
-  ViewQualityScene vq(s.S_obj, DepthCameraOptions{}, NoiseModelOptions{}, ViewQualityOptions{});
-  vq.setNearHand(s.nearHand);
-  RobotOccluders occ(s.model);
-  ViewPlanner planner(s.model, DepthCameraOptions{}, NoiseModelOptions{}, ViewPlannerOptions{});
-  std::vector<Iso3> poses;
-  std::vector<std::vector<Occluder>> occluders;
-  for (const Vec3& d : fibonacciSphere(64)) {
-    Iso3 T_O_C = cameraPoseInObject(s.S_obj.mesh.bounds().center(), d, 0.7, 0);
-    poses.push_back(T_O_C);
-    Iso3 T_B_O = planner.objectPoseFor(T_O_C, 0.7);
-    occluders.push_back(occ.at(s.q, T_B_O.inverse()));
-  }
+  ViewQualityScene vq = s.qualityScene();
+  const auto& poses = s.poses;
+  const auto& occluders = s.occluders;
   const int batch = 64;
   for (auto _ : state) {
     std::vector<double> q(batch);
@@ -78,23 +89,16 @@ BENCHMARK(BM_ViewQuality)->Unit(benchmark::kMillisecond)->UseRealTime();
 // The same evaluations on one core, with the per-pixel outcome counts.
 void BM_ViewQualityOneCore(benchmark::State& state) {
   Scenario& s = scenario();
-  ViewQualityScene vq(s.S_obj, DepthCameraOptions{}, NoiseModelOptions{}, ViewQualityOptions{});
-  vq.setNearHand(s.nearHand);
-  RobotOccluders occ(s.model);
-  ViewPlanner planner(s.model, DepthCameraOptions{}, NoiseModelOptions{}, ViewPlannerOptions{});
-  std::vector<Iso3> poses;
-  std::vector<std::vector<Occluder>> occluders;
-  for (const Vec3& d : fibonacciSphere(64)) {
-    Iso3 T_O_C = cameraPoseInObject(s.S_obj.mesh.bounds().center(), d, 0.7, 0);
-    poses.push_back(T_O_C);
-    occluders.push_back(occ.at(s.q, planner.objectPoseFor(T_O_C, 0.7).inverse()));
-  }
+  ViewQualityScene vq = s.qualityScene();
+  const auto& poses = s.poses;
+  const auto& occluders = s.occluders;
   size_t i = 0;
   double cast = 0, counted = 0;
   const bool withRobot = state.range(0) != 0;
   for (auto _ : state) {
     ViewQualityStats st;
-    benchmark::DoNotOptimize(vq.quality(poses[i], withRobot ? occluders[i] : std::vector<Occluder>{}, &st));
+    benchmark::DoNotOptimize(
+        vq.quality(poses[i], withRobot ? occluders[i] : std::vector<Occluder>{}, &st));
     cast += st.cast;
     counted += st.counted;
     i = (i + 1) % poses.size();
@@ -104,7 +108,6 @@ void BM_ViewQualityOneCore(benchmark::State& state) {
   state.counters["triangles"] = double(s.S_obj.mesh.triangles.size());
 }
 BENCHMARK(BM_ViewQualityOneCore)->Arg(1)->Arg(0)->Unit(benchmark::kMillisecond)->UseRealTime();
-
 
 void BM_ViewQualityReference(benchmark::State& state) {
   Scenario& s = scenario();

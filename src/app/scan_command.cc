@@ -11,7 +11,6 @@
 #include "inhand/core/pose.h"
 #include "inhand/geometry/builtin_objects.h"
 #include "inhand/geometry/mesh_io.h"
-#include "inhand/geometry/primitives.h"
 #include "inhand/scan/scan.h"
 #include "inhand/sim/sim_world.h"
 

@@ -13,6 +13,20 @@
 
 namespace inhand {
 
+namespace {
+// Collision checker with the held object as its current bounding box (the model changes every
+// pass, so a BVH of the model itself would be rebuilt each time).
+CollisionChecker heldObjectChecker(const RobotModel& model, const Aabb& box_O, const Iso3& T_O_palm,
+                                   bool enabled) {
+  CollisionChecker checker(model);
+  if (enabled)
+    checker.setHeldObject(
+        transformed(makeBox(box_O.size()), Iso3(Eigen::Translation3d(box_O.center()))),
+        T_O_palm.inverse());
+  return checker;
+}
+}  // namespace
+
 std::string ViewPlannerOptions::validate() const {
   if (directions < 1) return "directions must be >= 1";
   if (!(min_angle_deg >= 0 && min_angle_deg < 180)) return "min_angle_deg must be in [0, 180)";
@@ -55,11 +69,7 @@ std::vector<std::optional<ViewCandidate>> ViewPlanner::reach(const std::vector<V
   const Eigen::VectorXd current = model_->arm(grasp.q);
   IkOptions ik;
   ik.random_restarts = o.ik_restarts;
-  CollisionChecker checker(*model_);
-  if (o.check_collisions)  // the held object as its current bounding box
-    checker.setHeldObject(
-        transformed(makeBox(box.size()), Iso3(Eigen::Translation3d(box.center()))),
-        grasp.T_O_palm.inverse());
+  CollisionChecker checker = heldObjectChecker(*model_, box, grasp.T_O_palm, o.check_collisions);
   std::vector<std::optional<ViewCandidate>> chosen(dirs.size());
   std::vector<double> ranges{o.range_m};
   ranges.insert(ranges.end(), o.fallback_ranges_m.begin(), o.fallback_ranges_m.end());
@@ -133,12 +143,8 @@ ViewSelection ViewPlanner::select(const ObjectModel& S_obj, const GraspState& gr
   std::vector<std::optional<ViewCandidate>> chosen =
       reach(dirs, centre, S_obj.mesh.bounds(), grasp);
   out.ik_s = secs(tIk);
-  CollisionChecker checker(*model_);
-  if (o.check_collisions) {
-    Aabb b = S_obj.mesh.bounds();
-    checker.setHeldObject(transformed(makeBox(b.size()), Iso3(Eigen::Translation3d(b.center()))),
-                          grasp.T_O_palm.inverse());
-  }
+  CollisionChecker checker =
+      heldObjectChecker(*model_, S_obj.mesh.bounds(), grasp.T_O_palm, o.check_collisions);
 
   // Lines 11–14: quality and score of each reachable candidate, one candidate per core at a time.
   const auto tQ = Clock::now();

@@ -12,6 +12,7 @@
 #include "inhand/core/error.h"
 #include "inhand/core/file_util.h"
 #include "inhand/core/json_util.h"
+#include "inhand/core/pose.h"
 #include "inhand/geometry/mesh_io.h"
 #include "inhand/geometry/primitives.h"
 
@@ -86,16 +87,7 @@ std::optional<Iso3> CameraMount::aimAt(const Vec3& target_B) const {
   double pan = std::atan2(d.y(), d.x());
   double tilt = std::atan2(-d.z(), std::hypot(d.x(), d.y()));  // positive looks down
   if (pan < panMin || pan > panMax || tilt < tiltMin || tilt > tiltMax) return std::nullopt;
-  // Optical frame: z along d, x to the right (−y of the pan-tilt frame after panning).
-  Vec3 z = d.normalized();
-  Vec3 x = Vec3(std::sin(pan), -std::cos(pan), 0.0);
-  Vec3 y = z.cross(x);
-  Iso3 T = Iso3::Identity();
-  T.linear().col(0) = x;
-  T.linear().col(1) = y;
-  T.linear().col(2) = z;
-  T.translation() = panTilt_B;
-  return T;
+  return lookAt(panTilt_B, target_B, Vec3::UnitZ());  // optical frame, image x level
 }
 
 // ---- loading ------------------------------------------------------------------------------------

@@ -3,6 +3,11 @@
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
+#include <algorithm>
+#include <atomic>
+#include <thread>
+#include <vector>
+
 namespace inhand {
 
 // Calls fn(i) for i in [begin, end) on all cores, in chunks of at least `grain` items.
@@ -15,11 +20,6 @@ void parallelFor(int begin, int end, Fn&& fn, int grain = 1) {
 }
 
 }  // namespace inhand
-
-#include <algorithm>
-#include <atomic>
-#include <thread>
-#include <vector>
 
 namespace inhand {
 

@@ -94,7 +94,6 @@ class ViewQualityScene {
                           ViewQualityStats* stats = nullptr) const;
 
   const ObjectModel& model() const { return model_; }
-  Vec3 centre() const { return bounds_.center(); }
 
  private:
   RayScene buildScene(const std::vector<Occluder>& occluders) const;

@@ -59,7 +59,7 @@ struct ScanResult {
   std::vector<ViewRecord> views;
   std::string termination;  // no_view_above_threshold | max_views | no_reachable_view
   int view_evaluations = 0;
-  double planning_s = 0, fusion_s = 0, motion_frames = 0, total_s = 0;
+  double planning_s = 0, fusion_s = 0, total_s = 0;
   int frames = 0;
 };
 
