@@ -114,6 +114,7 @@ void readOptions(const fs::path& file, AllOptions* o) {
       q->num("max_incidence_deg", &v.quality.max_incidence_deg);
       q->num("max_projector_incidence_deg", &v.quality.max_projector_incidence_deg);
       q->num("near_hand_cell_m", &v.quality.near_hand_cell_m);
+      q->integer("pixel_stride", &v.quality.pixel_stride);
       q->finish();
     }
     p->finish();
@@ -160,7 +161,8 @@ Json optionsJson(const AllOptions& o) {
              {{"t_hand_m", v.quality.t_hand_m},
               {"max_incidence_deg", v.quality.max_incidence_deg},
               {"max_projector_incidence_deg", v.quality.max_projector_incidence_deg},
-              {"near_hand_cell_m", v.quality.near_hand_cell_m}}}}},
+              {"near_hand_cell_m", v.quality.near_hand_cell_m},
+              {"pixel_stride", v.quality.pixel_stride}}}}},
           {"mesh",
            {{"hole_sigma_m", o.scan.mesh.hole_sigma_m},
             {"drop_floating_unknown", o.scan.mesh.drop_floating_unknown},

@@ -126,8 +126,8 @@ Hit RayScene::makeHit(float t, unsigned geomID, unsigned instID, unsigned primID
   return h;
 }
 
-void RayScene::commit() {
-  rtcSetSceneBuildQuality(scene_, RTC_BUILD_QUALITY_MEDIUM);
+void RayScene::commit(bool high) {
+  rtcSetSceneBuildQuality(scene_, high ? RTC_BUILD_QUALITY_HIGH : RTC_BUILD_QUALITY_MEDIUM);
   rtcCommitScene(scene_);
   committed_ = true;
 }

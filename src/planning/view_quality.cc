@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <optional>
 
 #include "inhand/core/error.h"
 #include "inhand/core/parallel.h"
@@ -16,6 +17,7 @@ std::string ViewQualityOptions::validate() const {
   if (!(max_projector_incidence_deg > 0 && max_projector_incidence_deg < 90))
     return "max_projector_incidence_deg must be in (0, 90)";
   if (!(near_hand_cell_m > 0)) return "near_hand_cell_m must be > 0";
+  if (!(pixel_stride >= 1 && pixel_stride <= 16)) return "pixel_stride must be in [1, 16]";
   return {};
 }
 
@@ -100,12 +102,13 @@ ViewQualityScene::ViewQualityScene(const ObjectModel& model, const DepthCameraOp
   cosMaxProjector_ = std::cos(options.max_projector_incidence_deg * M_PI / 180);
   cosGrazing_ = std::cos(noise.grazing_start_deg * M_PI / 180);
   objectScene_.addMesh(model_.mesh);
-  objectScene_.commit();
+  objectScene_.commit(/*high=*/true);  // cast hundreds of times per Alg. 1 pass
 }
 
-RayScene ViewQualityScene::buildScene(const std::vector<Occluder>& occluders) const {
+RayScene ViewQualityScene::buildScene(const std::vector<Occluder>& occluders,
+                                      bool withObject) const {
   RayScene s;
-  s.addInstance(objectScene_, Iso3::Identity());  // geometry 0: S_obj
+  if (withObject) s.addInstance(objectScene_, Iso3::Identity());  // geometry 0: S_obj
   for (const Occluder& o : occluders) s.addInstance(*o.scene, o.T_O_scene);
   s.commit();
   return s;
@@ -190,29 +193,63 @@ double ViewQualityScene::quality(const Iso3& T_O_C, const std::vector<Occluder>&
     v1 = std::min(K.height - 1, int(std::ceil(vmax)) + 1);
     if (u0 > u1 || v0 > v1) return 0.0;
   }
-  RayScene scene = buildScene(occluders);
-  thread_local std::vector<Ray> rays, shadows;
+  // S_obj is cast on its own single-level BVH; the robot, a handful of instanced links, only
+  // for rays that hit S_obj (does a robot surface come first?) and for shadow rays that S_obj
+  // itself does not block.
+  std::optional<RayScene> robot;
+  if (!occluders.empty()) robot.emplace(buildScene(occluders, false));
+  thread_local std::vector<Ray> rays, shadows, toHit;
   thread_local std::vector<Hit> hits;
   thread_local std::vector<double> gains;
   thread_local std::vector<uint8_t> blocked;
+  thread_local std::vector<int> index;
   rays.clear();
   const Vec3f origin = T_O_C.translation().cast<float>();
   const Mat3 R = T_O_C.linear();
-  for (int ty = v0; ty <= v1; ty += 4)
-    for (int tx = u0; tx <= u1; tx += 4)
-      for (int v = ty; v < std::min(ty + 4, v1 + 1); ++v)
-        for (int u = tx; u < std::min(tx + 4, u1 + 1); ++u) {
+  // Samples on the image's stride grid (every pixel at stride 1), in coherent 4×4 tiles.
+  const int sp = options_.pixel_stride;
+  const int i0 = (u0 + sp - 1) / sp, i1 = u1 / sp, j0 = (v0 + sp - 1) / sp, j1 = v1 / sp;
+  for (int tj = j0; tj <= j1; tj += 4)
+    for (int ti = i0; ti <= i1; ti += 4)
+      for (int j = tj; j < std::min(tj + 4, j1 + 1); ++j)
+        for (int i = ti; i < std::min(ti + 4, i1 + 1); ++i) {
           Ray r;
           r.origin = origin;
-          r.dir = (R * K.rayZ1(u, v)).cast<float>();
+          r.dir = (R * K.rayZ1(i * sp, j * sp)).cast<float>();  // as the reference computes it
           rays.push_back(r);
         }
   st.cast = int(rays.size());
   hits.resize(rays.size());
-  scene.intersect(rays.data(), hits.data(), rays.size(), /*parallel=*/false);
+  objectScene_.intersect(rays.data(), hits.data(), rays.size(), /*parallel=*/false);
+  // Robot in front of the S_obj hit?
+  index.clear();
+  for (size_t i = 0; i < rays.size(); ++i) {
+    if (!hits[i].valid()) {
+      ++st.missed;
+      continue;
+    }
+    index.push_back(int(i));
+  }
+  if (robot) {
+    toHit.resize(index.size());
+    for (size_t j = 0; j < index.size(); ++j) {
+      toHit[j] = rays[index[j]];
+      toHit[j].tfar = hits[index[j]].t;
+    }
+    blocked.resize(toHit.size());
+    robot->occluded(toHit.data(), blocked.data(), toHit.size(), /*parallel=*/false);
+    size_t kept = 0;
+    for (size_t j = 0; j < index.size(); ++j) {
+      if (blocked[j])
+        ++st.robot_first;
+      else
+        index[kept++] = index[j];
+    }
+    index.resize(kept);
+  }
   shadows.clear();
   gains.clear();
-  for (size_t i = 0; i < rays.size(); ++i) {
+  for (int i : index) {
     Ray shadow;
     shadow.tfar = std::numeric_limits<float>::infinity();
     double g = pixelGain(hits[i], rays[i], T_O_C, &shadow, &st);
@@ -222,7 +259,20 @@ double ViewQualityScene::quality(const Iso3& T_O_C, const std::vector<Occluder>&
     }
   }
   blocked.resize(shadows.size());
-  scene.occluded(shadows.data(), blocked.data(), shadows.size(), /*parallel=*/false);
+  objectScene_.occluded(shadows.data(), blocked.data(), shadows.size(), /*parallel=*/false);
+  if (robot) {
+    toHit.clear();
+    index.clear();
+    for (size_t i = 0; i < shadows.size(); ++i)
+      if (!blocked[i]) {
+        toHit.push_back(shadows[i]);
+        index.push_back(int(i));
+      }
+    thread_local std::vector<uint8_t> robotBlocked;
+    robotBlocked.resize(toHit.size());
+    robot->occluded(toHit.data(), robotBlocked.data(), toHit.size(), /*parallel=*/false);
+    for (size_t j = 0; j < index.size(); ++j) blocked[index[j]] = robotBlocked[j];
+  }
   double G = 0;
   for (size_t i = 0; i < shadows.size(); ++i) {
     if (blocked[i]) {
@@ -232,7 +282,7 @@ double ViewQualityScene::quality(const Iso3& T_O_C, const std::vector<Occluder>&
     ++st.counted;
     G += gains[i];
   }
-  return G;
+  return G * double(sp) * double(sp);  // each sample stands for stride² pixels
 }
 
 double ViewQualityScene::qualityReference(const Iso3& T_O_C, const std::vector<Occluder>& occluders,
@@ -241,15 +291,18 @@ double ViewQualityScene::qualityReference(const Iso3& T_O_C, const std::vector<O
   ViewQualityStats& st = stats ? *stats : local;
   st = ViewQualityStats{};
   const CameraIntrinsics& K = camera_.intrinsics;
-  RayScene scene = buildScene(occluders);
+  RayScene scene = buildScene(occluders, true);
+  const int sp = options_.pixel_stride;
   double G = 0;
-  for (int v = 0; v < K.height; ++v)
-    for (int u = 0; u < K.width; ++u) {
+  for (int v = 0; v < K.height; v += sp)
+    for (int u = 0; u < K.width; u += sp) {
       Ray r;
       r.origin = T_O_C.translation().cast<float>();
       r.dir = (T_O_C.linear() * K.rayZ1(u, v)).cast<float>();
       ++st.cast;
       Hit h = scene.intersectOne(r);
+      if (h.valid() && h.geometry != 0 && !objectScene_.intersectOne(r).valid())
+        h = Hit{};  // the robot hides nothing of S_obj here: counts as a miss
       Ray shadow;
       shadow.tfar = std::numeric_limits<float>::infinity();
       double g = pixelGain(h, r, T_O_C, &shadow, &st);
@@ -261,7 +314,7 @@ double ViewQualityScene::qualityReference(const Iso3& T_O_C, const std::vector<O
       ++st.counted;
       G += g;
     }
-  return G;
+  return G * double(sp) * double(sp);
 }
 
 }  // namespace inhand

@@ -44,8 +44,9 @@ class RayScene {
   // Adds `inner` (committed; must outlive this scene) placed by T, without copying or rebuilding
   // its BVH (Embree instancing). Returns its geometry id; hits report inner's geometry in `inner`.
   int addInstance(const RayScene& inner, const Iso3& T);
-  // Builds the BVH. Must be called after the last addMesh and before any query.
-  void commit();
+  // Builds the BVH. Must be called after the last addMesh and before any query. `high` spends
+  // longer on the build (SAH with spatial splits) for faster queries: for scenes cast many times.
+  void commit(bool high = false);
   bool committed() const { return committed_; }
   int geometryCount() const { return geometryCount_; }
 

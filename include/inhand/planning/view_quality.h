@@ -25,14 +25,17 @@ struct ViewQualityOptions {
   double max_incidence_deg = 75.0;            // camera ray vs surface normal
   double max_projector_incidence_deg = 75.0;  // projector ray vs surface normal
   double near_hand_cell_m = 0.002;            // resolution of the precomputed near-hand grid, m
+  // 1: every pixel of the 640×480 map, as the paper. s > 1: every s-th pixel in u and v, each
+  // standing for s² pixels (the same surface integral, sampled s² times more coarsely).
+  int pixel_stride = 1;
   std::string validate() const;
 };
 
-// Per-pixel outcome counts of one evaluation (for tests and diagnostics).
+// Per-pixel outcome counts of one evaluation (for tests and diagnostics); samples at a stride.
 struct ViewQualityStats {
   int cast = 0;               // pixels whose ray was cast (inside the model's projected box)
-  int missed = 0;             // no S_obj and no robot surface hit
-  int robot_first = 0;        // a robot surface hit before S_obj (or instead of it)
+  int missed = 0;             // the ray misses S_obj (whatever else it hits)
+  int robot_first = 0;        // a robot surface hides the S_obj hit
   int near_hand = 0;          // S_obj hit within t_hand of the hand
   int too_oblique = 0;        // camera incidence too large
   int projector_oblique = 0;  // projector incidence too large
@@ -96,7 +99,8 @@ class ViewQualityScene {
   const ObjectModel& model() const { return model_; }
 
  private:
-  RayScene buildScene(const std::vector<Occluder>& occluders) const;
+  // The occluders as instances; with S_obj first (geometry 0) when `withObject`.
+  RayScene buildScene(const std::vector<Occluder>& occluders, bool withObject) const;
   // Per-pixel rule given the first hit; returns the gain or 0, and the shadow ray when the pixel
   // still needs the projector visibility test.
   double pixelGain(const Hit& hit, const Ray& ray, const Iso3& T_O_C, Ray* shadow,
