@@ -122,9 +122,11 @@ TEST(Cli, ScanWritesModelAndSummaryAndRejectsBadConfig) {
   test::TempDir dir;
   writeTextAtomically(
       dir.path() / "fast.json",
-      R"({"voxel_m": 0.003, "initial_views": 2, "planner": {"directions": 40, "rolls": 4}})");
+      R"({"voxel_m": 0.003, "initial_views": 2, "planner": {"directions": 40, "rolls": 4},
+          "grasp": {"approaches": 16, "rolls": 2, "max_candidates": 6,
+                    "ranking": {"directions": 24, "rolls": 2}}})");
   fs::path out = dir.path() / "scan";
-  Result r = run("scan --object builtin:coffee_can --max-views 1 --config " +
+  Result r = run("scan --object builtin:coffee_can --max-views 1 --max-grasps 2 --config " +
                      (dir.path() / "fast.json").string() + " --out " + out.string(),
                  dir);
   ASSERT_EQ(r.code, 0) << r.output;
@@ -137,6 +139,15 @@ TEST(Cli, ScanWritesModelAndSummaryAndRejectsBadConfig) {
   for (const char* key : {"quality", "cost_s", "score", "mean_entropy"})
     EXPECT_TRUE(s["views"][0].contains(key)) << key;
   EXPECT_EQ(s["options"]["planner"]["directions"].get<int>(), 40);
+  // Two grasps: the second chosen among ranked candidates, with its quality and stability.
+  ASSERT_EQ(s["grasps"].size(), 2u) << s.dump(2);
+  EXPECT_EQ(s["termination"], "max_grasps");
+  const Json& g2 = s["grasps"][1];
+  for (const char* key : {"candidates", "quality", "stability_epsilon", "views", "termination"})
+    EXPECT_TRUE(g2.contains(key)) << key;
+  EXPECT_GT(g2["candidates"].get<int>(), 0);
+  EXPECT_GE(g2["quality"].get<double>(), 0.005);
+  EXPECT_GT(g2["stability_epsilon"].get<double>(), 0.0);
   PlyData ply = readPly(out / "model.ply");
   EXPECT_EQ(ply.vertexProperties.count("variance"), 1u);
   // The model lies on the can (object frame = the mesh's own frame): Ø 102 × 139 mm about the
@@ -156,8 +167,9 @@ TEST(Cli, ScanWritesModelAndSummaryAndRejectsBadConfig) {
           dir);
   EXPECT_EQ(r.code, 1);
   EXPECT_NE(r.output.find("t_q"), std::string::npos) << r.output;
-  r = run("scan --object builtin:coffee_can --max-grasps 2 --out " + (dir.path() / "x").string(),
+  r = run("scan --object builtin:coffee_can --max-grasps 0 --out " + (dir.path() / "x").string(),
           dir);
   EXPECT_EQ(r.code, 1);
+  EXPECT_NE(r.output.find("max_grasps"), std::string::npos) << r.output;
   EXPECT_FALSE(fs::exists(dir.path() / "x"));
 }

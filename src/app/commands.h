@@ -52,7 +52,7 @@ struct ScanArgs {
   std::string out;        // output directory (new or empty)
   std::string robot;      // robot config (default: the WAM + BarrettHand in data/robots)
   std::string config;     // JSON of scan options (optional)
-  int max_grasps = 1;     // only 1 is implemented (re-grasping is issue #5)
+  int max_grasps = -1;    // grasps at most; -1: the config's (default 3)
   int max_views = -1;     // overrides the config when >= 0
   std::string hand_mode;  // overrides the config when set: naive | carve | carve-empty
   uint64_t seed = 1;      // sensor noise and IK restarts

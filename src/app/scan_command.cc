@@ -1,4 +1,4 @@
-// `inhand scan`: the single-grasp autonomous scan of a simulated object.
+// `inhand scan`: the autonomous (multi-grasp) scan of a simulated object.
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
@@ -11,7 +11,7 @@
 #include "inhand/core/pose.h"
 #include "inhand/geometry/builtin_objects.h"
 #include "inhand/geometry/mesh_io.h"
-#include "inhand/scan/scan.h"
+#include "inhand/scan/multi_grasp.h"
 #include "inhand/sim/sim_world.h"
 
 namespace inhand::app {
@@ -78,9 +78,53 @@ class OptionReader {
 
 struct AllOptions {
   ScanOptions scan;
+  MultiGraspOptions multi;
   SimOptions sim;
   std::string robot;
 };
+
+void readPlanner(OptionReader& p, ViewPlannerOptions* v) {
+  p.integer("directions", &v->directions);
+  p.num("min_angle_deg", &v->min_angle_deg);
+  p.num("range_m", &v->range_m);
+  p.numbers("fallback_ranges_m", &v->fallback_ranges_m);
+  p.integer("rolls", &v->rolls);
+  p.num("alpha_cost", &v->alpha_cost);
+  p.num("t_q", &v->t_q);
+  p.boolean("use_cost", &v->use_cost);
+  p.boolean("hand_occlusion", &v->hand_occlusion);
+  p.boolean("check_collisions", &v->check_collisions);
+  p.integer("ik_restarts", &v->ik_restarts);
+  if (auto q = p.object("quality")) {
+    q->num("t_hand_m", &v->quality.t_hand_m);
+    q->num("max_incidence_deg", &v->quality.max_incidence_deg);
+    q->num("max_projector_incidence_deg", &v->quality.max_projector_incidence_deg);
+    q->num("near_hand_cell_m", &v->quality.near_hand_cell_m);
+    q->integer("pixel_stride", &v->quality.pixel_stride);
+    q->finish();
+  }
+  p.finish();
+}
+
+Json plannerJson(const ViewPlannerOptions& v) {
+  return {{"directions", v.directions},
+          {"min_angle_deg", v.min_angle_deg},
+          {"range_m", v.range_m},
+          {"fallback_ranges_m", v.fallback_ranges_m},
+          {"rolls", v.rolls},
+          {"alpha_cost", v.alpha_cost},
+          {"t_q", v.t_q},
+          {"use_cost", v.use_cost},
+          {"hand_occlusion", v.hand_occlusion},
+          {"check_collisions", v.check_collisions},
+          {"ik_restarts", v.ik_restarts},
+          {"quality",
+           {{"t_hand_m", v.quality.t_hand_m},
+            {"max_incidence_deg", v.quality.max_incidence_deg},
+            {"max_projector_incidence_deg", v.quality.max_projector_incidence_deg},
+            {"near_hand_cell_m", v.quality.near_hand_cell_m},
+            {"pixel_stride", v.quality.pixel_stride}}}};
+}
 
 void readOptions(const fs::path& file, AllOptions* o) {
   Json j = readJsonFile(file);
@@ -96,28 +140,24 @@ void readOptions(const fs::path& file, AllOptions* o) {
   r.integer("initial_views", &o->scan.initial_views);
   r.integer("max_views", &o->scan.max_views);
   r.integer("planning_stride", &o->scan.planning_stride);
-  if (auto p = r.object("planner")) {
-    ViewPlannerOptions& v = o->scan.planner;
-    p->integer("directions", &v.directions);
-    p->num("min_angle_deg", &v.min_angle_deg);
-    p->num("range_m", &v.range_m);
-    p->numbers("fallback_ranges_m", &v.fallback_ranges_m);
-    p->integer("rolls", &v.rolls);
-    p->num("alpha_cost", &v.alpha_cost);
-    p->num("t_q", &v.t_q);
-    p->boolean("use_cost", &v.use_cost);
-    p->boolean("hand_occlusion", &v.hand_occlusion);
-    p->boolean("check_collisions", &v.check_collisions);
-    p->integer("ik_restarts", &v.ik_restarts);
-    if (auto q = p->object("quality")) {
-      q->num("t_hand_m", &v.quality.t_hand_m);
-      q->num("max_incidence_deg", &v.quality.max_incidence_deg);
-      q->num("max_projector_incidence_deg", &v.quality.max_projector_incidence_deg);
-      q->num("near_hand_cell_m", &v.quality.near_hand_cell_m);
-      q->integer("pixel_stride", &v.quality.pixel_stride);
-      q->finish();
-    }
-    p->finish();
+  if (auto p = r.object("planner")) readPlanner(*p, &o->scan.planner);
+  r.integer("max_grasps", &o->multi.max_grasps);
+  if (auto g = r.object("grasp")) {
+    GraspOptions& v = o->multi.grasp;
+    g->integer("approaches", &v.approaches);
+    g->integer("rolls", &v.rolls);
+    g->numbers("spreads", &v.spreads);
+    g->num("friction", &v.friction);
+    g->integer("cone_edges", &v.cone_edges);
+    g->integer("wrench_directions", &v.wrench_directions);
+    g->num("contact_m", &v.contact_m);
+    g->num("contact_cell_m", &v.contact_cell_m);
+    g->num("min_epsilon", &v.min_epsilon);
+    g->num("stability_weight", &v.stability_weight);
+    g->integer("max_candidates", &v.max_candidates);
+    g->num("lift_m", &v.lift_m);
+    if (auto p = g->object("ranking")) readPlanner(*p, &o->multi.ranking);
+    g->finish();
   }
   if (auto mo = r.object("mesh")) {
     mo->num("hole_sigma_m", &o->scan.mesh.hole_sigma_m);
@@ -137,6 +177,7 @@ void readOptions(const fs::path& file, AllOptions* o) {
 
 Json optionsJson(const AllOptions& o) {
   const ViewPlannerOptions& v = o.scan.planner;
+  const GraspOptions& g = o.multi.grasp;
   return {{"robot", o.robot},
           {"voxel_m", o.scan.voxel_m},
           {"volume_size_m", o.scan.volume_size_m},
@@ -145,24 +186,22 @@ Json optionsJson(const AllOptions& o) {
           {"initial_views", o.scan.initial_views},
           {"max_views", o.scan.max_views},
           {"planning_stride", o.scan.planning_stride},
-          {"planner",
-           {{"directions", v.directions},
-            {"min_angle_deg", v.min_angle_deg},
-            {"range_m", v.range_m},
-            {"fallback_ranges_m", v.fallback_ranges_m},
-            {"rolls", v.rolls},
-            {"alpha_cost", v.alpha_cost},
-            {"t_q", v.t_q},
-            {"use_cost", v.use_cost},
-            {"hand_occlusion", v.hand_occlusion},
-            {"check_collisions", v.check_collisions},
-            {"ik_restarts", v.ik_restarts},
-            {"quality",
-             {{"t_hand_m", v.quality.t_hand_m},
-              {"max_incidence_deg", v.quality.max_incidence_deg},
-              {"max_projector_incidence_deg", v.quality.max_projector_incidence_deg},
-              {"near_hand_cell_m", v.quality.near_hand_cell_m},
-              {"pixel_stride", v.quality.pixel_stride}}}}},
+          {"planner", plannerJson(v)},
+          {"max_grasps", o.multi.max_grasps},
+          {"grasp",
+           {{"approaches", g.approaches},
+            {"rolls", g.rolls},
+            {"spreads", g.spreads},
+            {"friction", g.friction},
+            {"cone_edges", g.cone_edges},
+            {"wrench_directions", g.wrench_directions},
+            {"contact_m", g.contact_m},
+            {"contact_cell_m", g.contact_cell_m},
+            {"min_epsilon", g.min_epsilon},
+            {"stability_weight", g.stability_weight},
+            {"max_candidates", g.max_candidates},
+            {"lift_m", g.lift_m},
+            {"ranking", plannerJson(o.multi.ranking)}}},
           {"mesh",
            {{"hole_sigma_m", o.scan.mesh.hole_sigma_m},
             {"drop_floating_unknown", o.scan.mesh.drop_floating_unknown},
@@ -178,21 +217,19 @@ Json optionsJson(const AllOptions& o) {
 
 int runScan(const ScanArgs& args) {
   const auto t0 = std::chrono::steady_clock::now();
-  if (args.max_grasps != 1)
-    throw Error(
-        "--max-grasps: only single-grasp scans (1) are implemented so far; re-grasping "
-        "is not built yet");
   AllOptions o;
   o.robot = args.robot;
   if (!args.config.empty()) readOptions(args.config, &o);
   if (!args.robot.empty()) o.robot = args.robot;
   if (o.robot.empty()) o.robot = INHAND_DATA_DIR "/robots/wam_barretthand.json";
   if (args.max_views >= 0) o.scan.max_views = args.max_views;
+  if (args.max_grasps != -1) o.multi.max_grasps = args.max_grasps;
   if (!args.hand_mode.empty() && !parseHandMode(args.hand_mode, &o.scan.hand_mode))
     throw Error("--hand-mode: must be naive, carve or carve-empty");
   o.scan.planner.seed = args.seed;
   o.sim.seed = args.seed;
   if (std::string p = o.scan.validate(); !p.empty()) throw Error("scan options: " + p);
+  if (std::string p = o.multi.validate(); !p.empty()) throw Error("scan options: " + p);
   if (std::string p = o.sim.validate(); !p.empty()) throw Error("simulation options: " + p);
 
   RobotModel model = RobotModel::load(o.robot);
@@ -215,7 +252,9 @@ int runScan(const ScanArgs& args) {
   // The volume is centred where the robot expects a held object: grasp_offset_m in front of the
   // palm (from the robot config; the scan is not told the object's shape or size).
   const Vec3 expected = T_O_palm * Vec3(0, 0, model.graspOffset());
-  ScanResult r = scanSingleGrasp(robot, sensor, T_O_palm, expected, o.scan, noise, progress);
+  MultiGraspResult mr = scanMultiGrasp(robot, sensor, T_O_palm, expected, world.restPose(), o.scan,
+                                       o.multi, noise, progress);
+  const ScanResult& r = mr.scan;
 
   writePly(out.path() / "model.ply", r.model.mesh, &r.model.variance);
   Json views = Json::array();
@@ -236,9 +275,20 @@ int runScan(const ScanArgs& args) {
   summary["seed"] = args.seed;
   summary["termination"] = r.termination;
   summary["views"] = views;
-  summary["grasps"] = Json::array({{{"T_O_palm", poseToRowMajor(T_O_palm)},
-                                    {"views", r.views.size()},
-                                    {"termination", r.termination}}});
+  Json grasps = Json::array();
+  for (const GraspRecord& g : mr.grasps)
+    grasps.push_back({{"T_O_palm", poseToRowMajor(g.T_O_palm)},
+                      {"candidates", g.candidates},
+                      {"poses_tried", g.tried},
+                      {"quality", g.quality},
+                      {"stability_epsilon", g.epsilon},
+                      {"views", g.views},
+                      {"termination", g.termination},
+                      {"unknown_area_m2", g.hole_area_m2},
+                      {"mean_entropy", g.mean_entropy},
+                      {"generation_s", g.generation_s},
+                      {"ranking_s", g.ranking_s}});
+  summary["grasps"] = grasps;
   summary["view_evaluations"] = r.view_evaluations;
   summary["view_evaluations_per_s"] = r.planning_s > 0 ? r.view_evaluations / r.planning_s : 0.0;
   summary["frames"] = r.frames;
@@ -249,16 +299,29 @@ int runScan(const ScanArgs& args) {
   summary["timing_s"] = {
       {"total", std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count()},
       {"planning", r.planning_s},
-      {"fusion", r.fusion_s}};
+      {"fusion", r.fusion_s},
+      {"grasp_generation",
+       [&] {
+         double t = 0;
+         for (const GraspRecord& g : mr.grasps) t += g.generation_s;
+         return t;
+       }()},
+      {"grasp_ranking", [&] {
+         double t = 0;
+         for (const GraspRecord& g : mr.grasps) t += g.ranking_s;
+         return t;
+       }()}};
   summary["options"] = optionsJson(o);
   writeTextAtomically(out.path() / "summary.json", summary.dump(2) + "\n");
   out.commit();
   std::printf(
-      "scan: %s: %zu views, %d frames, %s; observed %.1f%% of the surface, mean entropy %.3f "
-      "(%.1f s) -> %s\n",
-      args.object.c_str(), r.views.size(), r.frames, r.termination.c_str(),
+      "scan: %s: %zu grasps, %zu views, %d frames, %s; observed %.1f%% of the surface, mean "
+      "entropy %.3f (%.1f s) -> %s\n",
+      args.object.c_str(), mr.grasps.size(), r.views.size(), r.frames, r.termination.c_str(),
       100 * r.model.observedAreaFraction(), r.model.meanEntropy(), r.total_s, args.out.c_str());
-  return r.termination == "no_reachable_view" ? 3 : 0;
+  if (r.termination == "no_reachable_view") return 3;
+  if (r.termination == "no_reachable_grasp" || r.termination == "pick_up_failed") return 4;
+  return 0;
 }
 
 }  // namespace inhand::app

@@ -37,18 +37,39 @@ Iso3 cameraPoseInObject(const Vec3& centre_O, const Vec3& dir_O, double range_m,
 
 // ---- near-hand grid -----------------------------------------------------------------------------
 
-NearHandGrid::NearHandGrid(const HandGeometry& hand, double t_hand, double cell) : cell_(cell) {
+NearHandGrid::NearHandGrid(const HandGeometry& hand, double t_hand, double cell, const Aabb* region)
+    : cell_(cell) {
   Aabb box = hand.mesh().bounds();
-  origin_ = box.min - Vec3::Constant(t_hand + cell);
-  Vec3 extent = box.size() + Vec3::Constant(2 * (t_hand + cell));
+  box.min -= Vec3::Constant(t_hand + cell);
+  box.max += Vec3::Constant(t_hand + cell);
+  if (region) {
+    box.min = box.min.cwiseMax(region->min - Vec3::Constant(cell));
+    box.max = box.max.cwiseMin(region->max + Vec3::Constant(cell));
+    if (box.empty()) return;  // no cell: nothing of the region is near the hand
+  }
+  origin_ = box.min;
+  Vec3 extent = box.size();
   dims_ = Vec3i(int(std::ceil(extent.x() / cell)) + 1, int(std::ceil(extent.y() / cell)) + 1,
                 int(std::ceil(extent.z() / cell)) + 1);
   flags_.assign(size_t(dims_.prod()), 0);
-  parallelFor(0, dims_.z(), [&](int z) {
-    for (int y = 0; y < dims_.y(); ++y)
-      for (int x = 0; x < dims_.x(); ++x)
-        flags_[(size_t(z) * dims_.y() + y) * dims_.x() + x] =
-            hand.distance(origin_ + cell_ * Vec3(x, y, z)) < t_hand;
+  // Blocks of B³ cells: the distance is 1-Lipschitz, so a block whose centre lies farther than
+  // t_hand + its half-diagonal from the hand holds no near cell and is skipped whole.
+  constexpr int B = 8;
+  const Vec3i blocks = (dims_.array() + B - 1) / B;
+  const double halfDiagonal = 0.5 * std::sqrt(3.0) * (B - 1) * cell_;
+  parallelFor(0, blocks.z(), [&](int bz) {
+    for (int by = 0; by < blocks.y(); ++by)
+      for (int bx = 0; bx < blocks.x(); ++bx) {
+        const Vec3i lo(bx * B, by * B, bz * B);
+        const Vec3i hi = (lo.array() + B).min(dims_.array()) - 1;
+        const Vec3 centre = origin_ + cell_ * 0.5 * (lo + hi).cast<double>();
+        if (hand.distance(centre) > t_hand + halfDiagonal) continue;
+        for (int z = lo.z(); z <= hi.z(); ++z)
+          for (int y = lo.y(); y <= hi.y(); ++y)
+            for (int x = lo.x(); x <= hi.x(); ++x)
+              flags_[(size_t(z) * dims_.y() + y) * dims_.x() + x] =
+                  hand.distance(origin_ + cell_ * Vec3(x, y, z)) < t_hand;
+      }
   });
 }
 

@@ -111,9 +111,22 @@ std::vector<std::optional<ViewCandidate>> ViewPlanner::reach(const std::vector<V
   return chosen;
 }
 
+ViewQualityScene ViewPlanner::qualityScene(const ObjectModel& S_obj) const {
+  return ViewQualityScene(S_obj, camera_, noise_, options_.quality);
+}
+
 ViewSelection ViewPlanner::select(const ObjectModel& S_obj, const GraspState& grasp,
                                   const std::vector<Vec3>& used,
                                   std::shared_ptr<const NearHandGrid> nearHand) const {
+  if (S_obj.mesh.empty()) return ViewSelection{};
+  ViewQualityScene scene = qualityScene(S_obj);
+  return select(scene, grasp, used, std::move(nearHand));
+}
+
+ViewSelection ViewPlanner::select(ViewQualityScene& scene, const GraspState& grasp,
+                                  const std::vector<Vec3>& used,
+                                  std::shared_ptr<const NearHandGrid> nearHand) const {
+  const ObjectModel& S_obj = scene.model();
   using Clock = std::chrono::steady_clock;
   auto secs = [](Clock::time_point t) {
     return std::chrono::duration<double>(Clock::now() - t).count();
@@ -148,7 +161,6 @@ ViewSelection ViewPlanner::select(const ObjectModel& S_obj, const GraspState& gr
 
   // Lines 11–14: quality and score of each reachable candidate, one candidate per core at a time.
   const auto tQ = Clock::now();
-  ViewQualityScene scene(S_obj, camera_, noise_, o.quality);
   scene.setNearHand(std::move(nearHand));
   std::vector<size_t> reachable;
   for (size_t k = 0; k < chosen.size(); ++k)

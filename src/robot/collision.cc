@@ -192,21 +192,38 @@ double HandGeometry::distance(const Vec3& p_F) const {
   return best;
 }
 
-ClosingResult closeFingers(const RobotModel& model, const JointVector& qIn, const Iso3& T_O_palm,
-                           const TriangleMesh& object_O, double step, double tolerance) {
-  INHAND_CHECK(step > 0 && tolerance > 0, "closing step and tolerance must be positive");
-  GeomPtr object = bvhOf(object_O);
-  const Iso3 I = Iso3::Identity();
+struct FingerCloser::Geometry {
+  GeomPtr object;
+  std::map<std::pair<int, int>, GeomPtr> fingerMesh;
+};
+
+FingerCloser::FingerCloser(const RobotModel& model, const TriangleMesh& object_O) : model_(&model) {
+  auto g = std::make_shared<Geometry>();
+  g->object = bvhOf(object_O);
   // Finger links as triangle meshes: mesh–mesh checks are exact triangle–triangle tests, while
   // FCL's primitive–mesh path (GJK) can miss penetrations of a fraction of a millimetre, which
   // would let the bisection stop slightly inside the object.
-  std::map<std::pair<int, int>, GeomPtr> fingerMesh;
   for (const FingerInfo& f : model.fingers())
     for (int li : f.links)
       for (int k = 0; k < int(model.links()[li].collision.size()); ++k) {
         const Primitive& p = model.links()[li].collision[k];
-        fingerMesh[{li, k}] = bvhOf(transformed(p.toMesh(), p.T_link_geom.inverse()));
+        g->fingerMesh[{li, k}] = bvhOf(transformed(p.toMesh(), p.T_link_geom.inverse()));
       }
+  geometry_ = std::move(g);
+}
+
+ClosingResult closeFingers(const RobotModel& model, const JointVector& qIn, const Iso3& T_O_palm,
+                           const TriangleMesh& object_O, double step, double tolerance) {
+  return FingerCloser(model, object_O).close(qIn, T_O_palm, step, tolerance);
+}
+
+ClosingResult FingerCloser::close(const JointVector& qIn, const Iso3& T_O_palm, double step,
+                                  double tolerance) const {
+  INHAND_CHECK(step > 0 && tolerance > 0, "closing step and tolerance must be positive");
+  const RobotModel& model = *model_;
+  const GeomPtr& object = geometry_->object;
+  const auto& fingerMesh = geometry_->fingerMesh;
+  const Iso3 I = Iso3::Identity();
   ClosingResult result;
   result.q = qIn;
   for (const FingerInfo& f : model.fingers()) {

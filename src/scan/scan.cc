@@ -1,6 +1,7 @@
 #include "inhand/scan/scan.h"
 
 #include <chrono>
+#include <optional>
 
 #include "inhand/core/error.h"
 #include "inhand/core/parallel.h"
@@ -53,9 +54,19 @@ double secondsSince(Clock::time_point t) {
 }
 }  // namespace
 
+TsdfVolume makeScanVolume(const Vec3& centre_O, const ScanOptions& options) {
+  Aabb box;
+  box.extend(centre_O - Vec3::Constant(0.5 * options.volume_size_m));
+  box.extend(centre_O + Vec3::Constant(0.5 * options.volume_size_m));
+  VolumeOptions vo = options.volume_budget;
+  vo.voxel_size_m = options.voxel_m;
+  return TsdfVolume(box, vo);
+}
+
 ScanResult scanSingleGrasp(RobotInterface& robot, DepthSensor& sensor, const Iso3& T_O_palm,
                            const Vec3& centre_O, const ScanOptions& options,
-                           const NoiseModelOptions& noise, const ScanProgress& progress) {
+                           const NoiseModelOptions& noise, const ScanProgress& progress,
+                           TsdfVolume* sharedVolume) {
   const auto t0 = Clock::now();
   std::string problem = options.validate();
   if (!problem.empty()) throw Error("scan options: " + problem);
@@ -66,12 +77,9 @@ ScanResult scanSingleGrasp(RobotInterface& robot, DepthSensor& sensor, const Iso
   const CameraIntrinsics& K = sensor.camera().intrinsics;
   ScanResult result;
 
-  Aabb box;
-  box.extend(centre_O - Vec3::Constant(0.5 * options.volume_size_m));
-  box.extend(centre_O + Vec3::Constant(0.5 * options.volume_size_m));
-  VolumeOptions vo = options.volume_budget;
-  vo.voxel_size_m = options.voxel_m;
-  TsdfVolume volume(box, vo);
+  std::optional<TsdfVolume> ownVolume;
+  if (!sharedVolume) ownVolume.emplace(makeScanVolume(centre_O, options));
+  TsdfVolume& volume = sharedVolume ? *sharedVolume : *ownVolume;
 
   ViewPlanner planner(m, sensor.camera(), noise, options.planner);
   sensor.setPose(planner.cameraPose(options.planner.range_m));

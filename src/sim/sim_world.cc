@@ -30,13 +30,40 @@ SimWorld::SimWorld(const RobotModel& model, const TriangleMesh& object_O, const 
       robot_(model) {
   std::string p = options.validate();
   if (!p.empty()) throw Error("simulation options: " + p);
+  objectMesh_ = object_O;
   object_.addMesh(object_O);
   object_.commit();
+  objectMinZ_ = object_O.bounds().min.z();
   if (options.room_radius_m > 0) room_.addMesh(makeSphere(options.room_radius_m, 3));
   room_.commit();
 }
 
-Iso3 SimWorld::objectPose() const { return model_->tipPose(q) * T_O_palm.inverse(); }
+Iso3 SimWorld::objectPose() const {
+  return held ? model_->tipPose(q) * T_O_palm.inverse() : restPose();
+}
+
+Iso3 SimWorld::restPose() const {
+  const TableInfo& t = model_->table();
+  const Vec3 at = model_->camera().lookAt_B;
+  return Iso3(
+      Eigen::Translation3d(at.x(), at.y(), t.center_B.z() + 0.5 * t.size.z() - objectMinZ_));
+}
+
+bool SimRobot::putDown() {
+  world_->held = false;
+  return true;
+}
+
+bool SimRobot::pickUp(const Iso3& T_O_palm, const JointVector& q) {
+  // The real fingers close on the real object (the planner closed them on its model).
+  JointVector open = q;
+  for (const FingerInfo& f : world_->model().fingers()) open[f.variable] = f.open;
+  world_->model().applyCouplings(&open);
+  world_->T_O_palm = T_O_palm;
+  world_->q = closeFingers(world_->model(), open, T_O_palm, world_->objectMesh()).q;
+  world_->held = true;
+  return true;
+}
 
 DepthImage SimWorld::render() {
   RayScene scene;

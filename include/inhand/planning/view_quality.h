@@ -47,7 +47,10 @@ struct ViewQualityStats {
 class NearHandGrid {
  public:
   NearHandGrid() = default;
-  NearHandGrid(const HandGeometry& hand_O, double t_hand_m, double cell_m);
+  // Cells within t_hand of the hand, over the hand's bounds (intersected with `region_O` when
+  // given: only points of S_obj are ever looked up, so its bounds suffice).
+  NearHandGrid(const HandGeometry& hand_O, double t_hand_m, double cell_m,
+               const Aabb* region_O = nullptr);
   bool near(const Vec3& p_O) const;
 
  private:

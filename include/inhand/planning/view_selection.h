@@ -81,6 +81,15 @@ class ViewPlanner {
                        const std::vector<Vec3>& used_dirs_O,
                        std::shared_ptr<const NearHandGrid> near_hand) const;
 
+  // The same with S_obj already prepared (its BVH built once for many passes, e.g. one per
+  // grasp candidate); `scene` must have been made with this planner's camera, noise and quality
+  // options. Its near-hand grid is replaced by `near_hand`.
+  ViewSelection select(ViewQualityScene& scene, const GraspState& grasp,
+                       const std::vector<Vec3>& used_dirs_O,
+                       std::shared_ptr<const NearHandGrid> near_hand) const;
+  // A ViewQualityScene of S_obj for this planner.
+  ViewQualityScene qualityScene(const ObjectModel& S_obj) const;
+
   const ViewPlannerOptions& options() const { return options_; }
   const RobotModel& model() const { return *model_; }
 

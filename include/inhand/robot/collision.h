@@ -68,4 +68,18 @@ ClosingResult closeFingers(const RobotModel& model, const JointVector& q, const 
                            const TriangleMesh& object_O, double step = 0.02,
                            double tolerance = 1e-4);
 
+// The same with the object's and fingers' collision structures built once, for many grasps on
+// one object; close() is const and thread-safe.
+class FingerCloser {
+ public:
+  FingerCloser(const RobotModel& model, const TriangleMesh& object_O);
+  ClosingResult close(const JointVector& q, const Iso3& T_O_palm, double step = 0.02,
+                      double tolerance = 1e-4) const;
+
+ private:
+  struct Geometry;
+  const RobotModel* model_;
+  std::shared_ptr<const Geometry> geometry_;
+};
+
 }  // namespace inhand

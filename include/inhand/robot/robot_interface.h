@@ -18,6 +18,13 @@ class RobotInterface {
   // with the reported joints at each sensor frame time along the way (and once at the end).
   virtual void execute(const std::vector<JointVector>& waypoints,
                        const std::function<void(const JointVector&)>& on_state) = 0;
+
+  // Re-grasping (§IV). putDown: returns the held object to its resting pose on the table and
+  // lets go. pickUp: grasps it there with the palm at T_O_palm and the joints q (the arm at the
+  // pick configuration, fingers closed to contact), and holds it. A driver that cannot re-grasp
+  // returns false (the scan then ends after its first grasp).
+  virtual bool putDown() { return false; }
+  virtual bool pickUp(const Iso3& /*T_O_palm*/, const JointVector& /*q*/) { return false; }
 };
 
 }  // namespace inhand

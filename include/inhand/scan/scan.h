@@ -65,8 +65,14 @@ struct ScanResult {
 
 // Scans with the object held at T_O_palm (palm pose in the object frame); the robot must be
 // holding it already. `centre_O` is where the volume is centred (the object's expected centre).
+// With `volume` the views are fused into it (a model kept across grasps, in frame O); without,
+// into a new volume of options.volume_size_m around centre_O.
 ScanResult scanSingleGrasp(RobotInterface& robot, DepthSensor& sensor, const Iso3& T_O_palm,
                            const Vec3& centre_O, const ScanOptions& options,
-                           const NoiseModelOptions& noise, const ScanProgress& progress = {});
+                           const NoiseModelOptions& noise, const ScanProgress& progress = {},
+                           TsdfVolume* volume = nullptr);
+
+// The volume a scan centred at centre_O uses.
+TsdfVolume makeScanVolume(const Vec3& centre_O, const ScanOptions& options);
 
 }  // namespace inhand

@@ -37,6 +37,11 @@ class SimWorld {
   // Depth image at the current state, seeded by the frame counter.
   DepthImage render();
   Iso3 objectPose() const;  // T_B_O at the current state
+  bool held = true;         // false: the object rests on the table at restPose()
+  const TriangleMesh& objectMesh() const { return objectMesh_; }
+  // Where the object rests on the table: upright as given, its lowest point on the table top,
+  // under the presentation point.
+  Iso3 restPose() const;
 
  private:
   const RobotModel* model_;
@@ -45,6 +50,8 @@ class SimWorld {
   SimOptions options_;
   RayScene object_, room_;
   RobotOccluders robot_;
+  double objectMinZ_ = 0;
+  TriangleMesh objectMesh_;
   uint64_t frame_ = 0;
 };
 
@@ -56,6 +63,9 @@ class SimRobot : public RobotInterface {
   // Synchronous joint-space motion at the joint speed limits (the trajectory-time model).
   void execute(const std::vector<JointVector>& waypoints,
                const std::function<void(const JointVector&)>& on_state) override;
+  // Put-down and pick-up are instantaneous state changes in the simulator (no trajectories).
+  bool putDown() override;
+  bool pickUp(const Iso3& T_O_palm, const JointVector& q) override;
 
  private:
   SimWorld* world_;

@@ -1,0 +1,87 @@
+#pragma once
+// Re-grasping (paper §IV, §V-B): grasp candidates on the current model, their stability, and
+// their ranking by what Alg. 1 could still see with the hand there.
+//
+// Candidates (BarrettHand-style hands: a palm and closing fingers, optional spread):
+//   - approach directions spread over the sphere, palm rolls about each, spread settings;
+//   - the palm face is slid along the approach until it touches the model (the nearest model
+//     vertex inside the palm's footprint), fingers open;
+//   - fingers closed until contact (robot::closeFingers) against the model mesh;
+//   - kept when at least two links touch, the grasp is force closure (below), the hand on the
+//     object resting on the table is free of the table, and the arm reaches it (IK, collision).
+//
+// Stability (documented metric): contacts are the model's vertices within `contact_m` of the
+// closed hand, pooled into cells of `contact_cell_m`; each cell is a point contact with Coulomb
+// friction μ, its cone linearised by `cone_edges` forces. The wrenches (force, torque/ρ with ρ the
+// largest vertex distance from the model's centre) span a convex hull; ε is the radius of the
+// largest origin-centred ball inside it (Ferrari–Canny), estimated as the least support value
+// over `wrench_directions` fixed unit directions in R⁶ (an upper bound that tightens with more
+// directions). ε > 0 means force closure.
+#include <string>
+#include <vector>
+
+#include "inhand/mesh/extract.h"
+#include "inhand/planning/view_selection.h"
+
+namespace inhand {
+
+struct GraspOptions {
+  int approaches = 64;               // approach directions over the sphere
+  int rolls = 4;                     // palm rolls about each approach (over 180°)
+  std::vector<double> spreads{0.0};  // spread joint values tried (hands with a spread joint)
+  double friction = 0.5;             // μ at each contact
+  int cone_edges = 8;                // friction-cone linearisation
+  int wrench_directions = 1000;      // directions sampled for ε
+  double contact_m = 0.003;          // model vertices this close to the hand are in contact
+  double contact_cell_m = 0.01;      // contact pooling cell, m
+  double min_epsilon = 1e-4;         // ε below this: not a stable grasp
+  double stability_weight = 0.0;     // score = quality + weight·ε
+  int max_candidates = 50;           // ranked at most (the most stable first)
+  double lift_m = 0.15;              // the object is lifted this far after the pick
+  std::string validate() const;
+};
+
+struct Contact {
+  Vec3 p_O;       // contact point (object frame)
+  Vec3 normal_O;  // outward surface normal there
+};
+
+// ε of the Ferrari–Canny metric as described above (≤ 0: not force closure). `centre_O` and
+// `rho` set the torque origin and scale.
+double forceClosureEpsilon(const std::vector<Contact>& contacts, const Vec3& centre_O, double rho,
+                           double friction, int cone_edges, int directions);
+
+struct GraspCandidate {
+  Iso3 T_O_palm = Iso3::Identity();
+  JointVector q;             // hand joints closed to contact (arm part: the pick IK solution)
+  JointVector q_lift;        // the same grasp with the object lifted `lift_m` off the table
+  int links_in_contact = 0;  // fingers touching, plus one when the palm touches
+  std::vector<Contact> contacts;
+  double epsilon = 0;       // stability
+  double quality = 0;       // best view quality Alg. 1 finds with the hand there
+  double score = 0;         // quality + stability_weight·ε
+  int reachable_views = 0;  // views Alg. 1 could reach with this grasp
+};
+
+struct GraspGeneration {
+  std::vector<GraspCandidate> candidates;  // stable, table-free, reachable; best ε first
+  int tried = 0;                           // (approach, roll, spread) poses tried
+  int touching = 0;                        // with ≥ 2 links in contact
+  int stable = 0;                          // of those, force closure with ε ≥ min_epsilon
+  int table_free = 0;                      // of those, hand clear of the table
+  double seconds = 0;
+};
+
+// Candidates on `model_O` (the current S_obj) with the object resting on the table at T_B_O;
+// `q_now` gives the arm's current state (IK seed).
+GraspGeneration generateGrasps(const RobotModel& robot, const TriangleMesh& model_O,
+                               const Iso3& T_B_O, const JointVector& q_now,
+                               const GraspOptions& options);
+
+// Fills quality, reachable_views and score of each candidate by one Alg. 1 pass of `planner`
+// over S_obj with the hand at that grasp (usually a coarse planner: fewer directions, rolls and
+// a pixel stride), and sorts them best first. Returns the seconds spent.
+double rankGrasps(const ViewPlanner& planner, const ObjectModel& S_obj, const GraspOptions& options,
+                  std::vector<GraspCandidate>* candidates);
+
+}  // namespace inhand
