@@ -66,4 +66,20 @@ const RobotModel& wam() {
   return m;
 }
 
+ObjectModel unweldedModel(const TriangleMesh& mesh,
+                          const std::function<float(const Vec3&)>& varianceOfNormal) {
+  ObjectModel m;
+  for (int t = 0; t < int(mesh.triangles.size()); ++t) {
+    Vec3 n = mesh.faceNormal(t);
+    int base = int(m.mesh.vertices.size());
+    for (int k = 0; k < 3; ++k) {
+      m.mesh.vertices.push_back(mesh.vertices[mesh.triangles[t][k]]);
+      m.variance.push_back(varianceOfNormal(n));
+      m.observed.push_back(1);
+    }
+    m.mesh.triangles.emplace_back(base, base + 1, base + 2);
+  }
+  return m;
+}
+
 }  // namespace inhand::test

@@ -1,4 +1,5 @@
 #pragma once
+#include <functional>
 // Shared helpers for the tests: temp directories and fusing rendered views.
 #include <filesystem>
 #include <string>
@@ -32,6 +33,10 @@ std::vector<Iso3> viewsAround(int count, double range_m);
 
 // Segment–box overlap by the slab method (independent of Embree).
 bool segmentHitsBox(const Vec3& a, const Vec3& b, const Vec3& lo, const Vec3& hi);
+
+// Each triangle with its own three vertices, so variance can differ per face.
+ObjectModel unweldedModel(const TriangleMesh& mesh,
+                          const std::function<float(const Vec3&)>& varianceOfNormal);
 
 // The paper's robot from data/robots (loaded once).
 const RobotModel& wam();

@@ -4,13 +4,14 @@
 //
 // Candidates (BarrettHand-style hands: a palm and closing fingers, optional spread):
 //   - approach directions spread over the sphere, palm rolls about each, spread settings;
-//   - the palm face is slid along the approach until it touches the model (the nearest model
-//     vertex inside the palm's footprint), fingers open;
+//   - the palm face is slid along the approach until it touches the model (the nearest surface
+//     sample inside the palm's footprint; samples: the vertices, plus a lattice of half a contact
+//     cell on larger triangles), fingers open;
 //   - fingers closed until contact (robot::closeFingers) against the model mesh;
 //   - kept when at least two links touch, the grasp is force closure (below), the hand on the
 //     object resting on the table is free of the table, and the arm reaches it (IK, collision).
 //
-// Stability (documented metric): contacts are the model's vertices within `contact_m` of the
+// Stability (documented metric): contacts are the model's surface samples within `contact_m` of the
 // closed hand, pooled into cells of `contact_cell_m`; each cell is a point contact with Coulomb
 // friction μ, its cone linearised by `cone_edges` forces. The wrenches (force, torque/ρ with ρ the
 // largest vertex distance from the model's centre) span a convex hull; ε is the radius of the
