@@ -10,7 +10,9 @@
 #include "inhand/core/parallel.h"
 #include "inhand/core/pose.h"
 #include "inhand/geometry/builtin_objects.h"
+#include "inhand/grasp/grasp.h"
 #include "inhand/planning/view_selection.h"
+#include "inhand/scan/multi_grasp.h"
 #include "inhand/scan/scan.h"
 #include "inhand/sensor/render.h"
 #include "inhand/sim/sim_world.h"
@@ -57,8 +59,10 @@ struct Scenario {
   std::vector<Iso3> poses;
   std::vector<std::vector<Occluder>> occluders;
   std::unique_ptr<RobotOccluders> robot_;  // owns the link scenes the occluders point to
-  ViewQualityScene qualityScene() const {
-    ViewQualityScene vq(S_obj, DepthCameraOptions{}, NoiseModelOptions{}, ViewQualityOptions{});
+  ViewQualityScene qualityScene(int stride = 1) const {
+    ViewQualityOptions o;
+    o.pixel_stride = stride;
+    ViewQualityScene vq(S_obj, DepthCameraOptions{}, NoiseModelOptions{}, o);
     vq.setNearHand(nearHand);
     return vq;
   }
@@ -70,9 +74,10 @@ Scenario& scenario() {
 
 // One eq. 9 evaluation per iteration, candidates spread over the sphere, both cores (one
 // candidate per core at a time, as Alg. 1 runs them).
+// Arg: pixel stride (1: every pixel of the 640×480 map).
 void BM_ViewQuality(benchmark::State& state) {
   Scenario& s = scenario();
-  ViewQualityScene vq = s.qualityScene();
+  ViewQualityScene vq = s.qualityScene(int(state.range(0)));
   const auto& poses = s.poses;
   const auto& occluders = s.occluders;
   const int batch = 64;
@@ -84,7 +89,7 @@ void BM_ViewQuality(benchmark::State& state) {
   state.counters["evaluations_per_s"] =
       benchmark::Counter(double(state.iterations()) * batch, benchmark::Counter::kIsRate);
 }
-BENCHMARK(BM_ViewQuality)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_ViewQuality)->Arg(1)->Arg(2)->Arg(4)->Unit(benchmark::kMillisecond)->UseRealTime();
 
 // The same evaluations on one core, with the per-pixel outcome counts.
 void BM_ViewQualityOneCore(benchmark::State& state) {
@@ -131,6 +136,36 @@ void BM_SelectView(benchmark::State& state) {
   state.counters["quality_s"] = sel.quality_s;
 }
 BENCHMARK(BM_SelectView)->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(2);
+
+// Re-grasping: candidates on S_obj with the box resting on the table, then ranking the 50 most
+// stable by a coarse Alg. 1 pass each (the scan's defaults).
+void BM_GenerateGrasps(benchmark::State& state) {
+  Scenario& s = scenario();
+  SimWorld world(s.model, s.object, s.T_O_palm, DepthCameraOptions{}, NoiseModelOptions{},
+                 SimOptions{});
+  GraspGeneration g;
+  for (auto _ : state)
+    g = generateGrasps(s.model, s.S_obj.mesh, world.restPose(), s.q, GraspOptions{});
+  state.counters["tried"] = g.tried;
+  state.counters["candidates"] = double(g.candidates.size());
+}
+BENCHMARK(BM_GenerateGrasps)->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(2);
+
+void BM_RankGrasps(benchmark::State& state) {
+  Scenario& s = scenario();
+  SimWorld world(s.model, s.object, s.T_O_palm, DepthCameraOptions{}, NoiseModelOptions{},
+                 SimOptions{});
+  GraspGeneration g = generateGrasps(s.model, s.S_obj.mesh, world.restPose(), s.q, GraspOptions{});
+  ViewPlanner ranker(s.model, DepthCameraOptions{}, NoiseModelOptions{},
+                     MultiGraspOptions::defaultRankingPlanner());
+  for (auto _ : state) {
+    std::vector<GraspCandidate> c = g.candidates;
+    rankGrasps(ranker, s.S_obj, GraspOptions{}, &c);
+    benchmark::DoNotOptimize(c);
+  }
+  state.counters["candidates"] = double(g.candidates.size());
+}
+BENCHMARK(BM_RankGrasps)->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(2);
 
 }  // namespace
 

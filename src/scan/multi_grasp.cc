@@ -9,12 +9,12 @@ namespace inhand {
 
 ViewPlannerOptions MultiGraspOptions::defaultRankingPlanner() {
   ViewPlannerOptions o;
-  o.directions = 64;
+  o.directions = 48;
   o.rolls = 4;
   o.fallback_ranges_m = {};
   o.ik_restarts = 0;
   o.quality.pixel_stride = 4;
-  o.quality.near_hand_cell_m = 0.004;
+  o.quality.near_hand_cell_m = 0.005;
   return o;
 }
 
