@@ -254,3 +254,23 @@ TEST(RayScene, InstanceMatchesTransformedCopy) {
   }
   EXPECT_GT(hits, 500);
 }
+
+TEST(SurfaceSamples, CoverACoarseBoxOnItsSurfaceWithOutwardNormals) {
+  TriangleMesh box = makeBox(Vec3(0.1, 0.2, 0.3));
+  std::vector<SurfacePoint> s = surfaceSamples(box, 0.02);
+  ASSERT_GT(s.size(), 100u);
+  int perFace[6] = {0, 0, 0, 0, 0, 0};
+  const Vec3 half(0.05, 0.1, 0.15);
+  for (const SurfacePoint& p : s) {
+    // On the surface: inside the box, and on (at least) one face plane.
+    double onFace = ((p.p.cwiseAbs() - half).cwiseAbs()).minCoeff();
+    EXPECT_LT(onFace, 1e-6);
+    EXPECT_TRUE((p.p.cwiseAbs().array() <= half.array() + 1e-6).all());
+    EXPECT_NEAR(p.n.norm(), 1.0, 1e-9);
+    EXPECT_GT(p.n.dot(p.p), 0.0);  // outward
+    for (int a = 0; a < 3; ++a)
+      if (std::abs(std::abs(p.p[a]) - half[a]) < 1e-6 && std::abs(p.n[a]) > 0.99)
+        ++perFace[2 * a + (p.p[a] > 0)];
+  }
+  for (int f = 0; f < 6; ++f) EXPECT_GT(perFace[f], 10) << f;
+}

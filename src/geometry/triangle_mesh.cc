@@ -125,4 +125,27 @@ std::string validateMesh(const TriangleMesh& mesh) {
   return {};
 }
 
+std::vector<SurfacePoint> surfaceSamples(const TriangleMesh& mesh, double spacing) {
+  std::vector<SurfacePoint> samples(mesh.vertices.size());
+  for (size_t k = 0; k < mesh.vertices.size(); ++k)
+    samples[k] = {mesh.vertices[k].cast<double>(), Vec3::Zero()};
+  for (const Tri& f : mesh.triangles) {
+    const Vec3 a = mesh.vertices[f[0]].cast<double>(), b = mesh.vertices[f[1]].cast<double>(),
+               c = mesh.vertices[f[2]].cast<double>();
+    const Vec3 n = (b - a).cross(c - a);
+    for (int k = 0; k < 3; ++k) samples[f[k]].n += n;
+    const int steps =
+        int(std::ceil(std::max({(b - a).norm(), (c - b).norm(), (a - c).norm()}) / spacing));
+    if (steps < 2 || n.norm() == 0) continue;
+    for (int i = 0; i <= steps; ++i)
+      for (int j = 0; i + j <= steps; ++j) {
+        if ((i == 0 && j == 0) || i == steps || j == steps) continue;  // the corners
+        samples.push_back(
+            {a + (b - a) * (double(i) / steps) + (c - a) * (double(j) / steps), n.normalized()});
+      }
+  }
+  for (SurfacePoint& sm : samples) sm.n = sm.n.norm() > 0 ? sm.n.normalized() : Vec3::UnitZ();
+  return samples;
+}
+
 }  // namespace inhand

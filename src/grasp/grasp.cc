@@ -100,34 +100,11 @@ GraspGeneration generateGrasps(const RobotModel& robot, const TriangleMesh& mesh
     palm.extend(b.min);
     palm.extend(b.max);
   }
-  // Surface samples with outward normals: every vertex (area-weighted face normals), plus a
-  // lattice of about sample_m spacing on triangles larger than that (coarse meshes).
-  struct Sample {
-    Vec3 p, n;
-  };
-  std::vector<Sample> samples(mesh.vertices.size());
-  for (size_t k = 0; k < mesh.vertices.size(); ++k)
-    samples[k] = {mesh.vertices[k].cast<double>(), Vec3::Zero()};
-  const double spacing = 0.5 * o.contact_cell_m;
-  for (const Tri& f : mesh.triangles) {
-    const Vec3 a = mesh.vertices[f[0]].cast<double>(), b = mesh.vertices[f[1]].cast<double>(),
-               c = mesh.vertices[f[2]].cast<double>();
-    const Vec3 n = (b - a).cross(c - a);
-    for (int k = 0; k < 3; ++k) samples[f[k]].n += n;
-    const int steps =
-        int(std::ceil(std::max({(b - a).norm(), (c - b).norm(), (a - c).norm()}) / spacing));
-    if (steps < 2 || n.norm() == 0) continue;
-    for (int i = 0; i <= steps; ++i)
-      for (int j = 0; i + j <= steps; ++j) {
-        if ((i == 0 && j == 0) || (i == steps) || (j == steps)) continue;  // the corners
-        samples.push_back(
-            {a + (b - a) * (double(i) / steps) + (c - a) * (double(j) / steps), n.normalized()});
-      }
-  }
-  for (Sample& sm : samples) sm.n = sm.n.norm() > 0 ? sm.n.normalized() : Vec3::UnitZ();
+  // Surface samples with outward normals (vertices, plus a lattice on large triangles).
+  const std::vector<SurfacePoint> samples = surfaceSamples(mesh, 0.5 * o.contact_cell_m);
   const Vec3 centre = mesh.bounds().center();
   double rho = 0;
-  for (const Sample& sm : samples) rho = std::max(rho, (sm.p - centre).norm());
+  for (const SurfacePoint& sm : samples) rho = std::max(rho, (sm.p - centre).norm());
   const double tableTop = robot.table().center_B.z() + 0.5 * robot.table().size.z();
 
   // Every (approach, roll, spread) pose, closed to contact on both cores.
@@ -150,7 +127,7 @@ GraspGeneration generateGrasps(const RobotModel& robot, const TriangleMesh& mesh
     const Mat3 R = T.linear();
     // Slide the palm along −d until its face touches the nearest vertex in its footprint.
     double nearest = std::numeric_limits<double>::infinity();
-    for (const Sample& sm : samples) {
+    for (const SurfacePoint& sm : samples) {
       const Vec3 p = R.transpose() * (sm.p - centre);
       if (p.x() < palm.min.x() || p.x() > palm.max.x() || p.y() < palm.min.y() ||
           p.y() > palm.max.y())
@@ -173,7 +150,7 @@ GraspGeneration generateGrasps(const RobotModel& robot, const TriangleMesh& mesh
     Aabb hb = hand.mesh().bounds();
     std::map<std::tuple<int, int, int>, std::pair<Contact, int>> cells;
     bool palmTouch = false;
-    for (const Sample& sm : samples) {
+    for (const SurfacePoint& sm : samples) {
       const Vec3& p = sm.p;
       if (((p - hb.min).array() < -o.contact_m).any() || ((p - hb.max).array() > o.contact_m).any())
         continue;

@@ -104,16 +104,17 @@ MultiGraspResult scanMultiGrasp(RobotInterface& robot, DepthSensor& sensor, cons
       all.termination = "no_grasp_above_threshold";
       break;
     }
-    if (!robot.pickUp(best.T_O_palm, best.q)) {
+    const std::optional<Iso3> achieved = robot.pickUp(best.T_O_palm, best.q);
+    if (!achieved) {
       all.termination = "pick_up_failed";
       break;
     }
     // Lift (not fused): the fingers as the robot closed them, the arm to the lift configuration.
     robot.execute({robot.joints(), m.withArm(robot.joints(), m.arm(best.q_lift))},
                   [](const JointVector&) {});
-    T_O_palm = best.T_O_palm;
+    T_O_palm = *achieved;
     next = GraspRecord{};
-    next.T_O_palm = best.T_O_palm;
+    next.T_O_palm = *achieved;
     next.candidates = int(gen.candidates.size());
     next.tried = gen.tried;
     next.quality = best.quality;

@@ -31,6 +31,7 @@ SimWorld::SimWorld(const RobotModel& model, const TriangleMesh& object_O, const 
   std::string p = options.validate();
   if (!p.empty()) throw Error("simulation options: " + p);
   objectMesh_ = object_O;
+  objectSamples_ = surfaceSamples(object_O, 0.003);
   object_.addMesh(object_O);
   object_.commit();
   objectMinZ_ = object_O.bounds().min.z();
@@ -54,15 +55,32 @@ bool SimRobot::putDown() {
   return true;
 }
 
-bool SimRobot::pickUp(const Iso3& T_O_palm, const JointVector& q) {
-  // The real fingers close on the real object (the planner closed them on its model).
+std::optional<Iso3> SimRobot::pickUp(const Iso3& T_O_palm, const JointVector& q) {
+  const RobotModel& m = world_->model();
   JointVector open = q;
-  for (const FingerInfo& f : world_->model().fingers()) open[f.variable] = f.open;
-  world_->model().applyCouplings(&open);
-  world_->T_O_palm = T_O_palm;
-  world_->q = closeFingers(world_->model(), open, T_O_palm, world_->objectMesh()).q;
+  for (const FingerInfo& f : m.fingers()) open[f.variable] = f.open;
+  m.applyCouplings(&open);
+  Iso3 T = T_O_palm;
+  const Vec3 back = -T_O_palm.linear().col(2);  // palm z points into the object
+  const auto& palm = m.links()[m.tipLink()].collision;
+  for (int k = 0;; ++k) {
+    const Iso3 T_palm_O = T.inverse();
+    bool clear = true;
+    for (const SurfacePoint& s : world_->objectSamples()) {
+      const Vec3 p = T_palm_O * s.p;
+      for (const Primitive& prim : palm)
+        if (prim.contains(p)) clear = false;
+      if (!clear) break;
+    }
+    if (clear) break;
+    if (k == 25) return std::nullopt;  // 5 cm back and still inside: no grasp here
+    T.translation() += 0.002 * back;
+  }
+  // The real fingers close on the real object (the planner closed them on its model).
+  world_->T_O_palm = T;
+  world_->q = closeFingers(m, open, T, world_->objectMesh()).q;
   world_->held = true;
-  return true;
+  return T;
 }
 
 DepthImage SimWorld::render() {

@@ -48,6 +48,13 @@ TriangleMesh transformed(const TriangleMesh& mesh, const Iso3& T);
 // that become degenerate. STL files come unwelded; this makes them indexed.
 TriangleMesh welded(const TriangleMesh& mesh, double tolerance_m = 1e-7);
 
+// Points on the surface with outward normals: every vertex (area-weighted face normals), plus a
+// lattice of about `spacing_m` on triangles larger than that (so coarse meshes are covered too).
+struct SurfacePoint {
+  Vec3 p, n;
+};
+std::vector<SurfacePoint> surfaceSamples(const TriangleMesh& mesh, double spacing_m);
+
 // Checks indices and finite coordinates; returns an empty string when valid, else the problem.
 std::string validateMesh(const TriangleMesh& mesh);
 

@@ -2,6 +2,7 @@
 // What the scan needs from a robot arm, real or simulated. A driver for a real arm implements this
 // (joint states from the controller, trajectory execution); `sim` implements it for the simulator.
 #include <functional>
+#include <optional>
 #include <vector>
 
 #include "inhand/robot/robot_model.h"
@@ -20,11 +21,15 @@ class RobotInterface {
                        const std::function<void(const JointVector&)>& on_state) = 0;
 
   // Re-grasping (§IV). putDown: returns the held object to its resting pose on the table and
-  // lets go. pickUp: grasps it there with the palm at T_O_palm and the joints q (the arm at the
-  // pick configuration, fingers closed to contact), and holds it. A driver that cannot re-grasp
-  // returns false (the scan then ends after its first grasp).
+  // lets go. pickUp: grasps it there, aiming for the palm at T_O_palm with the joints q (the arm
+  // at the pick configuration, fingers closed to contact), and holds it; returns the grasp as
+  // achieved (palm pose in the object frame: a real driver would measure it, e.g. by registering
+  // a depth frame to the model), or nullopt. A driver that cannot re-grasp returns false /
+  // nullopt (the scan then ends after its first grasp).
   virtual bool putDown() { return false; }
-  virtual bool pickUp(const Iso3& /*T_O_palm*/, const JointVector& /*q*/) { return false; }
+  virtual std::optional<Iso3> pickUp(const Iso3& /*T_O_palm*/, const JointVector& /*q*/) {
+    return std::nullopt;
+  }
 };
 
 }  // namespace inhand

@@ -39,6 +39,7 @@ class SimWorld {
   Iso3 objectPose() const;  // T_B_O at the current state
   bool held = true;         // false: the object rests on the table at restPose()
   const TriangleMesh& objectMesh() const { return objectMesh_; }
+  const std::vector<SurfacePoint>& objectSamples() const { return objectSamples_; }
   // Where the object rests on the table: upright as given, its lowest point on the table top,
   // under the presentation point.
   Iso3 restPose() const;
@@ -52,6 +53,7 @@ class SimWorld {
   RobotOccluders robot_;
   double objectMinZ_ = 0;
   TriangleMesh objectMesh_;
+  std::vector<SurfacePoint> objectSamples_;  // for the pick-up clearance test
   uint64_t frame_ = 0;
 };
 
@@ -65,7 +67,10 @@ class SimRobot : public RobotInterface {
                const std::function<void(const JointVector&)>& on_state) override;
   // Put-down and pick-up are instantaneous state changes in the simulator (no trajectories).
   bool putDown() override;
-  bool pickUp(const Iso3& T_O_palm, const JointVector& q) override;
+  // The palm is backed off along its axis (2 mm steps) until it is clear of the true object (the
+  // planner placed it on its model, which can lie inside the true surface), then the fingers
+  // close on the true object.
+  std::optional<Iso3> pickUp(const Iso3& T_O_palm, const JointVector& q) override;
 
  private:
   SimWorld* world_;
