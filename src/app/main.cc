@@ -73,8 +73,8 @@ int main(int argc, char** argv) {
   sc->add_option("--robot", scan.robot,
                  "robot config JSON (default: data/robots/wam_barretthand.json)");
   sc->add_option("--config", scan.config, "JSON file of scan options (see README)");
-  sc->add_option("--max-grasps", scan.max_grasps, "grasps at most (1: no re-grasping)")
-      ->capture_default_str();
+  sc->add_option("--max-grasps", scan.max_grasps,
+                 "grasps at most (default: the config's max_grasps, 3; 1: no re-grasping)");
   sc->add_option("--max-views", scan.max_views, "next-best views per grasp at most");
   sc->add_option("--hand-mode", scan.hand_mode,
                  "naive | carve | carve-empty (paper Fig. 3 a, b, c)");

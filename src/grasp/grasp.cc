@@ -105,7 +105,7 @@ GraspGeneration generateGrasps(const RobotModel& robot, const TriangleMesh& mesh
   const Vec3 centre = mesh.bounds().center();
   double rho = 0;
   for (const SurfacePoint& sm : samples) rho = std::max(rho, (sm.p - centre).norm());
-  const double tableTop = robot.table().center_B.z() + 0.5 * robot.table().size.z();
+  const double tableTop = robot.table().topZ();
 
   // Every (approach, roll, spread) pose, closed to contact on both cores.
   struct Pose {
@@ -125,7 +125,7 @@ GraspGeneration generateGrasps(const RobotModel& robot, const TriangleMesh& mesh
     Iso3 T = cameraPoseInObject(centre, -ps.approach, 1.0, ps.roll);  // z = −d, rolled
     T.translation().setZero();
     const Mat3 R = T.linear();
-    // Slide the palm along −d until its face touches the nearest vertex in its footprint.
+    // Slide the palm along −d until its face touches the nearest sample in its footprint.
     double nearest = std::numeric_limits<double>::infinity();
     for (const SurfacePoint& sm : samples) {
       const Vec3 p = R.transpose() * (sm.p - centre);
@@ -145,8 +145,9 @@ GraspGeneration generateGrasps(const RobotModel& robot, const TriangleMesh& mesh
     c.T_O_palm = T;
     c.q = closed.q;
     for (const FingerClosing& f : closed.fingers) c.links_in_contact += f.contact;
-    // Contacts: model vertices near the closed hand, pooled per cell.
+    // Contacts: model surface samples near the closed hand, pooled per cell.
     HandGeometry hand(robot, c.q, T);
+    const Iso3 T_palm_O = T.inverse();
     Aabb hb = hand.mesh().bounds();
     std::map<std::tuple<int, int, int>, std::pair<Contact, int>> cells;
     bool palmTouch = false;
@@ -155,7 +156,7 @@ GraspGeneration generateGrasps(const RobotModel& robot, const TriangleMesh& mesh
       if (((p - hb.min).array() < -o.contact_m).any() || ((p - hb.max).array() > o.contact_m).any())
         continue;
       if (hand.distance(p) > o.contact_m) continue;
-      if ((T.inverse() * p).z() < palm.max.z() + 0.002 + o.contact_m) palmTouch = true;
+      if ((T_palm_O * p).z() < palm.max.z() + 0.002 + o.contact_m) palmTouch = true;
       auto key = std::make_tuple(int(std::floor(p.x() / o.contact_cell_m)),
                                  int(std::floor(p.y() / o.contact_cell_m)),
                                  int(std::floor(p.z() / o.contact_cell_m)));
@@ -165,10 +166,9 @@ GraspGeneration generateGrasps(const RobotModel& robot, const TriangleMesh& mesh
       ++cell.second;
     }
     c.links_in_contact += palmTouch;
-    for (auto& [key, cell] : cells) {
-      (void)key;
-      Contact ct{cell.first.p_O / cell.second, cell.first.normal_O.normalized()};
-      c.contacts.push_back(ct);
+    for (const auto& entry : cells) {
+      const auto& [sum, count] = entry.second;
+      c.contacts.push_back({sum.p_O / count, sum.normal_O.normalized()});
     }
     if (c.links_in_contact < 2) return;
     c.epsilon =
@@ -228,9 +228,9 @@ double rankGrasps(const ViewPlanner& planner, const ObjectModel& S_obj, const Gr
   const auto t0 = std::chrono::steady_clock::now();
   const ViewQualityOptions& qo = planner.options().quality;
   ViewQualityScene scene = planner.qualityScene(S_obj);  // S_obj's BVH once for all candidates
+  const Aabb region = S_obj.mesh.bounds();  // near-hand cells only where S_obj can be hit
   for (GraspCandidate& c : *candidates) {
     HandGeometry hand(planner.model(), c.q, c.T_O_palm);
-    const Aabb region = S_obj.mesh.bounds();
     auto nearHand = std::make_shared<NearHandGrid>(hand, qo.t_hand_m, qo.near_hand_cell_m, &region);
     ViewSelection sel = planner.select(scene, GraspState{c.T_O_palm, c.q_lift}, {}, nearHand);
     c.reachable_views = sel.reachable;

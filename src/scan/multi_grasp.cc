@@ -75,7 +75,8 @@ MultiGraspResult scanMultiGrasp(RobotInterface& robot, DepthSensor& sensor, cons
       break;
     }
     if (g + 1 >= multi.max_grasps) {
-      all.termination = "max_grasps";
+      // One grasp only: the scan ends as that grasp's views did.
+      all.termination = multi.max_grasps == 1 ? r.termination : "max_grasps";
       break;
     }
     // Put down, then candidates on the model so far.
