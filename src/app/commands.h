@@ -48,17 +48,30 @@ struct RobotArgs {
 int runRobot(const RobotArgs& args);
 
 struct ScanArgs {
-  std::string object;     // builtin:NAME or a mesh file
-  std::string out;        // output directory (new or empty)
-  std::string robot;      // robot config (default: the WAM + BarrettHand in data/robots)
-  std::string config;     // JSON of scan options (optional)
-  int max_grasps = -1;    // grasps at most; -1: the config's (default 3)
-  int max_views = -1;     // overrides the config when >= 0
-  std::string hand_mode;  // overrides the config when set: naive | carve | carve-empty
-  uint64_t seed = 1;      // sensor noise and IK restarts
+  std::string object;          // builtin:NAME or a mesh file
+  std::string out;             // output directory (new or empty)
+  std::string robot;           // robot config (default: the WAM + BarrettHand in data/robots)
+  std::string config;          // JSON of scan options (optional)
+  int max_grasps = -1;         // grasps at most; -1: the config's (default 3)
+  int max_views = -1;          // overrides the config when >= 0
+  std::string hand_mode;       // overrides the config when set: naive | carve | carve-empty
+  std::string planner = "ig";  // view planner (see plannerNames())
+  uint64_t seed = 1;           // sensor noise and IK restarts
 };
 
 int runScan(const ScanArgs& args);
+
+struct EvalArgs {
+  std::string objects;  // comma-separated: builtin:NAME or mesh files
+  std::string planners = "ig,ig-no-hand,ig-no-cost,random,area,unobserved-voxels,rear-side-entropy";
+  int seeds = 3;        // seeds 1..seeds per (object, planner)
+  std::string out;      // output directory (new or empty)
+  std::string config;   // scan options JSON passed to every run
+  int max_grasps = -1;  // passed to every run when >= 0
+  int max_views = -1;   // passed to every run when >= 0
+  int jobs = 0;         // runs at a time; 0: one per core
+};
+int runEval(const EvalArgs& args);
 int runSnapshot(const SnapshotArgs& args);
 int runRender(const RenderArgs& args);
 int runFuse(const FuseArgs& args);

@@ -78,7 +78,24 @@ int main(int argc, char** argv) {
   sc->add_option("--max-views", scan.max_views, "next-best views per grasp at most");
   sc->add_option("--hand-mode", scan.hand_mode,
                  "naive | carve | carve-empty (paper Fig. 3 a, b, c)");
+  sc->add_option("--planner", scan.planner,
+                 "view planner: ig (inhand), ig-no-hand, ig-no-cost, random, area, "
+                 "unobserved-voxels, rear-side-entropy")
+      ->capture_default_str();
   sc->add_option("--seed", scan.seed, "noise and IK seed")->capture_default_str();
+
+  inhand::app::EvalArgs eval;
+  auto* ev = app.add_subcommand(
+      "eval", "scan objects with several view planners and seeds; tabulate against ground truth");
+  ev->add_option("--objects", eval.objects, "comma-separated objects: builtin:NAME or mesh files")
+      ->required();
+  ev->add_option("--planners", eval.planners, "comma-separated planners")->capture_default_str();
+  ev->add_option("--seeds", eval.seeds, "seeds 1..N per object and planner")->capture_default_str();
+  ev->add_option("--out", eval.out, "output directory (new or empty)")->required();
+  ev->add_option("--config", eval.config, "scan options JSON for every run");
+  ev->add_option("--max-grasps", eval.max_grasps, "grasps per run at most (default: scan's)");
+  ev->add_option("--max-views", eval.max_views, "next-best views per grasp at most");
+  ev->add_option("--jobs", eval.jobs, "runs at a time (0: one per core)")->capture_default_str();
 
   try {
     app.parse(argc, argv);
@@ -87,6 +104,7 @@ int main(int argc, char** argv) {
   }
   try {
     if (*sc) return inhand::app::runScan(scan);
+    if (*ev) return inhand::app::runEval(eval);
     if (*rb) return inhand::app::runRobot(robot);
     if (*s) return inhand::app::runSnapshot(snap);
     if (*r) return inhand::app::runRender(render);

@@ -9,6 +9,7 @@
 #include "inhand/core/file_util.h"
 #include "inhand/core/json_util.h"
 #include "inhand/core/pose.h"
+#include "inhand/eval/metrics.h"
 #include "inhand/geometry/builtin_objects.h"
 #include "inhand/geometry/mesh_io.h"
 #include "inhand/scan/multi_grasp.h"
@@ -80,6 +81,7 @@ struct AllOptions {
   ScanOptions scan;
   MultiGraspOptions multi;
   SimOptions sim;
+  EvalOptions eval;
   std::string robot;
 };
 
@@ -103,6 +105,14 @@ void readPlanner(OptionReader& p, ViewPlannerOptions* v) {
     q->integer("pixel_stride", &v->quality.pixel_stride);
     q->finish();
   }
+  if (auto q = p.object("volumetric")) {
+    q->integer("ray_stride", &v->volumetric.ray_stride);
+    q->num("p_unknown", &v->volumetric.p_unknown);
+    q->num("p_free", &v->volumetric.p_free);
+    q->num("p_occupied", &v->volumetric.p_occupied);
+    q->num("min_visibility", &v->volumetric.min_visibility);
+    q->finish();
+  }
   p.finish();
 }
 
@@ -123,7 +133,13 @@ Json plannerJson(const ViewPlannerOptions& v) {
             {"max_incidence_deg", v.quality.max_incidence_deg},
             {"max_projector_incidence_deg", v.quality.max_projector_incidence_deg},
             {"near_hand_cell_m", v.quality.near_hand_cell_m},
-            {"pixel_stride", v.quality.pixel_stride}}}};
+            {"pixel_stride", v.quality.pixel_stride}}},
+          {"volumetric",
+           {{"ray_stride", v.volumetric.ray_stride},
+            {"p_unknown", v.volumetric.p_unknown},
+            {"p_free", v.volumetric.p_free},
+            {"p_occupied", v.volumetric.p_occupied},
+            {"min_visibility", v.volumetric.min_visibility}}}};
 }
 
 void readOptions(const fs::path& file, AllOptions* o) {
@@ -164,6 +180,12 @@ void readOptions(const fs::path& file, AllOptions* o) {
     mo->boolean("drop_floating_unknown", &o->scan.mesh.drop_floating_unknown);
     mo->num("min_component_fraction", &o->scan.mesh.min_component_fraction);
     mo->finish();
+  }
+  if (auto e = r.object("eval")) {
+    e->integer("samples", &o->eval.samples);
+    e->num("tau_m", &o->eval.tau_m);
+    e->numbers("fscore_m", &o->eval.fscore_m);
+    e->finish();
   }
   if (auto s = r.object("sim")) {
     s->num("frame_rate_hz", &o->sim.frame_rate_hz);
@@ -206,6 +228,8 @@ Json optionsJson(const AllOptions& o) {
            {{"hole_sigma_m", o.scan.mesh.hole_sigma_m},
             {"drop_floating_unknown", o.scan.mesh.drop_floating_unknown},
             {"min_component_fraction", o.scan.mesh.min_component_fraction}}},
+          {"eval",
+           {{"samples", o.eval.samples}, {"tau_m", o.eval.tau_m}, {"fscore_m", o.eval.fscore_m}}},
           {"sim",
            {{"frame_rate_hz", o.sim.frame_rate_hz},
             {"frame_subsample", o.sim.frame_subsample},
@@ -219,6 +243,12 @@ int runScan(const ScanArgs& args) {
   const auto t0 = std::chrono::steady_clock::now();
   AllOptions o;
   o.robot = args.robot;
+  // The named planner first: a config file can still override any of its fields.
+  if (!applyPlannerName(args.planner, &o.scan.planner)) {
+    std::string names;
+    for (const std::string& n : plannerNames()) names += (names.empty() ? "" : ", ") + n;
+    throw Error("--planner: unknown planner \"" + args.planner + "\" (known: " + names + ")");
+  }
   if (!args.config.empty()) readOptions(args.config, &o);
   if (!args.robot.empty()) o.robot = args.robot;
   if (o.robot.empty()) o.robot = INHAND_DATA_DIR "/robots/wam_barretthand.json";
@@ -231,6 +261,7 @@ int runScan(const ScanArgs& args) {
   if (std::string p = o.scan.validate(); !p.empty()) throw Error("scan options: " + p);
   if (std::string p = o.multi.validate(); !p.empty()) throw Error("scan options: " + p);
   if (std::string p = o.sim.validate(); !p.empty()) throw Error("simulation options: " + p);
+  if (std::string p = o.eval.validate(); !p.empty()) throw Error("eval options: " + p);
 
   RobotModel model = RobotModel::load(o.robot);
   TriangleMesh object = loadObject(args.object);
@@ -249,6 +280,10 @@ int runScan(const ScanArgs& args) {
   SimSensor sensor(&world, camera);
   ScanProgress progress;
   progress.log = [](const std::string& s) { std::fprintf(stderr, "scan: %s\n", s.c_str()); };
+  // The simulated object is known: score the model against it after every view (its frame O
+  // is the mesh's own input frame).
+  const GroundTruth truth(object, o.eval);
+  progress.coverage = [&](const ObjectModel& m) { return truth.coverage(m); };
   // The volume is centred where the robot expects a held object: grasp_offset_m in front of the
   // palm (from the robot config; the scan is not told the object's shape or size).
   const Vec3 expected = T_O_palm * Vec3(0, 0, model.graspOffset());
@@ -257,8 +292,15 @@ int runScan(const ScanArgs& args) {
   const ScanResult& r = mr.scan;
 
   writePly(out.path() / "model.ply", r.model.mesh, &r.model.variance);
+  const SurfaceMetrics sm = truth.evaluate(r.model);
   Json views = Json::array();
-  for (const ViewRecord& v : r.views)
+  double trajectory = 0;
+  std::vector<int> viewGrasp;  // 1-based grasp of each view
+  for (size_t g = 0; g < mr.grasps.size(); ++g)
+    for (int k = 0; k < mr.grasps[g].views; ++k) viewGrasp.push_back(int(g) + 1);
+  for (size_t vi = 0; vi < r.views.size(); ++vi) {
+    const ViewRecord& v = r.views[vi];
+    trajectory += v.cost_s;
     views.push_back({{"initial", v.initial},
                      {"direction_O", {v.dir_O.x(), v.dir_O.y(), v.dir_O.z()}},
                      {"quality", v.quality},
@@ -268,12 +310,28 @@ int runScan(const ScanArgs& args) {
                      {"observed_fraction", v.observed_fraction},
                      {"frames", v.frames},
                      {"candidates", v.candidates},
-                     {"planning_s", v.planning_s}});
+                     {"planning_s", v.planning_s},
+                     {"coverage", v.coverage},
+                     {"trajectory_s", trajectory},
+                     {"grasp", vi < viewGrasp.size() ? viewGrasp[vi] : int(mr.grasps.size())}});
+  }
   Json summary;
   summary["object"] = args.object;
   summary["robot"] = o.robot;
   summary["seed"] = args.seed;
+  summary["planner"] = args.planner;
   summary["termination"] = r.termination;
+  summary["coverage"] = sm.coverage;
+  summary["accuracy_mm"] = {
+      {"mean", sm.accuracy_mean_mm}, {"rms", sm.accuracy_rms_mm}, {"p95", sm.accuracy_p95_mm}};
+  Json fs = Json::object();
+  for (size_t k = 0; k < sm.fscore.size(); ++k) {
+    char key[32];
+    std::snprintf(key, sizeof key, "%gmm", 1000 * o.eval.fscore_m[k]);
+    fs[key] = {{"f", sm.fscore[k]}, {"precision", sm.precision[k]}, {"recall", sm.recall[k]}};
+  }
+  summary["fscore"] = fs;
+  summary["trajectory_s"] = trajectory;
   summary["views"] = views;
   Json grasps = Json::array();
   for (const GraspRecord& g : mr.grasps)
@@ -315,10 +373,11 @@ int runScan(const ScanArgs& args) {
   writeTextAtomically(out.path() / "summary.json", summary.dump(2) + "\n");
   out.commit();
   std::printf(
-      "scan: %s: %zu grasps, %zu views, %d frames, %s; observed %.1f%% of the surface, mean "
-      "entropy %.3f (%.1f s) -> %s\n",
+      "scan: %s: %zu grasps, %zu views, %d frames, %s; observed %.1f%% of the surface, "
+      "coverage %.1f%% (%.0f mm), accuracy %.2f mm mean, mean entropy %.3f (%.1f s) -> %s\n",
       args.object.c_str(), mr.grasps.size(), r.views.size(), r.frames, r.termination.c_str(),
-      100 * r.model.observedAreaFraction(), r.model.meanEntropy(), r.total_s, args.out.c_str());
+      100 * r.model.observedAreaFraction(), 100 * sm.coverage, 1000 * o.eval.tau_m,
+      sm.accuracy_mean_mm, r.model.meanEntropy(), r.total_s, args.out.c_str());
   if (r.termination == "no_reachable_view") return 3;
   if (r.termination == "no_reachable_grasp" || r.termination == "pick_up_failed") return 4;
   return 0;

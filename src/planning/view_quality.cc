@@ -118,6 +118,8 @@ ViewQualityScene::ViewQualityScene(const ObjectModel& model, const DepthCameraOp
   std::string p = options.validate();
   if (!p.empty()) throw Error("view quality options: " + p);
   INHAND_CHECK(model.variance.size() == model.mesh.vertices.size(), "variance per vertex");
+  if (options.integrand == QualityIntegrand::kUnknownArea)
+    INHAND_CHECK(model.observed.size() == model.mesh.vertices.size(), "observed flag per vertex");
   bounds_ = model_.mesh.bounds();
   cosMaxIncidence_ = std::cos(options.max_incidence_deg * M_PI / 180);
   cosMaxProjector_ = std::cos(options.max_projector_incidence_deg * M_PI / 180);
@@ -170,14 +172,18 @@ double ViewQualityScene::pixelGain(const Hit& hit, const Ray& ray, const Iso3& T
   shadow->tnear = 2e-4f;
   shadow->tfar = float(dist - 2e-4);
   const Tri& f = model_.mesh.triangles[hit.triangle];
+  const CameraIntrinsics& K = camera_.intrinsics;
+  const double d = hit.t;  // the ray has camera z = 1, so t is the depth
+  const double nz = std::max(0.05, std::abs((T_O_C.linear().transpose() * n).z()));
+  if (options_.integrand == QualityIntegrand::kUnknownArea) {
+    const bool unknown = !model_.observed[f[0]] || !model_.observed[f[1]] || !model_.observed[f[2]];
+    return unknown ? d * d / (K.fx * K.fy * nz) : 0.0;
+  }
   const double var = (1.0 - hit.u - hit.v) * model_.variance[f[0]] + hit.u * model_.variance[f[1]] +
                      hit.v * model_.variance[f[2]];
-  const double d = hit.t;  // the ray has camera z = 1, so t is the depth
   // θ is only needed beyond the grazing threshold (the axial model is flat below it).
   const double sz = cosInc >= cosGrazing_ ? axialSigma(noise_, d, 0.0)
                                           : axialSigma(noise_, d, std::acos(std::min(1.0, cosInc)));
-  const double nz = std::max(0.05, std::abs((T_O_C.linear().transpose() * n).z()));
-  const CameraIntrinsics& K = camera_.intrinsics;
   return 0.5 * std::log1p(var / (sz * sz)) * d * d / (K.fx * K.fy * nz);
 }
 

@@ -9,6 +9,7 @@
 #include "inhand/core/error.h"
 #include "inhand/core/parallel.h"
 #include "inhand/core/pose.h"
+#include "inhand/core/random.h"
 #include "inhand/geometry/primitives.h"
 
 namespace inhand {
@@ -37,8 +38,56 @@ std::string ViewPlannerOptions::validate() const {
   if (!(alpha_cost >= 0)) return "alpha_cost must be >= 0";
   if (!(t_q >= 0)) return "t_q must be >= 0";
   if (ik_restarts < 0) return "ik_restarts must be >= 0";
-  std::string q = quality.validate();
+  std::string q = volumetric.validate();
+  if (!q.empty()) return "volumetric." + q;
+  q = quality.validate();
   return q.empty() ? "" : "quality." + q;
+}
+
+std::vector<std::string> plannerNames() {
+  return {"ig",   "ig-no-hand",        "ig-no-cost",       "random",
+          "area", "unobserved-voxels", "rear-side-entropy"};
+}
+
+bool applyPlannerName(const std::string& name, ViewPlannerOptions* o) {
+  o->metric = ViewMetric::kInformationGain;
+  o->quality.integrand = QualityIntegrand::kInformationGain;
+  o->use_cost = true;
+  o->hand_occlusion = true;
+  o->t_q = 0.005;
+  if (name == "ig") return true;
+  if (name == "ig-no-hand") {
+    o->hand_occlusion = false;
+    return true;
+  }
+  if (name == "ig-no-cost") {
+    o->use_cost = false;
+    return true;
+  }
+  // The baselines rank by their own metric alone (its units are not eq. 9's, so α_cost does not
+  // apply); ties go to the cheaper view.
+  o->use_cost = false;
+  if (name == "random") {
+    o->metric = ViewMetric::kRandom;
+    o->t_q = 0;
+    return true;
+  }
+  if (name == "area") {
+    o->quality.integrand = QualityIntegrand::kUnknownArea;
+    o->t_q = 2e-4;
+    return true;
+  }
+  if (name == "unobserved-voxels") {
+    o->metric = ViewMetric::kUnobservedVoxels;
+    o->t_q = 300;
+    return true;
+  }
+  if (name == "rear-side-entropy") {
+    o->metric = ViewMetric::kRearSideEntropy;
+    o->t_q = 5000;
+    return true;
+  }
+  return false;
 }
 
 ViewPlanner::ViewPlanner(const RobotModel& model, const DepthCameraOptions& camera,
@@ -117,16 +166,21 @@ ViewQualityScene ViewPlanner::qualityScene(const ObjectModel& S_obj) const {
 
 ViewSelection ViewPlanner::select(const ObjectModel& S_obj, const GraspState& grasp,
                                   const std::vector<Vec3>& used,
-                                  std::shared_ptr<const NearHandGrid> nearHand) const {
+                                  std::shared_ptr<const NearHandGrid> nearHand,
+                                  const TsdfVolume* volume) const {
   if (S_obj.mesh.empty()) return ViewSelection{};
   ViewQualityScene scene = qualityScene(S_obj);
-  return select(scene, grasp, used, std::move(nearHand));
+  return select(scene, grasp, used, std::move(nearHand), volume);
 }
 
 ViewSelection ViewPlanner::select(ViewQualityScene& scene, const GraspState& grasp,
                                   const std::vector<Vec3>& used,
-                                  std::shared_ptr<const NearHandGrid> nearHand) const {
+                                  std::shared_ptr<const NearHandGrid> nearHand,
+                                  const TsdfVolume* volume) const {
   const ObjectModel& S_obj = scene.model();
+  const bool volumetric = options_.metric == ViewMetric::kUnobservedVoxels ||
+                          options_.metric == ViewMetric::kRearSideEntropy;
+  if (volumetric && !volume) throw Error("the volumetric view metrics need the volume");
   using Clock = std::chrono::steady_clock;
   auto secs = [](Clock::time_point t) {
     return std::chrono::duration<double>(Clock::now() - t).count();
@@ -161,16 +215,34 @@ ViewSelection ViewPlanner::select(ViewQualityScene& scene, const GraspState& gra
 
   // Lines 11–14: quality and score of each reachable candidate, one candidate per core at a time.
   const auto tQ = Clock::now();
-  scene.setNearHand(std::move(nearHand));
+  // Without hand reasoning (ablation) neither the robot occludes nor the t_hand rule applies.
+  scene.setNearHand(o.hand_occlusion ? std::move(nearHand) : nullptr);
   std::vector<size_t> reachable;
   for (size_t k = 0; k < chosen.size(); ++k)
     if (chosen[k]) reachable.push_back(k);
   out.reachable = int(reachable.size());
+  std::optional<VolumetricScorer> voxels;
+  if (volumetric) voxels.emplace(*volume, camera_, o.volumetric);
+  // Random: one draw per (seed, pass, direction), independent of threads and of the other
+  // candidates' reachability.
+  const uint64_t passSeed = mixSeed(o.seed, 0x7a11 + used.size());
   parallelForThreads(0, int(reachable.size()), [&](int i) {
     ViewCandidate& c = *chosen[reachable[i]];
-    std::vector<Occluder> occ;
-    if (o.hand_occlusion) occ = occluders_.at(model_->withArm(grasp.q, c.arm), c.T_B_O.inverse());
-    c.quality = scene.quality(c.T_O_C, occ);
+    if (o.metric == ViewMetric::kRandom) {
+      Rng rng = makeRng(passSeed, reachable[i]);
+      c.quality = std::uniform_real_distribution<double>(0.0, 1.0)(rng);
+    } else {
+      std::vector<Occluder> occ;
+      if (o.hand_occlusion) occ = occluders_.at(model_->withArm(grasp.q, c.arm), c.T_B_O.inverse());
+      if (o.metric == ViewMetric::kInformationGain)
+        c.quality = scene.quality(c.T_O_C, occ);
+      else
+        c.quality = voxels->score(c.T_O_C,
+                                  o.metric == ViewMetric::kUnobservedVoxels
+                                      ? VolumetricMetric::kUnobservedVoxels
+                                      : VolumetricMetric::kRearSideEntropy,
+                                  occ);
+    }
     c.score = c.quality - (o.use_cost ? o.alpha_cost * c.cost_s : 0.0);
   });
   out.evaluated = int(reachable.size());
@@ -181,7 +253,9 @@ ViewSelection ViewPlanner::select(ViewQualityScene& scene, const GraspState& gra
   for (const ViewCandidate& c : out.candidates)
     if (c.quality >= o.t_q) order.push_back(&c);
   std::sort(order.begin(), order.end(), [](const ViewCandidate* a, const ViewCandidate* b) {
-    return a->score != b->score ? a->score > b->score : a->dir_O.x() < b->dir_O.x();
+    if (a->score != b->score) return a->score > b->score;
+    if (a->cost_s != b->cost_s) return a->cost_s < b->cost_s;
+    return a->dir_O.x() < b->dir_O.x();
   });
   for (const ViewCandidate* c : order) {
     if (o.check_collisions && !checker.pathFree(grasp.q, model_->withArm(grasp.q, c->arm), 0.05))

@@ -186,6 +186,7 @@ ScanResult scanSingleGrasp(RobotInterface& robot, DepthSensor& sensor, const Iso
       ObjectModel model = extractModel(volume, options.mesh);
       rec.mean_entropy = model.meanEntropy();
       rec.observed_fraction = model.observedAreaFraction();
+      if (progress.coverage) rec.coverage = progress.coverage(model);
       used.push_back(c->dir_O);
       result.views.push_back(rec);
       log("initial view " + std::to_string(result.views.size()) + ": " +
@@ -199,7 +200,8 @@ ScanResult scanSingleGrasp(RobotInterface& robot, DepthSensor& sensor, const Iso
   for (int v = 0; v < options.max_views; ++v) {
     ObjectModel model = extractModel(volume, planningMesh);
     const auto tp = Clock::now();
-    ViewSelection sel = planner.select(model, GraspState{T_O_palm, robot.joints()}, used, nearHand);
+    ViewSelection sel =
+        planner.select(model, GraspState{T_O_palm, robot.joints()}, used, nearHand, &volume);
     result.planning_s += secondsSince(tp);
     result.view_evaluations += sel.evaluated;
     if (!sel.best) {
@@ -219,6 +221,7 @@ ScanResult scanSingleGrasp(RobotInterface& robot, DepthSensor& sensor, const Iso
     ObjectModel after = extractModel(volume, options.mesh);
     rec.mean_entropy = after.meanEntropy();
     rec.observed_fraction = after.observedAreaFraction();
+    if (progress.coverage) rec.coverage = progress.coverage(after);
     used.push_back(c.dir_O);
     result.views.push_back(rec);
     char line[240];

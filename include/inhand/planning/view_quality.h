@@ -20,7 +20,16 @@
 
 namespace inhand {
 
+// What each counted pixel adds to a view's quality.
+enum class QualityIntegrand {
+  kInformationGain,  // eq. 9: ½ ln(1 + σ_t²/σ_z²) · d²/(f²|n_z|)
+  // Baseline after Connolly's planetarium algorithm: d²/(f²|n_z|), the area the pixel covers, on
+  // still-unknown surface (a triangle with a hole-filled vertex), else 0. Quality in m².
+  kUnknownArea,
+};
+
 struct ViewQualityOptions {
+  QualityIntegrand integrand = QualityIntegrand::kInformationGain;
   double t_hand_m = 0.01;                     // hits this close to the hand are skipped, m
   double max_incidence_deg = 75.0;            // camera ray vs surface normal
   double max_projector_incidence_deg = 75.0;  // projector ray vs surface normal

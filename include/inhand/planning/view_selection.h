@@ -13,20 +13,32 @@
 #include <vector>
 
 #include "inhand/planning/view_quality.h"
+#include "inhand/planning/volumetric.h"
 #include "inhand/robot/ik.h"
 
 namespace inhand {
 
+// How a candidate view is scored. inhand's own is eq. 9; the others are the baselines of
+// `inhand eval`, run through the same candidates, IK, costs and robot occluders.
+enum class ViewMetric {
+  kInformationGain,   // eq. 9 (quality.integrand picks eq. 9 or the unknown-area integrand)
+  kRandom,            // a uniformly random reachable view: quality drawn from U(0, 1)
+  kUnobservedVoxels,  // Isler et al. 2016 (see volumetric.h), needs the volume
+  kRearSideEntropy,   // Isler et al. 2016 (see volumetric.h), needs the volume
+};
+
 struct ViewPlannerOptions {
-  int directions = 500;         // candidate directions on the unit sphere
-  double min_angle_deg = 10.0;  // t_θ: minimum angle to every used view
-  double range_m = 0.7;         // preferred camera-to-object-centre distance
+  ViewMetric metric = ViewMetric::kInformationGain;
+  VolumetricOptions volumetric;  // for the volumetric metrics
+  int directions = 500;          // candidate directions on the unit sphere
+  double min_angle_deg = 10.0;   // t_θ: minimum angle to every used view
+  double range_m = 0.7;          // preferred camera-to-object-centre distance
   std::vector<double> fallback_ranges_m{0.6, 0.8, 0.9};  // tried only where range_m has no IK
   int rolls = 8;                                         // rolls swept about the viewing direction
   double alpha_cost = 0.0005;    // α_cost: quality units per second of trajectory
   double t_q = 0.005;            // t_q: minimum quality of a view that counts
   bool use_cost = true;          // false: score = q (ablation)
-  bool hand_occlusion = true;    // false: eq. 9 without the robot as occluder (ablation)
+  bool hand_occlusion = true;    // false: no robot occluders, no t_hand rule (ablation)
   bool check_collisions = true;  // reject candidates whose arm, hand or object hit table/base
   int ik_restarts = 1;           // random restarts per IK target after the seeded attempt
   uint64_t seed = 1;             // IK restarts
@@ -59,6 +71,15 @@ struct GraspState {
   JointVector q;
 };
 
+// The named planners of `--planner`: ig (inhand, eq. 9), ig-no-hand (no robot occlusion
+// reasoning), ig-no-cost (α_cost = 0), random, area, unobserved-voxels, rear-side-entropy.
+std::vector<std::string> plannerNames();
+// Sets metric, integrand, use_cost, hand_occlusion and the stopping threshold t_q of `name` on
+// `options` (other fields kept). False for an unknown name. Thresholds (a view counts only at or
+// above): ig 0.005 (the paper's t_q); area 2 cm² of unknown surface; unobserved-voxels 300 voxels;
+// rear-side-entropy 5000 bits; random 0 (it ends at the view budget).
+bool applyPlannerName(const std::string& name, ViewPlannerOptions* options);
+
 class ViewPlanner {
  public:
   ViewPlanner(const RobotModel& model, const DepthCameraOptions& camera,
@@ -77,16 +98,19 @@ class ViewPlanner {
 
   // Alg. 1. `used_dirs_O`: directions of views already taken (object frame). `near_hand`: the
   // grasp's near-hand grid (shared across passes of one grasp).
+  // `volume`: the fused volume, needed by the volumetric metrics only.
   ViewSelection select(const ObjectModel& S_obj, const GraspState& grasp,
                        const std::vector<Vec3>& used_dirs_O,
-                       std::shared_ptr<const NearHandGrid> near_hand) const;
+                       std::shared_ptr<const NearHandGrid> near_hand,
+                       const TsdfVolume* volume = nullptr) const;
 
   // The same with S_obj already prepared (its BVH built once for many passes, e.g. one per
   // grasp candidate); `scene` must have been made with this planner's camera, noise and quality
   // options. Its near-hand grid is replaced by `near_hand`.
   ViewSelection select(ViewQualityScene& scene, const GraspState& grasp,
                        const std::vector<Vec3>& used_dirs_O,
-                       std::shared_ptr<const NearHandGrid> near_hand) const;
+                       std::shared_ptr<const NearHandGrid> near_hand,
+                       const TsdfVolume* volume = nullptr) const;
   // A ViewQualityScene of S_obj for this planner.
   ViewQualityScene qualityScene(const ObjectModel& S_obj) const;
 

@@ -44,13 +44,17 @@ struct ViewRecord {
   double quality = 0, cost_s = 0, score = 0;
   double mean_entropy = 0;  // of the model after the view's frames
   double observed_fraction = 0;
-  int frames = 0;      // depth frames fused along the way
-  int candidates = 0;  // quality evaluations in the Alg. 1 pass that chose it
+  double coverage = -1;  // of the true surface after the view (ScanProgress::coverage), −1: unknown
+  int frames = 0;        // depth frames fused along the way
+  int candidates = 0;    // quality evaluations in the Alg. 1 pass that chose it
   double planning_s = 0;
 };
 
 struct ScanProgress {
   std::function<void(const std::string&)> log;  // one line per event (may be empty)
+  // Ground-truth coverage of a model (set when the object's true mesh is known): recorded in
+  // each view's record after its frames.
+  std::function<double(const ObjectModel&)> coverage;
 };
 
 struct ScanResult {

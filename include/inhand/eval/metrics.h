@@ -1,0 +1,54 @@
+#pragma once
+// Ground-truth metrics of a scan of a known mesh, in the mesh's own frame (the model is written in
+// the object's input frame, so the two lie on each other as they are):
+//   coverage  — the fraction of uniform samples of the true surface within τ of the observed part
+//               of the model (triangles whose three vertices came from measurements, not from the
+//               σ = 5 cm hole filling);
+//   accuracy  — distances from uniform samples of the observed model surface to the true surface
+//               (mean, RMS, 95th percentile);
+//   F-score   — at each threshold d: 2PR/(P+R) with precision P the fraction of observed-model
+//               samples within d of the truth and recall R the fraction of truth samples within d
+//               of the observed model.
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "inhand/geometry/surface_distance.h"
+#include "inhand/mesh/extract.h"
+
+namespace inhand {
+
+struct EvalOptions {
+  int samples = 20000;   // points drawn on each surface (truth and observed model)
+  uint64_t seed = 1;     // of those draws
+  double tau_m = 0.003;  // coverage radius τ
+  std::vector<double> fscore_m{0.002, 0.005, 0.010};
+  std::string validate() const;
+};
+
+struct SurfaceMetrics {
+  double coverage = 0;  // in [0, 1]
+  double accuracy_mean_mm = 0, accuracy_rms_mm = 0, accuracy_p95_mm = 0;
+  std::vector<double> fscore, precision, recall;  // one per EvalOptions::fscore_m
+  double observed_area_m2 = 0;                    // area of the observed model surface
+};
+
+// The true surface sampled once, ready to score many models (thread-safe after construction).
+class GroundTruth {
+ public:
+  GroundTruth(const TriangleMesh& truth, const EvalOptions& options = {});
+  // Coverage only (cheap: per-view curves).
+  double coverage(const ObjectModel& model) const;
+  SurfaceMetrics evaluate(const ObjectModel& model) const;
+  const EvalOptions& options() const { return options_; }
+
+ private:
+  EvalOptions options_;
+  TriangleDistanceIndex truthIndex_;
+  std::vector<Vec3> truthSamples_;
+};
+
+// Per-triangle flag: all three vertices observed.
+std::vector<uint8_t> observedTriangles(const ObjectModel& model);
+
+}  // namespace inhand

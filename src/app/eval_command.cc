@@ -1,0 +1,342 @@
+// `inhand eval`: every (object, planner, seed) scan, each in its own `inhand scan` process (a run
+// that fails cannot take the others down), `jobs` at a time, then one table of the results.
+#include <fcntl.h>
+#include <spawn.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <mutex>
+#include <sstream>
+#include <thread>
+
+#include "commands.h"
+#include "inhand/core/error.h"
+#include "inhand/core/file_util.h"
+#include "inhand/core/json_util.h"
+#include "inhand/geometry/builtin_objects.h"
+#include "inhand/planning/view_selection.h"
+
+extern char** environ;
+
+namespace inhand::app {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+std::vector<std::string> splitList(const std::string& s) {
+  std::vector<std::string> out;
+  std::stringstream ss(s);
+  std::string item;
+  while (std::getline(ss, item, ','))
+    if (!item.empty()) out.push_back(item);
+  return out;
+}
+
+// A short name for an object spec: builtin:NAME → NAME, a file → its stem.
+std::string objectName(const std::string& spec) {
+  if (spec.rfind("builtin:", 0) == 0) return spec.substr(8);
+  return fs::path(spec).stem().string();
+}
+
+struct Run {
+  std::string object, name, planner;
+  int seed = 0;
+  fs::path dir, log;
+  int status = -1;
+  double wall_s = 0;
+  Json summary;  // null when the run wrote none
+};
+
+// Runs `argv` with stdout and stderr to `log`; returns its exit status (128+signal if killed).
+int runProcess(const std::vector<std::string>& argv, const fs::path& log) {
+  posix_spawn_file_actions_t fa;
+  posix_spawn_file_actions_init(&fa);
+  posix_spawn_file_actions_addopen(&fa, 1, log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+  posix_spawn_file_actions_adddup2(&fa, 1, 2);
+  std::vector<char*> args;
+  for (const std::string& a : argv) args.push_back(const_cast<char*>(a.c_str()));
+  args.push_back(nullptr);
+  pid_t pid = 0;
+  const int rc = posix_spawn(&pid, argv[0].c_str(), &fa, nullptr, args.data(), environ);
+  posix_spawn_file_actions_destroy(&fa);
+  if (rc != 0) throw Error("cannot start " + argv[0] + ": " + std::strerror(rc));
+  int st = 0;
+  while (waitpid(pid, &st, 0) < 0)
+    if (errno != EINTR) throw Error("waitpid failed");
+  if (WIFEXITED(st)) return WEXITSTATUS(st);
+  return 128 + (WIFSIGNALED(st) ? WTERMSIG(st) : 0);
+}
+
+// Views (1-based, initial views included) and cumulative trajectory seconds until coverage first
+// reaches `level`; NaN when it never does.
+std::pair<double, double> firstReaching(const Json& views, double level) {
+  for (size_t i = 0; i < views.size(); ++i)
+    if (views[i].value("coverage", -1.0) >= level)
+      return {double(i + 1), views[i].value("trajectory_s", 0.0)};
+  return {NAN, NAN};
+}
+
+struct Stat {
+  std::vector<double> v;
+  int total = 0;  // runs, reached or not
+  void add(double x) {
+    ++total;
+    if (std::isfinite(x)) v.push_back(x);
+  }
+  std::string str(int decimals) const {
+    if (v.empty()) return total ? "– (0/" + std::to_string(total) + ")" : "–";
+    double m = 0;
+    for (double x : v) m += x;
+    m /= double(v.size());
+    double sd = 0;
+    for (double x : v) sd += (x - m) * (x - m);
+    sd = v.size() > 1 ? std::sqrt(sd / double(v.size() - 1)) : 0;
+    char b[96];
+    std::snprintf(b, sizeof b, "%.*f ± %.*f", decimals, m, decimals, sd);
+    std::string s = b;
+    if (int(v.size()) < total)
+      s += " (" + std::to_string(v.size()) + "/" + std::to_string(total) + ")";
+    return s;
+  }
+};
+
+std::string csvField(const std::string& s) {
+  if (s.find_first_of(",\"\n") == std::string::npos) return s;
+  std::string q = "\"";
+  for (char c : s) q += c == '"' ? std::string("\"\"") : std::string(1, c);
+  return q + "\"";
+}
+
+std::string num(double x) {
+  if (!std::isfinite(x)) return "";
+  char b[32];
+  std::snprintf(b, sizeof b, "%.6g", x);
+  return b;
+}
+
+}  // namespace
+
+int runEval(const EvalArgs& args) {
+  const auto t0 = std::chrono::steady_clock::now();
+  const std::vector<std::string> objects = splitList(args.objects);
+  const std::vector<std::string> planners = splitList(args.planners);
+  if (objects.empty()) throw Error("--objects: give at least one object (comma-separated)");
+  if (planners.empty()) throw Error("--planners: give at least one planner (comma-separated)");
+  if (args.seeds < 1 || args.seeds > 1000) throw Error("--seeds: must be in 1..1000");
+  if (args.jobs < 0 || args.jobs > 64) throw Error("--jobs: must be in 0..64 (0: one per core)");
+  const std::vector<std::string> known = plannerNames();
+  for (const std::string& p : planners)
+    if (std::find(known.begin(), known.end(), p) == known.end())
+      throw Error("--planners: unknown planner \"" + p + "\"");
+  std::map<std::string, std::string> names;  // short name → spec (must be unique)
+  for (const std::string& o : objects) {
+    loadObject(o);  // fails here, naming the object, before any scan starts
+    const std::string n = objectName(o);
+    if (names.count(n) && names[n] != o)
+      throw Error("--objects: two objects share the name \"" + n + "\"");
+    names[n] = o;
+  }
+  if (!args.config.empty()) readJsonFile(args.config);  // readable JSON (scan checks the keys)
+
+  char self[4096];
+  const ssize_t len = readlink("/proc/self/exe", self, sizeof(self) - 1);
+  if (len <= 0) throw Error("cannot find the inhand executable (/proc/self/exe)");
+  self[len] = 0;
+
+  StagedDirectory out(args.out);
+  std::vector<Run> runs;
+  for (const std::string& o : objects)
+    for (const std::string& p : planners)
+      for (int s = 1; s <= args.seeds; ++s) {
+        Run r;
+        r.object = o;
+        r.name = objectName(o);
+        r.planner = p;
+        r.seed = s;
+        const fs::path rel = fs::path("runs") / r.name / p / ("seed" + std::to_string(s));
+        r.dir = out.path() / rel;
+        r.log = out.path() / "runs" / r.name / p / ("seed" + std::to_string(s) + ".log");
+        fs::create_directories(r.log.parent_path());
+        runs.push_back(r);
+      }
+  const int jobs = args.jobs > 0 ? args.jobs : std::max(1u, std::thread::hardware_concurrency());
+  std::fprintf(stderr, "eval: %zu runs (%zu objects × %zu planners × %d seeds), %d at a time\n",
+               runs.size(), objects.size(), planners.size(), args.seeds, jobs);
+  std::atomic<size_t> next{0}, done{0};
+  std::mutex printLock;
+  auto worker = [&] {
+    for (size_t i = next++; i < runs.size(); i = next++) {
+      Run& r = runs[i];
+      std::vector<std::string> argv{
+          self,           "scan",      "--object", r.object, "--out",
+          r.dir.string(), "--planner", r.planner,  "--seed", std::to_string(r.seed)};
+      if (!args.config.empty()) argv.insert(argv.end(), {"--config", args.config});
+      if (args.max_grasps >= 0)
+        argv.insert(argv.end(), {"--max-grasps", std::to_string(args.max_grasps)});
+      if (args.max_views >= 0)
+        argv.insert(argv.end(), {"--max-views", std::to_string(args.max_views)});
+      const auto ts = std::chrono::steady_clock::now();
+      r.status = runProcess(argv, r.log);
+      r.wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - ts).count();
+      const fs::path sj = r.dir / "summary.json";
+      if (fs::exists(sj)) {
+        try {
+          r.summary = readJsonFile(sj);
+        } catch (const Error&) {
+          r.summary = nullptr;
+        }
+      }
+      std::lock_guard<std::mutex> lock(printLock);
+      const size_t k = ++done;
+      if (r.summary.is_object())
+        std::fprintf(stderr,
+                     "eval: [%zu/%zu] %s %s seed %d: coverage %.1f%%, %zu views, %s (%.0f s)\n", k,
+                     runs.size(), r.name.c_str(), r.planner.c_str(), r.seed,
+                     100 * r.summary.value("coverage", 0.0), r.summary["views"].size(),
+                     r.summary.value("termination", std::string("?")).c_str(), r.wall_s);
+      else
+        std::fprintf(stderr, "eval: [%zu/%zu] %s %s seed %d: FAILED (exit %d, see %s)\n", k,
+                     runs.size(), r.name.c_str(), r.planner.c_str(), r.seed, r.status,
+                     r.log.lexically_relative(out.path()).c_str());
+    }
+  };
+  std::vector<std::thread> pool;
+  for (int j = 1; j < std::min<int>(jobs, int(runs.size())); ++j) pool.emplace_back(worker);
+  worker();
+  for (auto& t : pool) t.join();
+
+  // results.csv: one row per run.
+  const std::vector<double> levels{0.90, 0.95, 0.99};
+  std::ostringstream csv;
+  csv << "object,planner,seed,exit_status,termination,views,grasps,coverage,accuracy_mean_mm,"
+         "accuracy_rms_mm,accuracy_p95_mm,fscore_2mm,fscore_5mm,fscore_10mm,mean_entropy,"
+         "observed_fraction,trajectory_s,planning_s,grasp_ranking_s,total_s,views_to_90,"
+         "views_to_95,views_to_99,trajectory_s_to_90,trajectory_s_to_95,trajectory_s_to_99,"
+         "view_evaluations\n";
+  std::ostringstream curves;
+  curves << "object,planner,seed,view,grasp,initial,coverage,mean_entropy,trajectory_s,quality,"
+            "cost_s\n";
+  Json curvesJson = Json::array();
+  for (const Run& r : runs) {
+    csv << csvField(r.name) << "," << r.planner << "," << r.seed << "," << r.status << ",";
+    if (!r.summary.is_object()) {
+      csv << "error" << std::string(22, ',') << "\n";
+      continue;
+    }
+    const Json& s = r.summary;
+    const Json& views = s["views"];
+    auto fs = [&](const char* k) {
+      return s.contains("fscore") && s["fscore"].contains(k) ? s["fscore"][k].value("f", NAN) : NAN;
+    };
+    const Json& t = s["timing_s"];
+    csv << s.value("termination", std::string()) << "," << views.size() << "," << s["grasps"].size()
+        << "," << num(s.value("coverage", NAN)) << "," << num(s["accuracy_mm"].value("mean", NAN))
+        << "," << num(s["accuracy_mm"].value("rms", NAN)) << ","
+        << num(s["accuracy_mm"].value("p95", NAN)) << "," << num(fs("2mm")) << "," << num(fs("5mm"))
+        << "," << num(fs("10mm")) << "," << num(s.value("mean_entropy", NAN)) << ","
+        << num(s.value("observed_fraction", NAN)) << "," << num(s.value("trajectory_s", NAN)) << ","
+        << num(t.value("planning", NAN)) << "," << num(t.value("grasp_ranking", NAN)) << ","
+        << num(t.value("total", NAN));
+    for (double l : levels) csv << "," << num(firstReaching(views, l).first);
+    for (double l : levels) csv << "," << num(firstReaching(views, l).second);
+    csv << "," << s.value("view_evaluations", 0) << "\n";
+    Json c = {{"object", r.name},
+              {"planner", r.planner},
+              {"seed", r.seed},
+              {"report", (fs::path("runs") / r.name / r.planner /
+                          ("seed" + std::to_string(r.seed)) / "report.html")
+                             .string()}};
+    Json cov = Json::array(), ent = Json::array(), traj = Json::array();
+    for (size_t i = 0; i < views.size(); ++i) {
+      const Json& v = views[i];
+      curves << csvField(r.name) << "," << r.planner << "," << r.seed << "," << i + 1 << ","
+             << v.value("grasp", 1) << "," << (v.value("initial", false) ? 1 : 0) << ","
+             << num(v.value("coverage", NAN)) << "," << num(v.value("mean_entropy", NAN)) << ","
+             << num(v.value("trajectory_s", NAN)) << "," << num(v.value("quality", NAN)) << ","
+             << num(v.value("cost_s", NAN)) << "\n";
+      cov.push_back(v.value("coverage", -1.0));
+      ent.push_back(v.value("mean_entropy", 0.0));
+      traj.push_back(v.value("trajectory_s", 0.0));
+    }
+    c["coverage"] = cov;
+    c["mean_entropy"] = ent;
+    c["trajectory_s"] = traj;
+    curvesJson.push_back(c);
+  }
+
+  // results.md: per object and planner, mean ± sample standard deviation over the seeds.
+  std::ostringstream md;
+  md << "| object | planner | views to 90% | views to 95% | views to 99% | trajectory s to 95% | "
+        "final coverage % | accuracy mean mm | grasps | views | planning s |\n"
+        "|---|---|---|---|---|---|---|---|---|---|---|\n";
+  std::map<std::string, std::array<Stat, 4>> overall;  // planner → coverage, to95, reached, views
+  for (const std::string& o : objects)
+    for (const std::string& p : planners) {
+      Stat v90, v95, v99, t95, cov, acc, gr, nv, plan;
+      for (const Run& r : runs) {
+        if (r.object != o || r.planner != p) continue;
+        if (!r.summary.is_object()) {
+          for (Stat* st : {&v90, &v95, &v99, &t95, &cov, &acc, &gr, &nv, &plan}) st->add(NAN);
+          continue;
+        }
+        const Json& s = r.summary;
+        v90.add(firstReaching(s["views"], 0.90).first);
+        v95.add(firstReaching(s["views"], 0.95).first);
+        v99.add(firstReaching(s["views"], 0.99).first);
+        t95.add(firstReaching(s["views"], 0.95).second);
+        cov.add(100 * s.value("coverage", NAN));
+        acc.add(s["accuracy_mm"].value("mean", NAN));
+        gr.add(double(s["grasps"].size()));
+        nv.add(double(s["views"].size()));
+        plan.add(s["timing_s"].value("planning", NAN) + s["timing_s"].value("grasp_ranking", 0.0));
+        auto& ov = overall[p];
+        ov[0].add(100 * s.value("coverage", NAN));
+        ov[1].add(firstReaching(s["views"], 0.95).first);
+        ov[2].add(std::isfinite(firstReaching(s["views"], 0.95).first) ? 1.0 : 0.0);
+        ov[3].add(double(s["views"].size()));
+      }
+      md << "| " << objectName(o) << " | " << p << " | " << v90.str(1) << " | " << v95.str(1)
+         << " | " << v99.str(1) << " | " << t95.str(1) << " | " << cov.str(1) << " | " << acc.str(2)
+         << " | " << gr.str(1) << " | " << nv.str(1) << " | " << plan.str(1) << " |\n";
+    }
+  std::ostringstream head;
+  head << "# inhand eval\n\n"
+       << runs.size() << " runs: objects " << args.objects << "; planners " << args.planners
+       << "; seeds 1.." << args.seeds;
+  if (args.max_grasps >= 0) head << "; --max-grasps " << args.max_grasps;
+  if (args.max_views >= 0) head << "; --max-views " << args.max_views;
+  if (!args.config.empty()) head << "; --config " << args.config;
+  head << ".\nViews count the initial trajectory's views too; \"(k/n)\": only k of n runs reached "
+          "the level (the mean is over those).\n\n## Over all objects\n\n"
+          "| planner | final coverage % | views to 95% | runs reaching 95% | views |\n"
+          "|---|---|---|---|---|\n";
+  for (const std::string& p : planners) {
+    auto& ov = overall[p];
+    head << "| " << p << " | " << ov[0].str(1) << " | " << ov[1].str(1) << " | " << ov[2].str(2)
+         << " | " << ov[3].str(1) << " |\n";
+  }
+  head << "\n## Per object\n\n";
+  const double total = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  writeTextAtomically(out.path() / "results.csv", csv.str());
+  writeTextAtomically(out.path() / "curves.csv", curves.str());
+  writeTextAtomically(out.path() / "curves.json", curvesJson.dump(1) + "\n");
+  writeTextAtomically(out.path() / "results.md", head.str() + md.str());
+  out.commit();
+  int failed = 0;
+  for (const Run& r : runs) failed += !r.summary.is_object();
+  std::printf("eval: %zu runs (%d failed) in %.0f s -> %s/results.md\n", runs.size(), failed, total,
+              args.out.c_str());
+  return failed ? 5 : 0;
+}
+
+}  // namespace inhand::app

@@ -1,0 +1,104 @@
+#include "inhand/eval/metrics.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "inhand/core/error.h"
+#include "inhand/core/parallel.h"
+
+namespace inhand {
+
+std::string EvalOptions::validate() const {
+  if (samples < 100 || samples > 10000000) return "samples must be in [100, 1e7]";
+  if (!(tau_m > 0 && tau_m < 1)) return "tau_m must be in (0, 1) m";
+  for (double d : fscore_m)
+    if (!(d > 0 && d < 1)) return "fscore_m values must be in (0, 1) m";
+  return {};
+}
+
+std::vector<uint8_t> observedTriangles(const ObjectModel& model) {
+  INHAND_CHECK(model.observed.size() == model.mesh.vertices.size(), "observed flag per vertex");
+  std::vector<uint8_t> use(model.mesh.triangles.size());
+  for (size_t t = 0; t < use.size(); ++t) {
+    const Tri& f = model.mesh.triangles[t];
+    use[t] = model.observed[f[0]] && model.observed[f[1]] && model.observed[f[2]];
+  }
+  return use;
+}
+
+GroundTruth::GroundTruth(const TriangleMesh& truth, const EvalOptions& options)
+    : options_(options), truthIndex_(truth) {
+  const std::string p = options.validate();
+  if (!p.empty()) throw Error("eval options: " + p);
+  if (truthIndex_.empty()) throw Error("ground truth mesh has no triangles");
+  truthSamples_ = sampleSurfaceUniform(truth, options.samples, options.seed);
+  if (truthSamples_.empty()) throw Error("ground truth mesh has zero area");
+}
+
+namespace {
+// Distances (capped at `cap`) from each point to the index, on both cores.
+std::vector<double> distances(const TriangleDistanceIndex& index, const std::vector<Vec3>& pts,
+                              double cap) {
+  std::vector<double> d(pts.size());
+  parallelFor(
+      0, int(pts.size()), [&](int i) { d[i] = index.distance(pts[i], cap); }, 256);
+  return d;
+}
+double fractionWithin(const std::vector<double>& d, double r) {
+  if (d.empty()) return 0;
+  size_t n = 0;
+  for (double x : d) n += x <= r;
+  return double(n) / double(d.size());
+}
+}  // namespace
+
+double GroundTruth::coverage(const ObjectModel& model) const {
+  const TriangleDistanceIndex observed(model.mesh, observedTriangles(model));
+  if (observed.empty()) return 0;
+  return fractionWithin(distances(observed, truthSamples_, options_.tau_m), options_.tau_m);
+}
+
+SurfaceMetrics GroundTruth::evaluate(const ObjectModel& model) const {
+  SurfaceMetrics m;
+  const std::vector<uint8_t> use = observedTriangles(model);
+  for (size_t t = 0; t < use.size(); ++t)
+    if (use[t]) m.observed_area_m2 += model.mesh.triangleArea(int(t));
+  const size_t nf = options_.fscore_m.size();
+  m.fscore.assign(nf, 0);
+  m.precision.assign(nf, 0);
+  m.recall.assign(nf, 0);
+  const TriangleDistanceIndex observed(model.mesh, use);
+  if (observed.empty()) return m;
+  double cap = options_.tau_m;
+  for (double d : options_.fscore_m) cap = std::max(cap, d);
+  const std::vector<double> toModel = distances(observed, truthSamples_, cap);
+  m.coverage = fractionWithin(toModel, options_.tau_m);
+  // Accuracy: every observed-model sample's exact distance to the truth (no cap).
+  const std::vector<Vec3> modelSamples =
+      sampleSurfaceUniform(model.mesh, options_.samples, options_.seed + 1, use);
+  std::vector<double> toTruth =
+      distances(truthIndex_, modelSamples, std::numeric_limits<double>::infinity());
+  double sum = 0, sum2 = 0;
+  for (double x : toTruth) {
+    sum += x;
+    sum2 += x * x;
+  }
+  const double n = double(std::max<size_t>(1, toTruth.size()));
+  m.accuracy_mean_mm = 1000 * sum / n;
+  m.accuracy_rms_mm = 1000 * std::sqrt(sum2 / n);
+  for (size_t k = 0; k < nf; ++k) {
+    const double P = fractionWithin(toTruth, options_.fscore_m[k]);
+    const double R = fractionWithin(toModel, options_.fscore_m[k]);
+    m.precision[k] = P;
+    m.recall[k] = R;
+    m.fscore[k] = P + R > 0 ? 2 * P * R / (P + R) : 0;
+  }
+  if (!toTruth.empty()) {
+    const size_t k = std::min(toTruth.size() - 1, size_t(std::ceil(0.95 * toTruth.size())) - 1);
+    std::nth_element(toTruth.begin(), toTruth.begin() + k, toTruth.end());
+    m.accuracy_p95_mm = 1000 * toTruth[k];
+  }
+  return m;
+}
+
+}  // namespace inhand
