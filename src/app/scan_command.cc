@@ -149,6 +149,7 @@ void readOptions(const fs::path& file, AllOptions* o) {
   r.num("voxel_m", &o->scan.voxel_m);
   r.num("volume_size_m", &o->scan.volume_size_m);
   r.num("t_hand_m", &o->scan.t_hand_m);
+  r.integer("carve_radius_px", &o->scan.carve_radius_px);
   std::string mode;
   r.string("hand_mode", &mode);
   if (!mode.empty() && !parseHandMode(mode, &o->scan.hand_mode))
@@ -204,6 +205,7 @@ Json optionsJson(const AllOptions& o) {
           {"voxel_m", o.scan.voxel_m},
           {"volume_size_m", o.scan.volume_size_m},
           {"t_hand_m", o.scan.t_hand_m},
+          {"carve_radius_px", o.scan.carve_radius_px},
           {"hand_mode", handModeName(o.scan.hand_mode)},
           {"initial_views", o.scan.initial_views},
           {"max_views", o.scan.max_views},

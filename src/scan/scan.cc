@@ -40,6 +40,7 @@ std::string ScanOptions::validate() const {
   if (initial_views < 0) return "initial_views must be >= 0";
   if (max_views < 0) return "max_views must be >= 0";
   if (planning_stride < 1 || planning_stride > 4) return "planning_stride must be in 1..4";
+  if (carve_radius_px < 0 || carve_radius_px > 10) return "carve_radius_px must be in 0..10";
   std::string p = planner.validate();
   if (!p.empty()) return "planner." + p;
   p = mesh.validate();
@@ -150,10 +151,26 @@ ScanResult scanSingleGrasp(RobotInterface& robot, DepthSensor& sensor, const Iso
       cam.max_projector_incidence_deg = 89;
       cam.projector_C = Vec3(1e-6, 0, 0);
       DepthImage robotDepth = renderDepth(robotScene, T_B_C, cam, noise, exact);
+      // A measurement is the robot's when the robot's rendered surface lies within t_hand of it
+      // at that pixel or within carve_radius_px of it: the sensor's lateral noise moves returns
+      // across the robot's silhouette by a pixel or two.
       carve.assign(depth.depth_m.size(), 0);
-      for (size_t i = 0; i < carve.size(); ++i)
-        carve[i] = depth.depth_m[i] > 0 && robotDepth.depth_m[i] > 0 &&
-                   std::abs(depth.depth_m[i] - robotDepth.depth_m[i]) < options.t_hand_m;
+      const int W = depth.width, H = depth.height, R = options.carve_radius_px;
+      parallelFor(0, H, [&](int v) {
+        for (int u = 0; u < W; ++u) {
+          const float d = depth.depth_m[size_t(v) * W + u];
+          if (!(d > 0)) continue;
+          bool robot = false;
+          for (int dv = -R; dv <= R && !robot; ++dv)
+            for (int du = -R; du <= R && !robot; ++du) {
+              const int uu = u + du, vv = v + dv;
+              if (uu < 0 || vv < 0 || uu >= W || vv >= H || du * du + dv * dv > R * R) continue;
+              const float rd = robotDepth.depth_m[size_t(vv) * W + uu];
+              robot = rd > 0 && std::abs(d - rd) < options.t_hand_m;
+            }
+          carve[size_t(v) * W + u] = robot;
+        }
+      });
     }
     integrate(depth, T_O_C, K, measurementSigma(depth, K, noise), &volume,
               carve.empty() ? nullptr : &carve);
