@@ -72,6 +72,8 @@ struct EvalArgs {
   int jobs = 0;         // runs at a time; 0: one per core
 };
 int runEval(const EvalArgs& args);
+// `inhand report DIR`: rebuilds DIR/report.html (a scan) or DIR/index.html (an eval).
+int runReport(const std::string& dir);
 int runSnapshot(const SnapshotArgs& args);
 int runRender(const RenderArgs& args);
 int runFuse(const FuseArgs& args);

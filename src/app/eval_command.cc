@@ -24,6 +24,7 @@
 #include "inhand/core/json_util.h"
 #include "inhand/geometry/builtin_objects.h"
 #include "inhand/planning/view_selection.h"
+#include "inhand/report/html_report.h"
 
 extern char** environ;
 
@@ -331,12 +332,32 @@ int runEval(const EvalArgs& args) {
   writeTextAtomically(out.path() / "curves.csv", curves.str());
   writeTextAtomically(out.path() / "curves.json", curvesJson.dump(1) + "\n");
   writeTextAtomically(out.path() / "results.md", head.str() + md.str());
+  try {
+    writeEvalIndex(out.path(), webDirectory());
+  } catch (const Error& e) {
+    std::fprintf(stderr, "eval: warning: no index.html: %s\n", e.what());
+  }
   out.commit();
   int failed = 0;
   for (const Run& r : runs) failed += !r.summary.is_object();
   std::printf("eval: %zu runs (%d failed) in %.0f s -> %s/results.md\n", runs.size(), failed, total,
               args.out.c_str());
   return failed ? 5 : 0;
+}
+
+int runReport(const std::string& dir) {
+  if (!fs::is_directory(dir)) throw Error(dir + ": not a directory");
+  const fs::path web = webDirectory();
+  if (fs::exists(fs::path(dir) / "summary.json")) {
+    writeScanReport(dir, web);
+    std::printf("report: %s/report.html\n", dir.c_str());
+  } else if (fs::exists(fs::path(dir) / "results.csv")) {
+    writeEvalIndex(dir, web);
+    std::printf("report: %s/index.html\n", dir.c_str());
+  } else {
+    throw Error(dir + ": neither a scan (summary.json) nor an eval (results.csv)");
+  }
+  return 0;
 }
 
 }  // namespace inhand::app

@@ -97,6 +97,10 @@ int main(int argc, char** argv) {
   ev->add_option("--max-views", eval.max_views, "next-best views per grasp at most");
   ev->add_option("--jobs", eval.jobs, "runs at a time (0: one per core)")->capture_default_str();
 
+  std::string reportDir;
+  auto* rp = app.add_subcommand("report", "rebuild the HTML report of a scan or an eval directory");
+  rp->add_option("dir", reportDir, "a scan's or an eval's output directory")->required();
+
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -105,6 +109,7 @@ int main(int argc, char** argv) {
   try {
     if (*sc) return inhand::app::runScan(scan);
     if (*ev) return inhand::app::runEval(eval);
+    if (*rp) return inhand::app::runReport(reportDir);
     if (*rb) return inhand::app::runRobot(robot);
     if (*s) return inhand::app::runSnapshot(snap);
     if (*r) return inhand::app::runRender(render);

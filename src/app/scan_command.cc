@@ -12,6 +12,8 @@
 #include "inhand/eval/metrics.h"
 #include "inhand/geometry/builtin_objects.h"
 #include "inhand/geometry/mesh_io.h"
+#include "inhand/report/html_report.h"
+#include "inhand/robot/collision.h"
 #include "inhand/scan/multi_grasp.h"
 #include "inhand/sim/sim_world.h"
 
@@ -294,6 +296,20 @@ int runScan(const ScanArgs& args) {
   const ScanResult& r = mr.scan;
 
   writePly(out.path() / "model.ply", r.model.mesh, &r.model.variance);
+  writePly(out.path() / "truth.ply", object);  // the simulated object, frame O
+  // Per grasp: the model after its views, the hand as it held the object, the best candidates.
+  fs::create_directories(out.path() / "grasps");
+  for (size_t g = 0; g < mr.grasps.size(); ++g) {
+    const GraspRecord& gr = mr.grasps[g];
+    const std::string k = "grasp_" + std::to_string(g + 1);
+    writePly(out.path() / "grasps" / (k + "_model.ply"), gr.model.mesh, &gr.model.variance);
+    if (int(gr.q.size()) == model.variableCount())
+      writePly(out.path() / "grasps" / (k + "_hand.ply"),
+               HandGeometry(model, gr.q, gr.T_O_palm).mesh());
+    for (size_t c = 0; c < gr.ranked.size(); ++c)
+      writePly(out.path() / "grasps" / (k + "_candidate_" + std::to_string(c + 1) + ".ply"),
+               HandGeometry(model, gr.ranked[c].q, gr.ranked[c].T_O_palm).mesh());
+  }
   const SurfaceMetrics sm = truth.evaluate(r.model);
   Json views = Json::array();
   double trajectory = 0;
@@ -305,6 +321,7 @@ int runScan(const ScanArgs& args) {
     trajectory += v.cost_s;
     views.push_back({{"initial", v.initial},
                      {"direction_O", {v.dir_O.x(), v.dir_O.y(), v.dir_O.z()}},
+                     {"T_O_C", poseToRowMajor(v.T_O_C)},
                      {"quality", v.quality},
                      {"cost_s", v.cost_s},
                      {"score", v.score},
@@ -336,8 +353,14 @@ int runScan(const ScanArgs& args) {
   summary["trajectory_s"] = trajectory;
   summary["views"] = views;
   Json grasps = Json::array();
-  for (const GraspRecord& g : mr.grasps)
+  for (const GraspRecord& g : mr.grasps) {
+    Json ranked = Json::array();
+    for (const RankedGrasp& c : g.ranked)
+      ranked.push_back({{"T_O_palm", poseToRowMajor(c.T_O_palm)},
+                        {"quality", c.quality},
+                        {"stability_epsilon", c.epsilon}});
     grasps.push_back({{"T_O_palm", poseToRowMajor(g.T_O_palm)},
+                      {"ranked", ranked},
                       {"candidates", g.candidates},
                       {"poses_tried", g.tried},
                       {"quality", g.quality},
@@ -348,7 +371,11 @@ int runScan(const ScanArgs& args) {
                       {"mean_entropy", g.mean_entropy},
                       {"generation_s", g.generation_s},
                       {"ranking_s", g.ranking_s}});
+  }
   summary["grasps"] = grasps;
+  const CameraIntrinsics& K = camera.intrinsics;
+  summary["camera"] = {{"width", K.width}, {"height", K.height}, {"fx", K.fx},
+                       {"fy", K.fy},       {"cx", K.cx},         {"cy", K.cy}};
   summary["view_evaluations"] = r.view_evaluations;
   summary["view_evaluations_per_s"] = r.planning_s > 0 ? r.view_evaluations / r.planning_s : 0.0;
   summary["frames"] = r.frames;
@@ -373,6 +400,12 @@ int runScan(const ScanArgs& args) {
        }()}};
   summary["options"] = optionsJson(o);
   writeTextAtomically(out.path() / "summary.json", summary.dump(2) + "\n");
+  // The report: a missing front-end install costs the report only, never the scan.
+  try {
+    writeScanReport(out.path(), webDirectory());
+  } catch (const Error& e) {
+    std::fprintf(stderr, "scan: warning: no report.html: %s\n", e.what());
+  }
   out.commit();
   std::printf(
       "scan: %s: %zu grasps, %zu views, %d frames, %s; observed %.1f%% of the surface, "

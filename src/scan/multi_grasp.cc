@@ -20,6 +20,7 @@ ViewPlannerOptions MultiGraspOptions::defaultRankingPlanner() {
 
 std::string MultiGraspOptions::validate() const {
   if (max_grasps < 1 || max_grasps > 50) return "max_grasps must be in 1..50";
+  if (keep_ranked < 0) return "keep_ranked must be >= 0";
   std::string p = grasp.validate();
   if (!p.empty()) return "grasp." + p;
   p = ranking.validate();
@@ -51,8 +52,10 @@ MultiGraspResult scanMultiGrasp(RobotInterface& robot, DepthSensor& sensor, cons
     log("grasp " + std::to_string(g + 1));
     ScanOptions o = options;
     if (g > 0) o.initial_views = 0;  // the model exists; Alg. 1 from the start
+    next.q = robot.joints();
     ScanResult r = scanSingleGrasp(robot, sensor, T_O_palm, centre_O, o, noise, progress, &volume);
     GraspRecord rec = next;
+    rec.model = r.planning_model;  // at the planning stride: a quarter of the triangles
     rec.views = int(r.views.size());
     rec.termination = r.termination;
     rec.hole_area_m2 = r.model.holeArea();
@@ -122,6 +125,10 @@ MultiGraspResult scanMultiGrasp(RobotInterface& robot, DepthSensor& sensor, cons
     next.epsilon = best.epsilon;
     next.generation_s = gen.seconds;
     next.ranking_s = rankS;
+    for (const GraspCandidate& c : gen.candidates) {
+      if (int(next.ranked.size()) >= multi.keep_ranked) break;
+      next.ranked.push_back({c.T_O_palm, c.q, c.quality, c.epsilon});
+    }
   }
   all.total_s = std::chrono::duration<double>(Clock::now() - t0).count();
   return out;

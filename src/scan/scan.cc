@@ -198,6 +198,7 @@ ScanResult scanSingleGrasp(RobotInterface& robot, DepthSensor& sensor, const Iso
       ViewRecord rec;
       rec.initial = true;
       rec.dir_O = c->dir_O;
+      rec.T_O_C = c->T_O_C;
       rec.cost_s = trajectoryTime(m, m.arm(robot.joints()), c->arm);
       rec.frames = moveTo(*c);
       ObjectModel model = extractModel(volume, options.mesh);
@@ -229,6 +230,7 @@ ScanResult scanSingleGrasp(RobotInterface& robot, DepthSensor& sensor, const Iso
     const ViewCandidate& c = *sel.best;
     ViewRecord rec;
     rec.dir_O = c.dir_O;
+    rec.T_O_C = c.T_O_C;
     rec.quality = c.quality;
     rec.cost_s = c.cost_s;
     rec.score = c.score;

@@ -15,12 +15,21 @@ struct MultiGraspOptions {
   // Alg. 1 as used to rank grasp candidates: coarser than the view planner's (fewer directions
   // and rolls, every 4th pixel), since it runs once per candidate.
   ViewPlannerOptions ranking = defaultRankingPlanner();
+  int keep_ranked = 12;  // candidates kept per grasp in its record (for the report)
   static ViewPlannerOptions defaultRankingPlanner();
   std::string validate() const;
 };
 
+// A ranked candidate as the report shows it.
+struct RankedGrasp {
+  Iso3 T_O_palm = Iso3::Identity();
+  JointVector q;  // hand closed to contact
+  double quality = 0, epsilon = 0;
+};
+
 struct GraspRecord {
   Iso3 T_O_palm = Iso3::Identity();
+  JointVector q;  // the robot's joints when the grasp's views began (hand as it holds the object)
   int candidates = 0;       // ranked candidates this grasp was chosen from (0: the first grasp)
   int tried = 0;            // candidate poses tried
   double quality = 0;       // its best view quality when ranked
@@ -30,6 +39,8 @@ struct GraspRecord {
   double hole_area_m2 = 0;  // σ = 5 cm (unknown) area of the model after its views
   double mean_entropy = 0;  // of the model after its views
   double generation_s = 0, ranking_s = 0;
+  std::vector<RankedGrasp> ranked;  // the best candidates it was chosen from, best first
+  ObjectModel model;                // the model after its views (at the planning stride)
 };
 
 struct MultiGraspResult {

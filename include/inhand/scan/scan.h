@@ -42,6 +42,7 @@ struct ScanOptions {
 struct ViewRecord {
   bool initial = false;  // part of the initial trajectory (not chosen by Alg. 1)
   Vec3 dir_O = Vec3::Zero();
+  Iso3 T_O_C = Iso3::Identity();  // the chosen camera pose in the object frame
   double quality = 0, cost_s = 0, score = 0;
   double mean_entropy = 0;  // of the model after the view's frames
   double observed_fraction = 0;

@@ -1,0 +1,174 @@
+#include "inhand/report/html_report.h"
+
+#include <cstdlib>
+#include <fstream>
+#include <sstream>
+
+#include "inhand/core/error.h"
+#include "inhand/core/file_util.h"
+#include "inhand/core/json_util.h"
+#include "inhand/geometry/mesh_io.h"
+
+namespace inhand {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+std::string readText(const fs::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  if (!in) throw Error(p.string() + ": cannot read");
+  std::ostringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+std::string base64(const void* data, size_t n) {
+  static const char* k = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+  const auto* b = static_cast<const unsigned char*>(data);
+  std::string out;
+  out.reserve((n + 2) / 3 * 4);
+  size_t i = 0;
+  for (; i + 2 < n; i += 3) {
+    const uint32_t v = (uint32_t(b[i]) << 16) | (uint32_t(b[i + 1]) << 8) | b[i + 2];
+    for (int s = 18; s >= 0; s -= 6) out += k[(v >> s) & 63];
+  }
+  if (i < n) {
+    uint32_t v = uint32_t(b[i]) << 16;
+    if (i + 1 < n) v |= uint32_t(b[i + 1]) << 8;
+    out += k[(v >> 18) & 63];
+    out += k[(v >> 12) & 63];
+    out += i + 1 < n ? k[(v >> 6) & 63] : '=';
+    out += '=';
+  }
+  return out;
+}
+
+// A mesh as base64 little-endian arrays: float32 positions, uint32 indices, and uint8 RGB
+// colours when the PLY has them.
+Json meshJson(const fs::path& ply) {
+  const PlyData d = readPly(ply);
+  std::vector<float> pos;
+  pos.reserve(d.mesh.vertices.size() * 3);
+  for (const Vec3f& v : d.mesh.vertices) pos.insert(pos.end(), {v.x(), v.y(), v.z()});
+  std::vector<uint32_t> idx;
+  idx.reserve(d.mesh.triangles.size() * 3);
+  for (const Tri& t : d.mesh.triangles)
+    idx.insert(idx.end(), {uint32_t(t[0]), uint32_t(t[1]), uint32_t(t[2])});
+  Json j = {{"positions", base64(pos.data(), pos.size() * 4)},
+            {"indices", base64(idx.data(), idx.size() * 4)},
+            {"vertices", d.mesh.vertices.size()},
+            {"triangles", d.mesh.triangles.size()}};
+  auto r = d.vertexProperties.find("red"), g = d.vertexProperties.find("green"),
+       b = d.vertexProperties.find("blue");
+  if (r != d.vertexProperties.end() && g != d.vertexProperties.end() &&
+      b != d.vertexProperties.end()) {
+    std::vector<uint8_t> rgb(d.mesh.vertices.size() * 3);
+    for (size_t i = 0; i < d.mesh.vertices.size(); ++i) {
+      rgb[3 * i] = uint8_t(r->second[i]);
+      rgb[3 * i + 1] = uint8_t(g->second[i]);
+      rgb[3 * i + 2] = uint8_t(b->second[i]);
+    }
+    j["colors"] = base64(rgb.data(), rgb.size());
+  }
+  return j;
+}
+
+void replaceOnce(std::string* s, const std::string& key, const std::string& value) {
+  const size_t at = s->find(key);
+  if (at == std::string::npos) throw Error("report template lacks " + key);
+  s->replace(at, key.size(), value);
+}
+
+// Inside <script>, "</" must not appear (it could close the element).
+std::string scriptSafe(std::string s) {
+  for (size_t at = s.find("</"); at != std::string::npos; at = s.find("</", at + 3))
+    s.replace(at, 2, "<\\/");
+  return s;
+}
+
+std::string dataUrl(const std::string& js) {
+  return "data:text/javascript;base64," + base64(js.data(), js.size());
+}
+
+// The page: template, libraries, data and app code put together.
+std::string buildPage(const fs::path& web, const std::string& title, const Json& data,
+                      const std::string& appFile) {
+  std::string page = readText(web / "template.html");
+  const fs::path nm = web / "node_modules";
+  std::string core = readText(nm / "three/build/three.core.min.js");
+  std::string three = readText(nm / "three/build/three.module.min.js");
+  // three.module imports its core by a relative path, which a data: URL cannot resolve: point it
+  // at a bare specifier the import map resolves.
+  for (size_t at = three.find("\"./three.core.min.js\""); at != std::string::npos;
+       at = three.find("\"./three.core.min.js\"", at))
+    three.replace(at, 21, "\"three/core\"");
+  const std::string orbit = readText(nm / "three/examples/jsm/controls/OrbitControls.js");
+  const Json importMap = {{"imports",
+                           {{"three", dataUrl(three)},
+                            {"three/core", dataUrl(core)},
+                            {"three/addons/OrbitControls.js", dataUrl(orbit)}}}};
+  replaceOnce(&page, "{{TITLE}}", title);
+  replaceOnce(&page, "/*{{IMPORTMAP}}*/", importMap.dump());
+  replaceOnce(&page, "/*{{CHARTJS}}*/", scriptSafe(readText(nm / "chart.js/dist/chart.umd.min.js")));
+  replaceOnce(&page, "/*{{DATA}}*/", scriptSafe(data.dump()));
+  replaceOnce(&page, "/*{{APP}}*/", scriptSafe(readText(web / appFile)));
+  return page;
+}
+
+}  // namespace
+
+fs::path webDirectory() {
+  fs::path dir = INHAND_WEB_DIR;
+  if (const char* env = std::getenv("INHAND_WEB_DIR"); env && *env) dir = env;
+  for (const char* f : {"node_modules/three/build/three.module.min.js",
+                        "node_modules/chart.js/dist/chart.umd.min.js", "template.html"})
+    if (!fs::exists(dir / f))
+      throw Error("report: " + (dir / f).string() +
+                  " is missing; install the report libraries with scripts/install_deps.sh "
+                  "(npm ci in web/) or point INHAND_WEB_DIR at such a folder");
+  return dir;
+}
+
+void writeScanReport(const fs::path& dir, const fs::path& web) {
+  const fs::path summaryFile = dir / "summary.json";
+  if (!fs::exists(summaryFile)) throw Error(summaryFile.string() + ": not found (not a scan?)");
+  const Json summary = readJsonFile(summaryFile);
+  if (!summary.is_object() || !summary.contains("views") || !summary.contains("grasps"))
+    throw Error(summaryFile.string() + ": not an inhand scan summary (no views or grasps)");
+  Json data = {{"summary", summary}};
+  data["model"] = meshJson(dir / "model.ply");
+  if (fs::exists(dir / "truth.ply")) data["truth"] = meshJson(dir / "truth.ply");
+  Json grasps = Json::array();
+  for (size_t g = 0; g < summary["grasps"].size(); ++g) {
+    const std::string k = std::to_string(g + 1);
+    Json gj = Json::object();
+    const fs::path gd = dir / "grasps";
+    if (fs::exists(gd / ("grasp_" + k + "_model.ply")))
+      gj["model"] = meshJson(gd / ("grasp_" + k + "_model.ply"));
+    if (fs::exists(gd / ("grasp_" + k + "_hand.ply")))
+      gj["hand"] = meshJson(gd / ("grasp_" + k + "_hand.ply"));
+    Json cands = Json::array();
+    for (int c = 1;; ++c) {
+      const fs::path f = gd / ("grasp_" + k + "_candidate_" + std::to_string(c) + ".ply");
+      if (!fs::exists(f)) break;
+      cands.push_back(meshJson(f));
+    }
+    gj["candidates"] = cands;
+    grasps.push_back(gj);
+  }
+  data["grasps"] = grasps;
+  const std::string title = "inhand scan: " + summary.value("object", std::string("?"));
+  writeTextAtomically(dir / "report.html", buildPage(web, title, data, "report.js"));
+}
+
+void writeEvalIndex(const fs::path& dir, const fs::path& web) {
+  for (const char* f : {"results.md", "curves.json", "results.csv"})
+    if (!fs::exists(dir / f)) throw Error((dir / f).string() + ": not found (not an eval?)");
+  Json data = {{"results_md", readText(dir / "results.md")},
+               {"results_csv", readText(dir / "results.csv")},
+               {"curves", readJsonFile(dir / "curves.json")}};
+  writeTextAtomically(dir / "index.html", buildPage(web, "inhand eval", data, "index.js"));
+}
+
+}  // namespace inhand
