@@ -7,17 +7,31 @@ packages=(
   nlohmann-json3-dev libcli11-dev
   liburdfdom-dev liborocos-kdl-dev libfcl-dev
   libgtest-dev libbenchmark-dev
+  nodejs npm chromium
 )
 missing=()
 for p in "${packages[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q 'install ok installed' || missing+=("$p")
 done
-if [ ${#missing[@]} -eq 0 ]; then
-  echo "install_deps: all ${#packages[@]} packages present"
-  exit 0
+# A machine that already has Node.js (from its own distribution) needs no Debian npm.
+if command -v node > /dev/null && command -v npm > /dev/null; then
+  kept=()
+  for p in "${missing[@]}"; do [ "$p" = nodejs ] || [ "$p" = npm ] || kept+=("$p"); done
+  missing=("${kept[@]+"${kept[@]}"}")
 fi
-echo "install_deps: installing ${missing[*]}"
-SUDO=""
-[ "$(id -u)" -eq 0 ] || SUDO="sudo"
-$SUDO apt-get update
-DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y --no-install-recommends "${missing[@]}"
+if [ ${#missing[@]} -eq 0 ]; then
+  echo "install_deps: all Debian packages present"
+else
+  echo "install_deps: installing ${missing[*]}"
+  SUDO=""
+  [ "$(id -u)" -eq 0 ] || SUDO="sudo"
+  $SUDO apt-get update
+  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y --no-install-recommends "${missing[@]}"
+fi
+# The report's front-end libraries (three.js, Chart.js), pinned by web/package-lock.json.
+web="$(cd "$(dirname "$0")/../web" && pwd)"
+if [ ! -f "$web/node_modules/three/package.json" ] || [ ! -f "$web/node_modules/chart.js/package.json" ] ||
+   [ "$web/package-lock.json" -nt "$web/node_modules/.package-lock.json" ]; then
+  echo "install_deps: npm ci in $web"
+  (cd "$web" && npm ci --no-audit --no-fund)
+fi

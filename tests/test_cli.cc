@@ -1,6 +1,7 @@
 // End-to-end runs of the `inhand` binary: the commands a user types, their outputs and errors.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cstdlib>
 #include <fstream>
 
@@ -171,5 +172,110 @@ TEST(Cli, ScanWritesModelAndSummaryAndRejectsBadConfig) {
           dir);
   EXPECT_EQ(r.code, 1);
   EXPECT_NE(r.output.find("max_grasps"), std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(dir.path() / "x"));
+}
+
+namespace {
+// A quick scan config for the report and eval tests: coarse voxels, few candidates.
+const char* kQuickConfig = R"({"voxel_m": 0.004, "initial_views": 2,
+    "planner": {"directions": 40, "rolls": 2, "fallback_ranges_m": []},
+    "grasp": {"approaches": 16, "rolls": 2, "max_candidates": 6,
+              "ranking": {"directions": 24, "rolls": 2}},
+    "sim": {"frame_subsample": 10}, "eval": {"samples": 4000}})";
+}  // namespace
+
+TEST(Cli, ScanReportOpensInHeadlessChromium) {
+  test::TempDir dir;
+  writeTextAtomically(dir.path() / "quick.json", kQuickConfig);
+  const fs::path out = dir.path() / "scan";
+  Result r = run("scan --object builtin:juice_bottle --max-views 1 --max-grasps 2 --config " +
+                     (dir.path() / "quick.json").string() + " --out " + out.string(),
+                 dir);
+  ASSERT_EQ(r.code, 0) << r.output;
+  ASSERT_TRUE(fs::exists(out / "report.html")) << r.output;
+  const Json s = readJsonFile(out / "summary.json");
+  // Self-contained: no script or style fetched from anywhere.
+  const std::string html = readTextFile(out / "report.html");
+  for (const char* ref : {"src=\"http", "src='http", "href=\"http", "@import"})
+    EXPECT_EQ(html.find(ref), std::string::npos) << ref;
+  // `inhand report` rebuilds it from the scan's files.
+  fs::remove(out / "report.html");
+  r = run("report " + out.string(), dir);
+  ASSERT_EQ(r.code, 0) << r.output;
+  ASSERT_TRUE(fs::exists(out / "report.html"));
+
+  const char* chromium = "/usr/bin/chromium";
+  if (!fs::exists(chromium))
+    GTEST_SKIP() << "Chromium is not installed (apt-get install chromium): the report was written "
+                    "but not opened in a browser";
+  const fs::path dom = dir.path() / "dom.html";
+  const std::string cmd = std::string("timeout 300 ") + chromium +
+                          " --headless --no-sandbox --disable-gpu --enable-unsafe-swiftshader "
+                          "--use-angle=swiftshader --window-size=1200,900 "
+                          "--virtual-time-budget=20000 --dump-dom 'file://" +
+                          fs::absolute(out / "report.html").string() + "#selftest' > " +
+                          dom.string() + " 2>/dev/null";
+  ASSERT_EQ(std::system(cmd.c_str()), 0) << cmd;
+  const std::string page = readTextFile(dom);
+  const std::string tag = "<pre id=\"inhand-selftest\">";
+  const size_t at = page.find(tag);
+  ASSERT_NE(at, std::string::npos) << "the page did not finish drawing (script error?)";
+  const size_t end = page.find("</pre>", at);
+  const std::string raw = page.substr(at + tag.size(), end - at - tag.size());
+  std::string text;  // the DOM dump escapes quotes
+  for (size_t i = 0; i < raw.size(); ++i) {
+    if (raw.compare(i, 6, "&quot;") == 0) {
+      text += '"';
+      i += 5;
+    } else {
+      text += raw[i];
+    }
+  }
+  const Json t = Json::parse(text);
+  EXPECT_TRUE(t["errors"].empty()) << t["errors"].dump();
+  // The 3-D view drew the model: well over 1% of the canvas is not background.
+  EXPECT_GT(t["nonBackground"].get<double>(), 0.01);
+  // Every chart has one point per view.
+  const size_t views = s["views"].size();
+  EXPECT_EQ(t["views"].get<size_t>(), views);
+  for (const char* chart : {"entropy", "coverage", "quality", "cost"}) {
+    ASSERT_TRUE(t["charts"].contains(chart)) << chart;
+    for (const Json& n : t["charts"][chart]) EXPECT_EQ(n.get<size_t>(), views) << chart;
+  }
+  // The second grasp's candidates drawn, one thumbnail each.
+  EXPECT_EQ(t["thumbnails"].get<size_t>(), s["grasps"][1]["ranked"].size());
+  EXPECT_GT(t["thumbnails"].get<size_t>(), 0u);
+}
+
+TEST(Cli, EvalTabulatesEveryRunAndRejectsUnknownPlanners) {
+  test::TempDir dir;
+  writeTextAtomically(dir.path() / "quick.json", kQuickConfig);
+  const fs::path out = dir.path() / "eval";
+  Result r =
+      run("eval --objects builtin:pill_bottle --planners ig,random --seeds 2 --max-grasps 1 "
+          "--max-views 1 --config " +
+              (dir.path() / "quick.json").string() + " --out " + out.string(),
+          dir);
+  ASSERT_EQ(r.code, 0) << r.output;
+  const std::string csv = readTextFile(out / "results.csv");
+  EXPECT_EQ(std::count(csv.begin(), csv.end(), '\n'), 5);  // header + 2 planners × 2 seeds
+  EXPECT_NE(csv.find("pill_bottle,random,2,0,"), std::string::npos) << csv;
+  const std::string md = readTextFile(out / "results.md");
+  EXPECT_NE(md.find("| pill_bottle | ig |"), std::string::npos) << md;
+  EXPECT_NE(md.find("| pill_bottle | random |"), std::string::npos) << md;
+  const Json curves = readJsonFile(out / "curves.json");
+  ASSERT_EQ(curves.size(), 4u);
+  for (const Json& c : curves) EXPECT_GE(c["coverage"].size(), 2u);  // initial views + 1
+  EXPECT_TRUE(fs::exists(out / "index.html"));
+  EXPECT_TRUE(fs::exists(out / "runs/pill_bottle/ig/seed1/summary.json"));
+
+  r = run(
+      "eval --objects builtin:pill_bottle --planners ig,best --out " + (dir.path() / "x").string(),
+      dir);
+  EXPECT_EQ(r.code, 1);
+  EXPECT_NE(r.output.find("unknown planner \"best\""), std::string::npos) << r.output;
+  r = run("eval --objects builtin:nothing --out " + (dir.path() / "x").string(), dir);
+  EXPECT_EQ(r.code, 1);
+  EXPECT_NE(r.output.find("nothing"), std::string::npos) << r.output;
   EXPECT_FALSE(fs::exists(dir.path() / "x"));
 }

@@ -220,7 +220,7 @@ const ds = (label, data, color) => ({ label, data, borderColor: color, backgroun
 chart('entropy', 'Mean entropy of the model (paper Fig. 5)', [ds('mean entropy, nats', S.views.map((v) => v.mean_entropy), '#c0392b')], 'nats');
 if (S.views.some((v) => v.coverage >= 0))
   chart('coverage', 'Coverage of the true surface (τ = 3 mm)', [ds('coverage %', S.views.map((v) => 100 * v.coverage), '#229954')], '%');
-chart('quality', 'View quality (eq. 9) of each chosen view', [ds('quality', S.views.map((v) => v.quality), '#2471a3')], 'quality');
+chart('quality', 'View quality (eq. 9) of each chosen view', [ds('quality (initial views: none)', S.views.map((v) => (v.initial ? null : v.quality)), '#2471a3')], 'quality');
 chart('cost', 'Trajectory time to each view', [ds('cost, s', S.views.map((v) => v.cost_s), '#7d3c98'),
   ds('cumulative, s', S.views.map((v) => v.trajectory_s), '#b7950b')], 's');
 
@@ -287,3 +287,5 @@ fig.append(el('pre', {}, JSON.stringify(S.options, null, 2)));
 
 state.views = S.views.length;
 state.ready = true;
+window.inhandSelfTest({ nonBackground: state.nonBackgroundFraction(), charts: state.charts, views: state.views,
+                        thumbnails: document.querySelectorAll('.thumb canvas').length });

@@ -110,7 +110,8 @@ std::string buildPage(const fs::path& web, const std::string& title, const Json&
                             {"three/addons/OrbitControls.js", dataUrl(orbit)}}}};
   replaceOnce(&page, "{{TITLE}}", title);
   replaceOnce(&page, "/*{{IMPORTMAP}}*/", importMap.dump());
-  replaceOnce(&page, "/*{{CHARTJS}}*/", scriptSafe(readText(nm / "chart.js/dist/chart.umd.min.js")));
+  replaceOnce(&page, "/*{{CHARTJS}}*/",
+              scriptSafe(readText(nm / "chart.js/dist/chart.umd.min.js")));
   replaceOnce(&page, "/*{{DATA}}*/", scriptSafe(data.dump()));
   replaceOnce(&page, "/*{{APP}}*/", scriptSafe(readText(web / appFile)));
   return page;
