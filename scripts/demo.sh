@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # The README's main command: installs what is missing, builds, and scans the built-in cracker box
 # with the simulated WAM + BarrettHand, re-grasping as needed (3 grasps). Output in ./out/cracker_box
-# (model.ply, summary.json, model.png).
+# (model.ply, summary.json, report.html, model.png, truth.ply, grasps/).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/install_deps.sh

@@ -61,7 +61,7 @@ const main = el('main');
 app.append(main);
 
 // ---- 3-D viewer -----------------------------------------------------------------------------
-const viewerSection = el('section', {}, el('h2', {}, 'Model'));
+const viewerSection = el('section', { id: 'model' }, el('h2', {}, 'Model'));
 main.append(viewerSection);
 const controlsDiv = el('div', { class: 'controls' });
 viewerSection.append(controlsDiv);
@@ -195,7 +195,7 @@ state.nonBackgroundFraction = () => {
 };
 
 // ---- curves ---------------------------------------------------------------------------------
-const curves = el('section', {}, el('h2', {}, 'Per view'));
+const curves = el('section', { id: 'curves' }, el('h2', {}, 'Per view'));
 main.append(curves);
 const chartRow = el('div', { class: 'row' });
 curves.append(chartRow);
@@ -225,7 +225,7 @@ chart('cost', 'Trajectory time to each view', [ds('cost, s', S.views.map((v) => 
   ds('cumulative, s', S.views.map((v) => v.trajectory_s), '#b7950b')], 's');
 
 // ---- grasps ---------------------------------------------------------------------------------
-const gs = el('section', {}, el('h2', {}, 'Grasps'));
+const gs = el('section', { id: 'grasps' }, el('h2', {}, 'Grasps'));
 main.append(gs);
 const gt = el('table');
 gt.append(el('tr', {}, ...['grasp', 'candidates', 'quality', 'stability ε', 'views', 'ended', 'unknown area m²', 'mean entropy']
@@ -287,5 +287,10 @@ fig.append(el('pre', {}, JSON.stringify(S.options, null, 2)));
 
 state.views = S.views.length;
 state.ready = true;
+// Anchors (#curves, #grasps) scroll once the page exists (the sections are made by this script).
+if (location.hash.length > 1 && location.hash !== '#selftest') {
+  const target = document.getElementById(location.hash.slice(1));
+  if (target) target.scrollIntoView();
+}
 window.inhandSelfTest({ nonBackground: state.nonBackgroundFraction(), charts: state.charts, views: state.views,
                         thumbnails: document.querySelectorAll('.thumb canvas').length });
