@@ -15,5 +15,5 @@ shot() {  # anchor, height, output
   echo "report_screenshots: $3"
 }
 shot "" 720 "${prefix}_model.png"
-shot "#curves" 720 "${prefix}_curves.png"
-shot "#grasps" 760 "${prefix}_grasps.png"
+shot "#only-curves" 720 "${prefix}_curves.png"
+shot "#only-grasps" 760 "${prefix}_grasps.png"

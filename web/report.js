@@ -287,10 +287,10 @@ fig.append(el('pre', {}, JSON.stringify(S.options, null, 2)));
 
 state.views = S.views.length;
 state.ready = true;
-// Anchors (#curves, #grasps) scroll once the page exists (the sections are made by this script).
-if (location.hash.length > 1 && location.hash !== '#selftest') {
-  const target = document.getElementById(location.hash.slice(1));
-  if (target) target.scrollIntoView();
+// #only-ID shows just that section under the header (for screenshots of one part).
+if (location.hash.startsWith('#only-')) {
+  for (const sec of document.querySelectorAll('main > section'))
+    if (sec.id !== location.hash.slice(6)) sec.style.display = 'none';
 }
 window.inhandSelfTest({ nonBackground: state.nonBackgroundFraction(), charts: state.charts, views: state.views,
                         thumbnails: document.querySelectorAll('.thumb canvas').length });
