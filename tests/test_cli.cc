@@ -268,6 +268,14 @@ TEST(Cli, EvalTabulatesEveryRunAndRejectsUnknownPlanners) {
   for (const Json& c : curves) EXPECT_GE(c["coverage"].size(), 2u);  // initial views + 1
   EXPECT_TRUE(fs::exists(out / "index.html"));
   EXPECT_TRUE(fs::exists(out / "runs/pill_bottle/ig/seed1/summary.json"));
+  EXPECT_NE(md.find("trajectory s to 99%"), std::string::npos) << md;
+  // `inhand report` rebuilds the tables and the index from the runs' files.
+  fs::remove(out / "results.md");
+  fs::remove(out / "index.html");
+  r = run("report " + out.string(), dir);
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_EQ(readTextFile(out / "results.md"), md);
+  EXPECT_TRUE(fs::exists(out / "index.html"));
 
   r = run(
       "eval --objects builtin:pill_bottle --planners ig,best --out " + (dir.path() / "x").string(),

@@ -125,6 +125,129 @@ std::string num(double x) {
   return b;
 }
 
+// results.csv, results.md, curves.csv and curves.json in `dir` from the runs.
+void tabulate(const fs::path& dir, const std::vector<Run>& runs,
+              const std::vector<std::string>& objects, const std::vector<std::string>& planners,
+              const std::string& description) {
+  // results.csv: one row per run.
+  const std::vector<double> levels{0.90, 0.95, 0.99};
+  std::ostringstream csv;
+  csv << "object,planner,seed,exit_status,termination,views,grasps,coverage,accuracy_mean_mm,"
+         "accuracy_rms_mm,accuracy_p95_mm,fscore_2mm,fscore_5mm,fscore_10mm,mean_entropy,"
+         "observed_fraction,trajectory_s,planning_s,grasp_ranking_s,total_s,views_to_90,"
+         "views_to_95,views_to_99,trajectory_s_to_90,trajectory_s_to_95,trajectory_s_to_99,"
+         "view_evaluations\n";
+  std::ostringstream curves;
+  curves << "object,planner,seed,view,grasp,initial,coverage,mean_entropy,trajectory_s,quality,"
+            "cost_s\n";
+  Json curvesJson = Json::array();
+  for (const Run& r : runs) {
+    csv << csvField(r.name) << "," << r.planner << "," << r.seed << "," << r.status << ",";
+    if (!r.summary.is_object()) {
+      csv << "error" << std::string(22, ',') << "\n";
+      continue;
+    }
+    const Json& s = r.summary;
+    const Json& views = s["views"];
+    auto fs = [&](const char* k) {
+      return s.contains("fscore") && s["fscore"].contains(k) ? s["fscore"][k].value("f", NAN) : NAN;
+    };
+    const Json& t = s["timing_s"];
+    csv << s.value("termination", std::string()) << "," << views.size() << "," << s["grasps"].size()
+        << "," << num(s.value("coverage", NAN)) << "," << num(s["accuracy_mm"].value("mean", NAN))
+        << "," << num(s["accuracy_mm"].value("rms", NAN)) << ","
+        << num(s["accuracy_mm"].value("p95", NAN)) << "," << num(fs("2mm")) << "," << num(fs("5mm"))
+        << "," << num(fs("10mm")) << "," << num(s.value("mean_entropy", NAN)) << ","
+        << num(s.value("observed_fraction", NAN)) << "," << num(s.value("trajectory_s", NAN)) << ","
+        << num(t.value("planning", NAN)) << "," << num(t.value("grasp_ranking", NAN)) << ","
+        << num(t.value("total", NAN));
+    for (double l : levels) csv << "," << num(firstReaching(views, l).first);
+    for (double l : levels) csv << "," << num(firstReaching(views, l).second);
+    csv << "," << s.value("view_evaluations", 0) << "\n";
+    Json c = {{"object", r.name},
+              {"planner", r.planner},
+              {"seed", r.seed},
+              {"report", (fs::path("runs") / r.name / r.planner /
+                          ("seed" + std::to_string(r.seed)) / "report.html")
+                             .string()}};
+    Json cov = Json::array(), ent = Json::array(), traj = Json::array();
+    for (size_t i = 0; i < views.size(); ++i) {
+      const Json& v = views[i];
+      curves << csvField(r.name) << "," << r.planner << "," << r.seed << "," << i + 1 << ","
+             << v.value("grasp", 1) << "," << (v.value("initial", false) ? 1 : 0) << ","
+             << num(v.value("coverage", NAN)) << "," << num(v.value("mean_entropy", NAN)) << ","
+             << num(v.value("trajectory_s", NAN)) << "," << num(v.value("quality", NAN)) << ","
+             << num(v.value("cost_s", NAN)) << "\n";
+      cov.push_back(v.value("coverage", -1.0));
+      ent.push_back(v.value("mean_entropy", 0.0));
+      traj.push_back(v.value("trajectory_s", 0.0));
+    }
+    c["coverage"] = cov;
+    c["mean_entropy"] = ent;
+    c["trajectory_s"] = traj;
+    curvesJson.push_back(c);
+  }
+
+  // results.md: per object and planner, mean ± sample standard deviation over the seeds.
+  std::ostringstream md;
+  md << "| object | planner | views to 90% | views to 95% | views to 99% | trajectory s to 90% | "
+        "trajectory s to 95% | trajectory s to 99% | final coverage % | accuracy mean mm | grasps "
+        "| "
+        "views | planning s |\n"
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
+  std::map<std::string, std::array<Stat, 4>> overall;  // planner → coverage, to95, reached, views
+  for (const std::string& o : objects)
+    for (const std::string& p : planners) {
+      Stat v90, v95, v99, t90, t95, t99, cov, acc, gr, nv, plan;
+      for (const Run& r : runs) {
+        if (r.name != o || r.planner != p) continue;
+        if (!r.summary.is_object()) {
+          for (Stat* st : {&v90, &v95, &v99, &t90, &t95, &t99, &cov, &acc, &gr, &nv, &plan})
+            st->add(NAN);
+          continue;
+        }
+        const Json& s = r.summary;
+        v90.add(firstReaching(s["views"], 0.90).first);
+        v95.add(firstReaching(s["views"], 0.95).first);
+        v99.add(firstReaching(s["views"], 0.99).first);
+        t90.add(firstReaching(s["views"], 0.90).second);
+        t95.add(firstReaching(s["views"], 0.95).second);
+        t99.add(firstReaching(s["views"], 0.99).second);
+        cov.add(100 * s.value("coverage", NAN));
+        acc.add(s["accuracy_mm"].value("mean", NAN));
+        gr.add(double(s["grasps"].size()));
+        nv.add(double(s["views"].size()));
+        plan.add(s["timing_s"].value("planning", NAN) + s["timing_s"].value("grasp_ranking", 0.0));
+        auto& ov = overall[p];
+        ov[0].add(100 * s.value("coverage", NAN));
+        ov[1].add(firstReaching(s["views"], 0.95).first);
+        ov[2].add(std::isfinite(firstReaching(s["views"], 0.95).first) ? 1.0 : 0.0);
+        ov[3].add(double(s["views"].size()));
+      }
+      md << "| " << o << " | " << p << " | " << v90.str(1) << " | " << v95.str(1) << " | "
+         << v99.str(1) << " | " << t90.str(1) << " | " << t95.str(1) << " | " << t99.str(1) << " | "
+         << cov.str(1) << " | " << acc.str(2) << " | " << gr.str(1) << " | " << nv.str(1) << " | "
+         << plan.str(1) << " |\n";
+    }
+  std::ostringstream head;
+  head << "# inhand eval\n\n"
+       << description
+       << ".\nViews count the initial trajectory's views too; \"(k/n)\": only k of n runs reached "
+          "the level (the mean is over those).\n\n## Over all objects\n\n"
+          "| planner | final coverage % | views to 95% | runs reaching 95% | views |\n"
+          "|---|---|---|---|---|\n";
+  for (const std::string& p : planners) {
+    auto& ov = overall[p];
+    head << "| " << p << " | " << ov[0].str(1) << " | " << ov[1].str(1) << " | " << ov[2].str(2)
+         << " | " << ov[3].str(1) << " |\n";
+  }
+  head << "\n## Per object\n\n";
+  writeTextAtomically(dir / "results.csv", csv.str());
+  writeTextAtomically(dir / "curves.csv", curves.str());
+  writeTextAtomically(dir / "curves.json", curvesJson.dump(1) + "\n");
+  writeTextAtomically(dir / "results.md", head.str() + md.str());
+}
+
 }  // namespace
 
 int runEval(const EvalArgs& args) {
@@ -188,6 +311,8 @@ int runEval(const EvalArgs& args) {
         argv.insert(argv.end(), {"--max-views", std::to_string(args.max_views)});
       const auto ts = std::chrono::steady_clock::now();
       r.status = runProcess(argv, r.log);
+      writeTextAtomically(fs::path(r.log).replace_extension(".exit"),
+                          std::to_string(r.status) + "\n");
       r.wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - ts).count();
       const fs::path sj = r.dir / "summary.json";
       if (fs::exists(sj)) {
@@ -216,122 +341,22 @@ int runEval(const EvalArgs& args) {
   worker();
   for (auto& t : pool) t.join();
 
-  // results.csv: one row per run.
-  const std::vector<double> levels{0.90, 0.95, 0.99};
-  std::ostringstream csv;
-  csv << "object,planner,seed,exit_status,termination,views,grasps,coverage,accuracy_mean_mm,"
-         "accuracy_rms_mm,accuracy_p95_mm,fscore_2mm,fscore_5mm,fscore_10mm,mean_entropy,"
-         "observed_fraction,trajectory_s,planning_s,grasp_ranking_s,total_s,views_to_90,"
-         "views_to_95,views_to_99,trajectory_s_to_90,trajectory_s_to_95,trajectory_s_to_99,"
-         "view_evaluations\n";
-  std::ostringstream curves;
-  curves << "object,planner,seed,view,grasp,initial,coverage,mean_entropy,trajectory_s,quality,"
-            "cost_s\n";
-  Json curvesJson = Json::array();
-  for (const Run& r : runs) {
-    csv << csvField(r.name) << "," << r.planner << "," << r.seed << "," << r.status << ",";
-    if (!r.summary.is_object()) {
-      csv << "error" << std::string(22, ',') << "\n";
-      continue;
-    }
-    const Json& s = r.summary;
-    const Json& views = s["views"];
-    auto fs = [&](const char* k) {
-      return s.contains("fscore") && s["fscore"].contains(k) ? s["fscore"][k].value("f", NAN) : NAN;
-    };
-    const Json& t = s["timing_s"];
-    csv << s.value("termination", std::string()) << "," << views.size() << "," << s["grasps"].size()
-        << "," << num(s.value("coverage", NAN)) << "," << num(s["accuracy_mm"].value("mean", NAN))
-        << "," << num(s["accuracy_mm"].value("rms", NAN)) << ","
-        << num(s["accuracy_mm"].value("p95", NAN)) << "," << num(fs("2mm")) << "," << num(fs("5mm"))
-        << "," << num(fs("10mm")) << "," << num(s.value("mean_entropy", NAN)) << ","
-        << num(s.value("observed_fraction", NAN)) << "," << num(s.value("trajectory_s", NAN)) << ","
-        << num(t.value("planning", NAN)) << "," << num(t.value("grasp_ranking", NAN)) << ","
-        << num(t.value("total", NAN));
-    for (double l : levels) csv << "," << num(firstReaching(views, l).first);
-    for (double l : levels) csv << "," << num(firstReaching(views, l).second);
-    csv << "," << s.value("view_evaluations", 0) << "\n";
-    Json c = {{"object", r.name},
-              {"planner", r.planner},
-              {"seed", r.seed},
-              {"report", (fs::path("runs") / r.name / r.planner /
-                          ("seed" + std::to_string(r.seed)) / "report.html")
-                             .string()}};
-    Json cov = Json::array(), ent = Json::array(), traj = Json::array();
-    for (size_t i = 0; i < views.size(); ++i) {
-      const Json& v = views[i];
-      curves << csvField(r.name) << "," << r.planner << "," << r.seed << "," << i + 1 << ","
-             << v.value("grasp", 1) << "," << (v.value("initial", false) ? 1 : 0) << ","
-             << num(v.value("coverage", NAN)) << "," << num(v.value("mean_entropy", NAN)) << ","
-             << num(v.value("trajectory_s", NAN)) << "," << num(v.value("quality", NAN)) << ","
-             << num(v.value("cost_s", NAN)) << "\n";
-      cov.push_back(v.value("coverage", -1.0));
-      ent.push_back(v.value("mean_entropy", 0.0));
-      traj.push_back(v.value("trajectory_s", 0.0));
-    }
-    c["coverage"] = cov;
-    c["mean_entropy"] = ent;
-    c["trajectory_s"] = traj;
-    curvesJson.push_back(c);
-  }
-
-  // results.md: per object and planner, mean ± sample standard deviation over the seeds.
-  std::ostringstream md;
-  md << "| object | planner | views to 90% | views to 95% | views to 99% | trajectory s to 95% | "
-        "final coverage % | accuracy mean mm | grasps | views | planning s |\n"
-        "|---|---|---|---|---|---|---|---|---|---|---|\n";
-  std::map<std::string, std::array<Stat, 4>> overall;  // planner → coverage, to95, reached, views
-  for (const std::string& o : objects)
-    for (const std::string& p : planners) {
-      Stat v90, v95, v99, t95, cov, acc, gr, nv, plan;
-      for (const Run& r : runs) {
-        if (r.object != o || r.planner != p) continue;
-        if (!r.summary.is_object()) {
-          for (Stat* st : {&v90, &v95, &v99, &t95, &cov, &acc, &gr, &nv, &plan}) st->add(NAN);
-          continue;
-        }
-        const Json& s = r.summary;
-        v90.add(firstReaching(s["views"], 0.90).first);
-        v95.add(firstReaching(s["views"], 0.95).first);
-        v99.add(firstReaching(s["views"], 0.99).first);
-        t95.add(firstReaching(s["views"], 0.95).second);
-        cov.add(100 * s.value("coverage", NAN));
-        acc.add(s["accuracy_mm"].value("mean", NAN));
-        gr.add(double(s["grasps"].size()));
-        nv.add(double(s["views"].size()));
-        plan.add(s["timing_s"].value("planning", NAN) + s["timing_s"].value("grasp_ranking", 0.0));
-        auto& ov = overall[p];
-        ov[0].add(100 * s.value("coverage", NAN));
-        ov[1].add(firstReaching(s["views"], 0.95).first);
-        ov[2].add(std::isfinite(firstReaching(s["views"], 0.95).first) ? 1.0 : 0.0);
-        ov[3].add(double(s["views"].size()));
-      }
-      md << "| " << objectName(o) << " | " << p << " | " << v90.str(1) << " | " << v95.str(1)
-         << " | " << v99.str(1) << " | " << t95.str(1) << " | " << cov.str(1) << " | " << acc.str(2)
-         << " | " << gr.str(1) << " | " << nv.str(1) << " | " << plan.str(1) << " |\n";
-    }
-  std::ostringstream head;
-  head << "# inhand eval\n\n"
-       << runs.size() << " runs: objects " << args.objects << "; planners " << args.planners
-       << "; seeds 1.." << args.seeds;
-  if (args.max_grasps >= 0) head << "; --max-grasps " << args.max_grasps;
-  if (args.max_views >= 0) head << "; --max-views " << args.max_views;
-  if (!args.config.empty()) head << "; --config " << args.config;
-  head << ".\nViews count the initial trajectory's views too; \"(k/n)\": only k of n runs reached "
-          "the level (the mean is over those).\n\n## Over all objects\n\n"
-          "| planner | final coverage % | views to 95% | runs reaching 95% | views |\n"
-          "|---|---|---|---|---|\n";
-  for (const std::string& p : planners) {
-    auto& ov = overall[p];
-    head << "| " << p << " | " << ov[0].str(1) << " | " << ov[1].str(1) << " | " << ov[2].str(2)
-         << " | " << ov[3].str(1) << " |\n";
-  }
-  head << "\n## Per object\n\n";
   const double total = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  writeTextAtomically(out.path() / "results.csv", csv.str());
-  writeTextAtomically(out.path() / "curves.csv", curves.str());
-  writeTextAtomically(out.path() / "curves.json", curvesJson.dump(1) + "\n");
-  writeTextAtomically(out.path() / "results.md", head.str() + md.str());
+  std::ostringstream desc;
+  desc << runs.size() << " runs: objects " << args.objects << "; planners " << args.planners
+       << "; seeds 1.." << args.seeds;
+  if (args.max_grasps >= 0) desc << "; --max-grasps " << args.max_grasps;
+  if (args.max_views >= 0) desc << "; --max-views " << args.max_views;
+  if (!args.config.empty()) desc << "; --config " << args.config;
+  std::vector<std::string> objectNames;
+  for (const std::string& o : objects) objectNames.push_back(objectName(o));
+  writeTextAtomically(out.path() / "eval.json", Json({{"description", desc.str()},
+                                                      {"objects", objectNames},
+                                                      {"planners", planners},
+                                                      {"seeds", args.seeds}})
+                                                        .dump(1) +
+                                                    "\n");
+  tabulate(out.path(), runs, objectNames, planners, desc.str());
   try {
     writeEvalIndex(out.path(), webDirectory());
   } catch (const Error& e) {
@@ -351,11 +376,31 @@ int runReport(const std::string& dir) {
   if (fs::exists(fs::path(dir) / "summary.json")) {
     writeScanReport(dir, web);
     std::printf("report: %s/report.html\n", dir.c_str());
-  } else if (fs::exists(fs::path(dir) / "results.csv")) {
+  } else if (fs::exists(fs::path(dir) / "eval.json")) {
+    // Rebuild the tables from the runs' own files, then the index.
+    const Json e = readJsonFile(fs::path(dir) / "eval.json");
+    const auto objects = e.at("objects").get<std::vector<std::string>>();
+    const auto planners = e.at("planners").get<std::vector<std::string>>();
+    std::vector<Run> runs;
+    for (const std::string& o : objects)
+      for (const std::string& p : planners)
+        for (int sd = 1; sd <= e.at("seeds").get<int>(); ++sd) {
+          Run r;
+          r.object = r.name = o;
+          r.planner = p;
+          r.seed = sd;
+          const fs::path base = fs::path(dir) / "runs" / o / p;
+          r.dir = base / ("seed" + std::to_string(sd));
+          const fs::path exitFile = base / ("seed" + std::to_string(sd) + ".exit");
+          if (fs::exists(exitFile)) r.status = std::stoi(readTextFile(exitFile));
+          if (fs::exists(r.dir / "summary.json")) r.summary = readJsonFile(r.dir / "summary.json");
+          runs.push_back(r);
+        }
+    tabulate(dir, runs, objects, planners, e.at("description").get<std::string>());
     writeEvalIndex(dir, web);
     std::printf("report: %s/index.html\n", dir.c_str());
   } else {
-    throw Error(dir + ": neither a scan (summary.json) nor an eval (results.csv)");
+    throw Error(dir + ": neither a scan (summary.json) nor an eval (eval.json)");
   }
   return 0;
 }
