@@ -87,6 +87,12 @@ std::pair<double, double> firstReaching(const Json& views, double level) {
   return {NAN, NAN};
 }
 
+// Coverage after `n` views (a run that ended earlier keeps its last coverage); NaN without views.
+double coverageAfter(const Json& views, size_t n) {
+  if (views.empty()) return NAN;
+  return views[std::min(n, views.size()) - 1].value("coverage", NAN);
+}
+
 struct Stat {
   std::vector<double> v;
   int total = 0;  // runs, reached or not
@@ -195,7 +201,9 @@ void tabulate(const fs::path& dir, const std::vector<Run>& runs,
         "| "
         "views | planning s |\n"
         "|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
-  std::map<std::string, std::array<Stat, 4>> overall;  // planner → coverage, to95, reached, views
+  // planner → final coverage, coverage after 5 / 7 / 10 views, views to 90%, runs reaching 90%,
+  // views
+  std::map<std::string, std::array<Stat, 7>> overall;
   for (const std::string& o : objects)
     for (const std::string& p : planners) {
       Stat v90, v95, v99, t90, t95, t99, cov, acc, gr, nv, plan;
@@ -220,9 +228,10 @@ void tabulate(const fs::path& dir, const std::vector<Run>& runs,
         plan.add(s["timing_s"].value("planning", NAN) + s["timing_s"].value("grasp_ranking", 0.0));
         auto& ov = overall[p];
         ov[0].add(100 * s.value("coverage", NAN));
-        ov[1].add(firstReaching(s["views"], 0.95).first);
-        ov[2].add(std::isfinite(firstReaching(s["views"], 0.95).first) ? 1.0 : 0.0);
-        ov[3].add(double(s["views"].size()));
+        for (int k = 0; k < 3; ++k) ov[1 + k].add(100 * coverageAfter(s["views"], 5 + 2 * k + (k == 2)));
+        ov[4].add(firstReaching(s["views"], 0.90).first);
+        ov[5].add(std::isfinite(firstReaching(s["views"], 0.90).first) ? 1.0 : 0.0);
+        ov[6].add(double(s["views"].size()));
       }
       md << "| " << o << " | " << p << " | " << v90.str(1) << " | " << v95.str(1) << " | "
          << v99.str(1) << " | " << t90.str(1) << " | " << t95.str(1) << " | " << t99.str(1) << " | "
@@ -233,13 +242,16 @@ void tabulate(const fs::path& dir, const std::vector<Run>& runs,
   head << "# inhand eval\n\n"
        << description
        << ".\nViews count the initial trajectory's views too; \"(k/n)\": only k of n runs reached "
-          "the level (the mean is over those).\n\n## Over all objects\n\n"
-          "| planner | final coverage % | views to 95% | runs reaching 95% | views |\n"
-          "|---|---|---|---|---|\n";
+          "the level (the mean is over those); coverage after n views carries a run's last coverage "
+          "forward when it stopped earlier.\n\n## Over all objects\n\n"
+          "| planner | final coverage % | coverage % after 5 views | after 7 | after 10 | views to "
+          "90% | share of runs reaching 90% | views |\n"
+          "|---|---|---|---|---|---|---|---|\n";
   for (const std::string& p : planners) {
     auto& ov = overall[p];
-    head << "| " << p << " | " << ov[0].str(1) << " | " << ov[1].str(1) << " | " << ov[2].str(2)
-         << " | " << ov[3].str(1) << " |\n";
+    head << "| " << p << " | " << ov[0].str(1) << " | " << ov[1].str(1) << " | " << ov[2].str(1)
+         << " | " << ov[3].str(1) << " | " << ov[4].str(1) << " | " << ov[5].str(2) << " | "
+         << ov[6].str(1) << " |\n";
   }
   head << "\n## Per object\n\n";
   writeTextAtomically(dir / "results.csv", csv.str());
