@@ -247,6 +247,24 @@ TEST(Cli, ScanReportOpensInHeadlessChromium) {
   EXPECT_GT(t["thumbnails"].get<size_t>(), 0u);
 }
 
+TEST(Cli, BaselinePlannerStillRegraspsOnEq9Ranking) {
+  // The re-grasp decision compares eq. 9 ranking qualities with the ranking planner's t_q, not
+  // with a baseline view planner's threshold (300 voxels here, which no eq. 9 value reaches).
+  test::TempDir dir;
+  writeTextAtomically(dir.path() / "quick.json", kQuickConfig);
+  const fs::path out = dir.path() / "scan";
+  Result r =
+      run("scan --object builtin:juice_bottle --planner unobserved-voxels --max-views 1 "
+          "--max-grasps 2 --config " +
+              (dir.path() / "quick.json").string() + " --out " + out.string(),
+          dir);
+  ASSERT_EQ(r.code, 0) << r.output;
+  const Json s = readJsonFile(out / "summary.json");
+  EXPECT_EQ(s["planner"], "unobserved-voxels");
+  EXPECT_EQ(s["grasps"].size(), 2u) << s["termination"];
+  EXPECT_EQ(s["termination"], "max_grasps");
+}
+
 TEST(Cli, EvalTabulatesEveryRunAndRejectsUnknownPlanners) {
   test::TempDir dir;
   writeTextAtomically(dir.path() / "quick.json", kQuickConfig);

@@ -90,11 +90,12 @@ double VolumetricScorer::traverse(const Vec3& o, const Vec3& dir, double t_max,
     const size_t i = V.index(cell.x(), cell.y(), cell.z());
     const double occ = occupancy(i);
     const bool unknown = V.state(i) == VoxelState::kUnknown;
+    const bool occupied = V.state(i) == VoxelState::kObserved && V.distance(i) <= 0;
     if (metric == VolumetricMetric::kUnobservedVoxels) {
       if (unknown) gain += vis;
       vis *= 1 - occ;
     } else if (phase == 0) {
-      if (occ == options_.p_occupied && V.state(i) == VoxelState::kObserved)
+      if (occupied)
         phase = 1;
       else
         vis *= 1 - occ;

@@ -104,7 +104,9 @@ MultiGraspResult scanMultiGrasp(RobotInterface& robot, DepthSensor& sensor, cons
     std::snprintf(line, sizeof(line), "ranked %zu grasps in %.2f s: best quality %.4f, ε %.4f",
                   gen.candidates.size(), rankS, best.quality, best.epsilon);
     log(line);
-    if (best.quality < options.planner.t_q) {
+    // Candidates are ranked by eq. 9 (the ranking planner) whatever the view planner is, so its
+    // own t_q decides; a baseline view planner's threshold is in other units.
+    if (best.quality < multi.ranking.t_q) {
       all.termination = "no_grasp_above_threshold";
       break;
     }
