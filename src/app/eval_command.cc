@@ -228,7 +228,8 @@ void tabulate(const fs::path& dir, const std::vector<Run>& runs,
         plan.add(s["timing_s"].value("planning", NAN) + s["timing_s"].value("grasp_ranking", 0.0));
         auto& ov = overall[p];
         ov[0].add(100 * s.value("coverage", NAN));
-        for (int k = 0; k < 3; ++k) ov[1 + k].add(100 * coverageAfter(s["views"], 5 + 2 * k + (k == 2)));
+        for (int k = 0; k < 3; ++k)
+          ov[1 + k].add(100 * coverageAfter(s["views"], 5 + 2 * k + (k == 2)));
         ov[4].add(firstReaching(s["views"], 0.90).first);
         ov[5].add(std::isfinite(firstReaching(s["views"], 0.90).first) ? 1.0 : 0.0);
         ov[6].add(double(s["views"].size()));
@@ -239,14 +240,15 @@ void tabulate(const fs::path& dir, const std::vector<Run>& runs,
          << plan.str(1) << " |\n";
     }
   std::ostringstream head;
-  head << "# inhand eval\n\n"
-       << description
-       << ".\nViews count the initial trajectory's views too; \"(k/n)\": only k of n runs reached "
-          "the level (the mean is over those); coverage after n views carries a run's last coverage "
-          "forward when it stopped earlier.\n\n## Over all objects\n\n"
-          "| planner | final coverage % | coverage % after 5 views | after 7 | after 10 | views to "
-          "90% | share of runs reaching 90% | views |\n"
-          "|---|---|---|---|---|---|---|---|\n";
+  head
+      << "# inhand eval\n\n"
+      << description
+      << ".\nViews count the initial trajectory's views too; \"(k/n)\": only k of n runs reached "
+         "the level (the mean is over those); coverage after n views carries a run's last coverage "
+         "forward when it stopped earlier.\n\n## Over all objects\n\n"
+         "| planner | final coverage % | coverage % after 5 views | after 7 | after 10 | views to "
+         "90% | share of runs reaching 90% | views |\n"
+         "|---|---|---|---|---|---|---|---|\n";
   for (const std::string& p : planners) {
     auto& ov = overall[p];
     head << "| " << p << " | " << ov[0].str(1) << " | " << ov[1].str(1) << " | " << ov[2].str(1)

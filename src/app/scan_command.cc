@@ -159,6 +159,10 @@ void readOptions(const fs::path& file, AllOptions* o) {
   r.integer("initial_views", &o->scan.initial_views);
   r.integer("max_views", &o->scan.max_views);
   r.integer("planning_stride", &o->scan.planning_stride);
+  std::string method;
+  r.string("planning_mesh", &method);
+  if (!method.empty() && !parseSurfaceMethod(method, &o->scan.planning_method))
+    throw Error(file.string() + ".planning_mesh: must be surface_nets or tetrahedra");
   if (auto p = r.object("planner")) readPlanner(*p, &o->scan.planner);
   r.integer("max_grasps", &o->multi.max_grasps);
   if (auto g = r.object("grasp")) {
@@ -212,6 +216,7 @@ Json optionsJson(const AllOptions& o) {
           {"initial_views", o.scan.initial_views},
           {"max_views", o.scan.max_views},
           {"planning_stride", o.scan.planning_stride},
+          {"planning_mesh", surfaceMethodName(o.scan.planning_method)},
           {"planner", plannerJson(v)},
           {"max_grasps", o.multi.max_grasps},
           {"grasp",

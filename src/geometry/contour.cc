@@ -1,5 +1,6 @@
 #include "inhand/geometry/contour.h"
 
+#include <array>
 #include <bit>
 
 #include "inhand/core/error.h"
@@ -141,6 +142,129 @@ ContourResult contour(const ScalarGrid& grid) {
               out.emplace_back(a, c, b);
               out.emplace_back(a, d, c);
             }
+          }
+        }
+      }
+  });
+  size_t total = 0;
+  for (const auto& s : sliceTris) total += s.size();
+  result.mesh.triangles.reserve(total);
+  for (const auto& s : sliceTris)
+    result.mesh.triangles.insert(result.mesh.triangles.end(), s.begin(), s.end());
+  result.first.resize(vertexCount + 1);
+  for (uint32_t k = 0; k <= vertexCount; ++k) result.first[k] = k;
+  return result;
+}
+
+ContourResult surfaceNets(const ScalarGrid& grid) {
+  const int nx = grid.dims.x(), ny = grid.dims.y(), nz = grid.dims.z();
+  INHAND_CHECK(grid.values.size() == size_t(nx) * ny * nz, "grid value count mismatch");
+  ContourResult result;
+  if (nx < 2 || ny < 2 || nz < 2) return result;
+  const int cx = nx - 1, cy = ny - 1, cz = nz - 1;  // cubes per axis
+  const size_t step[3] = {1, size_t(nx), size_t(nx) * ny};
+  const float* f = grid.values.data();
+  auto cubeIndex = [&](int x, int y, int z) {
+    return (size_t(z) * size_t(cy) + size_t(y)) * size_t(cx) + size_t(x);
+  };
+  // The 12 axis edges of a cube: (corner code, axis), corner bits as in contour().
+  static constexpr int kEdges[12][2] = {{0, 0}, {2, 0}, {4, 0}, {6, 0}, {0, 1}, {1, 1},
+                                        {4, 1}, {5, 1}, {0, 2}, {1, 2}, {2, 2}, {3, 2}};
+
+  // Pass 1: cubes with mixed corners, counted per slice.
+  std::vector<uint32_t> sliceCount(cz, 0);
+  std::vector<uint8_t> crossed(size_t(cx) * cy * cz, 0);
+  parallelFor(0, cz, [&](int z) {
+    uint32_t count = 0;
+    for (int y = 0; y < cy; ++y)
+      for (int x = 0; x < cx; ++x) {
+        const size_t base = grid.index(x, y, z);
+        int in = 0;
+        for (int c = 0; c < 8; ++c)
+          in += inside(
+              f[base + (c & 1) * step[0] + ((c >> 1) & 1) * step[1] + ((c >> 2) & 1) * step[2]]);
+        if (in != 0 && in != 8) {
+          crossed[cubeIndex(x, y, z)] = 1;
+          ++count;
+        }
+      }
+    sliceCount[z] = count;
+  });
+  std::vector<uint32_t> sliceBase(cz + 1, 0);
+  for (int z = 0; z < cz; ++z) sliceBase[z + 1] = sliceBase[z] + sliceCount[z];
+  const uint32_t vertexCount = sliceBase[cz];
+
+  // Pass 2: vertex ids, positions (mean crossing) and their crossings.
+  std::vector<uint32_t> vertexOf(crossed.size(), UINT32_MAX);
+  result.mesh.vertices.resize(vertexCount);
+  std::vector<uint8_t> crossingCount(vertexCount, 0);
+  std::vector<std::array<EdgeVertex, 12>> crossings(vertexCount);
+  parallelFor(0, cz, [&](int z) {
+    uint32_t next = sliceBase[z];
+    for (int y = 0; y < cy; ++y)
+      for (int x = 0; x < cx; ++x) {
+        const size_t ci = cubeIndex(x, y, z);
+        if (!crossed[ci]) continue;
+        vertexOf[ci] = next;
+        const size_t base = grid.index(x, y, z);
+        Vec3 sum = Vec3::Zero();
+        int n = 0;
+        for (const auto& e : kEdges) {
+          const int c = e[0], axis = e[1];
+          const size_t a =
+              base + (c & 1) * step[0] + ((c >> 1) & 1) * step[1] + ((c >> 2) & 1) * step[2];
+          const size_t b = a + step[axis];
+          if (inside(f[a]) == inside(f[b])) continue;
+          const float t = f[a] / (f[a] - f[b]);
+          Vec3 p = grid.point(x + (c & 1), y + ((c >> 1) & 1), z + ((c >> 2) & 1));
+          p[axis] += grid.spacing * t;
+          sum += p;
+          crossings[next][n++] = {uint32_t(a), uint32_t(b), t};
+        }
+        result.mesh.vertices[next] = (sum / n).cast<float>();
+        crossingCount[next] = uint8_t(n);
+        ++next;
+      }
+  });
+  result.first.resize(vertexCount + 1, 0);
+  for (uint32_t k = 0; k < vertexCount; ++k)
+    result.first[k + 1] = result.first[k] + crossingCount[k];
+  result.sources.resize(result.first[vertexCount]);
+  parallelFor(0, int(vertexCount), [&](int k) {
+    std::copy_n(crossings[k].begin(), crossingCount[k], result.sources.begin() + result.first[k]);
+  });
+
+  // Pass 3: a quad per crossing axis edge, around the 4 cubes sharing it; it faces from the
+  // inside end of the edge to the outside end. With axes (a, b, c) cyclic, the cubes at
+  // (b−1, c−1), (b, c−1), (b, c), (b−1, c) in that order make a quad whose normal is +a.
+  std::vector<std::vector<Tri>> sliceTris(nz);
+  parallelFor(0, nz, [&](int z) {
+    std::vector<Tri>& out = sliceTris[z];
+    for (int y = 0; y < ny; ++y)
+      for (int x = 0; x < nx; ++x) {
+        const int p[3] = {x, y, z};
+        const size_t i = grid.index(x, y, z);
+        for (int a = 0; a < 3; ++a) {
+          const int b = (a + 1) % 3, c = (a + 2) % 3;
+          if (p[a] + 1 >= grid.dims[a] || p[b] < 1 || p[c] < 1 || p[b] >= grid.dims[b] - 1 ||
+              p[c] >= grid.dims[c] - 1)
+            continue;
+          const bool inLow = inside(f[i]);
+          if (inLow == inside(f[i + step[a]])) continue;
+          uint32_t v[4];
+          const int db[4] = {-1, 0, 0, -1}, dc[4] = {-1, -1, 0, 0};
+          for (int k = 0; k < 4; ++k) {
+            int q[3] = {p[0], p[1], p[2]};
+            q[b] += db[k];
+            q[c] += dc[k];
+            v[k] = vertexOf[cubeIndex(q[0], q[1], q[2])];
+          }
+          if (inLow) {
+            out.emplace_back(int(v[0]), int(v[1]), int(v[2]));
+            out.emplace_back(int(v[0]), int(v[2]), int(v[3]));
+          } else {
+            out.emplace_back(int(v[0]), int(v[2]), int(v[1]));
+            out.emplace_back(int(v[0]), int(v[3]), int(v[2]));
           }
         }
       }

@@ -13,7 +13,22 @@ std::string MeshOptions::validate() const {
   if (!(min_component_fraction >= 0 && min_component_fraction <= 1))
     return "min_component_fraction must be in [0, 1]";
   if (stride < 1 || stride > 8) return "stride must be in 1..8";
+  if (method != SurfaceMethod::kTetrahedra && method != SurfaceMethod::kSurfaceNets)
+    return "method must be tetrahedra or surface_nets";
   return {};
+}
+
+std::string surfaceMethodName(SurfaceMethod m) {
+  return m == SurfaceMethod::kSurfaceNets ? "surface_nets" : "tetrahedra";
+}
+
+bool parseSurfaceMethod(const std::string& s, SurfaceMethod* out) {
+  for (SurfaceMethod m : {SurfaceMethod::kTetrahedra, SurfaceMethod::kSurfaceNets})
+    if (s == surfaceMethodName(m)) {
+      *out = m;
+      return true;
+    }
+  return false;
 }
 
 double gaussianEntropy(double variance) { return 0.5 * std::log(2.0 * M_PI * M_E * variance); }
@@ -168,40 +183,50 @@ ObjectModel extractModel(const TsdfVolume& volume, const MeshOptions& options) {
         }
       }
   });
-  ContourResult c = contour(grid);
+  ContourResult c =
+      options.method == SurfaceMethod::kSurfaceNets ? surfaceNets(grid) : contour(grid);
   ObjectModel model;
   model.mesh = std::move(c.mesh);
   const size_t nv = model.mesh.vertices.size();
   model.variance.resize(nv);
   model.observed.resize(nv);
   const float holeVar = float(options.hole_sigma_m * options.hole_sigma_m);
+  auto stateOf = [&](uint32_t v) {
+    if (v == UINT32_MAX) return VoxelState::kEmpty;
+    VoxelState st = volume.state(v);
+    return (st == VoxelState::kUnknown && !isUnknown(v)) ? VoxelState::kEmpty : st;
+  };
+  // One crossing's variance: σ_hole² next to an unknown voxel, else 1/Σw interpolated between
+  // observed voxels (or the observed end's, next to an empty voxel).
+  auto crossingVariance = [&](const EdgeVertex& e) {
+    uint32_t va = voxelOf[e.a], vb = voxelOf[e.b];
+    VoxelState sa = stateOf(va), sb = stateOf(vb);
+    if (sa == VoxelState::kUnknown || sb == VoxelState::kUnknown) return holeVar;
+    float var;
+    if (sa == VoxelState::kObserved && sb == VoxelState::kObserved)
+      var = (1 - e.t) * volume.variance(va) + e.t * volume.variance(vb);
+    else if (sa == VoxelState::kObserved)
+      var = volume.variance(va);
+    else if (sb == VoxelState::kObserved)
+      var = volume.variance(vb);
+    else
+      var = holeVar;  // empty next to empty cannot cross zero; kept for safety
+    return std::min(var, holeVar);
+  };
   parallelFor(
       0, int(nv),
       [&](int k) {
-        const EdgeVertex& e = c.sources[k];
-        uint32_t va = voxelOf[e.a], vb = voxelOf[e.b];
-        auto stateOf = [&](uint32_t v) {
-          if (v == UINT32_MAX) return VoxelState::kEmpty;
-          VoxelState st = volume.state(v);
-          return (st == VoxelState::kUnknown && !isUnknown(v)) ? VoxelState::kEmpty : st;
-        };
-        VoxelState sa = stateOf(va), sb = stateOf(vb);
-        if (sa == VoxelState::kUnknown || sb == VoxelState::kUnknown) {
-          model.variance[k] = holeVar;
-          model.observed[k] = 0;
-          return;
+        // The mean over the vertex's crossings, observed only if every crossing is; one crossing
+        // next to the unknown makes it a hole vertex (σ_hole), as for marching tetrahedra.
+        double sum = 0;
+        bool observed = true;
+        for (uint32_t s = c.first[k]; s < c.first[k + 1]; ++s) {
+          const float var = crossingVariance(c.sources[s]);
+          sum += var;
+          observed = observed && var < holeVar;
         }
-        float var;
-        if (sa == VoxelState::kObserved && sb == VoxelState::kObserved)
-          var = (1 - e.t) * volume.variance(va) + e.t * volume.variance(vb);
-        else if (sa == VoxelState::kObserved)
-          var = volume.variance(va);
-        else if (sb == VoxelState::kObserved)
-          var = volume.variance(vb);
-        else
-          var = holeVar;  // empty next to empty cannot cross zero; kept for safety
-        model.variance[k] = std::min(var, holeVar);
-        model.observed[k] = var < holeVar;
+        model.variance[k] = observed ? float(sum / double(c.first[k + 1] - c.first[k])) : holeVar;
+        model.observed[k] = observed;
       },
       4096);
   if (options.min_component_fraction > 0)

@@ -215,6 +215,7 @@ ScanResult scanSingleGrasp(RobotInterface& robot, DepthSensor& sensor, const Iso
   result.termination = "max_views";
   MeshOptions planningMesh = options.mesh;
   planningMesh.stride = options.planning_stride;
+  planningMesh.method = options.planning_method;
   for (int v = 0; v < options.max_views; ++v) {
     ObjectModel model = extractModel(volume, planningMesh);
     const auto tp = Clock::now();

@@ -1,8 +1,16 @@
 #pragma once
-// Iso-surface extraction (f = 0) from a dense scalar grid by marching tetrahedra over the Kuhn
-// (Freudenthal) split of every cube into 6 tetrahedra. The split is the same in every cube, so
-// neighbouring cubes share their face diagonals: the surface is watertight by construction, with
-// no ambiguous cases (unlike the 256-case marching cubes table). Negative values are inside.
+// Iso-surface extraction (f = 0) from a dense scalar grid. Negative values are inside.
+//
+// contour(): marching tetrahedra over the Kuhn (Freudenthal) split of every cube into 6
+// tetrahedra. The split is the same in every cube, so neighbouring cubes share their face
+// diagonals: the surface is watertight by construction, with no ambiguous cases (unlike the
+// 256-case marching cubes table). Dense: about 6–12 triangles per surface cube.
+//
+// surfaceNets(): one vertex per cube the surface crosses (the mean of the crossings on its 12
+// axis edges), one quad (two triangles) per axis edge that crosses, joining the 4 cubes around it.
+// About a fifth of marching tetrahedra's triangles, each vertex within the cube it stands for;
+// closed, but not guaranteed manifold where a cube is crossed by two sheets. Used for planning,
+// where S_obj is ray cast thousands of times per Alg. 1 pass.
 #include <cstdint>
 #include <vector>
 
@@ -32,10 +40,14 @@ struct EdgeVertex {
 
 struct ContourResult {
   TriangleMesh mesh;
-  std::vector<EdgeVertex> sources;  // one per mesh vertex
+  // Vertex k stands for the crossings sources[first[k]] … sources[first[k + 1] − 1]
+  // (one each for marching tetrahedra; the crossings of its cube for surface nets).
+  std::vector<uint32_t> first;
+  std::vector<EdgeVertex> sources;
 };
 
-// Parallel over both cores; output is deterministic (independent of scheduling).
+// Both parallel over both cores; output is deterministic (independent of scheduling).
 ContourResult contour(const ScalarGrid& grid);
+ContourResult surfaceNets(const ScalarGrid& grid);
 
 }  // namespace inhand

@@ -4,7 +4,8 @@
 // on a one-voxel border around the grid, so the surface closes at the volume's edge). Its zero
 // set is the maximum-likelihood surface where measured, extended over the empty/unknown boundary
 // elsewhere. Vertex variance: 1/Σw interpolated between observed voxels; σ = hole_sigma_m
-// (5 cm) for vertices on an edge touching an unknown voxel (never observed).
+// (5 cm) for vertices on an edge touching an unknown voxel (never observed); a surface-nets
+// vertex is a hole vertex if any crossing of its cube is, else it takes their mean variance.
 #include <string>
 #include <vector>
 
@@ -12,6 +13,12 @@
 #include "inhand/volume/tsdf_volume.h"
 
 namespace inhand {
+
+// How the zero set becomes triangles (geometry/contour.h): marching tetrahedra (watertight, dense:
+// the model written out) or surface nets (about a fifth of the triangles: planning).
+enum class SurfaceMethod { kTetrahedra, kSurfaceNets };
+std::string surfaceMethodName(SurfaceMethod m);  // "tetrahedra" | "surface_nets"
+bool parseSurfaceMethod(const std::string& s, SurfaceMethod* out);
 
 struct MeshOptions {
   double hole_sigma_m = 0.05;  // σ assigned to hole-filling (empty/unknown boundary) vertices, m
@@ -25,6 +32,7 @@ struct MeshOptions {
   // Use every stride-th voxel along each axis (1: full resolution). Planning can use a coarser
   // S_obj than the model written out.
   int stride = 1;
+  SurfaceMethod method = SurfaceMethod::kTetrahedra;
   std::string validate() const;
 };
 

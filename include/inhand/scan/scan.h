@@ -33,6 +33,8 @@ struct ScanOptions {
   int initial_views = 4;    // the simple initial trajectory: this many directions
   int max_views = 20;       // Alg. 1 views per grasp at most (after the initial ones)
   int planning_stride = 2;  // S_obj for planning from every n-th voxel (output: full res)
+  // S_obj for planning by surface nets (a fifth of the triangles to ray cast; output: tetrahedra)
+  SurfaceMethod planning_method = SurfaceMethod::kSurfaceNets;
   ViewPlannerOptions planner;
   MeshOptions mesh;
   VolumeOptions volume_budget;  // memory budget (voxel size above wins)
