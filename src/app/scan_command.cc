@@ -85,6 +85,7 @@ struct AllOptions {
   SimOptions sim;
   EvalOptions eval;
   std::string robot;
+  std::string start = "table";  // table: the whole scan from the table top; held: given grasp
 };
 
 void readPlanner(OptionReader& p, ViewPlannerOptions* v) {
@@ -165,6 +166,26 @@ void readOptions(const fs::path& file, AllOptions* o) {
     throw Error(file.string() + ".planning_mesh: must be surface_nets or tetrahedra");
   if (auto p = r.object("planner")) readPlanner(*p, &o->scan.planner);
   r.integer("max_grasps", &o->multi.max_grasps);
+  r.string("start", &o->start);
+  if (o->start != "table" && o->start != "held")
+    throw Error(file.string() + ".start: must be table or held");
+  if (auto t = r.object("table_top")) {
+    TableTopOptions& v = o->multi.table_top;
+    t->integer("frames", &v.frames);
+    t->num("aim_height_m", &v.aim_height_m);
+    t->num("search_radius_m", &v.search_radius_m);
+    t->num("above_table_m", &v.above_table_m);
+    t->num("cluster_cell_m", &v.cluster_cell_m);
+    t->integer("min_points", &v.min_points);
+    t->num("plane_inlier_m", &v.plane.inlier_m);
+    t->integer("plane_iterations", &v.plane.iterations);
+    t->num("plane_max_tilt_deg", &v.plane.max_tilt_deg);
+    t->integer("approaches", &v.grasp.approaches);
+    t->num("clearance_m", &v.grasp.clearance_m);
+    t->num("table_clearance_m", &v.grasp.table_clearance_m);
+    t->num("point_cell_m", &v.grasp.point_cell_m);
+    t->finish();
+  }
   if (auto g = r.object("grasp")) {
     GraspOptions& v = o->multi.grasp;
     g->integer("approaches", &v.approaches);
@@ -219,6 +240,21 @@ Json optionsJson(const AllOptions& o) {
           {"planning_mesh", surfaceMethodName(o.scan.planning_method)},
           {"planner", plannerJson(v)},
           {"max_grasps", o.multi.max_grasps},
+          {"start", o.start},
+          {"table_top",
+           {{"frames", o.multi.table_top.frames},
+            {"aim_height_m", o.multi.table_top.aim_height_m},
+            {"search_radius_m", o.multi.table_top.search_radius_m},
+            {"above_table_m", o.multi.table_top.above_table_m},
+            {"cluster_cell_m", o.multi.table_top.cluster_cell_m},
+            {"min_points", o.multi.table_top.min_points},
+            {"plane_inlier_m", o.multi.table_top.plane.inlier_m},
+            {"plane_iterations", o.multi.table_top.plane.iterations},
+            {"plane_max_tilt_deg", o.multi.table_top.plane.max_tilt_deg},
+            {"approaches", o.multi.table_top.grasp.approaches},
+            {"clearance_m", o.multi.table_top.grasp.clearance_m},
+            {"table_clearance_m", o.multi.table_top.grasp.table_clearance_m},
+            {"point_cell_m", o.multi.table_top.grasp.point_cell_m}}},
           {"grasp",
            {{"approaches", g.approaches},
             {"rolls", g.rolls},
@@ -274,7 +310,8 @@ int runScan(const ScanArgs& args) {
 
   RobotModel model = RobotModel::load(o.robot);
   TriangleMesh object = loadObject(args.object);
-  if (object.bounds().size().maxCoeff() > o.scan.volume_size_m - 0.02)
+  // From the table the scan finds out itself (object_too_large_for_volume); held, it cannot.
+  if (o.start == "held" && object.bounds().size().maxCoeff() > o.scan.volume_size_m - 0.02)
     throw Error(args.object + ": the object (" + std::to_string(object.bounds().size().maxCoeff()) +
                 " m across) does not fit the scan volume (volume_size_m = " +
                 std::to_string(o.scan.volume_size_m) + " m)");
@@ -282,9 +319,16 @@ int runScan(const ScanArgs& args) {
 
   DepthCameraOptions camera;
   NoiseModelOptions noise;
+  // start "table": the object rests on the table, the arm at home (the whole scan, §V);
+  // "held": the robot already holds it at the simulator's default side grasp.
   auto [T_O_palm, qGrasp] = defaultGrasp(model, object);
   SimWorld world(model, object, T_O_palm, camera, noise, o.sim);
-  world.q = qGrasp;
+  if (o.start == "held") {
+    world.q = qGrasp;
+  } else {
+    world.held = false;
+    world.q = model.home();
+  }
   SimRobot robot(&world);
   SimSensor sensor(&world, camera);
   ScanProgress progress;
@@ -293,11 +337,15 @@ int runScan(const ScanArgs& args) {
   // is the mesh's own input frame).
   const GroundTruth truth(object, o.eval);
   progress.coverage = [&](const ObjectModel& m) { return truth.coverage(m); };
-  // The volume is centred where the robot expects a held object: grasp_offset_m in front of the
-  // palm (from the robot config; the scan is not told the object's shape or size).
+  // Held: the volume is centred where the robot expects a held object, grasp_offset_m in front of
+  // the palm. Table: on the points the camera sees there. The scan is never told the object's
+  // shape or size; frame O is the object's frame where it rests (the mesh's own input frame).
   const Vec3 expected = T_O_palm * Vec3(0, 0, model.graspOffset());
-  MultiGraspResult mr = scanMultiGrasp(robot, sensor, T_O_palm, expected, world.restPose(), o.scan,
-                                       o.multi, noise, progress);
+  MultiGraspResult mr =
+      o.start == "held"
+          ? scanMultiGrasp(robot, sensor, T_O_palm, expected, world.restPose(), o.scan, o.multi,
+                           noise, progress)
+          : scanFromTable(robot, sensor, world.restPose(), o.scan, o.multi, noise, progress);
   const ScanResult& r = mr.scan;
 
   writePly(out.path() / "model.ply", r.model.mesh, &r.model.variance);
@@ -369,7 +417,7 @@ int runScan(const ScanArgs& args) {
                       {"candidates", g.candidates},
                       {"poses_tried", g.tried},
                       {"quality", g.quality},
-                      {"stability_epsilon", g.epsilon},
+                      {"stability_epsilon", std::isfinite(g.epsilon) ? Json(g.epsilon) : Json()},
                       {"views", g.views},
                       {"termination", g.termination},
                       {"unknown_area_m2", g.hole_area_m2},
@@ -378,6 +426,28 @@ int runScan(const ScanArgs& args) {
                       {"ranking_s", g.ranking_s}});
   }
   summary["grasps"] = grasps;
+  summary["start"] = o.start;
+  if (mr.table_top) {
+    const TableTopRecord& t = *mr.table_top;
+    const Vec3 n = t.table_O.n;
+    Json axes = Json::array();
+    for (int k = 0; k < 3; ++k)
+      axes.push_back({{"axis_O", {t.axes.axes(0, k), t.axes.axes(1, k), t.axes.axes(2, k)}},
+                      {"extent_m", t.axes.max[k] - t.axes.min[k]}});
+    summary["table_top"] = {
+        {"frames", t.frames},
+        {"points", t.points},
+        {"table_inliers", t.table_inliers},
+        {"object_points", t.object_points},
+        {"table_plane_O", {n.x(), n.y(), n.z(), t.table_O.d}},
+        {"centroid_O", {t.axes.centroid.x(), t.axes.centroid.y(), t.axes.centroid.z()}},
+        {"principal_axes", axes},
+        {"grasp_poses_tried", t.tried},
+        {"grasp_poses_fit", t.fit},
+        {"grasp_poses_table_free", t.table_free},
+        {"grasp_poses_reachable", t.reachable},
+        {"seconds", t.seconds}};
+  }
   const CameraIntrinsics& K = camera.intrinsics;
   summary["camera"] = {{"width", K.width}, {"height", K.height}, {"fx", K.fx},
                        {"fy", K.fy},       {"cx", K.cx},         {"cy", K.cy}};
@@ -419,7 +489,12 @@ int runScan(const ScanArgs& args) {
       100 * r.model.observedAreaFraction(), 100 * sm.coverage, 1000 * o.eval.tau_m,
       sm.accuracy_mean_mm, r.model.meanEntropy(), r.total_s, args.out.c_str());
   if (r.termination == "no_reachable_view") return 3;
-  if (r.termination == "no_reachable_grasp" || r.termination == "pick_up_failed") return 4;
+  if (r.termination == "no_reachable_grasp" || r.termination == "pick_up_failed" ||
+      r.termination == "object_too_large_for_hand")
+    return 4;
+  if (r.termination == "object_not_found" || r.termination == "object_out_of_view" ||
+      r.termination == "object_too_large_for_volume")
+    return 6;
   return 0;
 }
 

@@ -223,6 +223,148 @@ GraspGeneration generateGrasps(const RobotModel& robot, const TriangleMesh& mesh
   return out;
 }
 
+std::string TableTopGraspOptions::validate() const {
+  if (approaches < 1) return "approaches must be >= 1";
+  if (!(clearance_m >= 0 && clearance_m < 0.1)) return "clearance_m must be in [0, 0.1) m";
+  if (!(table_clearance_m >= 0 && table_clearance_m < 0.1))
+    return "table_clearance_m must be in [0, 0.1) m";
+  if (!(point_cell_m > 0 && point_cell_m < 0.05)) return "point_cell_m must be in (0, 0.05) m";
+  if (!(inside_fraction >= 0 && inside_fraction < 0.5))
+    return "inside_fraction must be in [0, 0.5)";
+  return {};
+}
+
+TableTopGrasps tableTopGrasps(const RobotModel& robot, const std::vector<Vec3>& points,
+                              const Vec3& up_O, const Iso3& T_B_O, const JointVector& q_now,
+                              const TableTopGraspOptions& o, double lift_m) {
+  std::string problem = o.validate();
+  if (!problem.empty()) throw Error("table-top grasp options: " + problem);
+  INHAND_CHECK(!robot.fingers().empty(), "the hand has no fingers to grasp with");
+  TableTopGrasps out;
+  if (points.empty()) return out;
+  // One point per cell (the first in input order: deterministic).
+  std::vector<Vec3> thin;
+  {
+    std::map<std::tuple<int, int, int>, bool> seen;
+    for (const Vec3& p : points) {
+      auto key = std::make_tuple(int(std::floor(p.x() / o.point_cell_m)),
+                                 int(std::floor(p.y() / o.point_cell_m)),
+                                 int(std::floor(p.z() / o.point_cell_m)));
+      if (seen.emplace(key, true).second) thin.push_back(p);
+    }
+  }
+  out.axes = principalAxesUpright(thin, up_O);
+  // The palm aims at the middle of the points' extent along the principal axes (the centroid of
+  // the visible side is off-centre).
+  const Vec3 c = out.axes.centroid + out.axes.axes * (0.5 * (out.axes.min + out.axes.max));
+  const Vec3 e1 = out.axes.axes.col(0), e2 = out.axes.axes.col(1), e3 = out.axes.axes.col(2);
+  double palmTop = 0;
+  for (const Primitive& p : robot.links()[robot.tipLink()].collision)
+    palmTop = std::max(palmTop, p.toMesh().bounds().max.z());
+  JointVector open = robot.home();
+  for (const FingerInfo& f : robot.fingers()) open[f.variable] = f.open;
+  if (robot.spreadVariable() >= 0) open[robot.spreadVariable()] = 0.0;
+  robot.applyCouplings(&open);
+  const double tableTop = robot.table().topZ();
+  // The open hand's span along the palm x axis (the fingers' closing direction).
+  double span = 0;
+  {
+    const Aabb hb = HandGeometry(robot, open, Iso3::Identity()).mesh().bounds();
+    span = hb.max.x() - hb.min.x();
+  }
+
+  struct Pose {
+    Iso3 T_O_palm;
+    int roll;  // 0: fingers close across the main axis, 1: along it
+  };
+  std::vector<Pose> poses;
+  for (int roll = 0; roll < 2; ++roll)
+    for (int k = 0; k < o.approaches; ++k) {
+      const double phi = 2 * M_PI * k / o.approaches;
+      const Vec3 a = std::cos(phi) * e2 + std::sin(phi) * e3;    // outward: object → palm
+      const Vec3 x = roll == 0 ? e1.cross(a).normalized() : e1;  // finger closing direction
+      double reach = -std::numeric_limits<double>::infinity();
+      for (const Vec3& p : thin) reach = std::max(reach, (p - c).dot(a));
+      Iso3 T = Iso3::Identity();
+      T.linear().col(2) = -a;
+      T.linear().col(0) = x;
+      T.linear().col(1) = (-a).cross(x);
+      T.translation() = c + (reach + o.clearance_m + palmTop) * a;
+      poses.push_back({T, roll});
+    }
+  out.tried = int(poses.size());
+  std::vector<uint8_t> ok(poses.size(), 0);
+  parallelFor(0, int(poses.size()), [&](int i) {
+    // The object fits the hand: its extent across the closing direction is within the open
+    // hand's span along it; then the palm (the link the fingers sit on) backs off in 5 mm steps,
+    // up to 3 cm, until at most `inside_fraction` of the points (noise) are inside it. The
+    // fingers close on the object at the pick, as for re-grasps.
+    const Mat3 R = poses[i].T_O_palm.linear();
+    double lo = 1e30, hi = -1e30;
+    for (const Vec3& p : thin) {
+      const double s = (p - c).dot(R.col(0));
+      lo = std::min(lo, s);
+      hi = std::max(hi, s);
+    }
+    if (hi - lo > span) return;
+    const Vec3 back = -R.col(2);
+    bool fits = false;
+    for (int k = 0; k <= 6 && !fits; ++k) {
+      const Iso3 T_palm_O = poses[i].T_O_palm.inverse();
+      int inside = 0;
+      for (const Vec3& p : thin)
+        for (const Primitive& prim : robot.links()[robot.tipLink()].collision)
+          if (prim.contains(T_palm_O * p)) {
+            ++inside;
+            break;
+          }
+      fits = inside <= o.inside_fraction * double(thin.size());
+      if (!fits) poses[i].T_O_palm.translation() += 0.005 * back;
+    }
+    if (!fits) return;
+    ok[i] = 1;
+    const HandGeometry handB(robot, open, T_B_O * poses[i].T_O_palm);
+    for (const Vec3f& v : handB.mesh().vertices)
+      if (v.z() < tableTop + o.table_clearance_m) return;
+    ok[i] = 2;
+  });
+  std::vector<size_t> keep;
+  for (size_t i = 0; i < poses.size(); ++i) {
+    out.fit += ok[i] >= 1;
+    out.table_free += ok[i] == 2;
+    if (ok[i] == 2) keep.push_back(i);
+  }
+  std::vector<Iso3> targets;
+  for (size_t i : keep) targets.push_back(T_B_O * poses[i].T_O_palm);
+  IkOptions ik;
+  ik.random_restarts = 4;
+  auto sols = solveIkBatch(robot, targets, robot.arm(q_now), 13, ik);
+  CollisionChecker checker(robot);
+  IkSolver lift(robot, ik);
+  Rng rng = makeRng(17);
+  const Iso3 up(Eigen::Translation3d(0, 0, lift_m));
+  std::vector<std::pair<std::pair<int, double>, GraspCandidate>> found;
+  for (size_t k = 0; k < keep.size(); ++k) {
+    if (!sols[k]) continue;
+    const Pose& ps = poses[keep[k]];
+    JointVector q = robot.withArm(open, *sols[k]);
+    if (checker.inCollision(q)) continue;
+    auto lifted = lift.solve(up * T_B_O * ps.T_O_palm, *sols[k], &rng);
+    if (!lifted) continue;
+    JointVector ql = robot.withArm(open, *lifted);
+    if (checker.inCollision(ql)) continue;
+    GraspCandidate g;
+    g.T_O_palm = ps.T_O_palm;
+    g.q = q;
+    g.q_lift = ql;
+    found.push_back({{ps.roll, trajectoryTime(robot, robot.arm(q_now), *sols[k])}, g});
+  }
+  std::stable_sort(found.begin(), found.end(),
+                   [](const auto& a, const auto& b) { return a.first < b.first; });
+  for (auto& f : found) out.candidates.push_back(std::move(f.second));
+  return out;
+}
+
 double rankGrasps(const ViewPlanner& planner, const ObjectModel& S_obj, const GraspOptions& o,
                   std::vector<GraspCandidate>* candidates) {
   const auto t0 = std::chrono::steady_clock::now();

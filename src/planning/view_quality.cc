@@ -100,12 +100,14 @@ RobotOccluders::RobotOccluders(const RobotModel& model) : model_(&model) {
   table_->commit();
 }
 
-std::vector<Occluder> RobotOccluders::at(const JointVector& q, const Iso3& T_O_B) const {
+std::vector<Occluder> RobotOccluders::at(const JointVector& q, const Iso3& T_O_B,
+                                         bool with_table) const {
   std::vector<Iso3> T = model_->linkPoses(q);
   std::vector<Occluder> out;
   for (size_t k = 0; k < links_.size(); ++k)
     out.push_back({scenes_[k].get(), T_O_B * T[links_[k]]});
-  out.push_back({table_.get(), T_O_B * Iso3(Eigen::Translation3d(model_->table().center_B))});
+  if (with_table)
+    out.push_back({table_.get(), T_O_B * Iso3(Eigen::Translation3d(model_->table().center_B))});
   return out;
 }
 

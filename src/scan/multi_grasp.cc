@@ -2,8 +2,11 @@
 
 #include <chrono>
 #include <cstdio>
+#include <limits>
 
 #include "inhand/core/error.h"
+#include "inhand/robot/collision.h"
+#include "inhand/sensor/render.h"
 
 namespace inhand {
 
@@ -23,30 +26,35 @@ std::string MultiGraspOptions::validate() const {
   if (keep_ranked < 0) return "keep_ranked must be >= 0";
   std::string p = grasp.validate();
   if (!p.empty()) return "grasp." + p;
+  p = table_top.validate();
+  if (!p.empty()) return "table_top." + p;
   p = ranking.validate();
   return p.empty() ? "" : "ranking." + p;
 }
 
-MultiGraspResult scanMultiGrasp(RobotInterface& robot, DepthSensor& sensor, const Iso3& T_O_palm0,
-                                const Vec3& centre_O, const Iso3& T_B_O_rest,
-                                const ScanOptions& options, const MultiGraspOptions& multi,
-                                const NoiseModelOptions& noise, const ScanProgress& progress) {
-  using Clock = std::chrono::steady_clock;
-  const auto t0 = Clock::now();
+namespace {
+using Clock = std::chrono::steady_clock;
+
+void validate(const ScanOptions& options, const MultiGraspOptions& multi) {
   std::string problem = options.validate();
   if (problem.empty()) problem = multi.validate();
   if (!problem.empty()) throw Error("scan options: " + problem);
+}
+
+// The grasp loop from the first grasp on (the robot holds the object at T_O_palm0), into
+// `volume`; `next` describes the first grasp.
+void runGrasps(RobotInterface& robot, DepthSensor& sensor, const Iso3& T_O_palm0,
+               const Vec3& centre_O, const Iso3& T_B_O_rest, const ScanOptions& options,
+               const MultiGraspOptions& multi, const NoiseModelOptions& noise,
+               const ScanProgress& progress, TsdfVolume& volume, GraspRecord next,
+               MultiGraspResult& out) {
   auto log = [&](const std::string& s) {
     if (progress.log) progress.log(s);
   };
   const RobotModel& m = robot.model();
-  TsdfVolume volume = makeScanVolume(centre_O, options);
-  MultiGraspResult out;
   ScanResult& all = out.scan;
   const ViewPlanner ranker(m, sensor.camera(), noise, multi.ranking);
-
   Iso3 T_O_palm = T_O_palm0;
-  GraspRecord next;
   next.T_O_palm = T_O_palm;
   for (int g = 0;; ++g) {
     log("grasp " + std::to_string(g + 1));
@@ -110,21 +118,34 @@ MultiGraspResult scanMultiGrasp(RobotInterface& robot, DepthSensor& sensor, cons
       all.termination = "no_grasp_above_threshold";
       break;
     }
-    const std::optional<Iso3> achieved = robot.pickUp(best.T_O_palm, best.q);
+    // The best candidate the robot manages to pick up (a real hand may fail where the model
+    // said it would not; the next one above t_q is tried).
+    std::optional<Iso3> achieved;
+    const GraspCandidate* picked = nullptr;
+    for (const GraspCandidate& c : gen.candidates) {
+      if (c.quality < multi.ranking.t_q) break;
+      achieved = robot.pickUp(c.T_O_palm, c.q);
+      if (achieved) {
+        picked = &c;
+        break;
+      }
+      log("pick-up failed; trying the next candidate");
+    }
     if (!achieved) {
       all.termination = "pick_up_failed";
       break;
     }
+    const GraspCandidate& best_ = *picked;
     // Lift (not fused): the fingers as the robot closed them, the arm to the lift configuration.
-    robot.execute({robot.joints(), m.withArm(robot.joints(), m.arm(best.q_lift))},
+    robot.execute({robot.joints(), m.withArm(robot.joints(), m.arm(best_.q_lift))},
                   [](const JointVector&) {});
     T_O_palm = *achieved;
     next = GraspRecord{};
     next.T_O_palm = *achieved;
     next.candidates = int(gen.candidates.size());
     next.tried = gen.tried;
-    next.quality = best.quality;
-    next.epsilon = best.epsilon;
+    next.quality = best_.quality;
+    next.epsilon = best_.epsilon;
     next.generation_s = gen.seconds;
     next.ranking_s = rankS;
     for (const GraspCandidate& c : gen.candidates) {
@@ -132,6 +153,197 @@ MultiGraspResult scanMultiGrasp(RobotInterface& robot, DepthSensor& sensor, cons
       next.ranked.push_back({c.T_O_palm, c.q, c.quality, c.epsilon});
     }
   }
+}
+}  // namespace
+
+std::string TableTopOptions::validate() const {
+  if (frames < 1 || frames > 30) return "frames must be in 1..30";
+  if (!(aim_height_m >= -0.5 && aim_height_m <= 0.5))
+    return "aim_height_m must be in [-0.5, 0.5] m";
+  if (!(search_radius_m > 0 && search_radius_m < 2)) return "search_radius_m must be in (0, 2) m";
+  if (!(above_table_m > 0 && above_table_m < 0.1)) return "above_table_m must be in (0, 0.1) m";
+  if (min_points < 3) return "min_points must be >= 3";
+  if (!(cluster_cell_m > 0 && cluster_cell_m < 0.1)) return "cluster_cell_m must be in (0, 0.1) m";
+  if (!(plane.inlier_m > 0 && plane.inlier_m < 0.05))
+    return "plane.inlier_m must be in (0, 0.05) m";
+  if (plane.iterations < 1) return "plane.iterations must be >= 1";
+  if (!(plane.max_tilt_deg > 0 && plane.max_tilt_deg <= 90))
+    return "plane.max_tilt_deg must be in (0, 90]";
+  std::string p = grasp.validate();
+  return p.empty() ? "" : "grasp." + p;
+}
+
+MultiGraspResult scanMultiGrasp(RobotInterface& robot, DepthSensor& sensor, const Iso3& T_O_palm0,
+                                const Vec3& centre_O, const Iso3& T_B_O_rest,
+                                const ScanOptions& options, const MultiGraspOptions& multi,
+                                const NoiseModelOptions& noise, const ScanProgress& progress) {
+  const auto t0 = Clock::now();
+  validate(options, multi);
+  TsdfVolume volume = makeScanVolume(centre_O, options);
+  MultiGraspResult out;
+  runGrasps(robot, sensor, T_O_palm0, centre_O, T_B_O_rest, options, multi, noise, progress, volume,
+            GraspRecord{}, out);
+  out.scan.total_s = std::chrono::duration<double>(Clock::now() - t0).count();
+  return out;
+}
+
+MultiGraspResult scanFromTable(RobotInterface& robot, DepthSensor& sensor, const Iso3& T_B_O_rest,
+                               const ScanOptions& options, const MultiGraspOptions& multi,
+                               const NoiseModelOptions& noise, const ScanProgress& progress) {
+  const auto t0 = Clock::now();
+  validate(options, multi);
+  auto log = [&](const std::string& s) {
+    if (progress.log) progress.log(s);
+  };
+  const RobotModel& m = robot.model();
+  const TableTopOptions& to = multi.table_top;
+  const CameraIntrinsics& K = sensor.camera().intrinsics;
+  MultiGraspResult out;
+  out.table_top = TableTopRecord{};
+  TableTopRecord& tt = *out.table_top;
+  ScanResult& all = out.scan;
+  auto finish = [&](const std::string& termination) {
+    all.termination = termination;
+    all.total_s = std::chrono::duration<double>(Clock::now() - t0).count();
+    tt.seconds = tt.seconds > 0 ? tt.seconds : all.total_s;
+    log("table top: " + termination);
+    return out;
+  };
+
+  // Frames of the object where it rests, the robot as it stands (its own pixels only carve).
+  const Vec3 rest_B = T_B_O_rest.translation();
+  const std::optional<Iso3> aim = m.camera().aimAt(rest_B + Vec3(0, 0, to.aim_height_m));
+  if (!aim) return finish("object_out_of_view");
+  sensor.setPose(*aim);
+  const RobotOccluders scenes(m);
+  const JointVector q = robot.joints();
+  std::vector<DepthImage> frames;
+  std::vector<std::vector<uint8_t>> robotMask;
+  for (int f = 0; f < to.frames; ++f) {
+    frames.push_back(sensor.capture());
+    robotMask.push_back(robotPixelMask(frames.back(), *aim, q, scenes, sensor.camera(), noise,
+                                       options.t_hand_m, options.carve_radius_px,
+                                       /*with_table=*/false));
+  }
+  tt.frames = int(frames.size());
+  const Iso3 T_O_B = T_B_O_rest.inverse();
+  const Iso3 T_O_C = T_O_B * *aim;
+  // Points near the rest pose (frame O), with their pixel.
+  std::vector<Vec3> near;
+  std::vector<std::pair<int, size_t>> pixelOf;
+  for (int f = 0; f < tt.frames; ++f) {
+    const DepthImage& d = frames[f];
+    for (int v = 0; v < d.height; ++v)
+      for (int u = 0; u < d.width; ++u) {
+        const size_t i = size_t(v) * d.width + u;
+        const float z = d.depth_m[i];
+        if (!(z > 0) || robotMask[f][i]) continue;
+        const Vec3 p_C = double(z) * K.rayZ1(u, v);
+        const Vec3 p_B = *aim * p_C;
+        if ((p_B - rest_B).head<2>().norm() > to.search_radius_m ||
+            std::abs(p_B.z() - rest_B.z()) > 0.5)
+          continue;
+        near.push_back(T_O_B * p_B);
+        pixelOf.push_back({f, i});
+      }
+  }
+  tt.points = int(near.size());
+  PlaneFitOptions po = to.plane;
+  po.expected_normal = T_O_B.linear() * Vec3::UnitZ();
+  const std::optional<PlaneFit> fit = fitPlaneRansac(near, po);
+  if (!fit) return finish("object_not_found");
+  tt.table_O = fit->plane;
+  tt.table_inliers = fit->inliers;
+  std::vector<Vec3> above;
+  for (const Vec3& p : near)
+    if (fit->plane.distance(p) > to.above_table_m) above.push_back(p);
+  // The object: the largest cluster above the table (stray returns dropped).
+  const std::vector<Vec3> object = above.empty() ? above : largestCluster(above, to.cluster_cell_m);
+  tt.object_points = int(object.size());
+  char line[240];
+  std::snprintf(line, sizeof(line),
+                "table top: %d frames, %d points near the rest pose, %d on the table plane, %zu "
+                "above it, %d in the object's cluster",
+                tt.frames, tt.points, tt.table_inliers, above.size(), tt.object_points);
+  log(line);
+  if (tt.object_points < to.min_points) return finish("object_not_found");
+
+  // The volume: centred on the points' box, from the table plane to their top.
+  const Vec3 n = fit->plane.n;
+  Aabb box;
+  double top = 0;
+  for (const Vec3& p : object) {
+    box.extend(p);
+    top = std::max(top, fit->plane.distance(p));
+  }
+  const Vec3 onTable = box.center() - n * fit->plane.distance(box.center());
+  const Vec3 centre_O = onTable + 0.5 * top * n;
+  if (std::max(box.size().maxCoeff(), top) > options.volume_size_m - 0.02) {
+    TsdfVolume none = makeScanVolume(centre_O, options);
+    all.model = extractModel(none, options.mesh);
+    return finish("object_too_large_for_volume");
+  }
+  TsdfVolume volume = makeScanVolume(centre_O, options);
+  // Fuse: table pixels (on or below the plane) and robot pixels only carve.
+  const auto tf = Clock::now();
+  for (int f = 0; f < tt.frames; ++f) {
+    const DepthImage& d = frames[f];
+    std::vector<uint8_t> carve = robotMask[f];
+    for (int v = 0; v < d.height; ++v)
+      for (int u = 0; u < d.width; ++u) {
+        const size_t i = size_t(v) * d.width + u;
+        const float z = d.depth_m[i];
+        if (z > 0 && fit->plane.distance(T_O_C * (double(z) * K.rayZ1(u, v))) < to.above_table_m)
+          carve[i] = 1;
+      }
+    integrate(d, T_O_C, K, measurementSigma(d, K, noise), &volume, &carve);
+  }
+  all.frames += tt.frames;
+  all.fusion_s += std::chrono::duration<double>(Clock::now() - tf).count();
+
+  // The first grasp from the points; the robot picks the object up with the first that works.
+  TableTopGrasps first = tableTopGrasps(m, object, fit->plane.n, T_B_O_rest, robot.joints(),
+                                        to.grasp, multi.grasp.lift_m);
+  tt.axes = first.axes;
+  tt.tried = first.tried;
+  tt.fit = first.fit;
+  tt.table_free = first.table_free;
+  tt.reachable = int(first.candidates.size());
+  std::snprintf(line, sizeof(line),
+                "first grasp: main axis (%.2f, %.2f, %.2f), extent %.0f × %.0f × %.0f mm; %d "
+                "poses, %d fit the hand, %d clear of the table, %d reachable",
+                tt.axes.axes(0, 0), tt.axes.axes(1, 0), tt.axes.axes(2, 0),
+                1000 * (tt.axes.max[0] - tt.axes.min[0]), 1000 * (tt.axes.max[1] - tt.axes.min[1]),
+                1000 * (tt.axes.max[2] - tt.axes.min[2]), tt.tried, tt.fit, tt.table_free,
+                tt.reachable);
+  log(line);
+  tt.seconds = std::chrono::duration<double>(Clock::now() - t0).count();
+  if (first.candidates.empty()) {
+    all.model = extractModel(volume, options.mesh);
+    return finish(tt.fit == 0 ? "object_too_large_for_hand" : "no_reachable_grasp");
+  }
+  std::optional<Iso3> achieved;
+  const GraspCandidate* chosen = nullptr;
+  for (const GraspCandidate& c : first.candidates) {
+    achieved = robot.pickUp(c.T_O_palm, c.q);
+    if (achieved) {
+      chosen = &c;
+      break;
+    }
+  }
+  if (!achieved) {
+    all.model = extractModel(volume, options.mesh);
+    return finish("pick_up_failed");
+  }
+  robot.execute({robot.joints(), m.withArm(robot.joints(), m.arm(chosen->q_lift))},
+                [](const JointVector&) {});
+  GraspRecord rec;
+  rec.candidates = tt.reachable;
+  rec.tried = tt.tried;
+  rec.epsilon = std::numeric_limits<double>::quiet_NaN();  // chosen from points, not contacts
+  rec.generation_s = tt.seconds;
+  runGrasps(robot, sensor, *achieved, centre_O, T_B_O_rest, options, multi, noise, progress, volume,
+            rec, out);
   all.total_s = std::chrono::duration<double>(Clock::now() - t0).count();
   return out;
 }

@@ -55,6 +55,45 @@ double secondsSince(Clock::time_point t) {
 }
 }  // namespace
 
+std::vector<uint8_t> robotPixelMask(const DepthImage& depth, const Iso3& T_B_C,
+                                    const JointVector& q, const RobotOccluders& robotScenes,
+                                    const DepthCameraOptions& camera,
+                                    const NoiseModelOptions& noise, double t_hand_m, int radius_px,
+                                    bool with_table) {
+  RayScene robotScene;
+  for (const Occluder& o : robotScenes.at(q, Iso3::Identity(), with_table))
+    robotScene.addInstance(*o.scene, o.T_O_scene);
+  robotScene.commit();
+  RenderOptions exact;
+  exact.noise = false;
+  DepthCameraOptions cam = camera;
+  cam.max_incidence_deg = 89;
+  cam.max_projector_incidence_deg = 89;
+  cam.projector_C = Vec3(1e-6, 0, 0);
+  DepthImage robotDepth = renderDepth(robotScene, T_B_C, cam, noise, exact);
+  // A measurement is the robot's when the robot's rendered surface lies within t_hand of it at
+  // that pixel or within radius_px of it: the sensor's lateral noise moves returns across the
+  // robot's silhouette by a pixel or two.
+  std::vector<uint8_t> mask(depth.depth_m.size(), 0);
+  const int W = depth.width, H = depth.height, R = radius_px;
+  parallelFor(0, H, [&](int v) {
+    for (int u = 0; u < W; ++u) {
+      const float d = depth.depth_m[size_t(v) * W + u];
+      if (!(d > 0)) continue;
+      bool robot = false;
+      for (int dv = -R; dv <= R && !robot; ++dv)
+        for (int du = -R; du <= R && !robot; ++du) {
+          const int uu = u + du, vv = v + dv;
+          if (uu < 0 || vv < 0 || uu >= W || vv >= H || du * du + dv * dv > R * R) continue;
+          const float rd = robotDepth.depth_m[size_t(vv) * W + uu];
+          robot = rd > 0 && std::abs(d - rd) < t_hand_m;
+        }
+      mask[size_t(v) * W + u] = robot;
+    }
+  });
+  return mask;
+}
+
 TsdfVolume makeScanVolume(const Vec3& centre_O, const ScanOptions& options) {
   Aabb box;
   box.extend(centre_O - Vec3::Constant(0.5 * options.volume_size_m));
@@ -119,6 +158,9 @@ ScanResult scanSingleGrasp(RobotInterface& robot, DepthSensor& sensor, const Iso
             for (const Primitive& prim : m.links()[li].collision)
               if (prim.contains(p)) {
                 size_t i = volume.index(x, y, z);
+                // Measurements win over the hand model: a voxel the sensor saw behind the
+                // object's surface stays (a finger closed on the model can overlap the object).
+                if (volume.state(i) == VoxelState::kObserved && volume.distance(i) < 0) break;
                 volume.states()[i] = uint8_t(VoxelState::kEmpty);
                 volume.sumW()[i] = 0;
                 volume.sumWD()[i] = 0;
@@ -138,40 +180,9 @@ ScanResult scanSingleGrasp(RobotInterface& robot, DepthSensor& sensor, const Iso
     const Iso3 T_O_B = T_O_palm * m.tipPose(q).inverse();
     const Iso3 T_O_C = T_O_B * T_B_C;
     std::vector<uint8_t> carve;
-    if (options.hand_mode != HandMode::kNaive) {
-      // Where the robot's own surfaces are, measurements only carve (§IV).
-      RayScene robotScene;
-      for (const Occluder& o : robotScenes.at(q, Iso3::Identity()))
-        robotScene.addInstance(*o.scene, o.T_O_scene);
-      robotScene.commit();
-      RenderOptions exact;
-      exact.noise = false;
-      DepthCameraOptions cam = sensor.camera();
-      cam.max_incidence_deg = 89;
-      cam.max_projector_incidence_deg = 89;
-      cam.projector_C = Vec3(1e-6, 0, 0);
-      DepthImage robotDepth = renderDepth(robotScene, T_B_C, cam, noise, exact);
-      // A measurement is the robot's when the robot's rendered surface lies within t_hand of it
-      // at that pixel or within carve_radius_px of it: the sensor's lateral noise moves returns
-      // across the robot's silhouette by a pixel or two.
-      carve.assign(depth.depth_m.size(), 0);
-      const int W = depth.width, H = depth.height, R = options.carve_radius_px;
-      parallelFor(0, H, [&](int v) {
-        for (int u = 0; u < W; ++u) {
-          const float d = depth.depth_m[size_t(v) * W + u];
-          if (!(d > 0)) continue;
-          bool robot = false;
-          for (int dv = -R; dv <= R && !robot; ++dv)
-            for (int du = -R; du <= R && !robot; ++du) {
-              const int uu = u + du, vv = v + dv;
-              if (uu < 0 || vv < 0 || uu >= W || vv >= H || du * du + dv * dv > R * R) continue;
-              const float rd = robotDepth.depth_m[size_t(vv) * W + uu];
-              robot = rd > 0 && std::abs(d - rd) < options.t_hand_m;
-            }
-          carve[size_t(v) * W + u] = robot;
-        }
-      });
-    }
+    if (options.hand_mode != HandMode::kNaive)  // the robot's own surfaces only carve (§IV)
+      carve = robotPixelMask(depth, T_B_C, q, robotScenes, sensor.camera(), noise, options.t_hand_m,
+                             options.carve_radius_px);
     integrate(depth, T_O_C, K, measurementSigma(depth, K, noise), &volume,
               carve.empty() ? nullptr : &carve);
     if (options.hand_mode == HandMode::kCarveAndEmpty) emptyInsideRobot(q, T_O_B);

@@ -80,7 +80,7 @@ class RobotOccluders {
  public:
   explicit RobotOccluders(const RobotModel& model);
   // Every link with geometry at q, and the table, placed in frame O by T_O_B.
-  std::vector<Occluder> at(const JointVector& q, const Iso3& T_O_B) const;
+  std::vector<Occluder> at(const JointVector& q, const Iso3& T_O_B, bool with_table = true) const;
 
  private:
   const RobotModel* model_;

@@ -4,13 +4,41 @@
 // the best view Alg. 1 finds with the hand there, pick the object up with the best one, and go
 // on, the model kept in the object frame throughout, until no candidate grasp promises a view
 // above t_q or a grasp limit.
+#include <optional>
+
 #include "inhand/grasp/grasp.h"
 #include "inhand/scan/scan.h"
 
 namespace inhand {
 
+// The table-top stage (paper §V): the object starts on the table, unknown.
+struct TableTopOptions {
+  int frames = 3;              // depth frames taken of it there (fused; the table hides the bottom)
+  double aim_height_m = 0.05;  // the camera aims this far above the rest pose's origin, m
+  double search_radius_m = 0.25;  // object points lie within this of the rest pose (horizontal), m
+  double above_table_m = 0.008;   // … and at least this far above the fitted table plane, m
+  double cluster_cell_m = 0.01;   // the object is the largest cluster at this linking cell, m
+  int min_points = 200;           // fewer object points than this: object_not_found
+  PlaneFitOptions plane;          // RANSAC of the table plane
+  TableTopGraspOptions grasp;     // the first grasp from the points' principal axes
+  std::string validate() const;
+};
+
+// What the table-top stage saw and chose.
+struct TableTopRecord {
+  int frames = 0;
+  int points = 0;                                         // measured points near the rest pose
+  int table_inliers = 0;                                  // of those, on the fitted plane
+  int object_points = 0;                                  // above it
+  Plane table_O;                                          // the fitted table plane, frame O
+  PrincipalAxes axes;                                     // of the object points, frame O
+  int tried = 0, fit = 0, table_free = 0, reachable = 0;  // first-grasp poses
+  double seconds = 0;
+};
+
 struct MultiGraspOptions {
   int max_grasps = 3;  // grasps in all (1: the single-grasp scan)
+  TableTopOptions table_top;
   GraspOptions grasp;
   // Alg. 1 as used to rank grasp candidates: coarser than the view planner's (fewer directions
   // and rolls, every 4th pixel), since it runs once per candidate.
@@ -46,6 +74,7 @@ struct GraspRecord {
 struct MultiGraspResult {
   ScanResult scan;  // views of all grasps, model, timings; termination of the whole scan
   std::vector<GraspRecord> grasps;
+  std::optional<TableTopRecord> table_top;  // when the scan began with the object on the table
 };
 
 // `T_O_palm` and the robot's state: the first grasp (the robot holds the object); `T_B_O_rest`:
@@ -54,5 +83,17 @@ MultiGraspResult scanMultiGrasp(RobotInterface& robot, DepthSensor& sensor, cons
                                 const Vec3& centre_O, const Iso3& T_B_O_rest,
                                 const ScanOptions& options, const MultiGraspOptions& multi,
                                 const NoiseModelOptions& noise, const ScanProgress& progress = {});
+
+// The whole autonomous scan (§V): the object rests on the table at T_B_O_rest (its frame O is the
+// model's frame; nothing of its shape is known). The camera takes table_top.frames of it; the
+// table plane is fitted (RANSAC) and the points above it near the rest pose are the object; the
+// volume is centred on them and the frames are fused (table and robot pixels only carve); the
+// first grasp comes from the points' principal axes (tableTopGrasps); the robot picks the object
+// up and the multi-grasp scan goes on as scanMultiGrasp. Terminations of its own:
+// object_not_found, object_too_large_for_volume, object_too_large_for_hand, no_reachable_grasp,
+// pick_up_failed (the model so far is returned with each).
+MultiGraspResult scanFromTable(RobotInterface& robot, DepthSensor& sensor, const Iso3& T_B_O_rest,
+                               const ScanOptions& options, const MultiGraspOptions& multi,
+                               const NoiseModelOptions& noise, const ScanProgress& progress = {});
 
 }  // namespace inhand

@@ -80,6 +80,16 @@ ScanResult scanSingleGrasp(RobotInterface& robot, DepthSensor& sensor, const Iso
                            const NoiseModelOptions& noise, const ScanProgress& progress = {},
                            TsdfVolume* volume = nullptr);
 
+// The pixels of `depth` (taken from T_B_C with the robot at q) that are the robot's own surface:
+// the robot rendered there lies within t_hand_m of the measurement, at that pixel or within
+// radius_px of it (the sensor's lateral noise moves returns across its silhouette). With
+// with_table the robot config's table counts as the robot's (as in the air, where it only carves).
+std::vector<uint8_t> robotPixelMask(const DepthImage& depth, const Iso3& T_B_C,
+                                    const JointVector& q, const RobotOccluders& robotScenes,
+                                    const DepthCameraOptions& camera,
+                                    const NoiseModelOptions& noise, double t_hand_m, int radius_px,
+                                    bool with_table = true);
+
 // The volume a scan centred at centre_O uses.
 TsdfVolume makeScanVolume(const Vec3& centre_O, const ScanOptions& options);
 
