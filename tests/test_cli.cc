@@ -7,6 +7,7 @@
 
 #include "inhand/core/file_util.h"
 #include "inhand/core/json_util.h"
+#include "inhand/geometry/builtin_objects.h"
 #include "inhand/geometry/mesh_io.h"
 #include "test_util.h"
 
@@ -149,6 +150,18 @@ TEST(Cli, ScanWritesModelAndSummaryAndRejectsBadConfig) {
   EXPECT_GT(g2["candidates"].get<int>(), 0);
   EXPECT_GE(g2["quality"].get<double>(), 0.005);
   EXPECT_GT(g2["stability_epsilon"].get<double>(), 0.0);
+  // The scan began on the table: the fitted table plane is the true one (the can rests upright
+  // with frame O's z up; its bottom at z = −h/2 lies on the table), the first grasp came from the
+  // points (no contact model, so no ε), the object's points are a can's.
+  EXPECT_EQ(s["start"], "table");
+  const Json& tt = s["table_top"];
+  const auto plane = tt["table_plane_O"].get<std::vector<double>>();
+  EXPECT_GT(plane[2], std::cos(M_PI / 180));
+  EXPECT_NEAR(-plane[3] / plane[2], loadObject("builtin:coffee_can").bounds().min.z(), 0.003);
+  EXPECT_GT(tt["object_points"].get<int>(), 1000);
+  EXPECT_GT(tt["grasp_poses_reachable"].get<int>(), 0);
+  EXPECT_TRUE(s["grasps"][0]["stability_epsilon"].is_null());
+  EXPECT_NEAR(tt["principal_axes"][0]["axis_O"][2].get<double>(), 1.0, 1e-6);  // upright
   PlyData ply = readPly(out / "model.ply");
   EXPECT_EQ(ply.vertexProperties.count("variance"), 1u);
   // The model lies on the can (object frame = the mesh's own frame): Ø 102 × 139 mm about the
@@ -270,22 +283,22 @@ TEST(Cli, EvalTabulatesEveryRunAndRejectsUnknownPlanners) {
   writeTextAtomically(dir.path() / "quick.json", kQuickConfig);
   const fs::path out = dir.path() / "eval";
   Result r =
-      run("eval --objects builtin:pill_bottle --planners ig,random --seeds 2 --max-grasps 1 "
+      run("eval --objects builtin:juice_bottle --planners ig,random --seeds 2 --max-grasps 1 "
           "--max-views 1 --config " +
               (dir.path() / "quick.json").string() + " --out " + out.string(),
           dir);
   ASSERT_EQ(r.code, 0) << r.output;
   const std::string csv = readTextFile(out / "results.csv");
   EXPECT_EQ(std::count(csv.begin(), csv.end(), '\n'), 5);  // header + 2 planners × 2 seeds
-  EXPECT_NE(csv.find("pill_bottle,random,2,0,"), std::string::npos) << csv;
+  EXPECT_NE(csv.find("juice_bottle,random,2,0,"), std::string::npos) << csv;
   const std::string md = readTextFile(out / "results.md");
-  EXPECT_NE(md.find("| pill_bottle | ig |"), std::string::npos) << md;
-  EXPECT_NE(md.find("| pill_bottle | random |"), std::string::npos) << md;
+  EXPECT_NE(md.find("| juice_bottle | ig |"), std::string::npos) << md;
+  EXPECT_NE(md.find("| juice_bottle | random |"), std::string::npos) << md;
   const Json curves = readJsonFile(out / "curves.json");
   ASSERT_EQ(curves.size(), 4u);
   for (const Json& c : curves) EXPECT_GE(c["coverage"].size(), 2u);  // initial views + 1
   EXPECT_TRUE(fs::exists(out / "index.html"));
-  EXPECT_TRUE(fs::exists(out / "runs/pill_bottle/ig/seed1/summary.json"));
+  EXPECT_TRUE(fs::exists(out / "runs/juice_bottle/ig/seed1/summary.json"));
   EXPECT_NE(md.find("trajectory s to 99%"), std::string::npos) << md;
   // `inhand report` rebuilds the tables and the index from the runs' files.
   fs::remove(out / "results.md");
@@ -296,7 +309,7 @@ TEST(Cli, EvalTabulatesEveryRunAndRejectsUnknownPlanners) {
   EXPECT_TRUE(fs::exists(out / "index.html"));
 
   r = run(
-      "eval --objects builtin:pill_bottle --planners ig,best --out " + (dir.path() / "x").string(),
+      "eval --objects builtin:juice_bottle --planners ig,best --out " + (dir.path() / "x").string(),
       dir);
   EXPECT_EQ(r.code, 1);
   EXPECT_NE(r.output.find("unknown planner \"best\""), std::string::npos) << r.output;

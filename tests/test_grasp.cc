@@ -2,6 +2,8 @@
 #include <gtest/gtest.h>
 
 #include "inhand/core/pose.h"
+#include "inhand/core/random.h"
+#include "inhand/geometry/point_cloud.h"
 #include "inhand/geometry/primitives.h"
 #include "inhand/grasp/grasp.h"
 #include "inhand/robot/collision.h"
@@ -111,4 +113,110 @@ TEST(GraspGeneration, CandidatesAreStableClearOfTheTableAndReachable) {
   GraspOptions bad = o;
   bad.friction = 0;
   EXPECT_THROW(generateGrasps(r, model.mesh, T_B_O, r.home(), bad), std::runtime_error);
+}
+
+// ---- the table-top stage (§V) -----------------------------------------------------------------
+
+namespace {
+// Points on the faces of a box (half sizes h) resting on z = 0, seen from +x +y above: its top
+// and the +x and +y faces, rotated by `yaw` about z.
+std::vector<Vec3> visibleBoxPoints(const Vec3& h, double yaw, double step = 0.004) {
+  std::vector<Vec3> pts;
+  const Mat3 R = Eigen::AngleAxisd(yaw, Vec3::UnitZ()).toRotationMatrix();
+  for (double a = -h.x(); a <= h.x(); a += step)
+    for (double b = -h.y(); b <= h.y(); b += step) pts.push_back(R * Vec3(a, b, 2 * h.z()));
+  for (double b = -h.y(); b <= h.y(); b += step)
+    for (double z = 0.01; z <= 2 * h.z(); z += step) pts.push_back(R * Vec3(h.x(), b, z));
+  for (double a = -h.x(); a <= h.x(); a += step)
+    for (double z = 0.01; z <= 2 * h.z(); z += step) pts.push_back(R * Vec3(a, h.y(), z));
+  return pts;
+}
+}  // namespace
+
+TEST(TableTop, RansacFindsTheTableAmongObjectPointsAndOutliers) {
+  std::vector<Vec3> pts;
+  Rng rng = makeRng(3);
+  std::normal_distribution<double> noise(0, 0.001);
+  std::uniform_real_distribution<double> U(-0.3, 0.3);
+  // A table at z = 0.2 tilted by 2° about x, with 1 mm noise.
+  const Vec3 n = Eigen::AngleAxisd(2 * M_PI / 180, Vec3::UnitX()) * Vec3::UnitZ();
+  const Vec3 o(0.5, 0, 0.2);
+  const Vec3 u = n.unitOrthogonal(), v = n.cross(u);
+  for (int i = 0; i < 3000; ++i) pts.push_back(o + U(rng) * u + U(rng) * v + noise(rng) * n);
+  for (const Vec3& p : visibleBoxPoints(Vec3(0.03, 0.08, 0.1), 0.3))
+    pts.push_back(o + p);  // an object standing on it
+  for (int i = 0; i < 300; ++i) pts.push_back(o + Vec3(U(rng), U(rng), U(rng)));  // clutter
+  PlaneFitOptions po;
+  auto fit = fitPlaneRansac(pts, po);
+  ASSERT_TRUE(fit.has_value());
+  EXPECT_GT(fit->plane.n.dot(n), std::cos(0.2 * M_PI / 180));  // within 0.2°
+  EXPECT_NEAR(fit->plane.distance(o), 0.0, 5e-4);
+  EXPECT_GE(fit->inliers, 2900);
+  // A wall (normal far from the expected one) is never the table.
+  po.expected_normal = Vec3::UnitX();
+  po.max_tilt_deg = 10;
+  auto wall = fitPlaneRansac(pts, po);
+  if (wall) {
+    EXPECT_LT(wall->inliers, 1000);
+  }
+  EXPECT_FALSE(fitPlaneRansac({Vec3::Zero(), Vec3::UnitX()}).has_value());
+}
+
+TEST(TableTop, UprightAxesOfAOneSidedViewMatchTheBox) {
+  // 60 × 160 × 200 mm, turned 0.3 rad; only three faces seen.
+  const double yaw = 0.3;
+  std::vector<Vec3> pts = visibleBoxPoints(Vec3(0.03, 0.08, 0.1), yaw);
+  PrincipalAxes pa = principalAxesUpright(pts, Vec3::UnitZ(), 0.0);
+  EXPECT_NEAR(std::abs(pa.axes.col(0).z()), 1.0, 1e-12);  // tallest: the vertical
+  const Vec3 longSide = Eigen::AngleAxisd(yaw, Vec3::UnitZ()) * Vec3::UnitY();
+  EXPECT_GT(std::abs(pa.axes.col(1).dot(longSide)), std::cos(1.0 * M_PI / 180));
+  EXPECT_NEAR(pa.max[0] - pa.min[0], 0.19, 0.005);  // 0.01 … 0.2 sampled
+  EXPECT_NEAR(pa.max[1] - pa.min[1], 0.16, 0.005);
+  EXPECT_NEAR(pa.max[2] - pa.min[2], 0.06, 0.005);
+  EXPECT_GT(pa.axes.determinant(), 0.99);
+  // Free PCA of the same one-sided view is tilted by the unseen faces.
+  PrincipalAxes free = principalAxes(pts);
+  EXPECT_GT(free.max[2] - free.min[2], pa.max[2] - pa.min[2] + 0.002);
+}
+
+TEST(TableTop, LargestClusterDropsStrayPoints) {
+  std::vector<Vec3> pts = visibleBoxPoints(Vec3(0.03, 0.08, 0.1), 0.0);
+  const size_t box = pts.size();
+  pts.push_back(Vec3(0.2, 0.2, 0.05));
+  pts.push_back(Vec3(0.21, 0.2, 0.05));
+  pts.push_back(Vec3(-0.3, 0.0, 0.1));
+  std::vector<Vec3> kept = largestCluster(pts, 0.01);
+  EXPECT_EQ(kept.size(), box);
+}
+
+TEST(TableTop, FirstGraspApproachesPerpendicularToTheMainAxisAndIsReachable) {
+  const RobotModel& r = test::wam();
+  const Iso3 T_B_O(
+      Eigen::Translation3d(r.camera().lookAt_B.x(), r.camera().lookAt_B.y(), r.table().topZ()));
+  std::vector<Vec3> pts = visibleBoxPoints(Vec3(0.03, 0.08, 0.1), 0.0);
+  TableTopGraspOptions o;
+  TableTopGrasps g = tableTopGrasps(r, pts, Vec3::UnitZ(), T_B_O, r.home(), o, 0.15);
+  EXPECT_EQ(g.tried, 2 * o.approaches + 2);  // + 2 from above (the main axis is vertical)
+  ASSERT_FALSE(g.candidates.empty());
+  CollisionChecker checker(r);
+  for (const GraspCandidate& c : g.candidates) {
+    const Mat3 R = c.T_O_palm.linear();
+    // Horizontal approaches (⟂ the vertical main axis) or, last, from above.
+    EXPECT_TRUE(std::abs(R.col(2).z()) < 1e-9 || R.col(2).z() < -0.999);
+    EXPECT_LT((r.tipPose(c.q).translation() - (T_B_O * c.T_O_palm).translation()).norm(), 1e-3);
+    EXPECT_FALSE(checker.inCollision(c.q));
+    // The palm is clear of the points.
+    const Iso3 T_palm_O = c.T_O_palm.inverse();
+    for (const Vec3& p : pts)
+      for (const Primitive& prim : r.links()[r.tipLink()].collision)
+        ASSERT_FALSE(prim.contains(T_palm_O * p));
+  }
+  // Fingers across the main axis come first, and close across the 60 mm side (the only one
+  // within the hand's span; the rectangle's axes in 0.5° steps).
+  EXPECT_GT(std::abs(g.candidates.front().T_O_palm.linear().col(0).x()), std::cos(M_PI / 360));
+  // A 40 cm wide block fits no pose.
+  TableTopGrasps wide = tableTopGrasps(r, visibleBoxPoints(Vec3(0.2, 0.2, 0.1), 0.0), Vec3::UnitZ(),
+                                       T_B_O, r.home(), o, 0.15);
+  EXPECT_EQ(wide.fit, 0);
+  EXPECT_TRUE(wide.candidates.empty());
 }

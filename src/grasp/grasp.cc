@@ -292,6 +292,21 @@ TableTopGrasps tableTopGrasps(const RobotModel& robot, const std::vector<Vec3>& 
       T.translation() = c + (reach + o.clearance_m + palmTop) * a;
       poses.push_back({T, roll});
     }
+  // Fallback, last in order: from above (for short objects the side approaches put the hand
+  // into the table), fingers closing across each horizontal axis, the narrower first.
+  if (std::abs(e1.dot(up_O.normalized())) > 0.9) {
+    const Vec3 a = up_O.normalized();
+    for (const Vec3& x : {e3, e2}) {
+      double reach = -std::numeric_limits<double>::infinity();
+      for (const Vec3& p : thin) reach = std::max(reach, (p - c).dot(a));
+      Iso3 T = Iso3::Identity();
+      T.linear().col(2) = -a;
+      T.linear().col(0) = x;
+      T.linear().col(1) = (-a).cross(x);
+      T.translation() = c + (reach + o.clearance_m + palmTop) * a;
+      poses.push_back({T, 2});
+    }
+  }
   out.tried = int(poses.size());
   std::vector<uint8_t> ok(poses.size(), 0);
   parallelFor(0, int(poses.size()), [&](int i) {
