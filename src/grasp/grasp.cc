@@ -275,38 +275,31 @@ TableTopGrasps tableTopGrasps(const RobotModel& robot, const std::vector<Vec3>& 
 
   struct Pose {
     Iso3 T_O_palm;
-    int roll;  // 0: fingers close across the main axis, 1: along it
+    int roll;  // 0: fingers close across the main axis, 1: along it, 2: from above
   };
   std::vector<Pose> poses;
+  // Palm z along −a (a: outward, object → palm), fingers closing along x, the palm face
+  // `clearance_m` outside the points along a.
+  auto palmPose = [&](const Vec3& a, const Vec3& x) {
+    double reach = -std::numeric_limits<double>::infinity();
+    for (const Vec3& p : thin) reach = std::max(reach, (p - c).dot(a));
+    Iso3 T = Iso3::Identity();
+    T.linear().col(2) = -a;
+    T.linear().col(0) = x;
+    T.linear().col(1) = (-a).cross(x);
+    T.translation() = c + (reach + o.clearance_m + palmTop) * a;
+    return T;
+  };
   for (int roll = 0; roll < 2; ++roll)
     for (int k = 0; k < o.approaches; ++k) {
       const double phi = 2 * M_PI * k / o.approaches;
-      const Vec3 a = std::cos(phi) * e2 + std::sin(phi) * e3;    // outward: object → palm
-      const Vec3 x = roll == 0 ? e1.cross(a).normalized() : e1;  // finger closing direction
-      double reach = -std::numeric_limits<double>::infinity();
-      for (const Vec3& p : thin) reach = std::max(reach, (p - c).dot(a));
-      Iso3 T = Iso3::Identity();
-      T.linear().col(2) = -a;
-      T.linear().col(0) = x;
-      T.linear().col(1) = (-a).cross(x);
-      T.translation() = c + (reach + o.clearance_m + palmTop) * a;
-      poses.push_back({T, roll});
+      const Vec3 a = std::cos(phi) * e2 + std::sin(phi) * e3;
+      poses.push_back({palmPose(a, roll == 0 ? e1.cross(a).normalized() : e1), roll});
     }
   // Fallback, last in order: from above (for short objects the side approaches put the hand
   // into the table), fingers closing across each horizontal axis, the narrower first.
-  if (std::abs(e1.dot(up_O.normalized())) > 0.9) {
-    const Vec3 a = up_O.normalized();
-    for (const Vec3& x : {e3, e2}) {
-      double reach = -std::numeric_limits<double>::infinity();
-      for (const Vec3& p : thin) reach = std::max(reach, (p - c).dot(a));
-      Iso3 T = Iso3::Identity();
-      T.linear().col(2) = -a;
-      T.linear().col(0) = x;
-      T.linear().col(1) = (-a).cross(x);
-      T.translation() = c + (reach + o.clearance_m + palmTop) * a;
-      poses.push_back({T, 2});
-    }
-  }
+  if (std::abs(e1.dot(up_O.normalized())) > 0.9)
+    for (const Vec3& x : {e3, e2}) poses.push_back({palmPose(up_O.normalized(), x), 2});
   out.tried = int(poses.size());
   std::vector<uint8_t> ok(poses.size(), 0);
   parallelFor(0, int(poses.size()), [&](int i) {
