@@ -56,6 +56,37 @@ const std::vector<Vec6>& wrenchDirections(int n) {
   made = n;
   return dirs;
 }
+// Pick and lift configurations for palm poses T_B_palm[k] with the hand joints hands[k]: IK to
+// the pick pose (seeded from q_now, `restarts` random restarts), then to the same pose lift_m
+// higher, seeded from the pick; both free of table and base. nullopt where either fails.
+struct PickLift {
+  JointVector q, q_lift;
+};
+std::vector<std::optional<PickLift>> pickAndLift(const RobotModel& robot,
+                                                 const std::vector<Iso3>& T_B_palm,
+                                                 const std::vector<JointVector>& hands,
+                                                 const JointVector& q_now, double lift_m,
+                                                 int restarts, uint64_t seed) {
+  IkOptions ik;
+  ik.random_restarts = restarts;
+  const auto sols = solveIkBatch(robot, T_B_palm, robot.arm(q_now), seed, ik);
+  CollisionChecker checker(robot);
+  IkSolver lift(robot, ik);
+  Rng rng = makeRng(seed + 4);
+  const Iso3 up(Eigen::Translation3d(0, 0, lift_m));
+  std::vector<std::optional<PickLift>> out(T_B_palm.size());
+  for (size_t k = 0; k < T_B_palm.size(); ++k) {
+    if (!sols[k]) continue;
+    JointVector q = robot.withArm(hands[k], *sols[k]);
+    if (checker.inCollision(q)) continue;
+    auto lifted = lift.solve(up * T_B_palm[k], *sols[k], &rng);
+    if (!lifted) continue;
+    JointVector ql = robot.withArm(hands[k], *lifted);
+    if (checker.inCollision(ql)) continue;
+    out[k] = PickLift{q, ql};
+  }
+  return out;
+}
 }  // namespace
 
 double forceClosureEpsilon(const std::vector<Contact>& contacts, const Vec3& centre, double rho,
@@ -195,24 +226,16 @@ GraspGeneration generateGrasps(const RobotModel& robot, const TriangleMesh& mesh
   }
   // Reachable at the table (IK to the palm pose, arm and hand free of table and base).
   std::vector<Iso3> targets;
-  for (const GraspCandidate& c : kept) targets.push_back(T_B_O * c.T_O_palm);
-  IkOptions ik;
-  ik.random_restarts = 2;
-  auto sols = solveIkBatch(robot, targets, robot.arm(q_now), 7, ik);
-  CollisionChecker checker(robot);
-  IkSolver lift(robot, ik);
-  Rng rng = makeRng(11);
-  const Iso3 up(Eigen::Translation3d(0, 0, o.lift_m));
+  std::vector<JointVector> hands;
+  for (const GraspCandidate& c : kept) {
+    targets.push_back(T_B_O * c.T_O_palm);
+    hands.push_back(c.q);
+  }
+  const auto reach = pickAndLift(robot, targets, hands, q_now, o.lift_m, 2, 7);
   for (size_t k = 0; k < kept.size(); ++k) {
-    if (!sols[k]) continue;
-    JointVector q = robot.withArm(kept[k].q, *sols[k]);
-    if (checker.inCollision(q)) continue;
-    auto lifted = lift.solve(up * T_B_O * kept[k].T_O_palm, *sols[k], &rng);
-    if (!lifted) continue;
-    JointVector ql = robot.withArm(kept[k].q, *lifted);
-    if (checker.inCollision(ql)) continue;
-    kept[k].q = q;
-    kept[k].q_lift = ql;
+    if (!reach[k]) continue;
+    kept[k].q = reach[k]->q;
+    kept[k].q_lift = reach[k]->q_lift;
     out.candidates.push_back(std::move(kept[k]));
   }
   std::stable_sort(
@@ -344,28 +367,17 @@ TableTopGrasps tableTopGrasps(const RobotModel& robot, const std::vector<Vec3>& 
   }
   std::vector<Iso3> targets;
   for (size_t i : keep) targets.push_back(T_B_O * poses[i].T_O_palm);
-  IkOptions ik;
-  ik.random_restarts = 4;
-  auto sols = solveIkBatch(robot, targets, robot.arm(q_now), 13, ik);
-  CollisionChecker checker(robot);
-  IkSolver lift(robot, ik);
-  Rng rng = makeRng(17);
-  const Iso3 up(Eigen::Translation3d(0, 0, lift_m));
+  const auto reach = pickAndLift(robot, targets, std::vector<JointVector>(keep.size(), open), q_now,
+                                 lift_m, 4, 13);
   std::vector<std::pair<std::pair<int, double>, GraspCandidate>> found;
   for (size_t k = 0; k < keep.size(); ++k) {
-    if (!sols[k]) continue;
+    if (!reach[k]) continue;
     const Pose& ps = poses[keep[k]];
-    JointVector q = robot.withArm(open, *sols[k]);
-    if (checker.inCollision(q)) continue;
-    auto lifted = lift.solve(up * T_B_O * ps.T_O_palm, *sols[k], &rng);
-    if (!lifted) continue;
-    JointVector ql = robot.withArm(open, *lifted);
-    if (checker.inCollision(ql)) continue;
     GraspCandidate g;
     g.T_O_palm = ps.T_O_palm;
-    g.q = q;
-    g.q_lift = ql;
-    found.push_back({{ps.roll, trajectoryTime(robot, robot.arm(q_now), *sols[k])}, g});
+    g.q = reach[k]->q;
+    g.q_lift = reach[k]->q_lift;
+    found.push_back({{ps.roll, trajectoryTime(robot, robot.arm(q_now), robot.arm(g.q))}, g});
   }
   std::stable_sort(found.begin(), found.end(),
                    [](const auto& a, const auto& b) { return a.first < b.first; });

@@ -278,11 +278,8 @@ MultiGraspResult scanFromTable(RobotInterface& robot, DepthSensor& sensor, const
   }
   const Vec3 onTable = box.center() - n * fit->plane.distance(box.center());
   const Vec3 centre_O = onTable + 0.5 * top * n;
-  if (std::max(box.size().maxCoeff(), top) > options.volume_size_m - 0.02) {
-    TsdfVolume none = makeScanVolume(centre_O, options);
-    all.model = extractModel(none, options.mesh);
-    return finish("object_too_large_for_volume");
-  }
+  if (std::max(box.size().maxCoeff(), top) > options.volume_size_m - 0.02)
+    return finish("object_too_large_for_volume");  // nothing fused: the model is empty
   TsdfVolume volume = makeScanVolume(centre_O, options);
   // Fuse: table pixels (on or below the plane) and robot pixels only carve.
   const auto tf = Clock::now();
