@@ -114,6 +114,21 @@ void BM_ViewQualityOneCore(benchmark::State& state) {
 }
 BENCHMARK(BM_ViewQualityOneCore)->Arg(1)->Arg(0)->Unit(benchmark::kMillisecond)->UseRealTime();
 
+// The rasteriser alone: S_obj into a full 640×480 z-buffer, one core. Arg 1: back faces culled.
+void BM_RasteriseModel(benchmark::State& state) {
+  Scenario& s = scenario();
+  const CameraIntrinsics K = DepthCameraOptions{}.intrinsics;
+  DepthRaster r;
+  size_t i = 0;
+  for (auto _ : state) {
+    r.reset({K.fx, K.fy, K.cx, K.cy}, {0, K.width - 1, 0, K.height - 1, 1});
+    r.draw(s.S_obj.mesh, s.poses[i].inverse(), 0, state.range(0) != 0);
+    benchmark::DoNotOptimize(r.id(0));
+    i = (i + 1) % s.poses.size();
+  }
+}
+BENCHMARK(BM_RasteriseModel)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond)->UseRealTime();
+
 void BM_ViewQualityReference(benchmark::State& state) {
   Scenario& s = scenario();
   ViewQualityScene vq(s.S_obj, DepthCameraOptions{}, NoiseModelOptions{}, ViewQualityOptions{});

@@ -10,6 +10,7 @@
 #include "inhand/geometry/contour.h"
 #include "inhand/geometry/mesh_io.h"
 #include "inhand/geometry/primitives.h"
+#include "inhand/geometry/raster.h"
 #include "inhand/geometry/ray_scene.h"
 #include "test_util.h"
 
@@ -347,4 +348,94 @@ TEST(SurfaceSamples, CoverACoarseBoxOnItsSurfaceWithOutwardNormals) {
         ++perFace[2 * a + (p.p[a] > 0)];
   }
   for (int f = 0; f < 6; ++f) EXPECT_GT(perFace[f], 10) << f;
+}
+
+// ---- rasteriser ---------------------------------------------------------------------------------
+
+namespace {
+
+// Compares the rasteriser with one Embree ray per sample (ray through the sample pixel, camera
+// at the origin looking along +z): returns the fraction of samples where one hits and the other
+// does not, or both hit at depths more than 1e-5 apart (on a shared edge either triangle may be
+// reported, at the same depth).
+double rasterDisagreement(const TriangleMesh& mesh, const Iso3& T_C_mesh, const RasterWindow& w,
+                          bool cull, int* hitSamples) {
+  const PinholeProjection K{525, 525, 319.5, 239.5};
+  DepthRaster r;
+  r.reset(K, w);
+  r.draw(mesh, T_C_mesh, 0, cull);
+  RayScene scene;
+  scene.addMesh(mesh, T_C_mesh);
+  scene.commit();
+  int differ = 0, n = 0, hits = 0;
+  for (int j = w.j0; j <= w.j1; ++j)
+    for (int i = w.i0; i <= w.i1; ++i) {
+      Ray ray;
+      ray.dir =
+          Vec3f(float((i * w.stride - K.cx) / K.fx), float((j * w.stride - K.cy) / K.fy), 1.f);
+      const Hit h = scene.intersectOne(ray);
+      const int s = r.index(i, j);
+      ++n;
+      if (h.valid() != (r.id(s) >= 0) ||
+          (h.valid() && std::abs(1.0 / r.inverseDepth(s) - h.t) > 1e-5 * h.t)) {
+        ++differ;
+        continue;
+      }
+      hits += h.valid();
+    }
+  *hitSamples = hits;
+  return double(differ) / n;
+}
+
+}  // namespace
+
+TEST(Raster, FirstTriangleAndDepthMatchRayCasting) {
+  // A sphere of small triangles and a box of large ones, turned, 0.6 m in front of the camera.
+  const Iso3 T = Iso3(Eigen::Translation3d(0.02, -0.01, 0.6)) *
+                 Eigen::AngleAxisd(0.7, Vec3(1, 2, 3).normalized());
+  const RasterWindow full{0, 639, 0, 479, 1};
+  int hits = 0;
+  for (const TriangleMesh& m : {makeSphere(0.1, 5), makeBox(Vec3(0.2, 0.1, 0.15))}) {
+    EXPECT_LT(rasterDisagreement(m, T, full, false, &hits), 1e-3);
+    EXPECT_GT(hits, 10000);
+    // Closed and outward: culling back faces changes nothing.
+    EXPECT_LT(rasterDisagreement(m, T, full, true, &hits), 1e-3);
+    EXPECT_GT(hits, 10000);
+  }
+  // A window and a stride: samples at (i·3, j·3).
+  const RasterWindow part{40, 150, 30, 120, 3};
+  EXPECT_LT(rasterDisagreement(makeSphere(0.1, 5), T, part, false, &hits), 1e-3);
+  EXPECT_GT(hits, 2000);
+}
+
+TEST(Raster, TrianglesCrossingTheNearPlaneAreClipped) {
+  // A floor 10 cm below the camera reaching from behind it to 3 m ahead: its triangles cross
+  // the near plane; only the part in front may be drawn, at the right depth.
+  TriangleMesh floor;
+  floor.vertices = {Vec3f(-2, 0.1f, -1), Vec3f(2, 0.1f, -1), Vec3f(2, 0.1f, 3.05f),
+                    Vec3f(-2, 0.1f, 3.05f)};  // (3 m would put a row exactly on the far edge)
+  floor.triangles = {Tri(0, 2, 1), Tri(0, 3, 2)};
+  int hits = 0;
+  EXPECT_LT(rasterDisagreement(floor, Iso3::Identity(), {0, 639, 0, 479, 1}, false, &hits), 1e-3);
+  EXPECT_GT(hits, 100000);  // the lower half of the image, less the rows beyond 3 m
+  // Entirely behind the camera: nothing drawn.
+  DepthRaster r;
+  r.reset({525, 525, 319.5, 239.5}, {0, 639, 0, 479, 1});
+  r.draw(floor, Iso3(Eigen::Translation3d(0, 0, -4)));
+  for (int s = 0; s < 640 * 480; s += 97) EXPECT_EQ(r.id(s), -1);
+}
+
+TEST(Raster, WatertightIsWeakerThanClosed) {
+  TriangleMesh box = makeBox(Vec3(0.1, 0.1, 0.1));
+  EXPECT_TRUE(box.isClosed());
+  EXPECT_TRUE(box.isWatertight());
+  // Two boxes sharing an edge: four triangles on that edge, still bounding a region.
+  TriangleMesh two = box;
+  two.append(transformed(box, Iso3(Eigen::Translation3d(0.1, 0.1, 0))));
+  two = welded(two);
+  EXPECT_FALSE(two.isClosed());
+  EXPECT_TRUE(two.isWatertight());
+  TriangleMesh open = box;
+  open.triangles.pop_back();
+  EXPECT_FALSE(open.isWatertight());
 }

@@ -116,7 +116,8 @@ TEST(ViewQuality, ExclusionRulesRemoveExactlyTheirPixels) {
   EXPECT_NEAR(G, expectG, 1e-6 * expectG);  // float hit distances
   // Pixels outside the model's projected box are not cast at all; the reference casts all.
   ViewQualityStats ref;
-  EXPECT_NEAR(vq.qualityReference(Iso3::Identity(), {{&occ, Iso3::Identity()}}, &ref), G, 1e-9 * G);
+  // (The rasteriser's hit distances come from double arithmetic, Embree's from float.)
+  EXPECT_NEAR(vq.qualityReference(Iso3::Identity(), {{&occ, Iso3::Identity()}}, &ref), G, 1e-6 * G);
   EXPECT_EQ(ref.missed, missed);
   EXPECT_EQ(ref.counted, counted);
 }
@@ -203,24 +204,41 @@ TEST(ViewQuality, OptimisedMatchesReferenceOnAFusedModelWithTheRobot) {
   vq.setNearHand(std::make_shared<NearHandGrid>(hand, 0.01, 0.002));
   RobotOccluders occ(r);
   auto occluders = occ.at(q, T_O_B);
+  // Embree packets: the same rays as the reference, so the same pixels exactly.
+  ViewQualityOptions castOptions;
+  castOptions.rasterise = false;
+  ViewQualityScene cast(model, DepthCameraOptions{}, NoiseModelOptions{}, castOptions);
+  cast.setNearHand(std::make_shared<NearHandGrid>(hand, 0.01, 0.002));
   int compared = 0;
   for (const Vec3& d : fibonacciSphere(8)) {
     Iso3 T_O_C = cameraPoseInObject(b.center(), d, 0.7, 0.5);
-    ViewQualityStats a, ref;
-    double g = vq.quality(T_O_C, occluders, &a), gRef = vq.qualityReference(T_O_C, occluders, &ref);
-    EXPECT_NEAR(g, gRef, 1e-9 * std::max(1e-12, gRef));
-    EXPECT_EQ(a.counted, ref.counted);
+    ViewQualityStats a, c, ref;
+    double gRef = vq.qualityReference(T_O_C, occluders, &ref);
+    double gc = cast.quality(T_O_C, occluders, &c);
+    EXPECT_NEAR(gc, gRef, 1e-9 * std::max(1e-12, gRef));
+    EXPECT_EQ(c.counted, ref.counted);
+    EXPECT_EQ(c.robot_first, ref.robot_first);
+    EXPECT_EQ(c.near_hand, ref.near_hand);
+    EXPECT_EQ(c.projector_blocked, ref.projector_blocked);
+    // The rasteriser: the same first surfaces except where a ray grazes a triangle edge (Embree
+    // is not watertight there) and hit points that sit on a near-hand cell boundary to within
+    // float rounding (the model's flat faces lie on voxel planes): within 1 % of the counts.
+    double g = vq.quality(T_O_C, occluders, &a);
+    EXPECT_NEAR(g, gRef, 0.01 * std::max(1e-12, gRef));
+    EXPECT_EQ(a.cast, c.cast);
     EXPECT_EQ(a.robot_first, ref.robot_first);
-    EXPECT_EQ(a.near_hand, ref.near_hand);
-    EXPECT_EQ(a.projector_blocked, ref.projector_blocked);
+    EXPECT_NEAR(a.missed, c.missed, 0.001 * c.cast);
+    EXPECT_NEAR(a.counted, ref.counted, 0.01 * ref.counted + 1);
+    EXPECT_NEAR(a.near_hand, ref.near_hand, 0.01 * (ref.counted + ref.near_hand) + 1);
+    EXPECT_NEAR(a.projector_blocked, ref.projector_blocked, 0.01 * ref.counted + 1);
     compared += gRef > 0;
   }
   EXPECT_GT(compared, 4);
 }
 
 // Sampling every s-th pixel (each sample standing for s² pixels) estimates the same surface
-// integral: the optimised path matches its own reference exactly and the full-resolution
-// value closely.
+// integral: the optimised (rasterised) path matches its own reference up to edge pixels and the
+// full-resolution value closely.
 TEST(ViewQuality, PixelStrideMatchesItsReferenceAndApproximatesFullResolution) {
   TriangleMesh bottle = loadObject("builtin:juice_bottle");
   Aabb b = bottle.bounds();
@@ -236,8 +254,8 @@ TEST(ViewQuality, PixelStrideMatchesItsReferenceAndApproximatesFullResolution) {
     ViewQualityStats a, ref, f;
     double g = coarse.quality(T_O_C, {}, &a), gRef = coarse.qualityReference(T_O_C, {}, &ref);
     double gFull = full.quality(T_O_C, {}, &f);
-    EXPECT_NEAR(g, gRef, 1e-9 * gRef);
-    EXPECT_EQ(a.counted, ref.counted);
+    EXPECT_NEAR(g, gRef, 1e-3 * gRef);
+    EXPECT_NEAR(a.counted, ref.counted, 0.002 * ref.counted + 1);
     EXPECT_NEAR(a.counted, f.counted / 4.0, 0.02 * f.counted / 4.0);
     EXPECT_NEAR(g, gFull, 0.02 * gFull);
   }

@@ -41,6 +41,8 @@ RayScene::~RayScene() {
 RayScene::RayScene(RayScene&& o) noexcept
     : scene_(o.scene_),
       instanceRotation_(std::move(o.instanceRotation_)),
+      meshes_(std::move(o.meshes_)),
+      instances_(std::move(o.instances_)),
       geometryCount_(o.geometryCount_),
       committed_(o.committed_) {
   o.scene_ = nullptr;
@@ -51,6 +53,8 @@ RayScene& RayScene::operator=(RayScene&& o) noexcept {
     if (scene_) rtcReleaseScene(scene_);
     scene_ = o.scene_;
     instanceRotation_ = std::move(o.instanceRotation_);
+    meshes_ = std::move(o.meshes_);
+    instances_ = std::move(o.instances_);
     geometryCount_ = o.geometryCount_;
     committed_ = o.committed_;
     o.scene_ = nullptr;
@@ -85,6 +89,8 @@ int RayScene::addMesh(const TriangleMesh& mesh, const Iso3& T) {
   rtcReleaseGeometry(geom);
   INHAND_CHECK(int(id) == geometryCount_, "unexpected Embree geometry id");
   instanceRotation_.push_back(Eigen::Matrix3f::Identity());
+  meshes_.push_back(transformed(mesh, T));
+  instances_.emplace_back(nullptr, Iso3::Identity());
   return geometryCount_++;
 }
 
@@ -104,6 +110,8 @@ int RayScene::addInstance(const RayScene& inner, const Iso3& T) {
   rtcReleaseGeometry(geom);
   INHAND_CHECK(int(id) == geometryCount_, "unexpected Embree geometry id");
   instanceRotation_.push_back(T.linear().cast<float>());
+  meshes_.emplace_back();
+  instances_.emplace_back(&inner, T);
   return geometryCount_++;
 }
 
@@ -124,6 +132,16 @@ Hit RayScene::makeHit(float t, unsigned geomID, unsigned instID, unsigned primID
     h.normal = Ng;
   }
   return h;
+}
+
+void RayScene::collectMeshes(const Iso3& T,
+                             std::vector<std::pair<const TriangleMesh*, Iso3>>* out) const {
+  for (int g = 0; g < geometryCount_; ++g) {
+    if (instances_[size_t(g)].first)
+      instances_[size_t(g)].first->collectMeshes(T * instances_[size_t(g)].second, out);
+    else
+      out->emplace_back(&meshes_[size_t(g)], T);
+  }
 }
 
 void RayScene::commit(bool high) {

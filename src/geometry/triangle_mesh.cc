@@ -69,6 +69,20 @@ bool TriangleMesh::isClosed() const {
   return true;
 }
 
+bool TriangleMesh::isWatertight() const {
+  if (triangles.empty()) return false;
+  std::unordered_map<uint64_t, int> directed;
+  directed.reserve(triangles.size() * 3);
+  for (const Tri& f : triangles)
+    for (int k = 0; k < 3; ++k) ++directed[edgeKey(f[k], f[(k + 1) % 3])];
+  for (const auto& [key, count] : directed) {
+    int a = int(key >> 32), b = int(key & 0xffffffffu);
+    auto it = directed.find(edgeKey(b, a));
+    if (it == directed.end() || it->second != count) return false;
+  }
+  return true;
+}
+
 int TriangleMesh::boundaryEdgeCount() const {
   std::unordered_map<uint64_t, int> undirected;
   for (const Tri& f : triangles)

@@ -76,8 +76,12 @@ NearHandGrid::NearHandGrid(const HandGeometry& hand, double t_hand, double cell,
 bool NearHandGrid::near(const Vec3& p) const {
   if (flags_.empty()) return false;
   Vec3 g = (p - origin_) / cell_;
-  int x = int(std::lround(g.x())), y = int(std::lround(g.y())), z = int(std::lround(g.z()));
-  if (x < 0 || y < 0 || z < 0 || x >= dims_.x() || y >= dims_.y() || z >= dims_.z()) return false;
+  // The nearest cell, as lround would give it, without a libm call: in range only for
+  // -½ < g < dims − ½, where int(g + ½) rounds half up like lround.
+  if (!(g.x() > -0.5 && g.y() > -0.5 && g.z() > -0.5 && g.x() < dims_.x() - 0.5 &&
+        g.y() < dims_.y() - 0.5 && g.z() < dims_.z() - 0.5))
+    return false;
+  const int x = int(g.x() + 0.5), y = int(g.y() + 0.5), z = int(g.z() + 0.5);
   return flags_[(size_t(z) * dims_.y() + y) * dims_.x() + x];
 }
 
@@ -126,6 +130,13 @@ ViewQualityScene::ViewQualityScene(const ObjectModel& model, const DepthCameraOp
   cosMaxIncidence_ = std::cos(options.max_incidence_deg * M_PI / 180);
   cosMaxProjector_ = std::cos(options.max_projector_incidence_deg * M_PI / 180);
   cosGrazing_ = std::cos(noise.grazing_start_deg * M_PI / 180);
+  closed_ = model_.mesh.isWatertight();
+  faceNormals_.reserve(model_.mesh.triangles.size());
+  for (const Tri& f : model_.mesh.triangles) {
+    const Vec3f& p0 = model_.mesh.vertices[size_t(f[0])];
+    faceNormals_.push_back(
+        (model_.mesh.vertices[size_t(f[1])] - p0).cross(model_.mesh.vertices[size_t(f[2])] - p0));
+  }
   objectScene_.addMesh(model_.mesh);
   objectScene_.commit(/*high=*/true);  // cast hundreds of times per Alg. 1 pass
 }
@@ -189,13 +200,8 @@ double ViewQualityScene::pixelGain(const Hit& hit, const Ray& ray, const Iso3& T
   return 0.5 * std::log1p(var / (sz * sz)) * d * d / (K.fx * K.fy * nz);
 }
 
-double ViewQualityScene::quality(const Iso3& T_O_C, const std::vector<Occluder>& occluders,
-                                 ViewQualityStats* stats) const {
-  ViewQualityStats local;
-  ViewQualityStats& st = stats ? *stats : local;
-  st = ViewQualityStats{};
+bool ViewQualityScene::pixelWindow(const Iso3& T_O_C, RasterWindow* window) const {
   const CameraIntrinsics& K = camera_.intrinsics;
-  // Pixel box covering the projection of the model's bounding box.
   const Aabb& box = bounds_;
   const Iso3 T_C_O = T_O_C.inverse();
   int u0 = 0, v0 = 0, u1 = K.width - 1, v1 = K.height - 1;
@@ -220,41 +226,120 @@ double ViewQualityScene::quality(const Iso3& T_O_C, const std::vector<Occluder>&
     v0 = std::max(0, int(std::floor(vmin)) - 1);
     u1 = std::min(K.width - 1, int(std::ceil(umax)) + 1);
     v1 = std::min(K.height - 1, int(std::ceil(vmax)) + 1);
-    if (u0 > u1 || v0 > v1) return 0.0;
+    if (u0 > u1 || v0 > v1) return false;
   }
-  // S_obj is cast on its own single-level BVH; the robot, a handful of instanced links, only
-  // for rays that hit S_obj (does a robot surface come first?) and for shadow rays that S_obj
-  // itself does not block.
-  std::optional<RayScene> robot;
-  if (!occluders.empty()) robot.emplace(buildScene(occluders, false));
-  thread_local std::vector<Ray> rays, shadows, toHit;
+  const int sp = options_.pixel_stride;
+  window->stride = sp;
+  window->i0 = (u0 + sp - 1) / sp;
+  window->i1 = u1 / sp;
+  window->j0 = (v0 + sp - 1) / sp;
+  window->j1 = v1 / sp;
+  return window->size() > 0;
+}
+
+namespace {
+
+// Möller–Trumbore on one triangle known to be hit (the rasteriser chose it): t and the
+// barycentrics as Embree reports them, clamped onto the triangle for samples on its edges.
+void hitTriangle(const Ray& r, const Vec3& p0, const Vec3& p1, const Vec3& p2, Hit* h) {
+  const Vec3 o = r.origin.cast<double>(), d = r.dir.cast<double>();
+  const Vec3 e1 = p1 - p0, e2 = p2 - p0;
+  const Vec3 pv = d.cross(e2);
+  const double det = e1.dot(pv);
+  const double inv = 1.0 / det;
+  const Vec3 tv = o - p0;
+  double u = tv.dot(pv) * inv;
+  const Vec3 qv = tv.cross(e1);
+  double v = d.dot(qv) * inv;
+  h->t = float(e2.dot(qv) * inv);
+  u = std::clamp(u, 0.0, 1.0);
+  v = std::clamp(v, 0.0, 1.0 - u);
+  h->u = float(u);
+  h->v = float(v);
+}
+
+}  // namespace
+
+void ViewQualityScene::primaryHitsRaster(const Iso3& T_O_C, const RasterWindow& w,
+                                         const std::vector<Occluder>& occluders,
+                                         std::vector<Ray>* rays, std::vector<Hit>* hits,
+                                         ViewQualityStats* st) const {
+  const CameraIntrinsics& K = camera_.intrinsics;
+  const PinholeProjection P{K.fx, K.fy, K.cx, K.cy};
+  const Iso3 T_C_O = T_O_C.inverse();
+  thread_local DepthRaster object, robot;
+  thread_local std::vector<std::pair<const TriangleMesh*, Iso3>> meshes;
+  object.reset(P, w);
+  const Vec3 c = T_O_C.translation();
+  const bool outside =
+      (c.array() < bounds_.min.array()).any() || (c.array() > bounds_.max.array()).any();
+  object.draw(model_.mesh, T_C_O, 0, /*cull_back_faces=*/closed_ && outside);
+  const bool withRobot = !occluders.empty();
+  if (withRobot) {
+    robot.reset(P, w);
+    meshes.clear();
+    for (const Occluder& o : occluders) o.scene->collectMeshes(T_C_O * o.T_O_scene, &meshes);
+    for (const auto& [mesh, T] : meshes) robot.draw(*mesh, T);
+  }
+  const Vec3f origin = T_O_C.translation().cast<float>();
+  const Mat3 R = T_O_C.linear();
+  const auto& V = model_.mesh.vertices;
+  for (int j = w.j0; j <= w.j1; ++j)
+    for (int i = w.i0; i <= w.i1; ++i) {
+      const int s = object.index(i, j);
+      const int tri = object.id(s);
+      if (tri < 0) {
+        ++st->missed;
+        continue;
+      }
+      if (withRobot && robot.inverseDepth(s) > object.inverseDepth(s)) {
+        ++st->robot_first;
+        continue;
+      }
+      Ray r;
+      r.origin = origin;
+      r.dir = (R * K.rayZ1(i * w.stride, j * w.stride)).cast<float>();  // as the reference
+      const Tri& f = model_.mesh.triangles[size_t(tri)];
+      Hit h;
+      h.geometry = 0;
+      h.triangle = tri;
+      h.normal = faceNormals_[size_t(tri)];
+      hitTriangle(r, V[size_t(f[0])].cast<double>(), V[size_t(f[1])].cast<double>(),
+                  V[size_t(f[2])].cast<double>(), &h);
+      rays->push_back(r);
+      hits->push_back(h);
+    }
+}
+
+void ViewQualityScene::primaryHitsRayCast(const Iso3& T_O_C, const RasterWindow& w,
+                                          const RayScene* robot, std::vector<Ray>* out,
+                                          std::vector<Hit>* outHits, ViewQualityStats* st) const {
+  const CameraIntrinsics& K = camera_.intrinsics;
+  thread_local std::vector<Ray> rays, toHit;
   thread_local std::vector<Hit> hits;
-  thread_local std::vector<double> gains;
   thread_local std::vector<uint8_t> blocked;
   thread_local std::vector<int> index;
   rays.clear();
   const Vec3f origin = T_O_C.translation().cast<float>();
   const Mat3 R = T_O_C.linear();
-  // Samples on the image's stride grid (every pixel at stride 1), in coherent 4×4 tiles.
-  const int sp = options_.pixel_stride;
-  const int i0 = (u0 + sp - 1) / sp, i1 = u1 / sp, j0 = (v0 + sp - 1) / sp, j1 = v1 / sp;
-  for (int tj = j0; tj <= j1; tj += 4)
-    for (int ti = i0; ti <= i1; ti += 4)
-      for (int j = tj; j < std::min(tj + 4, j1 + 1); ++j)
-        for (int i = ti; i < std::min(ti + 4, i1 + 1); ++i) {
+  const int sp = w.stride;
+  // Samples in coherent 4×4 tiles.
+  for (int tj = w.j0; tj <= w.j1; tj += 4)
+    for (int ti = w.i0; ti <= w.i1; ti += 4)
+      for (int j = tj; j < std::min(tj + 4, w.j1 + 1); ++j)
+        for (int i = ti; i < std::min(ti + 4, w.i1 + 1); ++i) {
           Ray r;
           r.origin = origin;
           r.dir = (R * K.rayZ1(i * sp, j * sp)).cast<float>();  // as the reference computes it
           rays.push_back(r);
         }
-  st.cast = int(rays.size());
   hits.resize(rays.size());
   objectScene_.intersect(rays.data(), hits.data(), rays.size(), /*parallel=*/false);
   // Robot in front of the S_obj hit?
   index.clear();
   for (size_t i = 0; i < rays.size(); ++i) {
     if (!hits[i].valid()) {
-      ++st.missed;
+      ++st->missed;
       continue;
     }
     index.push_back(int(i));
@@ -262,23 +347,52 @@ double ViewQualityScene::quality(const Iso3& T_O_C, const std::vector<Occluder>&
   if (robot) {
     toHit.resize(index.size());
     for (size_t j = 0; j < index.size(); ++j) {
-      toHit[j] = rays[index[j]];
-      toHit[j].tfar = hits[index[j]].t;
+      toHit[j] = rays[size_t(index[j])];
+      toHit[j].tfar = hits[size_t(index[j])].t;
     }
     blocked.resize(toHit.size());
     robot->occluded(toHit.data(), blocked.data(), toHit.size(), /*parallel=*/false);
     size_t kept = 0;
     for (size_t j = 0; j < index.size(); ++j) {
       if (blocked[j])
-        ++st.robot_first;
+        ++st->robot_first;
       else
         index[kept++] = index[j];
     }
     index.resize(kept);
   }
+  for (int i : index) {
+    out->push_back(rays[size_t(i)]);
+    outHits->push_back(hits[size_t(i)]);
+  }
+}
+
+double ViewQualityScene::quality(const Iso3& T_O_C, const std::vector<Occluder>& occluders,
+                                 ViewQualityStats* stats) const {
+  ViewQualityStats local;
+  ViewQualityStats& st = stats ? *stats : local;
+  st = ViewQualityStats{};
+  RasterWindow w;
+  if (!pixelWindow(T_O_C, &w)) return 0.0;
+  st.cast = w.size();
+  // The robot, a handful of instanced links, as one Embree scene for the shadow rays that S_obj
+  // itself does not block (and, when not rasterising, for the primary rays that hit S_obj).
+  std::optional<RayScene> robot;
+  if (!occluders.empty()) robot.emplace(buildScene(occluders, false));
+  thread_local std::vector<Ray> rays, shadows, toHit;
+  thread_local std::vector<Hit> hits;
+  thread_local std::vector<double> gains;
+  thread_local std::vector<uint8_t> blocked, robotBlocked;
+  thread_local std::vector<int> index;
+  rays.clear();
+  hits.clear();
+  if (options_.rasterise)
+    primaryHitsRaster(T_O_C, w, occluders, &rays, &hits, &st);
+  else
+    primaryHitsRayCast(T_O_C, w, robot ? &*robot : nullptr, &rays, &hits, &st);
   shadows.clear();
   gains.clear();
-  for (int i : index) {
+  for (size_t i = 0; i < rays.size(); ++i) {
     Ray shadow;
     shadow.tfar = std::numeric_limits<float>::infinity();
     double g = pixelGain(hits[i], rays[i], T_O_C, &shadow, &st);
@@ -297,10 +411,9 @@ double ViewQualityScene::quality(const Iso3& T_O_C, const std::vector<Occluder>&
         toHit.push_back(shadows[i]);
         index.push_back(int(i));
       }
-    thread_local std::vector<uint8_t> robotBlocked;
     robotBlocked.resize(toHit.size());
     robot->occluded(toHit.data(), robotBlocked.data(), toHit.size(), /*parallel=*/false);
-    for (size_t j = 0; j < index.size(); ++j) blocked[index[j]] = robotBlocked[j];
+    for (size_t j = 0; j < index.size(); ++j) blocked[size_t(index[j])] = robotBlocked[j];
   }
   double G = 0;
   for (size_t i = 0; i < shadows.size(); ++i) {
@@ -311,6 +424,7 @@ double ViewQualityScene::quality(const Iso3& T_O_C, const std::vector<Occluder>&
     ++st.counted;
     G += gains[i];
   }
+  const int sp = options_.pixel_stride;
   return G * double(sp) * double(sp);  // each sample stands for stride² pixels
 }
 

@@ -58,11 +58,19 @@ class RayScene {
   // Scalar reference path (rtcIntersect1), one ray.
   Hit intersectOne(const Ray& ray) const;
 
+  // The triangles this scene was built from, for other renderers (the rasteriser): each added
+  // mesh with its placement T·(instance placements) in the frame that T maps this scene into,
+  // instanced scenes expanded recursively. Pointers live as long as the scenes.
+  void collectMeshes(const Iso3& T, std::vector<std::pair<const TriangleMesh*, Iso3>>* out) const;
+
  private:
   Hit makeHit(float t, unsigned geomID, unsigned instID, unsigned primID, float u, float v,
               const Vec3f& Ng) const;
   RTCScene scene_ = nullptr;
   std::vector<Eigen::Matrix3f> instanceRotation_;  // per geometry id (identity for meshes)
+  // Per geometry id: the mesh as added (already placed), or the instanced scene and placement.
+  std::vector<TriangleMesh> meshes_;
+  std::vector<std::pair<const RayScene*, Iso3>> instances_;
   int geometryCount_ = 0;
   bool committed_ = false;
 };

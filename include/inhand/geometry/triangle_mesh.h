@@ -38,6 +38,10 @@ struct TriangleMesh {
   void append(const TriangleMesh& other);
   // Every undirected edge used by exactly two triangles, in opposite directions.
   bool isClosed() const;
+  // Every directed edge is used as often as its reverse: the triangles bound a region (edges
+  // where surfaces touch may be shared by four), as contouring a scalar field gives. Weaker
+  // than isClosed, which also asks for a manifold.
+  bool isWatertight() const;
   // Number of edges used by only one triangle.
   int boundaryEdgeCount() const;
 };

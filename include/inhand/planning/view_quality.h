@@ -12,6 +12,7 @@
 #include <string>
 #include <vector>
 
+#include "inhand/geometry/raster.h"
 #include "inhand/geometry/ray_scene.h"
 #include "inhand/mesh/extract.h"
 #include "inhand/robot/collision.h"
@@ -37,6 +38,11 @@ struct ViewQualityOptions {
   // 1: every pixel of the 640×480 map, as the paper. s > 1: every s-th pixel in u and v, each
   // standing for s² pixels (the same surface integral, sampled s² times more coarsely).
   int pixel_stride = 1;
+  // How quality() finds the first surface along each pixel's ray: true, a z-buffer rasteriser
+  // over S_obj and the robot's triangles (several times faster for a mesh of sub-pixel
+  // triangles); false, Embree packets. Shadow rays to the projector are cast with Embree either
+  // way. Both agree with qualityReference up to pixels that fall exactly on triangle edges.
+  bool rasterise = true;
   std::string validate() const;
 };
 
@@ -98,9 +104,9 @@ class ViewQualityScene {
   // Sets the grasp's near-hand grid (no grid: no t_hand rule).
   void setNearHand(std::shared_ptr<const NearHandGrid> grid) { nearHand_ = std::move(grid); }
 
-  // eq. 9 for a camera at T_O_C among `occluders` (robot surfaces in frame O). Casts only the
+  // eq. 9 for a camera at T_O_C among `occluders` (robot surfaces in frame O). Looks only at the
   // pixels inside the projection of the model's bounding box (no pixel outside can hit S_obj),
-  // in coherent 4×4 packets, on the calling thread.
+  // on the calling thread: rasterised (options.rasterise) or cast in coherent 4×4 packets.
   double quality(const Iso3& T_O_C, const std::vector<Occluder>& occluders = {},
                  ViewQualityStats* stats = nullptr) const;
 
@@ -113,6 +119,16 @@ class ViewQualityScene {
  private:
   // The occluders as instances; with S_obj first (geometry 0) when `withObject`.
   RayScene buildScene(const std::vector<Occluder>& occluders, bool withObject) const;
+  // Pixel window covering the projection of the model's bounding box; false when it is empty.
+  bool pixelWindow(const Iso3& T_O_C, RasterWindow* window) const;
+  // First S_obj hit per sample of `window` not hidden by a robot surface (rays[i], hits[i];
+  // counts misses and robot-first pixels), by rasterising or by Embree.
+  void primaryHitsRaster(const Iso3& T_O_C, const RasterWindow& window,
+                         const std::vector<Occluder>& occluders, std::vector<Ray>* rays,
+                         std::vector<Hit>* hits, ViewQualityStats* st) const;
+  void primaryHitsRayCast(const Iso3& T_O_C, const RasterWindow& window, const RayScene* robot,
+                          std::vector<Ray>* rays, std::vector<Hit>* hits,
+                          ViewQualityStats* st) const;
   // Per-pixel rule given the first hit; returns the gain or 0, and the shadow ray when the pixel
   // still needs the projector visibility test.
   double pixelGain(const Hit& hit, const Ray& ray, const Iso3& T_O_C, Ray* shadow,
@@ -125,6 +141,8 @@ class ViewQualityScene {
   NoiseModelOptions noise_;
   ViewQualityOptions options_;
   RayScene objectScene_;
+  bool closed_ = false;  // S_obj watertight: back faces can be culled for cameras outside it
+  std::vector<Vec3f> faceNormals_;  // unnormalised (p1 − p0) × (p2 − p0), as Embree's Ng
   std::shared_ptr<const NearHandGrid> nearHand_;
 };
 
