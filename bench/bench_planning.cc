@@ -59,9 +59,11 @@ struct Scenario {
   std::vector<Iso3> poses;
   std::vector<std::vector<Occluder>> occluders;
   std::unique_ptr<RobotOccluders> robot_;  // owns the link scenes the occluders point to
-  ViewQualityScene qualityScene(int stride = 1) const {
+  ViewQualityScene qualityScene(int stride = 1,
+                                PrimaryVisibility v = PrimaryVisibility::kAuto) const {
     ViewQualityOptions o;
     o.pixel_stride = stride;
+    o.visibility = v;
     ViewQualityScene vq(S_obj, DepthCameraOptions{}, NoiseModelOptions{}, o);
     vq.setNearHand(nearHand);
     return vq;
@@ -74,10 +76,11 @@ Scenario& scenario() {
 
 // One eq. 9 evaluation per iteration, candidates spread over the sphere, both cores (one
 // candidate per core at a time, as Alg. 1 runs them).
-// Arg: pixel stride (1: every pixel of the 640×480 map).
+// Args: pixel stride (1: every pixel of the 640×480 map); primary visibility (0 auto: the
+// rasteriser at stride 1, else ray casting; 1 rasteriser; 2 Embree ray casting).
 void BM_ViewQuality(benchmark::State& state) {
   Scenario& s = scenario();
-  ViewQualityScene vq = s.qualityScene(int(state.range(0)));
+  ViewQualityScene vq = s.qualityScene(int(state.range(0)), PrimaryVisibility(state.range(1)));
   const auto& poses = s.poses;
   const auto& occluders = s.occluders;
   const int batch = 64;
@@ -89,7 +92,14 @@ void BM_ViewQuality(benchmark::State& state) {
   state.counters["evaluations_per_s"] =
       benchmark::Counter(double(state.iterations()) * batch, benchmark::Counter::kIsRate);
 }
-BENCHMARK(BM_ViewQuality)->Arg(1)->Arg(2)->Arg(4)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_ViewQuality)
+    ->Args({1, 0})
+    ->Args({1, 2})
+    ->Args({2, 0})
+    ->Args({2, 1})
+    ->Args({4, 0})
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
 
 // The same evaluations on one core, with the per-pixel outcome counts.
 void BM_ViewQualityOneCore(benchmark::State& state) {

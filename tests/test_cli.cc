@@ -181,6 +181,14 @@ TEST(Cli, ScanWritesModelAndSummaryAndRejectsBadConfig) {
           dir);
   EXPECT_EQ(r.code, 1);
   EXPECT_NE(r.output.find("t_q"), std::string::npos) << r.output;
+  writeTextAtomically(dir.path() / "bad.json", R"({"planner": {"quality": {"visibility": "z"}}})");
+  r = run("scan --object builtin:coffee_can --config " + (dir.path() / "bad.json").string() +
+              " --out " + (dir.path() / "x").string(),
+          dir);
+  EXPECT_EQ(r.code, 1);
+  EXPECT_NE(r.output.find("planner.quality.visibility: must be auto, raster or ray_cast"),
+            std::string::npos)
+      << r.output;
   r = run("scan --object builtin:coffee_can --max-grasps 0 --out " + (dir.path() / "x").string(),
           dir);
   EXPECT_EQ(r.code, 1);

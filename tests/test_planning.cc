@@ -206,7 +206,7 @@ TEST(ViewQuality, OptimisedMatchesReferenceOnAFusedModelWithTheRobot) {
   auto occluders = occ.at(q, T_O_B);
   // Embree packets: the same rays as the reference, so the same pixels exactly.
   ViewQualityOptions castOptions;
-  castOptions.rasterise = false;
+  castOptions.visibility = PrimaryVisibility::kRayCast;
   ViewQualityScene cast(model, DepthCameraOptions{}, NoiseModelOptions{}, castOptions);
   cast.setNearHand(std::make_shared<NearHandGrid>(hand, 0.01, 0.002));
   int compared = 0;
@@ -248,6 +248,7 @@ TEST(ViewQuality, PixelStrideMatchesItsReferenceAndApproximatesFullResolution) {
   ViewQualityScene full(model, DepthCameraOptions{}, NoiseModelOptions{}, ViewQualityOptions{});
   ViewQualityOptions o2;
   o2.pixel_stride = 2;
+  o2.visibility = PrimaryVisibility::kRaster;  // (auto would cast rays at stride 2)
   ViewQualityScene coarse(model, DepthCameraOptions{}, NoiseModelOptions{}, o2);
   for (const Vec3& d : fibonacciSphere(6)) {
     Iso3 T_O_C = cameraPoseInObject(b.center(), d, 0.7, 0.2);

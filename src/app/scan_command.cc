@@ -29,6 +29,7 @@ class OptionReader {
   OptionReader(const Json& j, std::string where) : j_(j), where_(std::move(where)) {
     if (!j.is_object()) throw Error(where_ + ": expected an object");
   }
+  const std::string& where() const { return where_; }
   // Call after reading every known key: any other key is an error that names it.
   void finish() const {
     for (const auto& [key, value] : j_.items())
@@ -106,6 +107,10 @@ void readPlanner(OptionReader& p, ViewPlannerOptions* v) {
     q->num("max_projector_incidence_deg", &v->quality.max_projector_incidence_deg);
     q->num("near_hand_cell_m", &v->quality.near_hand_cell_m);
     q->integer("pixel_stride", &v->quality.pixel_stride);
+    std::string visibility;
+    q->string("visibility", &visibility);
+    if (!visibility.empty() && !parsePrimaryVisibility(visibility, &v->quality.visibility))
+      throw Error(q->where() + ".visibility: must be auto, raster or ray_cast");
     q->finish();
   }
   if (auto q = p.object("volumetric")) {
@@ -136,7 +141,8 @@ Json plannerJson(const ViewPlannerOptions& v) {
             {"max_incidence_deg", v.quality.max_incidence_deg},
             {"max_projector_incidence_deg", v.quality.max_projector_incidence_deg},
             {"near_hand_cell_m", v.quality.near_hand_cell_m},
-            {"pixel_stride", v.quality.pixel_stride}}},
+            {"pixel_stride", v.quality.pixel_stride},
+            {"visibility", primaryVisibilityName(v.quality.visibility)}}},
           {"volumetric",
            {{"ray_stride", v.volumetric.ray_stride},
             {"p_unknown", v.volumetric.p_unknown},

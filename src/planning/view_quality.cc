@@ -21,6 +21,27 @@ std::string ViewQualityOptions::validate() const {
   return {};
 }
 
+const char* primaryVisibilityName(PrimaryVisibility v) {
+  switch (v) {
+    case PrimaryVisibility::kRaster:
+      return "raster";
+    case PrimaryVisibility::kRayCast:
+      return "ray_cast";
+    default:
+      return "auto";
+  }
+}
+
+bool parsePrimaryVisibility(const std::string& name, PrimaryVisibility* v) {
+  for (PrimaryVisibility c :
+       {PrimaryVisibility::kAuto, PrimaryVisibility::kRaster, PrimaryVisibility::kRayCast})
+    if (name == primaryVisibilityName(c)) {
+      *v = c;
+      return true;
+    }
+  return false;
+}
+
 Iso3 cameraPoseInObject(const Vec3& centre_O, const Vec3& dir_O, double range_m, double roll_rad) {
   Vec3 z = dir_O.normalized();
   Vec3 ref = std::abs(z.z()) < 0.95 ? Vec3::UnitZ() : Vec3::UnitX();
@@ -386,7 +407,9 @@ double ViewQualityScene::quality(const Iso3& T_O_C, const std::vector<Occluder>&
   thread_local std::vector<int> index;
   rays.clear();
   hits.clear();
-  if (options_.rasterise)
+  const bool raster = options_.visibility == PrimaryVisibility::kRaster ||
+                      (options_.visibility == PrimaryVisibility::kAuto && w.stride == 1);
+  if (raster)
     primaryHitsRaster(T_O_C, w, occluders, &rays, &hits, &st);
   else
     primaryHitsRayCast(T_O_C, w, robot ? &*robot : nullptr, &rays, &hits, &st);

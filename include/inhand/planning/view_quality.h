@@ -29,6 +29,10 @@ enum class QualityIntegrand {
   kUnknownArea,
 };
 
+enum class PrimaryVisibility { kAuto, kRaster, kRayCast };
+const char* primaryVisibilityName(PrimaryVisibility v);  // auto, raster, ray_cast
+bool parsePrimaryVisibility(const std::string& name, PrimaryVisibility* v);
+
 struct ViewQualityOptions {
   QualityIntegrand integrand = QualityIntegrand::kInformationGain;
   double t_hand_m = 0.01;                     // hits this close to the hand are skipped, m
@@ -38,11 +42,13 @@ struct ViewQualityOptions {
   // 1: every pixel of the 640×480 map, as the paper. s > 1: every s-th pixel in u and v, each
   // standing for s² pixels (the same surface integral, sampled s² times more coarsely).
   int pixel_stride = 1;
-  // How quality() finds the first surface along each pixel's ray: true, a z-buffer rasteriser
-  // over S_obj and the robot's triangles (several times faster for a mesh of sub-pixel
-  // triangles); false, Embree packets. Shadow rays to the projector are cast with Embree either
-  // way. Both agree with qualityReference up to pixels that fall exactly on triangle edges.
-  bool rasterise = true;
+  // How quality() finds the first surface along each pixel's ray (shadow rays to the projector
+  // are cast with Embree either way). kRaster: a z-buffer rasteriser over S_obj and the robot's
+  // triangles; it agrees with qualityReference up to samples on triangle edges and float
+  // rounding. kRayCast: Embree packets, the reference's own rays. kAuto: the rasteriser at
+  // stride 1, where it is the faster (its cost is per triangle, a ray caster's per sample), and
+  // ray casting at coarser strides.
+  PrimaryVisibility visibility = PrimaryVisibility::kAuto;
   std::string validate() const;
 };
 
@@ -106,7 +112,7 @@ class ViewQualityScene {
 
   // eq. 9 for a camera at T_O_C among `occluders` (robot surfaces in frame O). Looks only at the
   // pixels inside the projection of the model's bounding box (no pixel outside can hit S_obj),
-  // on the calling thread: rasterised (options.rasterise) or cast in coherent 4×4 packets.
+  // on the calling thread: rasterised or cast in coherent 4×4 packets (options.visibility).
   double quality(const Iso3& T_O_C, const std::vector<Occluder>& occluders = {},
                  ViewQualityStats* stats = nullptr) const;
 
