@@ -54,34 +54,33 @@ namespace {
 uint64_t edgeKey(int a, int b) { return (uint64_t(uint32_t(a)) << 32) | uint32_t(b); }
 }  // namespace
 
-bool TriangleMesh::isClosed() const {
-  if (triangles.empty()) return false;
+namespace {
+// How often each directed edge (a → b) is used.
+std::unordered_map<uint64_t, int> directedEdgeCounts(const std::vector<Tri>& triangles) {
   std::unordered_map<uint64_t, int> directed;
   directed.reserve(triangles.size() * 3);
   for (const Tri& f : triangles)
     for (int k = 0; k < 3; ++k) ++directed[edgeKey(f[k], f[(k + 1) % 3])];
-  for (const auto& [key, count] : directed) {
-    if (count != 1) return false;
-    int a = int(key >> 32), b = int(key & 0xffffffffu);
-    auto it = directed.find(edgeKey(b, a));
-    if (it == directed.end() || it->second != 1) return false;
-  }
-  return true;
+  return directed;
 }
 
-bool TriangleMesh::isWatertight() const {
+// Every directed edge used as often as its reverse, and (when `manifold`) exactly once.
+bool edgesPaired(const std::vector<Tri>& triangles, bool manifold) {
   if (triangles.empty()) return false;
-  std::unordered_map<uint64_t, int> directed;
-  directed.reserve(triangles.size() * 3);
-  for (const Tri& f : triangles)
-    for (int k = 0; k < 3; ++k) ++directed[edgeKey(f[k], f[(k + 1) % 3])];
+  const std::unordered_map<uint64_t, int> directed = directedEdgeCounts(triangles);
   for (const auto& [key, count] : directed) {
+    if (manifold && count != 1) return false;
     int a = int(key >> 32), b = int(key & 0xffffffffu);
     auto it = directed.find(edgeKey(b, a));
     if (it == directed.end() || it->second != count) return false;
   }
   return true;
 }
+}  // namespace
+
+bool TriangleMesh::isClosed() const { return edgesPaired(triangles, true); }
+
+bool TriangleMesh::isWatertight() const { return edgesPaired(triangles, false); }
 
 int TriangleMesh::boundaryEdgeCount() const {
   std::unordered_map<uint64_t, int> undirected;
