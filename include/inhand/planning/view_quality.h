@@ -54,8 +54,8 @@ struct ViewQualityOptions {
 
 // Per-pixel outcome counts of one evaluation (for tests and diagnostics); samples at a stride.
 struct ViewQualityStats {
-  int cast = 0;               // pixels whose ray was cast (inside the model's projected box)
-  int missed = 0;             // the ray misses S_obj (whatever else it hits)
+  int cast = 0;    // samples looked at: inside the model's projected box (rays cast or rasterised)
+  int missed = 0;  // the ray misses S_obj (whatever else it hits)
   int robot_first = 0;        // a robot surface hides the S_obj hit
   int near_hand = 0;          // S_obj hit within t_hand of the hand
   int too_oblique = 0;        // camera incidence too large
