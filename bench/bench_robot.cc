@@ -44,9 +44,16 @@ const Problems& problems() {
   return p;
 }
 
+// Arg: 0 our damped least squares (default), 1 KDL's LMA (the reference).
+IkOptions ikOptions(const benchmark::State& state) {
+  IkOptions o;
+  o.method = state.range(0) ? IkMethod::kKdlLma : IkMethod::kDampedLeastSquares;
+  return o;
+}
+
 void BM_IkNearSeed(benchmark::State& state) {
   const Problems& p = problems();
-  IkSolver ik(wam());
+  IkSolver ik(wam(), ikOptions(state));
   Rng rng = makeRng(1);
   size_t i = 0, ok = 0, n = 0;
   for (auto _ : state) {
@@ -57,12 +64,12 @@ void BM_IkNearSeed(benchmark::State& state) {
   state.counters["solves_per_s"] = benchmark::Counter(double(n), benchmark::Counter::kIsRate);
   state.counters["success"] = double(ok) / double(n);
 }
-BENCHMARK(BM_IkNearSeed)->UseRealTime();
+BENCHMARK(BM_IkNearSeed)->Arg(0)->Arg(1)->UseRealTime();
 
 // From the home configuration, whatever the target: LMA from home, then random restarts.
 void BM_IkFarSeed(benchmark::State& state) {
   const Problems& p = problems();
-  IkSolver ik(wam());
+  IkSolver ik(wam(), ikOptions(state));
   Rng rng = makeRng(1);
   const Eigen::VectorXd home = wam().arm(wam().home());
   size_t i = 0, ok = 0, n = 0;
@@ -74,7 +81,7 @@ void BM_IkFarSeed(benchmark::State& state) {
   state.counters["solves_per_s"] = benchmark::Counter(double(n), benchmark::Counter::kIsRate);
   state.counters["success"] = double(ok) / double(n);
 }
-BENCHMARK(BM_IkFarSeed)->UseRealTime();
+BENCHMARK(BM_IkFarSeed)->Arg(0)->Arg(1)->UseRealTime();
 
 // The batch form on both cores (as used for roll sweeps): 1000 targets from home.
 void BM_IkBatchBothCores(benchmark::State& state) {
@@ -82,12 +89,12 @@ void BM_IkBatchBothCores(benchmark::State& state) {
   const Eigen::VectorXd home = wam().arm(wam().home());
   size_t n = 0;
   for (auto _ : state) {
-    benchmark::DoNotOptimize(solveIkBatch(wam(), p.targets, home, 7));
+    benchmark::DoNotOptimize(solveIkBatch(wam(), p.targets, home, 7, ikOptions(state)));
     n += p.targets.size();
   }
   state.counters["solves_per_s"] = benchmark::Counter(double(n), benchmark::Counter::kIsRate);
 }
-BENCHMARK(BM_IkBatchBothCores)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_IkBatchBothCores)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond)->UseRealTime();
 
 // Whole-robot collision check (arm + hand vs table and base, plus a held cracker box).
 void BM_CollisionCheck(benchmark::State& state) {

@@ -91,10 +91,16 @@ void checkFkAgainstDh(const RobotModel& m, const std::vector<Dh>& dh,
     auto [dp, dr] = poseError(ik.fk(arm), m.tipPose(q));
     ASSERT_LT(dp, 1e-9);
     ASSERT_LT(dr, 1e-9);
+    // So does the compiled chain the damped-least-squares IK iterates on.
+    std::tie(dp, dr) = poseError(ik.compiledFk(arm), m.tipPose(q));
+    ASSERT_LT(dp, 1e-9);
+    ASSERT_LT(dr, 1e-9);
   }
 }
 
-void checkIkRoundTrip(const RobotModel& m, int samples, double minSuccess) {
+// Returns the number solved.
+int checkIkRoundTrip(const RobotModel& m, int samples, double minSuccess,
+                     IkMethod method = IkMethod::kDampedLeastSquares) {
   Rng rng = makeRng(99);
   std::vector<Eigen::VectorXd> truth;
   std::vector<Iso3> targets;
@@ -103,18 +109,21 @@ void checkIkRoundTrip(const RobotModel& m, int samples, double minSuccess) {
     truth.push_back(randomArm(m, rng));
     targets.push_back(fk.fk(truth.back()));
   }
-  auto sols = solveIkBatch(m, targets, m.arm(m.home()), 5);
+  IkOptions o;
+  o.method = method;
+  auto sols = solveIkBatch(m, targets, m.arm(m.home()), 5, o);
   int ok = 0;
   for (int n = 0; n < samples; ++n) {
     if (!sols[n]) continue;
     ++ok;
     const Eigen::VectorXd& q = *sols[n];
-    ASSERT_TRUE(m.withinLimits(m.withArm(m.home(), q)));
+    EXPECT_TRUE(m.withinLimits(m.withArm(m.home(), q)));
     auto [dp, dr] = poseError(fk.fk(q), targets[n]);
-    ASSERT_LE(dp, 1e-5);
-    ASSERT_LE(dr, 1e-4);
+    EXPECT_LE(dp, 1e-5);
+    EXPECT_LE(dr, 1e-4);
   }
   EXPECT_GE(double(ok) / samples, minSuccess) << ok << " of " << samples;
+  return ok;
 }
 
 }  // namespace
@@ -150,11 +159,25 @@ TEST(Robot, WamIkRoundTripTenThousand) { checkIkRoundTrip(wam(), 10000, 0.99); }
 
 TEST(Robot, SecondRobotIkRoundTrip) { checkIkRoundTrip(arm6(), 3000, 0.99); }
 
+// Our damped-least-squares solver against KDL's LMA (the reference) on the same targets: it
+// solves at least as many.
+TEST(Robot, DampedLeastSquaresSolvesWhatKdlSolves) {
+  for (const RobotModel* m : {&wam(), &arm6()}) {
+    const int kdl = checkIkRoundTrip(*m, 400, 0.98, IkMethod::kKdlLma);
+    const int dls = checkIkRoundTrip(*m, 400, 0.98, IkMethod::kDampedLeastSquares);
+    EXPECT_GE(dls, kdl);
+  }
+}
+
 TEST(Robot, IkReportsUnreachableAsNoSolution) {
-  IkSolver ik(wam());
-  Rng rng = makeRng(1);
-  Iso3 far = Iso3(Eigen::Translation3d(3.0, 0, 0.5));
-  EXPECT_FALSE(ik.solve(far, wam().arm(wam().home()), &rng));
+  for (IkMethod method : {IkMethod::kDampedLeastSquares, IkMethod::kKdlLma}) {
+    IkOptions o;
+    o.method = method;
+    IkSolver ik(wam(), o);
+    Rng rng = makeRng(1);
+    Iso3 far = Iso3(Eigen::Translation3d(3.0, 0, 0.5));
+    EXPECT_FALSE(ik.solve(far, wam().arm(wam().home()), &rng));
+  }
 }
 
 TEST(Robot, TrajectoryTimeIsSlowestJoint) {
