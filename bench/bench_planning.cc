@@ -139,6 +139,30 @@ void BM_RasteriseModel(benchmark::State& state) {
 }
 BENCHMARK(BM_RasteriseModel)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond)->UseRealTime();
 
+// How far the rasterised path is from Embree ray casting on the scenario's 64 views: mean and
+// largest relative difference of eq. 9.
+void BM_ViewQualityAgreement(benchmark::State& state) {
+  Scenario& s = scenario();
+  ViewQualityScene fast = s.qualityScene(1, PrimaryVisibility::kRaster);
+  ViewQualityScene cast = s.qualityScene(1, PrimaryVisibility::kRayCast);
+  double sum = 0, worst = 0;
+  int n = 0;
+  for (auto _ : state) {
+    for (size_t i = 0; i < s.poses.size(); ++i) {
+      const double a = fast.quality(s.poses[i], s.occluders[i]);
+      const double b = cast.quality(s.poses[i], s.occluders[i]);
+      if (b <= 0) continue;
+      const double rel = std::abs(a - b) / b;
+      sum += rel;
+      worst = std::max(worst, rel);
+      ++n;
+    }
+  }
+  state.counters["mean_rel_diff"] = sum / std::max(1, n);
+  state.counters["max_rel_diff"] = worst;
+}
+BENCHMARK(BM_ViewQualityAgreement)->Unit(benchmark::kMillisecond)->Iterations(1);
+
 void BM_ViewQualityReference(benchmark::State& state) {
   Scenario& s = scenario();
   ViewQualityScene vq(s.S_obj, DepthCameraOptions{}, NoiseModelOptions{}, ViewQualityOptions{});

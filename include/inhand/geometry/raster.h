@@ -35,8 +35,10 @@ class DepthRaster {
   // `cull_back_faces`: skip triangles that face away from the camera (wound clockwise as seen
   // from it). Exact for a closed, outward-oriented mesh seen from outside (every ray enters it
   // through a front face first), and about half the work.
+  // `max_depth` > 0: triangles whose three vertices all lie deeper than it are skipped (for
+  // occluders of something known to be nearer).
   void draw(const TriangleMesh& mesh, const Iso3& T_C_mesh, int id_base = 0,
-            bool cull_back_faces = false);
+            bool cull_back_faces = false, double max_depth = 0);
   // Draws one triangle given in the camera frame.
   void drawTriangle(const Vec3& a, const Vec3& b, const Vec3& c, int id);
 
@@ -50,17 +52,17 @@ class DepthRaster {
   static constexpr double kNear = 1e-3;  // near clipping plane, m
 
  private:
-  // Fills the samples inside the triangle (px, py) (sample coordinates) with 1/z on the plane
-  // of the camera-frame triangle (a, b, c).
-  void fill(const double* px, const double* py, const Vec3& a, const Vec3& b, const Vec3& c,
-            int id);
+  // Fills the samples of [ia, ib] × [ja, jb] inside the triangle (px, py) (sample coordinates,
+  // signed doubled area `area`), with 1/z interpolated from the vertices' piz.
+  void fill(const double* px, const double* py, const double* piz, int ia, int ib, int ja, int jb,
+            double area, int id);
   PinholeProjection K_;
   double invFx_ = 1, invFy_ = 1;
   RasterWindow window_;
   std::vector<float> invZ_;
   std::vector<int> id_;
-  std::vector<Vec3> scratch_;    // vertices in the camera frame
-  std::vector<double> sx_, sy_;  // and in sample coordinates
+  std::vector<Vec3> scratch_;          // vertices in the camera frame
+  std::vector<double> sx_, sy_, siz_;  // and in sample coordinates, with 1/z
 };
 
 }  // namespace inhand
