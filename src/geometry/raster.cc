@@ -162,14 +162,15 @@ void DepthRaster::fill(const double* px, const double* py, const double* piz, in
     float* zrow = &invZ_[size_t(index(ia, j))];
     int* idrow = &id_[size_t(index(ia, j))];
     const double zrowBase = z0 + zj * dj;
-    for (int di = lo; di <= hi; ++di) {
-      if (base[0] + ei[0] * di < 0 || base[1] + ei[1] * di < 0 || base[2] + ei[2] * di < 0)
-        continue;
-      const float iz = float(zrowBase + zi * di);
-      if (iz > zrow[di]) {
-        zrow[di] = iz;
-        idrow[di] = id;
-      }
+    // Branch-free: whether a sample of a small triangle is covered is a coin toss for the
+    // branch predictor.
+    double dd = lo;
+    for (int di = lo; di <= hi; ++di, dd += 1.0) {
+      const float iz = float(zrowBase + zi * dd);
+      const bool win = (base[0] + ei[0] * dd >= 0) & (base[1] + ei[1] * dd >= 0) &
+                       (base[2] + ei[2] * dd >= 0) & (iz > zrow[di]);
+      zrow[di] = win ? iz : zrow[di];
+      idrow[di] = win ? id : idrow[di];
     }
   }
 }
