@@ -117,6 +117,7 @@ RobotOccluders::RobotOccluders(const RobotModel& model) : model_(&model) {
     auto scene = std::make_unique<RayScene>();
     scene->addMesh(m);
     scene->commit();
+    solid_.push_back(m.isWatertight() && m.signedVolume() > 0);
     links_.push_back(li);
     scenes_.push_back(std::move(scene));
   }
@@ -130,9 +131,10 @@ std::vector<Occluder> RobotOccluders::at(const JointVector& q, const Iso3& T_O_B
   std::vector<Iso3> T = model_->linkPoses(q);
   std::vector<Occluder> out;
   for (size_t k = 0; k < links_.size(); ++k)
-    out.push_back({scenes_[k].get(), T_O_B * T[links_[k]]});
+    out.push_back({scenes_[k].get(), T_O_B * T[links_[k]], solid_[k] != 0});
   if (with_table)
-    out.push_back({table_.get(), T_O_B * Iso3(Eigen::Translation3d(model_->table().center_B))});
+    out.push_back(
+        {table_.get(), T_O_B * Iso3(Eigen::Translation3d(model_->table().center_B)), true});
   return out;
 }
 
@@ -297,10 +299,26 @@ void ViewQualityScene::primaryHitsRaster(const Iso3& T_O_C, const RasterWindow& 
   object.draw(model_.mesh, T_C_O, 0, /*cull_back_faces=*/closed_ && outside);
   const bool withRobot = !occluders.empty();
   if (withRobot) {
+    // Robot surfaces deeper than S_obj's farthest corner hide nothing of it.
+    double far = 0;
+    for (int k = 0; k < 8; ++k)
+      far = std::max(far, (T_C_O * Vec3((k & 1) ? bounds_.max.x() : bounds_.min.x(),
+                                        (k & 2) ? bounds_.max.y() : bounds_.min.y(),
+                                        (k & 4) ? bounds_.max.z() : bounds_.min.z()))
+                              .z());
     robot.reset(P, w);
-    meshes.clear();
-    for (const Occluder& o : occluders) o.scene->collectMeshes(T_C_O * o.T_O_scene, &meshes);
-    for (const auto& [mesh, T] : meshes) robot.draw(*mesh, T);
+    for (const Occluder& o : occluders) {
+      meshes.clear();
+      o.scene->collectMeshes(T_C_O * o.T_O_scene, &meshes);
+      for (const auto& [mesh, T] : meshes) {
+        // Back faces of a solid may go when the camera (the origin) is outside its bounds.
+        const Aabb b = mesh->bounds();
+        const Vec3 cam = T.inverse().translation();
+        const bool inside =
+            (cam.array() >= b.min.array()).all() && (cam.array() <= b.max.array()).all();
+        robot.draw(*mesh, T, 0, o.solid && !inside, far);
+      }
+    }
   }
   const Vec3f origin = T_O_C.translation().cast<float>();
   const Mat3 R = T_O_C.linear();

@@ -85,6 +85,9 @@ class NearHandGrid {
 struct Occluder {
   const RayScene* scene;
   Iso3 T_O_scene;
+  // Every mesh of the scene is watertight and outward-facing: the rasteriser may skip its back
+  // faces when the camera is outside it.
+  bool solid = false;
 };
 
 // One robot's links as Embree scenes in their link frames, built once and instanced per view.
@@ -98,6 +101,7 @@ class RobotOccluders {
   const RobotModel* model_;
   std::vector<int> links_;
   std::vector<std::unique_ptr<RayScene>> scenes_;
+  std::vector<uint8_t> solid_;  // per link scene: watertight with positive volume
   std::unique_ptr<RayScene> table_;
 };
 
