@@ -77,7 +77,7 @@ Scenario& scenario() {
 // One eq. 9 evaluation per iteration, candidates spread over the sphere, both cores (one
 // candidate per core at a time, as Alg. 1 runs them).
 // Args: pixel stride (1: every pixel of the 640×480 map); primary visibility (0 auto: the
-// rasteriser at stride 1, else ray casting; 1 rasteriser; 2 Embree ray casting).
+// rasteriser at strides 1 and 2, else ray casting; 1 rasteriser; 2 Embree ray casting).
 void BM_ViewQuality(benchmark::State& state) {
   Scenario& s = scenario();
   ViewQualityScene vq = s.qualityScene(int(state.range(0)), PrimaryVisibility(state.range(1)));
@@ -98,6 +98,7 @@ BENCHMARK(BM_ViewQuality)
     ->Args({2, 0})
     ->Args({2, 1})
     ->Args({4, 0})
+    ->Args({4, 1})
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime();
 

@@ -426,7 +426,7 @@ double ViewQualityScene::quality(const Iso3& T_O_C, const std::vector<Occluder>&
   rays.clear();
   hits.clear();
   const bool raster = options_.visibility == PrimaryVisibility::kRaster ||
-                      (options_.visibility == PrimaryVisibility::kAuto && w.stride == 1);
+                      (options_.visibility == PrimaryVisibility::kAuto && w.stride <= 2);
   if (raster)
     primaryHitsRaster(T_O_C, w, occluders, &rays, &hits, &st);
   else

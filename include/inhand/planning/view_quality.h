@@ -46,8 +46,8 @@ struct ViewQualityOptions {
   // are cast with Embree either way). kRaster: a z-buffer rasteriser over S_obj and the robot's
   // triangles; it agrees with qualityReference up to samples on triangle edges and float
   // rounding. kRayCast: Embree packets, the reference's own rays. kAuto: the rasteriser at
-  // stride 1, where it is the faster (its cost is per triangle, a ray caster's per sample), and
-  // ray casting at coarser strides.
+  // strides 1 and 2, where it is the faster (its cost is per triangle, a ray caster's per
+  // sample; measured 1.5× at stride 1, 1.05–1.2× at stride 2), and ray casting at coarser ones.
   PrimaryVisibility visibility = PrimaryVisibility::kAuto;
   std::string validate() const;
 };
