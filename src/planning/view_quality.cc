@@ -59,7 +59,7 @@ Iso3 cameraPoseInObject(const Vec3& centre_O, const Vec3& dir_O, double range_m,
 // ---- near-hand grid -----------------------------------------------------------------------------
 
 NearHandGrid::NearHandGrid(const HandGeometry& hand, double t_hand, double cell, const Aabb* region)
-    : cell_(cell) {
+    : cell_(cell), invCell_(1.0 / cell) {
   Aabb box = hand.mesh().bounds();
   box.min -= Vec3::Constant(t_hand + cell);
   box.max += Vec3::Constant(t_hand + cell);
@@ -96,7 +96,7 @@ NearHandGrid::NearHandGrid(const HandGeometry& hand, double t_hand, double cell,
 
 bool NearHandGrid::near(const Vec3& p) const {
   if (flags_.empty()) return false;
-  Vec3 g = (p - origin_) / cell_;
+  const Vec3 g = (p - origin_) * invCell_;
   // The nearest cell, as lround would give it, without a libm call: in range only for
   // -½ < g < dims − ½, where int(g + ½) rounds half up like lround.
   if (!(g.x() > -0.5 && g.y() > -0.5 && g.z() > -0.5 && g.x() < dims_.x() - 0.5 &&
@@ -159,6 +159,7 @@ ViewQualityScene::ViewQualityScene(const ObjectModel& model, const DepthCameraOp
     const Vec3f& p0 = model_.mesh.vertices[size_t(f[0])];
     faceNormals_.push_back(
         (model_.mesh.vertices[size_t(f[1])] - p0).cross(model_.mesh.vertices[size_t(f[2])] - p0));
+    unitNormals_.push_back(faceNormals_.back().cast<double>().normalized());
   }
   objectScene_.addMesh(model_.mesh);
   objectScene_.commit(/*high=*/true);  // cast hundreds of times per Alg. 1 pass
@@ -173,6 +174,10 @@ RayScene ViewQualityScene::buildScene(const std::vector<Occluder>& occluders,
   return s;
 }
 
+ViewQualityScene::ViewContext ViewQualityScene::viewContext(const Iso3& T_O_C) const {
+  return {T_O_C * camera_.projector_C, T_O_C.linear().col(2)};
+}
+
 double ViewQualityScene::pixelGain(const Hit& hit, const Ray& ray, const Iso3& T_O_C, Ray* shadow,
                                    ViewQualityStats* st) const {
   if (!hit.valid()) {
@@ -183,20 +188,25 @@ double ViewQualityScene::pixelGain(const Hit& hit, const Ray& ray, const Iso3& T
     ++st->robot_first;
     return 0;
   }
+  return surfaceGain(ray, hit.t, hit.u, hit.v, hit.triangle, hit.normal.cast<double>().normalized(),
+                     viewContext(T_O_C), shadow, st);
+}
+
+double ViewQualityScene::surfaceGain(const Ray& ray, float t, float hu, float hv, int triangle,
+                                     const Vec3& n, const ViewContext& view, Ray* shadow,
+                                     ViewQualityStats* st) const {
   const Vec3 dir = ray.dir.cast<double>();
-  const Vec3 p = ray.origin.cast<double>() + double(hit.t) * dir;
+  const Vec3 p = ray.origin.cast<double>() + double(t) * dir;
   if (nearHand_ && nearHand_->near(p)) {
     ++st->near_hand;
     return 0;
   }
-  const Vec3 n = hit.normal.cast<double>().normalized();
   const double cosInc = std::abs(n.dot(dir)) / dir.norm();
   if (cosInc < cosMaxIncidence_) {
     ++st->too_oblique;
     return 0;
   }
-  const Vec3 projector = T_O_C * camera_.projector_C;
-  Vec3 toP = projector - p;
+  Vec3 toP = view.projector_O - p;
   const double dist = toP.norm();
   toP /= dist;
   if (std::abs(n.dot(toP)) < cosMaxProjector_) {
@@ -207,16 +217,17 @@ double ViewQualityScene::pixelGain(const Hit& hit, const Ray& ray, const Iso3& T
   shadow->dir = toP.cast<float>();
   shadow->tnear = 2e-4f;
   shadow->tfar = float(dist - 2e-4);
-  const Tri& f = model_.mesh.triangles[hit.triangle];
+  const Tri& f = model_.mesh.triangles[size_t(triangle)];
   const CameraIntrinsics& K = camera_.intrinsics;
-  const double d = hit.t;  // the ray has camera z = 1, so t is the depth
-  const double nz = std::max(0.05, std::abs((T_O_C.linear().transpose() * n).z()));
+  const double d = t;  // the ray has camera z = 1, so t is the depth
+  // n_z in the camera frame: (Rᵀ n).z = R.col(2) · n.
+  const double nz = std::max(0.05, std::abs(view.axis_O.dot(n)));
   if (options_.integrand == QualityIntegrand::kUnknownArea) {
     const bool unknown = !model_.observed[f[0]] || !model_.observed[f[1]] || !model_.observed[f[2]];
     return unknown ? d * d / (K.fx * K.fy * nz) : 0.0;
   }
-  const double var = (1.0 - hit.u - hit.v) * model_.variance[f[0]] + hit.u * model_.variance[f[1]] +
-                     hit.v * model_.variance[f[2]];
+  const double var = (1.0 - hu - hv) * model_.variance[f[0]] + hu * model_.variance[f[1]] +
+                     hv * model_.variance[f[2]];
   // θ is only needed beyond the grazing threshold (the axial model is flat below it).
   const double sz = cosInc >= cosGrazing_ ? axialSigma(noise_, d, 0.0)
                                           : axialSigma(noise_, d, std::acos(std::min(1.0, cosInc)));
@@ -283,10 +294,10 @@ void hitTriangle(const Ray& r, const Vec3& p0, const Vec3& p1, const Vec3& p2, H
 
 }  // namespace
 
-void ViewQualityScene::primaryHitsRaster(const Iso3& T_O_C, const RasterWindow& w,
-                                         const std::vector<Occluder>& occluders,
-                                         std::vector<Ray>* rays, std::vector<Hit>* hits,
-                                         ViewQualityStats* st) const {
+void ViewQualityScene::rasterGains(const Iso3& T_O_C, const RasterWindow& w,
+                                   const std::vector<Occluder>& occluders,
+                                   std::vector<Ray>* shadows, std::vector<double>* gains,
+                                   ViewQualityStats* st) const {
   const CameraIntrinsics& K = camera_.intrinsics;
   const PinholeProjection P{K.fx, K.fy, K.cx, K.cy};
   const Iso3 T_C_O = T_O_C.inverse();
@@ -323,6 +334,7 @@ void ViewQualityScene::primaryHitsRaster(const Iso3& T_O_C, const RasterWindow& 
   const Vec3f origin = T_O_C.translation().cast<float>();
   const Mat3 R = T_O_C.linear();
   const auto& V = model_.mesh.vertices;
+  const ViewContext view = viewContext(T_O_C);
   for (int j = w.j0; j <= w.j1; ++j)
     for (int i = w.i0; i <= w.i1; ++i) {
       const int s = object.index(i, j);
@@ -340,13 +352,16 @@ void ViewQualityScene::primaryHitsRaster(const Iso3& T_O_C, const RasterWindow& 
       r.dir = (R * K.rayZ1(i * w.stride, j * w.stride)).cast<float>();  // as the reference
       const Tri& f = model_.mesh.triangles[size_t(tri)];
       Hit h;
-      h.geometry = 0;
-      h.triangle = tri;
-      h.normal = faceNormals_[size_t(tri)];
       hitTriangle(r, V[size_t(f[0])].cast<double>(), V[size_t(f[1])].cast<double>(),
                   V[size_t(f[2])].cast<double>(), &h);
-      rays->push_back(r);
-      hits->push_back(h);
+      Ray shadow;
+      shadow.tfar = std::numeric_limits<float>::infinity();
+      const double g =
+          surfaceGain(r, h.t, h.u, h.v, tri, unitNormals_[size_t(tri)], view, &shadow, st);
+      if (shadow.tfar != std::numeric_limits<float>::infinity()) {  // passed the other rules
+        shadows->push_back(shadow);
+        gains->push_back(g);
+      }
     }
 }
 
@@ -427,12 +442,12 @@ double ViewQualityScene::quality(const Iso3& T_O_C, const std::vector<Occluder>&
   hits.clear();
   const bool raster = options_.visibility == PrimaryVisibility::kRaster ||
                       (options_.visibility == PrimaryVisibility::kAuto && w.stride <= 2);
-  if (raster)
-    primaryHitsRaster(T_O_C, w, occluders, &rays, &hits, &st);
-  else
-    primaryHitsRayCast(T_O_C, w, robot ? &*robot : nullptr, &rays, &hits, &st);
   shadows.clear();
   gains.clear();
+  if (raster)
+    rasterGains(T_O_C, w, occluders, &shadows, &gains, &st);
+  else
+    primaryHitsRayCast(T_O_C, w, robot ? &*robot : nullptr, &rays, &hits, &st);
   for (size_t i = 0; i < rays.size(); ++i) {
     Ray shadow;
     shadow.tfar = std::numeric_limits<float>::infinity();

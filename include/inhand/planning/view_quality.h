@@ -76,7 +76,7 @@ class NearHandGrid {
 
  private:
   Vec3 origin_ = Vec3::Zero();
-  double cell_ = 1.0;
+  double cell_ = 1.0, invCell_ = 1.0;
   Vec3i dims_ = Vec3i::Zero();
   std::vector<uint8_t> flags_;
 };
@@ -131,11 +131,18 @@ class ViewQualityScene {
   RayScene buildScene(const std::vector<Occluder>& occluders, bool withObject) const;
   // Pixel window covering the projection of the model's bounding box; false when it is empty.
   bool pixelWindow(const Iso3& T_O_C, RasterWindow* window) const;
+  // Per view: the projector's centre and the camera's optical axis in frame O.
+  struct ViewContext {
+    Vec3 projector_O, axis_O;
+  };
+  ViewContext viewContext(const Iso3& T_O_C) const;
+  // Rasterised: per sample of `window` whose first surface is S_obj, the pixel rules and gain at
+  // once (gains[i] with the shadow ray still to test, shadows[i]; counts the other outcomes).
+  void rasterGains(const Iso3& T_O_C, const RasterWindow& window,
+                   const std::vector<Occluder>& occluders, std::vector<Ray>* shadows,
+                   std::vector<double>* gains, ViewQualityStats* st) const;
   // First S_obj hit per sample of `window` not hidden by a robot surface (rays[i], hits[i];
-  // counts misses and robot-first pixels), by rasterising or by Embree.
-  void primaryHitsRaster(const Iso3& T_O_C, const RasterWindow& window,
-                         const std::vector<Occluder>& occluders, std::vector<Ray>* rays,
-                         std::vector<Hit>* hits, ViewQualityStats* st) const;
+  // counts misses and robot-first pixels), by Embree.
   void primaryHitsRayCast(const Iso3& T_O_C, const RasterWindow& window, const RayScene* robot,
                           std::vector<Ray>* rays, std::vector<Hit>* hits,
                           ViewQualityStats* st) const;
@@ -143,6 +150,10 @@ class ViewQualityScene {
   // still needs the projector visibility test.
   double pixelGain(const Hit& hit, const Ray& ray, const Iso3& T_O_C, Ray* shadow,
                    ViewQualityStats* stats) const;
+  // The same for a hit on S_obj at ray parameter t, barycentrics (u, v) of `triangle`, unit
+  // normal n: the rules after "S_obj is the first surface".
+  double surfaceGain(const Ray& ray, float t, float u, float v, int triangle, const Vec3& n,
+                     const ViewContext& view, Ray* shadow, ViewQualityStats* stats) const;
 
   ObjectModel model_;
   Aabb bounds_;
@@ -153,6 +164,7 @@ class ViewQualityScene {
   RayScene objectScene_;
   bool closed_ = false;  // S_obj watertight: back faces can be culled for cameras outside it
   std::vector<Vec3f> faceNormals_;  // unnormalised (p1 − p0) × (p2 − p0), as Embree's Ng
+  std::vector<Vec3> unitNormals_;   // faceNormals_ normalised in double, as pixelGain does
   std::shared_ptr<const NearHandGrid> nearHand_;
 };
 
