@@ -36,22 +36,21 @@ void DepthRaster::draw(const TriangleMesh& mesh, const Iso3& T_C_mesh, int id_ba
   // Each vertex into the camera frame and, in front of the near plane, to sample coordinates
   // and 1/z, once (a vertex is shared by about six triangles).
   const size_t nv = mesh.vertices.size();
-  scratch_.resize(nv);
-  sx_.resize(nv);
-  sy_.resize(nv);
-  siz_.resize(nv);
+  verts_.resize(nv);
   const Mat3 R = T_C_mesh.linear();
   const Vec3 t = T_C_mesh.translation();
   const double s = window_.stride;
   const double fxs = K_.fx / s, fys = K_.fy / s, cxs = K_.cx / s, cys = K_.cy / s;
   for (size_t i = 0; i < nv; ++i) {
     const Vec3 p = R * mesh.vertices[i].cast<double>() + t;
-    scratch_[i] = p;
+    ProjectedVertex& v = verts_[i];
     if (p.z() >= kNear) {
       const double iz = 1.0 / p.z();
-      sx_[i] = fxs * p.x() * iz + cxs;
-      sy_[i] = fys * p.y() * iz + cys;
-      siz_[i] = iz;
+      v.x = fxs * p.x() * iz + cxs;
+      v.y = fys * p.y() * iz + cys;
+      v.iz = iz;
+    } else {
+      v.iz = -1;  // behind the near plane: the triangle is clipped
     }
   }
   const double minInvZ = max_depth > 0 ? 1.0 / max_depth : 0.0;
@@ -60,20 +59,23 @@ void DepthRaster::draw(const TriangleMesh& mesh, const Iso3& T_C_mesh, int id_ba
     const Tri& f = mesh.triangles[k];
     const size_t a = size_t(f[0]), b = size_t(f[1]), c = size_t(f[2]);
     const int id = id_base + int(k);
-    if (scratch_[a].z() < kNear || scratch_[b].z() < kNear || scratch_[c].z() < kNear) {
-      if (!cull_back_faces ||
-          (scratch_[b] - scratch_[a]).cross(scratch_[c] - scratch_[a]).dot(scratch_[a]) < 0)
-        drawTriangle(scratch_[a], scratch_[b], scratch_[c], id);  // clips
+    const ProjectedVertex &A = verts_[a], &B = verts_[b], &C = verts_[c];
+    if (A.iz < 0 || B.iz < 0 || C.iz < 0) {
+      const Vec3 pa = R * mesh.vertices[a].cast<double>() + t;
+      const Vec3 pb = R * mesh.vertices[b].cast<double>() + t;
+      const Vec3 pc = R * mesh.vertices[c].cast<double>() + t;
+      if (!cull_back_faces || (pb - pa).cross(pc - pa).dot(pa) < 0)
+        drawTriangle(pa, pb, pc, id);  // clips
       continue;
     }
     // Entirely beyond max_depth: it can hide nothing that matters.
-    if (siz_[a] < minInvZ && siz_[b] < minInvZ && siz_[c] < minInvZ) continue;
+    if (A.iz < minInvZ && B.iz < minInvZ && C.iz < minInvZ) continue;
     // Most triangles of a fine mesh cover no sample: rejected on their bounding box alone.
-    const double xa = sx_[a], xb = sx_[b], xc = sx_[c];
+    const double xa = A.x, xb = B.x, xc = C.x;
     const int ia = std::max(w.i0, iceil((std::min({xa, xb, xc}))));
     const int ib = std::min(w.i1, ifloor((std::max({xa, xb, xc}))));
     if (ia > ib) continue;
-    const double ya = sy_[a], yb = sy_[b], yc = sy_[c];
+    const double ya = A.y, yb = B.y, yc = C.y;
     const int ja = std::max(w.j0, iceil((std::min({ya, yb, yc}))));
     const int jb = std::min(w.j1, ifloor((std::max({ya, yb, yc}))));
     if (ja > jb) continue;
@@ -81,7 +83,7 @@ void DepthRaster::draw(const TriangleMesh& mesh, const Iso3& T_C_mesh, int id_ba
     // outward normal faces the camera.
     const double area = (xb - xa) * (yc - ya) - (yb - ya) * (xc - xa);
     if (cull_back_faces && area > 0) continue;
-    const double px[3] = {xa, xb, xc}, py[3] = {ya, yb, yc}, piz[3] = {siz_[a], siz_[b], siz_[c]};
+    const double px[3] = {xa, xb, xc}, py[3] = {ya, yb, yc}, piz[3] = {A.iz, B.iz, C.iz};
     fill(px, py, piz, ia, ib, ja, jb, area, id);
   }
 }

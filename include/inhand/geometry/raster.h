@@ -61,8 +61,12 @@ class DepthRaster {
   RasterWindow window_;
   std::vector<float> invZ_;
   std::vector<int> id_;
-  std::vector<Vec3> scratch_;          // vertices in the camera frame
-  std::vector<double> sx_, sy_, siz_;  // and in sample coordinates, with 1/z
+  // Each vertex in sample coordinates with its 1/z (iz < 0: behind the near plane), packed so a
+  // triangle's corners cost three cache lines, not twelve.
+  struct ProjectedVertex {
+    double x, y, iz;
+  };
+  std::vector<ProjectedVertex> verts_;
 };
 
 }  // namespace inhand
