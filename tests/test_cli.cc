@@ -189,6 +189,13 @@ TEST(Cli, ScanWritesModelAndSummaryAndRejectsBadConfig) {
   EXPECT_NE(r.output.find("planner.quality.visibility: must be auto, raster or ray_cast"),
             std::string::npos)
       << r.output;
+  writeTextAtomically(dir.path() / "bad.json", R"({"planner": {"ik_solver": "analytic"}})");
+  r = run("scan --object builtin:coffee_can --config " + (dir.path() / "bad.json").string() +
+              " --out " + (dir.path() / "x").string(),
+          dir);
+  EXPECT_EQ(r.code, 1);
+  EXPECT_NE(r.output.find("planner.ik_solver: must be dls or kdl_lma"), std::string::npos)
+      << r.output;
   r = run("scan --object builtin:coffee_can --max-grasps 0 --out " + (dir.path() / "x").string(),
           dir);
   EXPECT_EQ(r.code, 1);

@@ -101,6 +101,10 @@ void readPlanner(OptionReader& p, ViewPlannerOptions* v) {
   p.boolean("hand_occlusion", &v->hand_occlusion);
   p.boolean("check_collisions", &v->check_collisions);
   p.integer("ik_restarts", &v->ik_restarts);
+  std::string ikSolver;
+  p.string("ik_solver", &ikSolver);
+  if (!ikSolver.empty() && !parseIkMethod(ikSolver, &v->ik_solver))
+    throw Error(p.where() + ".ik_solver: must be dls or kdl_lma");
   if (auto q = p.object("quality")) {
     q->num("t_hand_m", &v->quality.t_hand_m);
     q->num("max_incidence_deg", &v->quality.max_incidence_deg);
@@ -136,6 +140,7 @@ Json plannerJson(const ViewPlannerOptions& v) {
           {"hand_occlusion", v.hand_occlusion},
           {"check_collisions", v.check_collisions},
           {"ik_restarts", v.ik_restarts},
+          {"ik_solver", ikMethodName(v.ik_solver)},
           {"quality",
            {{"t_hand_m", v.quality.t_hand_m},
             {"max_incidence_deg", v.quality.max_incidence_deg},

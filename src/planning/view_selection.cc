@@ -118,6 +118,7 @@ std::vector<std::optional<ViewCandidate>> ViewPlanner::reach(const std::vector<V
   const Eigen::VectorXd current = model_->arm(grasp.q);
   IkOptions ik;
   ik.random_restarts = o.ik_restarts;
+  ik.method = o.ik_solver;
   CollisionChecker checker = heldObjectChecker(*model_, box, grasp.T_O_palm, o.check_collisions);
   std::vector<std::optional<ViewCandidate>> chosen(dirs.size());
   std::vector<double> ranges{o.range_m};

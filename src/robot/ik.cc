@@ -12,13 +12,25 @@
 
 namespace inhand {
 
+const char* ikMethodName(IkMethod m) { return m == IkMethod::kKdlLma ? "kdl_lma" : "dls"; }
+
+bool parseIkMethod(const std::string& name, IkMethod* m) {
+  if (name == "dls")
+    *m = IkMethod::kDampedLeastSquares;
+  else if (name == "kdl_lma")
+    *m = IkMethod::kKdlLma;
+  else
+    return false;
+  return true;
+}
+
 std::string IkOptions::validate() const {
   if (random_restarts < 0) return "random_restarts must be >= 0";
   if (max_iterations < 1) return "max_iterations must be >= 1";
   if (!(position_tolerance_m > 0)) return "position_tolerance_m must be > 0";
   if (!(orientation_tolerance_rad > 0)) return "orientation_tolerance_rad must be > 0";
   if (method != IkMethod::kDampedLeastSquares && method != IkMethod::kKdlLma)
-    return "method must be damped_least_squares or kdl_lma";
+    return "method must be dls or kdl_lma";
   return {};
 }
 

@@ -41,7 +41,8 @@ struct ViewPlannerOptions {
   bool hand_occlusion = true;    // false: no robot occluders, no t_hand rule (ablation)
   bool check_collisions = true;  // reject candidates whose arm, hand or object hit table/base
   int ik_restarts = 1;           // random restarts per IK target after the seeded attempt
-  uint64_t seed = 1;             // IK restarts
+  IkMethod ik_solver = IkMethod::kDampedLeastSquares;  // dls (ours) or kdl_lma (the reference)
+  uint64_t seed = 1;                                   // IK restarts
   ViewQualityOptions quality;
   std::string validate() const;
 };

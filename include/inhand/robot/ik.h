@@ -24,6 +24,8 @@ class ChainFkSolverPos_recursive;
 namespace inhand {
 
 enum class IkMethod { kDampedLeastSquares, kKdlLma };
+const char* ikMethodName(IkMethod m);                      // dls, kdl_lma
+bool parseIkMethod(const std::string& name, IkMethod* m);  // false for an unknown name
 
 struct IkOptions {
   int random_restarts = 40;                 // attempts from random seeds after the given seed fails
