@@ -163,6 +163,7 @@ IkSolver::IkSolver(const RobotModel& model, const IkOptions& options)
   INHAND_CHECK(compiled_->dof == model.armDof(), "IK: chain DOF != arm DOF");
   lower_ = model.armLower();
   upper_ = model.armUpper();
+  for (int v : model.armVariables()) types_.push_back(model.variable(v).type);
 }
 
 IkSolver::~IkSolver() = default;
@@ -194,12 +195,11 @@ bool IkSolver::solveDls(const Iso3& target, const Eigen::VectorXd& seed,
   // (continuous joints are wrapped into (−π, π]), then clamped.
   auto project = [&](VecQ& q) {
     for (int i = 0; i < n; ++i) {
-      const JointInfo& j = model_->variable(model_->armVariables()[i]);
-      if (j.type == JointInfo::Type::kContinuous) {
+      if (types_[size_t(i)] == JointInfo::Type::kContinuous) {
         q[i] = std::remainder(q[i], 2 * M_PI);
         continue;
       }
-      if (j.type == JointInfo::Type::kRevolute) {
+      if (types_[size_t(i)] == JointInfo::Type::kRevolute) {
         while (q[i] > upper_[i] && q[i] - 2 * M_PI >= lower_[i]) q[i] -= 2 * M_PI;
         while (q[i] < lower_[i] && q[i] + 2 * M_PI <= upper_[i]) q[i] += 2 * M_PI;
       }

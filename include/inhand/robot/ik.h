@@ -65,6 +65,7 @@ class IkSolver {
   std::unique_ptr<KDL::ChainFkSolverPos_recursive> fk_;
   std::shared_ptr<const CompiledChain> compiled_;
   Eigen::VectorXd lower_, upper_;
+  std::vector<JointInfo::Type> types_;  // per arm joint
 };
 
 // Solves many targets on both cores (one solver per thread); result i for target i. Each target
