@@ -22,8 +22,6 @@ inline int iceil(double x) {
 
 void DepthRaster::reset(const PinholeProjection& K, const RasterWindow& window) {
   K_ = K;
-  invFx_ = 1.0 / K.fx;
-  invFy_ = 1.0 / K.fy;
   window_ = window;
   const size_t n = size_t(window.size());
   invZ_.assign(n, 0.f);

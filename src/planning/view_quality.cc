@@ -242,9 +242,7 @@ bool ViewQualityScene::pixelWindow(const Iso3& T_O_C, RasterWindow* window) cons
   bool bounded = true;
   double umin = 1e30, umax = -1e30, vmin = 1e30, vmax = -1e30;
   for (int c = 0; c < 8; ++c) {
-    Vec3 corner((c & 1) ? box.max.x() : box.min.x(), (c & 2) ? box.max.y() : box.min.y(),
-                (c & 4) ? box.max.z() : box.min.z());
-    Vec3 pc = T_C_O * corner;
+    Vec3 pc = T_C_O * box.corner(c);
     if (pc.z() < 1e-3) {
       bounded = false;
       break;
@@ -312,11 +310,7 @@ void ViewQualityScene::rasterGains(const Iso3& T_O_C, const RasterWindow& w,
   if (withRobot) {
     // Robot surfaces deeper than S_obj's farthest corner hide nothing of it.
     double far = 0;
-    for (int k = 0; k < 8; ++k)
-      far = std::max(far, (T_C_O * Vec3((k & 1) ? bounds_.max.x() : bounds_.min.x(),
-                                        (k & 2) ? bounds_.max.y() : bounds_.min.y(),
-                                        (k & 4) ? bounds_.max.z() : bounds_.min.z()))
-                              .z());
+    for (int k = 0; k < 8; ++k) far = std::max(far, (T_C_O * bounds_.corner(k)).z());
     robot.reset(P, w);
     for (const Occluder& o : occluders) {
       meshes.clear();

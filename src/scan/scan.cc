@@ -141,10 +141,7 @@ ScanResult scanSingleGrasp(RobotInterface& robot, DepthSensor& sensor, const Iso
       if (m.links()[li].collision.empty()) continue;
       const Iso3 T_O_link = T_O_B * T[li];
       Aabb b;  // the link's box in O
-      for (int c = 0; c < 8; ++c)
-        b.extend(T_O_link * Vec3((c & 1) ? linkBox[li].max.x() : linkBox[li].min.x(),
-                                 (c & 2) ? linkBox[li].max.y() : linkBox[li].min.y(),
-                                 (c & 4) ? linkBox[li].max.z() : linkBox[li].min.z()));
+      for (int c = 0; c < 8; ++c) b.extend(T_O_link * linkBox[li].corner(c));
       Vec3 lo = ((b.min - volume.origin()) / volume.voxelSize()).array().ceil();
       Vec3 hi = ((b.max - volume.origin()) / volume.voxelSize()).array().floor();
       lo = lo.cwiseMax(Vec3::Zero());

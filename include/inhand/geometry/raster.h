@@ -57,7 +57,6 @@ class DepthRaster {
   void fill(const double* px, const double* py, const double* piz, int ia, int ib, int ja, int jb,
             double area, int id);
   PinholeProjection K_;
-  double invFx_ = 1, invFy_ = 1;
   RasterWindow window_;
   std::vector<float> invZ_;
   std::vector<int> id_;

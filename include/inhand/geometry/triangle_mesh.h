@@ -21,6 +21,11 @@ struct Aabb {
   bool empty() const { return !(min.array() <= max.array()).all(); }
   Vec3 center() const { return 0.5 * (min + max); }
   Vec3 size() const { return max - min; }
+  // Corner k of 8: bit 0 picks max.x, bit 1 max.y, bit 2 max.z.
+  Vec3 corner(int k) const {
+    return Vec3((k & 1) ? max.x() : min.x(), (k & 2) ? max.y() : min.y(),
+                (k & 4) ? max.z() : min.z());
+  }
 };
 
 struct TriangleMesh {
