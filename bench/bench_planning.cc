@@ -174,18 +174,37 @@ void BM_ViewQualityReference(benchmark::State& state) {
 }
 BENCHMARK(BM_ViewQualityReference)->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(3);
 
-// A full Alg. 1 pass: 500 directions, 8 rolls each, IK + collision + eq. 9.
+// A full Alg. 1 pass: 500 directions, 8 rolls each, IK + collision + eq. 9. Arg 0: every
+// reachable candidate at full resolution (exhaustive); arg 1: the default coarse to fine (all at
+// stride 4, the best 32 again at full resolution). `same_view` (arg 1): 1 when it chose the
+// exhaustive pass's view.
 void BM_SelectView(benchmark::State& state) {
   Scenario& s = scenario();
-  ViewPlanner planner(s.model, DepthCameraOptions{}, NoiseModelOptions{}, ViewPlannerOptions{});
+  ViewPlannerOptions o;
+  if (state.range(0) == 0) o.refine = 0;
+  ViewPlanner planner(s.model, DepthCameraOptions{}, NoiseModelOptions{}, o);
   ViewSelection sel;
   for (auto _ : state) sel = planner.select(s.S_obj, GraspState{s.T_O_palm, s.q}, {}, s.nearHand);
   state.counters["directions"] = sel.directions;
   state.counters["reachable"] = sel.reachable;
+  state.counters["refined"] = sel.refined;
   state.counters["ik_s"] = sel.ik_s;
   state.counters["quality_s"] = sel.quality_s;
+  if (state.range(0) != 0) {
+    ViewPlannerOptions ex;
+    ex.refine = 0;
+    const ViewSelection all = ViewPlanner(s.model, DepthCameraOptions{}, NoiseModelOptions{}, ex)
+                                  .select(s.S_obj, GraspState{s.T_O_palm, s.q}, {}, s.nearHand);
+    state.counters["same_view"] =
+        sel.best && all.best && sel.best->dir_O.isApprox(all.best->dir_O) ? 1 : 0;
+  }
 }
-BENCHMARK(BM_SelectView)->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(2);
+BENCHMARK(BM_SelectView)
+    ->Arg(0)
+    ->Arg(1)
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime()
+    ->Iterations(2);
 
 // Re-grasping: candidates on S_obj with the box resting on the table, then ranking the 50 most
 // stable by a coarse Alg. 1 pass each (the scan's defaults).

@@ -5,6 +5,7 @@
 #include "inhand/geometry/builtin_objects.h"
 #include "inhand/geometry/primitives.h"
 #include "inhand/planning/view_quality.h"
+#include "inhand/planning/view_selection.h"
 #include "test_util.h"
 
 using namespace inhand;
@@ -264,4 +265,45 @@ TEST(ViewQuality, PixelStrideMatchesItsReferenceAndApproximatesFullResolution) {
   bad.pixel_stride = 0;
   EXPECT_THROW(ViewQualityScene(model, DepthCameraOptions{}, NoiseModelOptions{}, bad),
                std::runtime_error);
+}
+
+// Alg. 1 coarse to fine: scoring every candidate at stride 4 and only the best few again at full
+// resolution chooses the view the exhaustive full-resolution pass chooses, pass after pass.
+TEST(ViewSelection, CoarseToFineChoosesTheExhaustivePassView) {
+  const RobotModel& r = wam();
+  TriangleMesh bottle = loadObject("builtin:juice_bottle");
+  Aabb b = bottle.bounds();
+  TsdfVolume vol(Aabb{b.min - Vec3::Constant(0.03), b.max + Vec3::Constant(0.03)}, VolumeOptions{});
+  test::renderAndFuse(bottle, {lookAt(Vec3(0.7, 0.1, 0.1), Vec3::Zero())}, true, &vol);
+  MeshOptions planning;
+  planning.stride = 2;  // as the scan plans
+  ObjectModel model = extractModel(vol, planning);
+  const Iso3 T_O_palm =
+      Iso3(Eigen::Translation3d(0, -0.044 - 0.09, 0)) * Eigen::AngleAxisd(-M_PI / 2, Vec3::UnitX());
+  const GraspState g{T_O_palm, r.home()};
+  auto hand = std::make_shared<NearHandGrid>(HandGeometry(r, r.home(), T_O_palm), 0.01, 0.002);
+  ViewPlannerOptions fine, c2f;
+  fine.directions = c2f.directions = 80;
+  fine.rolls = c2f.rolls = 4;
+  fine.refine = 0;
+  c2f.refine = 8;
+  const ViewPlanner exhaustive(r, DepthCameraOptions{}, NoiseModelOptions{}, fine);
+  const ViewPlanner fast(r, DepthCameraOptions{}, NoiseModelOptions{}, c2f);
+  std::vector<Vec3> used;
+  for (int pass = 0; pass < 4; ++pass) {
+    const ViewSelection a = exhaustive.select(model, g, used, hand);
+    const ViewSelection f = fast.select(model, g, used, hand);
+    ASSERT_TRUE(a.best && f.best) << pass;
+    EXPECT_EQ(a.refined, a.evaluated);
+    EXPECT_EQ(f.evaluated, a.evaluated);
+    EXPECT_GT(f.evaluated, 3 * c2f.refine) << "the test should pre-screen most candidates";
+    EXPECT_EQ(f.refined, c2f.refine);
+    EXPECT_EQ(f.best->pixel_stride, 1);
+    EXPECT_TRUE(f.best->dir_O.isApprox(a.best->dir_O)) << pass;
+    EXPECT_NEAR(f.best->score, a.best->score, 1e-12) << pass;
+    used.push_back(a.best->dir_O);
+  }
+  ViewPlannerOptions bad;
+  bad.refine = -1;
+  EXPECT_THROW(ViewPlanner(r, DepthCameraOptions{}, NoiseModelOptions{}, bad), std::runtime_error);
 }

@@ -105,6 +105,8 @@ void readPlanner(OptionReader& p, ViewPlannerOptions* v) {
   p.string("ik_solver", &ikSolver);
   if (!ikSolver.empty() && !parseIkMethod(ikSolver, &v->ik_solver))
     throw Error(p.where() + ".ik_solver: must be dls or kdl_lma");
+  p.integer("prescreen_stride", &v->prescreen_stride);
+  p.integer("refine", &v->refine);
   if (auto q = p.object("quality")) {
     q->num("t_hand_m", &v->quality.t_hand_m);
     q->num("max_incidence_deg", &v->quality.max_incidence_deg);
@@ -141,6 +143,8 @@ Json plannerJson(const ViewPlannerOptions& v) {
           {"check_collisions", v.check_collisions},
           {"ik_restarts", v.ik_restarts},
           {"ik_solver", ikMethodName(v.ik_solver)},
+          {"prescreen_stride", v.prescreen_stride},
+          {"refine", v.refine},
           {"quality",
            {{"t_hand_m", v.quality.t_hand_m},
             {"max_incidence_deg", v.quality.max_incidence_deg},
@@ -463,6 +467,7 @@ int runScan(const ScanArgs& args) {
   summary["camera"] = {{"width", K.width}, {"height", K.height}, {"fx", K.fx},
                        {"fy", K.fy},       {"cx", K.cx},         {"cy", K.cy}};
   summary["view_evaluations"] = r.view_evaluations;
+  summary["view_evaluations_full_resolution"] = r.view_refinements;
   summary["view_evaluations_per_s"] = r.planning_s > 0 ? r.view_evaluations / r.planning_s : 0.0;
   summary["frames"] = r.frames;
   summary["mean_entropy"] = r.model.meanEntropy();

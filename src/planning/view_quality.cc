@@ -234,7 +234,7 @@ double ViewQualityScene::surfaceGain(const Ray& ray, float t, float hu, float hv
   return 0.5 * std::log1p(var / (sz * sz)) * d * d / (K.fx * K.fy * nz);
 }
 
-bool ViewQualityScene::pixelWindow(const Iso3& T_O_C, RasterWindow* window) const {
+bool ViewQualityScene::pixelWindow(const Iso3& T_O_C, int sp, RasterWindow* window) const {
   const CameraIntrinsics& K = camera_.intrinsics;
   const Aabb& box = bounds_;
   const Iso3 T_C_O = T_O_C.inverse();
@@ -260,7 +260,6 @@ bool ViewQualityScene::pixelWindow(const Iso3& T_O_C, RasterWindow* window) cons
     v1 = std::min(K.height - 1, int(std::ceil(vmax)) + 1);
     if (u0 > u1 || v0 > v1) return false;
   }
-  const int sp = options_.pixel_stride;
   window->stride = sp;
   window->i0 = (u0 + sp - 1) / sp;
   window->i1 = u1 / sp;
@@ -416,12 +415,13 @@ void ViewQualityScene::primaryHitsRayCast(const Iso3& T_O_C, const RasterWindow&
 }
 
 double ViewQualityScene::quality(const Iso3& T_O_C, const std::vector<Occluder>& occluders,
-                                 ViewQualityStats* stats) const {
+                                 ViewQualityStats* stats, int pixel_stride) const {
   ViewQualityStats local;
   ViewQualityStats& st = stats ? *stats : local;
   st = ViewQualityStats{};
+  const int sp = pixel_stride > 0 ? pixel_stride : options_.pixel_stride;
   RasterWindow w;
-  if (!pixelWindow(T_O_C, &w)) return 0.0;
+  if (!pixelWindow(T_O_C, sp, &w)) return 0.0;
   st.cast = w.size();
   // The robot, a handful of instanced links, as one Embree scene for the shadow rays that S_obj
   // itself does not block (and, when not rasterising, for the primary rays that hit S_obj).
@@ -474,7 +474,6 @@ double ViewQualityScene::quality(const Iso3& T_O_C, const std::vector<Occluder>&
     ++st.counted;
     G += gains[i];
   }
-  const int sp = options_.pixel_stride;
   return G * double(sp) * double(sp);  // each sample stands for stride² pixels
 }
 

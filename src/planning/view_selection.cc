@@ -38,6 +38,9 @@ std::string ViewPlannerOptions::validate() const {
   if (!(alpha_cost >= 0)) return "alpha_cost must be >= 0";
   if (!(t_q >= 0)) return "t_q must be >= 0";
   if (ik_restarts < 0) return "ik_restarts must be >= 0";
+  if (!(prescreen_stride >= 1 && prescreen_stride <= 16))
+    return "prescreen_stride must be in [1, 16]";
+  if (refine < 0) return "refine must be >= 0";
   std::string q = volumetric.validate();
   if (!q.empty()) return "volumetric." + q;
   q = quality.validate();
@@ -227,16 +230,16 @@ ViewSelection ViewPlanner::select(ViewQualityScene& scene, const GraspState& gra
   // Random: one draw per (seed, pass, direction), independent of threads and of the other
   // candidates' reachability.
   const uint64_t passSeed = mixSeed(o.seed, 0x7a11 + used.size());
-  parallelForThreads(0, int(reachable.size()), [&](int i) {
-    ViewCandidate& c = *chosen[reachable[i]];
+  auto evaluate = [&](size_t k, int stride) {
+    ViewCandidate& c = *chosen[k];
     if (o.metric == ViewMetric::kRandom) {
-      Rng rng = makeRng(passSeed, reachable[i]);
+      Rng rng = makeRng(passSeed, k);
       c.quality = std::uniform_real_distribution<double>(0.0, 1.0)(rng);
     } else {
       std::vector<Occluder> occ;
       if (o.hand_occlusion) occ = occluders_.at(model_->withArm(grasp.q, c.arm), c.T_B_O.inverse());
       if (o.metric == ViewMetric::kInformationGain)
-        c.quality = scene.quality(c.T_O_C, occ);
+        c.quality = scene.quality(c.T_O_C, occ, nullptr, stride);
       else
         c.quality = voxels->score(c.T_O_C,
                                   o.metric == ViewMetric::kUnobservedVoxels
@@ -244,26 +247,58 @@ ViewSelection ViewPlanner::select(ViewQualityScene& scene, const GraspState& gra
                                       : VolumetricMetric::kRearSideEntropy,
                                   occ);
     }
+    c.pixel_stride = stride;
     c.score = c.quality - (o.use_cost ? o.alpha_cost * c.cost_s : 0.0);
-  });
+  };
+  auto evaluateAll = [&](const std::vector<size_t>& ks, int stride) {
+    parallelForThreads(0, int(ks.size()), [&](int i) { evaluate(ks[size_t(i)], stride); });
+  };
+  // Best score first; ties to the cheaper view, then by direction (deterministic).
+  auto better = [](const ViewCandidate& a, const ViewCandidate& b) {
+    if (a.score != b.score) return a.score > b.score;
+    if (a.cost_s != b.cost_s) return a.cost_s < b.cost_s;
+    return a.dir_O.x() < b.dir_O.x();
+  };
+  // Line 15: the best score among `pool` with q ≥ t_q whose joint-space path is collision-free.
+  auto pick = [&](const std::vector<size_t>& pool) -> std::optional<ViewCandidate> {
+    std::vector<const ViewCandidate*> order;
+    for (size_t k : pool)
+      if (chosen[k]->quality >= o.t_q) order.push_back(&*chosen[k]);
+    std::sort(order.begin(), order.end(),
+              [&](const ViewCandidate* a, const ViewCandidate* b) { return better(*a, *b); });
+    for (const ViewCandidate* c : order)
+      if (!o.check_collisions || checker.pathFree(grasp.q, model_->withArm(grasp.q, c->arm), 0.05))
+        return *c;
+    return std::nullopt;
+  };
+  const int fine = o.quality.pixel_stride;
+  const bool coarseToFine = o.metric == ViewMetric::kInformationGain && o.refine > 0 &&
+                            o.prescreen_stride > fine && reachable.size() > size_t(o.refine);
   out.evaluated = int(reachable.size());
+  if (!coarseToFine) {
+    evaluateAll(reachable, fine);
+    out.refined = out.evaluated;
+    out.best = pick(reachable);
+  } else {
+    evaluateAll(reachable, o.prescreen_stride);
+    std::vector<size_t> coarse = reachable;
+    std::sort(coarse.begin(), coarse.end(),
+              [&](size_t a, size_t b) { return better(*chosen[a], *chosen[b]); });
+    std::vector<size_t> refined;
+    for (size_t next = 0; next < coarse.size() && !out.best;) {
+      std::vector<size_t> batch;
+      for (; next < coarse.size() && batch.size() < size_t(o.refine); ++next)
+        if (refined.empty() || chosen[coarse[next]]->quality >= 0.5 * o.t_q)
+          batch.push_back(coarse[next]);
+      if (batch.empty()) break;
+      evaluateAll(batch, fine);
+      refined.insert(refined.end(), batch.begin(), batch.end());
+      out.best = pick(refined);
+    }
+    out.refined = int(refined.size());
+  }
   out.quality_s = secs(tQ);
   for (size_t k : reachable) out.candidates.push_back(*chosen[k]);
-  // Best score among q ≥ t_q whose joint-space path is collision-free.
-  std::vector<const ViewCandidate*> order;
-  for (const ViewCandidate& c : out.candidates)
-    if (c.quality >= o.t_q) order.push_back(&c);
-  std::sort(order.begin(), order.end(), [](const ViewCandidate* a, const ViewCandidate* b) {
-    if (a->score != b->score) return a->score > b->score;
-    if (a->cost_s != b->cost_s) return a->cost_s < b->cost_s;
-    return a->dir_O.x() < b->dir_O.x();
-  });
-  for (const ViewCandidate* c : order) {
-    if (o.check_collisions && !checker.pathFree(grasp.q, model_->withArm(grasp.q, c->arm), 0.05))
-      continue;
-    out.best = *c;
-    break;
-  }
   out.total_s = secs(t0);
   return out;
 }

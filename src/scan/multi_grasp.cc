@@ -70,6 +70,7 @@ void runGrasps(RobotInterface& robot, DepthSensor& sensor, const Iso3& T_O_palm0
     rec.mean_entropy = r.model.meanEntropy();
     for (ViewRecord& v : r.views) all.views.push_back(v);
     all.view_evaluations += r.view_evaluations;
+    all.view_refinements += r.view_refinements;
     all.planning_s += r.planning_s;
     all.fusion_s += r.fusion_s;
     all.frames += r.frames;

@@ -231,6 +231,7 @@ ScanResult scanSingleGrasp(RobotInterface& robot, DepthSensor& sensor, const Iso
         planner.select(model, GraspState{T_O_palm, robot.joints()}, used, nearHand, &volume);
     result.planning_s += secondsSince(tp);
     result.view_evaluations += sel.evaluated;
+    result.view_refinements += sel.refined;
     if (!sel.best) {
       result.termination = sel.reachable == 0 ? "no_reachable_view" : "no_view_above_threshold";
       log("no view reaches t_q (" + std::to_string(sel.evaluated) + " candidates): done");
@@ -254,10 +255,10 @@ ScanResult scanSingleGrasp(RobotInterface& robot, DepthSensor& sensor, const Iso
     result.views.push_back(rec);
     char line[240];
     std::snprintf(line, sizeof(line),
-                  "view %d: quality %.4f, cost %.2f s, %d candidates (%.2f s: IK %.2f, quality "
-                  "%.2f), %d frames, mean entropy %.3f",
-                  v + 1, rec.quality, rec.cost_s, rec.candidates, rec.planning_s, sel.ik_s,
-                  sel.quality_s, rec.frames, rec.mean_entropy);
+                  "view %d: quality %.4f, cost %.2f s, %d candidates, %d at full resolution (%.2f "
+                  "s: IK %.2f, quality %.2f), %d frames, mean entropy %.3f",
+                  v + 1, rec.quality, rec.cost_s, rec.candidates, sel.refined, rec.planning_s,
+                  sel.ik_s, sel.quality_s, rec.frames, rec.mean_entropy);
     log(line);
   }
   result.model = extractModel(volume, options.mesh);

@@ -117,8 +117,10 @@ class ViewQualityScene {
   // eq. 9 for a camera at T_O_C among `occluders` (robot surfaces in frame O). Looks only at the
   // pixels inside the projection of the model's bounding box (no pixel outside can hit S_obj),
   // on the calling thread: rasterised or cast in coherent 4×4 packets (options.visibility).
+  // `pixel_stride` > 0 overrides options.pixel_stride for this evaluation (Alg. 1's coarse
+  // pre-screen).
   double quality(const Iso3& T_O_C, const std::vector<Occluder>& occluders = {},
-                 ViewQualityStats* stats = nullptr) const;
+                 ViewQualityStats* stats = nullptr, int pixel_stride = 0) const;
 
   // Brute-force reference: every pixel of the full image, one ray at a time (rtcIntersect1).
   double qualityReference(const Iso3& T_O_C, const std::vector<Occluder>& occluders = {},
@@ -130,7 +132,7 @@ class ViewQualityScene {
   // The occluders as instances; with S_obj first (geometry 0) when `withObject`.
   RayScene buildScene(const std::vector<Occluder>& occluders, bool withObject) const;
   // Pixel window covering the projection of the model's bounding box; false when it is empty.
-  bool pixelWindow(const Iso3& T_O_C, RasterWindow* window) const;
+  bool pixelWindow(const Iso3& T_O_C, int stride, RasterWindow* window) const;
   // Per view: the projector's centre and the camera's optical axis in frame O.
   struct ViewContext {
     Vec3 projector_O, axis_O;

@@ -43,6 +43,14 @@ struct ViewPlannerOptions {
   int ik_restarts = 1;           // random restarts per IK target after the seeded attempt
   IkMethod ik_solver = IkMethod::kDampedLeastSquares;  // dls (ours) or kdl_lma (the reference)
   uint64_t seed = 1;                                   // IK restarts
+  // Coarse to fine (eq. 9 only): every reachable candidate is first scored at every
+  // `prescreen_stride`-th pixel in u and v; the `refine` best by that score are scored again at
+  // quality.pixel_stride and the view is chosen among them (when none of them counts, the next
+  // `refine` whose coarse quality is at least t_q/2, and so on). refine = 0, or a prescreen
+  // stride not coarser than quality.pixel_stride: every candidate at quality.pixel_stride (the
+  // paper's exhaustive pass).
+  int prescreen_stride = 4;
+  int refine = 32;
   ViewQualityOptions quality;
   std::string validate() const;
 };
@@ -54,13 +62,15 @@ struct ViewCandidate {
   Iso3 T_B_O = Iso3::Identity();  // object pose in the base frame there
   Eigen::VectorXd arm;            // IK solution
   double cost_s = 0, quality = 0, score = 0;
+  int pixel_stride = 1;  // the stride `quality` was evaluated at
 };
 
 struct ViewSelection {
   std::optional<ViewCandidate> best;  // none: no reachable view reaches t_q
   int directions = 0;                 // after the t_θ filter
   int reachable = 0;                  // with an IK solution (and collision-free)
-  int evaluated = 0;                  // quality evaluations (eq. 9)
+  int evaluated = 0;                  // candidates scored (eq. 9, coarse or full)
+  int refined = 0;                    // of those, scored again at full resolution
   double ik_s = 0, quality_s = 0, total_s = 0;
   std::vector<ViewCandidate> candidates;  // every evaluated candidate
 };

@@ -65,8 +65,9 @@ struct ScanResult {
   ObjectModel model;           // final S_obj, object frame
   ObjectModel planning_model;  // the same at the planning stride (what Alg. 1 would see next)
   std::vector<ViewRecord> views;
-  std::string termination;  // no_view_above_threshold | max_views | no_reachable_view
-  int view_evaluations = 0;
+  std::string termination;   // no_view_above_threshold | max_views | no_reachable_view
+  int view_evaluations = 0;  // candidates scored by Alg. 1 (coarse pre-screen or full)
+  int view_refinements = 0;  // of those, scored at full resolution
   double planning_s = 0, fusion_s = 0, total_s = 0;
   int frames = 0;
 };
