@@ -196,6 +196,12 @@ TEST(Cli, ScanWritesModelAndSummaryAndRejectsBadConfig) {
   EXPECT_EQ(r.code, 1);
   EXPECT_NE(r.output.find("planner.ik_solver: must be dls or kdl_lma"), std::string::npos)
       << r.output;
+  writeTextAtomically(dir.path() / "bad.json", R"({"planner": {"prescreen_stride": 0}})");
+  r = run("scan --object builtin:coffee_can --config " + (dir.path() / "bad.json").string() +
+              " --out " + (dir.path() / "x").string(),
+          dir);
+  EXPECT_EQ(r.code, 1);
+  EXPECT_NE(r.output.find("prescreen_stride must be in [1, 16]"), std::string::npos) << r.output;
   r = run("scan --object builtin:coffee_can --max-grasps 0 --out " + (dir.path() / "x").string(),
           dir);
   EXPECT_EQ(r.code, 1);
