@@ -68,19 +68,20 @@ void DepthRaster::draw(const TriangleMesh& mesh, const Iso3& T_C_mesh, int id_ba
     }
     // Entirely beyond max_depth: it can hide nothing that matters.
     if (A.iz < minInvZ && B.iz < minInvZ && C.iz < minInvZ) continue;
-    // Most triangles of a fine mesh cover no sample: rejected on their bounding box alone.
+    // The projected area has the sign of det[a b c] = n·a: negative for a triangle whose
+    // outward normal faces the camera. Culling first drops half of a closed mesh before any
+    // rounding.
     const double xa = A.x, xb = B.x, xc = C.x;
+    const double ya = A.y, yb = B.y, yc = C.y;
+    const double area = (xb - xa) * (yc - ya) - (yb - ya) * (xc - xa);
+    if (cull_back_faces && area > 0) continue;
+    // Most triangles of a fine mesh cover no sample: rejected on their bounding box alone.
     const int ia = std::max(w.i0, iceil((std::min({xa, xb, xc}))));
     const int ib = std::min(w.i1, ifloor((std::max({xa, xb, xc}))));
     if (ia > ib) continue;
-    const double ya = A.y, yb = B.y, yc = C.y;
     const int ja = std::max(w.j0, iceil((std::min({ya, yb, yc}))));
     const int jb = std::min(w.j1, ifloor((std::max({ya, yb, yc}))));
     if (ja > jb) continue;
-    // The projected area has the sign of det[a b c] = n·a: negative for a triangle whose
-    // outward normal faces the camera.
-    const double area = (xb - xa) * (yc - ya) - (yb - ya) * (xc - xa);
-    if (cull_back_faces && area > 0) continue;
     const double px[3] = {xa, xb, xc}, py[3] = {ya, yb, yc}, piz[3] = {A.iz, B.iz, C.iz};
     fill(px, py, piz, ia, ib, ja, jb, area, id);
   }
