@@ -4,6 +4,8 @@
 // no IK solution exists there); rolls about the viewing direction swept and the roll with the
 // lowest trajectory time kept; quality by eq. 9 with the robot (hand, wrist, forearm, …) at that
 // candidate's IK solution as occluder; score = q − α_cost·cost; views with q < t_q do not count.
+// By default coarse to fine: every candidate's q at every 4th pixel, the best few again at full
+// resolution (see ViewPlannerOptions::refine; refine = 0 is the paper's exhaustive pass).
 //
 // Camera placement: the camera stays on its pan-tilt unit aimed at one presentation point, at the
 // view range from the unit towards the config's look_at point; the arm turns the object in front
