@@ -169,39 +169,22 @@ TEST(Cli, ScanWritesModelAndSummaryAndRejectsBadConfig) {
   Aabb b = ply.mesh.bounds();
   EXPECT_NEAR(b.center().z(), 0.0, 0.03);
 
-  writeTextAtomically(dir.path() / "bad.json", R"({"planner": {"directons": 10}})");
-  r = run("scan --object builtin:coffee_can --config " + (dir.path() / "bad.json").string() +
-              " --out " + (dir.path() / "x").string(),
-          dir);
-  EXPECT_EQ(r.code, 1);
-  EXPECT_NE(r.output.find("planner: unknown option \"directons\""), std::string::npos) << r.output;
-  writeTextAtomically(dir.path() / "bad.json", R"({"planner": {"t_q": -1}})");
-  r = run("scan --object builtin:coffee_can --config " + (dir.path() / "bad.json").string() +
-              " --out " + (dir.path() / "x").string(),
-          dir);
-  EXPECT_EQ(r.code, 1);
-  EXPECT_NE(r.output.find("t_q"), std::string::npos) << r.output;
-  writeTextAtomically(dir.path() / "bad.json", R"({"planner": {"quality": {"visibility": "z"}}})");
-  r = run("scan --object builtin:coffee_can --config " + (dir.path() / "bad.json").string() +
-              " --out " + (dir.path() / "x").string(),
-          dir);
-  EXPECT_EQ(r.code, 1);
-  EXPECT_NE(r.output.find("planner.quality.visibility: must be auto, raster or ray_cast"),
-            std::string::npos)
-      << r.output;
-  writeTextAtomically(dir.path() / "bad.json", R"({"planner": {"ik_solver": "analytic"}})");
-  r = run("scan --object builtin:coffee_can --config " + (dir.path() / "bad.json").string() +
-              " --out " + (dir.path() / "x").string(),
-          dir);
-  EXPECT_EQ(r.code, 1);
-  EXPECT_NE(r.output.find("planner.ik_solver: must be dls or kdl_lma"), std::string::npos)
-      << r.output;
-  writeTextAtomically(dir.path() / "bad.json", R"({"planner": {"prescreen_stride": 0}})");
-  r = run("scan --object builtin:coffee_can --config " + (dir.path() / "bad.json").string() +
-              " --out " + (dir.path() / "x").string(),
-          dir);
-  EXPECT_EQ(r.code, 1);
-  EXPECT_NE(r.output.find("prescreen_stride must be in [1, 16]"), std::string::npos) << r.output;
+  // A bad config is refused with its field named (exit 1), before any output is written.
+  auto rejects = [&](const std::string& json, const std::string& message) {
+    writeTextAtomically(dir.path() / "bad.json", json);
+    const auto bad =
+        run("scan --object builtin:coffee_can --config " + (dir.path() / "bad.json").string() +
+                " --out " + (dir.path() / "x").string(),
+            dir);
+    EXPECT_EQ(bad.code, 1) << json;
+    EXPECT_NE(bad.output.find(message), std::string::npos) << json << "\n" << bad.output;
+  };
+  rejects(R"({"planner": {"directons": 10}})", "planner: unknown option \"directons\"");
+  rejects(R"({"planner": {"t_q": -1}})", "t_q");
+  rejects(R"({"planner": {"quality": {"visibility": "z"}}})",
+          "planner.quality.visibility: must be auto, raster or ray_cast");
+  rejects(R"({"planner": {"ik_solver": "analytic"}})", "planner.ik_solver: must be dls or kdl_lma");
+  rejects(R"({"planner": {"prescreen_stride": 0}})", "prescreen_stride must be in [1, 16]");
   r = run("scan --object builtin:coffee_can --max-grasps 0 --out " + (dir.path() / "x").string(),
           dir);
   EXPECT_EQ(r.code, 1);
