@@ -220,3 +220,29 @@ TEST(TableTop, FirstGraspApproachesPerpendicularToTheMainAxisAndIsReachable) {
   EXPECT_EQ(wide.fit, 0);
   EXPECT_TRUE(wide.candidates.empty());
 }
+
+// A short object (40 × 40 × 74 mm, the pill bottle's size): side approaches at its middle would put
+// the open hand's lower half into the table, so the palm rises along the table normal until the
+// hand clears it, its centre still below the object's top. A 30 mm high block leaves no room.
+TEST(TableTop, ShortObjectsAreGraspedFromTheSideWithThePalmRaised) {
+  const RobotModel& r = test::wam();
+  const Iso3 T_B_O(
+      Eigen::Translation3d(r.camera().lookAt_B.x(), r.camera().lookAt_B.y(), r.table().topZ()));
+  TableTopGraspOptions o;
+  const std::vector<Vec3> pts = visibleBoxPoints(Vec3(0.02, 0.02, 0.037), 0.3);
+  TableTopGrasps g = tableTopGrasps(r, pts, Vec3::UnitZ(), T_B_O, r.home(), o, 0.15);
+  ASSERT_FALSE(g.candidates.empty());
+  CollisionChecker checker(r);
+  for (const GraspCandidate& c : g.candidates) {
+    const Vec3 palm = c.T_O_palm.translation();
+    EXPECT_LT(std::abs(c.T_O_palm.linear().col(2).z()), 1e-9) << "a side approach";
+    EXPECT_GT(palm.z(), 0.037) << "raised above the middle";
+    EXPECT_LE(palm.z(), 0.074 - o.clearance_m + 1e-9) << "still below the top";
+    for (const Vec3f& v : HandGeometry(r, c.q, T_B_O * c.T_O_palm).mesh().vertices)
+      EXPECT_GT(v.z(), r.table().topZ() + o.table_clearance_m);
+    EXPECT_FALSE(checker.inCollision(c.q));
+  }
+  TableTopGrasps flat = tableTopGrasps(r, visibleBoxPoints(Vec3(0.02, 0.02, 0.015), 0.3),
+                                       Vec3::UnitZ(), T_B_O, r.home(), o, 0.15);
+  EXPECT_TRUE(flat.candidates.empty());
+}

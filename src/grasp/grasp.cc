@@ -324,6 +324,10 @@ TableTopGrasps tableTopGrasps(const RobotModel& robot, const std::vector<Vec3>& 
   if (std::abs(e1.dot(up_O.normalized())) > 0.9)
     for (const Vec3& x : {e3, e2}) poses.push_back({palmPose(up_O.normalized(), x), 2});
   out.tried = int(poses.size());
+  // Height of the points' top along the table normal (a side grasp's palm may rise towards it).
+  const Vec3 up = up_O.normalized();
+  double top = -std::numeric_limits<double>::infinity();
+  for (const Vec3& p : thin) top = std::max(top, p.dot(up));
   std::vector<uint8_t> ok(poses.size(), 0);
   parallelFor(0, int(poses.size()), [&](int i) {
     // The object fits the hand: its extent across the closing direction is within the open
@@ -338,6 +342,20 @@ TableTopGrasps tableTopGrasps(const RobotModel& robot, const std::vector<Vec3>& 
       hi = std::max(hi, s);
     }
     if (hi - lo > span) return;
+    // A side approach to a short object puts the lower half of the open hand into the table:
+    // the palm rises along the table normal until the hand clears the table, as long as its
+    // centre stays `clearance_m` below the points' top (the palm axis still meets the object).
+    if (poses[i].roll != 2) {
+      double lowest = std::numeric_limits<double>::infinity();
+      for (const Vec3f& v : HandGeometry(robot, open, T_B_O * poses[i].T_O_palm).mesh().vertices)
+        lowest = std::min(lowest, double(v.z()));
+      const double rise = tableTop + o.table_clearance_m + 1e-3 - lowest;
+      if (rise > 0) {
+        const Vec3 raised = poses[i].T_O_palm.translation() + rise * up;
+        if (raised.dot(up) > top - o.clearance_m) return;
+        poses[i].T_O_palm.translation() = raised;
+      }
+    }
     const Vec3 back = -R.col(2);
     bool fits = false;
     for (int k = 0; k <= 6 && !fits; ++k) {
