@@ -246,3 +246,31 @@ TEST(TableTop, ShortObjectsAreGraspedFromTheSideWithThePalmRaised) {
                                        Vec3::UnitZ(), T_B_O, r.home(), o, 0.15);
   EXPECT_TRUE(flat.candidates.empty());
 }
+
+// Re-grasps of a short object (a 40 × 40 × 74 mm box standing on the table): side approaches
+// through its centre would put the open hand into the table, so their palm axis rises until the
+// hand clears it. Candidates are found, all clear of the table, their palm axes between the
+// centre and 1 cm below the top.
+TEST(GraspGeneration, ShortObjectsGetSideGraspsWithThePalmRaised) {
+  const RobotModel& r = test::wam();
+  const TriangleMesh box = makeBox(Vec3(0.04, 0.04, 0.074));  // centred at the origin
+  const Iso3 T_B_O(Eigen::Translation3d(r.camera().lookAt_B.x(), r.camera().lookAt_B.y(),
+                                        r.table().topZ() + 0.037));
+  GraspOptions o;
+  o.approaches = 32;
+  o.rolls = 2;
+  GraspGeneration g = generateGrasps(r, box, T_B_O, r.home(), o);
+  ASSERT_FALSE(g.candidates.empty());
+  int raised = 0;
+  for (const GraspCandidate& c : g.candidates) {
+    for (const Vec3f& v : HandGeometry(r, c.q, T_B_O * c.T_O_palm).mesh().vertices)
+      EXPECT_GT(v.z(), r.table().topZ());
+    const Mat3 R = c.T_O_palm.linear();
+    // Near-horizontal approaches (the slide along the axis moves the palm up to ~5 mm in z):
+    // the palm axis is at most 1 cm below the top (z = 0.037), and above the middle when raised.
+    if (std::abs(R.col(2).z()) > 0.05) continue;
+    EXPECT_LE(c.T_O_palm.translation().z(), 0.027 + 0.006);
+    raised += c.T_O_palm.translation().z() > 0.006;
+  }
+  EXPECT_GT(raised, 0) << "side grasps on a 74 mm object need the palm raised";
+}

@@ -137,6 +137,12 @@ GraspGeneration generateGrasps(const RobotModel& robot, const TriangleMesh& mesh
   double rho = 0;
   for (const SurfacePoint& sm : samples) rho = std::max(rho, (sm.p - centre).norm());
   const double tableTop = robot.table().topZ();
+  // The table normal in O, and how far a palm may rise along it above the centre (to keep a hand
+  // on a short object clear of the table) with its axis still 1 cm below the object's top.
+  const Vec3 up = T_B_O.linear().transpose() * Vec3::UnitZ();
+  double maxRise = -0.01;
+  for (const SurfacePoint& sm : samples)
+    maxRise = std::max(maxRise, (sm.p - centre).dot(up) - 0.01);
 
   // Every (approach, roll, spread) pose, closed to contact on both cores.
   struct Pose {
@@ -156,21 +162,33 @@ GraspGeneration generateGrasps(const RobotModel& robot, const TriangleMesh& mesh
     Iso3 T = cameraPoseInObject(centre, -ps.approach, 1.0, ps.roll);  // z = −d, rolled
     T.translation().setZero();
     const Mat3 R = T.linear();
-    // Slide the palm along −d until its face touches the nearest sample in its footprint.
-    double nearest = std::numeric_limits<double>::infinity();
-    for (const SurfacePoint& sm : samples) {
-      const Vec3 p = R.transpose() * (sm.p - centre);
-      if (p.x() < palm.min.x() || p.x() > palm.max.x() || p.y() < palm.min.y() ||
-          p.y() > palm.max.y())
-        continue;
-      nearest = std::min(nearest, p.z());
-    }
-    if (!std::isfinite(nearest)) return;
-    T.translation() = centre + R * Vec3(0, 0, nearest - palm.max.z() - 0.002);
+    // Slide the palm along −d, its axis through `origin`, until its face touches the nearest
+    // sample in its footprint.
+    auto slide = [&](const Vec3& origin) {
+      double nearest = std::numeric_limits<double>::infinity();
+      for (const SurfacePoint& sm : samples) {
+        const Vec3 p = R.transpose() * (sm.p - origin);
+        if (p.x() < palm.min.x() || p.x() > palm.max.x() || p.y() < palm.min.y() ||
+            p.y() > palm.max.y())
+          continue;
+        nearest = std::min(nearest, p.z());
+      }
+      if (!std::isfinite(nearest)) return false;
+      T.translation() = origin + R * Vec3(0, 0, nearest - palm.max.z() - 0.002);
+      return true;
+    };
+    if (!slide(centre)) return;
     JointVector q = robot.home();
     for (const FingerInfo& f : robot.fingers()) q[f.variable] = f.open;
     if (robot.spreadVariable() >= 0) q[robot.spreadVariable()] = ps.spread;
     robot.applyCouplings(&q);
+    // On a short object the open hand reaches below the table top: the palm axis rises along
+    // the table normal until the hand clears it (as for the first grasp), within maxRise.
+    double lowest = std::numeric_limits<double>::infinity();
+    for (const Vec3f& v : HandGeometry(robot, q, T_B_O * T).mesh().vertices)
+      lowest = std::min(lowest, double(v.z()));
+    const double rise = tableTop + 0.003 - lowest;
+    if (rise > 0 && (rise > maxRise || !slide(centre + rise * up))) return;
     ClosingResult closed = closer.close(q, T);
     GraspCandidate c;
     c.T_O_palm = T;
