@@ -282,6 +282,27 @@ TEST(Cli, BaselinePlannerStillRegraspsOnEq9Ranking) {
   EXPECT_EQ(s["termination"], "max_grasps");
 }
 
+// Issue #5 on a short object: the pill bottle (74 mm) is picked from the table with the palm
+// raised clear of it, and the re-grasp reveals most of what the first grasp covered.
+TEST(Cli, ShortObjectIsPickedFromTheTableAndRegrasped) {
+  test::TempDir dir;
+  writeTextAtomically(dir.path() / "c.json",
+                      R"({"voxel_m": 0.003, "planner": {"directions": 150, "rolls": 4},
+          "grasp": {"approaches": 32, "rolls": 2, "ranking": {"directions": 32, "rolls": 2}}})");
+  const fs::path out = dir.path() / "scan";
+  Result r = run("scan --object builtin:pill_bottle --config " + (dir.path() / "c.json").string() +
+                     " --out " + out.string(),
+                 dir);
+  ASSERT_EQ(r.code, 0) << r.output;
+  const Json s = readJsonFile(out / "summary.json");
+  EXPECT_EQ(s["start"], "table");
+  ASSERT_GE(s["grasps"].size(), 2u) << s["termination"];
+  const double first = s["grasps"][0]["unknown_area_m2"].get<double>();
+  const double last = s["grasps"].back()["unknown_area_m2"].get<double>();
+  EXPECT_GT(first, 0.001);
+  EXPECT_LT(last, 0.25 * first);
+}
+
 TEST(Cli, EvalTabulatesEveryRunAndRejectsUnknownPlanners) {
   test::TempDir dir;
   writeTextAtomically(dir.path() / "quick.json", kQuickConfig);
