@@ -2,6 +2,9 @@
 
 #include <algorithm>
 #include <cmath>
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
 
 namespace inhand {
 
@@ -125,6 +128,12 @@ void DepthRaster::drawTriangle(const Vec3& a, const Vec3& b, const Vec3& c, int 
 void DepthRaster::fill(const double* px, const double* py, const double* piz, int ia, int ib,
                        int ja, int jb, double area, int id) {
   if (area == 0) return;  // degenerate, or edge-on through the camera centre
+#if defined(__SSE2__)
+  if (ib - ia < 4 && jb - ja < 4 && ia + 3 <= window_.i1) {
+    fillSmall(px, py, piz, ia, ib, ja, jb, area, id);
+    return;
+  }
+#endif
   const double x0 = px[0], y0 = py[0], x1 = px[1], y1 = py[1], x2 = px[2], y2 = py[2];
   const double sg = area > 0 ? 1.0 : -1.0;
   // Edge functions e_k(i, j) = sg·((x_b − x_a)(j − y_a) − (y_b − y_a)(i − x_a)) ≥ 0 inside,
@@ -174,6 +183,56 @@ void DepthRaster::fill(const double* px, const double* py, const double* piz, in
       idrow[di] = win ? id : idrow[di];
     }
   }
+}
+
+void DepthRaster::fillSmall(const double* px, const double* py, const double* piz, int ia, int ib,
+                            int ja, int jb, double area, int id) {
+#if defined(__SSE2__)
+  const double sg = area > 0 ? 1.0 : -1.0;
+  // As fill(), with (i, j) relative to (ia, ja): e_k = A_k·i + B_k·j + C_k, and 1/z likewise.
+  const double x[3] = {px[0] - ia, px[1] - ia, px[2] - ia};
+  const double y[3] = {py[0] - ja, py[1] - ja, py[2] - ja};
+  const double inv = 1.0 / std::abs(area);
+  double A[3], B[3], C[3];
+  double zi = 0, zj = 0, z0 = 0;
+  for (int e = 0; e < 3; ++e) {
+    const int a = (e + 1) % 3, b = (e + 2) % 3;  // edge e runs from vertex a to vertex b
+    A[e] = -sg * (y[b] - y[a]);
+    B[e] = sg * (x[b] - x[a]);
+    C[e] = sg * ((x[b] - x[a]) * -y[a] - (y[b] - y[a]) * -x[a]);
+    zi += A[e] * piz[e] * inv;
+    zj += B[e] * piz[e] * inv;
+    z0 += C[e] * piz[e] * inv;
+  }
+  const __m128 I = _mm_setr_ps(0.f, 1.f, 2.f, 3.f);
+  const __m128 inBox = _mm_cmple_ps(I, _mm_set1_ps(float(ib - ia)));
+  const __m128 zero = _mm_setzero_ps();
+  __m128 eI[3];
+  for (int e = 0; e < 3; ++e) eI[e] = _mm_mul_ps(_mm_set1_ps(float(A[e])), I);
+  const __m128 zI = _mm_mul_ps(_mm_set1_ps(float(zi)), I);
+  const __m128i ids = _mm_set1_epi32(id);
+  for (int j = ja; j <= jb; ++j) {
+    const double dj = j - ja;
+    __m128 cover = inBox;
+    for (int e = 0; e < 3; ++e) {
+      const __m128 ee = _mm_add_ps(eI[e], _mm_set1_ps(float(B[e] * dj + C[e])));
+      cover = _mm_and_ps(cover, _mm_cmpge_ps(ee, zero));
+    }
+    if (_mm_movemask_ps(cover) == 0) continue;
+    float* zrow = &invZ_[size_t(index(ia, j))];
+    int* idrow = &id_[size_t(index(ia, j))];
+    const __m128 iz = _mm_add_ps(zI, _mm_set1_ps(float(zj * dj + z0)));
+    const __m128 old = _mm_loadu_ps(zrow);
+    const __m128 win = _mm_and_ps(cover, _mm_cmpgt_ps(iz, old));
+    _mm_storeu_ps(zrow, _mm_or_ps(_mm_and_ps(win, iz), _mm_andnot_ps(win, old)));
+    const __m128i w = _mm_castps_si128(win);
+    const __m128i oldId = _mm_loadu_si128(reinterpret_cast<const __m128i*>(idrow));
+    _mm_storeu_si128(reinterpret_cast<__m128i*>(idrow),
+                     _mm_or_si128(_mm_and_si128(w, ids), _mm_andnot_si128(w, oldId)));
+  }
+#else
+  (void)px, (void)py, (void)piz, (void)ia, (void)ib, (void)ja, (void)jb, (void)area, (void)id;
+#endif
 }
 
 }  // namespace inhand
