@@ -25,6 +25,15 @@ RayScene sceneOf(const TriangleMesh& m) {
 
 const float kHoleVar = 0.05f * 0.05f;
 
+// The juice bottle fused from one depth frame taken from one side: observed front, σ = 5 cm back.
+ObjectModel bottleSeenFromOneSide(const MeshOptions& mesh = MeshOptions{}) {
+  const TriangleMesh bottle = loadObject("builtin:juice_bottle");
+  const Aabb b = bottle.bounds();
+  TsdfVolume vol(Aabb{b.min - Vec3::Constant(0.03), b.max + Vec3::Constant(0.03)}, VolumeOptions{});
+  test::renderAndFuse(bottle, {lookAt(Vec3(0.7, 0.1, 0.1), Vec3::Zero())}, true, &vol);
+  return extractModel(vol, mesh);
+}
+
 }  // namespace
 
 TEST(ViewQuality, HoleFilledFaceScoresHigherThanObservedFace) {
@@ -190,11 +199,8 @@ TEST(ViewQuality, NearHandRuleUsesDistanceToTheHand) {
 TEST(ViewQuality, OptimisedMatchesReferenceOnAFusedModelWithTheRobot) {
   const RobotModel& r = wam();
   // A juice bottle seen from one side: observed front, σ = 5 cm back.
-  TriangleMesh bottle = loadObject("builtin:juice_bottle");
-  Aabb b = bottle.bounds();
-  TsdfVolume vol(Aabb{b.min - Vec3::Constant(0.03), b.max + Vec3::Constant(0.03)}, VolumeOptions{});
-  test::renderAndFuse(bottle, {lookAt(Vec3(0.7, 0.1, 0.1), Vec3::Zero())}, true, &vol);
-  ObjectModel model = extractModel(vol);
+  const Aabb b = loadObject("builtin:juice_bottle").bounds();
+  const ObjectModel model = bottleSeenFromOneSide();
   ViewQualityScene vq(model, DepthCameraOptions{}, NoiseModelOptions{}, ViewQualityOptions{});
   // Held from the side; the robot at home, placed so the palm is at its grasp.
   Iso3 T_O_palm =
@@ -241,11 +247,8 @@ TEST(ViewQuality, OptimisedMatchesReferenceOnAFusedModelWithTheRobot) {
 // integral: the optimised (rasterised) path matches its own reference up to edge pixels and the
 // full-resolution value closely.
 TEST(ViewQuality, PixelStrideMatchesItsReferenceAndApproximatesFullResolution) {
-  TriangleMesh bottle = loadObject("builtin:juice_bottle");
-  Aabb b = bottle.bounds();
-  TsdfVolume vol(Aabb{b.min - Vec3::Constant(0.03), b.max + Vec3::Constant(0.03)}, VolumeOptions{});
-  test::renderAndFuse(bottle, {lookAt(Vec3(0.7, 0.1, 0.1), Vec3::Zero())}, true, &vol);
-  ObjectModel model = extractModel(vol);
+  const Aabb b = loadObject("builtin:juice_bottle").bounds();
+  const ObjectModel model = bottleSeenFromOneSide();
   ViewQualityScene full(model, DepthCameraOptions{}, NoiseModelOptions{}, ViewQualityOptions{});
   ViewQualityOptions o2;
   o2.pixel_stride = 2;
@@ -271,13 +274,9 @@ TEST(ViewQuality, PixelStrideMatchesItsReferenceAndApproximatesFullResolution) {
 // resolution chooses the view the exhaustive full-resolution pass chooses, pass after pass.
 TEST(ViewSelection, CoarseToFineChoosesTheExhaustivePassView) {
   const RobotModel& r = wam();
-  TriangleMesh bottle = loadObject("builtin:juice_bottle");
-  Aabb b = bottle.bounds();
-  TsdfVolume vol(Aabb{b.min - Vec3::Constant(0.03), b.max + Vec3::Constant(0.03)}, VolumeOptions{});
-  test::renderAndFuse(bottle, {lookAt(Vec3(0.7, 0.1, 0.1), Vec3::Zero())}, true, &vol);
   MeshOptions planning;
   planning.stride = 2;  // as the scan plans
-  ObjectModel model = extractModel(vol, planning);
+  const ObjectModel model = bottleSeenFromOneSide(planning);
   const Iso3 T_O_palm =
       Iso3(Eigen::Translation3d(0, -0.044 - 0.09, 0)) * Eigen::AngleAxisd(-M_PI / 2, Vec3::UnitX());
   const GraspState g{T_O_palm, r.home()};
