@@ -172,14 +172,26 @@ void loadPacket(const Ray* rays, size_t n, RTCRay8& r, int* valid) {
     r.flags[k] = 0;
   }
 }
+
+// Calls packet(first, n) for each packet of `count` rays: on the calling thread, or spread over
+// the cores.
+template <typename F>
+void forEachPacket(size_t count, bool parallel, const F& packet) {
+  const int packets = int((count + kPacket - 1) / kPacket);
+  auto one = [&](int p) {
+    const size_t first = size_t(p) * kPacket;
+    packet(first, std::min(kPacket, count - first));
+  };
+  if (parallel)
+    parallelFor(0, packets, one, 8);
+  else
+    for (int p = 0; p < packets; ++p) one(p);
+}
 }  // namespace
 
 void RayScene::intersect(const Ray* rays, Hit* hits, size_t count, bool parallel) const {
   INHAND_CHECK(committed_, "intersect before commit");
-  const int packets = int((count + kPacket - 1) / kPacket);
-  auto packet = [&](int p) {
-    size_t first = size_t(p) * kPacket;
-    size_t n = std::min(kPacket, count - first);
+  forEachPacket(count, parallel, [&](size_t first, size_t n) {
     alignas(64) RTCRayHit8 rh;
     alignas(64) int valid[kPacket];
     loadPacket(rays + first, n, rh.ray, valid);
@@ -195,19 +207,12 @@ void RayScene::intersect(const Ray* rays, Hit* hits, size_t count, bool parallel
       hits[first + k] =
           makeHit(rh.ray.tfar[k], rh.hit.geomID[k], rh.hit.instID[0][k], rh.hit.primID[k],
                   rh.hit.u[k], rh.hit.v[k], Vec3f(rh.hit.Ng_x[k], rh.hit.Ng_y[k], rh.hit.Ng_z[k]));
-  };
-  if (parallel)
-    parallelFor(0, packets, packet, 8);
-  else
-    for (int p = 0; p < packets; ++p) packet(p);
+  });
 }
 
 void RayScene::occluded(const Ray* rays, uint8_t* blocked, size_t count, bool parallel) const {
   INHAND_CHECK(committed_, "occluded before commit");
-  const int packets = int((count + kPacket - 1) / kPacket);
-  auto packet = [&](int p) {
-    size_t first = size_t(p) * kPacket;
-    size_t n = std::min(kPacket, count - first);
+  forEachPacket(count, parallel, [&](size_t first, size_t n) {
     alignas(64) RTCRay8 r;
     alignas(64) int valid[kPacket];
     loadPacket(rays + first, n, r, valid);
@@ -216,11 +221,7 @@ void RayScene::occluded(const Ray* rays, uint8_t* blocked, size_t count, bool pa
     rtcOccluded8(valid, scene_, &ctx, &r);
     // Embree sets tfar to −inf for occluded rays.
     for (size_t k = 0; k < n; ++k) blocked[first + k] = r.tfar[k] < 0.f ? 1 : 0;
-  };
-  if (parallel)
-    parallelFor(0, packets, packet, 8);
-  else
-    for (int p = 0; p < packets; ++p) packet(p);
+  });
 }
 
 Hit RayScene::intersectOne(const Ray& ray) const {
