@@ -185,6 +185,8 @@ TEST(Cli, ScanWritesModelAndSummaryAndRejectsBadConfig) {
           "planner.quality.visibility: must be auto, raster or ray_cast");
   rejects(R"({"planner": {"ik_solver": "analytic"}})", "planner.ik_solver: must be dls or kdl_lma");
   rejects(R"({"planner": {"prescreen_stride": 0}})", "prescreen_stride must be in [1, 16]");
+  rejects(R"({"grasp": {"approach": "slide"}})", "grasp.approach: must be palm or first_contact");
+  rejects(R"({"sim": {"pick_up": "grab"}})", "sim.pick_up: must be palm or first_contact");
   r = run("scan --object builtin:coffee_can --max-grasps 0 --out " + (dir.path() / "x").string(),
           dir);
   EXPECT_EQ(r.code, 1);

@@ -274,3 +274,44 @@ TEST(GraspGeneration, ShortObjectsGetSideGraspsWithThePalmRaised) {
   }
   EXPECT_GT(raised, 0) << "side grasps on a 74 mm object need the palm raised";
 }
+
+// GraspApproach::kFirstContact: the open hand never starts inside the model. On a 15 mm plate
+// (thinner than the open fingertips' gap) it finds stable grasps; at each of them the open hand
+// is free of the plate, and with the fingers closed it touches it. The default kPalm approach on
+// the 60 mm box leaves the open fingers inside the model (the README's measured limit).
+TEST(GraspGeneration, FirstContactApproachNeverStartsInsideTheObject) {
+  const RobotModel& r = test::wam();
+  const Iso3 T_B_O(Eigen::Translation3d(r.camera().lookAt_B.x(), r.camera().lookAt_B.y(),
+                                        r.table().topZ() + 0.08));
+  auto openHand = [&](const GraspCandidate& c) {
+    JointVector q = c.q;
+    for (const FingerInfo& f : r.fingers()) q[f.variable] = f.open;
+    r.applyCouplings(&q);
+    return q;
+  };
+  GraspOptions o;
+  o.approaches = 32;
+  o.rolls = 2;
+  o.approach = GraspApproach::kFirstContact;
+  const TriangleMesh plate = makeBox(Vec3(0.015, 0.10, 0.16));
+  const GraspGeneration g = generateGrasps(r, plate, T_B_O, r.home(), o);
+  ASSERT_FALSE(g.candidates.empty());
+  const FingerCloser plateCloser(r, plate);
+  for (const GraspCandidate& c : g.candidates) {
+    EXPECT_FALSE(plateCloser.handTouches(openHand(c), c.T_O_palm));
+    EXPECT_GE(c.epsilon, o.min_epsilon);
+  }
+  o.approach = GraspApproach::kPalm;
+  const TriangleMesh box = makeBox(Vec3(0.06, 0.10, 0.16));
+  const GraspGeneration p = generateGrasps(r, box, T_B_O, r.home(), o);
+  const FingerCloser boxCloser(r, box);
+  int inside = 0;
+  for (const GraspCandidate& c : p.candidates)
+    inside += boxCloser.handTouches(openHand(c), c.T_O_palm);
+  EXPECT_GT(inside, 0) << "kPalm is expected to start fingers inside a 60 mm box";
+  GraspApproach a;
+  EXPECT_TRUE(parseGraspApproach("first_contact", &a));
+  EXPECT_EQ(a, GraspApproach::kFirstContact);
+  EXPECT_STREQ(graspApproachName(a), "first_contact");
+  EXPECT_FALSE(parseGraspApproach("slide", &a));
+}

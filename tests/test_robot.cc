@@ -354,6 +354,36 @@ TEST(Hand, BarrettFingersStopAtContactOnBoxAndCylinder) {
   }
 }
 
+// The approach to first contact: the open hand moving along its palm axis towards a wall wider
+// than the hand stops where its most advanced point (a mesh vertex of the hand: the links are
+// boxes and a cylinder) reaches the wall, within the bisection tolerance; the hand is free there
+// and touches 1 mm further. Touching at the start gives nullopt, nothing in the way max_travel.
+TEST(Hand, FreeTravelStopsAtTheFirstContactOfAnyLink) {
+  const RobotModel& m = wam();
+  JointVector open = m.home();
+  m.applyCouplings(&open);
+  double tip = -1;
+  for (const Vec3f& v : HandGeometry(m, open, Iso3::Identity()).mesh().vertices)
+    tip = std::max(tip, double(v.z()));
+  EXPECT_GT(tip, 0.15);  // the open fingers reach well beyond the palm face (z = 0.09)
+  // A wall 0.5 m ahead of the palm, facing it.
+  const double d = 0.5;
+  const TriangleMesh wall =
+      transformed(makeBox(Vec3(0.4, 0.4, 0.02)), Iso3(Eigen::Translation3d(0, 0, d + 0.01)));
+  const FingerCloser closer(m, wall);
+  const std::optional<double> travel =
+      closer.freeTravel(open, Iso3::Identity(), Vec3::UnitZ(), 1.0, 0.01, 1e-4);
+  ASSERT_TRUE(travel.has_value());
+  EXPECT_NEAR(*travel, d - tip, 2e-4);
+  Iso3 at = Iso3(Eigen::Translation3d(0, 0, *travel));
+  EXPECT_FALSE(closer.handTouches(open, at));
+  at.translation().z() += 0.001;
+  EXPECT_TRUE(closer.handTouches(open, at));
+  EXPECT_FALSE(closer.freeTravel(open, at, Vec3::UnitZ(), 1.0).has_value());
+  // Moving away: nothing in the way.
+  EXPECT_DOUBLE_EQ(*closer.freeTravel(open, Iso3::Identity(), -Vec3::UnitZ(), 0.3), 0.3);
+}
+
 TEST(Hand, ParallelJawStopsAtContact) {
   const RobotModel& m = arm6();
   const Vec3 c(0, 0, 0.07), size(0.03, 0.04, 0.03);

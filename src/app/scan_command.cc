@@ -203,6 +203,10 @@ void readOptions(const fs::path& file, AllOptions* o) {
   }
   if (auto g = r.object("grasp")) {
     GraspOptions& v = o->multi.grasp;
+    std::string approach;
+    g->string("approach", &approach);
+    if (!approach.empty() && !parseGraspApproach(approach, &v.approach))
+      throw Error(g->where() + ".approach: must be palm or first_contact");
     g->integer("approaches", &v.approaches);
     g->integer("rolls", &v.rolls);
     g->numbers("spreads", &v.spreads);
@@ -235,6 +239,14 @@ void readOptions(const fs::path& file, AllOptions* o) {
     s->integer("frame_subsample", &o->sim.frame_subsample);
     s->boolean("noise", &o->sim.noise);
     s->num("room_radius_m", &o->sim.room_radius_m);
+    std::string pickUp;
+    s->string("pick_up", &pickUp);
+    if (pickUp == "first_contact")
+      o->sim.pick_up_first_contact = true;
+    else if (pickUp == "palm")
+      o->sim.pick_up_first_contact = false;
+    else if (!pickUp.empty())
+      throw Error(s->where() + ".pick_up: must be palm or first_contact");
     s->finish();
   }
   r.finish();
@@ -271,7 +283,8 @@ Json optionsJson(const AllOptions& o) {
             {"table_clearance_m", o.multi.table_top.grasp.table_clearance_m},
             {"point_cell_m", o.multi.table_top.grasp.point_cell_m}}},
           {"grasp",
-           {{"approaches", g.approaches},
+           {{"approach", graspApproachName(g.approach)},
+            {"approaches", g.approaches},
             {"rolls", g.rolls},
             {"spreads", g.spreads},
             {"friction", g.friction},
@@ -294,7 +307,8 @@ Json optionsJson(const AllOptions& o) {
            {{"frame_rate_hz", o.sim.frame_rate_hz},
             {"frame_subsample", o.sim.frame_subsample},
             {"noise", o.sim.noise},
-            {"room_radius_m", o.sim.room_radius_m}}}};
+            {"room_radius_m", o.sim.room_radius_m},
+            {"pick_up", o.sim.pick_up_first_contact ? "first_contact" : "palm"}}}};
 }
 
 }  // namespace

@@ -15,6 +15,20 @@
 
 namespace inhand {
 
+const char* graspApproachName(GraspApproach a) {
+  return a == GraspApproach::kFirstContact ? "first_contact" : "palm";
+}
+
+bool parseGraspApproach(const std::string& name, GraspApproach* a) {
+  if (name == "palm")
+    *a = GraspApproach::kPalm;
+  else if (name == "first_contact")
+    *a = GraspApproach::kFirstContact;
+  else
+    return false;
+  return true;
+}
+
 std::string GraspOptions::validate() const {
   if (approaches < 1) return "approaches must be >= 1";
   if (rolls < 1) return "rolls must be >= 1";
@@ -162,9 +176,28 @@ GraspGeneration generateGrasps(const RobotModel& robot, const TriangleMesh& mesh
     Iso3 T = cameraPoseInObject(centre, -ps.approach, 1.0, ps.roll);  // z = −d, rolled
     T.translation().setZero();
     const Mat3 R = T.linear();
-    // Slide the palm along −d, its axis through `origin`, until its face touches the nearest
-    // sample in its footprint.
+    JointVector q = robot.home();
+    for (const FingerInfo& f : robot.fingers()) q[f.variable] = f.open;
+    if (robot.spreadVariable() >= 0) q[robot.spreadVariable()] = ps.spread;
+    robot.applyCouplings(&q);
+    // kFirstContact: the open hand comes in along −d, its palm axis through `origin`, from
+    // outside the object until any of its links touches the model.
+    double handReach = 0;
+    if (o.approach == GraspApproach::kFirstContact)
+      for (const Vec3f& v : HandGeometry(robot, q, Iso3::Identity()).mesh().vertices)
+        handReach = std::max(handReach, double(v.norm()));
+    auto firstContact = [&](const Vec3& origin) {
+      const double start = 2 * rho + handReach + 0.01;
+      T.translation() = origin - start * R.col(2);
+      const std::optional<double> travel = closer.freeTravel(q, T, R.col(2), start + rho);
+      if (!travel || *travel >= start + rho) return false;
+      T.translation() += *travel * R.col(2);
+      return true;
+    };
+    // kPalm: the palm slides along −d, its axis through `origin`, until its face touches the
+    // nearest sample in its footprint.
     auto slide = [&](const Vec3& origin) {
+      if (o.approach == GraspApproach::kFirstContact) return firstContact(origin);
       double nearest = std::numeric_limits<double>::infinity();
       for (const SurfacePoint& sm : samples) {
         const Vec3 p = R.transpose() * (sm.p - origin);
@@ -178,10 +211,6 @@ GraspGeneration generateGrasps(const RobotModel& robot, const TriangleMesh& mesh
       return true;
     };
     if (!slide(centre)) return;
-    JointVector q = robot.home();
-    for (const FingerInfo& f : robot.fingers()) q[f.variable] = f.open;
-    if (robot.spreadVariable() >= 0) q[robot.spreadVariable()] = ps.spread;
-    robot.applyCouplings(&q);
     // On a short object the open hand reaches below the table top: the palm axis rises along
     // the table normal until the hand clears it (as for the first grasp), within maxRise.
     double lowest = std::numeric_limits<double>::infinity();

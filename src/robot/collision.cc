@@ -194,7 +194,7 @@ double HandGeometry::distance(const Vec3& p_F) const {
 
 struct FingerCloser::Geometry {
   GeomPtr object;
-  std::map<std::pair<int, int>, GeomPtr> fingerMesh;
+  std::map<std::pair<int, int>, GeomPtr> fingerMesh;  // every hand link's, palm included
 };
 
 FingerCloser::FingerCloser(const RobotModel& model, const TriangleMesh& object_O) : model_(&model) {
@@ -203,13 +203,51 @@ FingerCloser::FingerCloser(const RobotModel& model, const TriangleMesh& object_O
   // Finger links as triangle meshes: mesh–mesh checks are exact triangle–triangle tests, while
   // FCL's primitive–mesh path (GJK) can miss penetrations of a fraction of a millimetre, which
   // would let the bisection stop slightly inside the object.
-  for (const FingerInfo& f : model.fingers())
-    for (int li : f.links)
-      for (int k = 0; k < int(model.links()[li].collision.size()); ++k) {
-        const Primitive& p = model.links()[li].collision[k];
-        g->fingerMesh[{li, k}] = bvhOf(transformed(p.toMesh(), p.T_link_geom.inverse()));
-      }
+  for (int li : model.handLinks())
+    for (int k = 0; k < int(model.links()[li].collision.size()); ++k) {
+      const Primitive& p = model.links()[li].collision[k];
+      g->fingerMesh[{li, k}] = bvhOf(transformed(p.toMesh(), p.T_link_geom.inverse()));
+    }
   geometry_ = std::move(g);
+}
+
+bool FingerCloser::handTouches(const JointVector& q, const Iso3& T_O_palm) const {
+  const RobotModel& model = *model_;
+  const std::vector<Iso3> T = model.linkPoses(q);
+  const Iso3 T_O_B = T_O_palm * T[model.tipLink()].inverse();
+  for (int li : model.handLinks())
+    for (int k = 0; k < int(model.links()[li].collision.size()); ++k)
+      if (collide(geometry_->fingerMesh.at({li, k}),
+                  T_O_B * T[li] * model.links()[li].collision[k].T_link_geom, geometry_->object,
+                  Iso3::Identity()))
+        return true;
+  return false;
+}
+
+std::optional<double> FingerCloser::freeTravel(const JointVector& q, const Iso3& T_O_palm,
+                                               const Vec3& dir, double max_travel, double step,
+                                               double tolerance) const {
+  INHAND_CHECK(step > 0 && tolerance > 0, "approach step and tolerance must be positive");
+  auto touches = [&](double s) {
+    Iso3 T = T_O_palm;
+    T.translation() += s * dir;
+    return handTouches(q, T);
+  };
+  if (touches(0)) return std::nullopt;
+  double free = 0;
+  for (double s = step; free < max_travel; s += step) {
+    const double v = std::min(s, max_travel);
+    if (touches(v)) {
+      double hit = v;
+      while (hit - free > tolerance) {
+        const double mid = 0.5 * (hit + free);
+        (touches(mid) ? hit : free) = mid;
+      }
+      return free;
+    }
+    free = v;
+  }
+  return max_travel;
 }
 
 ClosingResult closeFingers(const RobotModel& model, const JointVector& qIn, const Iso3& T_O_palm,

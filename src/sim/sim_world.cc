@@ -60,6 +60,21 @@ std::optional<Iso3> SimRobot::pickUp(const Iso3& T_O_palm, const JointVector& q)
   JointVector open = q;
   for (const FingerInfo& f : m.fingers()) open[f.variable] = f.open;
   m.applyCouplings(&open);
+  if (world_->options().pick_up_first_contact) {
+    // From 10 cm short of the planned pose to at most 3 cm past it (the plan was made on the
+    // model, which can lie inside or outside the true surface).
+    const FingerCloser closer(m, world_->objectMesh());
+    const Vec3 in = T_O_palm.linear().col(2);  // palm z points into the object
+    Iso3 T = T_O_palm;
+    T.translation() -= 0.10 * in;
+    const std::optional<double> travel = closer.freeTravel(open, T, in, 0.13);
+    if (!travel || *travel >= 0.13) return std::nullopt;  // blocked, or nothing to grasp there
+    T.translation() += *travel * in;
+    world_->T_O_palm = T;
+    world_->q = closer.close(open, T).q;
+    world_->held = true;
+    return T;
+  }
   Iso3 T = T_O_palm;
   const Vec3 back = -T_O_palm.linear().col(2);  // palm z points into the object
   const auto& palm = m.links()[m.tipLink()].collision;

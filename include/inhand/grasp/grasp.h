@@ -27,7 +27,22 @@
 
 namespace inhand {
 
+// How a candidate's open hand comes to the object along its approach.
+enum class GraspApproach {
+  // The palm slides until its face touches the model; the open fingers may start inside the
+  // object (the BarrettHand's open fingertips converge to ~34 mm apart, so for wider objects they
+  // do; the README measures what that costs).
+  kPalm,
+  // The whole open hand comes in from outside until any link, palm or finger, touches the model:
+  // it never starts inside the object (physically valid; with this BarrettHand model it finds
+  // few stable grasps of objects wider than its fingertips' gap).
+  kFirstContact,
+};
+const char* graspApproachName(GraspApproach a);  // palm, first_contact
+bool parseGraspApproach(const std::string& name, GraspApproach* a);
+
 struct GraspOptions {
+  GraspApproach approach = GraspApproach::kPalm;
   int approaches = 64;               // approach directions over the sphere
   int rolls = 4;                     // palm rolls about each approach (over 180°)
   std::vector<double> spreads{0.0};  // spread joint values tried (hands with a spread joint)

@@ -4,6 +4,7 @@
 // arm links is not checked (links adjacent to the base are listed in the config and skipped
 // against it).
 #include <memory>
+#include <optional>
 #include <string>
 
 #include "inhand/robot/robot_model.h"
@@ -75,6 +76,17 @@ class FingerCloser {
   FingerCloser(const RobotModel& model, const TriangleMesh& object_O);
   ClosingResult close(const JointVector& q, const Iso3& T_O_palm, double step = 0.02,
                       double tolerance = 1e-4) const;
+  // Whether any hand link (palm included) at q, palm at T_O_palm, touches the object's surface.
+  // (A link wholly inside the object does not touch it: approach from outside.)
+  bool handTouches(const JointVector& q, const Iso3& T_O_palm) const;
+  // The approach to first contact: how far the whole hand at q can move from T_O_palm along the
+  // unit direction dir_O before any link touches the object, stepping `step` and bisecting to
+  // `tolerance` (m); `max_travel` when nothing is touched on the way, nullopt when the hand
+  // touches the object at T_O_palm already. `step` must be below the thinnest link and object
+  // wall for no contact to be stepped over.
+  std::optional<double> freeTravel(const JointVector& q, const Iso3& T_O_palm, const Vec3& dir_O,
+                                   double max_travel, double step = 0.01,
+                                   double tolerance = 5e-4) const;
 
  private:
   struct Geometry;

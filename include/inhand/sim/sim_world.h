@@ -19,6 +19,9 @@ struct SimOptions {
   bool noise = true;            // sensor noise
   uint64_t seed = 1;            // noise seed
   double room_radius_m = 2.5;   // background: a room around the camera (0: none)
+  // Pick-up: false backs the palm off until it is clear of the true object (the fingers may end
+  // inside it); true stops the open hand at the first contact of any link (physically valid).
+  bool pick_up_first_contact = false;
   std::string validate() const;
 };
 
@@ -68,8 +71,9 @@ class SimRobot : public RobotInterface {
   // Put-down and pick-up are instantaneous state changes in the simulator (no trajectories).
   bool putDown() override;
   // The palm is backed off along its axis (2 mm steps) until it is clear of the true object (the
-  // planner placed it on its model, which can lie inside the true surface), then the fingers
-  // close on the true object.
+  // planner placed it on its model, which can lie inside the true surface), or with
+  // SimOptions::pick_up_first_contact the open hand comes in along its axis until any link
+  // touches the true object; then the fingers close on the true object.
   std::optional<Iso3> pickUp(const Iso3& T_O_palm, const JointVector& q) override;
 
  private:
