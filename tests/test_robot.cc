@@ -384,6 +384,27 @@ TEST(Hand, FreeTravelStopsAtTheFirstContactOfAnyLink) {
   EXPECT_DOUBLE_EQ(*closer.freeTravel(open, Iso3::Identity(), -Vec3::UnitZ(), 0.3), 0.3);
 }
 
+// How deep slabs get between the open BarrettHand's fingers, against its URDF geometry: a 10 mm
+// slab across palm x slips between the fingertips down to the knuckle links' tops (palm face
+// 90 mm + knuckle 20 mm), a 60 mm one lands on the inward-bent fingertips, and depth never grows
+// with width. Across palm y, finger 3 sits on the slab's path.
+TEST(Hand, OpenHandDepthAgainstTheUrdfGeometry) {
+  const RobotModel& m = wam();
+  const double reach = openHandReach(m);
+  EXPECT_GT(reach, 0.1);
+  const double tipZ = 0.09 + reach;  // the palm link's top is its face at z = 90 mm
+  EXPECT_NEAR(openHandDepth(m, 0, 0.010), tipZ - 0.11, 5e-4);
+  EXPECT_NEAR(openHandDepth(m, 0, 0.060), 0.0, 5e-4);
+  double previous = reach;
+  for (int w = 10; w <= 100; w += 10) {
+    const double d = openHandDepth(m, 0, 0.001 * w);
+    EXPECT_LE(d, previous + 5e-4) << w;
+    previous = d;
+  }
+  EXPECT_NEAR(openHandDepth(m, 1, 0.010), 0.0, 5e-4);
+  EXPECT_THROW(openHandDepth(m, 2, 0.01), std::runtime_error);
+}
+
 TEST(Hand, ParallelJawStopsAtContact) {
   const RobotModel& m = arm6();
   const Vec3 c(0, 0, 0.07), size(0.03, 0.04, 0.03);

@@ -18,6 +18,7 @@
 #include "inhand/geometry/ray_scene.h"
 #include "inhand/mesh/extract.h"
 #include "inhand/report/snapshot.h"
+#include "inhand/robot/collision.h"
 #include "inhand/robot/reachability.h"
 #include "inhand/sensor/frame_set.h"
 #include "inhand/sensor/render.h"
@@ -249,6 +250,19 @@ int runRobot(const RobotArgs& args) {
   std::printf(
       "%s%s\n", model.spreadVariable() >= 0 ? ", spread " : "",
       model.spreadVariable() >= 0 ? model.variable(model.spreadVariable()).name.c_str() : "");
+  if (!model.fingers().empty()) {
+    // What the open hand can envelop: how deep slabs of a few widths get between its fingers.
+    std::printf(
+        "open hand: reaches %.0f mm beyond the palm; depth a slab gets between the open "
+        "fingers (mm, from the fingertips):\n",
+        1000 * openHandReach(model));
+    for (int axis = 0; axis < 2; ++axis) {
+      std::printf("  slab across palm %c:", axis == 0 ? 'x' : 'y');
+      for (int w = 10; w <= 100; w += 10)
+        std::printf(" %d mm wide %.0f%s", w, 1000 * openHandDepth(model, axis, 0.001 * w),
+                    w < 100 ? "," : "\n");
+    }
+  }
   ReachabilityOptions ro;
   ro.directions = args.directions;
   ro.rolls = args.rolls;

@@ -7,6 +7,7 @@
 #include <set>
 
 #include "inhand/core/error.h"
+#include "inhand/geometry/primitives.h"
 
 namespace inhand {
 
@@ -307,6 +308,51 @@ ClosingResult FingerCloser::close(const JointVector& qIn, const Iso3& T_O_palm, 
     result.fingers.push_back(fc);
   }
   return result;
+}
+
+namespace {
+JointVector openHand(const RobotModel& model) {
+  JointVector open = model.home();
+  for (const FingerInfo& f : model.fingers()) open[f.variable] = f.open;
+  model.applyCouplings(&open);
+  return open;
+}
+double palmTop(const RobotModel& model) {
+  double top = 0;
+  for (const Primitive& p : model.links()[model.tipLink()].collision)
+    top = std::max(top, p.toMesh().bounds().max.z());
+  return top;
+}
+double handTip(const RobotModel& model, const JointVector& open) {
+  double tip = -std::numeric_limits<double>::infinity();
+  for (const Vec3f& v : HandGeometry(model, open, Iso3::Identity()).mesh().vertices)
+    tip = std::max(tip, double(v.z()));
+  return tip;
+}
+}  // namespace
+
+double openHandReach(const RobotModel& model) {
+  return handTip(model, openHand(model)) - palmTop(model);
+}
+
+double openHandDepth(const RobotModel& model, int axis, double width) {
+  if (axis != 0 && axis != 1) throw Error("openHandDepth: axis must be 0 (palm x) or 1 (palm y)");
+  if (!(width > 0)) throw Error("openHandDepth: width must be positive");
+  const JointVector open = openHand(model);
+  const double tip = handTip(model, open);
+  // The slab's face 5 cm beyond the fingertips; the hand moves towards it along palm z.
+  Vec3 size(1.0, 1.0, 0.02);
+  size[axis] = width;
+  const double face = tip + 0.05;
+  const TriangleMesh slab =
+      transformed(makeBox(size), Iso3(Eigen::Translation3d(0, 0, face + 0.01)));
+  const double reach = tip - palmTop(model);
+  const std::optional<double> travel =
+      FingerCloser(model, slab)
+          .freeTravel(open, Iso3::Identity(), Vec3::UnitZ(), 0.05 + reach + 0.05, 0.005, 2e-4);
+  if (!travel) return 0;
+  // Where the slab's face sits in the hand's frame at the stop, below the fingertips.
+  return std::clamp(*travel - 0.05, 0.0, reach);
 }
 
 }  // namespace inhand

@@ -94,4 +94,14 @@ class FingerCloser {
   std::shared_ptr<const Geometry> geometry_;
 };
 
+// How far objects of a given width get into the open hand (fingers at their `open` values, other
+// joints at home): a slab `width_m` wide across palm x (axis 0) or palm y (axis 1), unbounded
+// along the other palm axis, meets the hand coming along palm z until any link first touches
+// (FingerCloser::freeTravel). Returns the depth from the fingertips' level down to where the slab
+// stops: the hand's whole reach beyond the palm for a slab that slips between the fingers to the
+// palm, about 0 for one that lands on the fingertips.
+double openHandDepth(const RobotModel& model, int axis, double width_m);
+// How far the open hand reaches beyond its palm link along palm z.
+double openHandReach(const RobotModel& model);
+
 }  // namespace inhand
