@@ -239,14 +239,13 @@ void readOptions(const fs::path& file, AllOptions* o) {
     s->integer("frame_subsample", &o->sim.frame_subsample);
     s->boolean("noise", &o->sim.noise);
     s->num("room_radius_m", &o->sim.room_radius_m);
+    // The same two ways as grasp.approach, for the simulator's pick-up.
     std::string pickUp;
     s->string("pick_up", &pickUp);
-    if (pickUp == "first_contact")
-      o->sim.pick_up_first_contact = true;
-    else if (pickUp == "palm")
-      o->sim.pick_up_first_contact = false;
-    else if (!pickUp.empty())
+    GraspApproach a = GraspApproach::kPalm;
+    if (!pickUp.empty() && !parseGraspApproach(pickUp, &a))
       throw Error(s->where() + ".pick_up: must be palm or first_contact");
+    if (!pickUp.empty()) o->sim.pick_up_first_contact = a == GraspApproach::kFirstContact;
     s->finish();
   }
   r.finish();
@@ -308,7 +307,8 @@ Json optionsJson(const AllOptions& o) {
             {"frame_subsample", o.sim.frame_subsample},
             {"noise", o.sim.noise},
             {"room_radius_m", o.sim.room_radius_m},
-            {"pick_up", o.sim.pick_up_first_contact ? "first_contact" : "palm"}}}};
+            {"pick_up", graspApproachName(o.sim.pick_up_first_contact ? GraspApproach::kFirstContact
+                                                                      : GraspApproach::kPalm)}}}};
 }
 
 }  // namespace

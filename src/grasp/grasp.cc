@@ -177,9 +177,8 @@ GraspGeneration generateGrasps(const RobotModel& robot, const TriangleMesh& mesh
     T.translation().setZero();
     const Mat3 R = T.linear();
     JointVector q = robot.home();
-    for (const FingerInfo& f : robot.fingers()) q[f.variable] = f.open;
     if (robot.spreadVariable() >= 0) q[robot.spreadVariable()] = ps.spread;
-    robot.applyCouplings(&q);
+    q = robot.withFingersOpen(q);
     // kFirstContact: the open hand comes in along −d, its palm axis through `origin`, from
     // outside the object until any of its links touches the model.
     double handReach = 0;
@@ -328,13 +327,10 @@ TableTopGrasps tableTopGrasps(const RobotModel& robot, const std::vector<Vec3>& 
   // the visible side is off-centre).
   const Vec3 c = out.axes.centroid + out.axes.axes * (0.5 * (out.axes.min + out.axes.max));
   const Vec3 e1 = out.axes.axes.col(0), e2 = out.axes.axes.col(1), e3 = out.axes.axes.col(2);
-  double palmTop = 0;
-  for (const Primitive& p : robot.links()[robot.tipLink()].collision)
-    palmTop = std::max(palmTop, p.toMesh().bounds().max.z());
+  const double palmTop = robot.palmFaceZ();
   JointVector open = robot.home();
-  for (const FingerInfo& f : robot.fingers()) open[f.variable] = f.open;
   if (robot.spreadVariable() >= 0) open[robot.spreadVariable()] = 0.0;
-  robot.applyCouplings(&open);
+  open = robot.withFingersOpen(open);
   const double tableTop = robot.table().topZ();
   // The open hand's span along the palm x axis (the fingers' closing direction).
   double span = 0;

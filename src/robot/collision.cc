@@ -195,7 +195,8 @@ double HandGeometry::distance(const Vec3& p_F) const {
 
 struct FingerCloser::Geometry {
   GeomPtr object;
-  std::map<std::pair<int, int>, GeomPtr> fingerMesh;  // every hand link's, palm included
+  std::map<std::pair<int, int>, GeomPtr>
+      linkMesh;  // every hand link's, palm included, by (link, k)
 };
 
 FingerCloser::FingerCloser(const RobotModel& model, const TriangleMesh& object_O) : model_(&model) {
@@ -207,7 +208,7 @@ FingerCloser::FingerCloser(const RobotModel& model, const TriangleMesh& object_O
   for (int li : model.handLinks())
     for (int k = 0; k < int(model.links()[li].collision.size()); ++k) {
       const Primitive& p = model.links()[li].collision[k];
-      g->fingerMesh[{li, k}] = bvhOf(transformed(p.toMesh(), p.T_link_geom.inverse()));
+      g->linkMesh[{li, k}] = bvhOf(transformed(p.toMesh(), p.T_link_geom.inverse()));
     }
   geometry_ = std::move(g);
 }
@@ -218,7 +219,7 @@ bool FingerCloser::handTouches(const JointVector& q, const Iso3& T_O_palm) const
   const Iso3 T_O_B = T_O_palm * T[model.tipLink()].inverse();
   for (int li : model.handLinks())
     for (int k = 0; k < int(model.links()[li].collision.size()); ++k)
-      if (collide(geometry_->fingerMesh.at({li, k}),
+      if (collide(geometry_->linkMesh.at({li, k}),
                   T_O_B * T[li] * model.links()[li].collision[k].T_link_geom, geometry_->object,
                   Iso3::Identity()))
         return true;
@@ -261,7 +262,7 @@ ClosingResult FingerCloser::close(const JointVector& qIn, const Iso3& T_O_palm, 
   INHAND_CHECK(step > 0 && tolerance > 0, "closing step and tolerance must be positive");
   const RobotModel& model = *model_;
   const GeomPtr& object = geometry_->object;
-  const auto& fingerMesh = geometry_->fingerMesh;
+  const auto& linkMesh = geometry_->linkMesh;
   const Iso3 I = Iso3::Identity();
   ClosingResult result;
   result.q = qIn;
@@ -275,7 +276,7 @@ ClosingResult FingerCloser::close(const JointVector& qIn, const Iso3& T_O_palm, 
       Iso3 T_O_B = T_O_palm * T[model.tipLink()].inverse();
       for (int li : f.links)
         for (int k = 0; k < int(model.links()[li].collision.size()); ++k)
-          if (collide(fingerMesh.at({li, k}),
+          if (collide(linkMesh.at({li, k}),
                       T_O_B * T[li] * model.links()[li].collision[k].T_link_geom, object, I))
             return true;
       return false;
@@ -311,18 +312,6 @@ ClosingResult FingerCloser::close(const JointVector& qIn, const Iso3& T_O_palm, 
 }
 
 namespace {
-JointVector openHand(const RobotModel& model) {
-  JointVector open = model.home();
-  for (const FingerInfo& f : model.fingers()) open[f.variable] = f.open;
-  model.applyCouplings(&open);
-  return open;
-}
-double palmTop(const RobotModel& model) {
-  double top = 0;
-  for (const Primitive& p : model.links()[model.tipLink()].collision)
-    top = std::max(top, p.toMesh().bounds().max.z());
-  return top;
-}
 double handTip(const RobotModel& model, const JointVector& open) {
   double tip = -std::numeric_limits<double>::infinity();
   for (const Vec3f& v : HandGeometry(model, open, Iso3::Identity()).mesh().vertices)
@@ -332,13 +321,13 @@ double handTip(const RobotModel& model, const JointVector& open) {
 }  // namespace
 
 double openHandReach(const RobotModel& model) {
-  return handTip(model, openHand(model)) - palmTop(model);
+  return handTip(model, model.withFingersOpen(model.home())) - model.palmFaceZ();
 }
 
 double openHandDepth(const RobotModel& model, int axis, double width) {
   if (axis != 0 && axis != 1) throw Error("openHandDepth: axis must be 0 (palm x) or 1 (palm y)");
   if (!(width > 0)) throw Error("openHandDepth: width must be positive");
-  const JointVector open = openHand(model);
+  const JointVector open = model.withFingersOpen(model.home());
   const double tip = handTip(model, open);
   // The slab's face 5 cm beyond the fingertips; the hand moves towards it along palm z.
   Vec3 size(1.0, 1.0, 0.02);
@@ -346,7 +335,7 @@ double openHandDepth(const RobotModel& model, int axis, double width) {
   const double face = tip + 0.05;
   const TriangleMesh slab =
       transformed(makeBox(size), Iso3(Eigen::Translation3d(0, 0, face + 0.01)));
-  const double reach = tip - palmTop(model);
+  const double reach = tip - model.palmFaceZ();
   const std::optional<double> travel =
       FingerCloser(model, slab)
           .freeTravel(open, Iso3::Identity(), Vec3::UnitZ(), 0.05 + reach + 0.05, 0.005, 2e-4);

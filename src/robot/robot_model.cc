@@ -503,6 +503,20 @@ JointVector RobotModel::withArm(const JointVector& q, const Eigen::VectorXd& arm
   return out;
 }
 
+JointVector RobotModel::withFingersOpen(const JointVector& q) const {
+  JointVector out = q;
+  for (const FingerInfo& f : fingers_) out[f.variable] = f.open;
+  applyCouplings(&out);
+  return out;
+}
+
+double RobotModel::palmFaceZ() const {
+  double top = 0;
+  for (const Primitive& p : links_[size_t(tipLink_)].collision)
+    top = std::max(top, p.toMesh().bounds().max.z());
+  return top;
+}
+
 Eigen::VectorXd RobotModel::arm(const JointVector& q) const {
   Eigen::VectorXd a(armDof());
   for (int i = 0; i < armDof(); ++i) a[i] = q[armVariables_[i]];

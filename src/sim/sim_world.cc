@@ -57,9 +57,7 @@ bool SimRobot::putDown() {
 
 std::optional<Iso3> SimRobot::pickUp(const Iso3& T_O_palm, const JointVector& q) {
   const RobotModel& m = world_->model();
-  JointVector open = q;
-  for (const FingerInfo& f : m.fingers()) open[f.variable] = f.open;
-  m.applyCouplings(&open);
+  const JointVector open = m.withFingersOpen(q);
   if (world_->options().pick_up_first_contact) {
     // From 10 cm short of the planned pose to at most 3 cm past it (the plan was made on the
     // model, which can lie inside or outside the true surface).
@@ -143,14 +141,10 @@ std::pair<Iso3, JointVector> defaultGrasp(const RobotModel& model, const Triangl
   T.linear().col(0) = across;
   T.linear().col(1) = (-approach).cross(across);
   // Palm face (the top of the palm link's geometry along palm z) just touching the object's face.
-  double palmHeight = 0;
-  for (const Primitive& p : model.links()[model.tipLink()].collision)
-    palmHeight = std::max(palmHeight, p.toMesh().bounds().max.z());
-  T.translation() = b.center() + (0.5 * size[middle] + palmHeight + 0.002) * approach;
+  T.translation() = b.center() + (0.5 * size[middle] + model.palmFaceZ() + 0.002) * approach;
   JointVector q = model.home();
-  for (const FingerInfo& f : model.fingers()) q[f.variable] = f.open;
   if (model.spreadVariable() >= 0) q[model.spreadVariable()] = 0.0;
-  model.applyCouplings(&q);
+  q = model.withFingersOpen(q);
   ClosingResult r = closeFingers(model, q, T, object);
   return {T, r.q};
 }

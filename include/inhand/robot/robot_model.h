@@ -113,6 +113,10 @@ class RobotModel {
   // Sets mimic joints from their leaders.
   void applyCouplings(JointVector* q) const;
   JointVector withArm(const JointVector& q, const Eigen::VectorXd& arm) const;
+  // q with every finger at its `open` value (spread as in q), couplings applied.
+  JointVector withFingersOpen(const JointVector& q) const;
+  // The palm face: the top of the palm (tip) link's collision geometry along palm z, m.
+  double palmFaceZ() const;
   Eigen::VectorXd arm(const JointVector& q) const;
   bool withinLimits(const JointVector& q, double tol = 1e-9) const;
 
