@@ -405,6 +405,41 @@ TEST(Hand, OpenHandDepthAgainstTheUrdfGeometry) {
   EXPECT_THROW(openHandDepth(m, 2, 0.01), std::runtime_error);
 }
 
+// The spread joint swings fingers 1 and 2 outward around the palm, as on the real hand: at 0
+// both face finger 3 across the palm (flexion joints 50 mm behind the centre), at 90° they face
+// each other across palm y (flexion joints 75 mm either side), at 180° both sit beside finger 3.
+// They never cross the palm's centre line.
+TEST(Hand, SpreadSwingsFingersOneAndTwoOutwardAroundThePalm) {
+  const RobotModel& m = wam();
+  const int palm = m.tipLink();
+  const int f1 = m.linkIndex("bh_f1_medial"), f2 = m.linkIndex("bh_f2_medial");
+  ASSERT_GE(f1, 0);
+  ASSERT_GE(f2, 0);
+  auto flexJoints = [&](double spread) {
+    JointVector q = m.home();
+    q[m.spreadVariable()] = spread;
+    m.applyCouplings(&q);
+    const std::vector<Iso3> T = m.linkPoses(q);
+    const Iso3 T_palm_B = T[palm].inverse();
+    return std::make_pair(Vec3(T_palm_B * T[f1].translation()),
+                          Vec3(T_palm_B * T[f2].translation()));
+  };
+  auto [a0, b0] = flexJoints(0.0);
+  EXPECT_LT((a0 - Vec3(-0.05, 0.025, 0.09)).norm(), 1e-9) << a0.transpose();
+  EXPECT_LT((b0 - Vec3(-0.05, -0.025, 0.09)).norm(), 1e-9) << b0.transpose();
+  auto [a90, b90] = flexJoints(M_PI / 2);
+  EXPECT_LT((a90 - Vec3(0, 0.075, 0.09)).norm(), 1e-9) << a90.transpose();
+  EXPECT_LT((b90 - Vec3(0, -0.075, 0.09)).norm(), 1e-9) << b90.transpose();
+  auto [a180, b180] = flexJoints(M_PI);
+  EXPECT_LT((a180 - Vec3(0.05, 0.025, 0.09)).norm(), 1e-9) << a180.transpose();
+  EXPECT_LT((b180 - Vec3(0.05, -0.025, 0.09)).norm(), 1e-9) << b180.transpose();
+  for (int k = 0; k <= 18; ++k) {
+    auto [a, b] = flexJoints(M_PI * k / 18);
+    EXPECT_GT(a.y(), 0.02) << k;
+    EXPECT_LT(b.y(), -0.02) << k;
+  }
+}
+
 TEST(Hand, ParallelJawStopsAtContact) {
   const RobotModel& m = arm6();
   const Vec3 c(0, 0, 0.07), size(0.03, 0.04, 0.03);
