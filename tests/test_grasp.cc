@@ -88,7 +88,7 @@ TEST(GraspGeneration, CandidatesAreStableClearOfTheTableAndReachable) {
   o.approaches = 24;
   o.rolls = 2;
   GraspGeneration g = generateGrasps(r, model.mesh, T_B_O, r.home(), o);
-  EXPECT_EQ(g.tried, 48);
+  EXPECT_EQ(g.tried, 48 + 24);  // + the edge poses: 6 palm axes × 4 (palm y, palm x signs)
   ASSERT_GT(g.candidates.size(), 3u);
   CollisionChecker checker(r);
   for (size_t k = 0; k < g.candidates.size(); ++k) {
@@ -196,7 +196,8 @@ TEST(TableTop, FirstGraspApproachesPerpendicularToTheMainAxisAndIsReachable) {
   std::vector<Vec3> pts = visibleBoxPoints(Vec3(0.03, 0.08, 0.1), 0.0);
   TableTopGraspOptions o;
   TableTopGrasps g = tableTopGrasps(r, pts, Vec3::UnitZ(), T_B_O, r.home(), o, 0.15);
-  EXPECT_EQ(g.tried, 2 * o.approaches + 2);  // + 2 from above (the main axis is vertical)
+  // Across and along the main axis, 2 from above (the main axis is vertical), and the edge poses.
+  EXPECT_EQ(g.tried, 3 * o.approaches + 2);
   ASSERT_FALSE(g.candidates.empty());
   CollisionChecker checker(r);
   for (const GraspCandidate& c : g.candidates) {
@@ -211,9 +212,30 @@ TEST(TableTop, FirstGraspApproachesPerpendicularToTheMainAxisAndIsReachable) {
       for (const Primitive& prim : r.links()[r.tipLink()].collision)
         ASSERT_FALSE(prim.contains(T_palm_O * p));
   }
-  // Fingers across the main axis come first, and close across the 60 mm side (the only one
-  // within the hand's span; the rectangle's axes in 0.5° steps).
-  EXPECT_GT(std::abs(g.candidates.front().T_O_palm.linear().col(0).x()), std::cos(M_PI / 360));
+  // Edge poses come first: spread 90°, palm x up, fingers 1 and 2 across the 60 mm side (the
+  // only one they straddle), the palm axis `edge_inset_m` below the top, and the open hand
+  // clear of the whole box (its hidden faces included) with the knuckles `clearance_m` from it.
+  const GraspCandidate& edge = g.candidates.front();
+  EXPECT_NEAR(edge.q[r.spreadVariable()], M_PI / 2, 1e-12);
+  EXPECT_GT(edge.T_O_palm.linear().col(0).z(), 0.999);
+  EXPECT_GT(std::abs(edge.T_O_palm.linear().col(1).x()), std::cos(M_PI / 360));
+  EXPECT_NEAR(edge.T_O_palm.translation().z(), 0.2 - o.edge_inset_m, 1e-3);
+  const FingerCloser trueBox(
+      r, transformed(makeBox(Vec3(0.06, 0.16, 0.2)), Iso3(Eigen::Translation3d(0, 0, 0.1))));
+  EXPECT_FALSE(trueBox.handTouches(edge.q, edge.T_O_palm));
+  EXPECT_FALSE(
+      trueBox.freeTravel(edge.q, edge.T_O_palm, edge.T_O_palm.linear().col(2), 0.1).value_or(0) >=
+      0.1);  // it does land on the box within 10 cm
+  // Then fingers across the main axis, closing across the 60 mm side (the only one within the
+  // hand's span at spread 0; the rectangle's axes in 0.5° steps).
+  const GraspCandidate* across = nullptr;
+  for (const GraspCandidate& c : g.candidates)
+    if (c.q[r.spreadVariable()] == 0.0) {
+      across = &c;
+      break;
+    }
+  ASSERT_NE(across, nullptr);
+  EXPECT_GT(std::abs(across->T_O_palm.linear().col(0).x()), std::cos(M_PI / 360));
   // A 40 cm wide block fits no pose.
   TableTopGrasps wide = tableTopGrasps(r, visibleBoxPoints(Vec3(0.2, 0.2, 0.1), 0.0), Vec3::UnitZ(),
                                        T_B_O, r.home(), o, 0.15);
@@ -237,7 +259,10 @@ TEST(TableTop, ShortObjectsAreGraspedFromTheSideWithThePalmRaised) {
     const Vec3 palm = c.T_O_palm.translation();
     EXPECT_LT(std::abs(c.T_O_palm.linear().col(2).z()), 1e-9) << "a side approach";
     EXPECT_GT(palm.z(), 0.037) << "raised above the middle";
-    EXPECT_LE(palm.z(), 0.074 - o.clearance_m + 1e-9) << "still below the top";
+    // Edge poses sit `edge_inset_m` below the top, the raised ones at least `clearance_m`.
+    const bool edge = c.q[r.spreadVariable()] != 0.0;
+    EXPECT_LE(palm.z(), 0.074 - (edge ? o.edge_inset_m : o.clearance_m) + 1e-9)
+        << "still below the top";
     for (const Vec3f& v : HandGeometry(r, c.q, T_B_O * c.T_O_palm).mesh().vertices)
       EXPECT_GT(v.z(), r.table().topZ() + o.table_clearance_m);
     EXPECT_FALSE(checker.inCollision(c.q));
@@ -259,6 +284,9 @@ TEST(GraspGeneration, ShortObjectsGetSideGraspsWithThePalmRaised) {
   GraspOptions o;
   o.approaches = 32;
   o.rolls = 2;
+  // The raise is for palm-first candidates: with first contact (the default) a 40 mm box is
+  // wider than the open fingertips' gap at spread 0, and only the edge poses hold it.
+  o.approach = GraspApproach::kPalm;
   GraspGeneration g = generateGrasps(r, box, T_B_O, r.home(), o);
   ASSERT_FALSE(g.candidates.empty());
   int raised = 0;
@@ -268,7 +296,8 @@ TEST(GraspGeneration, ShortObjectsGetSideGraspsWithThePalmRaised) {
     const Mat3 R = c.T_O_palm.linear();
     // Near-horizontal approaches (the slide along the axis moves the palm up to ~5 mm in z):
     // the palm axis is at most 1 cm below the top (z = 0.037), and above the middle when raised.
-    if (std::abs(R.col(2).z()) > 0.05) continue;
+    // Edge poses (spread 90°) sit `edge_inset_m` below the top instead.
+    if (std::abs(R.col(2).z()) > 0.05 || c.q[r.spreadVariable()] != 0.0) continue;
     EXPECT_LE(c.T_O_palm.translation().z(), 0.027 + 0.006);
     raised += c.T_O_palm.translation().z() > 0.006;
   }

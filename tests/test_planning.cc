@@ -6,6 +6,7 @@
 #include "inhand/geometry/primitives.h"
 #include "inhand/planning/view_quality.h"
 #include "inhand/planning/view_selection.h"
+#include "inhand/robot/collision.h"
 #include "test_util.h"
 
 using namespace inhand;
@@ -305,4 +306,47 @@ TEST(ViewSelection, CoarseToFineChoosesTheExhaustivePassView) {
   ViewPlannerOptions bad;
   bad.refine = -1;
   EXPECT_THROW(ViewPlanner(r, DepthCameraOptions{}, NoiseModelOptions{}, bad), std::runtime_error);
+}
+
+// The initial trajectory's moves (reach with path_free): the cracker box held at its top edge
+// hangs 20 cm from the palm, and some of the cheapest rolls swing the arm through it on the way.
+// With path_free every chosen move is collision-free against the held box; without, at least one
+// is not (so the check matters here), and where both find a view the free one costs no less.
+TEST(ViewSelection, PathFreeReachKeepsTheArmClearOfTheHeldObject) {
+  const RobotModel& r = wam();
+  Aabb box;
+  box.extend(Vec3(-0.03, -0.079, -0.105));
+  box.extend(Vec3(0.03, 0.079, 0.105));
+  Iso3 T_O_palm = Iso3::Identity();  // palm x up, fingers 1 and 2 across the 60 mm side
+  T_O_palm.linear().col(0) = Vec3::UnitZ();
+  T_O_palm.linear().col(1) = Vec3::UnitX();
+  T_O_palm.linear().col(2) = Vec3::UnitY();
+  T_O_palm.translation() = Vec3(0, -0.079 - 0.11, 0.1);
+  JointVector q = r.home();
+  q[r.spreadVariable()] = M_PI / 2;
+  q = r.withFingersOpen(q);
+  ViewPlannerOptions o;
+  o.rolls = 8;
+  const ViewPlanner planner(r, DepthCameraOptions{}, NoiseModelOptions{}, o);
+  // Start from a presentation pose of the object (the first reachable direction).
+  const auto start = planner.reach({Vec3(1, 0, 0)}, Vec3::Zero(), box, GraspState{T_O_palm, q});
+  ASSERT_TRUE(start[0].has_value());
+  const GraspState g{T_O_palm, r.withArm(q, start[0]->arm)};
+  CollisionChecker checker(r);
+  checker.setHeldObject(transformed(makeBox(box.size()), Iso3(Eigen::Translation3d(box.center()))),
+                        T_O_palm.inverse());
+  const std::vector<Vec3> dirs = fibonacciSphere(40);
+  const auto plain = planner.reach(dirs, Vec3::Zero(), box, g);
+  const auto free = planner.reach(dirs, Vec3::Zero(), box, g, true);
+  int colliding = 0, found = 0;
+  for (size_t k = 0; k < dirs.size(); ++k) {
+    if (plain[k] && !checker.pathFree(g.q, r.withArm(g.q, plain[k]->arm), 0.05)) ++colliding;
+    if (!free[k]) continue;
+    ++found;
+    EXPECT_TRUE(checker.pathFree(g.q, r.withArm(g.q, free[k]->arm), 0.05)) << k;
+    ASSERT_TRUE(plain[k].has_value());
+    EXPECT_GE(free[k]->cost_s, plain[k]->cost_s - 1e-12);
+  }
+  EXPECT_GT(colliding, 0) << "the scenario should have moves through the box";
+  EXPECT_GT(found, 0);
 }

@@ -199,6 +199,8 @@ void readOptions(const fs::path& file, AllOptions* o) {
     t->num("clearance_m", &v.grasp.clearance_m);
     t->num("table_clearance_m", &v.grasp.table_clearance_m);
     t->num("point_cell_m", &v.grasp.point_cell_m);
+    t->numbers("edge_spreads", &v.grasp.edge_spreads);
+    t->num("edge_inset_m", &v.grasp.edge_inset_m);
     t->finish();
   }
   if (auto g = r.object("grasp")) {
@@ -210,6 +212,8 @@ void readOptions(const fs::path& file, AllOptions* o) {
     g->integer("approaches", &v.approaches);
     g->integer("rolls", &v.rolls);
     g->numbers("spreads", &v.spreads);
+    g->numbers("edge_spreads", &v.edge_spreads);
+    g->num("edge_inset_m", &v.edge_inset_m);
     g->num("friction", &v.friction);
     g->integer("cone_edges", &v.cone_edges);
     g->integer("wrench_directions", &v.wrench_directions);
@@ -280,12 +284,16 @@ Json optionsJson(const AllOptions& o) {
             {"approaches", o.multi.table_top.grasp.approaches},
             {"clearance_m", o.multi.table_top.grasp.clearance_m},
             {"table_clearance_m", o.multi.table_top.grasp.table_clearance_m},
-            {"point_cell_m", o.multi.table_top.grasp.point_cell_m}}},
+            {"point_cell_m", o.multi.table_top.grasp.point_cell_m},
+            {"edge_spreads", o.multi.table_top.grasp.edge_spreads},
+            {"edge_inset_m", o.multi.table_top.grasp.edge_inset_m}}},
           {"grasp",
            {{"approach", graspApproachName(g.approach)},
             {"approaches", g.approaches},
             {"rolls", g.rolls},
             {"spreads", g.spreads},
+            {"edge_spreads", g.edge_spreads},
+            {"edge_inset_m", g.edge_inset_m},
             {"friction", g.friction},
             {"cone_edges", g.cone_edges},
             {"wrench_directions", g.wrench_directions},

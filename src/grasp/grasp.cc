@@ -4,12 +4,14 @@
 #include <chrono>
 #include <cmath>
 #include <map>
+#include <optional>
 #include <random>
 
 #include "inhand/core/error.h"
 #include "inhand/core/parallel.h"
 #include "inhand/core/pose.h"
 #include "inhand/core/random.h"
+#include "inhand/geometry/primitives.h"
 #include "inhand/robot/collision.h"
 #include "inhand/robot/ik.h"
 
@@ -33,6 +35,9 @@ std::string GraspOptions::validate() const {
   if (approaches < 1) return "approaches must be >= 1";
   if (rolls < 1) return "rolls must be >= 1";
   if (spreads.empty()) return "spreads must not be empty";
+  for (double s : edge_spreads)
+    if (!std::isfinite(s)) return "edge_spreads must be finite";
+  if (!(edge_inset_m >= 0 && edge_inset_m < 0.05)) return "edge_inset_m must be in [0, 0.05) m";
   if (!(friction > 0 && friction <= 2)) return "friction must be in (0, 2]";
   if (cone_edges < 3 || cone_edges > 64) return "cone_edges must be in 3..64";
   if (wrench_directions < 12) return "wrench_directions must be >= 12";
@@ -158,38 +163,81 @@ GraspGeneration generateGrasps(const RobotModel& robot, const TriangleMesh& mesh
   for (const SurfacePoint& sm : samples)
     maxRise = std::max(maxRise, (sm.p - centre).dot(up) - 0.01);
 
-  // Every (approach, roll, spread) pose, closed to contact on both cores.
+  // Every (approach, roll, spread) pose with the palm axis through the centre; then the edge
+  // poses, aligned with the model's principal axes (palm z along ± one axis, palm y along
+  // another, palm x either way along the third: the hand is not symmetric there). Closed to
+  // contact on both cores.
   struct Pose {
-    Vec3 approach;
-    double roll, spread;
+    Mat3 R;  // palm orientation in O; palm z points into the object
+    double spread;
+    bool edge;
   };
   std::vector<Pose> poses;
   for (const Vec3& d : fibonacciSphere(o.approaches))
-    for (int r = 0; r < o.rolls; ++r)
-      for (double s : o.spreads) poses.push_back({d, M_PI * r / o.rolls, s});
+    for (int r = 0; r < o.rolls; ++r) {
+      const Mat3 R = cameraPoseInObject(centre, -d, 1.0, M_PI * r / o.rolls).linear();
+      for (double s : o.spreads) poses.push_back({R, s, false});
+    }
+  if (robot.spreadVariable() >= 0 && !o.edge_spreads.empty()) {
+    std::vector<Vec3> points;
+    for (const SurfacePoint& sm : samples) points.push_back(sm.p);
+    const Mat3 A = principalAxes(points).axes;
+    for (int z = 0; z < 3; ++z)
+      for (double sz : {1.0, -1.0})
+        for (int y = 0; y < 3; ++y) {
+          if (y == z) continue;
+          for (double sy : {1.0, -1.0}) {
+            Mat3 R;
+            R.col(2) = sz * A.col(z);
+            R.col(1) = sy * A.col(y);
+            R.col(0) = R.col(1).cross(R.col(2));
+            for (double s : o.edge_spreads) poses.push_back({R, s, true});
+          }
+        }
+  }
   out.tried = int(poses.size());
   std::vector<std::optional<GraspCandidate>> found(poses.size());
   const FingerCloser closer(robot, mesh);
+  // The open hand's bounding box in the palm frame, per spread value.
+  struct OpenHandBoxes {
+    std::map<double, Aabb> boxes;
+    Aabb at(double spread) const { return boxes.at(spread); }
+  } openHand;
+  for (const Pose& ps : poses)
+    if (!openHand.boxes.count(ps.spread)) {
+      JointVector q = robot.home();
+      if (robot.spreadVariable() >= 0) q[robot.spreadVariable()] = ps.spread;
+      openHand.boxes[ps.spread] =
+          HandGeometry(robot, robot.withFingersOpen(q), Iso3::Identity()).mesh().bounds();
+    }
   parallelFor(0, int(poses.size()), [&](int i) {
     const Pose& ps = poses[i];
-    // Palm z points into the object (against the outward approach direction d).
-    Iso3 T = cameraPoseInObject(centre, -ps.approach, 1.0, ps.roll);  // z = −d, rolled
-    T.translation().setZero();
-    const Mat3 R = T.linear();
+    Iso3 T = Iso3::Identity();
+    T.linear() = ps.R;
+    const Mat3& R = ps.R;
     JointVector q = robot.home();
     if (robot.spreadVariable() >= 0) q[robot.spreadVariable()] = ps.spread;
     q = robot.withFingersOpen(q);
     // kFirstContact: the open hand comes in along −d, its palm axis through `origin`, from
     // outside the object until any of its links touches the model.
-    double handReach = 0;
-    if (o.approach == GraspApproach::kFirstContact)
-      for (const Vec3f& v : HandGeometry(robot, q, Iso3::Identity()).mesh().vertices)
-        handReach = std::max(handReach, double(v.norm()));
+    // The travel starts where the open hand's box (palm frame) first reaches a sample inside
+    // its footprint: nothing can touch earlier.
+    Aabb handBox;
+    if (o.approach == GraspApproach::kFirstContact) handBox = openHand.at(ps.spread);
     auto firstContact = [&](const Vec3& origin) {
-      const double start = 2 * rho + handReach + 0.01;
+      double nearest = std::numeric_limits<double>::infinity();
+      for (const SurfacePoint& sm : samples) {
+        const Vec3 p = R.transpose() * (sm.p - origin);
+        if (p.x() < handBox.min.x() - 0.005 || p.x() > handBox.max.x() + 0.005 ||
+            p.y() < handBox.min.y() - 0.005 || p.y() > handBox.max.y() + 0.005)
+          continue;
+        nearest = std::min(nearest, p.z());
+      }
+      if (!std::isfinite(nearest)) return false;
+      const double start = handBox.max.z() - nearest + 0.01, travelMax = 2 * rho + 0.02;
       T.translation() = origin - start * R.col(2);
-      const std::optional<double> travel = closer.freeTravel(q, T, R.col(2), start + rho);
-      if (!travel || *travel >= start + rho) return false;
+      const std::optional<double> travel = closer.freeTravel(q, T, R.col(2), travelMax);
+      if (!travel || *travel >= travelMax) return false;
       T.translation() += *travel * R.col(2);
       return true;
     };
@@ -209,14 +257,24 @@ GraspGeneration generateGrasps(const RobotModel& robot, const TriangleMesh& mesh
       T.translation() = origin + R * Vec3(0, 0, nearest - palm.max.z() - 0.002);
       return true;
     };
-    if (!slide(centre)) return;
+    // Edge poses: the palm axis moves along palm x until the model's extent along it ends
+    // `edge_inset_m` beyond the axis, so that fingers 1 and 2 (across palm y at a 90° spread)
+    // straddle the object near its edge and finger 3 closes over that edge.
+    Vec3 origin = centre;
+    if (ps.edge) {
+      double extent = -std::numeric_limits<double>::infinity();
+      for (const SurfacePoint& sm : samples)
+        extent = std::max(extent, (sm.p - centre).dot(R.col(0)));
+      origin += (extent - o.edge_inset_m) * R.col(0);
+    }
+    if (!slide(origin)) return;
     // On a short object the open hand reaches below the table top: the palm axis rises along
     // the table normal until the hand clears it (as for the first grasp), within maxRise.
     double lowest = std::numeric_limits<double>::infinity();
     for (const Vec3f& v : HandGeometry(robot, q, T_B_O * T).mesh().vertices)
       lowest = std::min(lowest, double(v.z()));
     const double rise = tableTop + 0.003 - lowest;
-    if (rise > 0 && (rise > maxRise || !slide(centre + rise * up))) return;
+    if (rise > 0 && (rise > maxRise || !slide(origin + rise * up))) return;
     ClosingResult closed = closer.close(q, T);
     GraspCandidate c;
     c.T_O_palm = T;
@@ -300,6 +358,9 @@ std::string TableTopGraspOptions::validate() const {
   if (!(point_cell_m > 0 && point_cell_m < 0.05)) return "point_cell_m must be in (0, 0.05) m";
   if (!(inside_fraction >= 0 && inside_fraction < 0.5))
     return "inside_fraction must be in [0, 0.5)";
+  for (double s : edge_spreads)
+    if (!std::isfinite(s)) return "edge_spreads must be finite";
+  if (!(edge_inset_m >= 0 && edge_inset_m < 0.05)) return "edge_inset_m must be in [0, 0.05) m";
   return {};
 }
 
@@ -328,9 +389,15 @@ TableTopGrasps tableTopGrasps(const RobotModel& robot, const std::vector<Vec3>& 
   const Vec3 c = out.axes.centroid + out.axes.axes * (0.5 * (out.axes.min + out.axes.max));
   const Vec3 e1 = out.axes.axes.col(0), e2 = out.axes.axes.col(1), e3 = out.axes.axes.col(2);
   const double palmTop = robot.palmFaceZ();
-  JointVector open = robot.home();
-  if (robot.spreadVariable() >= 0) open[robot.spreadVariable()] = 0.0;
-  open = robot.withFingersOpen(open);
+  auto openAt = [&](double spread) {
+    JointVector q = robot.home();
+    if (robot.spreadVariable() >= 0) q[robot.spreadVariable()] = spread;
+    return robot.withFingersOpen(q);
+  };
+  std::map<double, JointVector> openHands;
+  openHands[0.0] = openAt(0.0);
+  for (double s : o.edge_spreads) openHands[s] = openAt(s);
+  const JointVector& open = openHands.at(0.0);
   const double tableTop = robot.table().topZ();
   // The open hand's span along the palm x axis (the fingers' closing direction).
   double span = 0;
@@ -341,7 +408,8 @@ TableTopGrasps tableTopGrasps(const RobotModel& robot, const std::vector<Vec3>& 
 
   struct Pose {
     Iso3 T_O_palm;
-    int roll;  // 0: fingers close across the main axis, 1: along it, 2: from above
+    int roll;  // 0: fingers close across the main axis, 1: along it, 2: from above, 3: edge
+    double spread = 0;
   };
   std::vector<Pose> poses;
   // Palm z along −a (a: outward, object → palm), fingers closing along x, the palm face
@@ -362,6 +430,23 @@ TableTopGrasps tableTopGrasps(const RobotModel& robot, const std::vector<Vec3>& 
       const Vec3 a = std::cos(phi) * e2 + std::sin(phi) * e3;
       poses.push_back({palmPose(a, roll == 0 ? e1.cross(a).normalized() : e1), roll});
     }
+  // Edge poses (hands with a spread joint, at each of `edge_spreads`): from the side, palm x
+  // up the table normal with the palm axis `edge_inset_m` below the points' top, so that
+  // fingers 1 and 2 straddle the object across palm y and finger 3 closes over its top edge.
+  if (robot.spreadVariable() >= 0)
+    for (double spread : o.edge_spreads)
+      for (int k = 0; k < o.approaches; ++k) {
+        const double phi = 2 * M_PI * k / o.approaches;
+        const Vec3 a = std::cos(phi) * e2 + std::sin(phi) * e3;
+        const Vec3 h = (a - a.dot(up_O.normalized()) * up_O.normalized());
+        if (h.norm() < 0.5) continue;  // the edge poses approach from the side
+        const Vec3 ah = h.normalized(), x = up_O.normalized();
+        Pose ps{palmPose(ah, x), 3, spread};
+        double top = -std::numeric_limits<double>::infinity();
+        for (const Vec3& p : thin) top = std::max(top, (p - c).dot(x));
+        ps.T_O_palm.translation() += (top - o.edge_inset_m) * x;
+        poses.push_back(ps);
+      }
   // Fallback, last in order: from above (for short objects the side approaches put the hand
   // into the table), fingers closing across each horizontal axis, the narrower first.
   if (std::abs(e1.dot(up_O.normalized())) > 0.9)
@@ -371,6 +456,14 @@ TableTopGrasps tableTopGrasps(const RobotModel& robot, const std::vector<Vec3>& 
   const Vec3 up = up_O.normalized();
   double top = -std::numeric_limits<double>::infinity();
   for (const Vec3& p : thin) top = std::max(top, p.dot(up));
+  // The points' principal box in O (collision geometry for the edge poses).
+  std::optional<FingerCloser> boxCloser;
+  if (!o.edge_spreads.empty()) {
+    Iso3 T_O_box = Iso3::Identity();
+    T_O_box.linear() = out.axes.axes;
+    T_O_box.translation() = c;
+    boxCloser.emplace(robot, transformed(makeBox(out.axes.max - out.axes.min), T_O_box));
+  }
   std::vector<uint8_t> ok(poses.size(), 0);
   parallelFor(0, int(poses.size()), [&](int i) {
     // The object fits the hand: its extent across the closing direction is within the open
@@ -378,19 +471,21 @@ TableTopGrasps tableTopGrasps(const RobotModel& robot, const std::vector<Vec3>& 
     // up to 3 cm, until at most `inside_fraction` of the points (noise) are inside it. The
     // fingers close on the object at the pick, as for re-grasps.
     const Mat3 R = poses[i].T_O_palm.linear();
+    const bool edge = poses[i].roll == 3;
+    const JointVector& hand = openHands.at(poses[i].spread);
     double lo = 1e30, hi = -1e30;
     for (const Vec3& p : thin) {
       const double s = (p - c).dot(R.col(0));
       lo = std::min(lo, s);
       hi = std::max(hi, s);
     }
-    if (hi - lo > span) return;
+    if (!edge && hi - lo > span) return;
     // A side approach to a short object puts the lower half of the open hand into the table:
     // the palm rises along the table normal until the hand clears the table, as long as its
     // centre stays `clearance_m` below the points' top (the palm axis still meets the object).
-    if (poses[i].roll != 2) {
+    if (poses[i].roll < 2) {
       double lowest = std::numeric_limits<double>::infinity();
-      for (const Vec3f& v : HandGeometry(robot, open, T_B_O * poses[i].T_O_palm).mesh().vertices)
+      for (const Vec3f& v : HandGeometry(robot, hand, T_B_O * poses[i].T_O_palm).mesh().vertices)
         lowest = std::min(lowest, double(v.z()));
       const double rise = tableTop + o.table_clearance_m + 1e-3 - lowest;
       if (rise > 0) {
@@ -414,8 +509,21 @@ TableTopGrasps tableTopGrasps(const RobotModel& robot, const std::vector<Vec3>& 
       if (!fits) poses[i].T_O_palm.translation() += 0.005 * back;
     }
     if (!fits) return;
+    // An edge pose's fingers must straddle the object: the open hand stays clear of the points'
+    // principal box (the camera saw one side; the box spans the far side like the near one).
+    // From 15 cm back along the approach, the open hand comes in until it touches the box and
+    // stops `clearance_m` short of that; a stop more than 3 cm before the palm face would reach
+    // the box (the knuckle links stand 2 cm on the palm) means the fingertips landed on it.
+    if (edge) {
+      const Vec3 in = R.col(2);
+      Iso3 T0 = poses[i].T_O_palm;
+      T0.translation() -= 0.15 * in;
+      const std::optional<double> travel = boxCloser->freeTravel(hand, T0, in, 0.3);
+      if (!travel || *travel - o.clearance_m - 0.15 < -0.03) return;
+      poses[i].T_O_palm.translation() = T0.translation() + (*travel - o.clearance_m) * in;
+    }
     ok[i] = 1;
-    const HandGeometry handB(robot, open, T_B_O * poses[i].T_O_palm);
+    const HandGeometry handB(robot, hand, T_B_O * poses[i].T_O_palm);
     for (const Vec3f& v : handB.mesh().vertices)
       if (v.z() < tableTop + o.table_clearance_m) return;
     ok[i] = 2;
@@ -427,9 +535,12 @@ TableTopGrasps tableTopGrasps(const RobotModel& robot, const std::vector<Vec3>& 
     if (ok[i] == 2) keep.push_back(i);
   }
   std::vector<Iso3> targets;
-  for (size_t i : keep) targets.push_back(T_B_O * poses[i].T_O_palm);
-  const auto reach = pickAndLift(robot, targets, std::vector<JointVector>(keep.size(), open), q_now,
-                                 lift_m, 4, 13);
+  std::vector<JointVector> hands;
+  for (size_t i : keep) {
+    targets.push_back(T_B_O * poses[i].T_O_palm);
+    hands.push_back(openHands.at(poses[i].spread));
+  }
+  const auto reach = pickAndLift(robot, targets, hands, q_now, lift_m, 4, 13);
   std::vector<std::pair<std::pair<int, double>, GraspCandidate>> found;
   for (size_t k = 0; k < keep.size(); ++k) {
     if (!reach[k]) continue;
@@ -438,7 +549,9 @@ TableTopGrasps tableTopGrasps(const RobotModel& robot, const std::vector<Vec3>& 
     g.T_O_palm = ps.T_O_palm;
     g.q = reach[k]->q;
     g.q_lift = reach[k]->q_lift;
-    found.push_back({{ps.roll, trajectoryTime(robot, robot.arm(q_now), robot.arm(g.q))}, g});
+    // Edge poses first (the fingers envelop the object), then across, along, from above.
+    const int order = ps.roll == 3 ? -1 : ps.roll;
+    found.push_back({{order, trajectoryTime(robot, robot.arm(q_now), robot.arm(g.q))}, g});
   }
   std::stable_sort(found.begin(), found.end(),
                    [](const auto& a, const auto& b) { return a.first < b.first; });

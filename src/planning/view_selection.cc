@@ -114,7 +114,8 @@ Iso3 ViewPlanner::objectPoseFor(const Iso3& T_O_C, double range) const {
 
 std::vector<std::optional<ViewCandidate>> ViewPlanner::reach(const std::vector<Vec3>& dirs,
                                                              const Vec3& centre, const Aabb& box,
-                                                             const GraspState& grasp) const {
+                                                             const GraspState& grasp,
+                                                             bool path_free) const {
   const ViewPlannerOptions& o = options_;
   // IK for every (direction, roll) at the preferred range, then the fallback ranges for the
   // directions with no solution; keep the cheapest collision-free roll.
@@ -150,16 +151,28 @@ std::vector<std::optional<ViewCandidate>> ViewPlanner::reach(const std::vector<V
       if (!sols[i]) return;
       free[i] = !o.check_collisions || !checker.inCollision(model_->withArm(grasp.q, *sols[i]));
     });
-    for (size_t j = 0; j < open.size(); ++j)
+    for (size_t j = 0; j < open.size(); ++j) {
+      std::vector<ViewCandidate> rolls;
       for (int r = 0; r < o.rolls; ++r) {
         size_t i = j * o.rolls + r;
         if (!free[i]) continue;
         ViewCandidate c = cands[i];
         c.arm = *sols[i];
         c.cost_s = trajectoryTime(*model_, current, c.arm);
-        auto& best = chosen[open[j]];
-        if (!best || c.cost_s < best->cost_s) best = c;
+        rolls.push_back(c);
       }
+      // The cheapest (stable order on ties); with path_free the cheapest whose move from
+      // grasp.q is collision-free.
+      std::stable_sort(
+          rolls.begin(), rolls.end(),
+          [](const ViewCandidate& a, const ViewCandidate& b) { return a.cost_s < b.cost_s; });
+      for (const ViewCandidate& c : rolls)
+        if (!path_free || !o.check_collisions ||
+            checker.pathFree(grasp.q, model_->withArm(grasp.q, c.arm), 0.05)) {
+          chosen[open[j]] = c;
+          break;
+        }
+    }
   }
   return chosen;
 }

@@ -42,12 +42,13 @@ void validate(const ScanOptions& options, const MultiGraspOptions& multi) {
 }
 
 // The grasp loop from the first grasp on (the robot holds the object at T_O_palm0), into
-// `volume`; `next` describes the first grasp.
+// `volume`; `next` describes the first grasp, `box_O` where the object is believed to lie for
+// the first grasp's initial trajectory (empty: unknown).
 void runGrasps(RobotInterface& robot, DepthSensor& sensor, const Iso3& T_O_palm0,
                const Vec3& centre_O, const Iso3& T_B_O_rest, const ScanOptions& options,
                const MultiGraspOptions& multi, const NoiseModelOptions& noise,
                const ScanProgress& progress, TsdfVolume& volume, GraspRecord next,
-               MultiGraspResult& out) {
+               MultiGraspResult& out, const Aabb& box_O) {
   auto log = [&](const std::string& s) {
     if (progress.log) progress.log(s);
   };
@@ -61,7 +62,8 @@ void runGrasps(RobotInterface& robot, DepthSensor& sensor, const Iso3& T_O_palm0
     ScanOptions o = options;
     if (g > 0) o.initial_views = 0;  // the model exists; Alg. 1 from the start
     next.q = robot.joints();
-    ScanResult r = scanSingleGrasp(robot, sensor, T_O_palm, centre_O, o, noise, progress, &volume);
+    ScanResult r = scanSingleGrasp(robot, sensor, T_O_palm, centre_O, o, noise, progress, &volume,
+                                   g == 0 ? box_O : Aabb());
     GraspRecord rec = next;
     rec.model = r.planning_model;  // at the planning stride: a quarter of the triangles
     rec.views = int(r.views.size());
@@ -183,7 +185,7 @@ MultiGraspResult scanMultiGrasp(RobotInterface& robot, DepthSensor& sensor, cons
   TsdfVolume volume = makeScanVolume(centre_O, options);
   MultiGraspResult out;
   runGrasps(robot, sensor, T_O_palm0, centre_O, T_B_O_rest, options, multi, noise, progress, volume,
-            GraspRecord{}, out);
+            GraspRecord{}, out, Aabb());
   out.scan.total_s = std::chrono::duration<double>(Clock::now() - t0).count();
   return out;
 }
@@ -281,6 +283,18 @@ MultiGraspResult scanFromTable(RobotInterface& robot, DepthSensor& sensor, const
   const Vec3 centre_O = onTable + 0.5 * top * n;
   if (std::max(box.size().maxCoeff(), top) > options.volume_size_m - 0.02)
     return finish("object_too_large_for_volume");  // nothing fused: the model is empty
+  // Where the object may lie, for the arm's clearance on the first grasp's initial trajectory:
+  // the points' box mirrored about the volume's centre (the camera saw one side), table to top.
+  Aabb objectBox;
+  for (int c = 0; c < 8; ++c) {
+    const Vec3 p = box.corner(c);
+    objectBox.extend(p);
+    objectBox.extend(2 * centre_O - p);
+  }
+  objectBox.extend(onTable);
+  objectBox.extend(onTable + top * n);
+  objectBox.min.array() -= 0.005;
+  objectBox.max.array() += 0.005;
   TsdfVolume volume = makeScanVolume(centre_O, options);
   // Fuse: table pixels (on or below the plane) and robot pixels only carve.
   const auto tf = Clock::now();
@@ -341,7 +355,7 @@ MultiGraspResult scanFromTable(RobotInterface& robot, DepthSensor& sensor, const
   rec.epsilon = std::numeric_limits<double>::quiet_NaN();  // chosen from points, not contacts
   rec.generation_s = tt.seconds;
   runGrasps(robot, sensor, *achieved, centre_O, T_B_O_rest, options, multi, noise, progress, volume,
-            rec, out);
+            rec, out, objectBox);
   all.total_s = std::chrono::duration<double>(Clock::now() - t0).count();
   return out;
 }

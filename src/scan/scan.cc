@@ -106,7 +106,7 @@ TsdfVolume makeScanVolume(const Vec3& centre_O, const ScanOptions& options) {
 ScanResult scanSingleGrasp(RobotInterface& robot, DepthSensor& sensor, const Iso3& T_O_palm,
                            const Vec3& centre_O, const ScanOptions& options,
                            const NoiseModelOptions& noise, const ScanProgress& progress,
-                           TsdfVolume* sharedVolume) {
+                           TsdfVolume* sharedVolume, const Aabb& object_box_O) {
   const auto t0 = Clock::now();
   std::string problem = options.validate();
   if (!problem.empty()) throw Error("scan options: " + problem);
@@ -196,13 +196,21 @@ ScanResult scanSingleGrasp(RobotInterface& robot, DepthSensor& sensor, const Iso
   std::vector<Vec3> used;
   // The simple initial trajectory: a few directions spread over the sphere.
   if (options.initial_views > 0) {
-    GraspState g{T_O_palm, robot.joints()};
-    Aabb guess;
-    guess.extend(centre_O - Vec3::Constant(0.05));
-    guess.extend(centre_O + Vec3::Constant(0.05));
-    auto initial = planner.reach(fibonacciSphere(options.initial_views), centre_O, guess, g);
-    for (const auto& c : initial) {
-      if (!c) continue;
+    Aabb guess = object_box_O;
+    if (guess.empty()) {
+      guess.extend(centre_O - Vec3::Constant(0.05));
+      guess.extend(centre_O + Vec3::Constant(0.05));
+    }
+    for (const Vec3& dir : fibonacciSphere(options.initial_views)) {
+      // The views are taken one after the other: each move, from where the arm is, must keep
+      // it clear of the object in the hand (a forearm swinging through it would also empty its
+      // inside in the model).
+      const GraspState g{T_O_palm, robot.joints()};
+      const std::optional<ViewCandidate> c = planner.reach({dir}, centre_O, guess, g, true)[0];
+      if (!c) {
+        log("initial view skipped: no collision-free move there");
+        continue;
+      }
       ViewRecord rec;
       rec.initial = true;
       rec.dir_O = c->dir_O;

@@ -59,14 +59,16 @@ std::optional<Iso3> SimRobot::pickUp(const Iso3& T_O_palm, const JointVector& q)
   const RobotModel& m = world_->model();
   const JointVector open = m.withFingersOpen(q);
   if (world_->options().pick_up_first_contact) {
-    // From 10 cm short of the planned pose to at most 3 cm past it (the plan was made on the
-    // model, which can lie inside or outside the true surface).
+    // A guarded move along the planned palm axis, from 25 cm short of the planned pose (more
+    // than the open hand's reach: a plan made with the palm may have its fingers in the object)
+    // to at most 10 cm past it (the plan was made on the model, whose hole-filled parts can lie
+    // well outside the true surface).
     const FingerCloser closer(m, world_->objectMesh());
     const Vec3 in = T_O_palm.linear().col(2);  // palm z points into the object
     Iso3 T = T_O_palm;
-    T.translation() -= 0.10 * in;
-    const std::optional<double> travel = closer.freeTravel(open, T, in, 0.13);
-    if (!travel || *travel >= 0.13) return std::nullopt;  // blocked, or nothing to grasp there
+    T.translation() -= 0.25 * in;
+    const std::optional<double> travel = closer.freeTravel(open, T, in, 0.35);
+    if (!travel || *travel >= 0.35) return std::nullopt;  // blocked, or nothing to grasp there
     T.translation() += *travel * in;
     world_->T_O_palm = T;
     world_->q = closer.close(open, T).q;

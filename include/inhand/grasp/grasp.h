@@ -30,31 +30,39 @@ namespace inhand {
 // How a candidate's open hand comes to the object along its approach.
 enum class GraspApproach {
   // The palm slides until its face touches the model; the open fingers may start inside the
-  // object (the BarrettHand's open fingertips converge to ~34 mm apart, so for wider objects they
-  // do; the README measures what that costs).
+  // object (the BarrettHand's open fingertips converge to ~34 mm apart at spread 0, so for wider
+  // objects they do, and the hand-aware update then empties the object where they are: the
+  // README measures what that costs). Kept for comparison.
   kPalm,
   // The whole open hand comes in from outside until any link, palm or finger, touches the model:
-  // it never starts inside the object (physically valid; with this BarrettHand model it finds
-  // few stable grasps of objects wider than its fingertips' gap).
+  // it never starts inside the object (physically valid; the default). With this BarrettHand
+  // the stable grasps of wider objects are the edge poses below.
   kFirstContact,
 };
 const char* graspApproachName(GraspApproach a);  // palm, first_contact
 bool parseGraspApproach(const std::string& name, GraspApproach* a);
 
 struct GraspOptions {
-  GraspApproach approach = GraspApproach::kPalm;
+  GraspApproach approach = GraspApproach::kFirstContact;
   int approaches = 64;               // approach directions over the sphere
   int rolls = 4;                     // palm rolls about each approach (over 180°)
   std::vector<double> spreads{0.0};  // spread joint values tried (hands with a spread joint)
-  double friction = 0.5;             // μ at each contact
-  int cone_edges = 8;                // friction-cone linearisation
-  int wrench_directions = 1000;      // directions sampled for ε
-  double contact_m = 0.003;          // model vertices this close to the hand are in contact
-  double contact_cell_m = 0.01;      // contact pooling cell, m
-  double min_epsilon = 1e-4;         // ε below this: not a stable grasp
-  double stability_weight = 0.0;     // score = quality + weight·ε
-  int max_candidates = 50;           // ranked at most (the most stable first)
-  double lift_m = 0.15;              // the object is lifted this far after the pick
+  // Edge poses (hands with a spread joint): at each of these spreads, every approach and roll
+  // (over the full turn) with the palm axis moved along palm x until the model ends
+  // `edge_inset_m` beyond it. At 90° the BarrettHand's fingers 1 and 2 face each other 150 mm
+  // apart at their flexion joints and straddle objects up to ~68 mm thick (their fingertips
+  // converge less than at spread 0), while finger 3 closes over the edge.
+  std::vector<double> edge_spreads{M_PI / 2};
+  double edge_inset_m = 0.005;
+  double friction = 0.5;          // μ at each contact
+  int cone_edges = 8;             // friction-cone linearisation
+  int wrench_directions = 1000;   // directions sampled for ε
+  double contact_m = 0.003;       // model vertices this close to the hand are in contact
+  double contact_cell_m = 0.01;   // contact pooling cell, m
+  double min_epsilon = 1e-4;      // ε below this: not a stable grasp
+  double stability_weight = 0.0;  // score = quality + weight·ε
+  int max_candidates = 50;        // ranked at most (the most stable first)
+  double lift_m = 0.15;           // the object is lifted this far after the pick
   std::string validate() const;
 };
 
@@ -112,6 +120,11 @@ struct TableTopGraspOptions {
   double table_clearance_m = 0.01;  // the open hand stays this far above the table top, m
   double point_cell_m = 0.004;      // points thinned to one per cell of this size, m
   double inside_fraction = 0.005;   // points inside the open hand tolerated (depth noise)
+  // Edge poses (hands with a spread joint): side approaches with palm x up and the palm axis
+  // `edge_inset_m` below the points' top, at each of these spreads (see GraspOptions). Tried
+  // first: where the fingers straddle the object, they envelop it.
+  std::vector<double> edge_spreads{M_PI / 2};
+  double edge_inset_m = 0.005;
   std::string validate() const;
 };
 

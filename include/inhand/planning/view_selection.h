@@ -105,9 +105,11 @@ class ViewPlanner {
 
   // Line 7 of Alg. 1 for each direction: the cheapest collision-free (range, roll) with an IK
   // solution, or nullopt. `object_box_O`: the held object's current bounds (for collisions).
+  // With `path_free` the straight joint-space move there from grasp.q must be free too.
   std::vector<std::optional<ViewCandidate>> reach(const std::vector<Vec3>& dirs_O,
                                                   const Vec3& centre_O, const Aabb& object_box_O,
-                                                  const GraspState& grasp) const;
+                                                  const GraspState& grasp,
+                                                  bool path_free = false) const;
 
   // Alg. 1. `used_dirs_O`: directions of views already taken (object frame). `near_hand`: the
   // grasp's near-hand grid (shared across passes of one grasp).

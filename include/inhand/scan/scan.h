@@ -75,11 +75,13 @@ struct ScanResult {
 // Scans with the object held at T_O_palm (palm pose in the object frame); the robot must be
 // holding it already. `centre_O` is where the volume is centred (the object's expected centre).
 // With `volume` the views are fused into it (a model kept across grasps, in frame O); without,
-// into a new volume of options.volume_size_m around centre_O.
+// into a new volume of options.volume_size_m around centre_O. `object_box_O`: where the object
+// is believed to lie before any model exists (the initial trajectory keeps the arm clear of it);
+// empty: a 10 cm cube around centre_O.
 ScanResult scanSingleGrasp(RobotInterface& robot, DepthSensor& sensor, const Iso3& T_O_palm,
                            const Vec3& centre_O, const ScanOptions& options,
                            const NoiseModelOptions& noise, const ScanProgress& progress = {},
-                           TsdfVolume* volume = nullptr);
+                           TsdfVolume* volume = nullptr, const Aabb& object_box_O = Aabb());
 
 // The pixels of `depth` (taken from T_B_C with the robot at q) that are the robot's own surface:
 // the robot rendered there lies within t_hand_m of the measurement, at that pixel or within

@@ -21,7 +21,7 @@ struct SimOptions {
   double room_radius_m = 2.5;   // background: a room around the camera (0: none)
   // Pick-up: false backs the palm off until it is clear of the true object (the fingers may end
   // inside it); true stops the open hand at the first contact of any link (physically valid).
-  bool pick_up_first_contact = false;
+  bool pick_up_first_contact = true;
   std::string validate() const;
 };
 
