@@ -109,6 +109,7 @@ TEST(Cli, RobotCommandPrintsChainAndReachability) {
   EXPECT_NE(r.output.find("wam_j4"), std::string::npos);
   EXPECT_NE(r.output.find("reachable"), std::string::npos);
   EXPECT_NE(r.output.find("slab across palm x: 10 mm wide 94,"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("60 mm wide 94, 70 mm wide 12"), std::string::npos) << r.output;
   Json bad = readJsonFile(cfg);
   bad["urdf"] = std::string(INHAND_SOURCE_DIR) + "/data/robots/wam_barretthand.urdf";
   bad["base_link"] = "wam_bse";

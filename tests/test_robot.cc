@@ -403,6 +403,16 @@ TEST(Hand, OpenHandDepthAgainstTheUrdfGeometry) {
   }
   EXPECT_NEAR(openHandDepth(m, 1, 0.010), 0.0, 5e-4);
   EXPECT_THROW(openHandDepth(m, 2, 0.01), std::runtime_error);
+  // The edge grasps' case: at spread 90° fingers 1 and 2 face each other across palm y, their
+  // fingertips' inner corners 2 × (75 − 50 sin 42° − 10 cos 42°) = 68.2 mm apart, and a slab
+  // ending 5 mm past the palm axis in x passes finger 3's tip (its inner corner at x = 9.1 mm):
+  // 60 mm slips in down to the knuckle tops, 70 mm lands on the fingertips.
+  const double gap =
+      2 * (0.075 - 0.05 * std::sin(0.7330382858376184) - 0.01 * std::cos(0.7330382858376184));
+  EXPECT_NEAR(openHandDepth(m, 1, gap - 0.002, M_PI / 2, 0.005), tipZ - 0.11, 5e-4);
+  EXPECT_LT(openHandDepth(m, 1, gap + 0.002, M_PI / 2, 0.005), 0.015);
+  // Past finger 3's tip the edge no longer clears it.
+  EXPECT_LT(openHandDepth(m, 1, 0.04, M_PI / 2, 0.012), 0.015);
 }
 
 // The spread joint swings fingers 1 and 2 outward around the palm, as on the real hand: at 0

@@ -262,6 +262,15 @@ int runRobot(const RobotArgs& args) {
         std::printf(" %d mm wide %.0f%s", w, 1000 * openHandDepth(model, axis, 0.001 * w),
                     w < 100 ? "," : "\n");
     }
+    if (model.spreadVariable() >= 0) {
+      // The edge grasps' case (grasp.edge_spreads): spread 90°, a slab across palm y whose edge
+      // is 5 mm beyond the palm axis along palm x.
+      std::printf("  edge at spread 90 deg, slab across palm y ending 5 mm past the palm axis:");
+      for (int w = 10; w <= 100; w += 10)
+        std::printf(" %d mm wide %.0f%s", w,
+                    1000 * openHandDepth(model, 1, 0.001 * w, M_PI / 2, 0.005),
+                    w < 100 ? "," : "\n");
+    }
   }
   ReachabilityOptions ro;
   ro.directions = args.directions;

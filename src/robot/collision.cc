@@ -327,17 +327,24 @@ double openHandReach(const RobotModel& model) {
   return handTip(model, model.withFingersOpen(model.home())) - model.palmFaceZ();
 }
 
-double openHandDepth(const RobotModel& model, int axis, double width) {
+double openHandDepth(const RobotModel& model, int axis, double width, double spread,
+                     double edge_x) {
   if (axis != 0 && axis != 1) throw Error("openHandDepth: axis must be 0 (palm x) or 1 (palm y)");
   if (!(width > 0)) throw Error("openHandDepth: width must be positive");
-  const JointVector open = model.withFingersOpen(model.home());
+  JointVector q = model.home();
+  if (model.spreadVariable() >= 0) q[model.spreadVariable()] = spread;
+  const JointVector open = model.withFingersOpen(q);
   const double tip = handTip(model, open);
   // The slab's face 5 cm beyond the fingertips; the hand moves towards it along palm z.
-  Vec3 size(1.0, 1.0, 0.02);
+  Vec3 size(1.0, 1.0, 0.02), centre(0, 0, 0);
   size[axis] = width;
+  if (std::isfinite(edge_x)) {
+    size.x() = 0.5;
+    centre.x() = edge_x - 0.25;
+  }
   const double face = tip + 0.05;
-  const TriangleMesh slab =
-      transformed(makeBox(size), Iso3(Eigen::Translation3d(0, 0, face + 0.01)));
+  centre.z() = face + 0.01;
+  const TriangleMesh slab = transformed(makeBox(size), Iso3(Eigen::Translation3d(centre)));
   const double reach = tip - model.palmFaceZ();
   const std::optional<double> travel =
       FingerCloser(model, slab)

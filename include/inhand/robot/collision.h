@@ -3,6 +3,7 @@
 // robot's own static base, at a configuration or along a joint-space path. Self-collision between
 // arm links is not checked (links adjacent to the base are listed in the config and skipped
 // against it).
+#include <limits>
 #include <memory>
 #include <optional>
 #include <string>
@@ -99,8 +100,11 @@ class FingerCloser {
 // along the other palm axis, meets the hand coming along palm z until any link first touches
 // (FingerCloser::freeTravel). Returns the depth from the fingertips' level down to where the slab
 // stops: the hand's whole reach beyond the palm for a slab that slips between the fingers to the
-// palm, about 0 for one that lands on the fingertips.
-double openHandDepth(const RobotModel& model, int axis, double width_m);
+// palm, about 0 for one that lands on the fingertips. `spread`: the spread joint's value (hands
+// with one). With a finite `edge_x_m` the slab ends at palm x = edge_x_m (an object's edge held
+// with the palm axis just inside it, as in the edge grasps), else it is unbounded along x too.
+double openHandDepth(const RobotModel& model, int axis, double width_m, double spread = 0,
+                     double edge_x_m = std::numeric_limits<double>::infinity());
 // How far the open hand reaches beyond its palm link along palm z.
 double openHandReach(const RobotModel& model);
 
