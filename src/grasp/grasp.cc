@@ -204,20 +204,15 @@ GraspGeneration generateGrasps(const RobotModel& robot, const TriangleMesh& mesh
     Aabb at(double spread) const { return boxes.at(spread); }
   } openHand;
   for (const Pose& ps : poses)
-    if (!openHand.boxes.count(ps.spread)) {
-      JointVector q = robot.home();
-      if (robot.spreadVariable() >= 0) q[robot.spreadVariable()] = ps.spread;
+    if (!openHand.boxes.count(ps.spread))
       openHand.boxes[ps.spread] =
-          HandGeometry(robot, robot.withFingersOpen(q), Iso3::Identity()).mesh().bounds();
-    }
+          HandGeometry(robot, robot.openHand(ps.spread), Iso3::Identity()).mesh().bounds();
   parallelFor(0, int(poses.size()), [&](int i) {
     const Pose& ps = poses[i];
     Iso3 T = Iso3::Identity();
     T.linear() = ps.R;
     const Mat3& R = ps.R;
-    JointVector q = robot.home();
-    if (robot.spreadVariable() >= 0) q[robot.spreadVariable()] = ps.spread;
-    q = robot.withFingersOpen(q);
+    const JointVector q = robot.openHand(ps.spread);
     // kFirstContact: the open hand comes in along −d, its palm axis through `origin`, from
     // outside the object until any of its links touches the model.
     // The travel starts where the open hand's box (palm frame) first reaches a sample inside
@@ -389,14 +384,9 @@ TableTopGrasps tableTopGrasps(const RobotModel& robot, const std::vector<Vec3>& 
   const Vec3 c = out.axes.centroid + out.axes.axes * (0.5 * (out.axes.min + out.axes.max));
   const Vec3 e1 = out.axes.axes.col(0), e2 = out.axes.axes.col(1), e3 = out.axes.axes.col(2);
   const double palmTop = robot.palmFaceZ();
-  auto openAt = [&](double spread) {
-    JointVector q = robot.home();
-    if (robot.spreadVariable() >= 0) q[robot.spreadVariable()] = spread;
-    return robot.withFingersOpen(q);
-  };
   std::map<double, JointVector> openHands;
-  openHands[0.0] = openAt(0.0);
-  for (double s : o.edge_spreads) openHands[s] = openAt(s);
+  openHands[0.0] = robot.openHand(0.0);
+  for (double s : o.edge_spreads) openHands[s] = robot.openHand(s);
   const JointVector& open = openHands.at(0.0);
   const double tableTop = robot.table().topZ();
   // The open hand's span along the palm x axis (the fingers' closing direction).

@@ -331,9 +331,7 @@ double openHandDepth(const RobotModel& model, int axis, double width, double spr
                      double edge_x) {
   if (axis != 0 && axis != 1) throw Error("openHandDepth: axis must be 0 (palm x) or 1 (palm y)");
   if (!(width > 0)) throw Error("openHandDepth: width must be positive");
-  JointVector q = model.home();
-  if (model.spreadVariable() >= 0) q[model.spreadVariable()] = spread;
-  const JointVector open = model.withFingersOpen(q);
+  const JointVector open = model.openHand(spread);
   const double tip = handTip(model, open);
   // The slab's face 5 cm beyond the fingertips; the hand moves towards it along palm z.
   Vec3 size(1.0, 1.0, 0.02), centre(0, 0, 0);

@@ -510,6 +510,12 @@ JointVector RobotModel::withFingersOpen(const JointVector& q) const {
   return out;
 }
 
+JointVector RobotModel::openHand(double spread) const {
+  JointVector q = home();
+  if (spreadVariable_ >= 0) q[spreadVariable_] = spread;
+  return withFingersOpen(q);
+}
+
 double RobotModel::palmFaceZ() const {
   double top = 0;
   for (const Primitive& p : links_[size_t(tipLink_)].collision)

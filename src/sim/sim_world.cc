@@ -144,10 +144,7 @@ std::pair<Iso3, JointVector> defaultGrasp(const RobotModel& model, const Triangl
   T.linear().col(1) = (-approach).cross(across);
   // Palm face (the top of the palm link's geometry along palm z) just touching the object's face.
   T.translation() = b.center() + (0.5 * size[middle] + model.palmFaceZ() + 0.002) * approach;
-  JointVector q = model.home();
-  if (model.spreadVariable() >= 0) q[model.spreadVariable()] = 0.0;
-  q = model.withFingersOpen(q);
-  ClosingResult r = closeFingers(model, q, T, object);
+  ClosingResult r = closeFingers(model, model.openHand(0.0), T, object);
   return {T, r.q};
 }
 

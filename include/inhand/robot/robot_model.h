@@ -115,6 +115,8 @@ class RobotModel {
   JointVector withArm(const JointVector& q, const Eigen::VectorXd& arm) const;
   // q with every finger at its `open` value (spread as in q), couplings applied.
   JointVector withFingersOpen(const JointVector& q) const;
+  // home() with the spread joint (hands with one) at `spread` and the fingers open.
+  JointVector openHand(double spread = 0.0) const;
   // The palm face: the top of the palm (tip) link's collision geometry along palm z, m.
   double palmFaceZ() const;
   Eigen::VectorXd arm(const JointVector& q) const;
