@@ -199,13 +199,10 @@ GraspGeneration generateGrasps(const RobotModel& robot, const TriangleMesh& mesh
   std::vector<std::optional<GraspCandidate>> found(poses.size());
   const FingerCloser closer(robot, mesh);
   // The open hand's bounding box in the palm frame, per spread value.
-  struct OpenHandBoxes {
-    std::map<double, Aabb> boxes;
-    Aabb at(double spread) const { return boxes.at(spread); }
-  } openHand;
+  std::map<double, Aabb> openHandBox;
   for (const Pose& ps : poses)
-    if (!openHand.boxes.count(ps.spread))
-      openHand.boxes[ps.spread] =
+    if (!openHandBox.count(ps.spread))
+      openHandBox[ps.spread] =
           HandGeometry(robot, robot.openHand(ps.spread), Iso3::Identity()).mesh().bounds();
   parallelFor(0, int(poses.size()), [&](int i) {
     const Pose& ps = poses[i];
@@ -218,7 +215,7 @@ GraspGeneration generateGrasps(const RobotModel& robot, const TriangleMesh& mesh
     // The travel starts where the open hand's box (palm frame) first reaches a sample inside
     // its footprint: nothing can touch earlier.
     Aabb handBox;
-    if (o.approach == GraspApproach::kFirstContact) handBox = openHand.at(ps.spread);
+    if (o.approach == GraspApproach::kFirstContact) handBox = openHandBox.at(ps.spread);
     auto firstContact = [&](const Vec3& origin) {
       double nearest = std::numeric_limits<double>::infinity();
       for (const SurfacePoint& sm : samples) {
@@ -423,20 +420,21 @@ TableTopGrasps tableTopGrasps(const RobotModel& robot, const std::vector<Vec3>& 
   // Edge poses (hands with a spread joint, at each of `edge_spreads`): from the side, palm x
   // up the table normal with the palm axis `edge_inset_m` below the points' top, so that
   // fingers 1 and 2 straddle the object across palm y and finger 3 closes over its top edge.
-  if (robot.spreadVariable() >= 0)
+  if (robot.spreadVariable() >= 0 && !o.edge_spreads.empty()) {
+    const Vec3 x = up_O.normalized();
+    double above = -std::numeric_limits<double>::infinity();  // the points' top above c
+    for (const Vec3& p : thin) above = std::max(above, (p - c).dot(x));
     for (double spread : o.edge_spreads)
       for (int k = 0; k < o.approaches; ++k) {
         const double phi = 2 * M_PI * k / o.approaches;
         const Vec3 a = std::cos(phi) * e2 + std::sin(phi) * e3;
-        const Vec3 h = (a - a.dot(up_O.normalized()) * up_O.normalized());
+        const Vec3 h = a - a.dot(x) * x;
         if (h.norm() < 0.5) continue;  // the edge poses approach from the side
-        const Vec3 ah = h.normalized(), x = up_O.normalized();
-        Pose ps{palmPose(ah, x), 3, spread};
-        double top = -std::numeric_limits<double>::infinity();
-        for (const Vec3& p : thin) top = std::max(top, (p - c).dot(x));
-        ps.T_O_palm.translation() += (top - o.edge_inset_m) * x;
+        Pose ps{palmPose(h.normalized(), x), 3, spread};
+        ps.T_O_palm.translation() += (above - o.edge_inset_m) * x;
         poses.push_back(ps);
       }
+  }
   // Fallback, last in order: from above (for short objects the side approaches put the hand
   // into the table), fingers closing across each horizontal axis, the narrower first.
   if (std::abs(e1.dot(up_O.normalized())) > 0.9)

@@ -3,10 +3,12 @@
 // their ranking by what Alg. 1 could still see with the hand there.
 //
 // Candidates (BarrettHand-style hands: a palm and closing fingers, optional spread):
-//   - approach directions spread over the sphere, palm rolls about each, spread settings;
-//   - the palm face is slid along the approach until it touches the model (the nearest surface
-//     sample inside the palm's footprint; samples: the vertices, plus a lattice of half a contact
-//     cell on larger triangles), fingers open;
+//   - approach directions spread over the sphere, palm rolls about each, spread settings, the
+//     palm axis through the model's centre; then the edge poses (below);
+//   - the open hand comes along the approach until any link first touches the model
+//     (GraspApproach::kFirstContact, the default), or the palm face is slid until it touches the
+//     nearest surface sample inside its footprint (kPalm; samples: the vertices, plus a lattice of
+//     half a contact cell on larger triangles);
 //   - fingers closed until contact (robot::closeFingers) against the model mesh;
 //   - kept when at least two links touch, the grasp is force closure (below), the hand on the
 //     object resting on the table is free of the table, and the arm reaches it (IK, collision).
@@ -47,11 +49,11 @@ struct GraspOptions {
   int approaches = 64;               // approach directions over the sphere
   int rolls = 4;                     // palm rolls about each approach (over 180°)
   std::vector<double> spreads{0.0};  // spread joint values tried (hands with a spread joint)
-  // Edge poses (hands with a spread joint): at each of these spreads, every approach and roll
-  // (over the full turn) with the palm axis moved along palm x until the model ends
-  // `edge_inset_m` beyond it. At 90° the BarrettHand's fingers 1 and 2 face each other 150 mm
-  // apart at their flexion joints and straddle objects up to ~68 mm thick (their fingertips
-  // converge less than at spread 0), while finger 3 closes over the edge.
+  // Edge poses (hands with a spread joint), at each of these spreads: palm z along ± each of the
+  // model's principal axes, palm y along another, palm x either way along the third (24 poses),
+  // the palm axis moved along palm x until the model ends `edge_inset_m` beyond it. At 90° the
+  // BarrettHand's fingers 1 and 2 face each other 150 mm apart at their flexion joints and
+  // straddle objects up to ~68 mm thick, while finger 3 closes over the edge.
   std::vector<double> edge_spreads{M_PI / 2};
   double edge_inset_m = 0.005;
   double friction = 0.5;          // μ at each contact
