@@ -223,9 +223,10 @@ TEST(TableTop, FirstGraspApproachesPerpendicularToTheMainAxisAndIsReachable) {
   const FingerCloser trueBox(
       r, transformed(makeBox(Vec3(0.06, 0.16, 0.2)), Iso3(Eigen::Translation3d(0, 0, 0.1))));
   EXPECT_FALSE(trueBox.handTouches(edge.q, edge.T_O_palm));
-  EXPECT_FALSE(
-      trueBox.freeTravel(edge.q, edge.T_O_palm, edge.T_O_palm.linear().col(2), 0.1).value_or(0) >=
-      0.1);  // it does land on the box within 10 cm
+  const std::optional<double> travel =
+      trueBox.freeTravel(edge.q, edge.T_O_palm, edge.T_O_palm.linear().col(2), 0.1);
+  ASSERT_TRUE(travel.has_value());
+  EXPECT_LT(*travel, 0.1);  // it lands on the box within 10 cm
   // Then fingers across the main axis, closing across the 60 mm side (the only one within the
   // hand's span at spread 0; the rectangle's axes in 0.5° steps).
   const GraspCandidate* across = nullptr;

@@ -322,9 +322,7 @@ TEST(ViewSelection, PathFreeReachKeepsTheArmClearOfTheHeldObject) {
   T_O_palm.linear().col(1) = Vec3::UnitX();
   T_O_palm.linear().col(2) = Vec3::UnitY();
   T_O_palm.translation() = Vec3(0, -0.079 - 0.11, 0.1);
-  JointVector q = r.home();
-  q[r.spreadVariable()] = M_PI / 2;
-  q = r.withFingersOpen(q);
+  const JointVector q = r.openHand(M_PI / 2);
   ViewPlannerOptions o;
   o.rolls = 8;
   const ViewPlanner planner(r, DepthCameraOptions{}, NoiseModelOptions{}, o);
