@@ -70,10 +70,12 @@ class SimRobot : public RobotInterface {
                const std::function<void(const JointVector&)>& on_state) override;
   // Put-down and pick-up are instantaneous state changes in the simulator (no trajectories).
   bool putDown() override;
-  // The palm is backed off along its axis (2 mm steps) until it is clear of the true object (the
-  // planner placed it on its model, which can lie inside the true surface), or with
-  // SimOptions::pick_up_first_contact the open hand comes in along its axis until any link
-  // touches the true object; then the fingers close on the true object.
+  // With SimOptions::pick_up_first_contact (the default) a guarded move: the open hand comes in
+  // along its axis, from 25 cm short of the planned pose to at most 10 cm past it, until any link
+  // touches the true object (nullopt when it is blocked at the start or touches nothing).
+  // Without, the palm is backed off (2 mm steps, up to 5 cm) until it is clear of the true
+  // object. Then the fingers close on the true object. No force-closure check: the simulator
+  // holds whatever the hand touches.
   std::optional<Iso3> pickUp(const Iso3& T_O_palm, const JointVector& q) override;
 
  private:
