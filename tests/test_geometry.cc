@@ -10,6 +10,7 @@
 #include "inhand/geometry/contour.h"
 #include "inhand/geometry/mesh_io.h"
 #include "inhand/geometry/primitives.h"
+#include "inhand/geometry/projector_shadows.h"
 #include "inhand/geometry/raster.h"
 #include "inhand/geometry/ray_scene.h"
 #include "test_util.h"
@@ -423,6 +424,133 @@ TEST(Raster, TrianglesCrossingTheNearPlaneAreClipped) {
   r.reset({525, 525, 319.5, 239.5}, {0, 639, 0, 479, 1});
   r.draw(floor, Iso3(Eigen::Translation3d(0, 0, -4)));
   for (int s = 0; s < 640 * 480; s += 97) EXPECT_EQ(r.id(s), -1);
+}
+
+namespace {
+
+// Projector shadows against Embree shadow rays on a scene of a sphere of small triangles in
+// front of a box, and a strip 0.4 samples wide (an open mesh, narrower than a sample: a shadow
+// map would miss it) slanted across the rows in front of both. Every sample's first surface is
+// a point; the projector sits 7.5 cm to the right. Returns the fraction of points on which the
+// two disagree; counts the points and the blocked ones.
+double shadowDisagreement(const RasterWindow& w, int* points, int* blocked) {
+  const PinholeProjection K{525, 525, 319.5, 239.5};
+  const Vec3 projector(0.075, 0, 0);
+  const Iso3 T_sphere = Iso3(Eigen::Translation3d(0.03, 0.0, 0.55)) *
+                        Eigen::AngleAxisd(0.4, Vec3(1, 1, 0).normalized());
+  const Iso3 T_box = Iso3(Eigen::Translation3d(0, 0, 0.85));
+  const TriangleMesh sphere = makeSphere(0.08, 5), box = makeBox(Vec3(0.6, 0.5, 0.05));
+  TriangleMesh strip;
+  const double z = 0.45, width = 0.4 * w.stride * z / K.fx;  // 0.4 samples at its depth
+  strip.vertices = {Vec3f(-0.1f, -0.15f, float(z)), Vec3f(float(-0.1 + width), -0.15f, float(z)),
+                    Vec3f(float(-0.08 + width), 0.15f, float(z)), Vec3f(-0.08f, 0.15f, float(z))};
+  strip.triangles = {Tri(0, 2, 1), Tri(0, 3, 2)};
+  DepthRaster first;
+  first.reset(K, w);
+  first.draw(sphere, T_sphere, 0, true);
+  first.draw(box, T_box, 0, true);
+  first.draw(strip, Iso3::Identity(), 0, false);
+  RayScene scene;
+  scene.addMesh(sphere, T_sphere);
+  scene.addMesh(box, T_box);
+  scene.addMesh(strip);
+  scene.commit();
+  ProjectorShadows shadows;
+  shadows.reset(K, w, projector.x());
+  std::vector<Ray> rays;
+  constexpr double margin = 2e-4;
+  for (int j = w.j0; j <= w.j1; ++j)
+    for (int i = w.i0; i <= w.i1; ++i) {
+      const int s = first.index(i, j);
+      if (first.id(s) < 0) continue;
+      const double iz = first.inverseDepth(s);
+      const Vec3 p = Vec3((i * w.stride - K.cx) / K.fx, (j * w.stride - K.cy) / K.fy, 1) / iz;
+      const double dist = (projector - p).norm();
+      shadows.add(j, i, iz, iz / (1 - margin / dist));
+      Ray r;
+      r.origin = p.cast<float>();
+      r.dir = ((projector - p) / dist).cast<float>();
+      r.tnear = float(margin);
+      r.tfar = float(dist - margin);
+      rays.push_back(r);
+    }
+  shadows.index();
+  shadows.draw(sphere, T_sphere, true);
+  shadows.draw(box, T_box, true);
+  shadows.draw(strip, Iso3::Identity(), false);
+  std::vector<uint8_t> occluded(rays.size());
+  scene.occluded(rays.data(), occluded.data(), rays.size(), false);
+  int differ = 0;
+  *blocked = 0;
+  for (int k = 0; k < shadows.size(); ++k) {
+    differ += shadows.blocked(k) != (occluded[size_t(k)] != 0);
+    *blocked += shadows.blocked(k);
+  }
+  *points = shadows.size();
+  return double(differ) / std::max(1, shadows.size());
+}
+
+}  // namespace
+
+TEST(ProjectorShadows, MatchEmbreeShadowRaysIncludingBlockersThinnerThanASample) {
+  int points = 0, blocked = 0;
+  EXPECT_LT(shadowDisagreement({0, 639, 0, 479, 1}, &points, &blocked), 1e-3);
+  EXPECT_GT(points, 100000);  // the box, 370 × 310 samples
+  // The sphere's shadow on the box, and the strip's on both.
+  EXPECT_GT(blocked, 3000);
+  EXPECT_LT(shadowDisagreement({20, 300, 10, 230, 2}, &points, &blocked), 1e-3);
+  EXPECT_GT(points, 25000);
+  EXPECT_GT(blocked, 700);
+}
+
+TEST(ProjectorShadows, AStripThinnerThanASampleStillCastsItsShadow) {
+  // The strip alone in front of a wall: in each row it spans, its shadow on the wall is 0.3
+  // samples wide (a segment's W does not change along it), so most rows have no sample in it and
+  // a shadow map at sample resolution would mostly miss it; the points it blocks are exactly
+  // those Embree's rays find blocked.
+  const PinholeProjection K{525, 525, 319.5, 239.5};
+  const RasterWindow w{0, 639, 0, 479, 1};
+  TriangleMesh wall;
+  wall.vertices = {Vec3f(-1, -1, 1), Vec3f(1, -1, 1), Vec3f(1, 1, 1), Vec3f(-1, 1, 1)};
+  wall.triangles = {Tri(0, 1, 2), Tri(0, 2, 3)};  // facing the camera (−z)
+  TriangleMesh strip;
+  const float z = 0.5f, width = 0.3f * z / 525.f;
+  strip.vertices = {Vec3f(0.0123f, -0.1f, z), Vec3f(0.0123f + width, -0.1f, z),
+                    Vec3f(0.0537f + width, 0.1f, z), Vec3f(0.0537f, 0.1f, z)};
+  strip.triangles = {Tri(0, 2, 1), Tri(0, 3, 2)};
+  ProjectorShadows shadows;
+  shadows.reset(K, w, 0.075);
+  RayScene scene;
+  scene.addMesh(strip);
+  scene.commit();
+  std::vector<Ray> rays;
+  for (int j = w.j0; j <= w.j1; ++j)
+    for (int i = w.i0; i <= w.i1; ++i) {
+      const Vec3 p((i - K.cx) / K.fx, (j - K.cy) / K.fy, 1);  // on the wall
+      const double dist = (Vec3(0.075, 0, 0) - p).norm();
+      shadows.add(j, i, 1.0, 1.0 / (1 - 2e-4 / dist));
+      Ray r;
+      r.origin = p.cast<float>();
+      r.dir = ((Vec3(0.075, 0, 0) - p) / dist).cast<float>();
+      r.tnear = 2e-4f;
+      r.tfar = float(dist - 2e-4);
+      rays.push_back(r);
+    }
+  shadows.index();
+  shadows.draw(wall, Iso3::Identity(), true);  // the wall blocks nothing of itself
+  shadows.draw(strip, Iso3::Identity(), false);
+  std::vector<uint8_t> occluded(rays.size());
+  scene.occluded(rays.data(), occluded.data(), rays.size(), false);
+  int blocked = 0, differ = 0;
+  for (int k = 0; k < shadows.size(); ++k) {
+    blocked += shadows.blocked(k);
+    differ += shadows.blocked(k) != (occluded[size_t(k)] != 0);
+  }
+  // The shadow spans 210 rows at 0.3 samples wide: about 0.3 × 210 = 63 points (64 by exact
+  // arithmetic in double, and by Embree).
+  EXPECT_GT(blocked, 50);
+  EXPECT_LT(blocked, 80);
+  EXPECT_LE(differ, 1);
 }
 
 TEST(Raster, WatertightIsWeakerThanClosed) {

@@ -7,8 +7,69 @@
 #include "inhand/core/error.h"
 #include "inhand/core/parallel.h"
 #include "inhand/geometry/primitives.h"
+#include "inhand/geometry/projector_shadows.h"
 
 namespace inhand {
+
+namespace {
+// A shadow ray ignores surfaces within this distance of the point and of the projector, m.
+constexpr double kShadowMargin = 2e-4;
+// How many samples ahead the per-sample stage prefetches a triangle's record.
+constexpr int kPrefetch = 6;
+
+// 10-bit Morton code of a point in [0, 1)³.
+uint32_t morton3(const Vec3& u) {
+  auto spread = [](uint32_t x) {
+    x &= 0x3FF;
+    x = (x | (x << 16)) & 0x030000FF;
+    x = (x | (x << 8)) & 0x0300F00F;
+    x = (x | (x << 4)) & 0x030C30C3;
+    x = (x | (x << 2)) & 0x09249249;
+    return x;
+  };
+  auto q = [](double v) { return uint32_t(std::clamp(v, 0.0, 1.0) * 1023.0); };
+  return spread(q(u.x())) | (spread(q(u.y())) << 1) | (spread(q(u.z())) << 2);
+}
+
+// The same model with its triangles sorted along a Morton curve of their centroids and its
+// vertices in order of first use: triangles near one another in space, which a view's
+// neighbouring pixels hit, then lie near one another in memory (the per-sample stage looks up
+// one triangle per sample; in the contouring's order it missed the cache on most of them).
+ObjectModel spatiallyOrdered(const ObjectModel& in) {
+  const TriangleMesh& m = in.mesh;
+  const Aabb b = m.bounds();
+  const Vec3 scale = (b.max - b.min).cwiseMax(Vec3::Constant(1e-9)).cwiseInverse();
+  std::vector<std::pair<uint32_t, int>> key(m.triangles.size());
+  for (size_t k = 0; k < m.triangles.size(); ++k) {
+    const Tri& f = m.triangles[k];
+    const Vec3 c =
+        (m.vertices[size_t(f[0])].cast<double>() + m.vertices[size_t(f[1])].cast<double>() +
+         m.vertices[size_t(f[2])].cast<double>()) /
+        3.0;
+    key[k] = {morton3((c - b.min).cwiseProduct(scale)), int(k)};
+  }
+  std::sort(key.begin(), key.end());
+  ObjectModel out;
+  std::vector<int> newIndex(m.vertices.size(), -1);
+  const bool observed = in.observed.size() == m.vertices.size();
+  out.mesh.triangles.reserve(m.triangles.size());
+  for (const auto& [code, k] : key) {
+    Tri f = m.triangles[size_t(k)];
+    for (int c = 0; c < 3; ++c) {
+      int& n = newIndex[size_t(f[c])];
+      if (n < 0) {
+        n = int(out.mesh.vertices.size());
+        out.mesh.vertices.push_back(m.vertices[size_t(f[c])]);
+        out.variance.push_back(in.variance[size_t(f[c])]);
+        if (observed) out.observed.push_back(in.observed[size_t(f[c])]);
+      }
+      f[c] = n;
+    }
+    out.mesh.triangles.push_back(f);
+  }
+  return out;
+}
+}  // namespace
 
 std::string ViewQualityOptions::validate() const {
   if (!(t_hand_m >= 0)) return "t_hand_m must be >= 0";
@@ -106,6 +167,23 @@ bool NearHandGrid::near(const Vec3& p) const {
   return flags_[(size_t(z) * dims_.y() + y) * dims_.x() + x];
 }
 
+bool NearHandGrid::anyNear(const Aabb& box) const {
+  if (flags_.empty()) return false;
+  const Vec3 lo = (box.min - origin_) * invCell_, hi = (box.max - origin_) * invCell_;
+  Vec3i a, b;
+  for (int k = 0; k < 3; ++k) {
+    // near() looks at cell int(g + ½) for −½ < g < dims − ½.
+    a[k] = std::max(0, int(std::floor(lo[k] + 0.5)));
+    b[k] = std::min(dims_[k] - 1, int(std::floor(hi[k] + 0.5)));
+    if (a[k] > b[k]) return false;
+  }
+  for (int z = a.z(); z <= b.z(); ++z)
+    for (int y = a.y(); y <= b.y(); ++y)
+      for (int x = a.x(); x <= b.x(); ++x)
+        if (flags_[(size_t(z) * dims_.y() + y) * dims_.x() + x]) return true;
+  return false;
+}
+
 // ---- robot occluders ----------------------------------------------------------------------------
 
 RobotOccluders::RobotOccluders(const RobotModel& model) : model_(&model) {
@@ -143,12 +221,13 @@ std::vector<Occluder> RobotOccluders::at(const JointVector& q, const Iso3& T_O_B
 ViewQualityScene::ViewQualityScene(const ObjectModel& model, const DepthCameraOptions& camera,
                                    const NoiseModelOptions& noise,
                                    const ViewQualityOptions& options)
-    : model_(model), camera_(camera), noise_(noise), options_(options) {
+    : camera_(camera), noise_(noise), options_(options) {
   std::string p = options.validate();
   if (!p.empty()) throw Error("view quality options: " + p);
   INHAND_CHECK(model.variance.size() == model.mesh.vertices.size(), "variance per vertex");
   if (options.integrand == QualityIntegrand::kUnknownArea)
     INHAND_CHECK(model.observed.size() == model.mesh.vertices.size(), "observed flag per vertex");
+  model_ = spatiallyOrdered(model);
   bounds_ = model_.mesh.bounds();
   cosMaxIncidence_ = std::cos(options.max_incidence_deg * M_PI / 180);
   cosMaxProjector_ = std::cos(options.max_projector_incidence_deg * M_PI / 180);
@@ -160,9 +239,50 @@ ViewQualityScene::ViewQualityScene(const ObjectModel& model, const DepthCameraOp
     faceNormals_.push_back(
         (model_.mesh.vertices[size_t(f[1])] - p0).cross(model_.mesh.vertices[size_t(f[2])] - p0));
     unitNormals_.push_back(faceNormals_.back().cast<double>().normalized());
+    // σ_t² = a + (b − a)·β1 + (c − a)·β2 with β the barycentrics of p = A + β1·e1 + β2·e2,
+    // β1 = (p − A)·(e2 × N)/|N|², β2 = (p − A)·(N × e1)/|N|², N = e1 × e2.
+    const Vec3 A = p0.cast<double>();
+    const Vec3 e1 = model_.mesh.vertices[size_t(f[1])].cast<double>() - A;
+    const Vec3 e2 = model_.mesh.vertices[size_t(f[2])].cast<double>() - A;
+    const Vec3 N = e1.cross(e2);
+    const double va = model_.variance[size_t(f[0])], vb = model_.variance[size_t(f[1])],
+                 vc = model_.variance[size_t(f[2])];
+    TrianglePlane tp;
+    tp.n = unitNormals_.back();
+    tp.offset = tp.n.dot(A);
+    const double nn = N.squaredNorm();
+    tp.grad =
+        nn > 0 ? Vec3(((vb - va) * e2.cross(N) + (vc - va) * N.cross(e1)) / nn) : Vec3::Zero();
+    tp.at0 = va - tp.grad.dot(A);
+    tp.varMin = std::min({va, vb, vc});
+    tp.varMax = std::max({va, vb, vc});
+    planes_.push_back(tp);
   }
   objectScene_.addMesh(model_.mesh);
   objectScene_.commit(/*high=*/true);  // cast hundreds of times per Alg. 1 pass
+}
+
+void ViewQualityScene::setNearHand(std::shared_ptr<const NearHandGrid> grid) {
+  nearHand_ = std::move(grid);
+  mayBeNearHand_.assign(model_.mesh.triangles.size(), 0);
+  if (!nearHand_) return;
+  const auto& V = model_.mesh.vertices;
+  for (size_t k = 0; k < model_.mesh.triangles.size(); ++k) {
+    const Tri& f = model_.mesh.triangles[k];
+    Aabb b;
+    b.min = V[size_t(f[0])]
+                .cast<double>()
+                .cwiseMin(V[size_t(f[1])].cast<double>())
+                .cwiseMin(V[size_t(f[2])].cast<double>());
+    b.max = V[size_t(f[0])]
+                .cast<double>()
+                .cwiseMax(V[size_t(f[1])].cast<double>())
+                .cwiseMax(V[size_t(f[2])].cast<double>());
+    // A sample on the triangle may land a rounding error outside its corners' box.
+    b.min -= Vec3::Constant(1e-6);
+    b.max += Vec3::Constant(1e-6);
+    mayBeNearHand_[k] = nearHand_->anyNear(b);
+  }
 }
 
 RayScene ViewQualityScene::buildScene(const std::vector<Occluder>& occluders,
@@ -215,8 +335,8 @@ double ViewQualityScene::surfaceGain(const Ray& ray, float t, float hu, float hv
   }
   shadow->origin = p.cast<float>();
   shadow->dir = toP.cast<float>();
-  shadow->tnear = 2e-4f;
-  shadow->tfar = float(dist - 2e-4);
+  shadow->tnear = float(kShadowMargin);
+  shadow->tfar = float(dist - kShadowMargin);
   const Tri& f = model_.mesh.triangles[size_t(triangle)];
   const CameraIntrinsics& K = camera_.intrinsics;
   const double d = t;  // the ray has camera z = 1, so t is the depth
@@ -294,12 +414,16 @@ void hitTriangle(const Ray& r, const Vec3& p0, const Vec3& p1, const Vec3& p2, H
 void ViewQualityScene::rasterGains(const Iso3& T_O_C, const RasterWindow& w,
                                    const std::vector<Occluder>& occluders,
                                    std::vector<Ray>* shadows, std::vector<double>* gains,
-                                   ViewQualityStats* st) const {
+                                   ProjectorShadows* rows, ViewQualityStats* st) const {
   const CameraIntrinsics& K = camera_.intrinsics;
   const PinholeProjection P{K.fx, K.fy, K.cx, K.cy};
   const Iso3 T_C_O = T_O_C.inverse();
   thread_local DepthRaster object, robot;
   thread_local std::vector<std::pair<const TriangleMesh*, Iso3>> meshes;
+  thread_local std::vector<std::pair<const TriangleMesh*, Iso3>> robotMeshes;
+  thread_local std::vector<uint8_t> robotSolid;
+  robotMeshes.clear();
+  robotSolid.clear();
   object.reset(P, w);
   const Vec3 c = T_O_C.translation();
   const bool outside =
@@ -321,6 +445,8 @@ void ViewQualityScene::rasterGains(const Iso3& T_O_C, const RasterWindow& w,
         const bool inside =
             (cam.array() >= b.min.array()).all() && (cam.array() <= b.max.array()).all();
         robot.draw(*mesh, T, 0, o.solid && !inside, far);
+        robotMeshes.emplace_back(mesh, T);
+        robotSolid.push_back(o.solid);
       }
     }
   }
@@ -328,16 +454,80 @@ void ViewQualityScene::rasterGains(const Iso3& T_O_C, const RasterWindow& w,
   const Mat3 R = T_O_C.linear();
   const auto& V = model_.mesh.vertices;
   const ViewContext view = viewContext(T_O_C);
-  for (int j = w.j0; j <= w.j1; ++j)
+  // The fast per-sample stage (eq. 9's integrand); the unknown-area baseline goes through
+  // surfaceGain with an exact hit per sample.
+  const bool fast = options_.integrand == QualityIntegrand::kInformationGain;
+  const Vec3 o = T_O_C.translation();
+  const double cos2Incidence = cosMaxIncidence_ * cosMaxIncidence_;
+  const double cos2Projector = cosMaxProjector_ * cosMaxProjector_;
+  const double cos2Grazing = cosGrazing_ * cosGrazing_;
+  const double fxfy = K.fx * K.fy;
+  for (int j = w.j0; j <= w.j1; ++j) {
+    const Vec3 dirRow = R.col(2) + (j * w.stride - K.cy) / K.fy * R.col(1);
     for (int i = w.i0; i <= w.i1; ++i) {
       const int s = object.index(i, j);
       const int tri = object.id(s);
+      // The triangle records live in L3 at best: ask for the one a few samples ahead now.
+      if (i + kPrefetch <= w.i1) {
+        const int ahead = object.id(s + kPrefetch);
+        if (ahead >= 0) {
+          __builtin_prefetch(&planes_[size_t(ahead)]);
+          __builtin_prefetch(reinterpret_cast<const char*>(&planes_[size_t(ahead)]) + 64);
+        }
+      }
       if (tri < 0) {
         ++st->missed;
         continue;
       }
       if (withRobot && robot.inverseDepth(s) > object.inverseDepth(s)) {
         ++st->robot_first;
+        continue;
+      }
+      if (fast) {
+        // The ray R·((u − cx)/fx, (v − cy)/fy, 1) meets the winning triangle's plane at depth
+        // d (the ray's camera z is 1); the rules and the gain as surfaceGain, in squared form
+        // where a cosine is compared.
+        const TrianglePlane& tp = planes_[size_t(tri)];
+        const Vec3 dir = dirRow + (i * w.stride - K.cx) / K.fx * R.col(0);
+        const double nd = tp.n.dot(dir);
+        const double d = (tp.offset - tp.n.dot(o)) / nd;
+        const Vec3 p = o + d * dir;
+        if (nearHand_ && mayBeNearHand_[size_t(tri)] && nearHand_->near(p)) {
+          ++st->near_hand;
+          continue;
+        }
+        const double dir2 = dir.squaredNorm();
+        if (nd * nd < cos2Incidence * dir2) {
+          ++st->too_oblique;
+          continue;
+        }
+        const Vec3 toP = view.projector_O - p;
+        const double dist2 = toP.squaredNorm(), np = tp.n.dot(toP);
+        if (np * np < cos2Projector * dist2) {
+          ++st->projector_oblique;
+          continue;
+        }
+        const double var = std::clamp(tp.grad.dot(p) + tp.at0, tp.varMin, tp.varMax);
+        const double nz = std::max(0.05, std::abs(view.axis_O.dot(tp.n)));
+        double sz;
+        if (nd * nd >= cos2Grazing * dir2) {
+          const double dz = d - noise_.axial_z0_m;
+          sz = noise_.axial_c0_m + noise_.axial_c1 * dz * dz;  // axialSigma at θ = 0
+        } else {
+          sz = axialSigma(noise_, d, std::acos(std::min(1.0, std::abs(nd) / std::sqrt(dir2))));
+        }
+        gains->push_back(0.5 * std::log1p(var / (sz * sz)) * d * d / fxfy / nz);
+        const double dist = std::sqrt(dist2);
+        if (rows) {
+          rows->add(j, i, 1.0 / d, 1.0 / (d * (1.0 - kShadowMargin / dist)));
+        } else {
+          Ray shadow;
+          shadow.origin = p.cast<float>();
+          shadow.dir = (toP / dist).cast<float>();
+          shadow.tnear = float(kShadowMargin);
+          shadow.tfar = float(dist - kShadowMargin);
+          shadows->push_back(shadow);
+        }
         continue;
       }
       Ray r;
@@ -352,10 +542,35 @@ void ViewQualityScene::rasterGains(const Iso3& T_O_C, const RasterWindow& w,
       const double g =
           surfaceGain(r, h.t, h.u, h.v, tri, unitNormals_[size_t(tri)], view, &shadow, st);
       if (shadow.tfar != std::numeric_limits<float>::infinity()) {  // passed the other rules
-        shadows->push_back(shadow);
+        if (rows) {
+          // Embree's shadow ray ignores blockers nearer than tnear to the point: in 1/z, those
+          // below iz / (1 − tnear/dist).
+          const double iz = 1.0 / double(h.t);
+          const double dist = double(shadow.tfar) + kShadowMargin;
+          rows->add(j, i, iz, iz / (1.0 - kShadowMargin / dist));
+        } else {
+          shadows->push_back(shadow);
+        }
         gains->push_back(g);
       }
     }
+  }
+  if (!rows) return;
+  // The projector's view, at each pending sample's own projector column: S_obj from the
+  // vertices its raster already projected, then the robot's surfaces.
+  rows->index();
+  const Vec3 projector = view.projector_O;
+  const bool projectorOutside = (projector.array() < bounds_.min.array()).any() ||
+                                (projector.array() > bounds_.max.array()).any();
+  rows->draw(model_.mesh, T_C_O, closed_ && projectorOutside, &object.projected());
+  for (size_t k = 0; k < robotMeshes.size(); ++k) {
+    const auto& [mesh, T] = robotMeshes[k];
+    const Aabb b = mesh->bounds();
+    const Vec3 proj = T.inverse() * camera_.projector_C;
+    const bool inside =
+        (proj.array() >= b.min.array()).all() && (proj.array() <= b.max.array()).all();
+    rows->draw(*mesh, T, robotSolid[k] && !inside);
+  }
 }
 
 void ViewQualityScene::primaryHitsRayCast(const Iso3& T_O_C, const RasterWindow& w,
@@ -425,8 +640,6 @@ double ViewQualityScene::quality(const Iso3& T_O_C, const std::vector<Occluder>&
   st.cast = w.size();
   // The robot, a handful of instanced links, as one Embree scene for the shadow rays that S_obj
   // itself does not block (and, when not rasterising, for the primary rays that hit S_obj).
-  std::optional<RayScene> robot;
-  if (!occluders.empty()) robot.emplace(buildScene(occluders, false));
   thread_local std::vector<Ray> rays, shadows, toHit;
   thread_local std::vector<Hit> hits;
   thread_local std::vector<double> gains;
@@ -438,8 +651,29 @@ double ViewQualityScene::quality(const Iso3& T_O_C, const std::vector<Occluder>&
                       (options_.visibility == PrimaryVisibility::kAuto && w.stride <= 2);
   shadows.clear();
   gains.clear();
+  // Rasterised with a projector on the camera's x axis: the projector's view decides the
+  // shadows too (ProjectorShadows), with no ray cast at all.
+  const bool rowShadows = raster && ProjectorShadows::applicable(camera_.projector_C);
+  if (rowShadows) {
+    thread_local ProjectorShadows rows;
+    const CameraIntrinsics& K = camera_.intrinsics;
+    rows.reset({K.fx, K.fy, K.cx, K.cy}, w, camera_.projector_C.x());
+    rasterGains(T_O_C, w, occluders, &shadows, &gains, &rows, &st);
+    double G = 0;
+    for (int k = 0; k < rows.size(); ++k) {
+      if (rows.blocked(k)) {
+        ++st.projector_blocked;
+        continue;
+      }
+      ++st.counted;
+      G += gains[size_t(k)];
+    }
+    return G * double(sp) * double(sp);  // each sample stands for stride² pixels
+  }
+  std::optional<RayScene> robot;
+  if (!occluders.empty()) robot.emplace(buildScene(occluders, false));
   if (raster)
-    rasterGains(T_O_C, w, occluders, &shadows, &gains, &st);
+    rasterGains(T_O_C, w, occluders, &shadows, &gains, nullptr, &st);
   else
     primaryHitsRayCast(T_O_C, w, robot ? &*robot : nullptr, &rays, &hits, &st);
   for (size_t i = 0; i < rays.size(); ++i) {

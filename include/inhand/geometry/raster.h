@@ -51,6 +51,14 @@ class DepthRaster {
 
   static constexpr double kNear = 1e-3;  // near clipping plane, m
 
+  // Each vertex in sample coordinates with its 1/z (iz < 0: behind the near plane), packed so a
+  // triangle's corners cost three cache lines, not twelve.
+  struct ProjectedVertex {
+    double x, y, iz;
+  };
+  // The vertices of the mesh last passed to draw(), as it projected them.
+  const std::vector<ProjectedVertex>& projected() const { return verts_; }
+
  private:
   // Fills the samples of [ia, ib] × [ja, jb] inside the triangle (px, py) (sample coordinates,
   // signed doubled area `area`), with 1/z interpolated from the vertices' piz.
@@ -66,11 +74,6 @@ class DepthRaster {
   RasterWindow window_;
   std::vector<float> invZ_;
   std::vector<int> id_;
-  // Each vertex in sample coordinates with its 1/z (iz < 0: behind the near plane), packed so a
-  // triangle's corners cost three cache lines, not twelve.
-  struct ProjectedVertex {
-    double x, y, iz;
-  };
   std::vector<ProjectedVertex> verts_;
 };
 

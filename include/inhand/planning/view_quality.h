@@ -21,6 +21,8 @@
 
 namespace inhand {
 
+class ProjectorShadows;
+
 // What each counted pixel adds to a view's quality.
 enum class QualityIntegrand {
   kInformationGain,  // eq. 9: ½ ln(1 + σ_t²/σ_z²) · d²/(f²|n_z|)
@@ -42,10 +44,13 @@ struct ViewQualityOptions {
   // 1: every pixel of the 640×480 map, as the paper. s > 1: every s-th pixel in u and v, each
   // standing for s² pixels (the same surface integral, sampled s² times more coarsely).
   int pixel_stride = 1;
-  // How quality() finds the first surface along each pixel's ray (shadow rays to the projector
-  // are cast with Embree either way). kRaster: a z-buffer rasteriser over S_obj and the robot's
-  // triangles; it agrees with qualityReference up to samples on triangle edges and float
-  // rounding. kRayCast: Embree packets, the reference's own rays. kAuto: the rasteriser at
+  // How quality() finds the first surface along each pixel's ray, and the projector's shadows.
+  // kRaster: a z-buffer rasteriser over S_obj and the robot's triangles; it agrees with
+  // qualityReference up to samples on triangle edges and float rounding. Its shadows come from
+  // ProjectorShadows (the projector's own view at each point's exact projector column, no ray
+  // cast) when the projector is on the camera's x axis, as on the Kinect-style sensor, else
+  // from Embree shadow rays. kRayCast: Embree packets for both, the reference's own rays.
+  // kAuto: the rasteriser at
   // strides 1 and 2, where it is the faster (its cost is per triangle, a ray caster's per
   // sample; measured 1.5× at stride 1, 1.05–1.2× at stride 2), and ray casting at coarser ones.
   PrimaryVisibility visibility = PrimaryVisibility::kAuto;
@@ -73,6 +78,9 @@ class NearHandGrid {
   NearHandGrid(const HandGeometry& hand_O, double t_hand_m, double cell_m,
                const Aabb* region_O = nullptr);
   bool near(const Vec3& p_O) const;
+  // Whether any point of `box` (frame O) could be near: some near cell is the nearest cell of a
+  // point in it (false means near() is false everywhere in the box).
+  bool anyNear(const Aabb& box_O) const;
 
  private:
   Vec3 origin_ = Vec3::Zero();
@@ -112,7 +120,7 @@ class ViewQualityScene {
                    const NoiseModelOptions& noise, const ViewQualityOptions& options);
 
   // Sets the grasp's near-hand grid (no grid: no t_hand rule).
-  void setNearHand(std::shared_ptr<const NearHandGrid> grid) { nearHand_ = std::move(grid); }
+  void setNearHand(std::shared_ptr<const NearHandGrid> grid);
 
   // eq. 9 for a camera at T_O_C among `occluders` (robot surfaces in frame O). Looks only at the
   // pixels inside the projection of the model's bounding box (no pixel outside can hit S_obj),
@@ -139,10 +147,12 @@ class ViewQualityScene {
   };
   ViewContext viewContext(const Iso3& T_O_C) const;
   // Rasterised: per sample of `window` whose first surface is S_obj, the pixel rules and gain at
-  // once (gains[i] with the shadow ray still to test, shadows[i]; counts the other outcomes).
+  // once (gains[i] with its projector visibility still to decide: the point added to `rows`,
+  // which this then draws S_obj and the robot into, or with rows null the shadow ray
+  // shadows[i]; counts the other outcomes).
   void rasterGains(const Iso3& T_O_C, const RasterWindow& window,
                    const std::vector<Occluder>& occluders, std::vector<Ray>* shadows,
-                   std::vector<double>* gains, ViewQualityStats* st) const;
+                   std::vector<double>* gains, ProjectorShadows* rows, ViewQualityStats* st) const;
   // First S_obj hit per sample of `window` not hidden by a robot surface (rays[i], hits[i];
   // counts misses and robot-first pixels), by Embree.
   void primaryHitsRayCast(const Iso3& T_O_C, const RasterWindow& window, const RayScene* robot,
@@ -168,6 +178,18 @@ class ViewQualityScene {
   std::vector<Vec3f> faceNormals_;  // unnormalised (p1 − p0) × (p2 − p0), as Embree's Ng
   std::vector<Vec3> unitNormals_;   // faceNormals_ normalised in double, as pixelGain does
   std::shared_ptr<const NearHandGrid> nearHand_;
+  // Per triangle of S_obj, for the rasterised per-sample stage: its plane n·p = offset (n the
+  // unit normal), σ_t² as an affine function grad·p + at0 of the point on it (what interpolating
+  // the corners' variances with barycentrics gives), clamped to the corners' range on edges.
+  struct TrianglePlane {
+    Vec3 n;
+    double offset;
+    Vec3 grad;
+    double at0;
+    double varMin, varMax;
+  };
+  std::vector<TrianglePlane> planes_;
+  std::vector<uint8_t> mayBeNearHand_;  // per triangle: some point of it may be near the hand
 };
 
 // Camera pose in the object frame looking along dir_O at centre_O from `range_m`, rolled by

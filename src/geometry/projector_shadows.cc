@@ -1,0 +1,210 @@
+#include "inhand/geometry/projector_shadows.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+namespace inhand {
+
+namespace {
+inline int ifloor(double x) {
+  x = std::clamp(x, -1e9, 1e9);
+  const int i = int(x);
+  return i - (x < double(i));
+}
+inline int iceil(double x) {
+  x = std::clamp(x, -1e9, 1e9);
+  const int i = int(x);
+  return i + (x > double(i));
+}
+}  // namespace
+
+void ProjectorShadows::reset(const PinholeProjection& K, const RasterWindow& window,
+                             double baseline_x_m) {
+  K_ = K;
+  window_ = window;
+  shift_ = K.fx * baseline_x_m / window.stride;
+  minIzBlock_ = std::numeric_limits<double>::infinity();
+  minW_ = std::numeric_limits<double>::infinity();
+  maxW_ = -std::numeric_limits<double>::infinity();
+  points_.clear();
+}
+
+int ProjectorShadows::add(int j, double x, double iz, double iz_block) {
+  const double W = x - shift_ * iz;
+  points_.push_back({j, W, iz_block});
+  minIzBlock_ = std::min(minIzBlock_, iz_block);
+  minW_ = std::min(minW_, W);
+  maxW_ = std::max(maxW_, W);
+  return int(points_.size()) - 1;
+}
+
+void ProjectorShadows::index() {
+  const int rows = std::max(0, window_.height());
+  rowBase_.assign(size_t(rows), 0);
+  rowBucket_.assign(size_t(rows) + 1, 0);
+  // Each row's whole-W range.
+  std::vector<int>& lo = rowBase_;
+  thread_local std::vector<int> hi;
+  hi.assign(size_t(rows), std::numeric_limits<int>::min());
+  std::fill(lo.begin(), lo.end(), std::numeric_limits<int>::max());
+  for (const Point& p : points_) {
+    const int r = p.j - window_.j0, b = ifloor(p.W);
+    lo[size_t(r)] = std::min(lo[size_t(r)], b);
+    hi[size_t(r)] = std::max(hi[size_t(r)], b);
+  }
+  for (int r = 0; r < rows; ++r) {
+    const int n = hi[size_t(r)] >= lo[size_t(r)] ? hi[size_t(r)] - lo[size_t(r)] + 1 : 0;
+    rowBucket_[size_t(r) + 1] = rowBucket_[size_t(r)] + n;
+  }
+  // Counting sort of the points into their buckets.
+  const int buckets = rowBucket_[size_t(rows)];
+  first_.assign(size_t(buckets) + 1, 0);
+  thread_local std::vector<int> bucketOf;
+  bucketOf.resize(points_.size());
+  for (size_t k = 0; k < points_.size(); ++k) {
+    const Point& p = points_[k];
+    const int r = p.j - window_.j0;
+    bucketOf[k] = rowBucket_[size_t(r)] + ifloor(p.W) - rowBase_[size_t(r)];
+    ++first_[size_t(bucketOf[k]) + 1];
+  }
+  for (int b = 0; b < buckets; ++b) first_[size_t(b) + 1] += first_[size_t(b)];
+  thread_local std::vector<int> next;
+  next.assign(first_.begin(), first_.end() - 1);
+  sortedW_.resize(points_.size());
+  sortedIzBlock_.resize(points_.size());
+  position_.resize(points_.size());
+  sortedBlocked_.assign(points_.size(), 0);
+  for (size_t k = 0; k < points_.size(); ++k) {
+    const int at = next[size_t(bucketOf[k])]++;
+    sortedW_[size_t(at)] = points_[k].W;
+    sortedIzBlock_[size_t(at)] = points_[k].izBlock;
+    position_[k] = at;
+  }
+}
+
+__attribute__((always_inline)) inline void ProjectorShadows::triangle(const double* W,
+                                                                      const double* y,
+                                                                      const double* iz, bool cull) {
+  const double area = (W[1] - W[0]) * (y[2] - y[0]) - (y[1] - y[0]) * (W[2] - W[0]);
+  // Zero: edge-on to the projector (it meets a projector ray only along its own plane).
+  if (area == 0 || (cull && area > 0)) return;
+  if (std::max({iz[0], iz[1], iz[2]}) < minIzBlock_) return;  // behind every point
+  const double Wmin = std::min({W[0], W[1], W[2]}), Wmax = std::max({W[0], W[1], W[2]});
+  if (Wmax < minW_ || Wmin > maxW_) return;
+  const int ja = std::max(window_.j0, iceil(std::min({y[0], y[1], y[2]})));
+  const int jb = std::min(window_.j1, ifloor(std::max({y[0], y[1], y[2]})));
+  if (ja > jb) return;
+  // Edge functions as DepthRaster::fill's: e_k(W, y) ≥ 0 inside, e_k / |area| the barycentric
+  // coordinate of corner k, so 1/z = Σ_k e_k·iz_k / |area|.
+  const double sg = area > 0 ? 1.0 : -1.0;
+  double eW[3], eY[3], e0[3];
+  for (int k = 0; k < 3; ++k) {
+    const int a = (k + 1) % 3, b = (k + 2) % 3;  // edge k runs from corner a to corner b
+    eW[k] = -sg * (y[b] - y[a]);
+    eY[k] = sg * (W[b] - W[a]);
+    e0[k] = sg * ((W[b] - W[a]) * -y[a] + (y[b] - y[a]) * W[a]);
+  }
+  const double inv = 1.0 / std::abs(area);
+  const double zW = (eW[0] * iz[0] + eW[1] * iz[1] + eW[2] * iz[2]) * inv;
+  const double zY = (eY[0] * iz[0] + eY[1] * iz[1] + eY[2] * iz[2]) * inv;
+  const double z0 = (e0[0] * iz[0] + e0[1] * iz[1] + e0[2] * iz[2]) * inv;
+  const bool wide = Wmax - Wmin > 4;
+  for (int j = ja; j <= jb; ++j) {
+    const int r = j - window_.j0;
+    const int rb = rowBucket_[size_t(r)], nb = rowBucket_[size_t(r) + 1] - rb;
+    if (nb == 0) continue;
+    double base[3];
+    for (int k = 0; k < 3; ++k) base[k] = e0[k] + eY[k] * j;
+    double lo = Wmin, hi = Wmax;
+    for (int k = 0; k < 3 && wide; ++k) {  // the row's span, one unit of margin for rounding
+      if (eW[k] > 0)
+        lo = std::max(lo, -base[k] / eW[k] - 1);
+      else if (eW[k] < 0)
+        hi = std::min(hi, -base[k] / eW[k] + 1);
+      else if (base[k] < 0)
+        hi = lo - 1;
+    }
+    if (lo > hi) continue;
+    const int b0 = std::max(0, ifloor(lo) - rowBase_[size_t(r)]);
+    const int b1 = std::min(nb - 1, ifloor(hi) - rowBase_[size_t(r)]);
+    if (b0 > b1) continue;
+    const double zRow = z0 + zY * j;
+    const int s1 = first_[size_t(rb + b1) + 1];
+    for (int s = first_[size_t(rb + b0)]; s < s1; ++s) {
+      const double w = sortedW_[size_t(s)];
+      const bool hit = (base[0] + eW[0] * w >= 0) & (base[1] + eW[1] * w >= 0) &
+                       (base[2] + eW[2] * w >= 0) & (zRow + zW * w >= sortedIzBlock_[size_t(s)]);
+      sortedBlocked_[size_t(s)] |= uint8_t(hit);
+    }
+  }
+}
+
+void ProjectorShadows::triangleCamera(const Vec3& a, const Vec3& b, const Vec3& c, bool cull) {
+  constexpr double kNear = DepthRaster::kNear;
+  if (a.z() < kNear && b.z() < kNear && c.z() < kNear) return;
+  // Sutherland–Hodgman against z = kNear, as DepthRaster::drawTriangle: the projector's rays
+  // through the window all run at z > 0, and nothing within a millimetre of the sensor is real.
+  const Vec3 in[3] = {a, b, c};
+  Vec3 poly[4];
+  int m = 0;
+  for (int k = 0; k < 3; ++k) {
+    const Vec3& p = in[k];
+    const Vec3& q = in[(k + 1) % 3];
+    const bool pin = p.z() >= kNear, qin = q.z() >= kNear;
+    if (pin) poly[m++] = p;
+    if (pin != qin) poly[m++] = p + (q - p) * ((kNear - p.z()) / (q.z() - p.z()));
+  }
+  const double s = window_.stride;
+  double W[4], y[4], iz[4];
+  for (int k = 0; k < m; ++k) {
+    iz[k] = 1.0 / poly[k].z();
+    W[k] = (K_.fx * poly[k].x() * iz[k] + K_.cx) / s - shift_ * iz[k];
+    y[k] = (K_.fy * poly[k].y() * iz[k] + K_.cy) / s;
+  }
+  for (int k = 1; k + 1 < m; ++k) {
+    const double fW[3] = {W[0], W[k], W[k + 1]}, fy[3] = {y[0], y[k], y[k + 1]};
+    const double fz[3] = {iz[0], iz[k], iz[k + 1]};
+    triangle(fW, fy, fz, cull);
+  }
+}
+
+void ProjectorShadows::draw(const TriangleMesh& mesh, const Iso3& T_C_mesh, bool cull_back_faces,
+                            const std::vector<DepthRaster::ProjectedVertex>* projected) {
+  if (points_.empty()) return;
+  const Mat3 R = T_C_mesh.linear();
+  const Vec3 t = T_C_mesh.translation();
+  const std::vector<DepthRaster::ProjectedVertex>* V = projected;
+  if (!V || V->size() != mesh.vertices.size()) {
+    const double s = window_.stride;
+    const double fxs = K_.fx / s, fys = K_.fy / s, cxs = K_.cx / s, cys = K_.cy / s;
+    verts_.resize(mesh.vertices.size());
+    for (size_t i = 0; i < mesh.vertices.size(); ++i) {
+      const Vec3 p = R * mesh.vertices[i].cast<double>() + t;
+      DepthRaster::ProjectedVertex& v = verts_[i];
+      if (p.z() >= DepthRaster::kNear) {
+        v.iz = 1.0 / p.z();
+        v.x = fxs * p.x() * v.iz + cxs;
+        v.y = fys * p.y() * v.iz + cys;
+      } else {
+        v.iz = -1;
+      }
+    }
+    V = &verts_;
+  }
+  for (const Tri& f : mesh.triangles) {
+    const DepthRaster::ProjectedVertex &A = (*V)[size_t(f[0])], &B = (*V)[size_t(f[1])],
+                                       &C = (*V)[size_t(f[2])];
+    if (A.iz < 0 || B.iz < 0 || C.iz < 0) {
+      triangleCamera(R * mesh.vertices[size_t(f[0])].cast<double>() + t,
+                     R * mesh.vertices[size_t(f[1])].cast<double>() + t,
+                     R * mesh.vertices[size_t(f[2])].cast<double>() + t, cull_back_faces);
+      continue;
+    }
+    const double W[3] = {A.x - shift_ * A.iz, B.x - shift_ * B.iz, C.x - shift_ * C.iz};
+    const double y[3] = {A.y, B.y, C.y}, iz[3] = {A.iz, B.iz, C.iz};
+    triangle(W, y, iz, cull_back_faces);
+  }
+}
+
+}  // namespace inhand
