@@ -4,6 +4,8 @@
 #include <cmath>
 #include <limits>
 
+#include "inhand/core/error.h"
+
 namespace inhand {
 
 namespace {
@@ -32,6 +34,8 @@ void ProjectorShadows::reset(const PinholeProjection& K, const RasterWindow& win
 
 int ProjectorShadows::add(int j, double x, double iz, double iz_block) {
   const double W = x - shift_ * iz;
+  INHAND_CHECK(std::isfinite(W) && std::isfinite(iz_block) && j >= window_.j0 && j <= window_.j1,
+               "ProjectorShadows::add: a finite point on a window row");
   points_.push_back({j, W, iz_block});
   minIzBlock_ = std::min(minIzBlock_, iz_block);
   minW_ = std::min(minW_, W);
@@ -40,45 +44,28 @@ int ProjectorShadows::add(int j, double x, double iz, double iz_block) {
 }
 
 void ProjectorShadows::index() {
+  // Buckets of whole W on a grid of rows × pitch, [base, base + pitch) the points' W range.
   const int rows = std::max(0, window_.height());
-  rowBase_.assign(size_t(rows), 0);
-  rowBucket_.assign(size_t(rows) + 1, 0);
-  // Each row's whole-W range.
-  std::vector<int>& lo = rowBase_;
-  thread_local std::vector<int> hi;
-  hi.assign(size_t(rows), std::numeric_limits<int>::min());
-  std::fill(lo.begin(), lo.end(), std::numeric_limits<int>::max());
-  for (const Point& p : points_) {
-    const int r = p.j - window_.j0, b = ifloor(p.W);
-    lo[size_t(r)] = std::min(lo[size_t(r)], b);
-    hi[size_t(r)] = std::max(hi[size_t(r)], b);
-  }
-  for (int r = 0; r < rows; ++r) {
-    const int n = hi[size_t(r)] >= lo[size_t(r)] ? hi[size_t(r)] - lo[size_t(r)] + 1 : 0;
-    rowBucket_[size_t(r) + 1] = rowBucket_[size_t(r)] + n;
-  }
-  // Counting sort of the points into their buckets.
-  const int buckets = rowBucket_[size_t(rows)];
-  first_.assign(size_t(buckets) + 1, 0);
-  thread_local std::vector<int> bucketOf;
+  base_ = points_.empty() ? 0 : ifloor(minW_);
+  pitch_ = points_.empty() ? 0 : ifloor(maxW_) - base_ + 1;
+  const size_t buckets = size_t(rows) * size_t(pitch_);
+  first_.assign(buckets + 1, 0);
+  thread_local std::vector<int> bucketOf, next;
   bucketOf.resize(points_.size());
   for (size_t k = 0; k < points_.size(); ++k) {
     const Point& p = points_[k];
-    const int r = p.j - window_.j0;
-    bucketOf[k] = rowBucket_[size_t(r)] + ifloor(p.W) - rowBase_[size_t(r)];
+    bucketOf[k] = (p.j - window_.j0) * pitch_ + ifloor(p.W) - base_;
     ++first_[size_t(bucketOf[k]) + 1];
   }
-  for (int b = 0; b < buckets; ++b) first_[size_t(b) + 1] += first_[size_t(b)];
-  thread_local std::vector<int> next;
+  for (size_t b = 0; b < buckets; ++b) first_[b + 1] += first_[b];
+  // Counting sort of the points into their buckets.
   next.assign(first_.begin(), first_.end() - 1);
-  sortedW_.resize(points_.size());
-  sortedIzBlock_.resize(points_.size());
+  sorted_.resize(points_.size());
   position_.resize(points_.size());
   sortedBlocked_.assign(points_.size(), 0);
   for (size_t k = 0; k < points_.size(); ++k) {
     const int at = next[size_t(bucketOf[k])]++;
-    sortedW_[size_t(at)] = points_[k].W;
-    sortedIzBlock_[size_t(at)] = points_[k].izBlock;
+    sorted_[size_t(at)] = {points_[k].W, points_[k].izBlock};
     position_[k] = at;
   }
 }
@@ -96,7 +83,8 @@ __attribute__((always_inline)) inline void ProjectorShadows::triangle(const doub
   const int jb = std::min(window_.j1, ifloor(std::max({y[0], y[1], y[2]})));
   if (ja > jb) return;
   // Edge functions as DepthRaster::fill's: e_k(W, y) ≥ 0 inside, e_k / |area| the barycentric
-  // coordinate of corner k, so 1/z = Σ_k e_k·iz_k / |area|.
+  // coordinate of corner k, so 1/z = Σ_k e_k·iz_k / |area|: compared as Σ_k e_k·iz_k against
+  // iz_block·|area|, without a division.
   const double sg = area > 0 ? 1.0 : -1.0;
   double eW[3], eY[3], e0[3];
   for (int k = 0; k < 3; ++k) {
@@ -105,36 +93,39 @@ __attribute__((always_inline)) inline void ProjectorShadows::triangle(const doub
     eY[k] = sg * (W[b] - W[a]);
     e0[k] = sg * ((W[b] - W[a]) * -y[a] + (y[b] - y[a]) * W[a]);
   }
-  const double inv = 1.0 / std::abs(area);
-  const double zW = (eW[0] * iz[0] + eW[1] * iz[1] + eW[2] * iz[2]) * inv;
-  const double zY = (eY[0] * iz[0] + eY[1] * iz[1] + eY[2] * iz[2]) * inv;
-  const double z0 = (e0[0] * iz[0] + e0[1] * iz[1] + e0[2] * iz[2]) * inv;
+  const double absArea = std::abs(area);
+  const double zW = eW[0] * iz[0] + eW[1] * iz[1] + eW[2] * iz[2];
+  const double zY = eY[0] * iz[0] + eY[1] * iz[1] + eY[2] * iz[2];
+  const double z0 = e0[0] * iz[0] + e0[1] * iz[1] + e0[2] * iz[2];
   const bool wide = Wmax - Wmin > 4;
+  const int c0 = std::max(0, ifloor(Wmin) - base_), c1 = std::min(pitch_ - 1, ifloor(Wmax) - base_);
   for (int j = ja; j <= jb; ++j) {
-    const int r = j - window_.j0;
-    const int rb = rowBucket_[size_t(r)], nb = rowBucket_[size_t(r) + 1] - rb;
-    if (nb == 0) continue;
+    const int rowFirst = (j - window_.j0) * pitch_;
     double base[3];
     for (int k = 0; k < 3; ++k) base[k] = e0[k] + eY[k] * j;
-    double lo = Wmin, hi = Wmax;
-    for (int k = 0; k < 3 && wide; ++k) {  // the row's span, one unit of margin for rounding
-      if (eW[k] > 0)
-        lo = std::max(lo, -base[k] / eW[k] - 1);
-      else if (eW[k] < 0)
-        hi = std::min(hi, -base[k] / eW[k] + 1);
-      else if (base[k] < 0)
-        hi = lo - 1;
+    int b0 = c0, b1 = c1;
+    if (wide) {  // the row's span, one unit of margin for rounding
+      double lo = Wmin, hi = Wmax;
+      for (int k = 0; k < 3; ++k) {
+        if (eW[k] > 0)
+          lo = std::max(lo, -base[k] / eW[k] - 1);
+        else if (eW[k] < 0)
+          hi = std::min(hi, -base[k] / eW[k] + 1);
+        else if (base[k] < 0)
+          hi = lo - 1;
+      }
+      if (lo > hi) continue;
+      b0 = std::max(b0, ifloor(lo) - base_);
+      b1 = std::min(b1, ifloor(hi) - base_);
     }
-    if (lo > hi) continue;
-    const int b0 = std::max(0, ifloor(lo) - rowBase_[size_t(r)]);
-    const int b1 = std::min(nb - 1, ifloor(hi) - rowBase_[size_t(r)]);
     if (b0 > b1) continue;
+    const int s0 = first_[size_t(rowFirst + b0)], s1 = first_[size_t(rowFirst + b1) + 1];
     const double zRow = z0 + zY * j;
-    const int s1 = first_[size_t(rb + b1) + 1];
-    for (int s = first_[size_t(rb + b0)]; s < s1; ++s) {
-      const double w = sortedW_[size_t(s)];
+    for (int s = s0; s < s1; ++s) {
+      const double w = sorted_[size_t(s)].W;
       const bool hit = (base[0] + eW[0] * w >= 0) & (base[1] + eW[1] * w >= 0) &
-                       (base[2] + eW[2] * w >= 0) & (zRow + zW * w >= sortedIzBlock_[size_t(s)]);
+                       (base[2] + eW[2] * w >= 0) &
+                       (zRow + zW * w >= sorted_[size_t(s)].izBlock * absArea);
       sortedBlocked_[size_t(s)] |= uint8_t(hit);
     }
   }

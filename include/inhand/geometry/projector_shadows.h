@@ -62,10 +62,14 @@ class ProjectorShadows {
   double minIzBlock_ = 0;       // a triangle whose corners all lie farther than this blocks nothing
   double minW_ = 0, maxW_ = 0;  // the points' W range
   std::vector<Point> points_;
-  // Bucketed points: row r = j − j0 has buckets [rowBucket_[r], rowBucket_[r + 1]) for whole W
-  // from rowBase_[r]; bucket b holds the points [first_[b], first_[b + 1]) of the sorted arrays.
-  std::vector<int> rowBase_, rowBucket_, first_;
-  std::vector<double> sortedW_, sortedIzBlock_;
+  // Bucketed points: bucket (r, c), r = j − j0, c = ⌊W⌋ − base_, is r·pitch_ + c and holds the
+  // points [first_[b], first_[b + 1]) of sorted_.
+  int base_ = 0, pitch_ = 0;
+  std::vector<int> first_;
+  struct Sorted {
+    double W, izBlock;
+  };
+  std::vector<Sorted> sorted_;
   std::vector<uint8_t> sortedBlocked_;
   std::vector<int> position_;  // point k sits at position_[k] of the sorted arrays
   std::vector<DepthRaster::ProjectedVertex> verts_;
