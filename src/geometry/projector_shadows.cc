@@ -161,8 +161,31 @@ void ProjectorShadows::triangleCamera(const Vec3& a, const Vec3& b, const Vec3& 
 }
 
 void ProjectorShadows::draw(const TriangleMesh& mesh, const Iso3& T_C_mesh, bool cull_back_faces,
-                            const std::vector<DepthRaster::ProjectedVertex>* projected) {
+                            const std::vector<DepthRaster::ProjectedVertex>* projected,
+                            const Aabb* bounds) {
   if (points_.empty()) return;
+  if (bounds && !bounds->empty()) {
+    // As DepthRaster::draw: the projector is a pinhole too, so with every corner in front of
+    // the sensor the hull of their (W, y) holds the mesh's, and 1/z peaks at a corner.
+    double zmin = 1e300, zmax = -1e300, Wmin = 1e300, Wmax = -1e300, ymin = 1e300, ymax = -1e300;
+    for (int k = 0; k < 8; ++k) {
+      const Vec3 p = T_C_mesh * bounds->corner(k);
+      zmin = std::min(zmin, p.z());
+      zmax = std::max(zmax, p.z());
+      if (p.z() < DepthRaster::kNear) continue;
+      const double iz = 1.0 / p.z();
+      const double W = (K_.fx * p.x() * iz + K_.cx) / window_.stride - shift_ * iz;
+      const double y = (K_.fy * p.y() * iz + K_.cy) / window_.stride;
+      Wmin = std::min(Wmin, W);
+      Wmax = std::max(Wmax, W);
+      ymin = std::min(ymin, y);
+      ymax = std::max(ymax, y);
+    }
+    if (zmax < DepthRaster::kNear) return;
+    if (zmin >= DepthRaster::kNear && (1.0 / zmin < minIzBlock_ || Wmax < minW_ || Wmin > maxW_ ||
+                                       ymax < window_.j0 || ymin > window_.j1))
+      return;
+  }
   const Mat3 R = T_C_mesh.linear();
   const Vec3 t = T_C_mesh.translation();
   const std::vector<DepthRaster::ProjectedVertex>* V = projected;

@@ -32,8 +32,29 @@ void DepthRaster::reset(const PinholeProjection& K, const RasterWindow& window) 
 }
 
 void DepthRaster::draw(const TriangleMesh& mesh, const Iso3& T_C_mesh, int id_base,
-                       bool cull_back_faces, double max_depth) {
+                       bool cull_back_faces, double max_depth, const Aabb* bounds) {
   if (window_.size() == 0) return;
+  if (bounds && !bounds->empty()) {
+    // The box's corners bound the mesh's depth, and (all in front of the camera) the convex hull
+    // of their projections holds the mesh's.
+    double zmin = 1e300, zmax = -1e300, xmin = 1e300, xmax = -1e300, ymin = 1e300, ymax = -1e300;
+    for (int k = 0; k < 8; ++k) {
+      const Vec3 p = T_C_mesh * bounds->corner(k);
+      zmin = std::min(zmin, p.z());
+      zmax = std::max(zmax, p.z());
+      if (p.z() < kNear) continue;
+      const double x = (K_.fx * p.x() / p.z() + K_.cx) / window_.stride;
+      const double y = (K_.fy * p.y() / p.z() + K_.cy) / window_.stride;
+      xmin = std::min(xmin, x);
+      xmax = std::max(xmax, x);
+      ymin = std::min(ymin, y);
+      ymax = std::max(ymax, y);
+    }
+    if (zmax < kNear || (max_depth > 0 && zmin > max_depth)) return;
+    if (zmin >= kNear &&
+        (xmax < window_.i0 || xmin > window_.i1 || ymax < window_.j0 || ymin > window_.j1))
+      return;
+  }
   // Each vertex into the camera frame and, in front of the near plane, to sample coordinates
   // and 1/z, once (a vertex is shared by about six triangles).
   const size_t nv = mesh.vertices.size();

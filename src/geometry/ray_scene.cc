@@ -42,6 +42,7 @@ RayScene::RayScene(RayScene&& o) noexcept
     : scene_(o.scene_),
       instanceRotation_(std::move(o.instanceRotation_)),
       meshes_(std::move(o.meshes_)),
+      bounds_(std::move(o.bounds_)),
       instances_(std::move(o.instances_)),
       geometryCount_(o.geometryCount_),
       committed_(o.committed_) {
@@ -54,6 +55,7 @@ RayScene& RayScene::operator=(RayScene&& o) noexcept {
     scene_ = o.scene_;
     instanceRotation_ = std::move(o.instanceRotation_);
     meshes_ = std::move(o.meshes_);
+    bounds_ = std::move(o.bounds_);
     instances_ = std::move(o.instances_);
     geometryCount_ = o.geometryCount_;
     committed_ = o.committed_;
@@ -90,6 +92,7 @@ int RayScene::addMesh(const TriangleMesh& mesh, const Iso3& T) {
   INHAND_CHECK(int(id) == geometryCount_, "unexpected Embree geometry id");
   instanceRotation_.push_back(Eigen::Matrix3f::Identity());
   meshes_.push_back(transformed(mesh, T));
+  bounds_.push_back(meshes_.back().bounds());
   instances_.emplace_back(nullptr, Iso3::Identity());
   return geometryCount_++;
 }
@@ -111,6 +114,7 @@ int RayScene::addInstance(const RayScene& inner, const Iso3& T) {
   INHAND_CHECK(int(id) == geometryCount_, "unexpected Embree geometry id");
   instanceRotation_.push_back(T.linear().cast<float>());
   meshes_.emplace_back();
+  bounds_.emplace_back();
   instances_.emplace_back(&inner, T);
   return geometryCount_++;
 }
@@ -134,13 +138,12 @@ Hit RayScene::makeHit(float t, unsigned geomID, unsigned instID, unsigned primID
   return h;
 }
 
-void RayScene::collectMeshes(const Iso3& T,
-                             std::vector<std::pair<const TriangleMesh*, Iso3>>* out) const {
+void RayScene::collectMeshes(const Iso3& T, std::vector<PlacedMesh>* out) const {
   for (int g = 0; g < geometryCount_; ++g) {
     if (instances_[size_t(g)].first)
       instances_[size_t(g)].first->collectMeshes(T * instances_[size_t(g)].second, out);
     else
-      out->emplace_back(&meshes_[size_t(g)], T);
+      out->push_back({&meshes_[size_t(g)], T, &bounds_[size_t(g)]});
   }
 }
 

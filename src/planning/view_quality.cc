@@ -419,8 +419,7 @@ void ViewQualityScene::rasterGains(const Iso3& T_O_C, const RasterWindow& w,
   const PinholeProjection P{K.fx, K.fy, K.cx, K.cy};
   const Iso3 T_C_O = T_O_C.inverse();
   thread_local DepthRaster object, robot;
-  thread_local std::vector<std::pair<const TriangleMesh*, Iso3>> meshes;
-  thread_local std::vector<std::pair<const TriangleMesh*, Iso3>> robotMeshes;
+  thread_local std::vector<RayScene::PlacedMesh> robotMeshes;
   thread_local std::vector<uint8_t> robotSolid;
   robotMeshes.clear();
   robotSolid.clear();
@@ -436,16 +435,16 @@ void ViewQualityScene::rasterGains(const Iso3& T_O_C, const RasterWindow& w,
     for (int k = 0; k < 8; ++k) far = std::max(far, (T_C_O * bounds_.corner(k)).z());
     robot.reset(P, w);
     for (const Occluder& o : occluders) {
-      meshes.clear();
-      o.scene->collectMeshes(T_C_O * o.T_O_scene, &meshes);
-      for (const auto& [mesh, T] : meshes) {
+      const size_t first = robotMeshes.size();
+      o.scene->collectMeshes(T_C_O * o.T_O_scene, &robotMeshes);
+      for (size_t k = first; k < robotMeshes.size(); ++k) {
+        const RayScene::PlacedMesh& m = robotMeshes[k];
         // Back faces of a solid may go when the camera (the origin) is outside its bounds.
-        const Aabb b = mesh->bounds();
-        const Vec3 cam = T.inverse().translation();
+        const Aabb& b = *m.bounds;
+        const Vec3 cam = m.T.inverse().translation();
         const bool inside =
             (cam.array() >= b.min.array()).all() && (cam.array() <= b.max.array()).all();
-        robot.draw(*mesh, T, 0, o.solid && !inside, far);
-        robotMeshes.emplace_back(mesh, T);
+        robot.draw(*m.mesh, m.T, 0, o.solid && !inside, far, m.bounds);
         robotSolid.push_back(o.solid);
       }
     }
@@ -564,12 +563,12 @@ void ViewQualityScene::rasterGains(const Iso3& T_O_C, const RasterWindow& w,
                                 (projector.array() > bounds_.max.array()).any();
   rows->draw(model_.mesh, T_C_O, closed_ && projectorOutside, &object.projected());
   for (size_t k = 0; k < robotMeshes.size(); ++k) {
-    const auto& [mesh, T] = robotMeshes[k];
-    const Aabb b = mesh->bounds();
-    const Vec3 proj = T.inverse() * camera_.projector_C;
+    const RayScene::PlacedMesh& m = robotMeshes[k];
+    const Aabb& b = *m.bounds;
+    const Vec3 proj = m.T.inverse() * camera_.projector_C;
     const bool inside =
         (proj.array() >= b.min.array()).all() && (proj.array() <= b.max.array()).all();
-    rows->draw(*mesh, T, robotSolid[k] && !inside);
+    rows->draw(*m.mesh, m.T, robotSolid[k] && !inside, nullptr, m.bounds);
   }
 }
 

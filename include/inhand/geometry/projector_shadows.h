@@ -40,8 +40,12 @@ class ProjectorShadows {
   // outward-oriented mesh with the projector outside it: a blocked segment leaves the solid for
   // the last time through a face that faces the projector). `projected`: the mesh's vertices as a
   // DepthRaster just projected them for this camera and window (saves projecting them again).
+  // `bounds`: the mesh's bounding box in its own frame, when known: a mesh whose box can block
+  // no point (behind the near plane or every point, or beside them in the projector's image) is
+  // skipped whole.
   void draw(const TriangleMesh& mesh, const Iso3& T_C_mesh, bool cull_back_faces,
-            const std::vector<DepthRaster::ProjectedVertex>* projected = nullptr);
+            const std::vector<DepthRaster::ProjectedVertex>* projected = nullptr,
+            const Aabb* bounds = nullptr);
 
   int size() const { return int(points_.size()); }
   bool blocked(int k) const { return sortedBlocked_[size_t(position_[size_t(k)])] != 0; }

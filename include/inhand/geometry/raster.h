@@ -37,8 +37,10 @@ class DepthRaster {
   // through a front face first), and about half the work.
   // `max_depth` > 0: triangles whose three vertices all lie deeper than it are skipped (for
   // occluders of something known to be nearer).
+  // `bounds`: the mesh's bounding box in its own frame, when known: a mesh whose box lies
+  // entirely behind the near plane, beyond max_depth or outside the window is skipped whole.
   void draw(const TriangleMesh& mesh, const Iso3& T_C_mesh, int id_base = 0,
-            bool cull_back_faces = false, double max_depth = 0);
+            bool cull_back_faces = false, double max_depth = 0, const Aabb* bounds = nullptr);
   // Draws one triangle given in the camera frame.
   void drawTriangle(const Vec3& a, const Vec3& b, const Vec3& c, int id);
 

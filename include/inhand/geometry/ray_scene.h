@@ -60,8 +60,14 @@ class RayScene {
 
   // The triangles this scene was built from, for other renderers (the rasteriser): each added
   // mesh with its placement T·(instance placements) in the frame that T maps this scene into,
-  // instanced scenes expanded recursively. Pointers live as long as the scenes.
-  void collectMeshes(const Iso3& T, std::vector<std::pair<const TriangleMesh*, Iso3>>* out) const;
+  // and its bounding box in its own frame, instanced scenes expanded recursively. Pointers live
+  // as long as the scenes.
+  struct PlacedMesh {
+    const TriangleMesh* mesh;
+    Iso3 T;
+    const Aabb* bounds;
+  };
+  void collectMeshes(const Iso3& T, std::vector<PlacedMesh>* out) const;
 
  private:
   Hit makeHit(float t, unsigned geomID, unsigned instID, unsigned primID, float u, float v,
@@ -70,6 +76,7 @@ class RayScene {
   std::vector<Eigen::Matrix3f> instanceRotation_;  // per geometry id (identity for meshes)
   // Per geometry id: the mesh as added (already placed), or the instanced scene and placement.
   std::vector<TriangleMesh> meshes_;
+  std::vector<Aabb> bounds_;  // per geometry id: its mesh's bounds
   std::vector<std::pair<const RayScene*, Iso3>> instances_;
   int geometryCount_ = 0;
   bool committed_ = false;
