@@ -5,6 +5,7 @@
 #include <optional>
 
 #include "inhand/core/error.h"
+#include "inhand/core/fast_math.h"
 #include "inhand/core/parallel.h"
 #include "inhand/geometry/primitives.h"
 #include "inhand/geometry/projector_shadows.h"
@@ -515,7 +516,7 @@ void ViewQualityScene::rasterGains(const Iso3& T_O_C, const RasterWindow& w,
         } else {
           sz = axialSigma(noise_, d, std::acos(std::min(1.0, std::abs(nd) / std::sqrt(dir2))));
         }
-        gains->push_back(0.5 * std::log1p(var / (sz * sz)) * d * d / fxfy / nz);
+        gains->push_back(0.5 * log1pNonNegative(var / (sz * sz)) * d * d / (fxfy * nz));
         const double dist = std::sqrt(dist2);
         if (rows) {
           rows->add(j, i, 1.0 / d, 1.0 / (d * (1.0 - kShadowMargin / dist)));
