@@ -32,17 +32,6 @@ void ProjectorShadows::reset(const PinholeProjection& K, const RasterWindow& win
   points_.clear();
 }
 
-int ProjectorShadows::add(int j, double x, double iz, double iz_block) {
-  const double W = x - shift_ * iz;
-  INHAND_CHECK(std::isfinite(W) && std::isfinite(iz_block) && j >= window_.j0 && j <= window_.j1,
-               "ProjectorShadows::add: a finite point on a window row");
-  points_.push_back({j, W, iz_block});
-  minIzBlock_ = std::min(minIzBlock_, iz_block);
-  minW_ = std::min(minW_, W);
-  maxW_ = std::max(maxW_, W);
-  return int(points_.size()) - 1;
-}
-
 void ProjectorShadows::index() {
   // Buckets of whole W on a grid of rows × pitch, [base, base + pitch) the points' W range.
   const int rows = std::max(0, window_.height());

@@ -12,9 +12,12 @@
 // sample (the weakness of a shadow map). Each triangle is walked over the sample rows it spans and
 // tested against the points whose W falls in its span on that row (points are bucketed by row and
 // by whole W). Coverage is inclusive on the edges: a segment through a shared edge is blocked.
+#include <algorithm>
+#include <cmath>
 #include <cstdint>
 #include <vector>
 
+#include "inhand/core/error.h"
 #include "inhand/geometry/raster.h"
 #include "inhand/geometry/triangle_mesh.h"
 
@@ -32,7 +35,16 @@ class ProjectorShadows {
   // Adds a point on sample row j (window.j0 ≤ j ≤ window.j1) at sample column x with inverse
   // depth iz; it is blocked by a surface whose 1/z on its projector ray is at least iz_block
   // (> iz: nearer than the point by the margin). Returns the point's index.
-  int add(int j, double x, double iz, double iz_block);
+  int add(int j, double x, double iz, double iz_block) {
+    const double W = x - shift_ * iz;
+    INHAND_CHECK(std::isfinite(W) && std::isfinite(iz_block) && j >= window_.j0 && j <= window_.j1,
+                 "ProjectorShadows::add: a finite point on a window row");
+    points_.push_back({j, W, iz_block});
+    minIzBlock_ = std::min(minIzBlock_, iz_block);
+    minW_ = std::min(minW_, W);
+    maxW_ = std::max(maxW_, W);
+    return int(points_.size()) - 1;
+  }
   // After the last add and before the first draw: buckets the points.
   void index();
   // Marks the points that triangles of `mesh`, placed in the camera frame by T_C_mesh, block.
