@@ -553,6 +553,51 @@ TEST(ProjectorShadows, AStripThinnerThanASampleStillCastsItsShadow) {
   EXPECT_LE(differ, 1);
 }
 
+TEST(Raster, MeshesSkippedByTheirBoxesDrawNothingTheyWouldHaveDrawn) {
+  // A sphere in view, one beside the window, one behind the camera and one beyond max_depth:
+  // with their boxes given, the buffers are exactly those drawn without (the boxes only skip
+  // meshes that would have drawn nothing), and the projector pass blocks the same points.
+  const PinholeProjection K{525, 525, 319.5, 239.5};
+  const RasterWindow w{100, 400, 80, 300, 1};
+  const TriangleMesh sphere = makeSphere(0.05, 4);
+  const Aabb box = sphere.bounds();
+  const std::vector<Vec3> places = {Vec3(0.02, 0, 0.5), Vec3(0.6, 0, 0.5), Vec3(0, 0, -0.5),
+                                    Vec3(0, 0.01, 3.0), Vec3(-0.03, 0.02, 0.45)};
+  DepthRaster plain, boxed;
+  plain.reset(K, w);
+  boxed.reset(K, w);
+  for (const Vec3& at : places) {
+    const Iso3 T = Iso3(Eigen::Translation3d(at));
+    plain.draw(sphere, T, 0, true, 2.0);
+    boxed.draw(sphere, T, 0, true, 2.0, &box);
+  }
+  int hits = 0;
+  for (int s = 0; s < w.size(); ++s) {
+    EXPECT_EQ(plain.id(s), boxed.id(s));
+    EXPECT_EQ(plain.inverseDepth(s), boxed.inverseDepth(s));
+    hits += plain.id(s) >= 0;
+  }
+  EXPECT_GT(hits, 5000);
+  ProjectorShadows a, b;
+  for (ProjectorShadows* p : {&a, &b}) {
+    p->reset(K, w, 0.075);
+    for (int j = w.j0; j <= w.j1; j += 3)
+      for (int i = w.i0; i <= w.i1; i += 3) p->add(j, i, 1.0, 1.0 / (1 - 2e-4));  // a wall at 1 m
+    p->index();
+  }
+  for (const Vec3& at : places) {
+    const Iso3 T = Iso3(Eigen::Translation3d(at));
+    a.draw(sphere, T, true);
+    b.draw(sphere, T, true, nullptr, &box);
+  }
+  int blocked = 0;
+  for (int k = 0; k < a.size(); ++k) {
+    EXPECT_EQ(a.blocked(k), b.blocked(k));
+    blocked += a.blocked(k);
+  }
+  EXPECT_GT(blocked, 500);
+}
+
 TEST(Raster, WatertightIsWeakerThanClosed) {
   TriangleMesh box = makeBox(Vec3(0.1, 0.1, 0.1));
   EXPECT_TRUE(box.isClosed());
