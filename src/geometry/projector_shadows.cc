@@ -8,23 +8,11 @@
 
 namespace inhand {
 
-namespace {
-inline int ifloor(double x) {
-  x = std::clamp(x, -1e9, 1e9);
-  const int i = int(x);
-  return i - (x < double(i));
-}
-inline int iceil(double x) {
-  x = std::clamp(x, -1e9, 1e9);
-  const int i = int(x);
-  return i + (x > double(i));
-}
-}  // namespace
-
 void ProjectorShadows::reset(const PinholeProjection& K, const RasterWindow& window,
                              double baseline_x_m) {
   K_ = K;
   window_ = window;
+  baseline_ = baseline_x_m;
   shift_ = K.fx * baseline_x_m / window.stride;
   minIzBlock_ = std::numeric_limits<double>::infinity();
   minW_ = std::numeric_limits<double>::infinity();
@@ -35,15 +23,15 @@ void ProjectorShadows::reset(const PinholeProjection& K, const RasterWindow& win
 void ProjectorShadows::index() {
   // Buckets of whole W on a grid of rows × pitch, [base, base + pitch) the points' W range.
   const int rows = std::max(0, window_.height());
-  base_ = points_.empty() ? 0 : ifloor(minW_);
-  pitch_ = points_.empty() ? 0 : ifloor(maxW_) - base_ + 1;
+  base_ = points_.empty() ? 0 : floorToInt(minW_);
+  pitch_ = points_.empty() ? 0 : floorToInt(maxW_) - base_ + 1;
   const size_t buckets = size_t(rows) * size_t(pitch_);
   first_.assign(buckets + 1, 0);
   thread_local std::vector<int> bucketOf, next;
   bucketOf.resize(points_.size());
   for (size_t k = 0; k < points_.size(); ++k) {
     const Point& p = points_[k];
-    bucketOf[k] = (p.j - window_.j0) * pitch_ + ifloor(p.W) - base_;
+    bucketOf[k] = (p.j - window_.j0) * pitch_ + floorToInt(p.W) - base_;
     ++first_[size_t(bucketOf[k]) + 1];
   }
   for (size_t b = 0; b < buckets; ++b) first_[b + 1] += first_[b];
@@ -68,8 +56,8 @@ __attribute__((always_inline)) inline void ProjectorShadows::triangle(const doub
   if (std::max({iz[0], iz[1], iz[2]}) < minIzBlock_) return;  // behind every point
   const double Wmin = std::min({W[0], W[1], W[2]}), Wmax = std::max({W[0], W[1], W[2]});
   if (Wmax < minW_ || Wmin > maxW_) return;
-  const int ja = std::max(window_.j0, iceil(std::min({y[0], y[1], y[2]})));
-  const int jb = std::min(window_.j1, ifloor(std::max({y[0], y[1], y[2]})));
+  const int ja = std::max(window_.j0, ceilToInt(std::min({y[0], y[1], y[2]})));
+  const int jb = std::min(window_.j1, floorToInt(std::max({y[0], y[1], y[2]})));
   if (ja > jb) return;
   // Edge functions as DepthRaster::fill's: e_k(W, y) ≥ 0 inside, e_k / |area| the barycentric
   // coordinate of corner k, so 1/z = Σ_k e_k·iz_k / |area|: compared as Σ_k e_k·iz_k against
@@ -87,7 +75,8 @@ __attribute__((always_inline)) inline void ProjectorShadows::triangle(const doub
   const double zY = eY[0] * iz[0] + eY[1] * iz[1] + eY[2] * iz[2];
   const double z0 = e0[0] * iz[0] + e0[1] * iz[1] + e0[2] * iz[2];
   const bool wide = Wmax - Wmin > 4;
-  const int c0 = std::max(0, ifloor(Wmin) - base_), c1 = std::min(pitch_ - 1, ifloor(Wmax) - base_);
+  const int c0 = std::max(0, floorToInt(Wmin) - base_),
+            c1 = std::min(pitch_ - 1, floorToInt(Wmax) - base_);
   for (int j = ja; j <= jb; ++j) {
     const int rowFirst = (j - window_.j0) * pitch_;
     double base[3];
@@ -104,8 +93,8 @@ __attribute__((always_inline)) inline void ProjectorShadows::triangle(const doub
           hi = lo - 1;
       }
       if (lo > hi) continue;
-      b0 = std::max(b0, ifloor(lo) - base_);
-      b1 = std::min(b1, ifloor(hi) - base_);
+      b0 = std::max(b0, floorToInt(lo) - base_);
+      b1 = std::min(b1, floorToInt(hi) - base_);
     }
     if (b0 > b1) continue;
     const int s0 = first_[size_t(rowFirst + b0)], s1 = first_[size_t(rowFirst + b1) + 1];
@@ -121,20 +110,10 @@ __attribute__((always_inline)) inline void ProjectorShadows::triangle(const doub
 }
 
 void ProjectorShadows::triangleCamera(const Vec3& a, const Vec3& b, const Vec3& c, bool cull) {
-  constexpr double kNear = DepthRaster::kNear;
-  if (a.z() < kNear && b.z() < kNear && c.z() < kNear) return;
-  // Sutherland–Hodgman against z = kNear, as DepthRaster::drawTriangle: the projector's rays
-  // through the window all run at z > 0, and nothing within a millimetre of the sensor is real.
-  const Vec3 in[3] = {a, b, c};
+  // Clipped as DepthRaster::drawTriangle clips: the projector's rays through the window all
+  // run at z > 0, and nothing within a millimetre of the sensor is real.
   Vec3 poly[4];
-  int m = 0;
-  for (int k = 0; k < 3; ++k) {
-    const Vec3& p = in[k];
-    const Vec3& q = in[(k + 1) % 3];
-    const bool pin = p.z() >= kNear, qin = q.z() >= kNear;
-    if (pin) poly[m++] = p;
-    if (pin != qin) poly[m++] = p + (q - p) * ((kNear - p.z()) / (q.z() - p.z()));
-  }
+  const int m = clipToNearPlane(a, b, c, DepthRaster::kNear, poly);
   const double s = window_.stride;
   double W[4], y[4], iz[4];
   for (int k = 0; k < m; ++k) {
@@ -154,45 +133,20 @@ void ProjectorShadows::draw(const TriangleMesh& mesh, const Iso3& T_C_mesh, bool
                             const Aabb* bounds) {
   if (points_.empty()) return;
   if (bounds && !bounds->empty()) {
-    // As DepthRaster::draw: the projector is a pinhole too, so with every corner in front of
-    // the sensor the hull of their (W, y) holds the mesh's, and 1/z peaks at a corner.
-    double zmin = 1e300, zmax = -1e300, Wmin = 1e300, Wmax = -1e300, ymin = 1e300, ymax = -1e300;
-    for (int k = 0; k < 8; ++k) {
-      const Vec3 p = T_C_mesh * bounds->corner(k);
-      zmin = std::min(zmin, p.z());
-      zmax = std::max(zmax, p.z());
-      if (p.z() < DepthRaster::kNear) continue;
-      const double iz = 1.0 / p.z();
-      const double W = (K_.fx * p.x() * iz + K_.cx) / window_.stride - shift_ * iz;
-      const double y = (K_.fy * p.y() * iz + K_.cy) / window_.stride;
-      Wmin = std::min(Wmin, W);
-      Wmax = std::max(Wmax, W);
-      ymin = std::min(ymin, y);
-      ymax = std::max(ymax, y);
-    }
-    if (zmax < DepthRaster::kNear) return;
-    if (zmin >= DepthRaster::kNear && (1.0 / zmin < minIzBlock_ || Wmax < minW_ || Wmin > maxW_ ||
-                                       ymax < window_.j0 || ymin > window_.j1))
+    // The projector is a pinhole too: with every corner in front of the sensor the hull of
+    // their (W, y) holds the mesh's, and 1/z peaks at a corner.
+    const BoxInView v =
+        boxInView(*bounds, T_C_mesh, K_, window_.stride, baseline_, DepthRaster::kNear);
+    if (v.zmax < DepthRaster::kNear) return;
+    if (v.allInFront && (1.0 / v.zmin < minIzBlock_ || v.xmax < minW_ || v.xmin > maxW_ ||
+                         v.ymax < window_.j0 || v.ymin > window_.j1))
       return;
   }
   const Mat3 R = T_C_mesh.linear();
   const Vec3 t = T_C_mesh.translation();
   const std::vector<DepthRaster::ProjectedVertex>* V = projected;
   if (!V || V->size() != mesh.vertices.size()) {
-    const double s = window_.stride;
-    const double fxs = K_.fx / s, fys = K_.fy / s, cxs = K_.cx / s, cys = K_.cy / s;
-    verts_.resize(mesh.vertices.size());
-    for (size_t i = 0; i < mesh.vertices.size(); ++i) {
-      const Vec3 p = R * mesh.vertices[i].cast<double>() + t;
-      DepthRaster::ProjectedVertex& v = verts_[i];
-      if (p.z() >= DepthRaster::kNear) {
-        v.iz = 1.0 / p.z();
-        v.x = fxs * p.x() * v.iz + cxs;
-        v.y = fys * p.y() * v.iz + cys;
-      } else {
-        v.iz = -1;
-      }
-    }
+    DepthRaster::projectVertices(mesh, T_C_mesh, K_, window_.stride, &verts_);
     V = &verts_;
   }
   for (const Tri& f : mesh.triangles) {

@@ -8,20 +8,63 @@
 
 namespace inhand {
 
-namespace {
-// floor and ceil to int without a libm call (the baseline x86-64 has no SSE4.1 rounding);
-// arguments are clamped to ±1e9 first, far outside any window.
-inline int ifloor(double x) {
-  x = std::clamp(x, -1e9, 1e9);
-  const int i = int(x);
-  return i - (x < double(i));
+BoxInView boxInView(const Aabb& box, const Iso3& T_C_box, const PinholeProjection& K, int stride,
+                    double shift_x_m, double near) {
+  BoxInView v{1e300, -1e300, true, 1e300, -1e300, 1e300, -1e300};
+  for (int k = 0; k < 8; ++k) {
+    const Vec3 p = T_C_box * box.corner(k);
+    v.zmin = std::min(v.zmin, p.z());
+    v.zmax = std::max(v.zmax, p.z());
+    if (p.z() < near) {
+      v.allInFront = false;
+      continue;
+    }
+    const double x = (K.fx * (p.x() - shift_x_m) / p.z() + K.cx) / stride;
+    const double y = (K.fy * p.y() / p.z() + K.cy) / stride;
+    v.xmin = std::min(v.xmin, x);
+    v.xmax = std::max(v.xmax, x);
+    v.ymin = std::min(v.ymin, y);
+    v.ymax = std::max(v.ymax, y);
+  }
+  return v;
 }
-inline int iceil(double x) {
-  x = std::clamp(x, -1e9, 1e9);
-  const int i = int(x);
-  return i + (x > double(i));
+
+int clipToNearPlane(const Vec3& a, const Vec3& b, const Vec3& c, double near, Vec3 poly[4]) {
+  if (a.z() < near && b.z() < near && c.z() < near) return 0;
+  const Vec3 in[3] = {a, b, c};
+  int m = 0;
+  for (int k = 0; k < 3; ++k) {
+    const Vec3& p = in[k];
+    const Vec3& q = in[(k + 1) % 3];
+    const bool pin = p.z() >= near, qin = q.z() >= near;
+    if (pin) poly[m++] = p;
+    if (pin != qin) poly[m++] = p + (q - p) * ((near - p.z()) / (q.z() - p.z()));
+  }
+  return m;
 }
-}  // namespace
+
+void DepthRaster::projectVertices(const TriangleMesh& mesh, const Iso3& T_C_mesh,
+                                  const PinholeProjection& K, int stride,
+                                  std::vector<ProjectedVertex>* out) {
+  const size_t nv = mesh.vertices.size();
+  out->resize(nv);
+  const Mat3 R = T_C_mesh.linear();
+  const Vec3 t = T_C_mesh.translation();
+  const double s = stride;
+  const double fxs = K.fx / s, fys = K.fy / s, cxs = K.cx / s, cys = K.cy / s;
+  for (size_t i = 0; i < nv; ++i) {
+    const Vec3 p = R * mesh.vertices[i].cast<double>() + t;
+    ProjectedVertex& v = (*out)[i];
+    if (p.z() >= kNear) {
+      const double iz = 1.0 / p.z();
+      v.x = fxs * p.x() * iz + cxs;
+      v.y = fys * p.y() * iz + cys;
+      v.iz = iz;
+    } else {
+      v.iz = -1;  // behind the near plane: the triangle is clipped
+    }
+  }
+}
 
 void DepthRaster::reset(const PinholeProjection& K, const RasterWindow& window) {
   K_ = K;
@@ -35,46 +78,17 @@ void DepthRaster::draw(const TriangleMesh& mesh, const Iso3& T_C_mesh, int id_ba
                        bool cull_back_faces, double max_depth, const Aabb* bounds) {
   if (window_.size() == 0) return;
   if (bounds && !bounds->empty()) {
-    // The box's corners bound the mesh's depth, and (all in front of the camera) the convex hull
-    // of their projections holds the mesh's.
-    double zmin = 1e300, zmax = -1e300, xmin = 1e300, xmax = -1e300, ymin = 1e300, ymax = -1e300;
-    for (int k = 0; k < 8; ++k) {
-      const Vec3 p = T_C_mesh * bounds->corner(k);
-      zmin = std::min(zmin, p.z());
-      zmax = std::max(zmax, p.z());
-      if (p.z() < kNear) continue;
-      const double x = (K_.fx * p.x() / p.z() + K_.cx) / window_.stride;
-      const double y = (K_.fy * p.y() / p.z() + K_.cy) / window_.stride;
-      xmin = std::min(xmin, x);
-      xmax = std::max(xmax, x);
-      ymin = std::min(ymin, y);
-      ymax = std::max(ymax, y);
-    }
-    if (zmax < kNear || (max_depth > 0 && zmin > max_depth)) return;
-    if (zmin >= kNear &&
-        (xmax < window_.i0 || xmin > window_.i1 || ymax < window_.j0 || ymin > window_.j1))
+    const BoxInView v = boxInView(*bounds, T_C_mesh, K_, window_.stride, 0.0, kNear);
+    if (v.zmax < kNear || (max_depth > 0 && v.zmin > max_depth)) return;
+    if (v.allInFront &&
+        (v.xmax < window_.i0 || v.xmin > window_.i1 || v.ymax < window_.j0 || v.ymin > window_.j1))
       return;
   }
   // Each vertex into the camera frame and, in front of the near plane, to sample coordinates
   // and 1/z, once (a vertex is shared by about six triangles).
-  const size_t nv = mesh.vertices.size();
-  verts_.resize(nv);
+  projectVertices(mesh, T_C_mesh, K_, window_.stride, &verts_);
   const Mat3 R = T_C_mesh.linear();
   const Vec3 t = T_C_mesh.translation();
-  const double s = window_.stride;
-  const double fxs = K_.fx / s, fys = K_.fy / s, cxs = K_.cx / s, cys = K_.cy / s;
-  for (size_t i = 0; i < nv; ++i) {
-    const Vec3 p = R * mesh.vertices[i].cast<double>() + t;
-    ProjectedVertex& v = verts_[i];
-    if (p.z() >= kNear) {
-      const double iz = 1.0 / p.z();
-      v.x = fxs * p.x() * iz + cxs;
-      v.y = fys * p.y() * iz + cys;
-      v.iz = iz;
-    } else {
-      v.iz = -1;  // behind the near plane: the triangle is clipped
-    }
-  }
   const double minInvZ = max_depth > 0 ? 1.0 / max_depth : 0.0;
   const RasterWindow& w = window_;
   for (size_t k = 0; k < mesh.triangles.size(); ++k) {
@@ -100,11 +114,11 @@ void DepthRaster::draw(const TriangleMesh& mesh, const Iso3& T_C_mesh, int id_ba
     const double area = (xb - xa) * (yc - ya) - (yb - ya) * (xc - xa);
     if (cull_back_faces && area > 0) continue;
     // Most triangles of a fine mesh cover no sample: rejected on their bounding box alone.
-    const int ia = std::max(w.i0, iceil((std::min({xa, xb, xc}))));
-    const int ib = std::min(w.i1, ifloor((std::max({xa, xb, xc}))));
+    const int ia = std::max(w.i0, ceilToInt((std::min({xa, xb, xc}))));
+    const int ib = std::min(w.i1, floorToInt((std::max({xa, xb, xc}))));
     if (ia > ib) continue;
-    const int ja = std::max(w.j0, iceil((std::min({ya, yb, yc}))));
-    const int jb = std::min(w.j1, ifloor((std::max({ya, yb, yc}))));
+    const int ja = std::max(w.j0, ceilToInt((std::min({ya, yb, yc}))));
+    const int jb = std::min(w.j1, floorToInt((std::max({ya, yb, yc}))));
     if (ja > jb) continue;
     const double px[3] = {xa, xb, xc}, py[3] = {ya, yb, yc}, piz[3] = {A.iz, B.iz, C.iz};
     fill(px, py, piz, ia, ib, ja, jb, area, id);
@@ -112,19 +126,8 @@ void DepthRaster::draw(const TriangleMesh& mesh, const Iso3& T_C_mesh, int id_ba
 }
 
 void DepthRaster::drawTriangle(const Vec3& a, const Vec3& b, const Vec3& c, int id) {
-  if (a.z() < kNear && b.z() < kNear && c.z() < kNear) return;
-  const Vec3 in[3] = {a, b, c};
-  // Sutherland–Hodgman against z = kNear: a triangle stays one or becomes a quad (a fan of two,
-  // each still on the original triangle's plane, so 1/z stays affine across the fan).
   Vec3 poly[4];
-  int m = 0;
-  for (int k = 0; k < 3; ++k) {
-    const Vec3& p = in[k];
-    const Vec3& q = in[(k + 1) % 3];
-    const bool pin = p.z() >= kNear, qin = q.z() >= kNear;
-    if (pin) poly[m++] = p;
-    if (pin != qin) poly[m++] = p + (q - p) * ((kNear - p.z()) / (q.z() - p.z()));
-  }
+  const int m = clipToNearPlane(a, b, c, kNear, poly);
   const double s = window_.stride;
   double px[4], py[4], piz[4];
   for (int k = 0; k < m; ++k) {
@@ -136,10 +139,10 @@ void DepthRaster::drawTriangle(const Vec3& a, const Vec3& b, const Vec3& c, int 
   for (int k = 1; k + 1 < m; ++k) {
     const double fx[3] = {px[0], px[k], px[k + 1]}, fy[3] = {py[0], py[k], py[k + 1]};
     const double fz[3] = {piz[0], piz[k], piz[k + 1]};
-    const int ia = std::max(w.i0, iceil((std::min({fx[0], fx[1], fx[2]}))));
-    const int ib = std::min(w.i1, ifloor((std::max({fx[0], fx[1], fx[2]}))));
-    const int ja = std::max(w.j0, iceil((std::min({fy[0], fy[1], fy[2]}))));
-    const int jb = std::min(w.j1, ifloor((std::max({fy[0], fy[1], fy[2]}))));
+    const int ia = std::max(w.i0, ceilToInt((std::min({fx[0], fx[1], fx[2]}))));
+    const int ib = std::min(w.i1, floorToInt((std::max({fx[0], fx[1], fx[2]}))));
+    const int ja = std::max(w.j0, ceilToInt((std::min({fy[0], fy[1], fy[2]}))));
+    const int jb = std::min(w.j1, floorToInt((std::max({fy[0], fy[1], fy[2]}))));
     if (ia > ib || ja > jb) continue;
     const double area = (fx[1] - fx[0]) * (fy[2] - fy[0]) - (fy[1] - fy[0]) * (fx[2] - fx[0]);
     fill(fx, fy, fz, ia, ib, ja, jb, area, id);
@@ -183,9 +186,9 @@ void DepthRaster::fill(const double* px, const double* py, const double* piz, in
     for (int e = 0; e < 3; ++e) base[e] = e0[e] + ej[e] * dj;
     for (int e = 0; e < 3 && wide && lo <= hi; ++e) {
       if (ei[e] > 0)
-        lo = std::max(lo, iceil(-base[e] / ei[e]) - 1);
+        lo = std::max(lo, ceilToInt(-base[e] / ei[e]) - 1);
       else if (ei[e] < 0)
-        hi = std::min(hi, ifloor(-base[e] / ei[e]) + 1);
+        hi = std::min(hi, floorToInt(-base[e] / ei[e]) + 1);
       else if (base[e] < 0)
         hi = -1;
     }

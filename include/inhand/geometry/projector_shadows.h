@@ -74,6 +74,7 @@ class ProjectorShadows {
 
   PinholeProjection K_;
   RasterWindow window_;
+  double baseline_ = 0;         // the projector's x in the camera frame, m
   double shift_ = 0;            // f_x·b / stride: W = x − shift·iz
   double minIzBlock_ = 0;       // a triangle whose corners all lie farther than this blocks nothing
   double minW_ = 0, maxW_ = 0;  // the points' W range

@@ -26,6 +26,36 @@ struct PinholeProjection {
   double fx = 1, fy = 1, cx = 0, cy = 0;
 };
 
+// floor and ceil to int without a libm call (the baseline x86-64 has no SSE4.1 rounding);
+// arguments are clamped to ±1e9 first, far outside any window.
+inline int floorToInt(double x) {
+  x = x < -1e9 ? -1e9 : (x > 1e9 ? 1e9 : x);
+  const int i = int(x);
+  return i - (x < double(i));
+}
+inline int ceilToInt(double x) {
+  x = x < -1e9 ? -1e9 : (x > 1e9 ? 1e9 : x);
+  const int i = int(x);
+  return i + (x > double(i));
+}
+
+// Where a box (a mesh's bounds, placed in the camera frame by T_C_box) can appear to a pinhole
+// at the camera centre shifted by `shift_x_m` along x (0: the camera itself; a rectified
+// projector): its depth range, and, when every corner is in front of `near`, the range of its
+// image coordinates in samples (the hull of the corners' projections holds the box's).
+struct BoxInView {
+  double zmin, zmax;
+  bool allInFront;
+  double xmin, xmax, ymin, ymax;
+};
+BoxInView boxInView(const Aabb& box, const Iso3& T_C_box, const PinholeProjection& K, int stride,
+                    double shift_x_m, double near);
+
+// Sutherland–Hodgman of the camera-frame triangle (a, b, c) against z = near: the part in front
+// as a convex polygon of 0, 3 or 4 corners in `poly` (the count is returned), drawn as a fan
+// around poly[0] whose pieces stay on the triangle's plane (so 1/z stays affine across it).
+int clipToNearPlane(const Vec3& a, const Vec3& b, const Vec3& c, double near, Vec3 poly[4]);
+
 class DepthRaster {
  public:
   // Empties the buffer (every sample: nothing hit) for a new view.
@@ -60,6 +90,11 @@ class DepthRaster {
   };
   // The vertices of the mesh last passed to draw(), as it projected them.
   const std::vector<ProjectedVertex>& projected() const { return verts_; }
+  // Each vertex of `mesh` into the camera frame and, in front of the near plane, to sample
+  // coordinates and 1/z (iz = −1 behind it).
+  static void projectVertices(const TriangleMesh& mesh, const Iso3& T_C_mesh,
+                              const PinholeProjection& K, int stride,
+                              std::vector<ProjectedVertex>* out);
 
  private:
   // Fills the samples of [ia, ib] × [ja, jb] inside the triangle (px, py) (sample coordinates,
