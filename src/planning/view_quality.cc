@@ -234,12 +234,12 @@ ViewQualityScene::ViewQualityScene(const ObjectModel& model, const DepthCameraOp
   cosMaxProjector_ = std::cos(options.max_projector_incidence_deg * M_PI / 180);
   cosGrazing_ = std::cos(noise.grazing_start_deg * M_PI / 180);
   closed_ = model_.mesh.isWatertight();
-  faceNormals_.reserve(model_.mesh.triangles.size());
+  planes_.reserve(model_.mesh.triangles.size());
   for (const Tri& f : model_.mesh.triangles) {
     const Vec3f& p0 = model_.mesh.vertices[size_t(f[0])];
-    faceNormals_.push_back(
-        (model_.mesh.vertices[size_t(f[1])] - p0).cross(model_.mesh.vertices[size_t(f[2])] - p0));
-    unitNormals_.push_back(faceNormals_.back().cast<double>().normalized());
+    // The unnormalised (p1 − p0) × (p2 − p0) in float, as Embree's Ng, which pixelGain normalises.
+    const Vec3f Ng =
+        (model_.mesh.vertices[size_t(f[1])] - p0).cross(model_.mesh.vertices[size_t(f[2])] - p0);
     // σ_t² = a + (b − a)·β1 + (c − a)·β2 with β the barycentrics of p = A + β1·e1 + β2·e2,
     // β1 = (p − A)·(e2 × N)/|N|², β2 = (p − A)·(N × e1)/|N|², N = e1 × e2.
     const Vec3 A = p0.cast<double>();
@@ -249,7 +249,7 @@ ViewQualityScene::ViewQualityScene(const ObjectModel& model, const DepthCameraOp
     const double va = model_.variance[size_t(f[0])], vb = model_.variance[size_t(f[1])],
                  vc = model_.variance[size_t(f[2])];
     TrianglePlane tp;
-    tp.n = unitNormals_.back();
+    tp.n = Ng.cast<double>().normalized();
     tp.offset = tp.n.dot(A);
     const double nn = N.squaredNorm();
     tp.grad =
@@ -540,7 +540,7 @@ void ViewQualityScene::rasterGains(const Iso3& T_O_C, const RasterWindow& w,
       Ray shadow;
       shadow.tfar = std::numeric_limits<float>::infinity();
       const double g =
-          surfaceGain(r, h.t, h.u, h.v, tri, unitNormals_[size_t(tri)], view, &shadow, st);
+          surfaceGain(r, h.t, h.u, h.v, tri, planes_[size_t(tri)].n, view, &shadow, st);
       if (shadow.tfar != std::numeric_limits<float>::infinity()) {  // passed the other rules
         if (rows) {
           // Embree's shadow ray ignores blockers nearer than tnear to the point: in 1/z, those

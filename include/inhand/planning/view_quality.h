@@ -175,8 +175,6 @@ class ViewQualityScene {
   ViewQualityOptions options_;
   RayScene objectScene_;
   bool closed_ = false;  // S_obj watertight: back faces can be culled for cameras outside it
-  std::vector<Vec3f> faceNormals_;  // unnormalised (p1 − p0) × (p2 − p0), as Embree's Ng
-  std::vector<Vec3> unitNormals_;   // faceNormals_ normalised in double, as pixelGain does
   std::shared_ptr<const NearHandGrid> nearHand_;
   // Per triangle of S_obj, for the rasterised per-sample stage: its plane n·p = offset (n the
   // unit normal), σ_t² as an affine function grad·p + at0 of the point on it (what interpolating
