@@ -516,10 +516,15 @@ void ViewQualityScene::rasterGains(const Iso3& T_O_C, const RasterWindow& w,
         } else {
           sz = axialSigma(noise_, d, std::acos(std::min(1.0, std::abs(nd) / std::sqrt(dir2))));
         }
-        gains->push_back(0.5 * log1pNonNegative(var / (sz * sz)) * d * d / (fxfy * nz));
+        // One division for both quotients: r = 1/(σ_z²·f²·n_z), σ_t²/σ_z² = σ_t²·f²·n_z·r and
+        // d²/(f²·n_z) = d²·σ_z²·r.
+        const double sz2 = sz * sz, a = fxfy * nz, r = 1.0 / (sz2 * a);
+        gains->push_back(0.5 * log1pNonNegative(var * a * r) * d * d * sz2 * r);
         const double dist = std::sqrt(dist2);
         if (rows) {
-          rows->add(j, i, 1.0 / d, 1.0 / (d * (1.0 - kShadowMargin / dist)));
+          // 1/d and (1/d)/(1 − margin/dist) from one division.
+          const double q = 1.0 / (d * (dist - kShadowMargin));
+          rows->add(j, i, (dist - kShadowMargin) * q, dist * q);
         } else {
           Ray shadow;
           shadow.origin = p.cast<float>();
