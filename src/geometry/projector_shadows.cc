@@ -4,8 +4,6 @@
 #include <cmath>
 #include <limits>
 
-#include "inhand/core/error.h"
-
 namespace inhand {
 
 void ProjectorShadows::reset(const PinholeProjection& K, const RasterWindow& window,

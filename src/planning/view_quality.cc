@@ -15,6 +15,14 @@ namespace inhand {
 namespace {
 // A shadow ray ignores surfaces within this distance of the point and of the projector, m.
 constexpr double kShadowMargin = 2e-4;
+
+// Adds a point at depth d and distance dist from the projector to `rows`, blocked as Embree's
+// shadow ray with tnear = kShadowMargin would be: by surfaces whose 1/z on its projector ray is at
+// least (1/d)/(1 − margin/dist). Both inverse depths from one division.
+inline void addShadowPoint(ProjectorShadows* rows, int j, int i, double d, double dist) {
+  const double q = 1.0 / (d * (dist - kShadowMargin));
+  rows->add(j, i, (dist - kShadowMargin) * q, dist * q);
+}
 // How many samples ahead the per-sample stage prefetches a triangle's record.
 constexpr int kPrefetch = 6;
 
@@ -522,9 +530,7 @@ void ViewQualityScene::rasterGains(const Iso3& T_O_C, const RasterWindow& w,
         gains->push_back(0.5 * log1pNonNegative(var * a * r) * d * d * sz2 * r);
         const double dist = std::sqrt(dist2);
         if (rows) {
-          // 1/d and (1/d)/(1 − margin/dist) from one division.
-          const double q = 1.0 / (d * (dist - kShadowMargin));
-          rows->add(j, i, (dist - kShadowMargin) * q, dist * q);
+          addShadowPoint(rows, j, i, d, dist);
         } else {
           Ray shadow;
           shadow.origin = p.cast<float>();
@@ -548,11 +554,7 @@ void ViewQualityScene::rasterGains(const Iso3& T_O_C, const RasterWindow& w,
           surfaceGain(r, h.t, h.u, h.v, tri, planes_[size_t(tri)].n, view, &shadow, st);
       if (shadow.tfar != std::numeric_limits<float>::infinity()) {  // passed the other rules
         if (rows) {
-          // Embree's shadow ray ignores blockers nearer than tnear to the point: in 1/z, those
-          // below iz / (1 − tnear/dist).
-          const double iz = 1.0 / double(h.t);
-          const double dist = double(shadow.tfar) + kShadowMargin;
-          rows->add(j, i, iz, iz / (1.0 - kShadowMargin / dist));
+          addShadowPoint(rows, j, i, double(h.t), double(shadow.tfar) + kShadowMargin);
         } else {
           shadows->push_back(shadow);
         }
