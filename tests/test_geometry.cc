@@ -598,6 +598,107 @@ TEST(Raster, MeshesSkippedByTheirBoxesDrawNothingTheyWouldHaveDrawn) {
   EXPECT_GT(blocked, 500);
 }
 
+TEST(Raster, FacingBitsHoldEveryTriangleThatFacesTheEyeAndSkipNothingDrawn) {
+  // A turned sphere of small triangles and a box with a degenerate triangle added: from eyes
+  // all around, the bit of every triangle that faces the eye (n·(e − a) > 0, in double) is set,
+  // and the bits of those clearly facing away are clear.
+  TriangleMesh m = transformed(makeSphere(0.08, 4), Iso3(Eigen::AngleAxisd(0.3, Vec3::UnitY())));
+  m.append(transformed(makeBox(Vec3(0.05, 0.04, 0.03)), Iso3(Eigen::Translation3d(0.2, 0, 0))));
+  m.triangles.push_back(Tri(0, 0, 1));  // no normal: always looked at
+  const TriangleFacing facing(m);
+  ASSERT_EQ(facing.size(), int(m.triangles.size()));
+  std::vector<uint64_t> bits;
+  int set = 0, clear = 0;
+  for (const Vec3& eye :
+       {Vec3(0.7, 0.1, 0), Vec3(-0.3, 0.5, 0.4), Vec3(0, 0, -0.9), Vec3(0.2, 0, 0.0251)}) {
+    facing.mayFace(eye, &bits);
+    ASSERT_EQ(bits.size(), (m.triangles.size() + 63) / 64);
+    for (size_t k = 0; k < m.triangles.size(); ++k) {
+      const Tri& f = m.triangles[k];
+      const Vec3 a = m.vertices[size_t(f[0])].cast<double>();
+      const Vec3 n = (m.vertices[size_t(f[1])].cast<double>() - a)
+                         .cross(m.vertices[size_t(f[2])].cast<double>() - a);
+      const bool bit = (bits[k / 64] >> (k % 64)) & 1;
+      const double s = n.norm() > 0 ? n.normalized().dot(eye - a) : 0.0;
+      if (s >= 0) {
+        EXPECT_TRUE(bit) << "triangle " << k;
+      } else if (s < -1e-3) {
+        EXPECT_FALSE(bit) << "triangle " << k;
+      }
+      set += bit;
+      clear += !bit;
+    }
+  }
+  EXPECT_GT(clear, 1000);
+  EXPECT_GT(set, 1000);
+  // Drawn with the camera's bits, a culled raster is exactly the one drawn without them, and so
+  // is the projector pass with the projector's.
+  const PinholeProjection K{525, 525, 319.5, 239.5};
+  const RasterWindow w{150, 500, 100, 380, 1};
+  const Iso3 T_C_M = Iso3(Eigen::Translation3d(-0.05, 0.01, 0.5)) *
+                     Eigen::AngleAxisd(0.9, Vec3(1, 2, 0).normalized());
+  const Iso3 T_M_C = T_C_M.inverse();
+  facing.mayFace(T_M_C.translation(), &bits);
+  DepthRaster plain, masked;
+  plain.reset(K, w);
+  masked.reset(K, w);
+  plain.draw(m, T_C_M, 0, true);
+  masked.draw(m, T_C_M, 0, true, 0, nullptr, &bits);
+  int hits = 0;
+  for (int s = 0; s < w.size(); ++s) {
+    EXPECT_EQ(plain.id(s), masked.id(s));
+    EXPECT_EQ(plain.inverseDepth(s), masked.inverseDepth(s));
+    hits += plain.id(s) >= 0;
+  }
+  EXPECT_GT(hits, 5000);
+  facing.mayFace(T_M_C * Vec3(0.075, 0, 0), &bits);
+  ProjectorShadows a, b;
+  for (ProjectorShadows* p : {&a, &b}) {
+    p->reset(K, w, 0.075);
+    for (int j = w.j0; j <= w.j1; j += 2)
+      for (int i = w.i0; i <= w.i1; i += 2) p->add(j, i, 1.0, 1.0 / (1 - 2e-4));  // a wall at 1 m
+    p->index();
+  }
+  a.draw(m, T_C_M, true);
+  b.draw(m, T_C_M, true, nullptr, nullptr, &bits);
+  int blocked = 0;
+  for (int k = 0; k < a.size(); ++k) {
+    EXPECT_EQ(a.blocked(k), b.blocked(k));
+    blocked += a.blocked(k);
+  }
+  EXPECT_GT(blocked, 2000);
+}
+
+TEST(Raster, SamplesBeyondMaxDepthAreTheOnlyOnesLeftOut) {
+  // A floor sloping away from 0.3 m to 3 m, in large triangles, turned so that its depth
+  // changes along the rows too: with max_depth 1 m, every sample nearer than 0.99 m holds
+  // exactly what it holds without a max_depth (the skipped samples lie beyond it, where an
+  // occluder hides nothing nearer).
+  TriangleMesh floor;
+  floor.vertices = {Vec3f(-2, 0.1f, 0.3f), Vec3f(2, 0.1f, 0.3f), Vec3f(2, 0.1f, 3),
+                    Vec3f(-2, 0.1f, 3)};
+  floor.triangles = {Tri(0, 2, 1), Tri(0, 3, 2)};
+  const PinholeProjection K{525, 525, 319.5, 239.5};
+  const RasterWindow w{0, 639, 0, 479, 1};
+  DepthRaster plain, near;
+  plain.reset(K, w);
+  near.reset(K, w);
+  const Iso3 T(Eigen::AngleAxisd(0.4, Vec3::UnitZ()));
+  plain.draw(floor, T);
+  near.draw(floor, T, 0, false, 1.0);
+  int kept = 0, left = 0;
+  for (int s = 0; s < w.size(); ++s) {
+    if (plain.inverseDepth(s) > 1 / 0.99) {
+      EXPECT_EQ(plain.id(s), near.id(s));
+      EXPECT_EQ(plain.inverseDepth(s), near.inverseDepth(s));
+      ++kept;
+    }
+    left += plain.id(s) >= 0 && near.id(s) < 0;
+  }
+  EXPECT_GT(kept, 10000);
+  EXPECT_GT(left, 10000);  // and it did skip the far part
+}
+
 TEST(Raster, WatertightIsWeakerThanClosed) {
   TriangleMesh box = makeBox(Vec3(0.1, 0.1, 0.1));
   EXPECT_TRUE(box.isClosed());

@@ -66,6 +66,44 @@ void DepthRaster::projectVertices(const TriangleMesh& mesh, const Iso3& T_C_mesh
   }
 }
 
+TriangleFacing::TriangleFacing(const TriangleMesh& mesh) {
+  const size_t nt = mesh.triangles.size();
+  nx_.resize(nt);
+  ny_.resize(nt);
+  nz_.resize(nt);
+  offset_.resize(nt);
+  for (const Vec3f& v : mesh.vertices) scale_ = std::max(scale_, v.cast<double>().norm());
+  for (size_t k = 0; k < nt; ++k) {
+    const Tri& f = mesh.triangles[k];
+    const Vec3 a = mesh.vertices[size_t(f[0])].cast<double>();
+    const Vec3 n = (mesh.vertices[size_t(f[1])].cast<double>() - a)
+                       .cross(mesh.vertices[size_t(f[2])].cast<double>() - a);
+    const double len = n.norm();
+    const Vec3 u = len > 0 ? Vec3(n / len) : Vec3::Zero();
+    nx_[k] = float(u.x());
+    ny_[k] = float(u.y());
+    nz_[k] = float(u.z());
+    offset_[k] = float(u.dot(a));
+  }
+}
+
+void TriangleFacing::mayFace(const Vec3& eye, std::vector<uint64_t>* bits) const {
+  const size_t nt = nx_.size();
+  bits->assign((nt + 63) / 64, 0);
+  // n·e − offset in float is within a few 1e-7·(|e| + scale) of the exact value.
+  const float ex = float(eye.x()), ey = float(eye.y()), ez = float(eye.z());
+  const float slack = float(1e-5 * (eye.norm() + scale_));
+  for (size_t w = 0; w < bits->size(); ++w) {
+    const size_t first = w * 64, last = std::min(nt, first + 64);
+    uint64_t word = 0;
+    for (size_t k = first; k < last; ++k) {
+      const float s = nx_[k] * ex + ny_[k] * ey + nz_[k] * ez - offset_[k];
+      word |= uint64_t(s > -slack) << (k - first);
+    }
+    (*bits)[w] = word;
+  }
+}
+
 void DepthRaster::reset(const PinholeProjection& K, const RasterWindow& window) {
   K_ = K;
   window_ = window;
@@ -75,7 +113,8 @@ void DepthRaster::reset(const PinholeProjection& K, const RasterWindow& window) 
 }
 
 void DepthRaster::draw(const TriangleMesh& mesh, const Iso3& T_C_mesh, int id_base,
-                       bool cull_back_faces, double max_depth, const Aabb* bounds) {
+                       bool cull_back_faces, double max_depth, const Aabb* bounds,
+                       const std::vector<uint64_t>* only) {
   if (window_.size() == 0) return;
   if (bounds && !bounds->empty()) {
     const BoxInView v = boxInView(*bounds, T_C_mesh, K_, window_.stride, 0.0, kNear);
@@ -90,39 +129,48 @@ void DepthRaster::draw(const TriangleMesh& mesh, const Iso3& T_C_mesh, int id_ba
   const Mat3 R = T_C_mesh.linear();
   const Vec3 t = T_C_mesh.translation();
   const double minInvZ = max_depth > 0 ? 1.0 / max_depth : 0.0;
+  minInvZ_ = minInvZ;
   const RasterWindow& w = window_;
-  for (size_t k = 0; k < mesh.triangles.size(); ++k) {
-    const Tri& f = mesh.triangles[k];
-    const size_t a = size_t(f[0]), b = size_t(f[1]), c = size_t(f[2]);
-    const int id = id_base + int(k);
-    const ProjectedVertex &A = verts_[a], &B = verts_[b], &C = verts_[c];
-    if (A.iz < 0 || B.iz < 0 || C.iz < 0) {
-      const Vec3 pa = R * mesh.vertices[a].cast<double>() + t;
-      const Vec3 pb = R * mesh.vertices[b].cast<double>() + t;
-      const Vec3 pc = R * mesh.vertices[c].cast<double>() + t;
-      if (!cull_back_faces || (pb - pa).cross(pc - pa).dot(pa) < 0)
-        drawTriangle(pa, pb, pc, id);  // clips
-      continue;
+  const size_t nt = mesh.triangles.size();
+  const bool masked = cull_back_faces && only && only->size() == (nt + 63) / 64;
+  for (size_t word = 0; word < (nt + 63) / 64; ++word) {
+    uint64_t bits = masked ? (*only)[word] : ~uint64_t(0);
+    if (!masked && word * 64 + 64 > nt) bits = (uint64_t(1) << (nt - word * 64)) - 1;
+    for (; bits; bits &= bits - 1) {
+      const size_t k = word * 64 + size_t(__builtin_ctzll(bits));
+      const Tri& f = mesh.triangles[k];
+      const size_t a = size_t(f[0]), b = size_t(f[1]), c = size_t(f[2]);
+      const int id = id_base + int(k);
+      const ProjectedVertex &A = verts_[a], &B = verts_[b], &C = verts_[c];
+      if (A.iz < 0 || B.iz < 0 || C.iz < 0) {
+        const Vec3 pa = R * mesh.vertices[a].cast<double>() + t;
+        const Vec3 pb = R * mesh.vertices[b].cast<double>() + t;
+        const Vec3 pc = R * mesh.vertices[c].cast<double>() + t;
+        if (!cull_back_faces || (pb - pa).cross(pc - pa).dot(pa) < 0)
+          drawTriangle(pa, pb, pc, id);  // clips
+        continue;
+      }
+      // Entirely beyond max_depth: it can hide nothing that matters.
+      if (A.iz < minInvZ && B.iz < minInvZ && C.iz < minInvZ) continue;
+      // The projected area has the sign of det[a b c] = n·a: negative for a triangle whose
+      // outward normal faces the camera. Culling first drops half of a closed mesh before any
+      // rounding.
+      const double xa = A.x, xb = B.x, xc = C.x;
+      const double ya = A.y, yb = B.y, yc = C.y;
+      const double area = (xb - xa) * (yc - ya) - (yb - ya) * (xc - xa);
+      if (cull_back_faces && area > 0) continue;
+      // Most triangles of a fine mesh cover no sample: rejected on their bounding box alone.
+      const int ia = std::max(w.i0, ceilToInt((std::min({xa, xb, xc}))));
+      const int ib = std::min(w.i1, floorToInt((std::max({xa, xb, xc}))));
+      if (ia > ib) continue;
+      const int ja = std::max(w.j0, ceilToInt((std::min({ya, yb, yc}))));
+      const int jb = std::min(w.j1, floorToInt((std::max({ya, yb, yc}))));
+      if (ja > jb) continue;
+      const double px[3] = {xa, xb, xc}, py[3] = {ya, yb, yc}, piz[3] = {A.iz, B.iz, C.iz};
+      fill(px, py, piz, ia, ib, ja, jb, area, id);
     }
-    // Entirely beyond max_depth: it can hide nothing that matters.
-    if (A.iz < minInvZ && B.iz < minInvZ && C.iz < minInvZ) continue;
-    // The projected area has the sign of det[a b c] = n·a: negative for a triangle whose
-    // outward normal faces the camera. Culling first drops half of a closed mesh before any
-    // rounding.
-    const double xa = A.x, xb = B.x, xc = C.x;
-    const double ya = A.y, yb = B.y, yc = C.y;
-    const double area = (xb - xa) * (yc - ya) - (yb - ya) * (xc - xa);
-    if (cull_back_faces && area > 0) continue;
-    // Most triangles of a fine mesh cover no sample: rejected on their bounding box alone.
-    const int ia = std::max(w.i0, ceilToInt((std::min({xa, xb, xc}))));
-    const int ib = std::min(w.i1, floorToInt((std::max({xa, xb, xc}))));
-    if (ia > ib) continue;
-    const int ja = std::max(w.j0, ceilToInt((std::min({ya, yb, yc}))));
-    const int jb = std::min(w.j1, floorToInt((std::max({ya, yb, yc}))));
-    if (ja > jb) continue;
-    const double px[3] = {xa, xb, xc}, py[3] = {ya, yb, yc}, piz[3] = {A.iz, B.iz, C.iz};
-    fill(px, py, piz, ia, ib, ja, jb, area, id);
   }
+  minInvZ_ = 0;
 }
 
 void DepthRaster::drawTriangle(const Vec3& a, const Vec3& b, const Vec3& c, int id) {
@@ -192,10 +240,21 @@ void DepthRaster::fill(const double* px, const double* py, const double* piz, in
       else if (base[e] < 0)
         hi = -1;
     }
+    const double zrowBase = z0 + zj * dj;
+    // Samples beyond max_depth (1/z below minInvZ_) hide nothing that matters: the part of the
+    // row nearer than it, with a sample of margin.
+    if (wide && minInvZ_ > 0 && lo <= hi) {
+      const double over = zrowBase - minInvZ_;  // iz(dd) − minInvZ = over + zi·dd ≥ 0
+      if (zi > 0)
+        lo = std::max(lo, ceilToInt(-over / zi) - 1);
+      else if (zi < 0)
+        hi = std::min(hi, floorToInt(-over / zi) + 1);
+      else if (over < 0)
+        hi = -1;
+    }
     if (lo > hi) continue;
     float* zrow = &invZ_[size_t(index(ia, j))];
     int* idrow = &id_[size_t(index(ia, j))];
-    const double zrowBase = z0 + zj * dj;
     // Branch-free: whether a sample of a small triangle is covered is a coin toss for the
     // branch predictor.
     double dd = lo;

@@ -267,6 +267,7 @@ ViewQualityScene::ViewQualityScene(const ObjectModel& model, const DepthCameraOp
     tp.varMax = std::max({va, vb, vc});
     planes_.push_back(tp);
   }
+  facing_ = TriangleFacing(model_.mesh);
   objectScene_.addMesh(model_.mesh);
   objectScene_.commit(/*high=*/true);  // cast hundreds of times per Alg. 1 pass
 }
@@ -423,20 +424,25 @@ void hitTriangle(const Ray& r, const Vec3& p0, const Vec3& p1, const Vec3& p2, H
 void ViewQualityScene::rasterGains(const Iso3& T_O_C, const RasterWindow& w,
                                    const std::vector<Occluder>& occluders,
                                    std::vector<Ray>* shadows, std::vector<double>* gains,
-                                   ProjectorShadows* rows, ViewQualityStats* st) const {
+                                   std::vector<double>* logArgs, ProjectorShadows* rows,
+                                   ViewQualityStats* st) const {
   const CameraIntrinsics& K = camera_.intrinsics;
   const PinholeProjection P{K.fx, K.fy, K.cx, K.cy};
   const Iso3 T_C_O = T_O_C.inverse();
   thread_local DepthRaster object, robot;
   thread_local std::vector<RayScene::PlacedMesh> robotMeshes;
   thread_local std::vector<uint8_t> robotSolid;
+  thread_local std::vector<uint64_t> facing;
   robotMeshes.clear();
   robotSolid.clear();
   object.reset(P, w);
   const Vec3 c = T_O_C.translation();
   const bool outside =
       (c.array() < bounds_.min.array()).any() || (c.array() > bounds_.max.array()).any();
-  object.draw(model_.mesh, T_C_O, 0, /*cull_back_faces=*/closed_ && outside);
+  // A closed S_obj seen from outside: only its triangles that may face the camera are looked at.
+  const bool cullObject = closed_ && outside;
+  if (cullObject) facing_.mayFace(c, &facing);
+  object.draw(model_.mesh, T_C_O, 0, cullObject, 0, nullptr, cullObject ? &facing : nullptr);
   const bool withRobot = !occluders.empty();
   if (withRobot) {
     // Robot surfaces deeper than S_obj's farthest corner hide nothing of it.
@@ -527,7 +533,13 @@ void ViewQualityScene::rasterGains(const Iso3& T_O_C, const RasterWindow& w,
         // One division for both quotients: r = 1/(σ_z²·f²·n_z), σ_t²/σ_z² = σ_t²·f²·n_z·r and
         // d²/(f²·n_z) = d²·σ_z²·r.
         const double sz2 = sz * sz, a = fxfy * nz, r = 1.0 / (sz2 * a);
-        gains->push_back(0.5 * log1pNonNegative(var * a * r) * d * d * sz2 * r);
+        const double weight = 0.5 * d * d * sz2 * r, ratio = var * a * r;
+        if (logArgs) {  // the logarithm later, for the samples the projector sees
+          gains->push_back(weight);
+          logArgs->push_back(ratio);
+        } else {
+          gains->push_back(weight * log1pNonNegative(ratio));
+        }
         const double dist = std::sqrt(dist2);
         if (rows) {
           addShadowPoint(rows, j, i, d, dist);
@@ -559,6 +571,7 @@ void ViewQualityScene::rasterGains(const Iso3& T_O_C, const RasterWindow& w,
           shadows->push_back(shadow);
         }
         gains->push_back(g);
+        if (logArgs) logArgs->push_back(-1.0);  // final
       }
     }
   }
@@ -569,7 +582,10 @@ void ViewQualityScene::rasterGains(const Iso3& T_O_C, const RasterWindow& w,
   const Vec3 projector = view.projector_O;
   const bool projectorOutside = (projector.array() < bounds_.min.array()).any() ||
                                 (projector.array() > bounds_.max.array()).any();
-  rows->draw(model_.mesh, T_C_O, closed_ && projectorOutside, &object.projected());
+  const bool cullProjector = closed_ && projectorOutside;
+  if (cullProjector) facing_.mayFace(projector, &facing);
+  rows->draw(model_.mesh, T_C_O, cullProjector, &object.projected(), nullptr,
+             cullProjector ? &facing : nullptr);
   for (size_t k = 0; k < robotMeshes.size(); ++k) {
     const RayScene::PlacedMesh& m = robotMeshes[k];
     const Aabb& b = *m.bounds;
@@ -649,7 +665,7 @@ double ViewQualityScene::quality(const Iso3& T_O_C, const std::vector<Occluder>&
   // itself does not block (and, when not rasterising, for the primary rays that hit S_obj).
   thread_local std::vector<Ray> rays, shadows, toHit;
   thread_local std::vector<Hit> hits;
-  thread_local std::vector<double> gains;
+  thread_local std::vector<double> gains, logArgs;
   thread_local std::vector<uint8_t> blocked, robotBlocked;
   thread_local std::vector<int> index;
   rays.clear();
@@ -665,7 +681,8 @@ double ViewQualityScene::quality(const Iso3& T_O_C, const std::vector<Occluder>&
     thread_local ProjectorShadows rows;
     const CameraIntrinsics& K = camera_.intrinsics;
     rows.reset({K.fx, K.fy, K.cx, K.cy}, w, camera_.projector_C.x());
-    rasterGains(T_O_C, w, occluders, &shadows, &gains, &rows, &st);
+    logArgs.clear();
+    rasterGains(T_O_C, w, occluders, &shadows, &gains, &logArgs, &rows, &st);
     double G = 0;
     for (int k = 0; k < rows.size(); ++k) {
       if (rows.blocked(k)) {
@@ -673,14 +690,16 @@ double ViewQualityScene::quality(const Iso3& T_O_C, const std::vector<Occluder>&
         continue;
       }
       ++st.counted;
-      G += gains[size_t(k)];
+      // Independent iterations: the series of many samples overlap in the pipeline.
+      const double x = logArgs[size_t(k)];
+      G += x < 0 ? gains[size_t(k)] : gains[size_t(k)] * log1pNonNegative(x);
     }
     return G * double(sp) * double(sp);  // each sample stands for stride² pixels
   }
   std::optional<RayScene> robot;
   if (!occluders.empty()) robot.emplace(buildScene(occluders, false));
   if (raster)
-    rasterGains(T_O_C, w, occluders, &shadows, &gains, nullptr, &st);
+    rasterGains(T_O_C, w, occluders, &shadows, &gains, nullptr, nullptr, &st);
   else
     primaryHitsRayCast(T_O_C, w, robot ? &*robot : nullptr, &rays, &hits, &st);
   for (size_t i = 0; i < rays.size(); ++i) {

@@ -54,10 +54,11 @@ class ProjectorShadows {
   // DepthRaster just projected them for this camera and window (saves projecting them again).
   // `bounds`: the mesh's bounding box in its own frame, when known: a mesh whose box can block
   // no point (behind the near plane or every point, or beside them in the projector's image) is
-  // skipped whole.
+  // skipped whole. `only`: with cull_back_faces, a bit per triangle (TriangleFacing::mayFace for
+  // the projector): triangles whose bit is clear face away and are not looked at.
   void draw(const TriangleMesh& mesh, const Iso3& T_C_mesh, bool cull_back_faces,
             const std::vector<DepthRaster::ProjectedVertex>* projected = nullptr,
-            const Aabb* bounds = nullptr);
+            const Aabb* bounds = nullptr, const std::vector<uint64_t>* only = nullptr);
 
   int size() const { return int(points_.size()); }
   bool blocked(int k) const { return sortedBlocked_[size_t(position_[size_t(k)])] != 0; }

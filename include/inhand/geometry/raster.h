@@ -56,6 +56,25 @@ BoxInView boxInView(const Aabb& box, const Iso3& T_C_box, const PinholeProjectio
 // around poly[0] whose pieces stay on the triangle's plane (so 1/z stays affine across it).
 int clipToNearPlane(const Vec3& a, const Vec3& b, const Vec3& c, double near, Vec3 poly[4]);
 
+// Each triangle's plane in float (unit normal n_k, offset n_k·a_k), packed for facing tests of
+// all the triangles at once: which may face a viewpoint e (n_k·e > offset_k). A rasteriser that
+// culls back faces then loads only those triangles' corners. The test is conservative: a
+// triangle facing away by less than 1e-5 of the distance scale (edge-on, where float rounding
+// could decide) counts as facing, and its own culling decides; a triangle with no normal
+// (degenerate) always counts.
+class TriangleFacing {
+ public:
+  TriangleFacing() = default;
+  explicit TriangleFacing(const TriangleMesh& mesh);
+  // Bit k % 64 of (*bits)[k / 64]: triangle k may face `eye_M` (a point in the mesh's frame).
+  void mayFace(const Vec3& eye_M, std::vector<uint64_t>* bits) const;
+  int size() const { return int(nx_.size()); }
+
+ private:
+  std::vector<float> nx_, ny_, nz_, offset_;
+  double scale_ = 0;  // the largest |corner| of the mesh, m
+};
+
 class DepthRaster {
  public:
   // Empties the buffer (every sample: nothing hit) for a new view.
@@ -65,12 +84,16 @@ class DepthRaster {
   // `cull_back_faces`: skip triangles that face away from the camera (wound clockwise as seen
   // from it). Exact for a closed, outward-oriented mesh seen from outside (every ray enters it
   // through a front face first), and about half the work.
-  // `max_depth` > 0: triangles whose three vertices all lie deeper than it are skipped (for
-  // occluders of something known to be nearer).
+  // `max_depth` > 0: triangles whose three vertices all lie deeper than it are skipped, and
+  // large triangles' samples deeper than it may be (for occluders of something known to be
+  // nearer).
   // `bounds`: the mesh's bounding box in its own frame, when known: a mesh whose box lies
   // entirely behind the near plane, beyond max_depth or outside the window is skipped whole.
+  // `only`: with cull_back_faces, a bit per triangle (TriangleFacing::mayFace for the camera):
+  // triangles whose bit is clear face away and are not looked at.
   void draw(const TriangleMesh& mesh, const Iso3& T_C_mesh, int id_base = 0,
-            bool cull_back_faces = false, double max_depth = 0, const Aabb* bounds = nullptr);
+            bool cull_back_faces = false, double max_depth = 0, const Aabb* bounds = nullptr,
+            const std::vector<uint64_t>* only = nullptr);
   // Draws one triangle given in the camera frame.
   void drawTriangle(const Vec3& a, const Vec3& b, const Vec3& c, int id);
 
@@ -109,6 +132,7 @@ class DepthRaster {
                  int jb, double area, int id);
   PinholeProjection K_;
   RasterWindow window_;
+  double minInvZ_ = 0;  // within draw(): 1/max_depth (0: none); wide fills skip samples beyond
   std::vector<float> invZ_;
   std::vector<int> id_;
   std::vector<ProjectedVertex> verts_;

@@ -149,10 +149,12 @@ class ViewQualityScene {
   // Rasterised: per sample of `window` whose first surface is S_obj, the pixel rules and gain at
   // once (gains[i] with its projector visibility still to decide: the point added to `rows`,
   // which this then draws S_obj and the robot into, or with rows null the shadow ray
-  // shadows[i]; counts the other outcomes).
+  // shadows[i]; counts the other outcomes). With `logArgs`, eq. 9's logarithm is left to the
+  // caller: sample i's gain is gains[i]·ln(1 + logArgs[i]), or gains[i] where logArgs[i] < 0.
   void rasterGains(const Iso3& T_O_C, const RasterWindow& window,
                    const std::vector<Occluder>& occluders, std::vector<Ray>* shadows,
-                   std::vector<double>* gains, ProjectorShadows* rows, ViewQualityStats* st) const;
+                   std::vector<double>* gains, std::vector<double>* logArgs, ProjectorShadows* rows,
+                   ViewQualityStats* st) const;
   // First S_obj hit per sample of `window` not hidden by a robot surface (rays[i], hits[i];
   // counts misses and robot-first pixels), by Embree.
   void primaryHitsRayCast(const Iso3& T_O_C, const RasterWindow& window, const RayScene* robot,
@@ -187,6 +189,9 @@ class ViewQualityScene {
     double varMin, varMax;
   };
   std::vector<TrianglePlane> planes_;
+  // S_obj's triangle planes packed for facing tests: the rasterisers load only the corners of
+  // triangles that may face the camera (or the projector).
+  TriangleFacing facing_;
   std::vector<uint8_t> mayBeNearHand_;  // per triangle: some point of it may be near the hand
 };
 
