@@ -33,6 +33,11 @@ void ProjectorShadows::index() {
     ++first_[size_t(bucketOf[k]) + 1];
   }
   for (size_t b = 0; b < buckets; ++b) first_[b + 1] += first_[b];
+  rowMinIzBlock_.assign(size_t(rows), std::numeric_limits<double>::infinity());
+  for (const Point& p : points_) {
+    double& m = rowMinIzBlock_[size_t(p.j - window_.j0)];
+    m = std::min(m, p.izBlock);
+  }
   // Counting sort of the points into their buckets.
   next.assign(first_.begin(), first_.end() - 1);
   sorted_.resize(points_.size());
@@ -80,6 +85,7 @@ __attribute__((always_inline)) inline void ProjectorShadows::triangle(const doub
     double base[3];
     for (int k = 0; k < 3; ++k) base[k] = e0[k] + eY[k] * j;
     int b0 = c0, b1 = c1;
+    const double zRow = z0 + zY * j;
     if (wide) {  // the row's span, one unit of margin for rounding
       double lo = Wmin, hi = Wmax;
       for (int k = 0; k < 3; ++k) {
@@ -90,13 +96,21 @@ __attribute__((always_inline)) inline void ProjectorShadows::triangle(const doub
         else if (base[k] < 0)
           hi = lo - 1;
       }
+      // Where the triangle lies behind every point of the row it blocks nothing: only the part
+      // with 1/z ≥ the row's least iz_block (zRow + zW·W ≥ that·|area|).
+      const double need = rowMinIzBlock_[size_t(j - window_.j0)] * absArea - zRow;
+      if (zW > 0)
+        lo = std::max(lo, need / zW - 1);
+      else if (zW < 0)
+        hi = std::min(hi, need / zW + 1);
+      else if (need > 0)
+        hi = lo - 1;
       if (lo > hi) continue;
       b0 = std::max(b0, floorToInt(lo) - base_);
       b1 = std::min(b1, floorToInt(hi) - base_);
     }
     if (b0 > b1) continue;
     const int s0 = first_[size_t(rowFirst + b0)], s1 = first_[size_t(rowFirst + b1) + 1];
-    const double zRow = z0 + zY * j;
     for (int s = s0; s < s1; ++s) {
       const double w = sorted_[size_t(s)].W;
       const bool hit = (base[0] + eW[0] * w >= 0) & (base[1] + eW[1] * w >= 0) &

@@ -84,6 +84,7 @@ class ProjectorShadows {
   // points [first_[b], first_[b + 1]) of sorted_.
   int base_ = 0, pitch_ = 0;
   std::vector<int> first_;
+  std::vector<double> rowMinIzBlock_;  // per row: the least iz_block of its points (∞: none)
   struct Sorted {
     double W, izBlock;
   };
