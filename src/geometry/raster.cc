@@ -93,14 +93,23 @@ void TriangleFacing::mayFace(const Vec3& eye, std::vector<uint64_t>* bits) const
   // n·e − offset in float is within a few 1e-7·(|e| + scale) of the exact value.
   const float ex = float(eye.x()), ey = float(eye.y()), ez = float(eye.z());
   const float slack = float(1e-5 * (eye.norm() + scale_));
-  for (size_t w = 0; w < bits->size(); ++w) {
-    const size_t first = w * 64, last = std::min(nt, first + 64);
-    uint64_t word = 0;
-    for (size_t k = first; k < last; ++k) {
-      const float s = nx_[k] * ex + ny_[k] * ey + nz_[k] * ez - offset_[k];
-      word |= uint64_t(s > -slack) << (k - first);
-    }
-    (*bits)[w] = word;
+  size_t k = 0;
+#if defined(__SSE2__)
+  // Four triangles at a time, their four bits from one movemask.
+  const __m128 Ex = _mm_set1_ps(ex), Ey = _mm_set1_ps(ey), Ez = _mm_set1_ps(ez);
+  const __m128 minus = _mm_set1_ps(-slack);
+  for (; k + 4 <= nt; k += 4) {
+    const __m128 s = _mm_sub_ps(_mm_add_ps(_mm_add_ps(_mm_mul_ps(_mm_loadu_ps(&nx_[k]), Ex),
+                                                      _mm_mul_ps(_mm_loadu_ps(&ny_[k]), Ey)),
+                                           _mm_mul_ps(_mm_loadu_ps(&nz_[k]), Ez)),
+                                _mm_loadu_ps(&offset_[k]));
+    const uint64_t four = uint64_t(_mm_movemask_ps(_mm_cmpgt_ps(s, minus)));
+    (*bits)[k / 64] |= four << (k % 64);
+  }
+#endif
+  for (; k < nt; ++k) {
+    const float s = nx_[k] * ex + ny_[k] * ey + nz_[k] * ez - offset_[k];
+    (*bits)[k / 64] |= uint64_t(s > -slack) << (k % 64);
   }
 }
 
