@@ -600,6 +600,40 @@ TEST(ProjectorShadows, LargeTrianglesBlockExactlyWhereTheyAreNearer) {
   EXPECT_GT(int(expected.size()) - blocked, 2000);
 }
 
+namespace {
+
+// Points of a wall 1 m away on every step-th sample of `w`, with the shadow ray's margin.
+void addWallAtOneMetre(ProjectorShadows* p, const PinholeProjection& K, const RasterWindow& w,
+                       int step) {
+  p->reset(K, w, 0.075);
+  for (int j = w.j0; j <= w.j1; j += step)
+    for (int i = w.i0; i <= w.i1; i += step) p->add(j, i, 1.0, 1.0 / (1 - 2e-4));
+  p->index();
+}
+
+// Both rasters hold the same ids and depths; returns how many samples hit.
+int expectSameRaster(const DepthRaster& a, const DepthRaster& b) {
+  int hits = 0;
+  for (int s = 0; s < a.window().size(); ++s) {
+    EXPECT_EQ(a.id(s), b.id(s));
+    EXPECT_EQ(a.inverseDepth(s), b.inverseDepth(s));
+    hits += a.id(s) >= 0;
+  }
+  return hits;
+}
+
+// Both passes blocked the same points; returns how many.
+int expectSameBlocked(const ProjectorShadows& a, const ProjectorShadows& b) {
+  int blocked = 0;
+  for (int k = 0; k < a.size(); ++k) {
+    EXPECT_EQ(a.blocked(k), b.blocked(k));
+    blocked += a.blocked(k);
+  }
+  return blocked;
+}
+
+}  // namespace
+
 TEST(Raster, MeshesSkippedByTheirBoxesDrawNothingTheyWouldHaveDrawn) {
   // A sphere in view, one beside the window, one behind the camera and one beyond max_depth:
   // with their boxes given, the buffers are exactly those drawn without (the boxes only skip
@@ -618,31 +652,16 @@ TEST(Raster, MeshesSkippedByTheirBoxesDrawNothingTheyWouldHaveDrawn) {
     plain.draw(sphere, T, 0, true, 2.0);
     boxed.draw(sphere, T, 0, true, 2.0, &box);
   }
-  int hits = 0;
-  for (int s = 0; s < w.size(); ++s) {
-    EXPECT_EQ(plain.id(s), boxed.id(s));
-    EXPECT_EQ(plain.inverseDepth(s), boxed.inverseDepth(s));
-    hits += plain.id(s) >= 0;
-  }
-  EXPECT_GT(hits, 5000);
+  EXPECT_GT(expectSameRaster(plain, boxed), 5000);
   ProjectorShadows a, b;
-  for (ProjectorShadows* p : {&a, &b}) {
-    p->reset(K, w, 0.075);
-    for (int j = w.j0; j <= w.j1; j += 3)
-      for (int i = w.i0; i <= w.i1; i += 3) p->add(j, i, 1.0, 1.0 / (1 - 2e-4));  // a wall at 1 m
-    p->index();
-  }
+  addWallAtOneMetre(&a, K, w, 3);
+  addWallAtOneMetre(&b, K, w, 3);
   for (const Vec3& at : places) {
     const Iso3 T = Iso3(Eigen::Translation3d(at));
     a.draw(sphere, T, true);
     b.draw(sphere, T, true, nullptr, &box);
   }
-  int blocked = 0;
-  for (int k = 0; k < a.size(); ++k) {
-    EXPECT_EQ(a.blocked(k), b.blocked(k));
-    blocked += a.blocked(k);
-  }
-  EXPECT_GT(blocked, 500);
+  EXPECT_GT(expectSameBlocked(a, b), 500);
 }
 
 TEST(Raster, FacingBitsHoldEveryTriangleThatFacesTheEyeAndSkipNothingDrawn) {
@@ -691,29 +710,14 @@ TEST(Raster, FacingBitsHoldEveryTriangleThatFacesTheEyeAndSkipNothingDrawn) {
   masked.reset(K, w);
   plain.draw(m, T_C_M, 0, true);
   masked.draw(m, T_C_M, 0, true, 0, nullptr, &bits);
-  int hits = 0;
-  for (int s = 0; s < w.size(); ++s) {
-    EXPECT_EQ(plain.id(s), masked.id(s));
-    EXPECT_EQ(plain.inverseDepth(s), masked.inverseDepth(s));
-    hits += plain.id(s) >= 0;
-  }
-  EXPECT_GT(hits, 5000);
+  EXPECT_GT(expectSameRaster(plain, masked), 5000);
   facing.mayFace(T_M_C * Vec3(0.075, 0, 0), &bits);
   ProjectorShadows a, b;
-  for (ProjectorShadows* p : {&a, &b}) {
-    p->reset(K, w, 0.075);
-    for (int j = w.j0; j <= w.j1; j += 2)
-      for (int i = w.i0; i <= w.i1; i += 2) p->add(j, i, 1.0, 1.0 / (1 - 2e-4));  // a wall at 1 m
-    p->index();
-  }
+  addWallAtOneMetre(&a, K, w, 2);
+  addWallAtOneMetre(&b, K, w, 2);
   a.draw(m, T_C_M, true);
   b.draw(m, T_C_M, true, nullptr, nullptr, &bits);
-  int blocked = 0;
-  for (int k = 0; k < a.size(); ++k) {
-    EXPECT_EQ(a.blocked(k), b.blocked(k));
-    blocked += a.blocked(k);
-  }
-  EXPECT_GT(blocked, 2000);
+  EXPECT_GT(expectSameBlocked(a, b), 2000);
 }
 
 TEST(Raster, SamplesBeyondMaxDepthAreTheOnlyOnesLeftOut) {

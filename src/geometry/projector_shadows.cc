@@ -163,24 +163,20 @@ void ProjectorShadows::draw(const TriangleMesh& mesh, const Iso3& T_C_mesh, bool
   }
   const size_t nt = mesh.triangles.size();
   const bool masked = cull_back_faces && only && only->size() == (nt + 63) / 64;
-  for (size_t w = 0; w < (nt + 63) / 64; ++w) {
-    uint64_t bits = masked ? (*only)[w] : ~uint64_t(0);
-    if (!masked && w * 64 + 64 > nt) bits = (uint64_t(1) << (nt - w * 64)) - 1;
-    for (; bits; bits &= bits - 1) {
-      const Tri& f = mesh.triangles[w * 64 + size_t(__builtin_ctzll(bits))];
-      const DepthRaster::ProjectedVertex &A = (*V)[size_t(f[0])], &B = (*V)[size_t(f[1])],
-                                         &C = (*V)[size_t(f[2])];
-      if (A.iz < 0 || B.iz < 0 || C.iz < 0) {
-        triangleCamera(R * mesh.vertices[size_t(f[0])].cast<double>() + t,
-                       R * mesh.vertices[size_t(f[1])].cast<double>() + t,
-                       R * mesh.vertices[size_t(f[2])].cast<double>() + t, cull_back_faces);
-        continue;
-      }
-      const double W[3] = {A.x - shift_ * A.iz, B.x - shift_ * B.iz, C.x - shift_ * C.iz};
-      const double y[3] = {A.y, B.y, C.y}, iz[3] = {A.iz, B.iz, C.iz};
-      triangle(W, y, iz, cull_back_faces);
+  forEachMarked(nt, masked ? only : nullptr, [&](size_t k) {
+    const Tri& f = mesh.triangles[k];
+    const DepthRaster::ProjectedVertex &A = (*V)[size_t(f[0])], &B = (*V)[size_t(f[1])],
+                                       &C = (*V)[size_t(f[2])];
+    if (A.iz < 0 || B.iz < 0 || C.iz < 0) {
+      triangleCamera(R * mesh.vertices[size_t(f[0])].cast<double>() + t,
+                     R * mesh.vertices[size_t(f[1])].cast<double>() + t,
+                     R * mesh.vertices[size_t(f[2])].cast<double>() + t, cull_back_faces);
+      return;
     }
-  }
+    const double W[3] = {A.x - shift_ * A.iz, B.x - shift_ * B.iz, C.x - shift_ * C.iz};
+    const double y[3] = {A.y, B.y, C.y}, iz[3] = {A.iz, B.iz, C.iz};
+    triangle(W, y, iz, cull_back_faces);
+  });
 }
 
 }  // namespace inhand

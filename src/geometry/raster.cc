@@ -142,43 +142,38 @@ void DepthRaster::draw(const TriangleMesh& mesh, const Iso3& T_C_mesh, int id_ba
   const RasterWindow& w = window_;
   const size_t nt = mesh.triangles.size();
   const bool masked = cull_back_faces && only && only->size() == (nt + 63) / 64;
-  for (size_t word = 0; word < (nt + 63) / 64; ++word) {
-    uint64_t bits = masked ? (*only)[word] : ~uint64_t(0);
-    if (!masked && word * 64 + 64 > nt) bits = (uint64_t(1) << (nt - word * 64)) - 1;
-    for (; bits; bits &= bits - 1) {
-      const size_t k = word * 64 + size_t(__builtin_ctzll(bits));
-      const Tri& f = mesh.triangles[k];
-      const size_t a = size_t(f[0]), b = size_t(f[1]), c = size_t(f[2]);
-      const int id = id_base + int(k);
-      const ProjectedVertex &A = verts_[a], &B = verts_[b], &C = verts_[c];
-      if (A.iz < 0 || B.iz < 0 || C.iz < 0) {
-        const Vec3 pa = R * mesh.vertices[a].cast<double>() + t;
-        const Vec3 pb = R * mesh.vertices[b].cast<double>() + t;
-        const Vec3 pc = R * mesh.vertices[c].cast<double>() + t;
-        if (!cull_back_faces || (pb - pa).cross(pc - pa).dot(pa) < 0)
-          drawTriangle(pa, pb, pc, id);  // clips
-        continue;
-      }
-      // Entirely beyond max_depth: it can hide nothing that matters.
-      if (A.iz < minInvZ && B.iz < minInvZ && C.iz < minInvZ) continue;
-      // The projected area has the sign of det[a b c] = n·a: negative for a triangle whose
-      // outward normal faces the camera. Culling first drops half of a closed mesh before any
-      // rounding.
-      const double xa = A.x, xb = B.x, xc = C.x;
-      const double ya = A.y, yb = B.y, yc = C.y;
-      const double area = (xb - xa) * (yc - ya) - (yb - ya) * (xc - xa);
-      if (cull_back_faces && area > 0) continue;
-      // Most triangles of a fine mesh cover no sample: rejected on their bounding box alone.
-      const int ia = std::max(w.i0, ceilToInt((std::min({xa, xb, xc}))));
-      const int ib = std::min(w.i1, floorToInt((std::max({xa, xb, xc}))));
-      if (ia > ib) continue;
-      const int ja = std::max(w.j0, ceilToInt((std::min({ya, yb, yc}))));
-      const int jb = std::min(w.j1, floorToInt((std::max({ya, yb, yc}))));
-      if (ja > jb) continue;
-      const double px[3] = {xa, xb, xc}, py[3] = {ya, yb, yc}, piz[3] = {A.iz, B.iz, C.iz};
-      fill(px, py, piz, ia, ib, ja, jb, area, id);
+  forEachMarked(nt, masked ? only : nullptr, [&](size_t k) {
+    const Tri& f = mesh.triangles[k];
+    const size_t a = size_t(f[0]), b = size_t(f[1]), c = size_t(f[2]);
+    const int id = id_base + int(k);
+    const ProjectedVertex &A = verts_[a], &B = verts_[b], &C = verts_[c];
+    if (A.iz < 0 || B.iz < 0 || C.iz < 0) {
+      const Vec3 pa = R * mesh.vertices[a].cast<double>() + t;
+      const Vec3 pb = R * mesh.vertices[b].cast<double>() + t;
+      const Vec3 pc = R * mesh.vertices[c].cast<double>() + t;
+      if (!cull_back_faces || (pb - pa).cross(pc - pa).dot(pa) < 0)
+        drawTriangle(pa, pb, pc, id);  // clips
+      return;
     }
-  }
+    // Entirely beyond max_depth: it can hide nothing that matters.
+    if (A.iz < minInvZ && B.iz < minInvZ && C.iz < minInvZ) return;
+    // The projected area has the sign of det[a b c] = n·a: negative for a triangle whose
+    // outward normal faces the camera. Culling first drops half of a closed mesh before any
+    // rounding.
+    const double xa = A.x, xb = B.x, xc = C.x;
+    const double ya = A.y, yb = B.y, yc = C.y;
+    const double area = (xb - xa) * (yc - ya) - (yb - ya) * (xc - xa);
+    if (cull_back_faces && area > 0) return;
+    // Most triangles of a fine mesh cover no sample: rejected on their bounding box alone.
+    const int ia = std::max(w.i0, ceilToInt((std::min({xa, xb, xc}))));
+    const int ib = std::min(w.i1, floorToInt((std::max({xa, xb, xc}))));
+    if (ia > ib) return;
+    const int ja = std::max(w.j0, ceilToInt((std::min({ya, yb, yc}))));
+    const int jb = std::min(w.j1, floorToInt((std::max({ya, yb, yc}))));
+    if (ja > jb) return;
+    const double px[3] = {xa, xb, xc}, py[3] = {ya, yb, yc}, piz[3] = {A.iz, B.iz, C.iz};
+    fill(px, py, piz, ia, ib, ja, jb, area, id);
+  });
   minInvZ_ = 0;
 }
 

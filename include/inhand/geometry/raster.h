@@ -75,6 +75,17 @@ class TriangleFacing {
   double scale_ = 0;  // the largest |corner| of the mesh, m
 };
 
+// Calls fn(k) for each triangle k < n whose bit is set in `only` (as TriangleFacing::mayFace
+// fills it), or for every k when `only` is null, in increasing order.
+template <typename Fn>
+inline void forEachMarked(size_t n, const std::vector<uint64_t>* only, Fn&& fn) {
+  for (size_t word = 0; word < (n + 63) / 64; ++word) {
+    uint64_t bits = only ? (*only)[word] : ~uint64_t(0);
+    if (!only && word * 64 + 64 > n) bits = (uint64_t(1) << (n - word * 64)) - 1;
+    for (; bits; bits &= bits - 1) fn(word * 64 + size_t(__builtin_ctzll(bits)));
+  }
+}
+
 class DepthRaster {
  public:
   // Empties the buffer (every sample: nothing hit) for a new view.
