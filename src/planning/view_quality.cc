@@ -437,8 +437,7 @@ void ViewQualityScene::rasterGains(const Iso3& T_O_C, const RasterWindow& w,
   robotSolid.clear();
   object.reset(P, w);
   const Vec3 c = T_O_C.translation();
-  const bool outside =
-      (c.array() < bounds_.min.array()).any() || (c.array() > bounds_.max.array()).any();
+  const bool outside = !bounds_.contains(c);
   // A closed S_obj seen from outside: only its triangles that may face the camera are looked at.
   const bool cullObject = closed_ && outside;
   if (cullObject) facing_.mayFace(c, &facing);
@@ -455,10 +454,7 @@ void ViewQualityScene::rasterGains(const Iso3& T_O_C, const RasterWindow& w,
       for (size_t k = first; k < robotMeshes.size(); ++k) {
         const RayScene::PlacedMesh& m = robotMeshes[k];
         // Back faces of a solid may go when the camera (the origin) is outside its bounds.
-        const Aabb& b = *m.bounds;
-        const Vec3 cam = m.T.inverse().translation();
-        const bool inside =
-            (cam.array() >= b.min.array()).all() && (cam.array() <= b.max.array()).all();
+        const bool inside = m.bounds->contains(m.T.inverse().translation());
         robot.draw(*m.mesh, m.T, 0, o.solid && !inside, far, m.bounds);
         robotSolid.push_back(o.solid);
       }
@@ -580,18 +576,14 @@ void ViewQualityScene::rasterGains(const Iso3& T_O_C, const RasterWindow& w,
   // vertices its raster already projected, then the robot's surfaces.
   rows->index();
   const Vec3 projector = view.projector_O;
-  const bool projectorOutside = (projector.array() < bounds_.min.array()).any() ||
-                                (projector.array() > bounds_.max.array()).any();
+  const bool projectorOutside = !bounds_.contains(projector);
   const bool cullProjector = closed_ && projectorOutside;
   if (cullProjector) facing_.mayFace(projector, &facing);
   rows->draw(model_.mesh, T_C_O, cullProjector, &object.projected(), nullptr,
              cullProjector ? &facing : nullptr);
   for (size_t k = 0; k < robotMeshes.size(); ++k) {
     const RayScene::PlacedMesh& m = robotMeshes[k];
-    const Aabb& b = *m.bounds;
-    const Vec3 proj = m.T.inverse() * camera_.projector_C;
-    const bool inside =
-        (proj.array() >= b.min.array()).all() && (proj.array() <= b.max.array()).all();
+    const bool inside = m.bounds->contains(m.T.inverse() * camera_.projector_C);
     rows->draw(*m.mesh, m.T, robotSolid[k] && !inside, nullptr, m.bounds);
   }
 }

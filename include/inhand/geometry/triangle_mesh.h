@@ -20,6 +20,10 @@ struct Aabb {
   }
   bool empty() const { return !(min.array() <= max.array()).all(); }
   Vec3 center() const { return 0.5 * (min + max); }
+  // p inside or on the boundary.
+  bool contains(const Vec3& p) const {
+    return (p.array() >= min.array()).all() && (p.array() <= max.array()).all();
+  }
   Vec3 size() const { return max - min; }
   // Corner k of 8: bit 0 picks max.x, bit 1 max.y, bit 2 max.z.
   Vec3 corner(int k) const {
