@@ -5,7 +5,16 @@
 // Run: ./build/bench/bench_planning
 #include <benchmark/benchmark.h>
 
+#include <chrono>
+#include <cstdlib>
+#include <fstream>
 #include <thread>
+#if __has_include(<valgrind/callgrind.h>)
+#include <valgrind/callgrind.h>
+#else
+#define CALLGRIND_START_INSTRUMENTATION
+#define CALLGRIND_STOP_INSTRUMENTATION
+#endif
 
 #include "inhand/core/parallel.h"
 #include "inhand/core/pose.h"
@@ -31,7 +40,26 @@ struct Scenario {
   ObjectModel S_obj;
   std::shared_ptr<NearHandGrid> nearHand;
   Scenario() {
-    // S_obj as the scan's Alg. 1 sees it after the initial trajectory (planning stride 2).
+    // S_obj as the scan's Alg. 1 sees it after the initial trajectory (planning stride 2): a
+    // simulated scan of several seconds, or the file INHAND_BENCH_SCENARIO names when it holds
+    // one from an earlier run (it is written there otherwise; for quick A/B runs).
+    const char* cache = std::getenv("INHAND_BENCH_SCENARIO");
+    if (!(cache && load(cache))) {
+      simulate();
+      if (cache) save(cache);
+    }
+    nearHand = std::make_shared<NearHandGrid>(HandGeometry(model, q, T_O_palm), 0.01, 0.002);
+    // 64 candidate views over the sphere, with the robot where it would be for each.
+    RobotOccluders occ(model);
+    ViewPlanner planner(model, DepthCameraOptions{}, NoiseModelOptions{}, ViewPlannerOptions{});
+    for (const Vec3& d : fibonacciSphere(64)) {
+      Iso3 T_O_C = cameraPoseInObject(S_obj.mesh.bounds().center(), d, 0.7, 0);
+      poses.push_back(T_O_C);
+      occluders.push_back(occ.at(q, planner.objectPoseFor(T_O_C, 0.7).inverse()));
+    }
+    robot_ = std::make_unique<RobotOccluders>(std::move(occ));
+  }
+  void simulate() {
     std::tie(T_O_palm, q) = defaultGrasp(model, object);
     SimWorld world(model, object, T_O_palm, DepthCameraOptions{}, NoiseModelOptions{},
                    SimOptions{});
@@ -45,16 +73,39 @@ struct Scenario {
                         NoiseModelOptions{});
     S_obj = r.planning_model;
     q = robot.joints();
-    nearHand = std::make_shared<NearHandGrid>(HandGeometry(model, q, T_O_palm), 0.01, 0.002);
-    // 64 candidate views over the sphere, with the robot where it would be for each.
-    RobotOccluders occ(model);
-    ViewPlanner planner(model, DepthCameraOptions{}, NoiseModelOptions{}, ViewPlannerOptions{});
-    for (const Vec3& d : fibonacciSphere(64)) {
-      Iso3 T_O_C = cameraPoseInObject(S_obj.mesh.bounds().center(), d, 0.7, 0);
-      poses.push_back(T_O_C);
-      occluders.push_back(occ.at(q, planner.objectPoseFor(T_O_C, 0.7).inverse()));
-    }
-    robot_ = std::make_unique<RobotOccluders>(std::move(occ));
+  }
+  // Raw arrays, each after its element count.
+  template <typename T>
+  static void put(std::ofstream& f, const T* p, size_t n) {
+    f.write(reinterpret_cast<const char*>(&n), sizeof n);
+    f.write(reinterpret_cast<const char*>(p), std::streamsize(n * sizeof(T)));
+  }
+  template <typename T>
+  static bool get(std::ifstream& f, std::vector<T>* v) {
+    size_t n = 0;
+    if (!f.read(reinterpret_cast<char*>(&n), sizeof n) || n > (size_t(1) << 28)) return false;
+    v->resize(n);
+    return bool(f.read(reinterpret_cast<char*>(v->data()), std::streamsize(n * sizeof(T))));
+  }
+  void save(const std::string& path) const {
+    std::ofstream f(path, std::ios::binary);
+    put(f, T_O_palm.matrix().data(), 16);
+    put(f, q.data(), size_t(q.size()));
+    put(f, S_obj.mesh.vertices.data(), S_obj.mesh.vertices.size());
+    put(f, S_obj.mesh.triangles.data(), S_obj.mesh.triangles.size());
+    put(f, S_obj.variance.data(), S_obj.variance.size());
+    put(f, S_obj.observed.data(), S_obj.observed.size());
+  }
+  bool load(const std::string& path) {
+    std::ifstream f(path, std::ios::binary);
+    std::vector<double> palm, joints;
+    if (!f || !get(f, &palm) || palm.size() != 16 || !get(f, &joints) ||
+        !get(f, &S_obj.mesh.vertices) || !get(f, &S_obj.mesh.triangles) ||
+        !get(f, &S_obj.variance) || !get(f, &S_obj.observed))
+      return false;
+    T_O_palm.matrix() = Eigen::Map<const Eigen::Matrix4d>(palm.data());
+    q = Eigen::Map<const JointVector>(joints.data(), Eigen::Index(joints.size()));
+    return true;
   }
   std::vector<Iso3> poses;
   std::vector<std::vector<Occluder>> occluders;
@@ -124,6 +175,35 @@ void BM_ViewQualityOneCore(benchmark::State& state) {
   state.counters["triangles"] = double(s.S_obj.mesh.triangles.size());
 }
 BENCHMARK(BM_ViewQualityOneCore)->Arg(1)->Arg(0)->Unit(benchmark::kMillisecond)->UseRealTime();
+
+// The same, robust to a shared machine: each of the 64 views evaluated 7 times in a row, its
+// fastest time kept. `best_ms` is the mean of those per-view minimums: the code's own speed,
+// with the interference of other tenants (which only ever adds time) mostly filtered out.
+// Under `valgrind --tool=callgrind --instr-atstart=no` only these evaluations are measured: an
+// instruction count that no other tenant changes.
+void BM_ViewQualityOneCoreBest(benchmark::State& state) {
+  Scenario& s = scenario();
+  ViewQualityScene vq = s.qualityScene();
+  double best = 0;
+  CALLGRIND_START_INSTRUMENTATION;
+  for (auto _ : state) {
+    best = 0;
+    for (size_t i = 0; i < s.poses.size(); ++i) {
+      double fastest = 1e9;
+      for (int k = 0; k < 7; ++k) {
+        const auto t0 = std::chrono::steady_clock::now();
+        benchmark::DoNotOptimize(vq.quality(s.poses[i], s.occluders[i]));
+        fastest = std::min(fastest, std::chrono::duration<double, std::milli>(
+                                        std::chrono::steady_clock::now() - t0)
+                                        .count());
+      }
+      best += fastest / double(s.poses.size());
+    }
+  }
+  CALLGRIND_STOP_INSTRUMENTATION;
+  state.counters["best_ms"] = best;
+}
+BENCHMARK(BM_ViewQualityOneCoreBest)->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(1);
 
 // The rasteriser alone: S_obj into a full 640×480 z-buffer, one core. Arg 1: back faces culled.
 void BM_RasteriseModel(benchmark::State& state) {

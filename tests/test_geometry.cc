@@ -750,6 +750,60 @@ TEST(Raster, SamplesBeyondMaxDepthAreTheOnlyOnesLeftOut) {
   EXPECT_GT(left, 10000);  // and it did skip the far part
 }
 
+TEST(Raster, OccludersMarkExactlyTheSurfaceSamplesTheyAreNearerThan) {
+  // Two spheres of small triangles side by side (the surface: rows with a gap), then as
+  // occluders a large box crossing in front of both and the gap and reaching far beside them,
+  // a finger-like thin box both in front of and behind a sphere, and a small ball: a sample is
+  // kOccluded exactly where the occluders' own z-buffer (drawn alone) is nearer than the spheres',
+  // keeps the spheres' id and depth where it is not, and stays empty where there is no sphere (the
+  // gap included), however near an occluder is there.
+  const PinholeProjection K{525, 525, 319.5, 239.5};
+  const RasterWindow w{120, 520, 60, 420, 1};
+  const TriangleMesh sphere = makeSphere(0.08, 5);
+  const Iso3 T_sphere(Eigen::Translation3d(0.01, 0.0, 0.6));
+  const TriangleMesh plate = makeBox(Vec3(0.3, 0.05, 0.02)), finger = makeBox(Vec3(0.01, 0.2, 0.3));
+  const Iso3 T_plate =
+      Iso3(Eigen::Translation3d(0.12, 0.03, 0.5)) * Eigen::AngleAxisd(0.3, Vec3::UnitZ());
+  const Iso3 T_finger =
+      Iso3(Eigen::Translation3d(-0.04, 0.0, 0.6)) * Eigen::AngleAxisd(0.2, Vec3::UnitX());
+  const Aabb plateBox = plate.bounds(), fingerBox = finger.bounds();
+  const TriangleMesh ball = makeSphere(0.03, 4);
+  const Iso3 T_ball(Eigen::Translation3d(0.14, -0.06, 0.45));
+  for (const double maxDepth : {0.0, 0.7}) {
+    DepthRaster surface, alone, merged;
+    for (DepthRaster* r : {&surface, &alone, &merged}) r->reset(K, w);
+    for (DepthRaster* r : {&surface, &merged}) {
+      r->draw(sphere, T_sphere, 0, true);
+      r->draw(sphere, Iso3(Eigen::Translation3d(0.22, 0.02, 0.65)), 100000, true);
+    }
+    alone.draw(plate, T_plate, 0, true, maxDepth, &plateBox);
+    alone.draw(finger, T_finger, 0, true, maxDepth, &fingerBox);
+    merged.drawOccluder(plate, T_plate, true, maxDepth, &plateBox);
+    merged.drawOccluder(finger, T_finger, true, maxDepth, &fingerBox);
+    // Small triangles too (a ball over the right sphere's edge and the gap).
+    alone.draw(ball, T_ball, 0, true, maxDepth);
+    merged.drawOccluder(ball, T_ball, true, maxDepth);
+    int occluded = 0, kept = 0, emptyUnderOccluder = 0;
+    for (int s = 0; s < w.size(); ++s) {
+      if (surface.id(s) < 0) {
+        EXPECT_EQ(merged.id(s), -1);
+        emptyUnderOccluder += alone.id(s) >= 0;
+      } else if (alone.id(s) >= 0 && alone.inverseDepth(s) > surface.inverseDepth(s)) {
+        EXPECT_EQ(merged.id(s), DepthRaster::kOccluded);
+        EXPECT_EQ(merged.inverseDepth(s), alone.inverseDepth(s));
+        ++occluded;
+      } else {
+        EXPECT_EQ(merged.id(s), surface.id(s));
+        EXPECT_EQ(merged.inverseDepth(s), surface.inverseDepth(s));
+        ++kept;
+      }
+    }
+    EXPECT_GT(occluded, 3000);
+    EXPECT_GT(kept, 3000);
+    EXPECT_GT(emptyUnderOccluder, 3000);
+  }
+}
+
 TEST(Raster, WatertightIsWeakerThanClosed) {
   TriangleMesh box = makeBox(Vec3(0.1, 0.1, 0.1));
   EXPECT_TRUE(box.isClosed());

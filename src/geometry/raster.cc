@@ -119,11 +119,42 @@ void DepthRaster::reset(const PinholeProjection& K, const RasterWindow& window) 
   const size_t n = size_t(window.size());
   invZ_.assign(n, 0.f);
   id_.assign(n, -1);
+  extentsValid_ = false;
 }
 
 void DepthRaster::draw(const TriangleMesh& mesh, const Iso3& T_C_mesh, int id_base,
                        bool cull_back_faces, double max_depth, const Aabb* bounds,
                        const std::vector<uint64_t>* only) {
+  extentsValid_ = false;
+  drawMesh<false>(mesh, T_C_mesh, id_base, cull_back_faces, max_depth, bounds, only);
+}
+
+void DepthRaster::drawOccluder(const TriangleMesh& mesh, const Iso3& T_C_mesh, bool cull_back_faces,
+                               double max_depth, const Aabb* bounds) {
+  if (!extentsValid_) findRowExtents();
+  drawMesh<true>(mesh, T_C_mesh, kOccluded, cull_back_faces, max_depth, bounds, nullptr);
+}
+
+void DepthRaster::findRowExtents() {
+  const RasterWindow& w = window_;
+  const int rows = std::max(0, w.height()), width = std::max(0, w.width());
+  rowFirst_.assign(size_t(rows), 0);
+  rowLast_.assign(size_t(rows), -1);
+  for (int r = 0; r < rows && width > 0; ++r) {
+    const int* row = &id_[size_t(r) * size_t(width)];
+    int a = 0, b = width - 1;
+    while (a < width && row[a] < 0) ++a;
+    while (b > a && row[b] < 0) --b;
+    rowFirst_[size_t(r)] = w.i0 + a;
+    rowLast_[size_t(r)] = a < width ? w.i0 + b : w.i0 - 1;
+  }
+  extentsValid_ = true;
+}
+
+template <bool Over>
+void DepthRaster::drawMesh(const TriangleMesh& mesh, const Iso3& T_C_mesh, int id_base,
+                           bool cull_back_faces, double max_depth, const Aabb* bounds,
+                           const std::vector<uint64_t>* only) {
   if (window_.size() == 0) return;
   if (bounds && !bounds->empty()) {
     const BoxInView v = boxInView(*bounds, T_C_mesh, K_, window_.stride, 0.0, kNear);
@@ -134,7 +165,9 @@ void DepthRaster::draw(const TriangleMesh& mesh, const Iso3& T_C_mesh, int id_ba
   }
   // Each vertex into the camera frame and, in front of the near plane, to sample coordinates
   // and 1/z, once (a vertex is shared by about six triangles).
-  projectVertices(mesh, T_C_mesh, K_, window_.stride, &verts_);
+  // (An occluder's go elsewhere: projected() stays the surfaces' for a ProjectorShadows pass.)
+  std::vector<ProjectedVertex>& verts = Over ? occluderVerts_ : verts_;
+  projectVertices(mesh, T_C_mesh, K_, window_.stride, &verts);
   const Mat3 R = T_C_mesh.linear();
   const Vec3 t = T_C_mesh.translation();
   const double minInvZ = max_depth > 0 ? 1.0 / max_depth : 0.0;
@@ -145,14 +178,14 @@ void DepthRaster::draw(const TriangleMesh& mesh, const Iso3& T_C_mesh, int id_ba
   forEachMarked(nt, masked ? only : nullptr, [&](size_t k) {
     const Tri& f = mesh.triangles[k];
     const size_t a = size_t(f[0]), b = size_t(f[1]), c = size_t(f[2]);
-    const int id = id_base + int(k);
-    const ProjectedVertex &A = verts_[a], &B = verts_[b], &C = verts_[c];
+    const int id = Over ? id_base : id_base + int(k);
+    const ProjectedVertex &A = verts[a], &B = verts[b], &C = verts[c];
     if (A.iz < 0 || B.iz < 0 || C.iz < 0) {
       const Vec3 pa = R * mesh.vertices[a].cast<double>() + t;
       const Vec3 pb = R * mesh.vertices[b].cast<double>() + t;
       const Vec3 pc = R * mesh.vertices[c].cast<double>() + t;
       if (!cull_back_faces || (pb - pa).cross(pc - pa).dot(pa) < 0)
-        drawTriangle(pa, pb, pc, id);  // clips
+        drawClipped<Over>(pa, pb, pc, id);
       return;
     }
     // Entirely beyond max_depth: it can hide nothing that matters.
@@ -172,12 +205,18 @@ void DepthRaster::draw(const TriangleMesh& mesh, const Iso3& T_C_mesh, int id_ba
     const int jb = std::min(w.j1, floorToInt((std::max({ya, yb, yc}))));
     if (ja > jb) return;
     const double px[3] = {xa, xb, xc}, py[3] = {ya, yb, yc}, piz[3] = {A.iz, B.iz, C.iz};
-    fill(px, py, piz, ia, ib, ja, jb, area, id);
+    fill<Over>(px, py, piz, ia, ib, ja, jb, area, id);
   });
   minInvZ_ = 0;
 }
 
 void DepthRaster::drawTriangle(const Vec3& a, const Vec3& b, const Vec3& c, int id) {
+  extentsValid_ = false;
+  drawClipped<false>(a, b, c, id);
+}
+
+template <bool Over>
+void DepthRaster::drawClipped(const Vec3& a, const Vec3& b, const Vec3& c, int id) {
   Vec3 poly[4];
   const int m = clipToNearPlane(a, b, c, kNear, poly);
   const double s = window_.stride;
@@ -197,16 +236,17 @@ void DepthRaster::drawTriangle(const Vec3& a, const Vec3& b, const Vec3& c, int 
     const int jb = std::min(w.j1, floorToInt((std::max({fy[0], fy[1], fy[2]}))));
     if (ia > ib || ja > jb) continue;
     const double area = (fx[1] - fx[0]) * (fy[2] - fy[0]) - (fy[1] - fy[0]) * (fx[2] - fx[0]);
-    fill(fx, fy, fz, ia, ib, ja, jb, area, id);
+    fill<Over>(fx, fy, fz, ia, ib, ja, jb, area, id);
   }
 }
 
+template <bool Over>
 void DepthRaster::fill(const double* px, const double* py, const double* piz, int ia, int ib,
                        int ja, int jb, double area, int id) {
   if (area == 0) return;  // degenerate, or edge-on through the camera centre
 #if defined(__SSE2__)
   if (ib - ia < 4 && jb - ja < 4 && ia + 3 <= window_.i1) {
-    fillSmall(px, py, piz, ia, ib, ja, jb, area, id);
+    fillSmall<Over>(px, py, piz, ia, ib, ja, jb, area, id);
     return;
   }
 #endif
@@ -256,6 +296,10 @@ void DepthRaster::fill(const double* px, const double* py, const double* piz, in
       else if (over < 0)
         hi = -1;
     }
+    if (Over) {  // only between the row's first and last surface sample
+      lo = std::max(lo, rowFirst_[size_t(j - window_.j0)] - ia);
+      hi = std::min(hi, rowLast_[size_t(j - window_.j0)] - ia);
+    }
     if (lo > hi) continue;
     float* zrow = &invZ_[size_t(index(ia, j))];
     int* idrow = &id_[size_t(index(ia, j))];
@@ -265,13 +309,14 @@ void DepthRaster::fill(const double* px, const double* py, const double* piz, in
     for (int di = lo; di <= hi; ++di, dd += 1.0) {
       const float iz = float(zrowBase + zi * dd);
       const bool win = (base[0] + ei[0] * dd >= 0) & (base[1] + ei[1] * dd >= 0) &
-                       (base[2] + ei[2] * dd >= 0) & (iz > zrow[di]);
+                       (base[2] + ei[2] * dd >= 0) & (iz > zrow[di]) & (!Over || idrow[di] >= 0);
       zrow[di] = win ? iz : zrow[di];
       idrow[di] = win ? id : idrow[di];
     }
   }
 }
 
+template <bool Over>
 void DepthRaster::fillSmall(const double* px, const double* py, const double* piz, int ia, int ib,
                             int ja, int jb, double area, int id) {
 #if defined(__SSE2__)
@@ -310,10 +355,11 @@ void DepthRaster::fillSmall(const double* px, const double* py, const double* pi
     int* idrow = &id_[size_t(index(ia, j))];
     const __m128 iz = _mm_add_ps(zI, _mm_set1_ps(float(zj * dj + z0)));
     const __m128 old = _mm_loadu_ps(zrow);
-    const __m128 win = _mm_and_ps(cover, _mm_cmpgt_ps(iz, old));
+    const __m128i oldId = _mm_loadu_si128(reinterpret_cast<const __m128i*>(idrow));
+    __m128 win = _mm_and_ps(cover, _mm_cmpgt_ps(iz, old));
+    if (Over) win = _mm_and_ps(win, _mm_castsi128_ps(_mm_cmpgt_epi32(oldId, _mm_set1_epi32(-1))));
     _mm_storeu_ps(zrow, _mm_or_ps(_mm_and_ps(win, iz), _mm_andnot_ps(win, old)));
     const __m128i w = _mm_castps_si128(win);
-    const __m128i oldId = _mm_loadu_si128(reinterpret_cast<const __m128i*>(idrow));
     _mm_storeu_si128(reinterpret_cast<__m128i*>(idrow),
                      _mm_or_si128(_mm_and_si128(w, ids), _mm_andnot_si128(w, oldId)));
   }

@@ -429,7 +429,7 @@ void ViewQualityScene::rasterGains(const Iso3& T_O_C, const RasterWindow& w,
   const CameraIntrinsics& K = camera_.intrinsics;
   const PinholeProjection P{K.fx, K.fy, K.cx, K.cy};
   const Iso3 T_C_O = T_O_C.inverse();
-  thread_local DepthRaster object, robot;
+  thread_local DepthRaster object;
   thread_local std::vector<RayScene::PlacedMesh> robotMeshes;
   thread_local std::vector<uint8_t> robotSolid;
   thread_local std::vector<uint64_t> facing;
@@ -447,7 +447,6 @@ void ViewQualityScene::rasterGains(const Iso3& T_O_C, const RasterWindow& w,
     // Robot surfaces deeper than S_obj's farthest corner hide nothing of it.
     double far = 0;
     for (int k = 0; k < 8; ++k) far = std::max(far, (T_C_O * bounds_.corner(k)).z());
-    robot.reset(P, w);
     for (const Occluder& o : occluders) {
       const size_t first = robotMeshes.size();
       o.scene->collectMeshes(T_C_O * o.T_O_scene, &robotMeshes);
@@ -455,7 +454,7 @@ void ViewQualityScene::rasterGains(const Iso3& T_O_C, const RasterWindow& w,
         const RayScene::PlacedMesh& m = robotMeshes[k];
         // Back faces of a solid may go when the camera (the origin) is outside its bounds.
         const bool inside = m.bounds->contains(m.T.inverse().translation());
-        robot.draw(*m.mesh, m.T, 0, o.solid && !inside, far, m.bounds);
+        object.drawOccluder(*m.mesh, m.T, o.solid && !inside, far, m.bounds);
         robotSolid.push_back(o.solid);
       }
     }
@@ -485,12 +484,8 @@ void ViewQualityScene::rasterGains(const Iso3& T_O_C, const RasterWindow& w,
           __builtin_prefetch(reinterpret_cast<const char*>(&planes_[size_t(ahead)]) + 64);
         }
       }
-      if (tri < 0) {
-        ++st->missed;
-        continue;
-      }
-      if (withRobot && robot.inverseDepth(s) > object.inverseDepth(s)) {
-        ++st->robot_first;
+      if (tri < 0) {  // nothing, or the robot in front of S_obj
+        ++(tri == DepthRaster::kOccluded ? st->robot_first : st->missed);
         continue;
       }
       if (fast) {

@@ -105,6 +105,15 @@ class DepthRaster {
   void draw(const TriangleMesh& mesh, const Iso3& T_C_mesh, int id_base = 0,
             bool cull_back_faces = false, double max_depth = 0, const Aabb* bounds = nullptr,
             const std::vector<uint64_t>* only = nullptr);
+  // Draws an occluder over what draw() left: a sample that holds a surface (id ≥ 0) and that
+  // `mesh` covers nearer takes id kOccluded and the occluder's 1/z; a sample that holds nothing
+  // stays empty (an occluder in front of nothing hides nothing). So after the surfaces of
+  // interest and then every occluder, id(s) == kOccluded exactly where the nearest occluder is
+  // nearer than the nearest surface. Options as draw's. Wide triangles visit only the part of
+  // each row between its first and last surface sample.
+  void drawOccluder(const TriangleMesh& mesh, const Iso3& T_C_mesh, bool cull_back_faces = false,
+                    double max_depth = 0, const Aabb* bounds = nullptr);
+  static constexpr int kOccluded = -2;
   // Draws one triangle given in the camera frame.
   void drawTriangle(const Vec3& a, const Vec3& b, const Vec3& c, int id);
 
@@ -122,7 +131,7 @@ class DepthRaster {
   struct ProjectedVertex {
     double x, y, iz;
   };
-  // The vertices of the mesh last passed to draw(), as it projected them.
+  // The vertices of the mesh last passed to draw() (not drawOccluder), as it projected them.
   const std::vector<ProjectedVertex>& projected() const { return verts_; }
   // Each vertex of `mesh` into the camera frame and, in front of the near plane, to sample
   // coordinates and 1/z (iz = −1 behind it).
@@ -133,20 +142,35 @@ class DepthRaster {
  private:
   // Fills the samples of [ia, ib] × [ja, jb] inside the triangle (px, py) (sample coordinates,
   // signed doubled area `area`), with 1/z interpolated from the vertices' piz.
+  // Over: occluder mode (drawOccluder): only samples with id ≥ 0 are candidates, and wide rows
+  // are clipped to [rowFirst_, rowLast_].
+  template <bool Over>
   void fill(const double* px, const double* py, const double* piz, int ia, int ib, int ja, int jb,
             double area, int id);
   // The same for a bounding box of at most 4 × 4 samples that ends at least 4 samples before the
   // window's right edge: four samples of a row at once (SSE2), edge functions in float relative
   // to the box's corner. Agrees with fill() except for samples within float rounding (~1e-6
   // sample) of an edge.
+  template <bool Over>
   void fillSmall(const double* px, const double* py, const double* piz, int ia, int ib, int ja,
                  int jb, double area, int id);
+  // The triangles of `mesh` (draw's loop), in surface or occluder mode.
+  template <bool Over>
+  void drawMesh(const TriangleMesh& mesh, const Iso3& T_C_mesh, int id_base, bool cull_back_faces,
+                double max_depth, const Aabb* bounds, const std::vector<uint64_t>* only);
+  template <bool Over>
+  void drawClipped(const Vec3& a, const Vec3& b, const Vec3& c, int id);
+  // Per row of the window: the first and last sample holding a surface (first > last: none),
+  // found once the occluders start.
+  void findRowExtents();
   PinholeProjection K_;
   RasterWindow window_;
   double minInvZ_ = 0;  // within draw(): 1/max_depth (0: none); wide fills skip samples beyond
+  bool extentsValid_ = false;
+  std::vector<int> rowFirst_, rowLast_;
   std::vector<float> invZ_;
   std::vector<int> id_;
-  std::vector<ProjectedVertex> verts_;
+  std::vector<ProjectedVertex> verts_, occluderVerts_;
 };
 
 }  // namespace inhand
