@@ -804,6 +804,42 @@ TEST(Raster, OccludersMarkExactlyTheSurfaceSamplesTheyAreNearerThan) {
   }
 }
 
+TEST(Raster, FourAtATimeIsBitForBitOneAtATime) {
+  // The AVX2 set-up against the one-at-a-time path: spheres of small triangles cut by the
+  // window's edges (the right edge, where fillSmall's four-wide rows do not fit, included), one
+  // crossing the near plane, a box of large triangles, with and without culling, with the
+  // facing bits, a max_depth, at strides 1 and 2: the same ids and depths at every sample.
+  if (!DepthRaster::avx2Available()) GTEST_SKIP() << "no AVX2 on this CPU";
+  const PinholeProjection K{525, 525, 319.5, 239.5};
+  TriangleMesh m = makeSphere(0.1, 5);
+  m.append(transformed(makeSphere(0.03, 4), Iso3(Eigen::Translation3d(0.12, 0.05, -0.55))));
+  m.append(transformed(makeBox(Vec3(0.05, 0.3, 0.02)), Iso3(Eigen::Translation3d(-0.1, 0, 0.1))));
+  const TriangleFacing facing(m);
+  std::vector<uint64_t> bits;
+  int compared = 0;
+  for (const RasterWindow& w :
+       {RasterWindow{0, 639, 0, 479, 1}, RasterWindow{200, 401, 150, 330, 1},
+        RasterWindow{100, 253, 60, 181, 2}}) {
+    for (const double angle : {0.0, 0.7, 2.1}) {
+      const Iso3 T_C_M = Iso3(Eigen::Translation3d(0.03, -0.02, 0.6)) *
+                         Eigen::AngleAxisd(angle, Vec3(1, 2, 3).normalized());
+      facing.mayFace(T_C_M.inverse().translation(), &bits);
+      for (int mode = 0; mode < 4; ++mode) {
+        DepthRaster one, four;
+        EXPECT_FALSE(one.setVectorised(false));
+        EXPECT_TRUE(four.setVectorised(true));
+        for (DepthRaster* r : {&one, &four}) {
+          r->reset(K, w);
+          const bool cull = mode != 0;
+          r->draw(m, T_C_M, 7, cull, mode == 3 ? 0.62 : 0.0, nullptr, mode >= 2 ? &bits : nullptr);
+        }
+        compared += expectSameRaster(one, four);
+      }
+    }
+  }
+  EXPECT_GT(compared, 100000);
+}
+
 TEST(Raster, WatertightIsWeakerThanClosed) {
   TriangleMesh box = makeBox(Vec3(0.1, 0.1, 0.1));
   EXPECT_TRUE(box.isClosed());

@@ -9,6 +9,13 @@
 #include <cstdint>
 #include <vector>
 
+// The four-triangle set-up needs GCC or Clang on x86-64 (function-level AVX2, chosen at run time).
+#if defined(__x86_64__) && defined(__GNUC__)
+#define INHAND_RASTER_AVX2 1
+#else
+#define INHAND_RASTER_AVX2 0
+#endif
+
 #include "inhand/geometry/triangle_mesh.h"
 
 namespace inhand {
@@ -114,6 +121,20 @@ class DepthRaster {
   void drawOccluder(const TriangleMesh& mesh, const Iso3& T_C_mesh, bool cull_back_faces = false,
                     double max_depth = 0, const Aabb* bounds = nullptr);
   static constexpr int kOccluded = -2;
+  // Whether draw() sets triangles up four at a time in AVX2 (when the CPU has it; the default),
+  // or one at a time. Both give the same buffers bit for bit; returns the setting in effect.
+  bool setVectorised(bool on) {
+    vectorised_ = on && avx2Available();
+    return vectorised_;
+  }
+  static bool avx2Available()
+#if !INHAND_RASTER_AVX2
+  {
+    return false;
+  }
+#else
+      ;
+#endif
   // Draws one triangle given in the camera frame.
   void drawTriangle(const Vec3& a, const Vec3& b, const Vec3& c, int id);
 
@@ -154,6 +175,16 @@ class DepthRaster {
   template <bool Over>
   void fillSmall(const double* px, const double* py, const double* piz, int ia, int ib, int ja,
                  int jb, double area, int id);
+  // fillSmall's rows, from its set-up: edge e is A[e·step]·i + B[e·step]·j + C[e·step] and 1/z
+  // is zi·i + zj·j + z0, with (i, j) relative to (ia, ja).
+  template <bool Over>
+  void fillSmallRows(const double* A, const double* B, const double* C, int step, double zi,
+                     double zj, double z0, int ia, int ib, int ja, int jb, int id);
+  // draw()'s per-triangle steps for the four triangles k[0..3] of a surface mesh at once
+  // (AVX2): fills those that need fillSmall; returns a bit per triangle left to the
+  // one-at-a-time path.
+  int drawFour(const TriangleMesh& mesh, const size_t* k, int id_base, bool cull);
+  bool vectorised_ = avx2Available();
   // The triangles of `mesh` (draw's loop), in surface or occluder mode.
   template <bool Over>
   void drawMesh(const TriangleMesh& mesh, const Iso3& T_C_mesh, int id_base, bool cull_back_faces,
