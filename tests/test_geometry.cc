@@ -840,6 +840,55 @@ TEST(Raster, FourAtATimeIsBitForBitOneAtATime) {
   EXPECT_GT(compared, 100000);
 }
 
+TEST(ProjectorShadows, FourAtATimeBlocksTheSamePointsAsOneAtATime) {
+  // The AVX2 set-up against the one-at-a-time path. Points: the first surface of every sample
+  // of a bumpy scene (spheres of small triangles in front of a box), so that the spheres shadow
+  // themselves and the box; then the same meshes and one crossing the near plane drawn, with and
+  // without culling and the facing bits: the same points blocked.
+  if (!DepthRaster::avx2Available()) GTEST_SKIP() << "no AVX2 on this CPU";
+  const PinholeProjection K{525, 525, 319.5, 239.5};
+  TriangleMesh m = makeSphere(0.06, 5);
+  m.append(transformed(makeSphere(0.03, 4), Iso3(Eigen::Translation3d(0.05, 0.02, -0.07))));
+  m.append(transformed(makeBox(Vec3(0.5, 0.4, 0.02)), Iso3(Eigen::Translation3d(0, 0, 0.2))));
+  const TriangleMesh nearSphere = makeSphere(0.03, 4);
+  const Iso3 T_near(Eigen::Translation3d(-0.05, 0.04, 0.0));  // crosses z = 0
+  const TriangleFacing facing(m);
+  std::vector<uint64_t> bits;
+  int blocked = 0;
+  for (const RasterWindow& w :
+       {RasterWindow{0, 639, 0, 479, 1}, RasterWindow{100, 253, 60, 181, 2}}) {
+    for (const double angle : {0.3, 1.9}) {
+      const Iso3 T_C_M = Iso3(Eigen::Translation3d(0.0, -0.01, 0.55)) *
+                         Eigen::AngleAxisd(angle, Vec3(1, 2, 3).normalized());
+      DepthRaster first;
+      first.reset(K, w);
+      first.draw(m, T_C_M, 0, true);
+      facing.mayFace(T_C_M.inverse() * Vec3(0.075, 0, 0), &bits);
+      for (int mode = 0; mode < 3; ++mode) {
+        ProjectorShadows one, four;
+        EXPECT_FALSE(one.setVectorised(false));
+        EXPECT_TRUE(four.setVectorised(true));
+        for (ProjectorShadows* p : {&one, &four}) {
+          p->reset(K, w, 0.075);
+          for (int j = w.j0; j <= w.j1; ++j)
+            for (int i = w.i0; i <= w.i1; ++i) {
+              const int s = first.index(i, j);
+              if (first.id(s) < 0) continue;
+              const double iz = first.inverseDepth(s);
+              p->add(j, i, iz, iz * (1 + 3e-4));
+            }
+          p->index();
+          p->draw(m, T_C_M, mode != 0, mode == 2 ? &first.projected() : nullptr, nullptr,
+                  mode == 2 ? &bits : nullptr);
+          p->draw(nearSphere, T_near, true);
+        }
+        blocked += expectSameBlocked(one, four);
+      }
+    }
+  }
+  EXPECT_GT(blocked, 5000);
+}
+
 TEST(Raster, WatertightIsWeakerThanClosed) {
   TriangleMesh box = makeBox(Vec3(0.1, 0.1, 0.1));
   EXPECT_TRUE(box.isClosed());

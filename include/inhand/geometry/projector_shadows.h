@@ -60,6 +60,13 @@ class ProjectorShadows {
             const std::vector<DepthRaster::ProjectedVertex>* projected = nullptr,
             const Aabb* bounds = nullptr, const std::vector<uint64_t>* only = nullptr);
 
+  // Whether draw() sets triangles up four at a time in AVX2 (when the CPU has it; the default),
+  // or one at a time. Both block the same points; returns the setting in effect.
+  bool setVectorised(bool on) {
+    vectorised_ = on && DepthRaster::avx2Available();
+    return vectorised_;
+  }
+
   int size() const { return int(points_.size()); }
   bool blocked(int k) const { return sortedBlocked_[size_t(position_[size_t(k)])] != 0; }
 
@@ -70,6 +77,15 @@ class ProjectorShadows {
   };
   // One triangle in projector-image coordinates (W, y) with its 1/z at the corners.
   void triangle(const double* W, const double* y, const double* iz, bool cull);
+  // triangle()'s walk over the rows, from its set-up (edge k: eW[k·step]·W + eY[k·step]·y +
+  // e0[k·step]; 1/z·|area|: zW·W + zY·y + z0).
+  void triangleRows(const double* eW, const double* eY, const double* e0, int step, double zW,
+                    double zY, double z0, double absArea, double Wmin, double Wmax, int ja, int jb);
+  // triangle() for the four triangles k[0..3] at once (AVX2), their corners projected in
+  // `verts`; returns a bit per triangle left to the one-at-a-time path (the clipped ones).
+  int drawFour(const TriangleMesh& mesh, const DepthRaster::ProjectedVertex* verts, const size_t* k,
+               bool cull);
+  bool vectorised_ = DepthRaster::avx2Available();
   // A triangle given in the camera frame, clipped at the near plane first.
   void triangleCamera(const Vec3& a, const Vec3& b, const Vec3& c, bool cull);
 
