@@ -3,7 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #if INHAND_RASTER_AVX2
-#include <immintrin.h>
+#include "raster_avx2.h"
 #elif defined(__SSE2__)
 #include <emmintrin.h>
 #endif
@@ -242,21 +242,12 @@ bool DepthRaster::avx2Available() {
 // buffers come out bit for bit the same.
 __attribute__((target("avx2"))) int DepthRaster::drawFour(const TriangleMesh& mesh, const size_t* k,
                                                           int id_base, bool cull) {
-  const Tri* T = mesh.triangles.data();
-  const __m128i three = _mm_set1_epi32(3);
-  const __m128i va =
-      _mm_mullo_epi32(_mm_setr_epi32(T[k[0]][0], T[k[1]][0], T[k[2]][0], T[k[3]][0]), three);
-  const __m128i vb =
-      _mm_mullo_epi32(_mm_setr_epi32(T[k[0]][1], T[k[1]][1], T[k[2]][1], T[k[3]][1]), three);
-  const __m128i vc =
-      _mm_mullo_epi32(_mm_setr_epi32(T[k[0]][2], T[k[1]][2], T[k[2]][2], T[k[3]][2]), three);
-  const double* V = &verts_[0].x;  // x, y, iz of vertex v at 3v, 3v + 1, 3v + 2
-  const __m256d zero = _mm256_setzero_pd(), all = _mm256_castsi256_pd(_mm256_set1_epi64x(-1));
-#define gather(base, idx) _mm256_mask_i32gather_pd(zero, base, idx, all, 8)
-  const __m256d xa = gather(V, va), ya = gather(V + 1, va), za = gather(V + 2, va);
-  const __m256d xb = gather(V, vb), yb = gather(V + 1, vb), zb = gather(V + 2, vb);
-  const __m256d xc = gather(V, vc), yc = gather(V + 1, vc), zc = gather(V + 2, vc);
-#undef gather
+  __m256d cornerX[3], cornerY[3], cornerIz[3];
+  loadFourTriangles(mesh, verts_.data(), k, cornerX, cornerY, cornerIz);
+  const __m256d xa = cornerX[0], xb = cornerX[1], xc = cornerX[2];
+  const __m256d ya = cornerY[0], yb = cornerY[1], yc = cornerY[2];
+  const __m256d za = cornerIz[0], zb = cornerIz[1], zc = cornerIz[2];
+  const __m256d zero = _mm256_setzero_pd();
   // Behind the near plane: the one-at-a-time path clips.
   const __m256d clipped = _mm256_or_pd(
       _mm256_or_pd(_mm256_cmp_pd(za, zero, _CMP_LT_OQ), _mm256_cmp_pd(zb, zero, _CMP_LT_OQ)),
