@@ -191,16 +191,9 @@ void ProjectorShadows::draw(const TriangleMesh& mesh, const Iso3& T_C_mesh, bool
 #if INHAND_RASTER_AVX2
   if (vectorised_) {
     // Four triangles at a time through the set-up; drawFour hands back the clipped ones.
-    size_t batch[4];
-    int n = 0;
-    forEachMarked(nt, masked ? only : nullptr, [&](size_t k) {
-      batch[n++] = k;
-      if (n < 4) return;
-      n = 0;
-      for (int rest = drawFour(mesh, V->data(), batch, cull_back_faces); rest; rest &= rest - 1)
-        one(batch[__builtin_ctz(unsigned(rest))]);
-    });
-    for (int q = 0; q < n; ++q) one(batch[q]);
+    forEachMarkedInFours(
+        nt, masked ? only : nullptr,
+        [&](const size_t* k) { return drawFour(mesh, V->data(), k, cull_back_faces); }, one);
     return;
   }
 #endif
@@ -213,21 +206,14 @@ void ProjectorShadows::draw(const TriangleMesh& mesh, const Iso3& T_C_mesh, bool
 __attribute__((target("avx2"))) int ProjectorShadows::drawFour(
     const TriangleMesh& mesh, const DepthRaster::ProjectedVertex* verts, const size_t* k,
     bool cull) {
-  __m256d cornerX[3], cornerY[3], cornerIz[3];
-  loadFourTriangles(mesh, verts, k, cornerX, cornerY, cornerIz);
-  const __m256d xa = cornerX[0], xb = cornerX[1], xc = cornerX[2];
-  const __m256d ya = cornerY[0], yb = cornerY[1], yc = cornerY[2];
-  const __m256d za = cornerIz[0], zb = cornerIz[1], zc = cornerIz[2];
-  const __m256d zero = _mm256_setzero_pd();
-  const __m256d clipped = _mm256_or_pd(
-      _mm256_or_pd(_mm256_cmp_pd(za, zero, _CMP_LT_OQ), _mm256_cmp_pd(zb, zero, _CMP_LT_OQ)),
-      _mm256_cmp_pd(zc, zero, _CMP_LT_OQ));
+  __m256d W[3], Y[3], Z[3];
+  const int clip = loadFourTriangles(mesh, verts, k, W, Y, Z);  // W holds x for now
   const __m256d shift = _mm256_set1_pd(shift_);
-  const __m256d Wa = _mm256_sub_pd(xa, _mm256_mul_pd(shift, za)),
-                Wb = _mm256_sub_pd(xb, _mm256_mul_pd(shift, zb)),
-                Wc = _mm256_sub_pd(xc, _mm256_mul_pd(shift, zc));
-  const __m256d area = _mm256_sub_pd(_mm256_mul_pd(_mm256_sub_pd(Wb, Wa), _mm256_sub_pd(yc, ya)),
-                                     _mm256_mul_pd(_mm256_sub_pd(yb, ya), _mm256_sub_pd(Wc, Wa)));
+  for (int c = 0; c < 3; ++c) W[c] = _mm256_sub_pd(W[c], _mm256_mul_pd(shift, Z[c]));
+  const __m256d Wa = W[0], Wb = W[1], Wc = W[2], ya = Y[0], yb = Y[1], yc = Y[2];
+  const __m256d za = Z[0], zb = Z[1], zc = Z[2];
+  const __m256d zero = _mm256_setzero_pd();
+  const __m256d area = signedAreaFour(W, Y);
   __m256d dropped = _mm256_cmp_pd(area, zero, _CMP_EQ_OQ);
   if (cull) dropped = _mm256_or_pd(dropped, _mm256_cmp_pd(area, zero, _CMP_GT_OQ));
   const __m256d maxIz = _mm256_max_pd(_mm256_max_pd(za, zb), zc);
@@ -241,14 +227,11 @@ __attribute__((target("avx2"))) int ProjectorShadows::drawFour(
   const __m256d fjb = _mm256_min_pd(_mm256_floor_pd(_mm256_max_pd(_mm256_max_pd(ya, yb), yc)),
                                     _mm256_set1_pd(window_.j1));
   dropped = _mm256_or_pd(dropped, _mm256_cmp_pd(fja, fjb, _CMP_GT_OQ));
-  const int clip = _mm256_movemask_pd(clipped);
   const int live = ~clip & ~_mm256_movemask_pd(dropped) & 15;
   if (!live) return clip;
   const __m256d signBit = _mm256_set1_pd(-0.0);
-  const __m256d sg = _mm256_blendv_pd(_mm256_set1_pd(-1.0), _mm256_set1_pd(1.0),
-                                      _mm256_cmp_pd(area, zero, _CMP_GT_OQ));
+  const __m256d sg = signOfAreaFour(area);
   const __m256d nsg = _mm256_xor_pd(sg, signBit);
-  const __m256d W[3] = {Wa, Wb, Wc}, Y[3] = {ya, yb, yc}, Z[3] = {za, zb, zc};
   alignas(32) double eW[3][4], eY[3][4], e0[3][4], zW[4], zY[4], z0[4], absArea[4], wmin[4],
       wmax[4], ja[4], jb[4];
   __m256d E[3][3];  // eW, eY, e0 per edge

@@ -213,16 +213,9 @@ void DepthRaster::drawMesh(const TriangleMesh& mesh, const Iso3& T_C_mesh, int i
   if (!Over && vectorised_) {
     // Four triangles at a time through the set-up; drawFour hands back the ones it leaves to
     // the one-at-a-time path (clipped, or larger than fillSmall's box).
-    size_t batch[4];
-    int n = 0;
-    forEachMarked(nt, masked ? only : nullptr, [&](size_t k) {
-      batch[n++] = k;
-      if (n < 4) return;
-      n = 0;
-      for (int rest = drawFour(mesh, batch, id_base, cull_back_faces); rest; rest &= rest - 1)
-        one(batch[__builtin_ctz(unsigned(rest))]);
-    });
-    for (int q = 0; q < n; ++q) one(batch[q]);
+    forEachMarkedInFours(
+        nt, masked ? only : nullptr,
+        [&](const size_t* k) { return drawFour(mesh, k, id_base, cull_back_faces); }, one);
     minInvZ_ = 0;
     return;
   }
@@ -243,21 +236,16 @@ bool DepthRaster::avx2Available() {
 __attribute__((target("avx2"))) int DepthRaster::drawFour(const TriangleMesh& mesh, const size_t* k,
                                                           int id_base, bool cull) {
   __m256d cornerX[3], cornerY[3], cornerIz[3];
-  loadFourTriangles(mesh, verts_.data(), k, cornerX, cornerY, cornerIz);
+  const int clip = loadFourTriangles(mesh, verts_.data(), k, cornerX, cornerY, cornerIz);
   const __m256d xa = cornerX[0], xb = cornerX[1], xc = cornerX[2];
   const __m256d ya = cornerY[0], yb = cornerY[1], yc = cornerY[2];
   const __m256d za = cornerIz[0], zb = cornerIz[1], zc = cornerIz[2];
   const __m256d zero = _mm256_setzero_pd();
-  // Behind the near plane: the one-at-a-time path clips.
-  const __m256d clipped = _mm256_or_pd(
-      _mm256_or_pd(_mm256_cmp_pd(za, zero, _CMP_LT_OQ), _mm256_cmp_pd(zb, zero, _CMP_LT_OQ)),
-      _mm256_cmp_pd(zc, zero, _CMP_LT_OQ));
   const __m256d minIz = _mm256_set1_pd(minInvZ_);
   const __m256d beyond = _mm256_and_pd(
       _mm256_and_pd(_mm256_cmp_pd(za, minIz, _CMP_LT_OQ), _mm256_cmp_pd(zb, minIz, _CMP_LT_OQ)),
       _mm256_cmp_pd(zc, minIz, _CMP_LT_OQ));
-  const __m256d area = _mm256_sub_pd(_mm256_mul_pd(_mm256_sub_pd(xb, xa), _mm256_sub_pd(yc, ya)),
-                                     _mm256_mul_pd(_mm256_sub_pd(yb, ya), _mm256_sub_pd(xc, xa)));
+  const __m256d area = signedAreaFour(cornerX, cornerY);
   __m256d dropped = _mm256_or_pd(beyond, _mm256_cmp_pd(area, zero, _CMP_EQ_OQ));
   if (cull) dropped = _mm256_or_pd(dropped, _mm256_cmp_pd(area, zero, _CMP_GT_OQ));
   const RasterWindow& w = window_;
@@ -276,7 +264,6 @@ __attribute__((target("avx2"))) int DepthRaster::drawFour(const TriangleMesh& me
       _mm256_and_pd(_mm256_cmp_pd(_mm256_sub_pd(fib, fia), four, _CMP_LT_OQ),
                     _mm256_cmp_pd(_mm256_sub_pd(fjb, fja), four, _CMP_LT_OQ)),
       _mm256_cmp_pd(_mm256_add_pd(fia, _mm256_set1_pd(3)), _mm256_set1_pd(w.i1), _CMP_LE_OQ));
-  const int clip = _mm256_movemask_pd(clipped);
   const int live = ~clip & ~_mm256_movemask_pd(_mm256_or_pd(dropped, empty)) & 15;
   const int fillNow = live & _mm256_movemask_pd(small);
   const int rest = clip | (live & ~fillNow);
@@ -287,8 +274,7 @@ __attribute__((target("avx2"))) int DepthRaster::drawFour(const TriangleMesh& me
   const __m256d y0 = _mm256_sub_pd(ya, fja), y1 = _mm256_sub_pd(yb, fja),
                 y2 = _mm256_sub_pd(yc, fja);
   const __m256d signBit = _mm256_set1_pd(-0.0);
-  const __m256d sg = _mm256_blendv_pd(_mm256_set1_pd(-1.0), _mm256_set1_pd(1.0),
-                                      _mm256_cmp_pd(area, zero, _CMP_GT_OQ));
+  const __m256d sg = signOfAreaFour(area);
   const __m256d nsg = _mm256_xor_pd(sg, signBit);
   const __m256d inv = _mm256_div_pd(_mm256_set1_pd(1.0), _mm256_andnot_pd(signBit, area));
   const __m256d X[3] = {x0, x1, x2}, Y[3] = {y0, y1, y2}, Z[3] = {za, zb, zc};

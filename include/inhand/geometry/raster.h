@@ -93,6 +93,23 @@ inline void forEachMarked(size_t n, const std::vector<uint64_t>* only, Fn&& fn) 
   }
 }
 
+// forEachMarked in groups of four: four(k) takes the triangles k[0..3] at once and returns a bit
+// per triangle it leaves to one(k[l]); the last (fewer than four) go to one() directly.
+template <typename Four, typename One>
+inline void forEachMarkedInFours(size_t n, const std::vector<uint64_t>* only, Four&& four,
+                                 One&& one) {
+  size_t batch[4];
+  int m = 0;
+  forEachMarked(n, only, [&](size_t k) {
+    batch[m++] = k;
+    if (m < 4) return;
+    m = 0;
+    for (int rest = four(static_cast<const size_t*>(batch)); rest; rest &= rest - 1)
+      one(batch[__builtin_ctz(unsigned(rest))]);
+  });
+  for (int q = 0; q < m; ++q) one(batch[q]);
+}
+
 class DepthRaster {
  public:
   // Empties the buffer (every sample: nothing hit) for a new view.
