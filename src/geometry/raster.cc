@@ -224,11 +224,16 @@ void DepthRaster::drawMesh(const TriangleMesh& mesh, const Iso3& T_C_mesh, int i
   minInvZ_ = 0;
 }
 
-#if INHAND_RASTER_AVX2
 bool DepthRaster::avx2Available() {
+#if INHAND_RASTER_AVX2
   static const bool has = __builtin_cpu_supports("avx2");
   return has;
+#else
+  return false;
+#endif
 }
+
+#if INHAND_RASTER_AVX2
 
 // draw()'s per-triangle steps for four triangles in AVX2 lanes, each operation the same IEEE
 // double operation as the one-at-a-time path's (no FMA: it would round differently), so the

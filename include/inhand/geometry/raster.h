@@ -144,14 +144,8 @@ class DepthRaster {
     vectorised_ = on && avx2Available();
     return vectorised_;
   }
-  static bool avx2Available()
-#if !INHAND_RASTER_AVX2
-  {
-    return false;
-  }
-#else
-      ;
-#endif
+  // Whether this build and CPU can run the AVX2 set-up.
+  static bool avx2Available();
   // Draws one triangle given in the camera frame.
   void drawTriangle(const Vec3& a, const Vec3& b, const Vec3& c, int id);
 
