@@ -1,11 +1,15 @@
 #include <gtest/gtest.h>
 
 #include <fstream>
+#include <mutex>
+#include <set>
+#include <stdexcept>
 
 #include "inhand/core/error.h"
 #include "inhand/core/fast_math.h"
 #include "inhand/core/file_util.h"
 #include "inhand/core/json_util.h"
+#include "inhand/core/parallel.h"
 #include "inhand/core/pose.h"
 #include "inhand/core/random.h"
 #include "test_util.h"
@@ -135,4 +139,46 @@ TEST(Json, ErrorsNameFileAndField) {
   } catch (const Error& e) {
     EXPECT_NE(std::string(e.what()).find("cfg.json: camera.n"), std::string::npos);
   }
+}
+
+// The persistent workers: every item exactly once, on both cores, over many calls; a nested call
+// and calls from two threads at once (both fall back to fresh threads) do the same; an exception
+// comes back to the caller and the workers go on working.
+TEST(Parallel, ForThreadsRunsEveryItemOnceAndRethrows) {
+  auto check = [](int n) {
+    std::vector<std::atomic<int>> seen(static_cast<size_t>(n));
+    parallelForThreads(0, n, [&](int i) { ++seen[size_t(i)]; });
+    for (int i = 0; i < n; ++i)
+      if (seen[size_t(i)] != 1) return false;
+    return true;
+  };
+  for (int call = 0; call < 200; ++call) ASSERT_TRUE(check(1 + call % 37)) << call;
+  // The work is shared: with a slow item first, another thread takes the rest.
+  if (std::thread::hardware_concurrency() > 1) {
+    std::mutex m;
+    std::set<std::thread::id> ids;
+    parallelForThreads(0, 8, [&](int i) {
+      if (i == 0) std::this_thread::sleep_for(std::chrono::milliseconds(50));
+      std::lock_guard<std::mutex> lock(m);
+      ids.insert(std::this_thread::get_id());
+    });
+    EXPECT_GE(ids.size(), 2u);
+  }
+  std::atomic<int> inner{0};
+  parallelForThreads(0, 4, [&](int) { parallelForThreads(0, 5, [&](int) { ++inner; }); });
+  EXPECT_EQ(inner, 20);
+  std::atomic<bool> ok1{false}, ok2{false};
+  std::thread a([&] { ok1 = check(1000); }), b([&] { ok2 = check(1000); });
+  a.join();
+  b.join();
+  EXPECT_TRUE(ok1 && ok2);
+  std::atomic<int> ran{0};
+  EXPECT_THROW(parallelForThreads(0, 1000,
+                                  [&](int i) {
+                                    ++ran;
+                                    if (i == 3) throw std::runtime_error("item 3");
+                                  }),
+               std::runtime_error);
+  EXPECT_LT(ran, 1000);  // handing out stopped
+  EXPECT_TRUE(check(100));
 }

@@ -43,14 +43,17 @@ void ProjectorShadows::index() {
   }
   // Counting sort of the points into their buckets.
   next.assign(first_.begin(), first_.end() - 1);
-  sorted_.resize(points_.size());
+  sortedW_.resize(points_.size() + 3);
+  sortedIzBlock_.resize(points_.size() + 3);
   position_.resize(points_.size());
   sortedBlocked_.assign(points_.size(), 0);
   for (size_t k = 0; k < points_.size(); ++k) {
     const int at = next[size_t(bucketOf[k])]++;
-    sorted_[size_t(at)] = {points_[k].W, points_[k].izBlock};
+    sortedW_[size_t(at)] = points_[k].W;
+    sortedIzBlock_[size_t(at)] = points_[k].izBlock;
     position_[k] = at;
   }
+  for (size_t k = points_.size(); k < sortedW_.size(); ++k) sortedW_[k] = sortedIzBlock_[k] = 0;
 }
 
 __attribute__((always_inline)) inline void ProjectorShadows::triangle(const double* W,
@@ -80,53 +83,61 @@ __attribute__((always_inline)) inline void ProjectorShadows::triangle(const doub
   const double zW = eW[0] * iz[0] + eW[1] * iz[1] + eW[2] * iz[2];
   const double zY = eY[0] * iz[0] + eY[1] * iz[1] + eY[2] * iz[2];
   const double z0 = e0[0] * iz[0] + e0[1] * iz[1] + e0[2] * iz[2];
-  triangleRows(eW, eY, e0, 1, zW, zY, z0, absArea, Wmin, Wmax, ja, jb);
+  triangleRows({eW, eY, e0, 1, zW, zY, z0, absArea, Wmin, Wmax, ja, jb});
 }
 
-__attribute__((always_inline)) inline void ProjectorShadows::triangleRows(
-    const double* eW, const double* eY, const double* e0, int step, double zW, double zY, double z0,
-    double absArea, double Wmin, double Wmax, int ja, int jb) {
-  const bool wide = Wmax - Wmin > 4;
-  const int c0 = std::max(0, floorToInt(Wmin) - base_),
-            c1 = std::min(pitch_ - 1, floorToInt(Wmax) - base_);
-  for (int j = ja; j <= jb; ++j) {
-    const int rowFirst = (j - window_.j0) * pitch_;
-    double base[3];
-    for (int k = 0; k < 3; ++k) base[k] = e0[k * step] + eY[k * step] * j;
-    int b0 = c0, b1 = c1;
-    const double zRow = z0 + zY * j;
-    if (wide) {  // the row's span, one unit of margin for rounding
-      double lo = Wmin, hi = Wmax;
-      for (int k = 0; k < 3; ++k) {
-        const double ew = eW[k * step];
-        if (ew > 0)
-          lo = std::max(lo, -base[k] / ew - 1);
-        else if (ew < 0)
-          hi = std::min(hi, -base[k] / ew + 1);
-        else if (base[k] < 0)
-          hi = lo - 1;
-      }
-      // Where the triangle lies behind every point of the row it blocks nothing: only the part
-      // with 1/z ≥ the row's least iz_block (zRow + zW·W ≥ that·|area|).
-      const double need = rowMinIzBlock_[size_t(j - window_.j0)] * absArea - zRow;
-      if (zW > 0)
-        lo = std::max(lo, need / zW - 1);
-      else if (zW < 0)
-        hi = std::min(hi, need / zW + 1);
-      else if (need > 0)
+__attribute__((always_inline)) inline bool ProjectorShadows::rowSpan(const RowWalk& t, bool wide,
+                                                                     int c0, int c1, int j,
+                                                                     double* base, double* zRow,
+                                                                     int* s0, int* s1) const {
+  for (int k = 0; k < 3; ++k) base[k] = t.e0[k * t.step] + t.eY[k * t.step] * j;
+  int b0 = c0, b1 = c1;
+  *zRow = t.z0 + t.zY * j;
+  if (wide) {  // the row's span, one unit of margin for rounding
+    double lo = t.Wmin, hi = t.Wmax;
+    for (int k = 0; k < 3; ++k) {
+      const double ew = t.eW[k * t.step];
+      if (ew > 0)
+        lo = std::max(lo, -base[k] / ew - 1);
+      else if (ew < 0)
+        hi = std::min(hi, -base[k] / ew + 1);
+      else if (base[k] < 0)
         hi = lo - 1;
-      if (lo > hi) continue;
-      b0 = std::max(b0, floorToInt(lo) - base_);
-      b1 = std::min(b1, floorToInt(hi) - base_);
     }
-    if (b0 > b1) continue;
-    const int s0 = first_[size_t(rowFirst + b0)], s1 = first_[size_t(rowFirst + b1) + 1];
-    const double ew0 = eW[0], ew1 = eW[step], ew2 = eW[2 * step];
+    // Where the triangle lies behind every point of the row it blocks nothing: only the part
+    // with 1/z ≥ the row's least iz_block (zRow + zW·W ≥ that·|area|).
+    const double need = rowMinIzBlock_[size_t(j - window_.j0)] * t.absArea - *zRow;
+    if (t.zW > 0)
+      lo = std::max(lo, need / t.zW - 1);
+    else if (t.zW < 0)
+      hi = std::min(hi, need / t.zW + 1);
+    else if (need > 0)
+      hi = lo - 1;
+    if (lo > hi) return false;
+    b0 = std::max(b0, floorToInt(lo) - base_);
+    b1 = std::min(b1, floorToInt(hi) - base_);
+  }
+  if (b0 > b1) return false;
+  const int rowFirst = (j - window_.j0) * pitch_;
+  *s0 = first_[size_t(rowFirst + b0)];
+  *s1 = first_[size_t(rowFirst + b1) + 1];
+  return true;
+}
+
+__attribute__((always_inline)) inline void ProjectorShadows::triangleRows(const RowWalk& t) {
+  const bool wide = t.Wmax - t.Wmin > 4;
+  const int c0 = std::max(0, floorToInt(t.Wmin) - base_),
+            c1 = std::min(pitch_ - 1, floorToInt(t.Wmax) - base_);
+  const double ew0 = t.eW[0], ew1 = t.eW[t.step], ew2 = t.eW[2 * t.step];
+  for (int j = t.ja; j <= t.jb; ++j) {
+    double base[3], zRow;
+    int s0, s1;
+    if (!rowSpan(t, wide, c0, c1, j, base, &zRow, &s0, &s1)) continue;
     for (int s = s0; s < s1; ++s) {
-      const double w = sorted_[size_t(s)].W;
+      const double w = sortedW_[size_t(s)];
       const bool hit = (base[0] + ew0 * w >= 0) & (base[1] + ew1 * w >= 0) &
                        (base[2] + ew2 * w >= 0) &
-                       (zRow + zW * w >= sorted_[size_t(s)].izBlock * absArea);
+                       (zRow + t.zW * w >= sortedIzBlock_[size_t(s)] * t.absArea);
       sortedBlocked_[size_t(s)] |= uint8_t(hit);
     }
   }
@@ -258,10 +269,47 @@ __attribute__((target("avx2"))) int ProjectorShadows::drawFour(
   _mm256_store_pd(jb, fjb);
   for (int bits = live; bits; bits &= bits - 1) {
     const int l = __builtin_ctz(unsigned(bits));
-    triangleRows(&eW[0][l], &eY[0][l], &e0[0][l], 4, zW[l], zY[l], z0[l], absArea[l], wmin[l],
-                 wmax[l], int(ja[l]), int(jb[l]));
+    triangleRowsFour({&eW[0][l], &eY[0][l], &e0[0][l], 4, zW[l], zY[l], z0[l], absArea[l], wmin[l],
+                      wmax[l], int(ja[l]), int(jb[l])});
   }
   return clip;
+}
+
+// triangleRows' tests four points at a time, each lane the same IEEE double operations as there
+// (no FMA). Most rows reach four points or fewer, so their loop runs once, predictably.
+__attribute__((target("avx2"), always_inline)) inline void ProjectorShadows::triangleRowsFour(
+    const RowWalk& t) {
+  const bool wide = t.Wmax - t.Wmin > 4;
+  const int c0 = std::max(0, floorToInt(t.Wmin) - base_),
+            c1 = std::min(pitch_ - 1, floorToInt(t.Wmax) - base_);
+  const __m256d ew0 = _mm256_set1_pd(t.eW[0]), ew1 = _mm256_set1_pd(t.eW[t.step]),
+                ew2 = _mm256_set1_pd(t.eW[2 * t.step]), zW = _mm256_set1_pd(t.zW),
+                area = _mm256_set1_pd(t.absArea), zero = _mm256_setzero_pd();
+  const double* W = sortedW_.data();
+  const double* izBlock = sortedIzBlock_.data();
+  for (int j = t.ja; j <= t.jb; ++j) {
+    double base[3], zRow;
+    int s0, s1;
+    if (!rowSpan(t, wide, c0, c1, j, base, &zRow, &s0, &s1)) continue;
+    const __m256d b0 = _mm256_set1_pd(base[0]), b1 = _mm256_set1_pd(base[1]),
+                  b2 = _mm256_set1_pd(base[2]), zr = _mm256_set1_pd(zRow);
+    int s = s0;
+    do {  // once even for no point (then every lane is masked off)
+      const __m256d w = _mm256_loadu_pd(W + s);
+      __m256d in = _mm256_cmp_pd(_mm256_add_pd(b0, _mm256_mul_pd(ew0, w)), zero, _CMP_GE_OQ);
+      in = _mm256_and_pd(in,
+                         _mm256_cmp_pd(_mm256_add_pd(b1, _mm256_mul_pd(ew1, w)), zero, _CMP_GE_OQ));
+      in = _mm256_and_pd(in,
+                         _mm256_cmp_pd(_mm256_add_pd(b2, _mm256_mul_pd(ew2, w)), zero, _CMP_GE_OQ));
+      in = _mm256_and_pd(
+          in, _mm256_cmp_pd(_mm256_add_pd(zr, _mm256_mul_pd(zW, w)),
+                            _mm256_mul_pd(_mm256_loadu_pd(izBlock + s), area), _CMP_GE_OQ));
+      const int lanes = std::clamp(s1 - s, 0, 4);
+      int hit = _mm256_movemask_pd(in) & ((1 << lanes) - 1);
+      for (; hit; hit &= hit - 1) sortedBlocked_[size_t(s + __builtin_ctz(unsigned(hit)))] = 1;
+      s += 4;
+    } while (s < s1);
+  }
 }
 #endif
 

@@ -77,10 +77,23 @@ class ProjectorShadows {
   };
   // One triangle in projector-image coordinates (W, y) with its 1/z at the corners.
   void triangle(const double* W, const double* y, const double* iz, bool cull);
-  // triangle()'s walk over the rows, from its set-up (edge k: eW[k·step]·W + eY[k·step]·y +
-  // e0[k·step]; 1/z·|area|: zW·W + zY·y + z0).
-  void triangleRows(const double* eW, const double* eY, const double* e0, int step, double zW,
-                    double zY, double z0, double absArea, double Wmin, double Wmax, int ja, int jb);
+  // A triangle's set-up for the walk over its rows: edge k is eW[k·step]·W + eY[k·step]·y +
+  // e0[k·step] (≥ 0 inside), 1/z·|area| is zW·W + zY·y + z0, over rows ja..jb and W in
+  // [Wmin, Wmax].
+  struct RowWalk {
+    const double *eW, *eY, *e0;
+    int step;
+    double zW, zY, z0, absArea, Wmin, Wmax;
+    int ja, jb;
+  };
+  // Row j of the walk: the edge functions and 1/z·|area| at W = 0 of that row (base, zRow) and
+  // the sorted points [s0, s1) it may block; false when it can block none there.
+  bool rowSpan(const RowWalk& t, bool wide, int c0, int c1, int j, double* base, double* zRow,
+               int* s0, int* s1) const;
+  // triangle()'s walk over the rows, one point at a time.
+  void triangleRows(const RowWalk& t);
+  // The same walk testing four points at a time (AVX2): the same points come out blocked.
+  void triangleRowsFour(const RowWalk& t);
   // triangle() for the four triangles k[0..3] at once (AVX2), their corners projected in
   // `verts`; returns a bit per triangle left to the one-at-a-time path (the clipped ones).
   int drawFour(const TriangleMesh& mesh, const DepthRaster::ProjectedVertex* verts, const size_t* k,
@@ -97,14 +110,13 @@ class ProjectorShadows {
   double minW_ = 0, maxW_ = 0;  // the points' W range
   std::vector<Point> points_;
   // Bucketed points: bucket (r, c), r = j − j0, c = ⌊W⌋ − base_, is r·pitch_ + c and holds the
-  // points [first_[b], first_[b + 1]) of sorted_.
+  // points [first_[b], first_[b + 1]) of the sorted arrays.
   int base_ = 0, pitch_ = 0;
   std::vector<int> first_;
   std::vector<double> rowMinIzBlock_;  // per row: the least iz_block of its points (∞: none)
-  struct Sorted {
-    double W, izBlock;
-  };
-  std::vector<Sorted> sorted_;
+  // The points in bucket order: their W and iz_block, with three entries of padding (for
+  // loads four at a time).
+  std::vector<double> sortedW_, sortedIzBlock_;
   std::vector<uint8_t> sortedBlocked_;
   std::vector<int> position_;  // point k sits at position_[k] of the sorted arrays
   std::vector<DepthRaster::ProjectedVertex> verts_;
