@@ -3,6 +3,7 @@
 #include <fstream>
 #include <functional>
 #include <map>
+#include <random>
 
 #include "inhand/core/error.h"
 #include "inhand/core/random.h"
@@ -574,21 +575,26 @@ TEST(ProjectorShadows, LargeTrianglesBlockExactlyWhereTheyAreNearer) {
     bool blocked;
   };
   std::vector<Expect> expected;
+  // The points in a shuffled order: rows need not come one after another.
+  std::vector<std::pair<int, int>> samples;
   for (int j = w.j0; j <= w.j1; j += 2)
-    for (int i = w.i0; i <= w.i1; i += 2) {
-      const double z = 0.8 + 0.3 * std::sin(i * 0.05) * std::cos(j * 0.07);
-      const double iz = 1 / z, izBlock = iz / (1 - 2e-4);
-      const int k = shadows.add(j, i, iz, izBlock);
-      // The projector's ray through the point: X(z) = ((W − cx)/fx·z + b, (j − cy)/fy·z, z).
-      const double W = i - K.fx * b * iz;
-      const Vec3 dir((W - K.cx) / K.fx, (j - K.cy) / K.fy, 1);
-      const double zHit = (n.dot(a) - n.x() * b) / n.dot(dir);
-      const Vec3 X = Vec3(b, 0, 0) + zHit * dir;
-      const double edge = std::min({0.3 - std::abs(X.y()), 0.4 - std::abs(X.x())});
-      if (!(zHit > 0) || std::abs(edge) < 1e-6 || std::abs(1 / zHit - izBlock) < 1e-9)
-        continue;  // on an edge or a tie: either answer is right
-      expected.push_back({k, edge > 0 && 1 / zHit >= izBlock});
-    }
+    for (int i = w.i0; i <= w.i1; i += 2) samples.push_back({i, j});
+  std::mt19937 rng(7);
+  std::shuffle(samples.begin(), samples.end(), rng);
+  for (const auto& [i, j] : samples) {
+    const double z = 0.8 + 0.3 * std::sin(i * 0.05) * std::cos(j * 0.07);
+    const double iz = 1 / z, izBlock = iz / (1 - 2e-4);
+    const int k = shadows.add(j, i, iz, izBlock);
+    // The projector's ray through the point: X(z) = ((W − cx)/fx·z + b, (j − cy)/fy·z, z).
+    const double W = i - K.fx * b * iz;
+    const Vec3 dir((W - K.cx) / K.fx, (j - K.cy) / K.fy, 1);
+    const double zHit = (n.dot(a) - n.x() * b) / n.dot(dir);
+    const Vec3 X = Vec3(b, 0, 0) + zHit * dir;
+    const double edge = std::min({0.3 - std::abs(X.y()), 0.4 - std::abs(X.x())});
+    if (!(zHit > 0) || std::abs(edge) < 1e-6 || std::abs(1 / zHit - izBlock) < 1e-9)
+      continue;  // on an edge or a tie: either answer is right
+    expected.push_back({k, edge > 0 && 1 / zHit >= izBlock});
+  }
   shadows.index();
   shadows.draw(quad, Iso3::Identity(), false);
   int blocked = 0;

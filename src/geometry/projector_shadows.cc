@@ -35,11 +35,15 @@ void ProjectorShadows::index() {
     bucketOf[k] = (p.j - window_.j0) * pitch_ + floorToInt(p.W) - base_;
     ++first_[size_t(bucketOf[k]) + 1];
   }
-  for (size_t b = 0; b < buckets; ++b) first_[b + 1] += first_[b];
+  // Running sums and minima in registers, not through memory element by element.
+  for (size_t b = 1, sum = 0; b <= buckets; ++b) first_[b] = int(sum += size_t(first_[b]));
   rowMinIzBlock_.assign(size_t(rows), std::numeric_limits<double>::infinity());
-  for (const Point& p : points_) {
-    double& m = rowMinIzBlock_[size_t(p.j - window_.j0)];
-    m = std::min(m, p.izBlock);
+  for (size_t k = 0; k < points_.size();) {  // by runs of points on one row
+    const int j = points_[k].j;
+    double m = points_[k].izBlock;
+    for (++k; k < points_.size() && points_[k].j == j; ++k) m = std::min(m, points_[k].izBlock);
+    double& row = rowMinIzBlock_[size_t(j - window_.j0)];
+    row = std::min(row, m);
   }
   // Counting sort of the points into their buckets.
   next.assign(first_.begin(), first_.end() - 1);
