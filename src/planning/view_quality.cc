@@ -471,6 +471,15 @@ void ViewQualityScene::rasterGains(const Iso3& T_O_C, const RasterWindow& w,
   const double cos2Projector = cosMaxProjector_ * cosMaxProjector_;
   const double cos2Grazing = cosGrazing_ * cosGrazing_;
   const double fxfy = K.fx * K.fy;
+  // With the projector's view rasterised, the fast path leaves each sample's last divisions and
+  // square root to the end of its row: there the samples are independent and branch-free, so
+  // they overlap in the pipeline instead of lengthening each sample's chain of dependent steps.
+  struct Pending {
+    int i;
+    double d, dist2, den, num, ratioNum;  // weight = num / den, ratio = ratioNum / den
+  };
+  thread_local std::vector<Pending> pending;
+  const bool defer = fast && rows && logArgs;
   for (int j = w.j0; j <= w.j1; ++j) {
     const Vec3 dirRow = R.col(2) + (j * w.stride - K.cy) / K.fy * R.col(1);
     for (int i = w.i0; i <= w.i1; ++i) {
@@ -523,7 +532,12 @@ void ViewQualityScene::rasterGains(const Iso3& T_O_C, const RasterWindow& w,
         }
         // One division for both quotients: r = 1/(σ_z²·f²·n_z), σ_t²/σ_z² = σ_t²·f²·n_z·r and
         // d²/(f²·n_z) = d²·σ_z²·r.
-        const double sz2 = sz * sz, a = fxfy * nz, r = 1.0 / (sz2 * a);
+        const double sz2 = sz * sz, a = fxfy * nz;
+        if (defer) {
+          pending.push_back({i, d, dist2, sz2 * a, 0.5 * d * d * sz2, var * a});
+          continue;
+        }
+        const double r = 1.0 / (sz2 * a);
         const double weight = 0.5 * d * d * sz2 * r, ratio = var * a * r;
         if (logArgs) {  // the logarithm later, for the samples the projector sees
           gains->push_back(weight);
@@ -565,6 +579,13 @@ void ViewQualityScene::rasterGains(const Iso3& T_O_C, const RasterWindow& w,
         if (logArgs) logArgs->push_back(-1.0);  // final
       }
     }
+    for (const Pending& s : pending) {  // as the immediate path above computes them
+      const double r = 1.0 / s.den;
+      gains->push_back(s.num * r);
+      logArgs->push_back(s.ratioNum * r);
+      addShadowPoint(rows, j, s.i, s.d, std::sqrt(s.dist2));
+    }
+    pending.clear();
   }
   if (!rows) return;
   // The projector's view, at each pending sample's own projector column: S_obj from the
