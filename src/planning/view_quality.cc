@@ -480,6 +480,11 @@ void ViewQualityScene::rasterGains(const Iso3& T_O_C, const RasterWindow& w,
   };
   thread_local std::vector<Pending> pending;
   const bool defer = fast && rows && logArgs;
+  // Each column's part of the ray direction, once per view rather than a division per sample.
+  thread_local std::vector<Vec3> colDir;
+  colDir.resize(size_t(std::max(0, w.i1 - w.i0 + 1)));
+  for (int i = w.i0; i <= w.i1; ++i)
+    colDir[size_t(i - w.i0)] = (i * w.stride - K.cx) / K.fx * R.col(0);
   for (int j = w.j0; j <= w.j1; ++j) {
     const Vec3 dirRow = R.col(2) + (j * w.stride - K.cy) / K.fy * R.col(1);
     for (int i = w.i0; i <= w.i1; ++i) {
@@ -502,7 +507,7 @@ void ViewQualityScene::rasterGains(const Iso3& T_O_C, const RasterWindow& w,
         // d (the ray's camera z is 1); the rules and the gain as surfaceGain, in squared form
         // where a cosine is compared.
         const TrianglePlane& tp = planes_[size_t(tri)];
-        const Vec3 dir = dirRow + (i * w.stride - K.cx) / K.fx * R.col(0);
+        const Vec3 dir = dirRow + colDir[size_t(i - w.i0)];
         const double nd = tp.n.dot(dir);
         const double d = (tp.offset - tp.n.dot(o)) / nd;
         const Vec3 p = o + d * dir;
