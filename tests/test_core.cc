@@ -32,6 +32,31 @@ TEST(FastMath, Log1pMatchesLibmOverTheRangeEq9Uses) {
   EXPECT_EQ(log1pNonNegative(0.0), 0.0);
 }
 
+#if INHAND_FAST_MATH_AVX2
+__attribute__((target("avx2"))) void log1pFour(const double* x, double* out) {
+  _mm256_storeu_pd(out, log1pNonNegativeFour(_mm256_loadu_pd(x)));
+}
+#endif
+
+TEST(FastMath, Log1pFourAtATimeIsBitForBitOneAtATime) {
+#if INHAND_FAST_MATH_AVX2
+  if (!fastMathAvx2()) GTEST_SKIP() << "no AVX2 on this CPU";
+  std::vector<double> xs = {0.0,        0.9e-3,     0.99999e-3, 1e-3, 1.00001e-3,
+                            0.41421356, 0.41421357, 1.0,        3.0,  1e12};
+  for (double x = 1e-12; x < 1e12; x *= 1.0013) xs.push_back(x);
+  while (xs.size() % 4) xs.push_back(2.0);
+  int differ = 0;
+  for (size_t k = 0; k < xs.size(); k += 4) {
+    double out[4];
+    log1pFour(&xs[k], out);
+    for (int l = 0; l < 4; ++l) differ += out[l] != log1pNonNegative(xs[k + size_t(l)]);
+  }
+  EXPECT_EQ(differ, 0);
+#else
+  GTEST_SKIP() << "no AVX2 build";
+#endif
+}
+
 TEST(Pose, LookAtPutsTargetOnOpticalAxis) {
   Rng rng = makeRng(3);
   std::uniform_real_distribution<double> U(-1, 1);

@@ -26,6 +26,22 @@ inline void addShadowPoint(ProjectorShadows* rows, int j, int i, double d, doubl
 // How many samples ahead the per-sample stage prefetches a triangle's record.
 constexpr int kPrefetch = 6;
 
+#if INHAND_FAST_MATH_AVX2
+// terms[k] = x < 0 ? gain : gain·ln(1 + x), x = logArgs[k], four at a time as far as whole
+// fours go (the same values as one at a time); returns how many it did.
+__attribute__((target("avx2"))) size_t logTermsFour(const double* gains, const double* logArgs,
+                                                    size_t n, double* terms) {
+  size_t k = 0;
+  for (; k + 4 <= n; k += 4) {
+    const __m256d x = _mm256_loadu_pd(logArgs + k), g = _mm256_loadu_pd(gains + k);
+    const __m256d t = _mm256_mul_pd(g, log1pNonNegativeFour(_mm256_max_pd(x, _mm256_setzero_pd())));
+    _mm256_storeu_pd(terms + k,
+                     _mm256_blendv_pd(t, g, _mm256_cmp_pd(x, _mm256_setzero_pd(), _CMP_LT_OQ)));
+  }
+  return k;
+}
+#endif
+
 // 10-bit Morton code of a point in [0, 1)³.
 uint32_t morton3(const Vec3& u) {
   auto spread = [](uint32_t x) {
@@ -696,16 +712,27 @@ double ViewQualityScene::quality(const Iso3& T_O_C, const std::vector<Occluder>&
     rows.reset({K.fx, K.fy, K.cx, K.cy}, w, camera_.projector_C.x());
     logArgs.clear();
     rasterGains(T_O_C, w, occluders, &shadows, &gains, &logArgs, &rows, &st);
+    // Each sample's term (its gain, or its weight times the logarithm), then their sum in
+    // sample order over those the projector sees.
+    const size_t n = size_t(rows.size());
+    thread_local std::vector<double> terms;
+    terms.resize(n);
+    size_t k = 0;
+#if INHAND_FAST_MATH_AVX2
+    if (fastMathAvx2()) k = logTermsFour(gains.data(), logArgs.data(), n, terms.data());
+#endif
+    for (; k < n; ++k) {
+      const double x = logArgs[k];
+      terms[k] = x < 0 ? gains[k] : gains[k] * log1pNonNegative(x);
+    }
     double G = 0;
-    for (int k = 0; k < rows.size(); ++k) {
-      if (rows.blocked(k)) {
+    for (k = 0; k < n; ++k) {
+      if (rows.blocked(int(k))) {
         ++st.projector_blocked;
         continue;
       }
       ++st.counted;
-      // Independent iterations: the series of many samples overlap in the pipeline.
-      const double x = logArgs[size_t(k)];
-      G += x < 0 ? gains[size_t(k)] : gains[size_t(k)] * log1pNonNegative(x);
+      G += terms[k];
     }
     return G * double(sp) * double(sp);  // each sample stands for stride² pixels
   }
