@@ -814,7 +814,8 @@ TEST(Raster, FourAtATimeIsBitForBitOneAtATime) {
   // The AVX2 set-up against the one-at-a-time path: spheres of small triangles cut by the
   // window's edges (the right edge, where fillSmall's four-wide rows do not fit, included), one
   // crossing the near plane, a box of large triangles, with and without culling, with the
-  // facing bits, a max_depth, at strides 1 and 2: the same ids and depths at every sample.
+  // facing bits, a max_depth, at strides 1 and 2, then occluders drawn over it: the same ids
+  // and depths at every sample.
   if (!DepthRaster::avx2Available()) GTEST_SKIP() << "no AVX2 on this CPU";
   const PinholeProjection K{525, 525, 319.5, 239.5};
   TriangleMesh m = makeSphere(0.1, 5);
@@ -822,6 +823,11 @@ TEST(Raster, FourAtATimeIsBitForBitOneAtATime) {
   m.append(transformed(makeBox(Vec3(0.05, 0.3, 0.02)), Iso3(Eigen::Translation3d(-0.1, 0, 0.1))));
   const TriangleFacing facing(m);
   std::vector<uint64_t> bits;
+  TriangleMesh plate = makeBox(Vec3(0.12, 0.05, 0.004));
+  plate.append(
+      transformed(makeBox(Vec3(0.015, 0.09, 0.015)), Iso3(Eigen::Translation3d(0.02, 0, 0))));
+  const Iso3 T_C_plate = Iso3(Eigen::Translation3d(-0.02, 0.03, 0.5)) *
+                         Eigen::AngleAxisd(0.4, Vec3(0, 1, 0.3).normalized());
   int compared = 0;
   for (const RasterWindow& w :
        {RasterWindow{0, 639, 0, 479, 1}, RasterWindow{200, 401, 150, 330, 1},
@@ -838,6 +844,8 @@ TEST(Raster, FourAtATimeIsBitForBitOneAtATime) {
           r->reset(K, w);
           const bool cull = mode != 0;
           r->draw(m, T_C_M, 7, cull, mode == 3 ? 0.62 : 0.0, nullptr, mode >= 2 ? &bits : nullptr);
+          // Occluders over it: a plate and a finger of large triangles (the wide fill).
+          r->drawOccluder(plate, T_C_plate, cull, mode == 3 ? 0.62 : 0.0);
         }
         compared += expectSameRaster(one, four);
       }

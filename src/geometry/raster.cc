@@ -345,6 +345,47 @@ void DepthRaster::drawClipped(const Vec3& a, const Vec3& b, const Vec3& c, int i
   }
 }
 
+#if INHAND_RASTER_AVX2
+namespace {
+// fill()'s loop over the samples lo..hi of one row, four at a time (AVX2): each lane takes the
+// same IEEE steps as the one-at-a-time loop (no FMA), so the same samples win with the same
+// depths. Returns the first sample left (fewer than four remain) for that loop.
+template <bool Over>
+__attribute__((target("avx2"))) int fillRowFour(float* zrow, int* idrow, int lo, int hi,
+                                                const double* base, const double* ei,
+                                                double zrowBase, double zi, int id) {
+  const __m256d b0 = _mm256_set1_pd(base[0]), b1 = _mm256_set1_pd(base[1]),
+                b2 = _mm256_set1_pd(base[2]), e0 = _mm256_set1_pd(ei[0]),
+                e1 = _mm256_set1_pd(ei[1]), e2 = _mm256_set1_pd(ei[2]),
+                zb = _mm256_set1_pd(zrowBase), z = _mm256_set1_pd(zi), zero = _mm256_setzero_pd();
+  const __m256d step = _mm256_setr_pd(0, 1, 2, 3);
+  const __m256i low = _mm256_setr_epi32(0, 2, 4, 6, 0, 2, 4, 6);  // each lane's low half
+  const __m128i ids = _mm_set1_epi32(id);
+  int di = lo;
+  for (; di + 3 <= hi; di += 4) {
+    const __m256d dd = _mm256_add_pd(_mm256_set1_pd(double(di)), step);  // exact integers
+    const __m128 iz = _mm256_cvtpd_ps(_mm256_add_pd(zb, _mm256_mul_pd(z, dd)));
+    __m256d in = _mm256_cmp_pd(_mm256_add_pd(b0, _mm256_mul_pd(e0, dd)), zero, _CMP_GE_OQ);
+    in = _mm256_and_pd(in,
+                       _mm256_cmp_pd(_mm256_add_pd(b1, _mm256_mul_pd(e1, dd)), zero, _CMP_GE_OQ));
+    in = _mm256_and_pd(in,
+                       _mm256_cmp_pd(_mm256_add_pd(b2, _mm256_mul_pd(e2, dd)), zero, _CMP_GE_OQ));
+    const __m128 inside = _mm_castsi128_ps(
+        _mm256_castsi256_si128(_mm256_permutevar8x32_epi32(_mm256_castpd_si256(in), low)));
+    const __m128 old = _mm_loadu_ps(zrow + di);
+    const __m128i oldId = _mm_loadu_si128(reinterpret_cast<const __m128i*>(idrow + di));
+    __m128 win = _mm_and_ps(inside, _mm_cmpgt_ps(iz, old));
+    if (Over) win = _mm_and_ps(win, _mm_castsi128_ps(_mm_cmpgt_epi32(oldId, _mm_set1_epi32(-1))));
+    _mm_storeu_ps(zrow + di, _mm_blendv_ps(old, iz, win));
+    _mm_storeu_si128(
+        reinterpret_cast<__m128i*>(idrow + di),
+        _mm_castps_si128(_mm_blendv_ps(_mm_castsi128_ps(oldId), _mm_castsi128_ps(ids), win)));
+  }
+  return di;
+}
+}  // namespace
+#endif
+
 template <bool Over>
 void DepthRaster::fill(const double* px, const double* py, const double* piz, int ia, int ib,
                        int ja, int jb, double area, int id) {
@@ -408,10 +449,15 @@ void DepthRaster::fill(const double* px, const double* py, const double* piz, in
     if (lo > hi) continue;
     float* zrow = &invZ_[size_t(index(ia, j))];
     int* idrow = &id_[size_t(index(ia, j))];
+    int from = lo;
+#if INHAND_RASTER_AVX2
+    if (vectorised_ && hi - lo >= 3)
+      from = fillRowFour<Over>(zrow, idrow, lo, hi, base, ei, zrowBase, zi, id);
+#endif
     // Branch-free: whether a sample of a small triangle is covered is a coin toss for the
     // branch predictor.
-    double dd = lo;
-    for (int di = lo; di <= hi; ++di, dd += 1.0) {
+    double dd = from;
+    for (int di = from; di <= hi; ++di, dd += 1.0) {
       const float iz = float(zrowBase + zi * dd);
       const bool win = (base[0] + ei[0] * dd >= 0) & (base[1] + ei[1] * dd >= 0) &
                        (base[2] + ei[2] * dd >= 0) & (iz > zrow[di]) & (!Over || idrow[di] >= 0);
