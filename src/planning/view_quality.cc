@@ -503,11 +503,15 @@ void ViewQualityScene::rasterGains(const Iso3& T_O_C, const RasterWindow& w,
     colDir[size_t(i - w.i0)] = (i * w.stride - K.cx) / K.fx * R.col(0);
   for (int j = w.j0; j <= w.j1; ++j) {
     const Vec3 dirRow = R.col(2) + (j * w.stride - K.cy) / K.fy * R.col(1);
-    for (int i = w.i0; i <= w.i1; ++i) {
+    // The row's samples outside its surface's extent are empty: counted, not visited.
+    int first, last;
+    object.rowExtent(j, &first, &last);
+    st->missed += w.width() - std::max(0, last - first + 1);
+    for (int i = first; i <= last; ++i) {
       const int s = object.index(i, j);
       const int tri = object.id(s);
       // The triangle records live in L3 at best: ask for the one a few samples ahead now.
-      if (i + kPrefetch <= w.i1) {
+      if (i + kPrefetch <= last) {
         const int ahead = object.id(s + kPrefetch);
         if (ahead >= 0) {
           __builtin_prefetch(&planes_[size_t(ahead)]);

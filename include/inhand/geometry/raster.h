@@ -150,6 +150,13 @@ class DepthRaster {
   void drawTriangle(const Vec3& a, const Vec3& b, const Vec3& c, int id);
 
   const RasterWindow& window() const { return window_; }
+  // The first and last column of window row j with a sample that holds a surface (or, after
+  // drawOccluder, kOccluded); first > last: none. Every sample outside them is empty.
+  void rowExtent(int j, int* first, int* last) {
+    if (!extentsValid_) findRowExtents();
+    *first = rowFirst_[size_t(j - window_.j0)];
+    *last = rowLast_[size_t(j - window_.j0)];
+  }
   // Sample index of (i, j) in the window, row-major.
   int index(int i, int j) const { return (j - window_.j0) * window_.width() + (i - window_.i0); }
   // 1/depth of the nearest surface at sample s (0: none), and its id (-1: none).
