@@ -262,19 +262,80 @@ __attribute__((target("avx2"))) int ProjectorShadows::drawFour(
     _mm256_store_pd(e0[e], E[2][e]);
   }
   double* sums[3] = {zW, zY, z0};
-  for (int q = 0; q < 3; ++q)
-    _mm256_store_pd(sums[q], _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(E[q][0], Z[0]),
-                                                         _mm256_mul_pd(E[q][1], Z[1])),
-                                           _mm256_mul_pd(E[q][2], Z[2])));
+  __m256d S[3];
+  for (int q = 0; q < 3; ++q) {
+    S[q] = _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(E[q][0], Z[0]), _mm256_mul_pd(E[q][1], Z[1])),
+                         _mm256_mul_pd(E[q][2], Z[2]));
+    _mm256_store_pd(sums[q], S[q]);
+  }
   _mm256_store_pd(absArea, _mm256_andnot_pd(signBit, area));
   _mm256_store_pd(wmin, Wmin);
   _mm256_store_pd(wmax, Wmax);
   _mm256_store_pd(ja, fja);
   _mm256_store_pd(jb, fjb);
+  // Per triangle (transposed): (e_0, e_1, e_2, 1/z·|area|)'s coefficients of W, y and 1, so a
+  // row's four values are one multiply and add; and the triangle's bucket range (as
+  // floorToInt, exact: the values are clamped to ±1e9 first).
+  alignas(32) double T[3][4][4];
+  for (int q = 0; q < 3; ++q) {
+    const __m256d t0 = _mm256_unpacklo_pd(E[q][0], E[q][1]),
+                  t1 = _mm256_unpackhi_pd(E[q][0], E[q][1]);
+    const __m256d t2 = _mm256_unpacklo_pd(E[q][2], S[q]), t3 = _mm256_unpackhi_pd(E[q][2], S[q]);
+    _mm256_store_pd(T[q][0], _mm256_permute2f128_pd(t0, t2, 0x20));
+    _mm256_store_pd(T[q][1], _mm256_permute2f128_pd(t1, t3, 0x20));
+    _mm256_store_pd(T[q][2], _mm256_permute2f128_pd(t0, t2, 0x31));
+    _mm256_store_pd(T[q][3], _mm256_permute2f128_pd(t1, t3, 0x31));
+  }
+  const __m256d lim = _mm256_set1_pd(1e9), base = _mm256_set1_pd(double(base_));
+  __m128i bucket[2];  // ⌊x⌋ − base_ of Wmin and Wmax, clamped to ±1e9 first as floorToInt
+  for (int q = 0; q < 2; ++q) {
+    const __m256d x = _mm256_min_pd(_mm256_max_pd(q ? Wmax : Wmin, _mm256_sub_pd(zero, lim)), lim);
+    bucket[q] = _mm256_cvttpd_epi32(_mm256_sub_pd(_mm256_floor_pd(x), base));
+  }
+  alignas(16) int c0[4], c1[4];
+  _mm_store_si128(reinterpret_cast<__m128i*>(c0), _mm_max_epi32(bucket[0], _mm_setzero_si128()));
+  _mm_store_si128(reinterpret_cast<__m128i*>(c1),
+                  _mm_min_epi32(bucket[1], _mm_set1_epi32(pitch_ - 1)));
+  const double* Wp = sortedW_.data();
+  const double* izBlock = sortedIzBlock_.data();
   for (int bits = live; bits; bits &= bits - 1) {
     const int l = __builtin_ctz(unsigned(bits));
-    triangleRowsFour({&eW[0][l], &eY[0][l], &e0[0][l], 4, zW[l], zY[l], z0[l], absArea[l], wmin[l],
-                      wmax[l], int(ja[l]), int(jb[l])});
+    if (wmax[l] - wmin[l] > 4) {  // wide: each row's own span first (rowSpan)
+      triangleRowsFour({&eW[0][l], &eY[0][l], &e0[0][l], 4, zW[l], zY[l], z0[l], absArea[l],
+                        wmin[l], wmax[l], int(ja[l]), int(jb[l])});
+      continue;
+    }
+    // triangleRows for a narrow triangle: every row's buckets c0..c1, its points four at a time.
+    const __m256d ew = _mm256_load_pd(T[0][l]), ey = _mm256_load_pd(T[1][l]),
+                  e00 = _mm256_load_pd(T[2][l]);
+    const __m256d ew0 = _mm256_permute4x64_pd(ew, 0x00), ew1 = _mm256_permute4x64_pd(ew, 0x55),
+                  ew2 = _mm256_permute4x64_pd(ew, 0xAA), zw = _mm256_permute4x64_pd(ew, 0xFF);
+    const __m256d ar = _mm256_set1_pd(absArea[l]);
+    const int first = int(ja[l]), last = int(jb[l]);
+    for (int j = first, rowFirst = (first - window_.j0) * pitch_; j <= last;
+         ++j, rowFirst += pitch_) {
+      // (e_0, e_1, e_2, 1/z·|area|) at W = 0 of row j: rowSpan's base and zRow.
+      const __m256d row = _mm256_add_pd(e00, _mm256_mul_pd(ey, _mm256_set1_pd(double(j))));
+      const __m256d b0 = _mm256_permute4x64_pd(row, 0x00), b1 = _mm256_permute4x64_pd(row, 0x55),
+                    b2 = _mm256_permute4x64_pd(row, 0xAA), zr = _mm256_permute4x64_pd(row, 0xFF);
+      const int s1 = first_[size_t(rowFirst + c1[l]) + 1];
+      int s = first_[size_t(rowFirst + c0[l])];
+      do {  // as rowPointsFour
+        const __m256d w = _mm256_loadu_pd(Wp + s);
+        __m256d in = _mm256_cmp_pd(_mm256_add_pd(b0, _mm256_mul_pd(ew0, w)), zero, _CMP_GE_OQ);
+        in = _mm256_and_pd(
+            in, _mm256_cmp_pd(_mm256_add_pd(b1, _mm256_mul_pd(ew1, w)), zero, _CMP_GE_OQ));
+        in = _mm256_and_pd(
+            in, _mm256_cmp_pd(_mm256_add_pd(b2, _mm256_mul_pd(ew2, w)), zero, _CMP_GE_OQ));
+        in = _mm256_and_pd(
+            in, _mm256_cmp_pd(_mm256_add_pd(zr, _mm256_mul_pd(zw, w)),
+                              _mm256_mul_pd(_mm256_loadu_pd(izBlock + s), ar), _CMP_GE_OQ));
+        const int lanes = std::clamp(s1 - s, 0, 4);
+        int hit = _mm256_movemask_pd(in) & ((1 << lanes) - 1);
+        for (; hit; hit &= hit - 1) sortedBlocked_[size_t(s + __builtin_ctz(unsigned(hit)))] = 1;
+        s += 4;
+      } while (s < s1);
+    }
   }
   return clip;
 }
