@@ -278,13 +278,8 @@ __attribute__((target("avx2"))) int ProjectorShadows::drawFour(
   // floorToInt, exact: the values are clamped to ±1e9 first).
   alignas(32) double T[3][4][4];
   for (int q = 0; q < 3; ++q) {
-    const __m256d t0 = _mm256_unpacklo_pd(E[q][0], E[q][1]),
-                  t1 = _mm256_unpackhi_pd(E[q][0], E[q][1]);
-    const __m256d t2 = _mm256_unpacklo_pd(E[q][2], S[q]), t3 = _mm256_unpackhi_pd(E[q][2], S[q]);
-    _mm256_store_pd(T[q][0], _mm256_permute2f128_pd(t0, t2, 0x20));
-    _mm256_store_pd(T[q][1], _mm256_permute2f128_pd(t1, t3, 0x20));
-    _mm256_store_pd(T[q][2], _mm256_permute2f128_pd(t0, t2, 0x31));
-    _mm256_store_pd(T[q][3], _mm256_permute2f128_pd(t1, t3, 0x31));
+    const __m256d r[4] = {E[q][0], E[q][1], E[q][2], S[q]};
+    transposeFour(r, T[q]);
   }
   const __m256d lim = _mm256_set1_pd(1e9), base = _mm256_set1_pd(double(base_));
   __m128i bucket[2];  // ⌊x⌋ − base_ of Wmin and Wmax, clamped to ±1e9 first as floorToInt

@@ -43,5 +43,16 @@ __attribute__((target("avx2"), always_inline)) inline __m256d signOfAreaFour(__m
                           _mm256_cmp_pd(area, _mm256_setzero_pd(), _CMP_GT_OQ));
 }
 
+// out[l] = (r[0][l], r[1][l], r[2][l], r[3][l]): four lanes of four vectors, regrouped by lane.
+__attribute__((target("avx2"), always_inline)) inline void transposeFour(const __m256d* r,
+                                                                         double (*out)[4]) {
+  const __m256d t0 = _mm256_unpacklo_pd(r[0], r[1]), t1 = _mm256_unpackhi_pd(r[0], r[1]);
+  const __m256d t2 = _mm256_unpacklo_pd(r[2], r[3]), t3 = _mm256_unpackhi_pd(r[2], r[3]);
+  _mm256_store_pd(out[0], _mm256_permute2f128_pd(t0, t2, 0x20));
+  _mm256_store_pd(out[1], _mm256_permute2f128_pd(t1, t3, 0x20));
+  _mm256_store_pd(out[2], _mm256_permute2f128_pd(t0, t2, 0x31));
+  _mm256_store_pd(out[3], _mm256_permute2f128_pd(t1, t3, 0x31));
+}
+
 }  // namespace inhand
 #endif

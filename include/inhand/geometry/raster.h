@@ -198,6 +198,9 @@ class DepthRaster {
   template <bool Over>
   void fillSmallRows(const double* A, const double* B, const double* C, int step, double zi,
                      double zj, double z0, int ia, int ib, int ja, int jb, int id);
+  // fillSmallRows (surface mode) for a set-up transposed by drawFour (AVX2).
+  void fillSmallRowsFour(const double* a, const double* b, const double* c, int ia, int ib, int ja,
+                         int jb, int id);
   // draw()'s per-triangle steps for the four triangles k[0..3] of a surface mesh at once
   // (AVX2): fills those that need fillSmall; returns a bit per triangle left to the
   // one-at-a-time path.
