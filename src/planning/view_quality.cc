@@ -507,8 +507,7 @@ void ViewQualityScene::rasterGains(const Iso3& T_O_C, const RasterWindow& w,
     int first, last;
     object.rowExtent(j, &first, &last);
     st->missed += w.width() - std::max(0, last - first + 1);
-    for (int i = first; i <= last; ++i) {
-      const int s = object.index(i, j);
+    for (int i = first, s = object.index(first, j); i <= last; ++i, ++s) {
       const int tri = object.id(s);
       // The triangle records live in L3 at best: ask for the one a few samples ahead now.
       if (i + kPrefetch <= last) {
