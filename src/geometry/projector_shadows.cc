@@ -47,8 +47,8 @@ void ProjectorShadows::index() {
   }
   // Counting sort of the points into their buckets.
   next.assign(first_.begin(), first_.end() - 1);
-  sortedW_.resize(points_.size() + 3);
-  sortedIzBlock_.resize(points_.size() + 3);
+  sortedW_.resize(points_.size() + 4);
+  sortedIzBlock_.resize(points_.size() + 4);
   position_.resize(points_.size());
   sortedBlocked_.assign(points_.size(), 0);
   for (size_t k = 0; k < points_.size(); ++k) {

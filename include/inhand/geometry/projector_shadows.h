@@ -114,8 +114,8 @@ class ProjectorShadows {
   int base_ = 0, pitch_ = 0;
   std::vector<int> first_;
   std::vector<double> rowMinIzBlock_;  // per row: the least iz_block of its points (∞: none)
-  // The points in bucket order: their W and iz_block, with three entries of padding (for
-  // loads four at a time).
+  // The points in bucket order: their W and iz_block, with four entries of padding (loads four
+  // at a time start at most at the last point's index + 1: an empty row at the end).
   std::vector<double> sortedW_, sortedIzBlock_;
   std::vector<uint8_t> sortedBlocked_;
   std::vector<int> position_;  // point k sits at position_[k] of the sorted arrays
