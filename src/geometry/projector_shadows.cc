@@ -28,15 +28,17 @@ void ProjectorShadows::index() {
   pitch_ = points_.empty() ? 0 : floorToInt(maxW_) - base_ + 1;
   const size_t buckets = size_t(rows) * size_t(pitch_);
   first_.assign(buckets + 1, 0);
-  thread_local std::vector<int> bucketOf, next;
+  thread_local std::vector<int> bucketOf;
   bucketOf.resize(points_.size());
   for (size_t k = 0; k < points_.size(); ++k) {
     const Point& p = points_[k];
     bucketOf[k] = (p.j - window_.j0) * pitch_ + floorToInt(p.W) - base_;
-    ++first_[size_t(bucketOf[k]) + 1];
+    ++first_[size_t(bucketOf[k])];
   }
-  // Running sums and minima in registers, not through memory element by element.
-  for (size_t b = 1, sum = 0; b <= buckets; ++b) first_[b] = int(sum += size_t(first_[b]));
+  // Running sums and minima in registers, not through memory element by element. first_[b]: the
+  // end of bucket b, until the sort below moves it back to the bucket's start.
+  for (size_t b = 0, sum = 0; b < buckets; ++b) first_[b] = int(sum += size_t(first_[b]));
+  first_[buckets] = int(points_.size());
   rowMinIzBlock_.assign(size_t(rows), std::numeric_limits<double>::infinity());
   for (size_t k = 0; k < points_.size();) {  // by runs of points on one row
     const int j = points_[k].j;
@@ -45,14 +47,14 @@ void ProjectorShadows::index() {
     double& row = rowMinIzBlock_[size_t(j - window_.j0)];
     row = std::min(row, m);
   }
-  // Counting sort of the points into their buckets.
-  next.assign(first_.begin(), first_.end() - 1);
+  // Counting sort of the points into their buckets, last point first: each bucket's end moves
+  // back to its start, and its points keep their order.
   sortedW_.resize(points_.size() + 4);
   sortedIzBlock_.resize(points_.size() + 4);
   position_.resize(points_.size());
   sortedBlocked_.assign(points_.size(), 0);
-  for (size_t k = 0; k < points_.size(); ++k) {
-    const int at = next[size_t(bucketOf[k])]++;
+  for (size_t k = points_.size(); k-- > 0;) {
+    const int at = --first_[size_t(bucketOf[k])];
     sortedW_[size_t(at)] = points_[k].W;
     sortedIzBlock_[size_t(at)] = points_[k].izBlock;
     position_[k] = at;
