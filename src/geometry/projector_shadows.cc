@@ -218,6 +218,33 @@ void ProjectorShadows::draw(const TriangleMesh& mesh, const Iso3& T_C_mesh, bool
 }
 
 #if INHAND_RASTER_AVX2
+namespace {
+// triangleRows' tests of the sorted points [s, s1) of one row, four at a time, each lane the same
+// IEEE double operations as there (no FMA): point k is blocked where r_e + c_e·W_k ≥ 0 for the
+// three edges e and r3 + c3·W_k ≥ iz_block_k·area. Runs once even for no point (every lane
+// masked off): most rows reach four points or fewer, so its loop is predictable.
+__attribute__((target("avx2"), always_inline)) inline void testPointsFour(
+    const double* W, const double* izBlock, uint8_t* blocked, int s, int s1, __m256d r0, __m256d r1,
+    __m256d r2, __m256d r3, __m256d c0, __m256d c1, __m256d c2, __m256d c3, __m256d area) {
+  const __m256d zero = _mm256_setzero_pd();
+  do {
+    const __m256d w = _mm256_loadu_pd(W + s);
+    __m256d in = _mm256_cmp_pd(_mm256_add_pd(r0, _mm256_mul_pd(c0, w)), zero, _CMP_GE_OQ);
+    in =
+        _mm256_and_pd(in, _mm256_cmp_pd(_mm256_add_pd(r1, _mm256_mul_pd(c1, w)), zero, _CMP_GE_OQ));
+    in =
+        _mm256_and_pd(in, _mm256_cmp_pd(_mm256_add_pd(r2, _mm256_mul_pd(c2, w)), zero, _CMP_GE_OQ));
+    in = _mm256_and_pd(
+        in, _mm256_cmp_pd(_mm256_add_pd(r3, _mm256_mul_pd(c3, w)),
+                          _mm256_mul_pd(_mm256_loadu_pd(izBlock + s), area), _CMP_GE_OQ));
+    const int lanes = std::clamp(s1 - s, 0, 4);
+    int hit = _mm256_movemask_pd(in) & ((1 << lanes) - 1);
+    for (; hit; hit &= hit - 1) blocked[size_t(s + __builtin_ctz(unsigned(hit)))] = 1;
+    s += 4;
+  } while (s < s1);
+}
+}  // namespace
+
 // triangle()'s steps for four triangles in AVX2 lanes, each the same IEEE double operation as
 // there (no FMA), so the same points come out blocked.
 __attribute__((target("avx2"))) int ProjectorShadows::drawFour(
@@ -315,23 +342,8 @@ __attribute__((target("avx2"))) int ProjectorShadows::drawFour(
       const __m256d row = _mm256_add_pd(e00, _mm256_mul_pd(ey, _mm256_set1_pd(double(j))));
       const __m256d b0 = _mm256_permute4x64_pd(row, 0x00), b1 = _mm256_permute4x64_pd(row, 0x55),
                     b2 = _mm256_permute4x64_pd(row, 0xAA), zr = _mm256_permute4x64_pd(row, 0xFF);
-      const int s1 = first_[size_t(rowFirst + c1[l]) + 1];
-      int s = first_[size_t(rowFirst + c0[l])];
-      do {  // as rowPointsFour
-        const __m256d w = _mm256_loadu_pd(Wp + s);
-        __m256d in = _mm256_cmp_pd(_mm256_add_pd(b0, _mm256_mul_pd(ew0, w)), zero, _CMP_GE_OQ);
-        in = _mm256_and_pd(
-            in, _mm256_cmp_pd(_mm256_add_pd(b1, _mm256_mul_pd(ew1, w)), zero, _CMP_GE_OQ));
-        in = _mm256_and_pd(
-            in, _mm256_cmp_pd(_mm256_add_pd(b2, _mm256_mul_pd(ew2, w)), zero, _CMP_GE_OQ));
-        in = _mm256_and_pd(
-            in, _mm256_cmp_pd(_mm256_add_pd(zr, _mm256_mul_pd(zw, w)),
-                              _mm256_mul_pd(_mm256_loadu_pd(izBlock + s), ar), _CMP_GE_OQ));
-        const int lanes = std::clamp(s1 - s, 0, 4);
-        int hit = _mm256_movemask_pd(in) & ((1 << lanes) - 1);
-        for (; hit; hit &= hit - 1) sortedBlocked_[size_t(s + __builtin_ctz(unsigned(hit)))] = 1;
-        s += 4;
-      } while (s < s1);
+      testPointsFour(Wp, izBlock, sortedBlocked_.data(), first_[size_t(rowFirst + c0[l])],
+                     first_[size_t(rowFirst + c1[l]) + 1], b0, b1, b2, zr, ew0, ew1, ew2, zw, ar);
     }
   }
   return clip;
@@ -344,33 +356,18 @@ __attribute__((target("avx2"), always_inline)) inline void ProjectorShadows::tri
   const bool wide = t.Wmax - t.Wmin > 4;
   const int c0 = std::max(0, floorToInt(t.Wmin) - base_),
             c1 = std::min(pitch_ - 1, floorToInt(t.Wmax) - base_);
-  const __m256d ew0 = _mm256_set1_pd(t.eW[0]), ew1 = _mm256_set1_pd(t.eW[t.step]),
-                ew2 = _mm256_set1_pd(t.eW[2 * t.step]), zW = _mm256_set1_pd(t.zW),
-                area = _mm256_set1_pd(t.absArea), zero = _mm256_setzero_pd();
+  const __m256d e[4] = {_mm256_set1_pd(t.eW[0]), _mm256_set1_pd(t.eW[t.step]),
+                        _mm256_set1_pd(t.eW[2 * t.step]), _mm256_set1_pd(t.zW)};
+  const __m256d area = _mm256_set1_pd(t.absArea);
   const double* W = sortedW_.data();
   const double* izBlock = sortedIzBlock_.data();
   for (int j = t.ja; j <= t.jb; ++j) {
     double base[3], zRow;
     int s0, s1;
     if (!rowSpan(t, wide, c0, c1, j, base, &zRow, &s0, &s1)) continue;
-    const __m256d b0 = _mm256_set1_pd(base[0]), b1 = _mm256_set1_pd(base[1]),
-                  b2 = _mm256_set1_pd(base[2]), zr = _mm256_set1_pd(zRow);
-    int s = s0;
-    do {  // once even for no point (then every lane is masked off)
-      const __m256d w = _mm256_loadu_pd(W + s);
-      __m256d in = _mm256_cmp_pd(_mm256_add_pd(b0, _mm256_mul_pd(ew0, w)), zero, _CMP_GE_OQ);
-      in = _mm256_and_pd(in,
-                         _mm256_cmp_pd(_mm256_add_pd(b1, _mm256_mul_pd(ew1, w)), zero, _CMP_GE_OQ));
-      in = _mm256_and_pd(in,
-                         _mm256_cmp_pd(_mm256_add_pd(b2, _mm256_mul_pd(ew2, w)), zero, _CMP_GE_OQ));
-      in = _mm256_and_pd(
-          in, _mm256_cmp_pd(_mm256_add_pd(zr, _mm256_mul_pd(zW, w)),
-                            _mm256_mul_pd(_mm256_loadu_pd(izBlock + s), area), _CMP_GE_OQ));
-      const int lanes = std::clamp(s1 - s, 0, 4);
-      int hit = _mm256_movemask_pd(in) & ((1 << lanes) - 1);
-      for (; hit; hit &= hit - 1) sortedBlocked_[size_t(s + __builtin_ctz(unsigned(hit)))] = 1;
-      s += 4;
-    } while (s < s1);
+    testPointsFour(W, izBlock, sortedBlocked_.data(), s0, s1, _mm256_set1_pd(base[0]),
+                   _mm256_set1_pd(base[1]), _mm256_set1_pd(base[2]), _mm256_set1_pd(zRow), e[0],
+                   e[1], e[2], e[3], area);
   }
 }
 #endif
