@@ -158,7 +158,9 @@ NearHandGrid::NearHandGrid(const HandGeometry& hand, double t_hand, double cell,
   Vec3 extent = box.size();
   dims_ = Vec3i(int(std::ceil(extent.x() / cell)) + 1, int(std::ceil(extent.y() / cell)) + 1,
                 int(std::ceil(extent.z() / cell)) + 1);
-  flags_.assign(size_t(dims_.prod()), 0);
+  // Built a byte per cell (the blocks run in parallel), then packed a bit per cell: 8× less
+  // memory for the per-sample lookups to miss in.
+  std::vector<uint8_t> flags(size_t(dims_.prod()), 0);
   // Blocks of B³ cells: the distance is 1-Lipschitz, so a block whose centre lies farther than
   // t_hand + its half-diagonal from the hand holds no near cell and is skipped whole.
   constexpr int B = 8;
@@ -174,14 +176,21 @@ NearHandGrid::NearHandGrid(const HandGeometry& hand, double t_hand, double cell,
         for (int z = lo.z(); z <= hi.z(); ++z)
           for (int y = lo.y(); y <= hi.y(); ++y)
             for (int x = lo.x(); x <= hi.x(); ++x)
-              flags_[(size_t(z) * dims_.y() + y) * dims_.x() + x] =
+              flags[(size_t(z) * dims_.y() + y) * dims_.x() + x] =
                   hand.distance(origin_ + cell_ * Vec3(x, y, z)) < t_hand;
       }
   });
+  bits_.assign((flags.size() + 63) / 64, 0);
+  for (size_t k = 0; k < flags.size(); ++k) bits_[k / 64] |= uint64_t(flags[k]) << (k % 64);
+}
+
+bool NearHandGrid::flag(int x, int y, int z) const {
+  const size_t k = (size_t(z) * size_t(dims_.y()) + size_t(y)) * size_t(dims_.x()) + size_t(x);
+  return (bits_[k / 64] >> (k % 64)) & 1;
 }
 
 bool NearHandGrid::near(const Vec3& p) const {
-  if (flags_.empty()) return false;
+  if (bits_.empty()) return false;
   const Vec3 g = (p - origin_) * invCell_;
   // The nearest cell, as lround would give it, without a libm call: in range only for
   // -½ < g < dims − ½, where int(g + ½) rounds half up like lround.
@@ -189,11 +198,11 @@ bool NearHandGrid::near(const Vec3& p) const {
         g.y() < dims_.y() - 0.5 && g.z() < dims_.z() - 0.5))
     return false;
   const int x = int(g.x() + 0.5), y = int(g.y() + 0.5), z = int(g.z() + 0.5);
-  return flags_[(size_t(z) * dims_.y() + y) * dims_.x() + x];
+  return flag(x, y, z);
 }
 
 bool NearHandGrid::anyNear(const Aabb& box) const {
-  if (flags_.empty()) return false;
+  if (bits_.empty()) return false;
   const Vec3 lo = (box.min - origin_) * invCell_, hi = (box.max - origin_) * invCell_;
   Vec3i a, b;
   for (int k = 0; k < 3; ++k) {
@@ -205,7 +214,7 @@ bool NearHandGrid::anyNear(const Aabb& box) const {
   for (int z = a.z(); z <= b.z(); ++z)
     for (int y = a.y(); y <= b.y(); ++y)
       for (int x = a.x(); x <= b.x(); ++x)
-        if (flags_[(size_t(z) * dims_.y() + y) * dims_.x() + x]) return true;
+        if (flag(x, y, z)) return true;
   return false;
 }
 

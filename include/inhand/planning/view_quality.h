@@ -86,7 +86,8 @@ class NearHandGrid {
   Vec3 origin_ = Vec3::Zero();
   double cell_ = 1.0, invCell_ = 1.0;
   Vec3i dims_ = Vec3i::Zero();
-  std::vector<uint8_t> flags_;
+  bool flag(int x, int y, int z) const;  // cell (x, y, z) is near
+  std::vector<uint64_t> bits_;           // a bit per cell, x fastest, then y, then z
 };
 
 // A committed scene placed in the object frame: something that can block the view of S_obj.
