@@ -263,9 +263,10 @@ TEST(Hand, MeshIsInTheRequestedFrame) {
   const RobotModel& m = wam();
   Iso3 T = Iso3(Eigen::Translation3d(1, 2, 3));
   Aabb b = HandGeometry(m, m.home(), T).mesh().bounds();
-  // Palm (Ø 89 × 90 mm) plus straight fingers up to 0.09 + 0.07 + 0.05 along z.
+  // Palm (Ø 89 × 76 mm) plus flat fingers whose distal links rise 42° to z ≈ 117 mm.
   EXPECT_NEAR(b.min.z(), 3.0, 1e-6);
-  EXPECT_GT(b.max.z(), 3.0 + 0.17);
+  EXPECT_GT(b.max.z(), 3.0 + 0.11);
+  EXPECT_GT(b.max.x() - b.min.x(), 0.3);
   EXPECT_NEAR(b.center().x(), 1.0, 0.03);
 }
 
@@ -365,7 +366,7 @@ TEST(Hand, FreeTravelStopsAtTheFirstContactOfAnyLink) {
   double tip = -1;
   for (const Vec3f& v : HandGeometry(m, open, Iso3::Identity()).mesh().vertices)
     tip = std::max(tip, double(v.z()));
-  EXPECT_GT(tip, 0.15);  // the open fingers reach well beyond the palm face (z = 0.09)
+  EXPECT_GT(tip, 0.11);  // the flat fingers' distal links rise beyond the palm face (z = 0.076)
   // A wall 0.5 m ahead of the palm, facing it.
   const double d = 0.5;
   const TriangleMesh wall =
@@ -384,35 +385,73 @@ TEST(Hand, FreeTravelStopsAtTheFirstContactOfAnyLink) {
   EXPECT_DOUBLE_EQ(*closer.freeTravel(open, Iso3::Identity(), -Vec3::UnitZ(), 0.3), 0.3);
 }
 
-// How deep slabs get between the open BarrettHand's fingers, against its URDF geometry: a 10 mm
-// slab across palm x slips between the fingertips down to the knuckle links' tops (palm face
-// 90 mm + knuckle 20 mm), a 60 mm one lands on the inward-bent fingertips, and depth never grows
-// with width. Across palm y, finger 3 sits on the slab's path.
-TEST(Hand, OpenHandDepthAgainstTheUrdfGeometry) {
+// The BH8-280's fingertips from the manufacturer's DH table (Craig: T = RotX(α) TransX(a) RotZ(θ)
+// TransZ(d) per row), computed here without the URDF: joint 1 a = r·Aw, d = Dw, θ = r·Θ1 − j·π/2
+// (r = −1, 1, 0 and j = 1, 1, −1 for fingers 1, 2, 3); joint 2 a = A1, α = π/2, θ = Θ2; joint 3
+// a = A2, θ = Θ3 + Φ3; joint 4 a = A3, α = −π/2, d = D3. Our palm frame is the DH palm frame turned
+// −90° about z (x towards finger 3). URDF FK must agree to 0.5 mm over spreads and flexions.
+namespace {
+Vec3 dhFingertip(int finger, double spread, double flex) {
+  const double Aw = 0.025, A1 = 0.05, A2 = 0.07, A3 = 0.05, Dw = 0.076, D3 = 0.0095;
+  const double Phi3 = 42 * M_PI / 180;
+  const double r = finger == 1 ? -1 : finger == 2 ? 1 : 0, j = finger == 3 ? -1 : 1;
+  auto row = [](double alpha, double a, double theta, double d) {
+    return Iso3(Eigen::AngleAxisd(alpha, Vec3::UnitX())) * Eigen::Translation3d(a, 0, 0) *
+           Eigen::AngleAxisd(theta, Vec3::UnitZ()) * Eigen::Translation3d(0, 0, d);
+  };
+  const Iso3 T = row(0, r * Aw, r * spread - j * M_PI / 2, Dw) * row(M_PI / 2, A1, flex, 0) *
+                 row(0, A2, flex / 3 + Phi3, 0) * row(-M_PI / 2, A3, 0, D3);
+  const Iso3 dhToPalm(Eigen::AngleAxisd(-M_PI / 2, Vec3::UnitZ()));
+  return dhToPalm * T.translation();
+}
+}  // namespace
+
+TEST(Hand, FingertipsMatchTheManufacturersDhTable) {
   const RobotModel& m = wam();
+  const int palm = m.tipLink();
+  for (double spread : {0.0, 0.4, M_PI / 2, 2.5, M_PI})
+    for (double flex : {0.0, 0.3, 1.0, M_PI / 2, 2.0, 2.443460952792061}) {
+      JointVector q = m.home();
+      q[m.spreadVariable()] = spread;
+      for (const char* j : {"bh_j12", "bh_j22", "bh_j32"}) q[m.variableIndex(j)] = flex;
+      m.applyCouplings(&q);
+      const std::vector<Iso3> T = m.linkPoses(q);
+      for (int finger = 1; finger <= 3; ++finger) {
+        const int distal = m.linkIndex("bh_f" + std::to_string(finger) + "_distal");
+        ASSERT_GE(distal, 0);
+        // DH frame 4 in the distal link's frame (the URDF's link frames are the DH frames).
+        const Vec3 tip = T[palm].inverse() * T[distal] * Vec3(0.05, 0.0095, 0);
+        EXPECT_LT((tip - dhFingertip(finger, spread, flex)).norm(), 5e-4)
+            << "finger " << finger << " spread " << spread << " flex " << flex << ": "
+            << tip.transpose() << " vs " << dhFingertip(finger, spread, flex).transpose();
+      }
+    }
+  // Flexion 0 lays the finger flat in the palm plane, pointing outward: finger 3's medial link
+  // runs along +x at the height of the flexion axes (Dw = 76 mm).
+  const Vec3 flat = dhFingertip(3, 0, 0);
+  EXPECT_GT(flat.x(), 0.15);
+  EXPECT_NEAR(flat.y(), 0.0, 1e-12);
+}
+
+// The open hand's aperture: flat fingers put finger 3's tip and fingers 1 and 2's tips
+// 2·(A1 + A2 + A3 cos Φ3 − D3 sin Φ3) = 301.6 mm apart along palm x; the flexion axes stand
+// 100 mm apart at spread 0 and fingers 1 and 2's 150 mm apart at 90°, so a slab 120 mm wide
+// passes between the open fingers down to the knuckles (10 mm above the palm face), and at
+// spread 90° one 120 mm wide across palm y too (ending 40 mm along palm x, short of finger 3).
+TEST(Hand, OpenHandApertureEnvelopsObjectsOverOneHundredMillimetres) {
+  const RobotModel& m = wam();
+  const double Phi3 = 42 * M_PI / 180;
+  const double expected = 2 * (0.05 + 0.07 + 0.05 * std::cos(Phi3) - 0.0095 * std::sin(Phi3));
+  const Vec3 t3 = dhFingertip(3, 0, 0), t1 = dhFingertip(1, 0, 0);
+  EXPECT_NEAR(t3.x() - t1.x(), expected, 1e-9);
+  EXPECT_NEAR(m.palmFaceZ(), 0.076, 1e-8);
   const double reach = openHandReach(m);
-  EXPECT_GT(reach, 0.1);
-  const double tipZ = 0.09 + reach;  // the palm link's top is its face at z = 90 mm
-  EXPECT_NEAR(openHandDepth(m, 0, 0.010), tipZ - 0.11, 5e-4);
-  EXPECT_NEAR(openHandDepth(m, 0, 0.060), 0.0, 5e-4);
-  double previous = reach;
-  for (int w = 10; w <= 100; w += 10) {
-    const double d = openHandDepth(m, 0, 0.001 * w);
-    EXPECT_LE(d, previous + 5e-4) << w;
-    previous = d;
-  }
-  EXPECT_NEAR(openHandDepth(m, 1, 0.010), 0.0, 5e-4);
+  const double tipZ = m.palmFaceZ() + reach;
+  EXPECT_NEAR(openHandDepth(m, 0, 0.120), tipZ - 0.086, 5e-4);
+  EXPECT_NEAR(openHandDepth(m, 1, 0.120, M_PI / 2, 0.04), tipZ - 0.086, 5e-4);
+  // Wider than the flexion axes: the slab lands on the finger roots.
+  EXPECT_LT(openHandDepth(m, 0, 0.28), tipZ - 0.086 - 0.005);
   EXPECT_THROW(openHandDepth(m, 2, 0.01), std::runtime_error);
-  // The edge grasps' case: at spread 90° fingers 1 and 2 face each other across palm y, their
-  // fingertips' inner corners 2 × (75 − 50 sin 42° − 10 cos 42°) = 68.2 mm apart, and a slab
-  // ending 5 mm past the palm axis in x passes finger 3's tip (its inner corner at x = 9.1 mm):
-  // 60 mm slips in down to the knuckle tops, 70 mm lands on the fingertips.
-  const double gap =
-      2 * (0.075 - 0.05 * std::sin(0.7330382858376184) - 0.01 * std::cos(0.7330382858376184));
-  EXPECT_NEAR(openHandDepth(m, 1, gap - 0.002, M_PI / 2, 0.005), tipZ - 0.11, 5e-4);
-  EXPECT_LT(openHandDepth(m, 1, gap + 0.002, M_PI / 2, 0.005), 0.015);
-  // Past finger 3's tip the edge no longer clears it.
-  EXPECT_LT(openHandDepth(m, 1, 0.04, M_PI / 2, 0.012), 0.015);
 }
 
 // The spread joint swings fingers 1 and 2 outward around the palm, as on the real hand: at 0
@@ -435,14 +474,14 @@ TEST(Hand, SpreadSwingsFingersOneAndTwoOutwardAroundThePalm) {
                           Vec3(T_palm_B * T[f2].translation()));
   };
   auto [a0, b0] = flexJoints(0.0);
-  EXPECT_LT((a0 - Vec3(-0.05, 0.025, 0.09)).norm(), 1e-9) << a0.transpose();
-  EXPECT_LT((b0 - Vec3(-0.05, -0.025, 0.09)).norm(), 1e-9) << b0.transpose();
+  EXPECT_LT((a0 - Vec3(-0.05, 0.025, 0.076)).norm(), 1e-9) << a0.transpose();
+  EXPECT_LT((b0 - Vec3(-0.05, -0.025, 0.076)).norm(), 1e-9) << b0.transpose();
   auto [a90, b90] = flexJoints(M_PI / 2);
-  EXPECT_LT((a90 - Vec3(0, 0.075, 0.09)).norm(), 1e-9) << a90.transpose();
-  EXPECT_LT((b90 - Vec3(0, -0.075, 0.09)).norm(), 1e-9) << b90.transpose();
+  EXPECT_LT((a90 - Vec3(0, 0.075, 0.076)).norm(), 1e-9) << a90.transpose();
+  EXPECT_LT((b90 - Vec3(0, -0.075, 0.076)).norm(), 1e-9) << b90.transpose();
   auto [a180, b180] = flexJoints(M_PI);
-  EXPECT_LT((a180 - Vec3(0.05, 0.025, 0.09)).norm(), 1e-9) << a180.transpose();
-  EXPECT_LT((b180 - Vec3(0.05, -0.025, 0.09)).norm(), 1e-9) << b180.transpose();
+  EXPECT_LT((a180 - Vec3(0.05, 0.025, 0.076)).norm(), 1e-9) << a180.transpose();
+  EXPECT_LT((b180 - Vec3(0.05, -0.025, 0.076)).norm(), 1e-9) << b180.transpose();
   for (int k = 0; k <= 18; ++k) {
     auto [a, b] = flexJoints(M_PI * k / 18);
     EXPECT_GT(a.y(), 0.02) << k;
