@@ -195,12 +195,6 @@ void readOptions(const fs::path& file, AllOptions* o) {
     t->num("plane_inlier_m", &v.plane.inlier_m);
     t->integer("plane_iterations", &v.plane.iterations);
     t->num("plane_max_tilt_deg", &v.plane.max_tilt_deg);
-    t->integer("approaches", &v.grasp.approaches);
-    t->num("clearance_m", &v.grasp.clearance_m);
-    t->num("table_clearance_m", &v.grasp.table_clearance_m);
-    t->num("point_cell_m", &v.grasp.point_cell_m);
-    t->numbers("edge_spreads", &v.grasp.edge_spreads);
-    t->num("edge_inset_m", &v.grasp.edge_inset_m);
     t->finish();
   }
   if (auto g = r.object("grasp")) {
@@ -212,6 +206,7 @@ void readOptions(const fs::path& file, AllOptions* o) {
     g->integer("approaches", &v.approaches);
     g->integer("rolls", &v.rolls);
     g->numbers("spreads", &v.spreads);
+    g->numbers("preshapes", &v.preshapes);
     g->numbers("edge_spreads", &v.edge_spreads);
     g->num("edge_inset_m", &v.edge_inset_m);
     g->num("friction", &v.friction);
@@ -280,18 +275,13 @@ Json optionsJson(const AllOptions& o) {
             {"min_points", o.multi.table_top.min_points},
             {"plane_inlier_m", o.multi.table_top.plane.inlier_m},
             {"plane_iterations", o.multi.table_top.plane.iterations},
-            {"plane_max_tilt_deg", o.multi.table_top.plane.max_tilt_deg},
-            {"approaches", o.multi.table_top.grasp.approaches},
-            {"clearance_m", o.multi.table_top.grasp.clearance_m},
-            {"table_clearance_m", o.multi.table_top.grasp.table_clearance_m},
-            {"point_cell_m", o.multi.table_top.grasp.point_cell_m},
-            {"edge_spreads", o.multi.table_top.grasp.edge_spreads},
-            {"edge_inset_m", o.multi.table_top.grasp.edge_inset_m}}},
+            {"plane_max_tilt_deg", o.multi.table_top.plane.max_tilt_deg}}},
           {"grasp",
            {{"approach", graspApproachName(g.approach)},
             {"approaches", g.approaches},
             {"rolls", g.rolls},
             {"spreads", g.spreads},
+            {"preshapes", g.preshapes},
             {"edge_spreads", g.edge_spreads},
             {"edge_inset_m", g.edge_inset_m},
             {"friction", g.friction},
@@ -460,6 +450,7 @@ int runScan(const ScanArgs& args) {
                       {"unknown_area_m2", g.hole_area_m2},
                       {"mean_entropy", g.mean_entropy},
                       {"generation_s", g.generation_s},
+                      {"pick_up_attempts", g.attempts},
                       {"ranking_s", g.ranking_s}});
   }
   summary["grasps"] = grasps;
@@ -480,9 +471,16 @@ int runScan(const ScanArgs& args) {
         {"centroid_O", {t.axes.centroid.x(), t.axes.centroid.y(), t.axes.centroid.z()}},
         {"principal_axes", axes},
         {"grasp_poses_tried", t.tried},
-        {"grasp_poses_fit", t.fit},
+        {"grasp_poses_touching", t.touching},
+        {"grasp_poses_stable", t.stable},
         {"grasp_poses_table_free", t.table_free},
         {"grasp_poses_reachable", t.reachable},
+        {"grasp_rejected",
+         {{"no_two_link_contact", t.tried - t.touching},
+          {"not_force_closure", t.touching - t.stable},
+          {"hand_in_table", t.stable - t.table_free},
+          {"unreachable", t.table_free - t.reachable}}},
+        {"pick_up_attempts", t.attempts},
         {"seconds", t.seconds}};
   }
   const CameraIntrinsics& K = camera.intrinsics;

@@ -14,6 +14,7 @@
 #include "inhand/geometry/primitives.h"
 #include "inhand/robot/collision.h"
 #include "inhand/robot/ik.h"
+#include "inhand/robot/wrench.h"
 
 namespace inhand {
 
@@ -35,6 +36,9 @@ std::string GraspOptions::validate() const {
   if (approaches < 1) return "approaches must be >= 1";
   if (rolls < 1) return "rolls must be >= 1";
   if (spreads.empty()) return "spreads must not be empty";
+  if (preshapes.empty()) return "preshapes must not be empty";
+  for (double f : preshapes)
+    if (!(f >= 0 && f < 1)) return "preshapes must be in [0, 1)";
   for (double s : edge_spreads)
     if (!std::isfinite(s)) return "edge_spreads must be finite";
   if (!(edge_inset_m >= 0 && edge_inset_m < 0.05)) return "edge_inset_m must be in [0, 0.05) m";
@@ -51,30 +55,6 @@ std::string GraspOptions::validate() const {
 }
 
 namespace {
-using Vec6 = Eigen::Matrix<double, 6, 1>;
-
-// Fixed unit directions in R⁶: the 12 signed axes, then seeded Gaussian samples.
-const std::vector<Vec6>& wrenchDirections(int n) {
-  thread_local std::vector<Vec6> dirs;
-  thread_local int made = -1;
-  if (made == n) return dirs;
-  dirs.clear();
-  for (int a = 0; a < 6; ++a)
-    for (double s : {1.0, -1.0}) {
-      Vec6 d = Vec6::Zero();
-      d[a] = s;
-      dirs.push_back(d);
-    }
-  std::mt19937_64 rng(0x9e3779b97f4a7c15ULL);
-  std::normal_distribution<double> g;
-  while (int(dirs.size()) < n) {
-    Vec6 d;
-    for (int k = 0; k < 6; ++k) d[k] = g(rng);
-    if (d.norm() > 1e-9) dirs.push_back(d.normalized());
-  }
-  made = n;
-  return dirs;
-}
 // Pick and lift configurations for palm poses T_B_palm[k] with the hand joints hands[k]: IK to
 // the pick pose (seeded from q_now, `restarts` random restarts), then to the same pose lift_m
 // higher, seeded from the pick; both free of table and base. nullopt where either fails.
@@ -107,32 +87,6 @@ std::vector<std::optional<PickLift>> pickAndLift(const RobotModel& robot,
   return out;
 }
 }  // namespace
-
-double forceClosureEpsilon(const std::vector<Contact>& contacts, const Vec3& centre, double rho,
-                           double mu, int edges, int directions) {
-  if (contacts.empty()) return -1.0;
-  std::vector<Vec6> w;
-  for (const Contact& c : contacts) {
-    const Vec3 n = -c.normal_O.normalized();  // pushing into the object
-    Vec3 t1 = n.unitOrthogonal(), t2 = n.cross(t1);
-    for (int e = 0; e < edges; ++e) {
-      const double a = 2 * M_PI * e / edges;
-      Vec3 f = n + mu * (std::cos(a) * t1 + std::sin(a) * t2);
-      f.normalize();
-      Vec6 x;
-      x.head<3>() = f;
-      x.tail<3>() = (c.p_O - centre).cross(f) / rho;
-      w.push_back(x);
-    }
-  }
-  double eps = std::numeric_limits<double>::infinity();
-  for (const Vec6& d : wrenchDirections(directions)) {
-    double h = -std::numeric_limits<double>::infinity();
-    for (const Vec6& x : w) h = std::max(h, d.dot(x));
-    eps = std::min(eps, h);
-  }
-  return eps;
-}
 
 GraspGeneration generateGrasps(const RobotModel& robot, const TriangleMesh& mesh, const Iso3& T_B_O,
                                const JointVector& q_now, const GraspOptions& o) {
@@ -171,12 +125,14 @@ GraspGeneration generateGrasps(const RobotModel& robot, const TriangleMesh& mesh
     Mat3 R;  // palm orientation in O; palm z points into the object
     double spread;
     bool edge;
+    double preshape = 0;  // fraction of the fingers' closing range at the approach
   };
   std::vector<Pose> poses;
   for (const Vec3& d : fibonacciSphere(o.approaches))
     for (int r = 0; r < o.rolls; ++r) {
       const Mat3 R = cameraPoseInObject(centre, -d, 1.0, M_PI * r / o.rolls).linear();
-      for (double s : o.spreads) poses.push_back({R, s, false});
+      for (double s : o.spreads)
+        for (double f : o.preshapes) poses.push_back({R, s, false, f});
     }
   if (robot.spreadVariable() >= 0 && !o.edge_spreads.empty()) {
     std::vector<Vec3> points;
@@ -191,31 +147,38 @@ GraspGeneration generateGrasps(const RobotModel& robot, const TriangleMesh& mesh
             R.col(2) = sz * A.col(z);
             R.col(1) = sy * A.col(y);
             R.col(0) = R.col(1).cross(R.col(2));
-            for (double s : o.edge_spreads) poses.push_back({R, s, true});
+            for (double s : o.edge_spreads)
+              for (double f : o.preshapes) poses.push_back({R, s, true, f});
           }
         }
   }
   out.tried = int(poses.size());
   std::vector<std::optional<GraspCandidate>> found(poses.size());
-  const FingerCloser closer(robot, mesh);
-  // The open hand's bounding box in the palm frame, per spread value.
-  std::map<double, Aabb> openHandBox;
+  // The hand stops at the model and at the table: approaching, and closing its fingers.
+  TriangleMesh obstacles = mesh;
+  obstacles.append(tableMeshInObject(robot, T_B_O));
+  const FingerCloser closer(robot, obstacles);
+  // The preshaped hand's bounding box in the palm frame, per (spread, preshape).
+  std::map<std::pair<double, double>, Aabb> openHandBox;
   for (const Pose& ps : poses)
-    if (!openHandBox.count(ps.spread))
-      openHandBox[ps.spread] =
-          HandGeometry(robot, robot.openHand(ps.spread), Iso3::Identity()).mesh().bounds();
+    if (!openHandBox.count({ps.spread, ps.preshape}))
+      openHandBox[{ps.spread, ps.preshape}] =
+          HandGeometry(robot, robot.preshapedHand(ps.spread, ps.preshape), Iso3::Identity())
+              .mesh()
+              .bounds();
   parallelFor(0, int(poses.size()), [&](int i) {
     const Pose& ps = poses[i];
     Iso3 T = Iso3::Identity();
     T.linear() = ps.R;
     const Mat3& R = ps.R;
-    const JointVector q = robot.openHand(ps.spread);
+    const JointVector q = robot.preshapedHand(ps.spread, ps.preshape);
     // kFirstContact: the open hand comes in along −d, its palm axis through `origin`, from
     // outside the object until any of its links touches the model.
     // The travel starts where the open hand's box (palm frame) first reaches a sample inside
     // its footprint: nothing can touch earlier.
     Aabb handBox;
-    if (o.approach == GraspApproach::kFirstContact) handBox = openHandBox.at(ps.spread);
+    if (o.approach == GraspApproach::kFirstContact)
+      handBox = openHandBox.at({ps.spread, ps.preshape});
     auto firstContact = [&](const Vec3& origin) {
       double nearest = std::numeric_limits<double>::infinity();
       for (const SurfacePoint& sm : samples) {
@@ -271,32 +234,12 @@ GraspGeneration generateGrasps(const RobotModel& robot, const TriangleMesh& mesh
     GraspCandidate c;
     c.T_O_palm = T;
     c.q = closed.q;
-    for (const FingerClosing& f : closed.fingers) c.links_in_contact += f.contact;
-    // Contacts: model surface samples near the closed hand, pooled per cell.
-    HandGeometry hand(robot, c.q, T);
-    const Iso3 T_palm_O = T.inverse();
-    Aabb hb = hand.mesh().bounds();
-    std::map<std::tuple<int, int, int>, std::pair<Contact, int>> cells;
-    bool palmTouch = false;
-    for (const SurfacePoint& sm : samples) {
-      const Vec3& p = sm.p;
-      if (((p - hb.min).array() < -o.contact_m).any() || ((p - hb.max).array() > o.contact_m).any())
-        continue;
-      if (hand.distance(p) > o.contact_m) continue;
-      if ((T_palm_O * p).z() < palm.max.z() + 0.002 + o.contact_m) palmTouch = true;
-      auto key = std::make_tuple(int(std::floor(p.x() / o.contact_cell_m)),
-                                 int(std::floor(p.y() / o.contact_cell_m)),
-                                 int(std::floor(p.z() / o.contact_cell_m)));
-      auto& cell = cells[key];
-      cell.first.p_O += p;
-      cell.first.normal_O += sm.n;
-      ++cell.second;
-    }
-    c.links_in_contact += palmTouch;
-    for (const auto& entry : cells) {
-      const auto& [sum, count] = entry.second;
-      c.contacts.push_back({sum.p_O / count, sum.normal_O.normalized()});
-    }
+    c.q_open = q;
+    // Contacts: model surface samples near the closed hand (a finger stopped by the table
+    // touches nothing).
+    HandContacts hc = handContacts(robot, c.q, T, samples, o.contact_m, o.contact_cell_m);
+    c.contacts = std::move(hc.contacts);
+    c.links_in_contact = hc.fingers_touching + int(hc.palm_touching);
     if (c.links_in_contact < 2) return;
     c.epsilon =
         forceClosureEpsilon(c.contacts, centre, rho, o.friction, o.cone_edges, o.wrench_directions);
@@ -312,7 +255,7 @@ GraspGeneration generateGrasps(const RobotModel& robot, const TriangleMesh& mesh
     HandGeometry hand(robot, f->q, T_B_O * f->T_O_palm);
     bool clear = true;
     for (const Vec3f& v : hand.mesh().vertices)
-      if (v.z() < tableTop + 0.002) {
+      if (v.z() < tableTop - 0.001) {  // fingers stop at the table top when they close
         clear = false;
         break;
       }
@@ -332,6 +275,7 @@ GraspGeneration generateGrasps(const RobotModel& robot, const TriangleMesh& mesh
     if (!reach[k]) continue;
     kept[k].q = reach[k]->q;
     kept[k].q_lift = reach[k]->q_lift;
+    kept[k].q_open = robot.withArm(kept[k].q_open, robot.arm(reach[k]->q));
     out.candidates.push_back(std::move(kept[k]));
   }
   std::stable_sort(

@@ -164,8 +164,9 @@ bool HandGeometry::contains(const Vec3& p_F) const {
   return false;
 }
 
-double HandGeometry::distance(const Vec3& p_F) const {
+double HandGeometry::distance(const Vec3& p_F, int* nearest) const {
   double best = std::numeric_limits<double>::infinity();
+  if (nearest) *nearest = -1;
   for (size_t k = 0; k < T_F_link_.size(); ++k) {
     const Vec3 p_link = T_F_link_[k].inverse() * p_F;
     for (const Primitive& p : model_->links()[model_->handLinks()[k]].collision) {
@@ -190,7 +191,10 @@ double HandGeometry::distance(const Vec3& p_F) const {
           d = p.contains(p_link) ? 0.0 : std::numeric_limits<double>::infinity();
           break;
       }
-      best = std::min(best, d);
+      if (d < best) {
+        best = d;
+        if (nearest) *nearest = model_->handLinks()[k];
+      }
     }
   }
   return best;
@@ -285,15 +289,18 @@ ClosingResult FingerCloser::close(const JointVector& qIn, const Iso3& T_O_palm, 
       return false;
     };
     FingerClosing fc;
-    const double dir = f.closed >= f.open ? 1.0 : -1.0, span = std::abs(f.closed - f.open);
-    double free = f.open;
+    // From where q has the finger (a preshape between open and closed), towards closed.
+    const double start =
+        std::clamp(qIn[f.variable], std::min(f.open, f.closed), std::max(f.open, f.closed));
+    const double dir = f.closed >= f.open ? 1.0 : -1.0, span = std::abs(f.closed - start);
+    double free = start;
     fc.value = f.closed;
-    if (touches(f.open)) {
-      fc.value = f.open;
+    if (touches(start)) {
+      fc.value = start;
       fc.contact = true;
     } else {
       for (double s = step; s < span + step; s += step) {
-        double v = f.open + dir * std::min(s, span);
+        double v = start + dir * std::min(s, span);
         if (touches(v)) {
           double hit = v;
           while (std::abs(hit - free) > tolerance) {
@@ -350,6 +357,11 @@ double openHandDepth(const RobotModel& model, int axis, double width, double spr
   if (!travel) return 0;
   // Where the slab's face sits in the hand's frame at the stop, below the fingertips.
   return std::clamp(*travel - 0.05, 0.0, reach);
+}
+
+TriangleMesh tableMeshInObject(const RobotModel& robot, const Iso3& T_B_O) {
+  const TableInfo& t = robot.table();
+  return transformed(makeBox(t.size), T_B_O.inverse() * Eigen::Translation3d(t.center_B));
 }
 
 }  // namespace inhand

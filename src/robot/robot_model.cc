@@ -4,6 +4,7 @@
 #include <kdl/chain.hpp>
 #include <kdl/frames.hpp>
 
+#include <algorithm>
 #include <cmath>
 #include <functional>
 #include <map>
@@ -514,6 +515,21 @@ JointVector RobotModel::openHand(double spread) const {
   JointVector q = home();
   if (spreadVariable_ >= 0) q[spreadVariable_] = spread;
   return withFingersOpen(q);
+}
+
+JointVector RobotModel::preshapedHand(double spread, double fraction) const {
+  JointVector q = openHand(spread);
+  for (const FingerInfo& f : fingers_) q[f.variable] = f.open + fraction * (f.closed - f.open);
+  applyCouplings(&q);
+  return q;
+}
+
+int RobotModel::fingerOfLink(int link) const {
+  for (size_t k = 0; k < fingers_.size(); ++k)
+    if (std::find(fingers_[k].links.begin(), fingers_[k].links.end(), link) !=
+        fingers_[k].links.end())
+      return int(k);
+  return -1;
 }
 
 double RobotModel::palmFaceZ() const {

@@ -6,7 +6,12 @@
 
 #include "inhand/core/error.h"
 #include "inhand/robot/collision.h"
+#include "inhand/robot/ik.h"
 #include "inhand/sensor/render.h"
+
+#include <algorithm>
+#include <cmath>
+#include <functional>
 
 namespace inhand {
 
@@ -39,6 +44,113 @@ void validate(const ScanOptions& options, const MultiGraspOptions& multi) {
   std::string problem = options.validate();
   if (problem.empty()) problem = multi.validate();
   if (!problem.empty()) throw Error("scan options: " + problem);
+}
+
+// How far a depth frame bears out object points `points_B`: of those in view whose pixel
+// measured something, the fraction measured within 2 cm of the point's depth, against those
+// measured more than 2 cm behind it (the camera sees through where the point should be). Points
+// in front of their measurement (occluded) and robot pixels do not count. -1: none counted.
+double depthSupport(const DepthImage& d, const Iso3& T_B_C, const CameraIntrinsics& K,
+                    const std::vector<uint8_t>& robotMask, const std::vector<Vec3>& points_B) {
+  const Iso3 T_C_B = T_B_C.inverse();
+  int support = 0, against = 0;
+  for (const Vec3& p_B : points_B) {
+    const Vec3 p = T_C_B * p_B;
+    if (p.z() <= 0.1) continue;
+    const Vec2 uv = K.project(p);
+    const int u = int(std::lround(uv.x())), v = int(std::lround(uv.y()));
+    if (u < 0 || v < 0 || u >= d.width || v >= d.height) continue;
+    const size_t i = size_t(v) * d.width + u;
+    const float z = d.depth_m[i];
+    if (!(z > 0) || robotMask[i]) continue;
+    if (std::abs(z - p.z()) < 0.02)
+      ++support;
+    else if (z > p.z() + 0.02)
+      ++against;
+  }
+  return support + against == 0 ? -1.0 : double(support) / (support + against);
+}
+
+// Picks the object up with the first candidate (in order, those `usable` accepts) that the robot
+// closes on, lifts, and by what it then observes holds. Fingers all closed to their limit mean
+// an empty hand. After the lift the camera looks at the hand: the object's points (`points_O`,
+// what the scan knows of its surface) carried by the hand as gripped must be borne out by the
+// depth frame (depthSupport > 1/2), and where it rested they must not be. Each failure lets go
+// and tries the next. Records every attempt.
+struct PickOutcome {
+  std::optional<Iso3> achieved;
+  const GraspCandidate* picked = nullptr;
+  std::vector<std::string>
+      attempts;  // per candidate tried: picked, no_contact, empty_hand, dropped
+};
+template <typename Usable>
+PickOutcome pickAndVerify(RobotInterface& robot, DepthSensor& sensor, const Iso3& T_B_O_rest,
+                          const std::vector<Vec3>& points_O,
+                          const std::vector<GraspCandidate>& candidates, Usable usable,
+                          const ScanOptions& options, const TableTopOptions& to,
+                          const NoiseModelOptions& noise,
+                          const std::function<void(const std::string&)>& log) {
+  const RobotModel& m = robot.model();
+  const RobotOccluders scenes(m);
+  PickOutcome out;
+  for (const GraspCandidate& c : candidates) {
+    if (!usable(c)) break;
+    std::optional<Iso3> achieved = robot.pickUp(c.T_O_palm, c.q_open);
+    if (!achieved) {
+      out.attempts.push_back("no_contact");
+      log("pick-up failed (the hand met nothing there); trying the next candidate");
+      continue;
+    }
+    const JointVector q = robot.joints();
+    bool empty = true;
+    for (const FingerInfo& f : m.fingers())
+      if (std::abs(q[f.variable] - f.closed) > 1e-3) empty = false;
+    if (empty) {
+      robot.putDown();
+      out.attempts.push_back("empty_hand");
+      log("the fingers closed on nothing; trying the next candidate");
+      continue;
+    }
+    robot.execute({robot.joints(), m.withArm(robot.joints(), m.arm(c.q_lift))},
+                  [](const JointVector&) {});
+    // Where the hand holds the object now, and where it rested: which does the camera see?
+    const Iso3 T_B_O_held = m.tipPose(robot.joints()) * achieved->inverse();
+    std::vector<Vec3> held_B, rest_B_points;
+    for (const Vec3& p : points_O) {
+      held_B.push_back(T_B_O_held * p);
+      rest_B_points.push_back(T_B_O_rest * p);
+    }
+    double inHand = -1, onTable = -1;
+    Aabb heldBox;
+    for (const Vec3& p : held_B) heldBox.extend(p);
+    if (const std::optional<Iso3> aim = m.camera().aimAt(heldBox.center())) {
+      sensor.setPose(*aim);
+      const DepthImage d = sensor.capture();
+      const std::vector<uint8_t> mask =
+          robotPixelMask(d, *aim, robot.joints(), scenes, sensor.camera(), noise, options.t_hand_m,
+                         options.carve_radius_px, /*with_table=*/false);
+      const CameraIntrinsics& K = sensor.camera().intrinsics;
+      inHand = depthSupport(d, *aim, K, mask, held_B);
+      onTable = depthSupport(d, *aim, K, mask, rest_B_points);
+    }
+    char line[160];
+    std::snprintf(line, sizeof(line),
+                  "after the lift: %.0f %% of the object's points in view borne "
+                  "out in the hand, %.0f %% where it rested",
+                  100 * inHand, 100 * onTable);
+    log(line);
+    if (!(inHand > 0.5) || onTable > 0.5) {
+      robot.putDown();
+      out.attempts.push_back("dropped");
+      log("the grasp did not hold; trying the next candidate");
+      continue;
+    }
+    out.attempts.push_back("picked");
+    out.achieved = achieved;
+    out.picked = &c;
+    break;
+  }
+  return out;
 }
 
 // The grasp loop from the first grasp on (the robot holds the object at T_O_palm0), into
@@ -121,27 +233,22 @@ void runGrasps(RobotInterface& robot, DepthSensor& sensor, const Iso3& T_O_palm0
       all.termination = "no_grasp_above_threshold";
       break;
     }
-    // The best candidate the robot manages to pick up (a real hand may fail where the model
-    // said it would not; the next one above t_q is tried).
-    std::optional<Iso3> achieved;
-    const GraspCandidate* picked = nullptr;
-    for (const GraspCandidate& c : gen.candidates) {
-      if (c.quality < multi.ranking.t_q) break;
-      achieved = robot.pickUp(c.T_O_palm, c.q);
-      if (achieved) {
-        picked = &c;
-        break;
-      }
-      log("pick-up failed; trying the next candidate");
-    }
-    if (!achieved) {
+    // The best candidate the robot manages to pick up and hold (a real hand may fail where the
+    // model said it would not; the next one above t_q is tried). Lifted, not fused.
+    std::vector<Vec3> known_O;  // the observed surface so far
+    for (size_t k = 0; k < all.model.mesh.vertices.size(); k += 7)
+      if (all.model.variance[k] < 0.25 * options.mesh.hole_sigma_m * options.mesh.hole_sigma_m)
+        known_O.push_back(all.model.mesh.vertices[k].cast<double>());
+    const PickOutcome pick = pickAndVerify(
+        robot, sensor, T_B_O_rest, known_O, gen.candidates,
+        [&](const GraspCandidate& c) { return c.quality >= multi.ranking.t_q; }, options,
+        multi.table_top, noise, log);
+    if (!pick.achieved) {
       all.termination = "pick_up_failed";
       break;
     }
-    const GraspCandidate& best_ = *picked;
-    // Lift (not fused): the fingers as the robot closed them, the arm to the lift configuration.
-    robot.execute({robot.joints(), m.withArm(robot.joints(), m.arm(best_.q_lift))},
-                  [](const JointVector&) {});
+    const GraspCandidate& best_ = *pick.picked;
+    const std::optional<Iso3> achieved = pick.achieved;
     T_O_palm = *achieved;
     next = GraspRecord{};
     next.T_O_palm = *achieved;
@@ -151,6 +258,7 @@ void runGrasps(RobotInterface& robot, DepthSensor& sensor, const Iso3& T_O_palm0
     next.epsilon = best_.epsilon;
     next.generation_s = gen.seconds;
     next.ranking_s = rankS;
+    next.attempts = pick.attempts;
     for (const GraspCandidate& c : gen.candidates) {
       if (int(next.ranked.size()) >= multi.keep_ranked) break;
       next.ranked.push_back({c.T_O_palm, c.q, c.quality, c.epsilon});
@@ -172,8 +280,7 @@ std::string TableTopOptions::validate() const {
   if (plane.iterations < 1) return "plane.iterations must be >= 1";
   if (!(plane.max_tilt_deg > 0 && plane.max_tilt_deg <= 90))
     return "plane.max_tilt_deg must be in (0, 90]";
-  std::string p = grasp.validate();
-  return p.empty() ? "" : "grasp." + p;
+  return {};
 }
 
 MultiGraspResult scanMultiGrasp(RobotInterface& robot, DepthSensor& sensor, const Iso3& T_O_palm0,
@@ -313,46 +420,70 @@ MultiGraspResult scanFromTable(RobotInterface& robot, DepthSensor& sensor, const
   all.frames += tt.frames;
   all.fusion_s += std::chrono::duration<double>(Clock::now() - tf).count();
 
-  // The first grasp from the points; the robot picks the object up with the first that works.
-  TableTopGrasps first = tableTopGrasps(m, object, fit->plane.n, T_B_O_rest, robot.joints(),
-                                        to.grasp, multi.grasp.lift_m);
-  tt.axes = first.axes;
+  // The first grasp: candidates on what the camera saw (the fused table-top model: the observed
+  // surface, closed over what it hides up to the table; the table itself cut off 3 mm above its
+  // plane), the hand stopping at that model and at the table, ranked by stability (ε) and then
+  // by the arm's trajectory time; the robot picks the object up with the first that holds.
+  GraspGeneration first;
+  {
+    const ObjectModel seen = extractModel(volume, options.mesh);
+    Aabb keepBox = objectBox;
+    keepBox.min.array() -= 0.02;
+    keepBox.max.array() += 0.02;
+    TriangleMesh firstModel;
+    firstModel.vertices = seen.mesh.vertices;
+    for (const Tri& t : seen.mesh.triangles) {
+      bool keep = true;
+      for (int k = 0; k < 3 && keep; ++k) {
+        const Vec3 p = seen.mesh.vertices[t[k]].cast<double>();
+        keep = fit->plane.distance(p) > 0.003 && keepBox.contains(p);
+      }
+      if (keep) firstModel.triangles.push_back(t);
+    }
+    first = generateGrasps(m, firstModel, T_B_O_rest, robot.joints(), multi.grasp);
+  }
+  tt.axes = principalAxesUpright(object, fit->plane.n);
   tt.tried = first.tried;
-  tt.fit = first.fit;
+  tt.touching = first.touching;
+  tt.stable = first.stable;
   tt.table_free = first.table_free;
   tt.reachable = int(first.candidates.size());
+  // Most stable first; among equally stable (to 10 %), the cheaper arm motion.
+  for (GraspCandidate& c : first.candidates)
+    c.score = trajectoryTime(m, m.arm(robot.joints()), m.arm(c.q));
+  std::stable_sort(first.candidates.begin(), first.candidates.end(),
+                   [](const GraspCandidate& a, const GraspCandidate& b) {
+                     const double ea = std::floor(std::log(std::max(a.epsilon, 1e-9)) / 0.1);
+                     const double eb = std::floor(std::log(std::max(b.epsilon, 1e-9)) / 0.1);
+                     return ea != eb ? ea > eb : a.score < b.score;
+                   });
   std::snprintf(line, sizeof(line),
-                "first grasp: main axis (%.2f, %.2f, %.2f), extent %.0f × %.0f × %.0f mm; %d "
-                "poses, %d fit the hand, %d clear of the table, %d reachable",
-                tt.axes.axes(0, 0), tt.axes.axes(1, 0), tt.axes.axes(2, 0),
-                1000 * (tt.axes.max[0] - tt.axes.min[0]), 1000 * (tt.axes.max[1] - tt.axes.min[1]),
-                1000 * (tt.axes.max[2] - tt.axes.min[2]), tt.tried, tt.fit, tt.table_free,
-                tt.reachable);
+                "first grasp: %d poses, %d touching, %d stable, %d clear of the table, %d "
+                "reachable (%.2f s)",
+                tt.tried, tt.touching, tt.stable, tt.table_free, tt.reachable, first.seconds);
   log(line);
   tt.seconds = std::chrono::duration<double>(Clock::now() - t0).count();
   if (first.candidates.empty()) {
     all.model = extractModel(volume, options.mesh);
-    return finish(tt.fit == 0 ? "object_too_large_for_hand" : "no_reachable_grasp");
+    return finish(tt.touching == 0 ? "object_too_large_for_hand" : "no_reachable_grasp");
   }
-  std::optional<Iso3> achieved;
-  const GraspCandidate* chosen = nullptr;
-  for (const GraspCandidate& c : first.candidates) {
-    achieved = robot.pickUp(c.T_O_palm, c.q);
-    if (achieved) {
-      chosen = &c;
-      break;
-    }
-  }
-  if (!achieved) {
+  std::vector<Vec3> seen_O;
+  for (size_t k = 0; k < object.size(); k += 5) seen_O.push_back(object[k]);
+  const PickOutcome pick = pickAndVerify(
+      robot, sensor, T_B_O_rest, seen_O, first.candidates,
+      [](const GraspCandidate&) { return true; }, options, to, noise, log);
+  tt.attempts = pick.attempts;
+  if (!pick.achieved) {
     all.model = extractModel(volume, options.mesh);
     return finish("pick_up_failed");
   }
-  robot.execute({robot.joints(), m.withArm(robot.joints(), m.arm(chosen->q_lift))},
-                [](const JointVector&) {});
+  const std::optional<Iso3> achieved = pick.achieved;
+  const GraspCandidate* chosen = pick.picked;
   GraspRecord rec;
+  rec.epsilon = chosen->epsilon;
+  rec.attempts = pick.attempts;
   rec.candidates = tt.reachable;
   rec.tried = tt.tried;
-  rec.epsilon = std::numeric_limits<double>::quiet_NaN();  // chosen from points, not contacts
   rec.generation_s = tt.seconds;
   runGrasps(robot, sensor, *achieved, centre_O, T_B_O_rest, options, multi, noise, progress, volume,
             rec, out, objectBox);

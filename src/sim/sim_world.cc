@@ -7,6 +7,7 @@
 #include "inhand/core/random.h"
 #include "inhand/geometry/primitives.h"
 #include "inhand/robot/collision.h"
+#include "inhand/robot/wrench.h"
 
 namespace inhand {
 
@@ -14,6 +15,10 @@ std::string SimOptions::validate() const {
   if (!(frame_rate_hz > 0)) return "frame_rate_hz must be > 0";
   if (frame_subsample < 1) return "frame_subsample must be >= 1";
   if (!(room_radius_m >= 0)) return "room_radius_m must be >= 0";
+  if (!(friction > 0 && friction <= 2)) return "friction must be in (0, 2]";
+  if (!(hold_min_epsilon >= 0)) return "hold_min_epsilon must be >= 0";
+  if (!R_B_O_rest.allFinite() || std::abs(R_B_O_rest.determinant() - 1) > 1e-6)
+    return "the rest orientation must be a rotation";
   return {};
 }
 
@@ -34,7 +39,6 @@ SimWorld::SimWorld(const RobotModel& model, const TriangleMesh& object_O, const 
   objectSamples_ = surfaceSamples(object_O, 0.003);
   object_.addMesh(object_O);
   object_.commit();
-  objectMinZ_ = object_O.bounds().min.z();
   if (options.room_radius_m > 0) room_.addMesh(makeSphere(options.room_radius_m, 3));
   room_.commit();
 }
@@ -44,26 +48,52 @@ Iso3 SimWorld::objectPose() const {
 }
 
 Iso3 SimWorld::restPose() const {
-  const TableInfo& t = model_->table();
   const Vec3 at = model_->camera().lookAt_B;
-  return Iso3(
-      Eigen::Translation3d(at.x(), at.y(), t.center_B.z() + 0.5 * t.size.z() - objectMinZ_));
+  Iso3 T = Iso3::Identity();
+  T.linear() = options_.R_B_O_rest;
+  Aabb b;
+  for (const Vec3f& v : objectMesh_.vertices) b.extend(options_.R_B_O_rest * v.cast<double>());
+  T.translation() =
+      Vec3(at.x() - b.center().x(), at.y() - b.center().y(), model_->table().topZ() - b.min.z());
+  return T;
+}
+
+bool SimWorld::graspHolds() const {
+  if (!options_.check_hold) return true;
+  const HandContacts hc = handContacts(*model_, q, T_O_palm, objectSamples_, 0.003, 0.01);
+  if (hc.fingers_touching + int(hc.palm_touching) < 2) return false;
+  Vec3 centre = Vec3::Zero();
+  for (const SurfacePoint& s : objectSamples_) centre += s.p;
+  centre /= double(std::max<size_t>(1, objectSamples_.size()));
+  double rho = 1e-3;
+  for (const SurfacePoint& s : objectSamples_) rho = std::max(rho, (s.p - centre).norm());
+  return forceClosureEpsilon(hc.contacts, centre, rho, options_.friction, 8, 1000) >=
+         options_.hold_min_epsilon;
 }
 
 bool SimRobot::putDown() {
   world_->held = false;
+  world_->slipping = false;
   return true;
 }
 
 std::optional<Iso3> SimRobot::pickUp(const Iso3& T_O_palm, const JointVector& q) {
+  std::optional<Iso3> T = grasp(T_O_palm, q);
+  world_->slipping = T && !world_->graspHolds();
+  return T;
+}
+
+std::optional<Iso3> SimRobot::grasp(const Iso3& T_O_palm, const JointVector& q) {
   const RobotModel& m = world_->model();
-  const JointVector open = m.withFingersOpen(q);
+  const JointVector open = q;  // the preshape the hand comes in with
   if (world_->options().pick_up_first_contact) {
     // A guarded move along the planned palm axis, from 25 cm short of the planned pose (more
     // than the open hand's reach: a plan made with the palm may have its fingers in the object)
     // to at most 10 cm past it (the plan was made on the model, whose hole-filled parts can lie
     // well outside the true surface).
-    const FingerCloser closer(m, world_->objectMesh());
+    TriangleMesh obstacles = world_->objectMesh();
+    obstacles.append(tableMeshInObject(m, world_->restPose()));
+    const FingerCloser closer(m, obstacles);
     const Vec3 in = T_O_palm.linear().col(2);  // palm z points into the object
     Iso3 T = T_O_palm;
     T.translation() -= 0.25 * in;
@@ -123,6 +153,11 @@ void SimRobot::execute(const std::vector<JointVector>& waypoints,
     int steps = std::max(1, int(std::ceil(duration * o.frame_rate_hz)));
     for (int s = 1; s <= steps; ++s) {
       world_->q = a + (b - a) * (double(s) / steps);
+      if (world_->held && world_->slipping) {  // the grasp does not hold: the object falls
+        world_->held = false;
+        world_->slipping = false;
+        ++world_->drops;
+      }
       if (++tick % o.frame_subsample == 0 || (w + 1 == waypoints.size() && s == steps))
         on_state(world_->q);
     }

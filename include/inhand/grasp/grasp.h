@@ -26,6 +26,7 @@
 #include "inhand/geometry/point_cloud.h"
 #include "inhand/mesh/extract.h"
 #include "inhand/planning/view_selection.h"
+#include "inhand/robot/wrench.h"
 
 namespace inhand {
 
@@ -49,6 +50,9 @@ struct GraspOptions {
   int approaches = 64;               // approach directions over the sphere
   int rolls = 4;                     // palm rolls about each approach (over 180°)
   std::vector<double> spreads{0.0};  // spread joint values tried (hands with a spread joint)
+  // Preshapes: each finger this fraction of the way from open to closed as the hand comes in
+  // (BarrettHand: 0 flat fingers, 0.25 ≈ 35°, 0.45 ≈ 63°, 0.6 ≈ 84° flexion, fingertips down).
+  std::vector<double> preshapes{0.0, 0.25, 0.45, 0.6};
   // Edge poses (hands with a spread joint), at each of these spreads: palm z along ± each of the
   // model's principal axes, palm y along another, palm x either way along the third (24 poses),
   // the palm axis moved along palm x until the model ends `edge_inset_m` beyond it. At 90° the
@@ -68,19 +72,10 @@ struct GraspOptions {
   std::string validate() const;
 };
 
-struct Contact {
-  Vec3 p_O;       // contact point (object frame)
-  Vec3 normal_O;  // outward surface normal there
-};
-
-// ε of the Ferrari–Canny metric as described above (≤ 0: not force closure). `centre_O` and
-// `rho` set the torque origin and scale.
-double forceClosureEpsilon(const std::vector<Contact>& contacts, const Vec3& centre_O, double rho,
-                           double friction, int cone_edges, int directions);
-
 struct GraspCandidate {
   Iso3 T_O_palm = Iso3::Identity();
   JointVector q;             // hand joints closed to contact (arm part: the pick IK solution)
+  JointVector q_open;        // the hand as it comes in (preshape; arm part as q)
   JointVector q_lift;        // the same grasp with the object lifted `lift_m` off the table
   int links_in_contact = 0;  // fingers touching, plus one when the palm touches
   std::vector<Contact> contacts;

@@ -43,8 +43,9 @@ class HandGeometry {
   // Whether p_F lies inside any hand link's geometry (exact for boxes, cylinders, spheres).
   bool contains(const Vec3& p_F) const;
   // Signed distance (m) from p_F to the hand: negative inside. Exact for boxes, cylinders and
-  // spheres; mesh links give 0 inside and +infinity outside.
-  double distance(const Vec3& p_F) const;
+  // spheres; mesh links give 0 inside and +infinity outside. `nearest` (optional) receives the
+  // model's index of the nearest link.
+  double distance(const Vec3& p_F, int* nearest = nullptr) const;
   // Link poses T_F_link of the hand links, in handLinks() order.
   const std::vector<Iso3>& linkPoses() const { return T_F_link_; }
 
@@ -63,7 +64,8 @@ struct ClosingResult {
   std::vector<FingerClosing> fingers;  // one per RobotModel::fingers()
 };
 
-// Closes each finger from its `open` value towards `closed` until its links touch the object
+// Closes each finger from its value in q (clamped to [open, closed]: the open hand, or a
+// preshape) towards `closed` until its links touch the object
 // (mesh in frame O; palm at T_O_palm), refining the contact by bisection to `tolerance` (rad or
 // m). Other hand joints (spread) are taken from q.
 ClosingResult closeFingers(const RobotModel& model, const JointVector& q, const Iso3& T_O_palm,
@@ -107,5 +109,8 @@ double openHandDepth(const RobotModel& model, int axis, double width_m, double s
                      double edge_x_m = std::numeric_limits<double>::infinity());
 // How far the open hand reaches beyond its palm link along palm z.
 double openHandReach(const RobotModel& model);
+
+// The robot's table as a box mesh in frame O, for an object resting at T_B_O.
+TriangleMesh tableMeshInObject(const RobotModel& robot, const Iso3& T_B_O);
 
 }  // namespace inhand

@@ -117,6 +117,11 @@ class RobotModel {
   JointVector withFingersOpen(const JointVector& q) const;
   // home() with the spread joint (hands with one) at `spread` and the fingers open.
   JointVector openHand(double spread = 0.0) const;
+  // The hand preshaped for an approach: spread as given, every finger `fraction` of the way
+  // from open to closed (0: open), couplings applied; the arm at home.
+  JointVector preshapedHand(double spread, double fraction) const;
+  // The finger (index into fingers()) that `link` moves with, or -1 (the palm, the arm).
+  int fingerOfLink(int link) const;
   // The palm face: the top of the palm (tip) link's collision geometry along palm z, m.
   double palmFaceZ() const;
   Eigen::VectorXd arm(const JointVector& q) const;

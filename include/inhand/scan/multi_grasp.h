@@ -20,19 +20,22 @@ struct TableTopOptions {
   double cluster_cell_m = 0.01;   // the object is the largest cluster at this linking cell, m
   int min_points = 200;           // fewer object points than this: object_not_found
   PlaneFitOptions plane;          // RANSAC of the table plane
-  TableTopGraspOptions grasp;     // the first grasp from the points' principal axes
   std::string validate() const;
 };
 
 // What the table-top stage saw and chose.
 struct TableTopRecord {
   int frames = 0;
-  int points = 0;                                         // measured points near the rest pose
-  int table_inliers = 0;                                  // of those, on the fitted plane
-  int object_points = 0;                                  // above it
-  Plane table_O;                                          // the fitted table plane, frame O
-  PrincipalAxes axes;                                     // of the object points, frame O
-  int tried = 0, fit = 0, table_free = 0, reachable = 0;  // first-grasp poses
+  int points = 0;         // measured points near the rest pose
+  int table_inliers = 0;  // of those, on the fitted plane
+  int object_points = 0;  // above it
+  Plane table_O;          // the fitted table plane, frame O
+  PrincipalAxes axes;     // of the object points, frame O
+  // First-grasp candidates (generateGrasps on the table-top model): poses tried, those whose
+  // closed hand touches with two links or more, of those force closure, clear of the table, and
+  // reachable; then the pick-up attempts in order (picked, no_contact, empty_hand, dropped).
+  int tried = 0, touching = 0, stable = 0, table_free = 0, reachable = 0;
+  std::vector<std::string> attempts;
   double seconds = 0;
 };
 
@@ -67,8 +70,9 @@ struct GraspRecord {
   double hole_area_m2 = 0;  // σ = 5 cm (unknown) area of the model after its views
   double mean_entropy = 0;  // of the model after its views
   double generation_s = 0, ranking_s = 0;
-  std::vector<RankedGrasp> ranked;  // the best candidates it was chosen from, best first
-  ObjectModel model;                // the model after its views (at the planning stride)
+  std::vector<RankedGrasp> ranked;    // the best candidates it was chosen from, best first
+  std::vector<std::string> attempts;  // pick-up attempts before it held (see TableTopRecord)
+  ObjectModel model;                  // the model after its views (at the planning stride)
 };
 
 struct MultiGraspResult {
@@ -88,10 +92,12 @@ MultiGraspResult scanMultiGrasp(RobotInterface& robot, DepthSensor& sensor, cons
 // model's frame; nothing of its shape is known). The camera takes table_top.frames of it; the
 // table plane is fitted (RANSAC) and the points above it near the rest pose are the object; the
 // volume is centred on them and the frames are fused (table and robot pixels only carve); the
-// first grasp comes from the points' principal axes (tableTopGrasps); the robot picks the object
-// up and the multi-grasp scan goes on as scanMultiGrasp. Terminations of its own:
-// object_not_found, object_too_large_for_volume, object_too_large_for_hand, no_reachable_grasp,
-// pick_up_failed (the model so far is returned with each).
+// first grasp comes from generateGrasps on the model those frames give (the observed surface,
+// closed over what it hides); the robot picks the object up with the first candidate that holds
+// (by what it observes after the lift) and the multi-grasp scan goes on as scanMultiGrasp.
+// Terminations of its own: object_not_found, object_too_large_for_volume,
+// object_too_large_for_hand, no_reachable_grasp, pick_up_failed (the model so far is returned with
+// each).
 MultiGraspResult scanFromTable(RobotInterface& robot, DepthSensor& sensor, const Iso3& T_B_O_rest,
                                const ScanOptions& options, const MultiGraspOptions& multi,
                                const NoiseModelOptions& noise, const ScanProgress& progress = {});

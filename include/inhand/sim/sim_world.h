@@ -22,6 +22,16 @@ struct SimOptions {
   // Pick-up: false backs the palm off until it is clear of the true object (the fingers may end
   // inside it); true stops the open hand at the first contact of any link (physically valid).
   bool pick_up_first_contact = true;
+  // Whether a grasp holds: the closed hand's contacts on the true object (its surface samples
+  // within 3 mm of the hand, pooled per 1 cm) with Coulomb friction `friction` must be force
+  // closure with ε ≥ `hold_min_epsilon` (robot/wrench.h): the scan turns the object to every
+  // side, so the grasp must resist gravity in every direction. One that does not lets the
+  // object fall back onto the table, where it rested, at the first motion after the pick-up.
+  bool check_hold = true;
+  double friction = 0.5;
+  double hold_min_epsilon = 1e-4;
+  // The object's orientation on the table (rotation from its mesh frame O to the base frame).
+  Mat3 R_B_O_rest = Mat3::Identity();
   std::string validate() const;
 };
 
@@ -41,11 +51,15 @@ class SimWorld {
   DepthImage render();
   Iso3 objectPose() const;  // T_B_O at the current state
   bool held = true;         // false: the object rests on the table at restPose()
+  bool slipping = false;    // held by a grasp that does not hold: falls at the next motion
+  int drops = 0;            // how often the object fell
   const TriangleMesh& objectMesh() const { return objectMesh_; }
   const std::vector<SurfacePoint>& objectSamples() const { return objectSamples_; }
-  // Where the object rests on the table: upright as given, its lowest point on the table top,
-  // under the presentation point.
+  // Where the object rests on the table: turned by SimOptions::R_B_O_rest, its lowest point on
+  // the table top, its box's centre under the presentation point.
   Iso3 restPose() const;
+  // Whether the hand at q, T_O_palm holds the object (SimOptions::check_hold).
+  bool graspHolds() const;
 
  private:
   const RobotModel* model_;
@@ -54,7 +68,6 @@ class SimWorld {
   SimOptions options_;
   RayScene object_, room_;
   RobotOccluders robot_;
-  double objectMinZ_ = 0;
   TriangleMesh objectMesh_;
   std::vector<SurfacePoint> objectSamples_;  // for the pick-up clearance test
   uint64_t frame_ = 0;
@@ -74,11 +87,13 @@ class SimRobot : public RobotInterface {
   // along its axis, from 25 cm short of the planned pose to at most 10 cm past it, until any link
   // touches the true object (nullopt when it is blocked at the start or touches nothing).
   // Without, the palm is backed off (2 mm steps, up to 5 cm) until it is clear of the true
-  // object. Then the fingers close on the true object. No force-closure check: the simulator
-  // holds whatever the hand touches.
+  // object. The guarded move and the fingers stop at the table too. Then the fingers close on
+  // the true object from the preshape in q (its finger values; an open hand when they are open),
+  // and SimOptions::check_hold decides whether the grasp holds.
   std::optional<Iso3> pickUp(const Iso3& T_O_palm, const JointVector& q) override;
 
  private:
+  std::optional<Iso3> grasp(const Iso3& T_O_palm, const JointVector& q);
   SimWorld* world_;
 };
 
