@@ -88,7 +88,8 @@ TEST(GraspGeneration, CandidatesAreStableClearOfTheTableAndReachable) {
   o.approaches = 24;
   o.rolls = 2;
   GraspGeneration g = generateGrasps(r, model.mesh, T_B_O, r.home(), o);
-  EXPECT_EQ(g.tried, 48 + 24);  // + the edge poses: 6 palm axes × 4 (palm y, palm x signs)
+  // + the edge poses (6 palm axes × 4: palm y, palm x signs), each at every preshape.
+  EXPECT_EQ(g.tried, (48 + 24) * int(o.preshapes.size()));
   ASSERT_GT(g.candidates.size(), 3u);
   CollisionChecker checker(r);
   for (size_t k = 0; k < g.candidates.size(); ++k) {
@@ -102,8 +103,9 @@ TEST(GraspGeneration, CandidatesAreStableClearOfTheTableAndReachable) {
     // above the table top.
     EXPECT_LT((r.tipPose(c.q).translation() - (T_B_O * c.T_O_palm).translation()).norm(), 1e-3);
     EXPECT_FALSE(checker.inCollision(c.q));
+    // Fingers closing may come to rest on the table top, never in it.
     for (const Vec3f& v : HandGeometry(r, c.q, T_B_O * c.T_O_palm).mesh().vertices)
-      EXPECT_GT(v.z(), r.table().topZ());
+      EXPECT_GT(v.z(), r.table().topZ() - 1e-3);
     // Lifted: the same palm orientation, lift_m higher.
     Vec3 up = r.tipPose(c.q_lift).translation() - r.tipPose(c.q).translation();
     EXPECT_NEAR(up.z(), o.lift_m, 1e-3);
@@ -189,90 +191,6 @@ TEST(TableTop, LargestClusterDropsStrayPoints) {
   EXPECT_EQ(kept.size(), box);
 }
 
-TEST(TableTop, FirstGraspApproachesPerpendicularToTheMainAxisAndIsReachable) {
-  const RobotModel& r = test::wam();
-  const Iso3 T_B_O(
-      Eigen::Translation3d(r.camera().lookAt_B.x(), r.camera().lookAt_B.y(), r.table().topZ()));
-  std::vector<Vec3> pts = visibleBoxPoints(Vec3(0.03, 0.08, 0.1), 0.0);
-  TableTopGraspOptions o;
-  TableTopGrasps g = tableTopGrasps(r, pts, Vec3::UnitZ(), T_B_O, r.home(), o, 0.15);
-  // Across and along the main axis, 2 from above (the main axis is vertical), and the edge poses.
-  EXPECT_EQ(g.tried, 3 * o.approaches + 2);
-  ASSERT_FALSE(g.candidates.empty());
-  CollisionChecker checker(r);
-  for (const GraspCandidate& c : g.candidates) {
-    const Mat3 R = c.T_O_palm.linear();
-    // Horizontal approaches (⟂ the vertical main axis) or, last, from above.
-    EXPECT_TRUE(std::abs(R.col(2).z()) < 1e-9 || R.col(2).z() < -0.999);
-    EXPECT_LT((r.tipPose(c.q).translation() - (T_B_O * c.T_O_palm).translation()).norm(), 1e-3);
-    EXPECT_FALSE(checker.inCollision(c.q));
-    // The palm is clear of the points.
-    const Iso3 T_palm_O = c.T_O_palm.inverse();
-    for (const Vec3& p : pts)
-      for (const Primitive& prim : r.links()[r.tipLink()].collision)
-        ASSERT_FALSE(prim.contains(T_palm_O * p));
-  }
-  // Edge poses come first: spread 90°, palm x up, fingers 1 and 2 across the 60 mm side (the
-  // only one they straddle), the palm axis `edge_inset_m` below the top, and the open hand
-  // clear of the whole box (its hidden faces included) with the knuckles `clearance_m` from it.
-  const GraspCandidate& edge = g.candidates.front();
-  EXPECT_NEAR(edge.q[r.spreadVariable()], M_PI / 2, 1e-12);
-  EXPECT_GT(edge.T_O_palm.linear().col(0).z(), 0.999);
-  EXPECT_GT(std::abs(edge.T_O_palm.linear().col(1).x()), std::cos(M_PI / 360));
-  EXPECT_NEAR(edge.T_O_palm.translation().z(), 0.2 - o.edge_inset_m, 1e-3);
-  const FingerCloser trueBox(
-      r, transformed(makeBox(Vec3(0.06, 0.16, 0.2)), Iso3(Eigen::Translation3d(0, 0, 0.1))));
-  EXPECT_FALSE(trueBox.handTouches(edge.q, edge.T_O_palm));
-  const std::optional<double> travel =
-      trueBox.freeTravel(edge.q, edge.T_O_palm, edge.T_O_palm.linear().col(2), 0.1);
-  ASSERT_TRUE(travel.has_value());
-  EXPECT_LT(*travel, 0.1);  // it lands on the box within 10 cm
-  // Then fingers across the main axis, closing across the 60 mm side (the only one within the
-  // hand's span at spread 0; the rectangle's axes in 0.5° steps).
-  const GraspCandidate* across = nullptr;
-  for (const GraspCandidate& c : g.candidates)
-    if (c.q[r.spreadVariable()] == 0.0) {
-      across = &c;
-      break;
-    }
-  ASSERT_NE(across, nullptr);
-  EXPECT_GT(std::abs(across->T_O_palm.linear().col(0).x()), std::cos(M_PI / 360));
-  // A 40 cm wide block fits no pose.
-  TableTopGrasps wide = tableTopGrasps(r, visibleBoxPoints(Vec3(0.2, 0.2, 0.1), 0.0), Vec3::UnitZ(),
-                                       T_B_O, r.home(), o, 0.15);
-  EXPECT_EQ(wide.fit, 0);
-  EXPECT_TRUE(wide.candidates.empty());
-}
-
-// A short object (40 × 40 × 74 mm, the pill bottle's size): side approaches at its middle would put
-// the open hand's lower half into the table, so the palm rises along the table normal until the
-// hand clears it, its centre still below the object's top. A 30 mm high block leaves no room.
-TEST(TableTop, ShortObjectsAreGraspedFromTheSideWithThePalmRaised) {
-  const RobotModel& r = test::wam();
-  const Iso3 T_B_O(
-      Eigen::Translation3d(r.camera().lookAt_B.x(), r.camera().lookAt_B.y(), r.table().topZ()));
-  TableTopGraspOptions o;
-  const std::vector<Vec3> pts = visibleBoxPoints(Vec3(0.02, 0.02, 0.037), 0.3);
-  TableTopGrasps g = tableTopGrasps(r, pts, Vec3::UnitZ(), T_B_O, r.home(), o, 0.15);
-  ASSERT_FALSE(g.candidates.empty());
-  CollisionChecker checker(r);
-  for (const GraspCandidate& c : g.candidates) {
-    const Vec3 palm = c.T_O_palm.translation();
-    EXPECT_LT(std::abs(c.T_O_palm.linear().col(2).z()), 1e-9) << "a side approach";
-    EXPECT_GT(palm.z(), 0.037) << "raised above the middle";
-    // Edge poses sit `edge_inset_m` below the top, the raised ones at least `clearance_m`.
-    const bool edge = c.q[r.spreadVariable()] != 0.0;
-    EXPECT_LE(palm.z(), 0.074 - (edge ? o.edge_inset_m : o.clearance_m) + 1e-9)
-        << "still below the top";
-    for (const Vec3f& v : HandGeometry(r, c.q, T_B_O * c.T_O_palm).mesh().vertices)
-      EXPECT_GT(v.z(), r.table().topZ() + o.table_clearance_m);
-    EXPECT_FALSE(checker.inCollision(c.q));
-  }
-  TableTopGrasps flat = tableTopGrasps(r, visibleBoxPoints(Vec3(0.02, 0.02, 0.015), 0.3),
-                                       Vec3::UnitZ(), T_B_O, r.home(), o, 0.15);
-  EXPECT_TRUE(flat.candidates.empty());
-}
-
 // Re-grasps of a short object (a 40 × 40 × 74 mm box standing on the table): side approaches
 // through its centre would put the open hand into the table, so their palm axis rises until the
 // hand clears it. Candidates are found, all clear of the table, their palm axes between the
@@ -293,7 +211,7 @@ TEST(GraspGeneration, ShortObjectsGetSideGraspsWithThePalmRaised) {
   int raised = 0;
   for (const GraspCandidate& c : g.candidates) {
     for (const Vec3f& v : HandGeometry(r, c.q, T_B_O * c.T_O_palm).mesh().vertices)
-      EXPECT_GT(v.z(), r.table().topZ());
+      EXPECT_GT(v.z(), r.table().topZ() - 1e-3);
     const Mat3 R = c.T_O_palm.linear();
     // Near-horizontal approaches (the slide along the axis moves the palm up to ~5 mm in z):
     // the palm axis is at most 1 cm below the top (z = 0.037), and above the middle when raised.

@@ -87,8 +87,7 @@ template <typename Usable>
 PickOutcome pickAndVerify(RobotInterface& robot, DepthSensor& sensor, const Iso3& T_B_O_rest,
                           const std::vector<Vec3>& points_O,
                           const std::vector<GraspCandidate>& candidates, Usable usable,
-                          const ScanOptions& options, const TableTopOptions& to,
-                          const NoiseModelOptions& noise,
+                          const ScanOptions& options, const NoiseModelOptions& noise,
                           const std::function<void(const std::string&)>& log) {
   const RobotModel& m = robot.model();
   const RobotOccluders scenes(m);
@@ -241,8 +240,8 @@ void runGrasps(RobotInterface& robot, DepthSensor& sensor, const Iso3& T_O_palm0
         known_O.push_back(all.model.mesh.vertices[k].cast<double>());
     const PickOutcome pick = pickAndVerify(
         robot, sensor, T_B_O_rest, known_O, gen.candidates,
-        [&](const GraspCandidate& c) { return c.quality >= multi.ranking.t_q; }, options,
-        multi.table_top, noise, log);
+        [&](const GraspCandidate& c) { return c.quality >= multi.ranking.t_q; }, options, noise,
+        log);
     if (!pick.achieved) {
       all.termination = "pick_up_failed";
       break;
@@ -426,7 +425,10 @@ MultiGraspResult scanFromTable(RobotInterface& robot, DepthSensor& sensor, const
   // by the arm's trajectory time; the robot picks the object up with the first that holds.
   GraspGeneration first;
   {
-    const ObjectModel seen = extractModel(volume, options.mesh);
+    MeshOptions coarse = options.mesh;  // as Alg. 1 sees S_obj
+    coarse.stride = options.planning_stride;
+    coarse.method = options.planning_method;
+    const ObjectModel seen = extractModel(volume, coarse);
     Aabb keepBox = objectBox;
     keepBox.min.array() -= 0.02;
     keepBox.max.array() += 0.02;
@@ -471,7 +473,7 @@ MultiGraspResult scanFromTable(RobotInterface& robot, DepthSensor& sensor, const
   for (size_t k = 0; k < object.size(); k += 5) seen_O.push_back(object[k]);
   const PickOutcome pick = pickAndVerify(
       robot, sensor, T_B_O_rest, seen_O, first.candidates,
-      [](const GraspCandidate&) { return true; }, options, to, noise, log);
+      [](const GraspCandidate&) { return true; }, options, noise, log);
   tt.attempts = pick.attempts;
   if (!pick.achieved) {
     all.model = extractModel(volume, options.mesh);

@@ -100,45 +100,6 @@ GraspGeneration generateGrasps(const RobotModel& robot, const TriangleMesh& mode
                                const Iso3& T_B_O, const JointVector& q_now,
                                const GraspOptions& options);
 
-// The first grasp (paper §V), before any model exists: from the object's points as the camera
-// sees it on the table. The palm approaches perpendicular to the points' main axis (the longest
-// of the upright principal axes, geometry/point_cloud.h), from `approaches` directions around it;
-// the fingers close across the main axis (or, as a second choice, along it). The palm face stands
-// `clearance_m` outside the points along the approach, on the line through the middle of their
-// extent along the principal axes. A pose is kept when the points' extent across the closing
-// direction is within the open hand's span, the palm is clear of them (backed off up to 3 cm), the
-// open hand is clear of the table, and the arm reaches it and the lift pose without collision (IK,
-// arm and hand against table and base). Kept poses are ordered: fingers across the main axis first,
-// then by trajectory time from the current configuration. The fingers close on the real object at
-// the pick (RobotInterface).
-struct TableTopGraspOptions {
-  int approaches = 16;              // directions around the main axis
-  double clearance_m = 0.01;        // palm face outside the points along the approach, m
-  double table_clearance_m = 0.01;  // the open hand stays this far above the table top, m
-  double point_cell_m = 0.004;      // points thinned to one per cell of this size, m
-  double inside_fraction = 0.005;   // points inside the open hand tolerated (depth noise)
-  // Edge poses (hands with a spread joint): side approaches with palm x up and the palm axis
-  // `edge_inset_m` below the points' top, at each of these spreads (see GraspOptions). Tried
-  // first: where the fingers straddle the object, they envelop it.
-  std::vector<double> edge_spreads{M_PI / 2};
-  double edge_inset_m = 0.005;
-  std::string validate() const;
-};
-
-struct TableTopGrasps {
-  std::vector<GraspCandidate> candidates;  // feasible, best first (q: fingers open)
-  PrincipalAxes axes;                      // of the points, frame O
-  int tried = 0;                           // poses tried
-  int fit = 0;                             // with the object within the hand's span
-  int table_free = 0;                      // of those, clear of the table
-};
-
-// `points_O`: the object's points in frame O (table removed); the object rests at T_B_O on a
-// table whose normal is up_O.
-TableTopGrasps tableTopGrasps(const RobotModel& robot, const std::vector<Vec3>& points_O,
-                              const Vec3& up_O, const Iso3& T_B_O, const JointVector& q_now,
-                              const TableTopGraspOptions& options, double lift_m);
-
 // Fills quality, reachable_views and score of each candidate by one Alg. 1 pass of `planner`
 // over S_obj with the hand at that grasp (usually a coarse planner: fewer directions, rolls and
 // a pixel stride), and sorts them best first. Returns the seconds spent.
