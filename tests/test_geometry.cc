@@ -14,6 +14,7 @@
 #include "inhand/geometry/projector_shadows.h"
 #include "inhand/geometry/raster.h"
 #include "inhand/geometry/ray_scene.h"
+#include "inhand/geometry/stable_poses.h"
 #include "test_util.h"
 
 using namespace inhand;
@@ -916,4 +917,106 @@ TEST(Raster, WatertightIsWeakerThanClosed) {
   TriangleMesh open = box;
   open.triangles.pop_back();
   EXPECT_FALSE(open.isWatertight());
+}
+
+// ---- stable resting poses ---------------------------------------------------------------------
+
+// The hull of a point set contains every point and has every hull vertex on it: a cube with
+// interior points and points on its faces comes back as 8 vertices, 12 triangles.
+TEST(StablePoses, ConvexHullOfACubeWithInteriorAndFacePoints) {
+  std::vector<Vec3> pts;
+  Rng rng = makeRng(5);
+  std::uniform_real_distribution<double> u(-0.5, 0.5);
+  for (int i = 0; i < 2000; ++i) pts.push_back(Vec3(u(rng), u(rng), u(rng)));
+  for (int i = 0; i < 200; ++i) pts.push_back(Vec3(0.5, u(rng), u(rng)));
+  for (int sx : {-1, 1})
+    for (int sy : {-1, 1})
+      for (int sz : {-1, 1}) pts.push_back(0.5 * Vec3(sx, sy, sz));
+  const ConvexHull h = convexHull(pts);
+  // Face points may stay as hull vertices (coplanar); every one lies on the cube's surface.
+  for (const Vec3& v : h.vertices) EXPECT_NEAR(v.cwiseAbs().maxCoeff(), 0.5, 1e-12);
+  double area = 0;
+  for (const auto& t : h.triangles)
+    area += 0.5 *
+            (h.vertices[t[1]] - h.vertices[t[0]]).cross(h.vertices[t[2]] - h.vertices[t[0]]).norm();
+  EXPECT_NEAR(area, 6.0, 1e-9);
+}
+
+// A box a × b × c rests on each face pair with the solid angle the face subtends at the centre,
+// Ω = 4 asin(ab / √((a² + 4d²)(b² + 4d²))) at distance d, over 4π.
+TEST(StablePoses, BoxProbabilitiesAreTheFacesSolidAngles) {
+  const Vec3 s(0.06, 0.158, 0.21);  // the cracker box
+  auto face = [](double a, double b, double d) {
+    return 4 * std::asin(a * b / std::sqrt((a * a + 4 * d * d) * (b * b + 4 * d * d))) / (4 * M_PI);
+  };
+  const Iso3 T = Iso3(Eigen::Translation3d(0.01, -0.02, 0.03)) *
+                 Eigen::AngleAxisd(0.3, Vec3(1, 2, 3).normalized());
+  const std::vector<StablePose> poses = stablePoses(transformed(makeBox(s), T));
+  ASSERT_EQ(poses.size(), 6u);
+  double total = 0;
+  for (const StablePose& p : poses) {
+    total += p.probability;
+    const Vec3 n = T.linear().transpose() * p.down_O;  // in the box's own axes
+    int axis;
+    n.cwiseAbs().maxCoeff(&axis);
+    EXPECT_NEAR(std::abs(n[axis]), 1.0, 1e-6);
+    const double a = s[(axis + 1) % 3], b = s[(axis + 2) % 3], d = 0.5 * s[axis];
+    EXPECT_NEAR(p.probability, face(a, b, d), 1e-6) << axis;  // float vertices
+    EXPECT_NEAR(p.height_m, d, 1e-6);
+    EXPECT_LT((p.R_B_O * p.down_O - Vec3(0, 0, -1)).norm(), 1e-12);
+  }
+  EXPECT_NEAR(total, 1.0, 1e-12);
+  // Most probable: on the largest face (the 158 × 210 mm one).
+  EXPECT_NEAR(std::abs((T.linear().transpose() * poses[0].down_O).x()), 1.0, 1e-6);
+}
+
+// A cylinder (radius r, height h) stands on a cap with probability (1 − cos θ)/2 each,
+// cos θ = (h/2)/√((h/2)² + r²), and lies on its side (one pose: every side facet is at the same
+// height) with the rest. The 128-gon is within 0.2 % of the circle.
+TEST(StablePoses, CylinderCapsAndSideMatchTheAnalyticSolidAngles) {
+  const double r = 0.051, h = 0.139;  // the coffee can
+  const std::vector<StablePose> poses = stablePoses(makeCylinder(r, h, 128));
+  ASSERT_EQ(poses.size(), 3u);
+  const double cap = 0.5 * (1 - 0.5 * h / std::hypot(0.5 * h, r));
+  EXPECT_NEAR(poses[0].probability, 1 - 2 * cap, 3e-3);  // on its side
+  EXPECT_NEAR(std::abs(poses[0].down_O.z()), 0.0, 1e-9);
+  EXPECT_NEAR(poses[0].height_m, r, 1e-3);
+  for (int k : {1, 2}) {
+    EXPECT_NEAR(poses[k].probability, cap, 3e-3);
+    EXPECT_NEAR(std::abs(poses[k].down_O.z()), 1.0, 1e-9);
+  }
+  // A flat disc stands on a cap almost always.
+  const std::vector<StablePose> disc = stablePoses(makeCylinder(0.05, 0.01, 64));
+  EXPECT_GT(disc[0].probability + disc[1].probability, 0.85);
+}
+
+// A right-angled wedge (legs 0.1 m in x, 0.02 m in z, 0.05 m deep) rests on all five faces: its
+// centre of mass projects inside each. Sheared so that its top overhangs far beyond the base
+// (apex at x = 0.25 m), the base is unstable and passes its probability on; the probabilities
+// still sum to 1.
+TEST(StablePoses, UnstableFacesPassTheirProbabilityOn) {
+  TriangleMesh w;
+  const std::vector<Vec3> v = {{0, 0, 0},    {0.1, 0, 0},    {0, 0, 0.02},
+                               {0, 0.05, 0}, {0.1, 0.05, 0}, {0, 0.05, 0.02}};
+  for (const Vec3& p : v) w.vertices.push_back(p.cast<float>());
+  w.triangles = {{0, 2, 1}, {3, 4, 5}, {0, 1, 4}, {0, 4, 3},
+                 {0, 3, 5}, {0, 5, 2}, {1, 2, 5}, {1, 5, 4}};
+  const std::vector<StablePose> poses = stablePoses(w);
+  double total = 0;
+  for (const StablePose& p : poses) {
+    total += p.probability;
+    EXPECT_GT(p.probability, 0);
+  }
+  EXPECT_NEAR(total, 1.0, 1e-12);
+  EXPECT_EQ(poses.size(), 5u);
+  TriangleMesh lean = w;
+  for (Vec3f& p : lean.vertices)
+    if (p.z() > 0.01f) p = Vec3f(0.25f, p.y(), 0.3f);  // the apex far beyond x = 0.1
+  const std::vector<StablePose> leaning = stablePoses(lean);
+  double sum = 0;
+  for (const StablePose& p : leaning) {
+    sum += p.probability;
+    EXPECT_FALSE(p.down_O.z() < -0.99) << "the base is unstable: the COM overhangs it";
+  }
+  EXPECT_NEAR(sum, 1.0, 1e-12);
 }

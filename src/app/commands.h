@@ -48,15 +48,16 @@ struct RobotArgs {
 int runRobot(const RobotArgs& args);
 
 struct ScanArgs {
-  std::string object;          // builtin:NAME or a mesh file
-  std::string out;             // output directory (new or empty)
-  std::string robot;           // robot config (default: the WAM + BarrettHand in data/robots)
-  std::string config;          // JSON of scan options (optional)
-  int max_grasps = -1;         // grasps at most; -1: the config's (default 3)
-  int max_views = -1;          // overrides the config when >= 0
-  std::string hand_mode;       // overrides the config when set: naive | carve | carve-empty
-  std::string planner = "ig";  // view planner (see plannerNames())
-  uint64_t seed = 1;           // sensor noise and IK restarts
+  std::string object;               // builtin:NAME or a mesh file
+  std::string out;                  // output directory (new or empty)
+  std::string robot;                // robot config (default: the WAM + BarrettHand in data/robots)
+  std::string config;               // JSON of scan options (optional)
+  int max_grasps = -1;              // grasps at most; -1: the config's (default 3)
+  int max_views = -1;               // overrides the config when >= 0
+  std::string hand_mode;            // overrides the config when set: naive | carve | carve-empty
+  std::string planner = "ig";       // view planner (see plannerNames())
+  uint64_t seed = 1;                // sensor noise and IK restarts
+  std::string rest_pose = "as-is";  // as-is (the mesh's own frame, dropped onto the table) or N
 };
 
 int runScan(const ScanArgs& args);

@@ -83,6 +83,10 @@ int main(int argc, char** argv) {
                  "unobserved-voxels, rear-side-entropy")
       ->capture_default_str();
   sc->add_option("--seed", scan.seed, "noise and IK seed")->capture_default_str();
+  sc->add_option("--rest-pose", scan.rest_pose,
+                 "as-is (the mesh's frame, dropped onto the table) or N: the N-th most probable "
+                 "stable pose (0: the most probable)")
+      ->capture_default_str();
 
   inhand::app::EvalArgs eval;
   auto* ev = app.add_subcommand(

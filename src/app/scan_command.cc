@@ -12,6 +12,7 @@
 #include "inhand/eval/metrics.h"
 #include "inhand/geometry/builtin_objects.h"
 #include "inhand/geometry/mesh_io.h"
+#include "inhand/geometry/stable_poses.h"
 #include "inhand/report/html_report.h"
 #include "inhand/robot/collision.h"
 #include "inhand/scan/multi_grasp.h"
@@ -337,6 +338,26 @@ int runScan(const ScanArgs& args) {
 
   RobotModel model = RobotModel::load(o.robot);
   TriangleMesh object = loadObject(args.object);
+  // The rest pose: the mesh as given, or one of its stable poses (frame O stays the mesh's).
+  Json restJson = {{"pose", "as-is"}};
+  if (args.rest_pose != "as-is") {
+    char* end = nullptr;
+    const long n = std::strtol(args.rest_pose.c_str(), &end, 10);
+    if (args.rest_pose.empty() || *end != '\0' || n < 0)
+      throw Error("--rest-pose: must be as-is or a stable pose's index (0, 1, ...), not \"" +
+                  args.rest_pose + "\"");
+    const std::vector<StablePose> poses = stablePoses(object);
+    if (n >= long(poses.size()))
+      throw Error("--rest-pose: " + args.object + " has " + std::to_string(poses.size()) +
+                  " stable poses (0.." + std::to_string(poses.size() - 1) + "), not " +
+                  args.rest_pose);
+    const StablePose& p = poses[size_t(n)];
+    o.sim.R_B_O_rest = p.R_B_O;
+    restJson = {{"pose", n},
+                {"probability", p.probability},
+                {"down_O", {p.down_O.x(), p.down_O.y(), p.down_O.z()}},
+                {"stable_poses", poses.size()}};
+  }
   // From the table the scan finds out itself (object_too_large_for_volume); held, it cannot.
   if (o.start == "held" && object.bounds().size().maxCoeff() > o.scan.volume_size_m - 0.02)
     throw Error(args.object + ": the object (" + std::to_string(object.bounds().size().maxCoeff()) +
@@ -455,6 +476,7 @@ int runScan(const ScanArgs& args) {
   }
   summary["grasps"] = grasps;
   summary["start"] = o.start;
+  summary["rest_pose"] = restJson;
   if (mr.table_top) {
     const TableTopRecord& t = *mr.table_top;
     const Vec3 n = t.table_O.n;

@@ -1,0 +1,287 @@
+#include "inhand/geometry/stable_poses.h"
+
+#include <algorithm>
+#include <cmath>
+#include <map>
+#include <numeric>
+#include <random>
+
+#include "inhand/core/error.h"
+
+namespace inhand {
+
+namespace {
+using Tri3 = std::array<int, 3>;
+
+// Solid angle of triangle (a, b, c) seen from the origin (Van Oosterom & Strackee).
+double solidAngle(const Vec3& a, const Vec3& b, const Vec3& c) {
+  const double la = a.norm(), lb = b.norm(), lc = c.norm();
+  const double num = a.dot(b.cross(c));
+  const double den = la * lb * lc + a.dot(b) * lc + a.dot(c) * lb + b.dot(c) * la;
+  return std::abs(2 * std::atan2(num, den));
+}
+}  // namespace
+
+ConvexHull convexHull(const std::vector<Vec3>& input) {
+  ConvexHull hull;
+  // Unique points, in a seeded random order (incremental hulls expect no adversarial order).
+  std::vector<Vec3> pts;
+  {
+    Aabb b;
+    for (const Vec3& p : input) b.extend(p);
+    const double cell = std::max(1e-9, 1e-7 * b.size().maxCoeff());
+    std::map<std::array<long long, 3>, bool> seen;
+    for (const Vec3& p : input) {
+      std::array<long long, 3> k{std::llround(p.x() / cell), std::llround(p.y() / cell),
+                                 std::llround(p.z() / cell)};
+      if (seen.emplace(k, true).second) pts.push_back(p);
+    }
+  }
+  if (pts.size() < 4) return hull;
+  std::mt19937_64 rng(12345);
+  std::shuffle(pts.begin(), pts.end(), rng);
+  Aabb box;
+  for (const Vec3& p : pts) box.extend(p);
+  const double eps = 1e-9 * std::max(1e-6, box.size().maxCoeff());
+  // An initial tetrahedron of four non-coplanar points.
+  int i0 = 0, i1 = -1, i2 = -1, i3 = -1;
+  for (size_t i = 1; i < pts.size() && i1 < 0; ++i)
+    if ((pts[i] - pts[i0]).norm() > 1e3 * eps) i1 = int(i);
+  if (i1 < 0) return hull;
+  for (size_t i = 1; i < pts.size() && i2 < 0; ++i)
+    if ((pts[i1] - pts[i0]).cross(pts[i] - pts[i0]).norm() > 1e3 * eps * box.size().maxCoeff())
+      i2 = int(i);
+  if (i2 < 0) return hull;
+  const Vec3 n012 = (pts[i1] - pts[i0]).cross(pts[i2] - pts[i0]).normalized();
+  for (size_t i = 1; i < pts.size() && i3 < 0; ++i)
+    if (std::abs(n012.dot(pts[i] - pts[i0])) > 1e3 * eps) i3 = int(i);
+  if (i3 < 0) return hull;
+  std::vector<Tri3> faces;
+  std::vector<Vec3> normal;
+  std::vector<double> offset;
+  std::vector<uint8_t> alive;
+  const Vec3 inside = 0.25 * (pts[i0] + pts[i1] + pts[i2] + pts[i3]);
+  auto addFace = [&](int a, int b, int c) {
+    Vec3 n = (pts[b] - pts[a]).cross(pts[c] - pts[a]);
+    if (n.dot(pts[a] - inside) < 0) {
+      std::swap(b, c);
+      n = -n;
+    }
+    n.normalize();
+    faces.push_back({a, b, c});
+    normal.push_back(n);
+    offset.push_back(n.dot(pts[a]));
+    alive.push_back(1);
+  };
+  addFace(i0, i1, i2);
+  addFace(i0, i1, i3);
+  addFace(i0, i2, i3);
+  addFace(i1, i2, i3);
+  for (size_t pi = 0; pi < pts.size(); ++pi) {
+    if (int(pi) == i0 || int(pi) == i1 || int(pi) == i2 || int(pi) == i3) continue;
+    const Vec3& p = pts[pi];
+    std::vector<int> visible;
+    for (size_t f = 0; f < faces.size(); ++f)
+      if (alive[f] && normal[f].dot(p) - offset[f] > eps) visible.push_back(int(f));
+    if (visible.empty()) continue;
+    // Horizon: directed edges of visible faces whose reverse is not on a visible face.
+    std::map<std::pair<int, int>, int> edges;
+    for (int f : visible)
+      for (int k = 0; k < 3; ++k) edges[{faces[f][k], faces[f][(k + 1) % 3]}]++;
+    for (int f : visible) alive[f] = 0;
+    for (const auto& [e, count] : edges)
+      if (!edges.count({e.second, e.first})) {
+        // Keep the orientation: the new face (a, b, p) continues the visible face's winding.
+        const int a = e.first, b = e.second;
+        Vec3 n = (pts[b] - pts[a]).cross(p - pts[a]);
+        if (n.norm() < 1e-30) continue;
+        n.normalize();
+        faces.push_back({a, b, int(pi)});
+        normal.push_back(n);
+        offset.push_back(n.dot(pts[a]));
+        alive.push_back(1);
+      }
+  }
+  std::map<int, int> index;
+  for (size_t f = 0; f < faces.size(); ++f) {
+    if (!alive[f]) continue;
+    Tri3 t;
+    for (int k = 0; k < 3; ++k) {
+      auto it = index.find(faces[f][k]);
+      if (it == index.end()) {
+        it = index.emplace(faces[f][k], int(hull.vertices.size())).first;
+        hull.vertices.push_back(pts[faces[f][k]]);
+      }
+      t[k] = it->second;
+    }
+    hull.triangles.push_back(t);
+  }
+  return hull;
+}
+
+Vec3 centreOfMass(const TriangleMesh& mesh) {
+  double volume = 0;
+  Vec3 moment = Vec3::Zero(), mean = Vec3::Zero();
+  for (const Vec3f& v : mesh.vertices) mean += v.cast<double>();
+  if (!mesh.vertices.empty()) mean /= double(mesh.vertices.size());
+  for (const Tri& t : mesh.triangles) {
+    const Vec3 a = mesh.vertices[t[0]].cast<double>() - mean;
+    const Vec3 b = mesh.vertices[t[1]].cast<double>() - mean;
+    const Vec3 c = mesh.vertices[t[2]].cast<double>() - mean;
+    const double v = a.dot(b.cross(c)) / 6;
+    volume += v;
+    moment += v * (a + b + c) / 4;
+  }
+  const double scale = mesh.bounds().size().prod();
+  if (!(std::abs(volume) > 1e-6 * scale)) return mean;
+  return mean + moment / volume;
+}
+
+std::vector<StablePose> stablePoses(const TriangleMesh& mesh) {
+  std::vector<Vec3> points;
+  for (const Vec3f& v : mesh.vertices) points.push_back(v.cast<double>());
+  const ConvexHull hull = convexHull(points);
+  if (hull.triangles.empty()) throw Error("stable poses: the mesh spans no volume");
+  // The centre of mass: of the enclosed solid when the mesh encloses a volume (a closed mesh),
+  // else of the hull.
+  Vec3 com = centreOfMass(mesh);
+  {
+    TriangleMesh h;
+    for (const Vec3& v : hull.vertices) h.vertices.push_back(v.cast<float>());
+    for (const auto& t : hull.triangles) h.triangles.push_back({t[0], t[1], t[2]});
+    bool inside = true;
+    for (const auto& t : hull.triangles) {
+      const Vec3 n = (hull.vertices[t[1]] - hull.vertices[t[0]])
+                         .cross(hull.vertices[t[2]] - hull.vertices[t[0]])
+                         .normalized();
+      if (n.dot(com - hull.vertices[t[0]]) > 0) inside = false;
+    }
+    if (!inside) com = centreOfMass(h);
+  }
+  // Facets: hull triangles merged over shared edges when coplanar (normals within 1e-4 rad,
+  // planes within 1e-6 of the size).
+  const size_t nt = hull.triangles.size();
+  const double size = (mesh.bounds().size()).maxCoeff();
+  std::vector<Vec3> n(nt);
+  std::vector<double> d(nt);
+  for (size_t t = 0; t < nt; ++t) {
+    const auto& T = hull.triangles[t];
+    n[t] = (hull.vertices[T[1]] - hull.vertices[T[0]])
+               .cross(hull.vertices[T[2]] - hull.vertices[T[0]])
+               .normalized();
+    d[t] = n[t].dot(hull.vertices[T[0]] - com);  // distance of the plane from the COM
+  }
+  std::map<std::pair<int, int>, int> edgeFace;
+  for (size_t t = 0; t < nt; ++t)
+    for (int k = 0; k < 3; ++k)
+      edgeFace[{hull.triangles[t][k], hull.triangles[t][(k + 1) % 3]}] = int(t);
+  std::vector<int> facet(nt, -1);
+  int facets = 0;
+  for (size_t s = 0; s < nt; ++s) {
+    if (facet[s] >= 0) continue;
+    std::vector<int> stack{int(s)};
+    facet[s] = facets;
+    while (!stack.empty()) {
+      const int t = stack.back();
+      stack.pop_back();
+      for (int k = 0; k < 3; ++k) {
+        auto it = edgeFace.find({hull.triangles[t][(k + 1) % 3], hull.triangles[t][k]});
+        if (it == edgeFace.end() || facet[it->second] >= 0) continue;
+        const int u = it->second;
+        if (n[u].dot(n[s]) > 1 - 1e-8 && std::abs(d[u] - d[s]) < 1e-6 * size) {
+          facet[u] = facets;
+          stack.push_back(u);
+        }
+      }
+    }
+    ++facets;
+  }
+  // Per facet: probability (solid angle / 4π), normal, distance, and whether the COM's
+  // projection lies inside; else the facet it rolls to (across the edge it lies beyond most).
+  std::vector<double> prob(facets, 0.0), dist(facets, 0.0);
+  std::vector<Vec3> fn(facets, Vec3::Zero());
+  for (size_t t = 0; t < nt; ++t) {
+    const auto& T = hull.triangles[t];
+    prob[facet[t]] += solidAngle(hull.vertices[T[0]] - com, hull.vertices[T[1]] - com,
+                                 hull.vertices[T[2]] - com) /
+                      (4 * M_PI);
+    fn[facet[t]] = n[t];
+    dist[facet[t]] = d[t];
+  }
+  std::vector<int> rollsTo(facets, -1);  // -1: stable
+  for (int f = 0; f < facets; ++f) {
+    // Boundary edges of the facet; the projection p of the COM onto its plane.
+    const Vec3 p = com + dist[f] * fn[f];
+    double worst = 0;
+    for (size_t t = 0; t < nt; ++t) {
+      if (facet[t] != f) continue;
+      for (int k = 0; k < 3; ++k) {
+        const int a = hull.triangles[t][k], b = hull.triangles[t][(k + 1) % 3];
+        auto it = edgeFace.find({b, a});
+        if (it == edgeFace.end() || facet[it->second] == f) continue;
+        // Outward in-plane direction of the edge; p beyond it by `out` metres.
+        const Vec3 e = (hull.vertices[b] - hull.vertices[a]).normalized();
+        const Vec3 outward = e.cross(fn[f]);
+        const double out = outward.dot(p - hull.vertices[a]);
+        if (out > worst + 1e-9 * size) {
+          worst = out;
+          rollsTo[f] = facet[it->second];
+        }
+      }
+    }
+  }
+  // Carry unstable facets' probability down to where they come to rest.
+  std::vector<double> rest(facets, 0.0);
+  for (int f = 0; f < facets; ++f) {
+    int g = f;
+    for (int hops = 0; rollsTo[g] >= 0 && hops < facets; ++hops) g = rollsTo[g];
+    if (rollsTo[g] >= 0) continue;  // a cycle (numerically degenerate): dropped
+    rest[g] += prob[f];
+  }
+  // Merge adjacent stable facets of a neutral family (equal COM height, within 15°).
+  std::vector<int> group(facets, -1);
+  std::vector<StablePose> poses;
+  std::vector<std::vector<int>> adjacent(facets);
+  for (size_t t = 0; t < nt; ++t)
+    for (int k = 0; k < 3; ++k) {
+      auto it = edgeFace.find({hull.triangles[t][(k + 1) % 3], hull.triangles[t][k]});
+      if (it != edgeFace.end() && facet[it->second] != facet[t])
+        adjacent[facet[t]].push_back(facet[it->second]);
+    }
+  std::vector<int> order(facets);
+  std::iota(order.begin(), order.end(), 0);
+  std::stable_sort(order.begin(), order.end(), [&](int a, int b) { return rest[a] > rest[b]; });
+  for (int s : order) {
+    if (rollsTo[s] >= 0 || group[s] >= 0 || rest[s] <= 0) continue;
+    StablePose pose;
+    pose.down_O = fn[s];
+    pose.height_m = dist[s];
+    std::vector<int> stack{s};
+    group[s] = int(poses.size());
+    while (!stack.empty()) {
+      const int f = stack.back();
+      stack.pop_back();
+      pose.probability += rest[f];
+      for (int g : adjacent[f]) {
+        if (group[g] >= 0 || rollsTo[g] >= 0) continue;
+        const double tol = std::max(1e-3, 0.01 * std::abs(dist[f]));
+        if (std::abs(dist[g] - dist[f]) < tol && fn[g].dot(fn[f]) > std::cos(15 * M_PI / 180)) {
+          group[g] = group[s];
+          stack.push_back(g);
+        }
+      }
+    }
+    // The rotation taking down_O to −z (the shortest one).
+    pose.R_B_O = Eigen::Quaterniond::FromTwoVectors(pose.down_O, -Vec3::UnitZ()).toRotationMatrix();
+    poses.push_back(pose);
+  }
+  double total = 0;
+  for (const StablePose& p : poses) total += p.probability;
+  for (StablePose& p : poses) p.probability /= total;
+  std::stable_sort(poses.begin(), poses.end(), [](const StablePose& a, const StablePose& b) {
+    return a.probability > b.probability;
+  });
+  return poses;
+}
+
+}  // namespace inhand
