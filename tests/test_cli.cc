@@ -108,8 +108,10 @@ TEST(Cli, RobotCommandPrintsChainAndReachability) {
   EXPECT_NE(r.output.find("7 DOF"), std::string::npos) << r.output;
   EXPECT_NE(r.output.find("wam_j4"), std::string::npos);
   EXPECT_NE(r.output.find("reachable"), std::string::npos);
-  EXPECT_NE(r.output.find("slab across palm x: 10 mm wide 94,"), std::string::npos) << r.output;
-  EXPECT_NE(r.output.find("60 mm wide 94, 70 mm wide 12"), std::string::npos) << r.output;
+  // The open BarrettHand's flat fingers: slabs up to 100 mm wide come down to the knuckles,
+  // 10 mm above the palm face, 31 mm below the raised distal links' tips.
+  EXPECT_NE(r.output.find("slab across palm x: 10 mm wide 31,"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("90 mm wide 31, 100 mm wide 31"), std::string::npos) << r.output;
   Json bad = readJsonFile(cfg);
   bad["urdf"] = std::string(INHAND_SOURCE_DIR) + "/data/robots/wam_barretthand.urdf";
   bad["base_link"] = "wam_bse";
@@ -290,9 +292,8 @@ TEST(Cli, BaselinePlannerStillRegraspsOnEq9Ranking) {
   EXPECT_EQ(s["termination"], "max_grasps");
 }
 
-// Issue #5 on a short object: the pill bottle (74 mm) is picked from the table from the side with
-// the palm raised clear of the table (an edge grasp: fingers 1 and 2 straddle it near its top),
-// and the scan leaves almost nothing unknown; a re-grasp, where one is taken, never adds any.
+// A short object: the pill bottle (74 mm) is picked from the table and the scan leaves almost
+// nothing unknown; a re-grasp, where one is taken, never adds any.
 TEST(Cli, ShortObjectIsPickedFromTheTableAndScannedAlmostWhole) {
   test::TempDir dir;
   writeTextAtomically(dir.path() / "c.json",
@@ -306,11 +307,7 @@ TEST(Cli, ShortObjectIsPickedFromTheTableAndScannedAlmostWhole) {
   const Json s = readJsonFile(out / "summary.json");
   EXPECT_EQ(s["start"], "table");
   ASSERT_GE(s["grasps"].size(), 1u) << s["termination"];
-  const Aabb b = loadObject("builtin:pill_bottle").bounds();
-  const auto T = s["grasps"][0]["T_O_palm"].get<std::vector<double>>();  // row-major 4 × 4
-  EXPECT_LT(std::abs(T[10]), 0.01) << "a side approach (the fitted table is level to 1e-3)";
-  EXPECT_GT(T[11], b.center().z()) << "the palm axis raised above the middle";
-  EXPECT_LT(T[11], b.max.z() + 0.005);
+  EXPECT_EQ(s["table_top"]["pick_up_attempts"].back(), "picked");
   double previous = 1.0;
   for (const Json& g : s["grasps"]) {
     const double a = g["unknown_area_m2"].get<double>();
@@ -321,21 +318,19 @@ TEST(Cli, ShortObjectIsPickedFromTheTableAndScannedAlmostWhole) {
   EXPECT_GT(s["views"].back()["observed_fraction"].get<double>(), 0.95);
 }
 
-// Issue #5's demonstration, with every default: the cracker box is picked by its top edge, the
-// re-grasp reveals what the first grasp's hand covered (σ = 5 cm area after the last grasp under a
-// quarter of the first's), and since no finger ever starts inside the object nor the arm swings
-// through it, the model has no surface inside the true box.
-TEST(Cli, CrackerBoxRegraspRevealsWhatTheFirstGraspCovered) {
+// The demonstration, with every default: the cracker box is picked from the table with a grasp
+// that holds, at most 3 grasps cover it (99 % of the true surface), and since no finger ever
+// starts inside the object nor the arm swings through it, the model has no surface inside it.
+TEST(Cli, CrackerBoxIsScannedWholeFromTheTable) {
   test::TempDir dir;
   const fs::path out = dir.path() / "scan";
   Result r = run("scan --object builtin:cracker_box --out " + out.string(), dir);
   ASSERT_EQ(r.code, 0) << r.output;
   const Json s = readJsonFile(out / "summary.json");
-  ASSERT_GE(s["grasps"].size(), 2u) << s["termination"];
-  const double first = s["grasps"][0]["unknown_area_m2"].get<double>();
-  const double last = s["grasps"].back()["unknown_area_m2"].get<double>();
-  EXPECT_GT(first, 5e-4);
-  EXPECT_LT(last, 0.25 * first);
+  ASSERT_GE(s["grasps"].size(), 1u) << s["termination"];
+  EXPECT_LE(s["grasps"].size(), 3u);
+  EXPECT_GT(s["coverage"].get<double>(), 0.99);
+  EXPECT_EQ(s["table_top"]["pick_up_attempts"].back(), "picked");
   EXPECT_EQ(s["options"]["grasp"]["approach"], "first_contact");
   EXPECT_EQ(s["options"]["sim"]["pick_up"], "first_contact");
   const Aabb b = loadObject("builtin:cracker_box").bounds();
@@ -389,4 +384,29 @@ TEST(Cli, EvalTabulatesEveryRunAndRejectsUnknownPlanners) {
   EXPECT_EQ(r.code, 1);
   EXPECT_NE(r.output.find("nothing"), std::string::npos) << r.output;
   EXPECT_FALSE(fs::exists(dir.path() / "x"));
+}
+
+// Grasps that must hold: with almost no friction (μ = 0.05) the simulator lets most grasps drop
+// the object at the lift. The scan sees it (the object's points are not in the hand, they are
+// still on the table), lets go and tries the next candidate; a drop never ends in a scan of an
+// empty hand: either a later candidate holds and the scan covers the box, or it ends with
+// pick_up_failed (exit 4) and says so.
+TEST(Cli, AGraspThatDoesNotHoldDropsTheObjectAndTheScanTriesTheNext) {
+  test::TempDir dir;
+  writeTextAtomically(dir.path() / "c.json", R"({"sim": {"friction": 0.05}, "max_views": 3})");
+  const fs::path out = dir.path() / "scan";
+  Result r = run("scan --object builtin:cracker_box --max-grasps 1 --config " +
+                     (dir.path() / "c.json").string() + " --out " + out.string(),
+                 dir);
+  const Json s = readJsonFile(out / "summary.json");
+  const auto attempts = s["table_top"]["pick_up_attempts"].get<std::vector<std::string>>();
+  ASSERT_FALSE(attempts.empty());
+  EXPECT_EQ(attempts.front(), "dropped") << r.output;
+  if (attempts.back() == "picked") {
+    EXPECT_EQ(r.code, 0) << r.output;
+    EXPECT_GT(s["coverage"].get<double>(), 0.9);
+  } else {
+    EXPECT_EQ(r.code, 4) << r.output;
+    EXPECT_EQ(s["termination"], "pick_up_failed");
+  }
 }

@@ -239,6 +239,9 @@ void readOptions(const fs::path& file, AllOptions* o) {
     s->integer("frame_subsample", &o->sim.frame_subsample);
     s->boolean("noise", &o->sim.noise);
     s->num("room_radius_m", &o->sim.room_radius_m);
+    s->boolean("check_hold", &o->sim.check_hold);
+    s->num("friction", &o->sim.friction);
+    s->num("hold_min_epsilon", &o->sim.hold_min_epsilon);
     // The same two ways as grasp.approach, for the simulator's pick-up.
     std::string pickUp;
     s->string("pick_up", &pickUp);
@@ -306,6 +309,9 @@ Json optionsJson(const AllOptions& o) {
             {"frame_subsample", o.sim.frame_subsample},
             {"noise", o.sim.noise},
             {"room_radius_m", o.sim.room_radius_m},
+            {"check_hold", o.sim.check_hold},
+            {"friction", o.sim.friction},
+            {"hold_min_epsilon", o.sim.hold_min_epsilon},
             {"pick_up", graspApproachName(o.sim.pick_up_first_contact ? GraspApproach::kFirstContact
                                                                       : GraspApproach::kPalm)}}}};
 }

@@ -1,0 +1,38 @@
+#!/usr/bin/env bash
+# The grasping test set: every mesh in ../shared/objects in its most probable resting poses
+# (REST_POSES, default "0 1") and the procedural objects of scripts/make_test_objects.py (flat
+# box, long thin ellipsoid, bowl, bottle, ring, L-bracket, cup) in their most probable pose,
+# each scanned from the table with default options. Writes OUT/results.md and OUT/results.csv
+# (first grasp made, grasps, views, coverage, accuracy, seconds, termination) as runs finish.
+# Usage: scripts/scan_set.sh [OUT]   (default out/scan_set; the build must exist)
+set -uo pipefail
+cd "$(dirname "$0")/.."
+out="${1:-out/scan_set}"
+poses="${REST_POSES:-0 1}"
+mkdir -p "$out/runs"
+/usr/bin/python3 scripts/make_test_objects.py "$out/objects"
+objects=()
+for f in "$out"/objects/*.obj; do objects+=("$f:0"); done
+if [ -d ../shared/objects ]; then
+  for f in ../shared/objects/*.obj; do
+    for p in $poses; do objects+=("$f:$p"); done
+  done
+else
+  echo "scan_set: ../shared/objects not found; procedural objects only" >&2
+fi
+for entry in "${objects[@]}"; do
+  mesh="${entry%:*}"
+  pose="${entry##*:}"
+  name="$(basename "$mesh" .obj)_pose$pose"
+  dir="$out/runs/$name"
+  if [ -f "$dir/summary.json" ]; then continue; fi
+  rm -rf "$dir"
+  start=$(date +%s)
+  ./build/inhand scan --object "$mesh" --rest-pose "$pose" --out "$dir" > "$out/runs/$name.log" 2>&1
+  echo "$?" > "$out/runs/$name.status"
+  end=$(date +%s)
+  echo "$((end - start))" > "$out/runs/$name.seconds"
+  echo "scan_set: $name exit $(cat "$out/runs/$name.status")"
+  /usr/bin/python3 scripts/scan_set_table.py "$out"
+done
+/usr/bin/python3 scripts/scan_set_table.py "$out"
