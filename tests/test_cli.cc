@@ -9,6 +9,7 @@
 #include "inhand/core/json_util.h"
 #include "inhand/geometry/builtin_objects.h"
 #include "inhand/geometry/mesh_io.h"
+#include "inhand/geometry/primitives.h"
 #include "test_util.h"
 
 using namespace inhand;
@@ -409,4 +410,20 @@ TEST(Cli, AGraspThatDoesNotHoldDropsTheObjectAndTheScanTriesTheNext) {
     EXPECT_EQ(r.code, 4) << r.output;
     EXPECT_EQ(s["termination"], "pick_up_failed");
   }
+}
+
+// An object the open BarrettHand cannot span (a 290 mm cube: the flat fingers reach 302 mm tip
+// to tip) ends cleanly: no force-closure grasp, object_too_large_for_hand, exit 4, with the
+// table-top model written.
+TEST(Cli, AnObjectTooLargeForTheHandEndsCleanly) {
+  test::TempDir dir;
+  writePly(dir.path() / "big.ply", makeBox(Vec3(0.29, 0.29, 0.29)));
+  const fs::path out = dir.path() / "scan";
+  Result r =
+      run("scan --object " + (dir.path() / "big.ply").string() + " --out " + out.string(), dir);
+  EXPECT_EQ(r.code, 4) << r.output;
+  const Json s = readJsonFile(out / "summary.json");
+  EXPECT_EQ(s["termination"], "object_too_large_for_hand") << r.output;
+  EXPECT_EQ(s["table_top"]["grasp_poses_stable"], 0);
+  EXPECT_TRUE(fs::exists(out / "model.ply"));
 }

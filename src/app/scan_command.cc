@@ -554,7 +554,7 @@ int runScan(const ScanArgs& args) {
       sm.accuracy_mean_mm, r.model.meanEntropy(), r.total_s, args.out.c_str());
   if (r.termination == "no_reachable_view") return 3;
   if (r.termination == "no_reachable_grasp" || r.termination == "pick_up_failed" ||
-      r.termination == "object_too_large_for_hand")
+      r.termination == "object_too_large_for_hand" || r.termination == "no_stable_grasp")
     return 4;
   if (r.termination == "object_not_found" || r.termination == "object_out_of_view" ||
       r.termination == "object_too_large_for_volume")

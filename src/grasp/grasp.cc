@@ -157,7 +157,7 @@ GraspGeneration generateGrasps(const RobotModel& robot, const TriangleMesh& mesh
   // The hand stops at the model and at the table: approaching, and closing its fingers.
   TriangleMesh obstacles = mesh;
   obstacles.append(tableMeshInObject(robot, T_B_O));
-  const FingerCloser closer(robot, obstacles);
+  const FingerCloser closer(robot, obstacles), modelCloser(robot, mesh);
   // The preshaped hand's bounding box in the palm frame, per (spread, preshape).
   std::map<std::pair<double, double>, Aabb> openHandBox;
   for (const Pose& ps : poses)
@@ -231,7 +231,9 @@ GraspGeneration generateGrasps(const RobotModel& robot, const TriangleMesh& mesh
     const double rise = tableTop + 0.003 - lowest;
     if (rise > 0 && (rise > maxRise || !slide(origin + rise * up))) return;
     // 0.06 rad steps: the fingertip moves 9 mm per step, less than a link is thick (20 mm).
-    ClosingResult closed = closer.close(q, T, 0.06, 1e-4);
+    // A finger stopped by the table short of the model lifts the hand off it (5 mm steps).
+    auto [closed, Tc] = closeOffTheTable(closer, modelCloser, q, T, 0.005, 0.03, 0.06);
+    T = Tc;
     GraspCandidate c;
     c.T_O_palm = T;
     c.q = closed.q;

@@ -321,6 +321,32 @@ ClosingResult FingerCloser::close(const JointVector& qIn, const Iso3& T_O_palm, 
   return result;
 }
 
+std::pair<ClosingResult, Iso3> closeOffTheTable(const FingerCloser& both,
+                                                const FingerCloser& object, const JointVector& q,
+                                                const Iso3& T_O_palm, double step,
+                                                double max_backoff, double closing_step) {
+  Iso3 T = T_O_palm;
+  const Vec3 back = -T_O_palm.linear().col(2);
+  for (double off = 0;; off += step) {
+    T.translation() = T_O_palm.translation() + off * back;
+    ClosingResult r = both.close(q, T, closing_step, 1e-4);
+    if (off + step > max_backoff + 1e-9) return {r, T};
+    bool blocked = false;
+    const ClosingResult alone = object.close(q, T, closing_step, 1e-4);
+    for (size_t k = 0; k < r.fingers.size(); ++k) {
+      const FingerInfo& f = both.model().fingers()[k];
+      const double dir = f.closed >= f.open ? 1.0 : -1.0;
+      if (r.fingers[k].contact && dir * (alone.fingers[k].value - r.fingers[k].value) > 1e-3)
+        blocked = true;
+    }
+    if (!blocked) return {r, T};
+    // Backed off, the hand must not leave the object altogether: stop when nothing touches.
+    bool any = false;
+    for (const FingerClosing& f : alone.fingers) any = any || f.contact;
+    if (!any) return {r, T};
+  }
+}
+
 namespace {
 double handTip(const RobotModel& model, const JointVector& open) {
   double tip = -std::numeric_limits<double>::infinity();

@@ -47,8 +47,8 @@ void validate(const ScanOptions& options, const MultiGraspOptions& multi) {
 }
 
 // How far a depth frame bears out object points `points_B`: of those in view whose pixel
-// measured something, the fraction measured within 2 cm of the point's depth, against those
-// measured more than 2 cm behind it (the camera sees through where the point should be). Points
+// measured something, the fraction measured within 1 cm of the point's depth, against those
+// measured more than 1 cm behind it (the camera sees through where the point should be). Points
 // in front of their measurement (occluded) and robot pixels do not count. -1: none counted.
 double depthSupport(const DepthImage& d, const Iso3& T_B_C, const CameraIntrinsics& K,
                     const std::vector<uint8_t>& robotMask, const std::vector<Vec3>& points_B) {
@@ -63,9 +63,9 @@ double depthSupport(const DepthImage& d, const Iso3& T_B_C, const CameraIntrinsi
     const size_t i = size_t(v) * d.width + u;
     const float z = d.depth_m[i];
     if (!(z > 0) || robotMask[i]) continue;
-    if (std::abs(z - p.z()) < 0.02)
+    if (std::abs(z - p.z()) < 0.01)
       ++support;
-    else if (z > p.z() + 0.02)
+    else if (z > p.z() + 0.01)
       ++against;
   }
   return support + against == 0 ? -1.0 : double(support) / (support + against);
@@ -115,9 +115,13 @@ PickOutcome pickAndVerify(RobotInterface& robot, DepthSensor& sensor, const Iso3
     // Where the hand holds the object now, and where it rested: which does the camera see?
     const Iso3 T_B_O_held = m.tipPose(robot.joints()) * achieved->inverse();
     std::vector<Vec3> held_B, rest_B_points;
+    // Where it rested, only points well above the table tell (the table itself is near the
+    // others' depth).
+    const double tableTop = m.table().topZ();
     for (const Vec3& p : points_O) {
       held_B.push_back(T_B_O_held * p);
-      rest_B_points.push_back(T_B_O_rest * p);
+      const Vec3 r = T_B_O_rest * p;
+      if (r.z() > tableTop + 0.015) rest_B_points.push_back(r);
     }
     double inHand = -1, onTable = -1;
     Aabb heldBox;
@@ -467,7 +471,17 @@ MultiGraspResult scanFromTable(RobotInterface& robot, DepthSensor& sensor, const
   tt.seconds = std::chrono::duration<double>(Clock::now() - t0).count();
   if (first.candidates.empty()) {
     all.model = extractModel(volume, options.mesh);
-    return finish(tt.touching == 0 ? "object_too_large_for_hand" : "no_reachable_grasp");
+    // No force-closure grasp at all: too large when even the object's smallest upright extent
+    // exceeds what the open hand spans (fingertip to fingertip along palm x), else its shape.
+    double span = 0;
+    {
+      const Aabb hb = HandGeometry(m, m.openHand(0.0), Iso3::Identity()).mesh().bounds();
+      span = hb.max.x() - hb.min.x();
+    }
+    const double smallest = (tt.axes.max - tt.axes.min).minCoeff();
+    if (tt.stable == 0)
+      return finish(smallest > 0.9 * span ? "object_too_large_for_hand" : "no_stable_grasp");
+    return finish("no_reachable_grasp");
   }
   std::vector<Vec3> seen_O;
   for (size_t k = 0; k < object.size(); k += 5) seen_O.push_back(object[k]);

@@ -93,15 +93,18 @@ std::optional<Iso3> SimRobot::grasp(const Iso3& T_O_palm, const JointVector& q) 
     // well outside the true surface).
     TriangleMesh obstacles = world_->objectMesh();
     obstacles.append(tableMeshInObject(m, world_->restPose()));
-    const FingerCloser closer(m, obstacles);
+    const FingerCloser closer(m, obstacles), objectOnly(m, world_->objectMesh());
     const Vec3 in = T_O_palm.linear().col(2);  // palm z points into the object
     Iso3 T = T_O_palm;
     T.translation() -= 0.25 * in;
     const std::optional<double> travel = closer.freeTravel(open, T, in, 0.35);
     if (!travel || *travel >= 0.35) return std::nullopt;  // blocked, or nothing to grasp there
     T.translation() += *travel * in;
-    world_->T_O_palm = T;
-    world_->q = closer.close(open, T).q;
+    // The fingers close; one that meets the table short of the object lifts the hand off it.
+    auto [closed, Tc] = closeOffTheTable(closer, objectOnly, open, T, 0.005, 0.03, 0.02);
+    world_->T_O_palm = Tc;
+    world_->q = closed.q;
+    T = Tc;
     world_->held = true;
     return T;
   }

@@ -1,25 +1,26 @@
 #pragma once
-// Re-grasping (paper §IV, §V-B): grasp candidates on the current model, their stability, and
-// their ranking by what Alg. 1 could still see with the hand there.
+// Grasp candidates on a model of the object resting on the table, their stability, and (for
+// re-grasps, paper §IV, §V-B) their ranking by what Alg. 1 could still see with the hand there.
+// The same generator makes the first grasp, on the model the table-top frames give (the observed
+// surface, closed over what it hides), and every re-grasp, on the model so far.
 //
 // Candidates (BarrettHand-style hands: a palm and closing fingers, optional spread):
-//   - approach directions spread over the sphere, palm rolls about each, spread settings, the
-//     palm axis through the model's centre; then the edge poses (below);
-//   - the open hand comes along the approach until any link first touches the model
-//     (GraspApproach::kFirstContact, the default), or the palm face is slid until it touches the
-//     nearest surface sample inside its footprint (kPalm; samples: the vertices, plus a lattice of
-//     half a contact cell on larger triangles);
-//   - fingers closed until contact (robot::closeFingers) against the model mesh;
-//   - kept when at least two links touch, the grasp is force closure (below), the hand on the
-//     object resting on the table is free of the table, and the arm reaches it (IK, collision).
+//   - approach directions spread over the sphere, palm rolls about each, spread settings and
+//     preshapes (how far the fingers are already closed as the hand comes in), the palm axis
+//     through the model's centre; then the edge poses (below);
+//   - the preshaped hand comes along the approach until any link first touches the model or the
+//     table (GraspApproach::kFirstContact, the default), or the palm face is slid until it
+//     touches the nearest surface sample inside its footprint (kPalm; samples: the vertices,
+//     plus a lattice of half a contact cell on larger triangles); where the hand would reach
+//     below the table top, the palm axis first rises along the table normal;
+//   - fingers closed from the preshape until contact with the model or the table
+//     (robot::FingerCloser); a finger stopped by the table touches nothing;
+//   - kept when at least two links touch the model, the grasp is force closure (below), the
+//     hand on the object resting on the table stays above the table top, and the arm reaches
+//     it and the lift pose (IK, collision).
 //
-// Stability (documented metric): contacts are the model's surface samples within `contact_m` of the
-// closed hand, pooled into cells of `contact_cell_m`; each cell is a point contact with Coulomb
-// friction μ, its cone linearised by `cone_edges` forces. The wrenches (force, torque/ρ with ρ the
-// largest vertex distance from the model's centre) span a convex hull; ε is the radius of the
-// largest origin-centred ball inside it (Ferrari–Canny), estimated as the least support value
-// over `wrench_directions` fixed unit directions in R⁶ (an upper bound that tightens with more
-// directions). ε > 0 means force closure.
+// Stability: robot/wrench.h (Ferrari–Canny ε on the model's surface samples near the closed
+// hand, Coulomb friction μ); ε > 0 means force closure.
 #include <string>
 #include <vector>
 
@@ -32,14 +33,12 @@ namespace inhand {
 
 // How a candidate's open hand comes to the object along its approach.
 enum class GraspApproach {
-  // The palm slides until its face touches the model; the open fingers may start inside the
-  // object (the BarrettHand's open fingertips converge to ~34 mm apart at spread 0, so for wider
-  // objects they do, and the hand-aware update then empties the object where they are: the
-  // README measures what that costs). Kept for comparison.
+  // The palm slides until its face touches the model; the preshaped fingers may start inside
+  // the object, and the hand-aware update then empties the object where they are. Kept for
+  // comparison.
   kPalm,
-  // The whole open hand comes in from outside until any link, palm or finger, touches the model:
-  // it never starts inside the object (physically valid; the default). With this BarrettHand
-  // the stable grasps of wider objects are the edge poses below.
+  // The whole preshaped hand comes in from outside until any link, palm or finger, touches the
+  // model or the table: it never starts inside the object (physically valid; the default).
   kFirstContact,
 };
 const char* graspApproachName(GraspApproach a);  // palm, first_contact
@@ -56,8 +55,8 @@ struct GraspOptions {
   // Edge poses (hands with a spread joint), at each of these spreads: palm z along ± each of the
   // model's principal axes, palm y along another, palm x either way along the third (24 poses),
   // the palm axis moved along palm x until the model ends `edge_inset_m` beyond it. At 90° the
-  // BarrettHand's fingers 1 and 2 face each other 150 mm apart at their flexion joints and
-  // straddle objects up to ~68 mm thick, while finger 3 closes over the edge.
+  // BarrettHand's fingers 1 and 2 face each other 150 mm apart at their flexion joints, while
+  // finger 3 closes over the edge.
   std::vector<double> edge_spreads{M_PI / 2};
   double edge_inset_m = 0.005;
   double friction = 0.5;          // μ at each contact

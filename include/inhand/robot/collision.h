@@ -77,6 +77,7 @@ ClosingResult closeFingers(const RobotModel& model, const JointVector& q, const 
 class FingerCloser {
  public:
   FingerCloser(const RobotModel& model, const TriangleMesh& object_O);
+  const RobotModel& model() const { return *model_; }
   ClosingResult close(const JointVector& q, const Iso3& T_O_palm, double step = 0.02,
                       double tolerance = 1e-4) const;
   // Whether any hand link (palm included) at q, palm at T_O_palm, touches the object's surface.
@@ -96,6 +97,17 @@ class FingerCloser {
   const RobotModel* model_;
   std::shared_ptr<const Geometry> geometry_;
 };
+
+// Closing on an object that rests on a table, as a hand with fingertip force sensing would: the
+// fingers close against object and table (`both`); where one stops on the table short of where
+// the object alone (`object`) would stop it, the palm backs off along its axis by `step_m` and
+// the fingers close again from the preshape, up to `max_backoff_m`. Short, flat objects are
+// then gripped with the fingertips skimming the table. Returns the closing and the palm pose.
+std::pair<ClosingResult, Iso3> closeOffTheTable(const FingerCloser& both,
+                                                const FingerCloser& object, const JointVector& q,
+                                                const Iso3& T_O_palm, double step_m = 0.005,
+                                                double max_backoff_m = 0.03,
+                                                double closing_step = 0.06);
 
 // How far objects of a given width get into the open hand (fingers at their `open` values, other
 // joints at home): a slab `width_m` wide across palm x (axis 0) or palm y (axis 1), unbounded
