@@ -156,8 +156,8 @@ TEST(Cli, ScanWritesModelAndSummaryAndRejectsBadConfig) {
   EXPECT_GE(g2["quality"].get<double>(), 0.005);
   EXPECT_GT(g2["stability_epsilon"].get<double>(), 0.0);
   // The scan began on the table: the fitted table plane is the true one (the box stands upright
-  // with frame O's z up; its bottom at z = −h/2 lies on the table), the first grasp came from the
-  // points (no contact model, so no ε), the object's points are the box's.
+  // with frame O's z up; its bottom at z = −h/2 lies on the table), the first grasp was made on
+  // the table-top model (force closure there), the object's points are the box's.
   EXPECT_EQ(s["start"], "table");
   const Json& tt = s["table_top"];
   const auto plane = tt["table_plane_O"].get<std::vector<double>>();
@@ -165,7 +165,7 @@ TEST(Cli, ScanWritesModelAndSummaryAndRejectsBadConfig) {
   EXPECT_NEAR(-plane[3] / plane[2], loadObject("builtin:cracker_box").bounds().min.z(), 0.003);
   EXPECT_GT(tt["object_points"].get<int>(), 1000);
   EXPECT_GT(tt["grasp_poses_reachable"].get<int>(), 0);
-  EXPECT_TRUE(s["grasps"][0]["stability_epsilon"].is_null());
+  EXPECT_GT(s["grasps"][0]["stability_epsilon"].get<double>(), 0.0);           // force closure
   EXPECT_NEAR(tt["principal_axes"][0]["axis_O"][2].get<double>(), 1.0, 1e-6);  // upright
   PlyData ply = readPly(out / "model.ply");
   EXPECT_EQ(ply.vertexProperties.count("variance"), 1u);
@@ -193,8 +193,10 @@ TEST(Cli, ScanWritesModelAndSummaryAndRejectsBadConfig) {
   rejects(R"({"grasp": {"approach": "slide"}})", "grasp.approach: must be palm or first_contact");
   rejects(R"({"sim": {"pick_up": "grab"}})", "sim.pick_up: must be palm or first_contact");
   rejects(R"({"grasp": {"edge_inset_m": 0.2}})", "grasp.edge_inset_m must be in [0, 0.05) m");
-  rejects(R"({"table_top": {"edge_inset_m": -1}})",
-          "table_top.grasp.edge_inset_m must be in [0, 0.05) m");
+  rejects(R"({"table_top": {"edge_inset_m": 0.005}})",
+          "table_top: unknown option \"edge_inset_m\"");
+  rejects(R"({"grasp": {"preshapes": [0, 1.5]}})", "grasp.preshapes must be in [0, 1)");
+  rejects(R"({"sim": {"friction": 0}})", "simulation options: friction must be in (0, 2]");
   rejects(R"({"grasp": {"edge_spreads": "x"}})", "grasp.edge_spreads: expected an array");
   r = run("scan --object builtin:coffee_can --max-grasps 0 --out " + (dir.path() / "x").string(),
           dir);

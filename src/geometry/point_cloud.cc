@@ -13,14 +13,23 @@ namespace inhand {
 
 std::optional<PlaneFit> fitPlaneRansac(const std::vector<Vec3>& pts, const PlaneFitOptions& o) {
   if (pts.size() < 3) return std::nullopt;
-  const double cosTilt = std::cos(o.max_tilt_deg * M_PI / 180);
+  const double cosTilt = std::cos(
+      (o.expected_plane ? std::min(o.max_tilt_deg, o.max_expected_tilt_deg) : o.max_tilt_deg) *
+      M_PI / 180);
   const Vec3 up = o.expected_normal.normalized();
   Rng rng = makeRng(o.seed, 0x9a7e);
-  std::uniform_int_distribution<size_t> pick(0, pts.size() - 1);
+  // Hypotheses from the points near the expected plane, where there is one.
+  std::vector<size_t> candidates;
+  for (size_t i = 0; i < pts.size(); ++i)
+    if (!o.expected_plane || std::abs(o.expected_plane->distance(pts[i])) <= o.max_offset_m)
+      candidates.push_back(i);
+  if (candidates.size() < 3) return std::nullopt;
+  std::uniform_int_distribution<size_t> pick(0, candidates.size() - 1);
   std::optional<Plane> best;
   int bestCount = 0;
   for (int it = 0; it < o.iterations; ++it) {
-    const Vec3 &a = pts[pick(rng)], &b = pts[pick(rng)], &c = pts[pick(rng)];
+    const Vec3 &a = pts[candidates[pick(rng)]], &b = pts[candidates[pick(rng)]],
+               &c = pts[candidates[pick(rng)]];
     Vec3 n = (b - a).cross(c - a);
     if (n.norm() < 1e-9) continue;
     n.normalize();
@@ -41,6 +50,10 @@ std::optional<PlaneFit> fitPlaneRansac(const std::vector<Vec3>& pts, const Plane
   PrincipalAxes pa = principalAxes(in);
   Vec3 n = pa.axes.col(2);
   if (n.dot(up) < 0) n = -n;
+  // Inliers along a thin strip (a large object hiding most of the table) leave the plane's tilt
+  // about the strip undetermined: the refit keeps the hypothesis' normal then.
+  if (n.dot(best->n) < std::cos(5 * M_PI / 180) || pa.variances[1] < 25 * pa.variances[2])
+    n = best->n;
   PlaneFit fit;
   fit.plane = Plane{n, -n.dot(pa.centroid)};
   for (const Vec3& p : pts) fit.inliers += std::abs(fit.plane.distance(p)) < o.inlier_m;

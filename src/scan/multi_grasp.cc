@@ -136,12 +136,11 @@ PickOutcome pickAndVerify(RobotInterface& robot, DepthSensor& sensor, const Iso3
       inHand = depthSupport(d, *aim, K, mask, held_B);
       onTable = depthSupport(d, *aim, K, mask, rest_B_points);
     }
-    char line[160];
-    std::snprintf(line, sizeof(line),
-                  "after the lift: %.0f %% of the object's points in view borne "
-                  "out in the hand, %.0f %% where it rested",
-                  100 * inHand, 100 * onTable);
-    log(line);
+    auto percent = [](double f) {
+      return f < 0 ? std::string("none in view") : std::to_string(int(std::lround(100 * f))) + " %";
+    };
+    log("after the lift: the object's points borne out in the hand " + percent(inHand) +
+        ", where it rested " + percent(onTable));
     if (!(inHand > 0.5) || onTable > 0.5) {
       robot.putDown();
       out.attempts.push_back("dropped");
@@ -363,6 +362,12 @@ MultiGraspResult scanFromTable(RobotInterface& robot, DepthSensor& sensor, const
   tt.points = int(near.size());
   PlaneFitOptions po = to.plane;
   po.expected_normal = T_O_B.linear() * Vec3::UnitZ();
+  // The table the robot's config declares, in O (the fit finds where it really is).
+  {
+    const Vec3 n = po.expected_normal;
+    const Vec3 onTable_O = T_O_B * Vec3(rest_B.x(), rest_B.y(), m.table().topZ());
+    po.expected_plane = Plane{n, -n.dot(onTable_O)};
+  }
   const std::optional<PlaneFit> fit = fitPlaneRansac(near, po);
   if (!fit) return finish("object_not_found");
   tt.table_O = fit->plane;
@@ -381,6 +386,27 @@ MultiGraspResult scanFromTable(RobotInterface& robot, DepthSensor& sensor, const
   log(line);
   if (tt.object_points < to.min_points) return finish("object_not_found");
 
+  // An object that the open hand cannot span in any direction is too large for it: its smallest
+  // extent (upright principal axes; along the table normal, from the table to its top) beyond
+  // 85 % of the open hand's extent along palm x (flat fingers: 328 mm for the BarrettHand).
+  tt.axes = principalAxesUpright(object, fit->plane.n);
+  {
+    const Aabb hb = HandGeometry(m, m.openHand(0.0), Iso3::Identity()).mesh().bounds();
+    const double span = hb.max.x() - hb.min.x();
+    // Height: the 99th percentile of the points' heights (as the axes' extents, 1 % trimmed:
+    // stray returns at depth edges).
+    std::vector<double> heights;
+    for (const Vec3& p : object) heights.push_back(fit->plane.distance(p));
+    std::nth_element(heights.begin(), heights.begin() + heights.size() * 99 / 100, heights.end());
+    const double height = heights[heights.size() * 99 / 100];
+    double smallest = std::numeric_limits<double>::infinity();
+    for (int k = 0; k < 3; ++k)
+      smallest = std::min(smallest, std::abs(tt.axes.axes.col(k).dot(fit->plane.n)) > 0.9
+                                        ? height
+                                        : tt.axes.max[k] - tt.axes.min[k]);
+    if (smallest > 0.85 * span)
+      return finish("object_too_large_for_hand");  // nothing fused: the model is empty
+  }
   // The volume: centred on the points' box, from the table plane to their top.
   const Vec3 n = fit->plane.n;
   Aabb box;
@@ -448,7 +474,6 @@ MultiGraspResult scanFromTable(RobotInterface& robot, DepthSensor& sensor, const
     }
     first = generateGrasps(m, firstModel, T_B_O_rest, robot.joints(), multi.grasp);
   }
-  tt.axes = principalAxesUpright(object, fit->plane.n);
   tt.tried = first.tried;
   tt.touching = first.touching;
   tt.stable = first.stable;
@@ -471,17 +496,7 @@ MultiGraspResult scanFromTable(RobotInterface& robot, DepthSensor& sensor, const
   tt.seconds = std::chrono::duration<double>(Clock::now() - t0).count();
   if (first.candidates.empty()) {
     all.model = extractModel(volume, options.mesh);
-    // No force-closure grasp at all: too large when even the object's smallest upright extent
-    // exceeds what the open hand spans (fingertip to fingertip along palm x), else its shape.
-    double span = 0;
-    {
-      const Aabb hb = HandGeometry(m, m.openHand(0.0), Iso3::Identity()).mesh().bounds();
-      span = hb.max.x() - hb.min.x();
-    }
-    const double smallest = (tt.axes.max - tt.axes.min).minCoeff();
-    if (tt.stable == 0)
-      return finish(smallest > 0.9 * span ? "object_too_large_for_hand" : "no_stable_grasp");
-    return finish("no_reachable_grasp");
+    return finish(tt.stable == 0 ? "no_stable_grasp" : "no_reachable_grasp");
   }
   std::vector<Vec3> seen_O;
   for (size_t k = 0; k < object.size(); k += 5) seen_O.push_back(object[k]);

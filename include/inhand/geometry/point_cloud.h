@@ -22,6 +22,14 @@ struct PlaneFitOptions {
   uint64_t seed = 1;        // for the hypotheses
   Vec3 expected_normal = Vec3::UnitZ();
   double max_tilt_deg = 25;  // hypotheses whose normal is farther from expected_normal lose
+  // Where the plane is expected (a robot's table, from its config): hypotheses through points
+  // farther than `max_offset_m` from it, or tilted more than `max_expected_tilt_deg` from
+  // expected_normal, lose (a plane through the table and the foot of a large object's face
+  // can otherwise collect more inliers than the little table left in view). Without it, the largest
+  // plane wins (a large object's top face can outnumber the table's visible points).
+  std::optional<Plane> expected_plane;
+  double max_offset_m = 0.05;
+  double max_expected_tilt_deg = 5;
 };
 
 struct PlaneFit {
