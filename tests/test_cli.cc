@@ -429,3 +429,35 @@ TEST(Cli, AnObjectTooLargeForTheHandEndsCleanly) {
   EXPECT_EQ(s["table_top"]["grasp_poses_stable"], 0);
   EXPECT_TRUE(fs::exists(out / "model.ply"));
 }
+
+// `eval --rest-poses`: each object is scanned in each of its requested stable poses (names
+// NAME@N), the pose reaching `inhand scan --rest-pose`; a pose an object does not have is
+// refused before any scan, naming the object and its count.
+TEST(Cli, EvalScansEachRequestedRestPose) {
+  test::TempDir dir;
+  writeTextAtomically(dir.path() / "quick.json", kQuickConfig);
+  const fs::path out = dir.path() / "eval";
+  Result r =
+      run("eval --objects builtin:cracker_box --planners random --seeds 1 --rest-poses 0,2 "
+          "--max-grasps 1 --max-views 1 --config " +
+              (dir.path() / "quick.json").string() + " --out " + out.string(),
+          dir);
+  ASSERT_EQ(r.code, 0) << r.output;
+  const std::string csv = readTextFile(out / "results.csv");
+  EXPECT_NE(csv.find("cracker_box@0,random,1,0,"), std::string::npos) << csv;
+  EXPECT_NE(csv.find("cracker_box@2,random,1,0,"), std::string::npos) << csv;
+  for (int pose : {0, 2}) {
+    const Json s = readJsonFile(out / ("runs/cracker_box@" + std::to_string(pose)) /
+                                "random/seed1/summary.json");
+    EXPECT_EQ(s["rest_pose"]["pose"].get<int>(), pose);
+    EXPECT_GT(s["rest_pose"]["probability"].get<double>(), 0.05);
+  }
+  r = run("eval --objects builtin:cracker_box --planners random --rest-poses 6 --out " +
+              (dir.path() / "e2").string(),
+          dir);
+  EXPECT_EQ(r.code, 1);
+  EXPECT_NE(r.output.find("builtin:cracker_box has 6 stable poses (0..5), not 6"),
+            std::string::npos)
+      << r.output;
+  EXPECT_FALSE(fs::exists(dir.path() / "e2"));
+}

@@ -65,12 +65,13 @@ int runScan(const ScanArgs& args);
 struct EvalArgs {
   std::string objects;  // comma-separated: builtin:NAME or mesh files
   std::string planners = "ig,ig-no-hand,ig-no-cost,random,area,unobserved-voxels,rear-side-entropy";
-  int seeds = 3;        // seeds 1..seeds per (object, planner)
-  std::string out;      // output directory (new or empty)
-  std::string config;   // scan options JSON passed to every run
-  int max_grasps = -1;  // passed to every run when >= 0
-  int max_views = -1;   // passed to every run when >= 0
-  int jobs = 0;         // runs at a time; 0: one per core
+  int seeds = 3;                     // seeds 1..seeds per (object, planner)
+  std::string out;                   // output directory (new or empty)
+  std::string config;                // scan options JSON passed to every run
+  int max_grasps = -1;               // passed to every run when >= 0
+  int max_views = -1;                // passed to every run when >= 0
+  int jobs = 0;                      // runs at a time; 0: one per core
+  std::string rest_poses = "as-is";  // comma-separated: as-is and/or stable pose indices
 };
 int runEval(const EvalArgs& args);
 // `inhand report DIR`: rebuilds DIR/report.html (a scan) or DIR/index.html (an eval).

@@ -23,6 +23,7 @@
 #include "inhand/core/file_util.h"
 #include "inhand/core/json_util.h"
 #include "inhand/geometry/builtin_objects.h"
+#include "inhand/geometry/stable_poses.h"
 #include "inhand/planning/view_selection.h"
 #include "inhand/report/html_report.h"
 
@@ -51,6 +52,7 @@ std::string objectName(const std::string& spec) {
 
 struct Run {
   std::string object, name, planner;
+  std::string rest_pose = "as-is";  // passed to `inhand scan --rest-pose`
   int seed = 0;
   fs::path dir, log;
   int status = -1;
@@ -276,14 +278,40 @@ int runEval(const EvalArgs& args) {
   for (const std::string& p : planners)
     if (std::find(known.begin(), known.end(), p) == known.end())
       throw Error("--planners: unknown planner \"" + p + "\"");
+  // Rest poses: as-is, or stable pose indices (each object must have that many).
+  const std::vector<std::string> restPoses = splitList(args.rest_poses);
+  if (restPoses.empty()) throw Error("--rest-poses: give as-is or stable pose indices (0, 1, ...)");
+  int maxPose = -1;
+  for (const std::string& rp : restPoses) {
+    if (rp == "as-is") continue;
+    char* end = nullptr;
+    const long n = std::strtol(rp.c_str(), &end, 10);
+    if (rp.empty() || *end != '\0' || n < 0 || n > 1000)
+      throw Error("--rest-poses: \"" + rp + "\" is neither as-is nor a stable pose's index");
+    maxPose = std::max(maxPose, int(n));
+  }
   std::map<std::string, std::string> names;  // short name → spec (must be unique)
   for (const std::string& o : objects) {
-    loadObject(o);  // fails here, naming the object, before any scan starts
+    const TriangleMesh mesh = loadObject(o);  // fails here, naming the object, before any scan
     const std::string n = objectName(o);
     if (names.count(n) && names[n] != o)
       throw Error("--objects: two objects share the name \"" + n + "\"");
     names[n] = o;
+    if (maxPose >= 0) {
+      const size_t count = stablePoses(mesh).size();
+      if (size_t(maxPose) >= count)
+        throw Error("--rest-poses: " + o + " has " + std::to_string(count) + " stable poses (0.." +
+                    std::to_string(count - 1) + "), not " + std::to_string(maxPose));
+    }
   }
+  // One entry per (object, rest pose): its name is the object's, with @N for pose N.
+  struct Entry {
+    std::string spec, name, rest_pose;
+  };
+  std::vector<Entry> entries;
+  for (const std::string& o : objects)
+    for (const std::string& rp : restPoses)
+      entries.push_back({o, objectName(o) + (rp == "as-is" ? "" : "@" + rp), rp});
   if (!args.config.empty()) readJsonFile(args.config);  // readable JSON (scan checks the keys)
 
   char self[4096];
@@ -293,12 +321,13 @@ int runEval(const EvalArgs& args) {
 
   StagedDirectory out(args.out);
   std::vector<Run> runs;
-  for (const std::string& o : objects)
+  for (const Entry& e : entries)
     for (const std::string& p : planners)
       for (int s = 1; s <= args.seeds; ++s) {
         Run r;
-        r.object = o;
-        r.name = objectName(o);
+        r.object = e.spec;
+        r.name = e.name;
+        r.rest_pose = e.rest_pose;
         r.planner = p;
         r.seed = s;
         const fs::path rel = fs::path("runs") / r.name / p / ("seed" + std::to_string(s));
@@ -308,8 +337,10 @@ int runEval(const EvalArgs& args) {
         runs.push_back(r);
       }
   const int jobs = args.jobs > 0 ? args.jobs : std::max(1u, std::thread::hardware_concurrency());
-  std::fprintf(stderr, "eval: %zu runs (%zu objects × %zu planners × %d seeds), %d at a time\n",
-               runs.size(), objects.size(), planners.size(), args.seeds, jobs);
+  std::fprintf(stderr,
+               "eval: %zu runs (%zu objects × %zu rest poses × %zu planners × %d seeds), %d at a "
+               "time\n",
+               runs.size(), objects.size(), restPoses.size(), planners.size(), args.seeds, jobs);
   std::atomic<size_t> next{0}, done{0};
   std::mutex printLock;
   auto worker = [&] {
@@ -317,7 +348,8 @@ int runEval(const EvalArgs& args) {
       Run& r = runs[i];
       std::vector<std::string> argv{
           self,           "scan",      "--object", r.object, "--out",
-          r.dir.string(), "--planner", r.planner,  "--seed", std::to_string(r.seed)};
+          r.dir.string(), "--planner", r.planner,  "--seed", std::to_string(r.seed),
+          "--rest-pose",  r.rest_pose};
       if (!args.config.empty()) argv.insert(argv.end(), {"--config", args.config});
       if (args.max_grasps >= 0)
         argv.insert(argv.end(), {"--max-grasps", std::to_string(args.max_grasps)});
@@ -359,11 +391,12 @@ int runEval(const EvalArgs& args) {
   std::ostringstream desc;
   desc << runs.size() << " runs: objects " << args.objects << "; planners " << args.planners
        << "; seeds 1.." << args.seeds;
+  if (args.rest_poses != "as-is") desc << "; --rest-poses " << args.rest_poses;
   if (args.max_grasps >= 0) desc << "; --max-grasps " << args.max_grasps;
   if (args.max_views >= 0) desc << "; --max-views " << args.max_views;
   if (!args.config.empty()) desc << "; --config " << args.config;
   std::vector<std::string> objectNames;
-  for (const std::string& o : objects) objectNames.push_back(objectName(o));
+  for (const Entry& e : entries) objectNames.push_back(e.name);
   writeTextAtomically(out.path() / "eval.json", Json({{"description", desc.str()},
                                                       {"objects", objectNames},
                                                       {"planners", planners},

@@ -100,6 +100,10 @@ int main(int argc, char** argv) {
   ev->add_option("--max-grasps", eval.max_grasps, "grasps per run at most (default: scan's)");
   ev->add_option("--max-views", eval.max_views, "next-best views per grasp at most");
   ev->add_option("--jobs", eval.jobs, "runs at a time (0: one per core)")->capture_default_str();
+  ev->add_option("--rest-poses", eval.rest_poses,
+                 "comma-separated: as-is and/or stable pose indices (0: the most probable); "
+                 "each object is scanned in each")
+      ->capture_default_str();
 
   std::string reportDir;
   auto* rp = app.add_subcommand("report", "rebuild the HTML report of a scan or an eval directory");

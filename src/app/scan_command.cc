@@ -167,6 +167,7 @@ void readOptions(const fs::path& file, AllOptions* o) {
   r.string("robot", &o->robot);
   r.num("voxel_m", &o->scan.voxel_m);
   r.num("volume_size_m", &o->scan.volume_size_m);
+  r.boolean("fit_volume", &o->scan.fit_volume);
   r.num("t_hand_m", &o->scan.t_hand_m);
   r.integer("carve_radius_px", &o->scan.carve_radius_px);
   std::string mode;
@@ -260,6 +261,7 @@ Json optionsJson(const AllOptions& o) {
   return {{"robot", o.robot},
           {"voxel_m", o.scan.voxel_m},
           {"volume_size_m", o.scan.volume_size_m},
+          {"fit_volume", o.scan.fit_volume},
           {"t_hand_m", o.scan.t_hand_m},
           {"carve_radius_px", o.scan.carve_radius_px},
           {"hand_mode", handModeName(o.scan.hand_mode)},
@@ -317,6 +319,23 @@ Json optionsJson(const AllOptions& o) {
 }
 
 }  // namespace
+
+// Every first-grasp pose tried, compactly: approach (palm z in O), roll, spread, preshape,
+// edge, ε, and what became of it.
+static Json posesJson(const std::vector<GraspPoseRecord>& poses) {
+  Json out = Json::array();
+  auto round4 = [](double v) { return std::round(v * 1e4) / 1e4; };
+  for (const GraspPoseRecord& p : poses)
+    out.push_back({{"approach_O",
+                    {round4(p.approach_O.x()), round4(p.approach_O.y()), round4(p.approach_O.z())}},
+                   {"roll_rad", round4(p.roll_rad)},
+                   {"spread", round4(p.spread)},
+                   {"preshape", p.preshape},
+                   {"edge", p.edge},
+                   {"epsilon", round4(p.epsilon)},
+                   {"result", p.result}});
+  return out;
+}
 
 int runScan(const ScanArgs& args) {
   const auto t0 = std::chrono::steady_clock::now();
@@ -509,6 +528,8 @@ int runScan(const ScanArgs& args) {
           {"hand_in_table", t.stable - t.table_free},
           {"unreachable", t.table_free - t.reachable}}},
         {"pick_up_attempts", t.attempts},
+        {"grasp_poses", posesJson(t.poses)},
+        {"volume", {{"size_m", t.volume_size_m}, {"voxel_m", t.voxel_m}}},
         {"seconds", t.seconds}};
   }
   const CameraIntrinsics& K = camera.intrinsics;

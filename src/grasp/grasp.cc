@@ -153,6 +153,18 @@ GraspGeneration generateGrasps(const RobotModel& robot, const TriangleMesh& mesh
         }
   }
   out.tried = int(poses.size());
+  out.poses.resize(poses.size());
+  for (size_t i = 0; i < poses.size(); ++i) {
+    GraspPoseRecord& rec = out.poses[i];
+    rec.approach_O = poses[i].R.col(2);
+    const Vec3 ref = poses[i].R.col(2).unitOrthogonal();
+    rec.roll_rad =
+        std::atan2(ref.cross(poses[i].R.col(0)).dot(poses[i].R.col(2)), ref.dot(poses[i].R.col(0)));
+    rec.spread = poses[i].spread;
+    rec.preshape = poses[i].preshape;
+    rec.edge = poses[i].edge;
+    rec.result = "no_contact";
+  }
   std::vector<std::optional<GraspCandidate>> found(poses.size());
   // The hand stops at the model and at the table: approaching, and closing its fingers.
   TriangleMesh obstacles = mesh;
@@ -229,7 +241,11 @@ GraspGeneration generateGrasps(const RobotModel& robot, const TriangleMesh& mesh
     for (const Vec3f& v : HandGeometry(robot, q, T_B_O * T).mesh().vertices)
       lowest = std::min(lowest, double(v.z()));
     const double rise = tableTop + 0.003 - lowest;
-    if (rise > 0 && (rise > maxRise || !slide(origin + rise * up))) return;
+    if (rise > 0 && rise > maxRise) {
+      out.poses[i].result = "table";
+      return;
+    }
+    if (rise > 0 && !slide(origin + rise * up)) return;
     // 0.06 rad steps: the fingertip moves 9 mm per step, less than a link is thick (20 mm).
     // A finger stopped by the table short of the model lifts the hand off it (5 mm steps).
     auto [closed, Tc] = closeOffTheTable(closer, modelCloser, q, T, 0.005, 0.03, 0.06);
@@ -243,16 +259,25 @@ GraspGeneration generateGrasps(const RobotModel& robot, const TriangleMesh& mesh
     HandContacts hc = handContacts(robot, c.q, T, samples, o.contact_m, o.contact_cell_m);
     c.contacts = std::move(hc.contacts);
     c.links_in_contact = hc.fingers_touching + int(hc.palm_touching);
-    if (c.links_in_contact < 2) return;
+    if (c.links_in_contact < 2) {
+      out.poses[i].result = "fewer_than_two_links";
+      return;
+    }
     c.epsilon =
         forceClosureEpsilon(c.contacts, centre, rho, o.friction, o.cone_edges, o.wrench_directions);
+    out.poses[i].epsilon = c.epsilon;
     found[i] = c;
   });
   std::vector<GraspCandidate> kept;
-  for (auto& f : found) {
+  std::vector<size_t> keptPose;
+  for (size_t i = 0; i < found.size(); ++i) {
+    auto& f = found[i];
     if (!f) continue;
     ++out.touching;
-    if (f->epsilon < o.min_epsilon) continue;
+    if (f->epsilon < o.min_epsilon) {
+      out.poses[i].result = "not_force_closure";
+      continue;
+    }
     ++out.stable;
     // The hand on the object resting on the table must stay above the table top.
     HandGeometry hand(robot, f->q, T_B_O * f->T_O_palm);
@@ -262,9 +287,13 @@ GraspGeneration generateGrasps(const RobotModel& robot, const TriangleMesh& mesh
         clear = false;
         break;
       }
-    if (!clear) continue;
+    if (!clear) {
+      out.poses[i].result = "hand_in_table";
+      continue;
+    }
     ++out.table_free;
     kept.push_back(std::move(*f));
+    keptPose.push_back(i);
   }
   // Reachable at the table (IK to the palm pose, arm and hand free of table and base).
   std::vector<Iso3> targets;
@@ -274,17 +303,33 @@ GraspGeneration generateGrasps(const RobotModel& robot, const TriangleMesh& mesh
     hands.push_back(c.q);
   }
   const auto reach = pickAndLift(robot, targets, hands, q_now, o.lift_m, 2, 7);
+  std::vector<size_t> candidatePose;
   for (size_t k = 0; k < kept.size(); ++k) {
-    if (!reach[k]) continue;
+    if (!reach[k]) {
+      out.poses[keptPose[k]].result = "unreachable";
+      continue;
+    }
+    out.poses[keptPose[k]].result = "kept";
+    candidatePose.push_back(keptPose[k]);
     kept[k].q = reach[k]->q;
     kept[k].q_lift = reach[k]->q_lift;
     kept[k].q_open = robot.withArm(kept[k].q_open, robot.arm(reach[k]->q));
     out.candidates.push_back(std::move(kept[k]));
   }
-  std::stable_sort(
-      out.candidates.begin(), out.candidates.end(),
-      [](const GraspCandidate& a, const GraspCandidate& b) { return a.epsilon > b.epsilon; });
-  if (int(out.candidates.size()) > o.max_candidates) out.candidates.resize(o.max_candidates);
+  std::vector<size_t> order(out.candidates.size());
+  for (size_t k = 0; k < order.size(); ++k) order[k] = k;
+  std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) {
+    return out.candidates[a].epsilon > out.candidates[b].epsilon;
+  });
+  std::vector<GraspCandidate> sorted;
+  for (size_t k = 0; k < order.size(); ++k) {
+    if (int(k) >= o.max_candidates) {
+      out.poses[candidatePose[order[k]]].result = "beyond_max_candidates";
+      continue;
+    }
+    sorted.push_back(std::move(out.candidates[order[k]]));
+  }
+  out.candidates = std::move(sorted);
   out.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return out;
 }

@@ -431,7 +431,19 @@ MultiGraspResult scanFromTable(RobotInterface& robot, DepthSensor& sensor, const
   objectBox.extend(onTable + top * n);
   objectBox.min.array() -= 0.005;
   objectBox.max.array() += 0.005;
-  TsdfVolume volume = makeScanVolume(centre_O, options);
+  // The volume fitted to the object (ScanOptions::fit_volume): as many voxels across as
+  // configured, over 1.5 times the object's largest extent plus 4 cm (at most volume_size_m), so
+  // a small object's thin walls get finer voxels at the same cost.
+  ScanOptions fitted = options;
+  if (options.fit_volume) {
+    const double extent = std::max((objectBox.max - objectBox.min).maxCoeff(), top);
+    const double size = std::min(options.volume_size_m, 1.5 * extent + 0.04);
+    fitted.voxel_m = options.voxel_m * size / options.volume_size_m;
+    fitted.volume_size_m = size;
+  }
+  tt.volume_size_m = fitted.volume_size_m;
+  tt.voxel_m = fitted.voxel_m;
+  TsdfVolume volume = makeScanVolume(centre_O, fitted);
   // Fuse: table pixels (on or below the plane) and robot pixels only carve.
   const auto tf = Clock::now();
   for (int f = 0; f < tt.frames; ++f) {
@@ -475,6 +487,7 @@ MultiGraspResult scanFromTable(RobotInterface& robot, DepthSensor& sensor, const
     first = generateGrasps(m, firstModel, T_B_O_rest, robot.joints(), multi.grasp);
   }
   tt.tried = first.tried;
+  tt.poses = first.poses;
   tt.touching = first.touching;
   tt.stable = first.stable;
   tt.table_free = first.table_free;
@@ -516,7 +529,7 @@ MultiGraspResult scanFromTable(RobotInterface& robot, DepthSensor& sensor, const
   rec.candidates = tt.reachable;
   rec.tried = tt.tried;
   rec.generation_s = tt.seconds;
-  runGrasps(robot, sensor, *achieved, centre_O, T_B_O_rest, options, multi, noise, progress, volume,
+  runGrasps(robot, sensor, *achieved, centre_O, T_B_O_rest, fitted, multi, noise, progress, volume,
             rec, out, objectBox);
   all.total_s = std::chrono::duration<double>(Clock::now() - t0).count();
   return out;

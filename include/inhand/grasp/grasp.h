@@ -84,8 +84,22 @@ struct GraspCandidate {
   int reachable_views = 0;  // views Alg. 1 could reach with this grasp
 };
 
+// What became of one candidate pose.
+struct GraspPoseRecord {
+  Vec3 approach_O = Vec3::Zero();  // palm z (the direction the hand moves in), frame O
+  double roll_rad = 0;             // palm x about it, from the approach's reference direction
+  double spread = 0, preshape = 0;
+  bool edge = false;
+  double epsilon = 0;  // when the closed hand touched with two links or more
+  // kept, no_contact (the hand met nothing or started in contact), table (the hand cannot clear
+  // the table), fewer_than_two_links, not_force_closure, hand_in_table, unreachable, or
+  // beyond_max_candidates
+  std::string result;
+};
+
 struct GraspGeneration {
   std::vector<GraspCandidate> candidates;  // stable, table-free, reachable; best ε first
+  std::vector<GraspPoseRecord> poses;      // every pose tried, in generation order
   int tried = 0;                           // (approach, roll, spread) poses tried
   int touching = 0;                        // with ≥ 2 links in contact
   int stable = 0;                          // of those, force closure with ε ≥ min_epsilon

@@ -35,6 +35,8 @@ struct TableTopRecord {
   // closed hand touches with two links or more, of those force closure, clear of the table, and
   // reachable; then the pick-up attempts in order (picked, no_contact, empty_hand, dropped).
   int tried = 0, touching = 0, stable = 0, table_free = 0, reachable = 0;
+  std::vector<GraspPoseRecord> poses;     // every pose tried and what became of it
+  double volume_size_m = 0, voxel_m = 0;  // the volume as fitted to the object
   std::vector<std::string> attempts;
   double seconds = 0;
 };

@@ -27,8 +27,12 @@ bool parseHandMode(const std::string& s, HandMode* out);
 struct ScanOptions {
   double voxel_m = 0.002;       // volume voxel size, m
   double volume_size_m = 0.34;  // edge of the cubic volume around the grasped object, m
-  double t_hand_m = 0.01;       // measurements this close to the robot only carve (§IV), m
-  int carve_radius_px = 2;      // … this close to it in the image, too (lateral noise), pixels
+  // From the table (scanFromTable): fit the volume to the object seen there, a cube of 1.5 times
+  // its largest extent + 4 cm (at most volume_size_m) with as many voxels across as
+  // volume_size_m / voxel_m (the same cost; finer voxels for smaller objects).
+  bool fit_volume = true;
+  double t_hand_m = 0.01;   // measurements this close to the robot only carve (§IV), m
+  int carve_radius_px = 2;  // … this close to it in the image, too (lateral noise), pixels
   HandMode hand_mode = HandMode::kCarveAndEmpty;
   int initial_views = 4;    // the simple initial trajectory: this many directions
   int max_views = 20;       // Alg. 1 views per grasp at most (after the initial ones)
