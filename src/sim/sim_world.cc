@@ -180,9 +180,15 @@ std::pair<Iso3, JointVector> defaultGrasp(const RobotModel& model, const Triangl
   T.linear().col(2) = -approach;
   T.linear().col(0) = across;
   T.linear().col(1) = (-approach).cross(across);
-  // Palm face (the top of the palm link's geometry along palm z) just touching the object's face.
-  T.translation() = b.center() + (0.5 * size[middle] + model.palmFaceZ() + 0.002) * approach;
-  ClosingResult r = closeFingers(model, model.openHand(0.0), T, object);
+  // The open hand comes in along −approach from well outside until any link first touches the
+  // object (the knuckles stand proud of the palm face), then the fingers close.
+  const JointVector open = model.openHand(0.0);
+  T.translation() = b.center() + (0.5 * size.norm() + 0.3) * approach;
+  const FingerCloser closer(model, object);
+  const std::optional<double> travel = closer.freeTravel(open, T, -approach, 1.0);
+  INHAND_CHECK(travel && *travel < 1.0, "the default grasp's approach meets the object");
+  T.translation() -= *travel * approach;
+  ClosingResult r = closer.close(open, T);
   return {T, r.q};
 }
 

@@ -110,8 +110,9 @@ class SimSensor : public DepthSensor {
   DepthCameraOptions camera_;
 };
 
-// A default side grasp for simulation: the palm against the face across the object's
-// middle-length axis, fingers closing across its shortest axis, then closed to contact.
+// A default side grasp for simulation: the open hand comes at the face across the object's
+// middle-length axis until it first touches it, fingers closing across its shortest axis, then
+// closed to contact.
 // Returns T_O_palm and the joint vector (home arm, fingers at contact).
 std::pair<Iso3, JointVector> defaultGrasp(const RobotModel& model, const TriangleMesh& object_O);
 
