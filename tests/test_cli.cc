@@ -50,6 +50,32 @@ TEST(Cli, RenderThenFuseMakesAClosedColouredModel) {
   Aabb b = ply.mesh.bounds();
   EXPECT_NEAR(b.size().z(), 0.080, 0.006);
   EXPECT_NEAR(b.size().x(), 0.040, 0.006);
+  // --surface observed: the measured triangles alone (no σ = 5 cm vertex), an open mesh whose
+  // area is the closed model's minus its hole area. Two views leave holes.
+  fs::path two = dir.path() / "two";
+  ASSERT_EQ(run("render --object builtin:pill_bottle --views 2 --out " + two.string(), dir).code,
+            0);
+  ASSERT_EQ(
+      run("fuse --frames " + two.string() + " --out " + (dir.path() / "c.ply").string(), dir).code,
+      0);
+  fs::path observed = dir.path() / "o.ply";
+  r = run("fuse --frames " + two.string() + " --surface observed --out " + observed.string(), dir);
+  ASSERT_EQ(r.code, 0) << r.output;
+  const Json sc = readJsonFile(dir.path() / "c.json"), so = readJsonFile(dir.path() / "o.json");
+  EXPECT_EQ(so["surface"], "observed");
+  EXPECT_GT(sc["hole_area_m2"].get<double>(), 1e-3);
+  EXPECT_NEAR(so["surface_area_m2"].get<double>(),
+              sc["surface_area_m2"].get<double>() - sc["hole_area_m2"].get<double>(), 1e-6);
+  EXPECT_EQ(so["hole_area_m2"].get<double>(), 0.0);
+  EXPECT_FALSE(so["closed"].get<bool>());
+  EXPECT_LT(readPly(observed).mesh.vertices.size(),
+            readPly(dir.path() / "c.ply").mesh.vertices.size());
+  r = run("fuse --frames " + frames.string() + " --surface open --out " +
+              (dir.path() / "x.ply").string(),
+          dir);
+  EXPECT_EQ(r.code, 1);
+  EXPECT_NE(r.output.find("--surface: must be closed or observed"), std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(dir.path() / "x.ply"));
 }
 
 TEST(Cli, BadInputIsNamedAndLeavesNoOutput) {

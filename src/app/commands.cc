@@ -135,6 +135,8 @@ int runFuse(const FuseArgs& args) {
   if (args.out.empty()) throw Error("--out is required");
   fs::path outPath(args.out);
   if (outPath.extension() != ".ply") throw Error("--out " + args.out + ": must end in .ply");
+  if (args.surface != "closed" && args.surface != "observed")
+    throw Error("--surface: must be closed or observed, not \"" + args.surface + "\"");
   fs::path summaryPath =
       args.summary.empty() ? fs::path(outPath).replace_extension(".json") : fs::path(args.summary);
   if (!(args.margin_m >= 0)) throw Error("--margin must be >= 0");
@@ -185,6 +187,7 @@ int runFuse(const FuseArgs& args) {
   double loadAndIntegrateS = secondsSince(tIntegrate);
   auto tMesh = Clock::now();
   ObjectModel model = extractModel(volume, mo);
+  if (args.surface == "observed") model = model.observedSurface();
   double meshS = secondsSince(tMesh);
   if (model.mesh.empty())
     throw Error(dir.string() +
@@ -196,6 +199,7 @@ int runFuse(const FuseArgs& args) {
   summary["frames"] = set.frames.size();
   summary["vertices"] = model.mesh.vertices.size();
   summary["triangles"] = model.mesh.triangles.size();
+  summary["surface"] = args.surface;
   summary["closed"] = model.mesh.isClosed();
   summary["mean_entropy"] = model.meanEntropy();
   summary["observed_fraction"] = model.observedAreaFraction();

@@ -28,6 +28,7 @@ struct FuseArgs {
   double margin_m = 0.02;                       // auto bounds: margin around the measured points
   double memory_mb = 2048;                      // volume memory budget
   double hole_sigma_m = 0.05;                   // σ of never-observed surface
+  std::string surface = "closed";  // closed (hole-filled, the paper's) or observed (measured only)
 };
 
 struct SnapshotArgs {

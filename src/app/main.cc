@@ -48,6 +48,10 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   f->add_option("--hole-sigma", fuse.hole_sigma_m, "sigma of never-observed surface, m")
       ->capture_default_str();
+  f->add_option("--surface", fuse.surface,
+                "closed: the model closed over what was never seen (hole-filled, red); observed: "
+                "the measured surface alone (an open mesh)")
+      ->capture_default_str();
 
   inhand::app::SnapshotArgs snap;
   auto* s =

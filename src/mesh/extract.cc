@@ -60,6 +60,27 @@ double ObjectModel::holeArea() const {
   return hole;
 }
 
+ObjectModel ObjectModel::observedSurface() const {
+  ObjectModel out;
+  std::vector<int> index(mesh.vertices.size(), -1);
+  for (const Tri& f : mesh.triangles) {
+    if (!(observed[f[0]] && observed[f[1]] && observed[f[2]])) continue;
+    Tri g;
+    for (int k = 0; k < 3; ++k) {
+      int& i = index[f[k]];
+      if (i < 0) {
+        i = int(out.mesh.vertices.size());
+        out.mesh.vertices.push_back(mesh.vertices[f[k]]);
+        out.variance.push_back(variance[f[k]]);
+        out.observed.push_back(1);
+      }
+      g[k] = i;
+    }
+    out.mesh.triangles.push_back(g);
+  }
+  return out;
+}
+
 namespace {
 
 // Marks (1) the unknown voxels 6-connected through unknown voxels to an observed voxel.

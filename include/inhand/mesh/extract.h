@@ -47,6 +47,9 @@ struct ObjectModel {
   double observedAreaFraction() const;
   // Area (m²) of triangles with at least one hole-filled vertex.
   double holeArea() const;
+  // The measured surface alone: the triangles whose three vertices are observed (an open mesh,
+  // as other fusion tools give), unused vertices dropped.
+  ObjectModel observedSurface() const;
 };
 
 ObjectModel extractModel(const TsdfVolume& volume, const MeshOptions& options = {});
