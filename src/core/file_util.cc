@@ -96,4 +96,14 @@ void StagedDirectory::commit() {
   committed_ = true;
 }
 
+fs::path resourceDirectory(const std::string& name, const fs::path& built_in) {
+  std::error_code ec;
+  const fs::path exe = fs::read_symlink("/proc/self/exe", ec);
+  if (!ec) {
+    const fs::path installed = exe.parent_path().parent_path() / "share" / "inhand" / name;
+    if (fs::is_directory(installed, ec)) return installed;
+  }
+  return built_in;
+}
+
 }  // namespace inhand

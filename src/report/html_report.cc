@@ -120,7 +120,7 @@ std::string buildPage(const fs::path& web, const std::string& title, const Json&
 }  // namespace
 
 fs::path webDirectory() {
-  fs::path dir = INHAND_WEB_DIR;
+  fs::path dir = resourceDirectory("web", INHAND_WEB_DIR);
   if (const char* env = std::getenv("INHAND_WEB_DIR"); env && *env) dir = env;
   for (const char* f : {"node_modules/three/build/three.module.min.js",
                         "node_modules/chart.js/dist/chart.umd.min.js", "template.html"})

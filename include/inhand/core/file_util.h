@@ -18,6 +18,11 @@ void writeTextAtomically(const fs::path& path, const std::string& text);
 // Reads a whole text file; throws Error naming the path when it is missing or unreadable.
 std::string readTextFile(const fs::path& path);
 
+// Where a resource folder `name` (data, web) is: beside an installed executable
+// (EXE_DIR/../share/inhand/NAME, as `cmake --install` lays it out) when that exists, else
+// `built_in` (the source tree the program was built from).
+fs::path resourceDirectory(const std::string& name, const fs::path& built_in);
+
 // A directory that is filled in a temporary sibling and renamed into place on commit().
 // Without commit() (an exception, an early return) the temporary is removed.
 class StagedDirectory {

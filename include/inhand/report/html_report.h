@@ -8,7 +8,8 @@
 
 namespace inhand {
 
-// Where the web assets are: $INHAND_WEB_DIR when set, else the source tree's web/. Throws Error
+// Where the web assets are: $INHAND_WEB_DIR when set, else share/inhand/web beside an installed
+// executable, else the source tree's web/. Throws Error
 // (saying how to install them) when the npm packages are missing.
 std::filesystem::path webDirectory();
 
