@@ -80,8 +80,8 @@ double depthSupport(const DepthImage& d, const Iso3& T_B_C, const CameraIntrinsi
 struct PickOutcome {
   std::optional<Iso3> achieved;
   const GraspCandidate* picked = nullptr;
-  std::vector<std::string>
-      attempts;  // per candidate tried: picked, no_contact, empty_hand, dropped
+  // Per candidate tried: picked, no_contact, empty_hand or dropped.
+  std::vector<std::string> attempts;
 };
 template <typename Usable>
 PickOutcome pickAndVerify(RobotInterface& robot, DepthSensor& sensor, const Iso3& T_B_O_rest,
