@@ -19,10 +19,12 @@ for name in sorted(os.listdir(runs)):
     if os.path.exists(path):
         s = json.load(open(path))
     grasps = len(s.get("grasps", []))
+    attempts = s.get("table_top", {}).get("pick_up_attempts", [])
     rows.append({
         "object": run,
         "exit": status,
         "first_grasp": "yes" if grasps > 0 else "no",
+        "pick_attempts": len(attempts),
         "grasps": grasps,
         "views": len(s.get("views", [])),
         "coverage_pct": "%.1f" % (100 * s["coverage"]) if "coverage" in s else "",
@@ -30,7 +32,7 @@ for name in sorted(os.listdir(runs)):
         "seconds": "%.0f" % float(seconds or 0),
         "termination": s.get("termination", "(no summary)"),
     })
-keys = ["object", "exit", "first_grasp", "grasps", "views", "coverage_pct", "accuracy_mm",
+keys = ["object", "exit", "first_grasp", "pick_attempts", "grasps", "views", "coverage_pct", "accuracy_mm",
         "seconds", "termination"]
 with open(os.path.join(out, "results.csv.tmp"), "w", newline="") as f:
     w = csv.DictWriter(f, keys)
@@ -41,11 +43,14 @@ n = len(rows)
 first = sum(r["first_grasp"] == "yes" for r in rows)
 cov97 = sum(r["coverage_pct"] != "" and float(r["coverage_pct"]) >= 97 for r in rows)
 le3 = sum(r["grasps"] <= 3 for r in rows)
+picks = sum(r["pick_attempts"] for r in rows)
+firstHeld = sum(r["pick_attempts"] == 1 and r["first_grasp"] == "yes" for r in rows)
 with open(os.path.join(out, "results.md.tmp"), "w") as f:
     f.write("| " + " | ".join(keys) + " |\n|" + "---|" * len(keys) + "\n")
     for r in rows:
         f.write("| " + " | ".join(str(r[k]) for k in keys) + " |\n")
     f.write("\n%d objects: first grasp on %d (%.0f %%), coverage >= 97 %% on %d (%.0f %%), "
-            "<= 3 grasps on %d.\n" % (n, first, 100.0 * first / max(n, 1), cov97,
-                                      100.0 * cov97 / max(n, 1), le3))
+            "<= 3 grasps on %d; %d first-grasp pick-up attempts, the first candidate held on %d.\n"
+            % (n, first, 100.0 * first / max(n, 1), cov97, 100.0 * cov97 / max(n, 1), le3, picks,
+               firstHeld))
 os.replace(os.path.join(out, "results.md.tmp"), os.path.join(out, "results.md"))
