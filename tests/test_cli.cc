@@ -91,6 +91,19 @@ TEST(Cli, BadInputIsNamedAndLeavesNoOutput) {
               "/nonexistent/x.obj");
   expectError("render --object builtin:mug --views 0 --out " + (dir.path() / "a").string(),
               "--views");
+  // Rest poses: a flat mesh has none; an index beyond the object's count is refused.
+  TriangleMesh flat;
+  flat.vertices = {{0, 0, 0}, {0.1f, 0, 0}, {0, 0.1f, 0}, {0.1f, 0.1f, 0}};
+  flat.triangles = {{0, 1, 2}, {1, 3, 2}};
+  writePly(dir.path() / "flat.ply", flat);
+  expectError("scan --object " + (dir.path() / "flat.ply").string() + " --rest-pose 0 --out " +
+                  (dir.path() / "a").string(),
+              "flat.ply: the mesh spans no volume");
+  expectError("scan --object builtin:coffee_can --rest-pose 3 --out " + (dir.path() / "a").string(),
+              "builtin:coffee_can has 3 stable poses (0..2), not 3");
+  expectError(
+      "scan --object builtin:coffee_can --rest-pose on-side --out " + (dir.path() / "a").string(),
+      "--rest-pose: must be as-is or a stable pose's index");
   expectError(
       "render --object builtin:mug --views 3 --range 0.1 --out " + (dir.path() / "a").string(),
       "--range");
@@ -104,11 +117,12 @@ TEST(Cli, BadInputIsNamedAndLeavesNoOutput) {
               "frames.json");
   expectError("fuse --frames x --out m.txt", ".ply");
   expectError("render --object builtin:mug --views 3", "--out");  // CLI11 usage error
-  // Nothing was left behind: only the broken input directory.
+  // Nothing was left behind: only the inputs (the broken frames directory, the flat mesh).
   std::vector<std::string> left;
   for (const auto& e : fs::directory_iterator(dir.path()))
     left.push_back(e.path().filename().string());
-  EXPECT_EQ(left, std::vector<std::string>{"broken"});
+  std::sort(left.begin(), left.end());
+  EXPECT_EQ(left, (std::vector<std::string>{"broken", "flat.ply"}));
 }
 
 TEST(Cli, VolumeOverBudgetIsRefusedWithSize) {

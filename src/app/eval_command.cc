@@ -298,7 +298,12 @@ int runEval(const EvalArgs& args) {
       throw Error("--objects: two objects share the name \"" + n + "\"");
     names[n] = o;
     if (maxPose >= 0) {
-      const size_t count = stablePoses(mesh).size();
+      size_t count = 0;
+      try {
+        count = stablePoses(mesh).size();
+      } catch (const Error& e) {
+        throw Error("--rest-poses: " + o + ": " + e.what());
+      }
       if (size_t(maxPose) >= count)
         throw Error("--rest-poses: " + o + " has " + std::to_string(count) + " stable poses (0.." +
                     std::to_string(count - 1) + "), not " + std::to_string(maxPose));

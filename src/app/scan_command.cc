@@ -372,7 +372,12 @@ int runScan(const ScanArgs& args) {
     if (args.rest_pose.empty() || *end != '\0' || n < 0)
       throw Error("--rest-pose: must be as-is or a stable pose's index (0, 1, ...), not \"" +
                   args.rest_pose + "\"");
-    const std::vector<StablePose> poses = stablePoses(object);
+    std::vector<StablePose> poses;
+    try {
+      poses = stablePoses(object);
+    } catch (const Error& e) {
+      throw Error("--rest-pose: " + args.object + ": " + e.what());
+    }
     if (n >= long(poses.size()))
       throw Error("--rest-pose: " + args.object + " has " + std::to_string(poses.size()) +
                   " stable poses (0.." + std::to_string(poses.size() - 1) + "), not " +

@@ -141,7 +141,8 @@ std::vector<StablePose> stablePoses(const TriangleMesh& mesh) {
   std::vector<Vec3> points;
   for (const Vec3f& v : mesh.vertices) points.push_back(v.cast<double>());
   const ConvexHull hull = convexHull(points);
-  if (hull.triangles.empty()) throw Error("stable poses: the mesh spans no volume");
+  if (hull.triangles.empty())
+    throw Error("the mesh spans no volume (flat or fewer than 4 distinct points): no stable poses");
   // The centre of mass: of the enclosed solid when the mesh encloses a volume (a closed mesh),
   // else of the hull.
   Vec3 com = centreOfMass(mesh);
