@@ -11,6 +11,7 @@
 #include "inhand/robot/collision.h"
 #include "inhand/robot/ik.h"
 #include "inhand/robot/reachability.h"
+#include "inhand/robot/wrench.h"
 #include "test_util.h"
 
 using namespace inhand;
@@ -595,4 +596,41 @@ TEST(RobotConfig, ErrorsNameTheField) {
   c = base;
   c["urdf"] = (dir.path() / "bad.urdf").string();
   expectError(c, "malformed URDF");
+}
+
+// A flat object on a table (a disc 15 mm thick, Ø 120 mm), the hand coming down on it with its
+// fingers spread wider than the disc (preshape 25 %, 35° of flexion): the fingertips meet the
+// table first; closing against object and table, they touch nothing of the disc; closeOffTheTable
+// lifts the hand in 5 mm steps until the fingers close on the disc's rim, with the hand never in
+// the table.
+TEST(Hand, FingersStoppedByTheTableLiftTheHandUntilTheyGripAFlatObject) {
+  const RobotModel& m = wam();
+  // Frame O: palm z (the approach) is +z; the table's face at z = 0.30, the disc on it.
+  const TriangleMesh table =
+      transformed(makeBox(Vec3(0.8, 0.8, 0.05)), Iso3(Eigen::Translation3d(0, 0, 0.325)));
+  const TriangleMesh disc =
+      transformed(makeCylinder(0.06, 0.015, 64), Iso3(Eigen::Translation3d(0, 0, 0.2925)));
+  TriangleMesh both = table;
+  both.append(disc);
+  const FingerCloser closeBoth(m, both), closeDisc(m, disc), closeTable(m, table);
+  const JointVector q = m.preshapedHand(0.0, 0.25);
+  const std::optional<double> travel =
+      closeBoth.freeTravel(q, Iso3::Identity(), Vec3::UnitZ(), 0.5);
+  ASSERT_TRUE(travel && *travel < 0.5);
+  const Iso3 T(Eigen::Translation3d(0, 0, *travel));
+  const std::vector<SurfacePoint> samples = surfaceSamples(disc, 0.003);
+  // Plain closing: the table stops the fingertips before they reach the disc.
+  const ClosingResult plain = closeBoth.close(q, T, 0.02, 1e-4);
+  EXPECT_LT(handContacts(m, plain.q, T, samples, 0.003, 0.01).fingers_touching, 2);
+  // Lifting off the table: the fingers grip the rim, and the hand is out of the table.
+  const auto [closed, lifted] = closeOffTheTable(closeBoth, closeDisc, q, T, 0.005, 0.03, 0.02);
+  const double lift = T.translation().z() - lifted.translation().z();
+  EXPECT_GT(lift, 0.004);
+  EXPECT_LE(lift, 0.03 + 1e-9);
+  const HandContacts hc = handContacts(m, closed.q, lifted, samples, 0.003, 0.01);
+  EXPECT_GE(hc.fingers_touching, 2);
+  Iso3 clear = lifted;
+  clear.translation().z() -= 0.001;  // within the bisection tolerance of touching
+  EXPECT_FALSE(closeTable.handTouches(closed.q, clear));
+  EXPECT_GT(forceClosureEpsilon(hc.contacts, Vec3(0, 0, 0.2925), 0.06, 0.5, 8, 1000), 0);
 }
