@@ -534,6 +534,7 @@ int runScan(const ScanArgs& args) {
           {"hand_in_table", t.stable - t.table_free},
           {"unreachable", t.table_free - t.reachable}}},
         {"pick_up_attempts", t.attempts},
+        {"pick_up_poses", t.attempt_poses},
         {"grasp_poses", posesJson(t.poses)},
         {"volume", {{"size_m", t.volume_size_m}, {"voxel_m", t.voxel_m}}},
         {"seconds", t.seconds}};

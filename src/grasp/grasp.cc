@@ -254,6 +254,7 @@ GraspGeneration generateGrasps(const RobotModel& robot, const TriangleMesh& mesh
     c.T_O_palm = T;
     c.q = closed.q;
     c.q_open = q;
+    c.pose = i;
     // Contacts: model surface samples near the closed hand (a finger stopped by the table
     // touches nothing).
     HandContacts hc = handContacts(robot, c.q, T, samples, o.contact_m, o.contact_cell_m);

@@ -80,8 +80,10 @@ double depthSupport(const DepthImage& d, const Iso3& T_B_C, const CameraIntrinsi
 struct PickOutcome {
   std::optional<Iso3> achieved;
   const GraspCandidate* picked = nullptr;
-  // Per candidate tried: picked, no_contact, empty_hand or dropped.
+  // Per candidate tried: picked, no_contact, empty_hand or dropped, and the candidate's pose
+  // index (GraspCandidate::pose).
   std::vector<std::string> attempts;
+  std::vector<int> attempt_poses;
 };
 template <typename Usable>
 PickOutcome pickAndVerify(RobotInterface& robot, DepthSensor& sensor, const Iso3& T_B_O_rest,
@@ -94,6 +96,7 @@ PickOutcome pickAndVerify(RobotInterface& robot, DepthSensor& sensor, const Iso3
   PickOutcome out;
   for (const GraspCandidate& c : candidates) {
     if (!usable(c)) break;
+    out.attempt_poses.push_back(c.pose);
     std::optional<Iso3> achieved = robot.pickUp(c.T_O_palm, c.q_open);
     if (!achieved) {
       out.attempts.push_back("no_contact");
@@ -517,6 +520,7 @@ MultiGraspResult scanFromTable(RobotInterface& robot, DepthSensor& sensor, const
       robot, sensor, T_B_O_rest, seen_O, first.candidates,
       [](const GraspCandidate&) { return true; }, options, noise, log);
   tt.attempts = pick.attempts;
+  tt.attempt_poses = pick.attempt_poses;
   if (!pick.achieved) {
     all.model = extractModel(volume, options.mesh);
     return finish("pick_up_failed");

@@ -38,6 +38,7 @@ struct TableTopRecord {
   std::vector<GraspPoseRecord> poses;     // every pose tried and what became of it
   double volume_size_m = 0, voxel_m = 0;  // the volume as fitted to the object
   std::vector<std::string> attempts;
+  std::vector<int> attempt_poses;  // the pose (index into `poses`) of each attempt
   double seconds = 0;
 };
 
