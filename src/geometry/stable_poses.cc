@@ -143,24 +143,7 @@ std::vector<StablePose> stablePoses(const TriangleMesh& mesh) {
   const ConvexHull hull = convexHull(points);
   if (hull.triangles.empty())
     throw Error("the mesh spans no volume (flat or fewer than 4 distinct points): no stable poses");
-  // The centre of mass: of the enclosed solid when the mesh encloses a volume (a closed mesh),
-  // else of the hull.
-  Vec3 com = centreOfMass(mesh);
-  {
-    TriangleMesh h;
-    for (const Vec3& v : hull.vertices) h.vertices.push_back(v.cast<float>());
-    for (const auto& t : hull.triangles) h.triangles.push_back({t[0], t[1], t[2]});
-    bool inside = true;
-    for (const auto& t : hull.triangles) {
-      const Vec3 n = (hull.vertices[t[1]] - hull.vertices[t[0]])
-                         .cross(hull.vertices[t[2]] - hull.vertices[t[0]])
-                         .normalized();
-      if (n.dot(com - hull.vertices[t[0]]) > 0) inside = false;
-    }
-    if (!inside) com = centreOfMass(h);
-  }
-  // Facets: hull triangles merged over shared edges when coplanar (normals within 1e-4 rad,
-  // planes within 1e-6 of the size).
+  // Hull triangle normals (outward).
   const size_t nt = hull.triangles.size();
   const double size = (mesh.bounds().size()).maxCoeff();
   std::vector<Vec3> n(nt);
@@ -170,8 +153,23 @@ std::vector<StablePose> stablePoses(const TriangleMesh& mesh) {
     n[t] = (hull.vertices[T[1]] - hull.vertices[T[0]])
                .cross(hull.vertices[T[2]] - hull.vertices[T[0]])
                .normalized();
-    d[t] = n[t].dot(hull.vertices[T[0]] - com);  // distance of the plane from the COM
   }
+  // The centre of mass: of the enclosed solid when it lies inside the hull (a closed mesh), else
+  // of the hull.
+  Vec3 com = centreOfMass(mesh);
+  bool inside = true;
+  for (size_t t = 0; t < nt; ++t)
+    if (n[t].dot(com - hull.vertices[hull.triangles[t][0]]) > 0) inside = false;
+  if (!inside) {
+    TriangleMesh h;
+    for (const Vec3& v : hull.vertices) h.vertices.push_back(v.cast<float>());
+    for (const auto& t : hull.triangles) h.triangles.push_back({t[0], t[1], t[2]});
+    com = centreOfMass(h);
+  }
+  for (size_t t = 0; t < nt; ++t)  // distance of each plane from the COM
+    d[t] = n[t].dot(hull.vertices[hull.triangles[t][0]] - com);
+  // Facets: hull triangles merged over shared edges when coplanar (normals within 1e-4 rad,
+  // planes within 1e-6 of the size).
   std::map<std::pair<int, int>, int> edgeFace;
   for (size_t t = 0; t < nt; ++t)
     for (int k = 0; k < 3; ++k)

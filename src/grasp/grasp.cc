@@ -270,7 +270,6 @@ GraspGeneration generateGrasps(const RobotModel& robot, const TriangleMesh& mesh
     found[i] = c;
   });
   std::vector<GraspCandidate> kept;
-  std::vector<size_t> keptPose;
   for (size_t i = 0; i < found.size(); ++i) {
     auto& f = found[i];
     if (!f) continue;
@@ -294,7 +293,6 @@ GraspGeneration generateGrasps(const RobotModel& robot, const TriangleMesh& mesh
     }
     ++out.table_free;
     kept.push_back(std::move(*f));
-    keptPose.push_back(i);
   }
   // Reachable at the table (IK to the palm pose, arm and hand free of table and base).
   std::vector<Iso3> targets;
@@ -304,33 +302,23 @@ GraspGeneration generateGrasps(const RobotModel& robot, const TriangleMesh& mesh
     hands.push_back(c.q);
   }
   const auto reach = pickAndLift(robot, targets, hands, q_now, o.lift_m, 2, 7);
-  std::vector<size_t> candidatePose;
   for (size_t k = 0; k < kept.size(); ++k) {
     if (!reach[k]) {
-      out.poses[keptPose[k]].result = "unreachable";
+      out.poses[kept[k].pose].result = "unreachable";
       continue;
     }
-    out.poses[keptPose[k]].result = "kept";
-    candidatePose.push_back(keptPose[k]);
+    out.poses[kept[k].pose].result = "kept";
     kept[k].q = reach[k]->q;
     kept[k].q_lift = reach[k]->q_lift;
     kept[k].q_open = robot.withArm(kept[k].q_open, robot.arm(reach[k]->q));
     out.candidates.push_back(std::move(kept[k]));
   }
-  std::vector<size_t> order(out.candidates.size());
-  for (size_t k = 0; k < order.size(); ++k) order[k] = k;
-  std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) {
-    return out.candidates[a].epsilon > out.candidates[b].epsilon;
-  });
-  std::vector<GraspCandidate> sorted;
-  for (size_t k = 0; k < order.size(); ++k) {
-    if (int(k) >= o.max_candidates) {
-      out.poses[candidatePose[order[k]]].result = "beyond_max_candidates";
-      continue;
-    }
-    sorted.push_back(std::move(out.candidates[order[k]]));
-  }
-  out.candidates = std::move(sorted);
+  std::stable_sort(
+      out.candidates.begin(), out.candidates.end(),
+      [](const GraspCandidate& a, const GraspCandidate& b) { return a.epsilon > b.epsilon; });
+  for (size_t k = o.max_candidates; k < out.candidates.size(); ++k)
+    out.poses[out.candidates[k].pose].result = "beyond_max_candidates";
+  if (int(out.candidates.size()) > o.max_candidates) out.candidates.resize(o.max_candidates);
   out.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return out;
 }

@@ -66,9 +66,7 @@ HandContacts handContacts(const RobotModel& robot, const JointVector& q, const I
                           const std::vector<SurfacePoint>& samples, double contact_m,
                           double cell_m) {
   HandContacts out;
-  double palmTop = 0;
-  for (const Primitive& p : robot.links()[robot.tipLink()].collision)
-    palmTop = std::max(palmTop, p.toMesh().bounds().max.z());
+  const double palmTop = robot.palmFaceZ();
   const HandGeometry hand(robot, q, T_O_palm);
   const Iso3 T_palm_O = T_O_palm.inverse();
   Aabb hb = hand.mesh().bounds();

@@ -1,17 +1,15 @@
 #include "inhand/scan/multi_grasp.h"
 
+#include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
+#include <functional>
 #include <limits>
 
 #include "inhand/core/error.h"
 #include "inhand/robot/collision.h"
-#include "inhand/robot/ik.h"
 #include "inhand/sensor/render.h"
-
-#include <algorithm>
-#include <cmath>
-#include <functional>
 
 namespace inhand {
 
@@ -240,10 +238,9 @@ void runGrasps(RobotInterface& robot, DepthSensor& sensor, const Iso3& T_O_palm0
     }
     // The best candidate the robot manages to pick up and hold (a real hand may fail where the
     // model said it would not; the next one above t_q is tried). Lifted, not fused.
-    std::vector<Vec3> known_O;  // the observed surface so far
+    std::vector<Vec3> known_O;  // the observed surface so far, every 7th vertex
     for (size_t k = 0; k < all.model.mesh.vertices.size(); k += 7)
-      if (all.model.variance[k] < 0.25 * options.mesh.hole_sigma_m * options.mesh.hole_sigma_m)
-        known_O.push_back(all.model.mesh.vertices[k].cast<double>());
+      if (all.model.observed[k]) known_O.push_back(all.model.mesh.vertices[k].cast<double>());
     const PickOutcome pick = pickAndVerify(
         robot, sensor, T_B_O_rest, known_O, gen.candidates,
         [&](const GraspCandidate& c) { return c.quality >= multi.ranking.t_q; }, options, noise,
