@@ -443,8 +443,14 @@ TEST(Hand, OpenHandApertureEnvelopsObjectsOverOneHundredMillimetres) {
   const RobotModel& m = wam();
   const double Phi3 = 42 * M_PI / 180;
   const double expected = 2 * (0.05 + 0.07 + 0.05 * std::cos(Phi3) - 0.0095 * std::sin(Phi3));
-  const Vec3 t3 = dhFingertip(3, 0, 0), t1 = dhFingertip(1, 0, 0);
-  EXPECT_NEAR(t3.x() - t1.x(), expected, 1e-9);
+  // Fingertips of the URDF's open hand (flexion 0, spread 0), DH frame 4 in the distal links.
+  const std::vector<Iso3> T = m.linkPoses(m.openHand(0.0));
+  auto tip = [&](int finger) {
+    const int distal = m.linkIndex("bh_f" + std::to_string(finger) + "_distal");
+    return Vec3(T[m.tipLink()].inverse() * T[distal] * Vec3(0.05, 0.0095, 0));
+  };
+  EXPECT_NEAR(tip(3).x() - tip(1).x(), expected, 1e-6);
+  EXPECT_NEAR(tip(3).x() - tip(2).x(), expected, 1e-6);
   EXPECT_NEAR(m.palmFaceZ(), 0.076, 1e-8);
   const double reach = openHandReach(m);
   const double tipZ = m.palmFaceZ() + reach;

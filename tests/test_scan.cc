@@ -4,6 +4,7 @@
 #include <algorithm>
 
 #include "inhand/geometry/builtin_objects.h"
+#include "inhand/scan/multi_grasp.h"
 #include "inhand/scan/scan.h"
 #include "inhand/sim/sim_world.h"
 #include "test_util.h"
@@ -109,4 +110,42 @@ TEST(Scan, EndsOnItsOwnAndIsDeterministic) {
       EXPECT_GE(r.quality, o.planner.t_q);
     }
   EXPECT_GT(a.result.model.observedAreaFraction(), 0.6);
+}
+
+// Grasps that must hold, checked against the simulator's own record: with almost no friction
+// (μ = 0.1) most grasps of the cracker box let it fall at the lift. The scan decides from the
+// fingers and a depth frame only; the attempts it calls "dropped" are exactly the drops the
+// simulator made, and when it goes on the box is in the hand.
+TEST(Scan, DropsSeenInTheDepthFramesAreTheSimulatorsDrops) {
+  const TriangleMesh box = loadObject("builtin:cracker_box");
+  SimOptions so;
+  so.friction = 0.1;
+  so.frame_subsample = 10;
+  auto [T_O_palm, q] = defaultGrasp(wam(), box);
+  SimWorld world(wam(), box, T_O_palm, DepthCameraOptions{}, NoiseModelOptions{}, so);
+  world.held = false;
+  world.q = wam().home();
+  SimRobot robot(&world);
+  SimSensor sensor(&world, DepthCameraOptions{});
+  ScanOptions o = testOptions();
+  o.initial_views = 1;
+  o.max_views = 0;
+  MultiGraspOptions multi;
+  multi.max_grasps = 1;
+  multi.grasp.approaches = 32;
+  const MultiGraspResult r =
+      scanFromTable(robot, sensor, world.restPose(), o, multi, NoiseModelOptions{});
+  ASSERT_TRUE(r.table_top);
+  const std::vector<std::string>& attempts = r.table_top->attempts;
+  ASSERT_FALSE(attempts.empty());
+  const int dropped = int(std::count(attempts.begin(), attempts.end(), "dropped"));
+  EXPECT_GT(dropped, 0) << "with μ = 0.1 some grasp should fail";
+  EXPECT_EQ(dropped, world.drops);
+  if (attempts.back() == "picked") {
+    EXPECT_TRUE(world.held);
+    EXPECT_EQ(r.grasps.size(), 1u);
+  } else {
+    EXPECT_EQ(r.scan.termination, "pick_up_failed");
+    EXPECT_FALSE(world.held);
+  }
 }
