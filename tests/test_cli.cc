@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cstdlib>
 #include <fstream>
+#include <functional>
 
 #include "inhand/core/file_util.h"
 #include "inhand/core/json_util.h"
@@ -500,4 +501,58 @@ TEST(Cli, EvalScansEachRequestedRestPose) {
             std::string::npos)
       << r.output;
   EXPECT_FALSE(fs::exists(dir.path() / "e2"));
+}
+
+// `inhand scan` gives the same scan for the same seed as recorded in tests/data/scan_golden.json:
+// the views (direction, frames, quality), the grasps, the model's size and the figures of merit.
+// The record was written by this test with INHAND_WRITE_GOLDEN=1; rewrite it only for a change
+// that is meant to change the scan (and say so in the commit).
+TEST(Cli, ScanOfTheCrackerBoxMatchesTheRecordedScan) {
+  test::TempDir dir;
+  const fs::path config = dir.path() / "fast.json";
+  writeTextAtomically(config, R"({"voxel_m": 0.003, "planner": {"directions": 80, "rolls": 4},
+    "max_views": 3, "grasp": {"approaches": 32}})");
+  const fs::path out = dir.path() / "scan";
+  const Result r = run("scan --object builtin:cracker_box --max-grasps 2 --seed 3 --config " +
+                           config.string() + " --out " + out.string(),
+                       dir);
+  ASSERT_EQ(r.code, 0) << r.output;
+  const Json s = readJsonFile(out / "summary.json");
+  Json got;
+  for (const char* k : {"termination", "frames", "vertices", "triangles", "observed_fraction",
+                        "mean_entropy", "coverage", "view_evaluations"})
+    got[k] = s[k];
+  for (const Json& v : s["views"])
+    got["views"].push_back({{"direction_O", v["direction_O"]},
+                            {"frames", v["frames"]},
+                            {"quality", v["quality"]},
+                            {"grasp", v["grasp"]}});
+  for (const Json& g : s["grasps"]) got["grasps"].push_back(g["T_O_palm"]);
+  const PlyData ply = readPly(out / "model.ply");
+  Vec3 sum = Vec3::Zero();
+  for (const Vec3f& p : ply.mesh.vertices) sum += p.cast<double>();
+  got["vertex_sum"] = {sum.x(), sum.y(), sum.z()};
+  const fs::path golden = fs::path(INHAND_SOURCE_DIR) / "tests/data/scan_golden.json";
+  if (std::getenv("INHAND_WRITE_GOLDEN")) writeTextAtomically(golden, got.dump(1) + "\n");
+  const Json want = readJsonFile(golden);
+  // Numbers agree to 1e-6 (relative, or absolute near zero); everything else exactly.
+  std::function<void(const Json&, const Json&, const std::string&)> same =
+      [&](const Json& a, const Json& b, const std::string& at) {
+        if (a.is_number() && b.is_number()) {
+          const double x = a.get<double>(), y = b.get<double>();
+          EXPECT_LE(std::abs(x - y), 1e-6 * std::max(1.0, std::abs(y))) << at;
+        } else if (a.is_array() && b.is_array()) {
+          ASSERT_EQ(a.size(), b.size()) << at;
+          for (size_t i = 0; i < a.size(); ++i)
+            same(a[i], b[i], at + "[" + std::to_string(i) + "]");
+        } else if (a.is_object() && b.is_object()) {
+          for (auto it = b.begin(); it != b.end(); ++it) {
+            ASSERT_TRUE(a.contains(it.key())) << at << "." << it.key();
+            same(a[it.key()], it.value(), at + "." + it.key());
+          }
+        } else {
+          EXPECT_EQ(a, b) << at;
+        }
+      };
+  same(got, want, "summary");
 }
