@@ -95,7 +95,7 @@ TEST(Scan, EndsOnItsOwnAndIsDeterministic) {
   ScanOptions o = testOptions();
   o.max_views = 25;
   ScanRun a = scanCan(o, 7), b = scanCan(o, 7);
-  EXPECT_EQ(a.result.termination, "no_view_above_threshold");
+  EXPECT_EQ(a.result.termination, Termination::kNoViewAboveThreshold);
   ASSERT_EQ(a.result.views.size(), b.result.views.size());
   for (size_t i = 0; i < a.result.views.size(); ++i) {
     EXPECT_EQ(a.result.views[i].dir_O, b.result.views[i].dir_O) << i;
@@ -145,7 +145,7 @@ TEST(Scan, DropsSeenInTheDepthFramesAreTheSimulatorsDrops) {
     EXPECT_TRUE(world.held);
     EXPECT_EQ(r.grasps.size(), 1u);
   } else {
-    EXPECT_EQ(r.scan.termination, "pick_up_failed");
+    EXPECT_EQ(r.scan.termination, Termination::kPickUpFailed);
     EXPECT_FALSE(world.held);
   }
 }

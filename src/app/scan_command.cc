@@ -471,7 +471,7 @@ int runScan(const ScanArgs& args) {
   summary["robot"] = o.robot;
   summary["seed"] = args.seed;
   summary["planner"] = args.planner;
-  summary["termination"] = r.termination;
+  summary["termination"] = terminationName(r.termination);
   summary["coverage"] = sm.coverage;
   summary["accuracy_mm"] = {
       {"mean", sm.accuracy_mean_mm}, {"rms", sm.accuracy_rms_mm}, {"p95", sm.accuracy_p95_mm}};
@@ -498,7 +498,7 @@ int runScan(const ScanArgs& args) {
                       {"quality", g.quality},
                       {"stability_epsilon", std::isfinite(g.epsilon) ? Json(g.epsilon) : Json()},
                       {"views", g.views},
-                      {"termination", g.termination},
+                      {"termination", terminationName(g.termination)},
                       {"unknown_area_m2", g.hole_area_m2},
                       {"mean_entropy", g.mean_entropy},
                       {"generation_s", g.generation_s},
@@ -577,17 +577,26 @@ int runScan(const ScanArgs& args) {
   std::printf(
       "scan: %s: %zu grasps, %zu views, %d frames, %s; observed %.1f%% of the surface, "
       "coverage %.1f%% (%.0f mm), accuracy %.2f mm mean, mean entropy %.3f (%.1f s) -> %s\n",
-      args.object.c_str(), mr.grasps.size(), r.views.size(), r.frames, r.termination.c_str(),
-      100 * r.model.observedAreaFraction(), 100 * sm.coverage, 1000 * o.eval.tau_m,
-      sm.accuracy_mean_mm, r.model.meanEntropy(), r.total_s, args.out.c_str());
-  if (r.termination == "no_reachable_view") return 3;
-  if (r.termination == "no_reachable_grasp" || r.termination == "pick_up_failed" ||
-      r.termination == "object_too_large_for_hand" || r.termination == "no_stable_grasp")
-    return 4;
-  if (r.termination == "object_not_found" || r.termination == "object_out_of_view" ||
-      r.termination == "object_too_large_for_volume")
-    return 6;
-  return 0;
+      args.object.c_str(), mr.grasps.size(), r.views.size(), r.frames,
+      terminationName(r.termination).c_str(), 100 * r.model.observedAreaFraction(),
+      100 * sm.coverage, 1000 * o.eval.tau_m, sm.accuracy_mean_mm, r.model.meanEntropy(), r.total_s,
+      args.out.c_str());
+  // Exit status: 3 no view reachable, 4 no grasp, 6 no object to scan (docs/commands.md).
+  switch (r.termination) {
+    case Termination::kNoReachableView:
+      return 3;
+    case Termination::kNoReachableGrasp:
+    case Termination::kPickUpFailed:
+    case Termination::kObjectTooLargeForHand:
+    case Termination::kNoStableGrasp:
+      return 4;
+    case Termination::kObjectNotFound:
+    case Termination::kObjectOutOfView:
+    case Termination::kObjectTooLargeForVolume:
+      return 6;
+    default:
+      return 0;
+  }
 }
 
 }  // namespace inhand::app

@@ -9,6 +9,7 @@
 
 #include "inhand/core/error.h"
 #include "inhand/robot/collision.h"
+#include "inhand/scan/session.h"
 #include "inhand/sensor/render.h"
 
 namespace inhand {
@@ -69,7 +70,7 @@ double depthSupport(const DepthImage& d, const Iso3& T_B_C, const CameraIntrinsi
   return support + against == 0 ? -1.0 : double(support) / (support + against);
 }
 
-// Picks the object up with the first candidate (in order, those `usable` accepts) that the robot
+// Picks the object up with the first candidate (in order) that the robot
 // closes on, lifts, and by what it then observes holds. Fingers all closed to their limit mean
 // an empty hand. After the lift the camera looks at the hand: the object's points (`points_O`,
 // what the scan knows of its surface) carried by the hand as gripped must be borne out by the
@@ -83,17 +84,15 @@ struct PickOutcome {
   std::vector<std::string> attempts;
   std::vector<int> attempt_poses;
 };
-template <typename Usable>
 PickOutcome pickAndVerify(RobotInterface& robot, DepthSensor& sensor, const Iso3& T_B_O_rest,
                           const std::vector<Vec3>& points_O,
-                          const std::vector<GraspCandidate>& candidates, Usable usable,
-                          const ScanOptions& options, const NoiseModelOptions& noise,
+                          const std::vector<GraspCandidate>& candidates, const ScanOptions& options,
+                          const NoiseModelOptions& noise,
                           const std::function<void(const std::string&)>& log) {
   const RobotModel& m = robot.model();
   const RobotOccluders scenes(m);
   PickOutcome out;
   for (const GraspCandidate& c : candidates) {
-    if (!usable(c)) break;
     out.attempt_poses.push_back(c.pose);
     std::optional<Iso3> achieved = robot.pickUp(c.T_O_palm, c.q_open);
     if (!achieved) {
@@ -156,84 +155,56 @@ PickOutcome pickAndVerify(RobotInterface& robot, DepthSensor& sensor, const Iso3
   return out;
 }
 
-// The grasp loop from the first grasp on (the robot holds the object at T_O_palm0), into
-// `volume`; `next` describes the first grasp, `box_O` where the object is believed to lie for
+// The grasp loop from the first grasp on (the robot holds the object at T_O_palm0), over
+// `session`; `next` describes the first grasp, `box_O` where the object is believed to lie for
 // the first grasp's initial trajectory (empty: unknown).
-void runGrasps(RobotInterface& robot, DepthSensor& sensor, const Iso3& T_O_palm0,
-               const Vec3& centre_O, const Iso3& T_B_O_rest, const ScanOptions& options,
-               const MultiGraspOptions& multi, const NoiseModelOptions& noise,
-               const ScanProgress& progress, TsdfVolume& volume, GraspRecord next,
+void runGrasps(RobotInterface& robot, DepthSensor& sensor, ScanSession& session,
+               const Iso3& T_O_palm0, const Iso3& T_B_O_rest, GraspRecord next,
                MultiGraspResult& out, const Aabb& box_O) {
-  auto log = [&](const std::string& s) {
-    if (progress.log) progress.log(s);
-  };
-  const RobotModel& m = robot.model();
+  const MultiGraspOptions& multi = session.multiOptions();
+  auto log = [&](const std::string& s) { session.log(s); };
   ScanResult& all = out.scan;
-  const ViewPlanner ranker(m, sensor.camera(), noise, multi.ranking);
   Iso3 T_O_palm = T_O_palm0;
   next.T_O_palm = T_O_palm;
   for (int g = 0;; ++g) {
     log("grasp " + std::to_string(g + 1));
-    ScanOptions o = options;
-    if (g > 0) o.initial_views = 0;  // the model exists; Alg. 1 from the start
     next.q = robot.joints();
-    ScanResult r = scanSingleGrasp(robot, sensor, T_O_palm, centre_O, o, noise, progress, &volume,
-                                   g == 0 ? box_O : Aabb());
+    const size_t viewsBefore = session.views().size();
+    session.beginGrasp(T_O_palm, robot.joints(), g == 0 ? box_O : Aabb());
+    const Termination ended = runGraspViews(session, robot, sensor);
+    all.model = session.model();
+    all.planning_model = session.planningModel();
     GraspRecord rec = next;
-    rec.model = r.planning_model;  // at the planning stride: a quarter of the triangles
-    rec.views = int(r.views.size());
-    rec.termination = r.termination;
-    rec.hole_area_m2 = r.model.holeArea();
-    rec.mean_entropy = r.model.meanEntropy();
-    for (ViewRecord& v : r.views) all.views.push_back(v);
-    all.view_evaluations += r.view_evaluations;
-    all.view_refinements += r.view_refinements;
-    all.planning_s += r.planning_s;
-    all.fusion_s += r.fusion_s;
-    all.frames += r.frames;
-    all.model = std::move(r.model);
-    all.planning_model = std::move(r.planning_model);
+    rec.model = all.planning_model;  // at the planning stride: a quarter of the triangles
+    rec.views = int(session.views().size() - viewsBefore);
+    rec.termination = ended;
+    rec.hole_area_m2 = all.model.holeArea();
+    rec.mean_entropy = all.model.meanEntropy();
     out.grasps.push_back(rec);
     char line[200];
     std::snprintf(line, sizeof(line),
                   "grasp %d: %d views (%s), unknown area %.4f m², mean entropy %.3f", g + 1,
-                  rec.views, rec.termination.c_str(), rec.hole_area_m2, rec.mean_entropy);
+                  rec.views, terminationName(rec.termination).c_str(), rec.hole_area_m2,
+                  rec.mean_entropy);
     log(line);
-    if (r.termination == "no_reachable_view" && g == 0) {
-      all.termination = "no_reachable_view";
+    if (ended == Termination::kNoReachableView && g == 0) {
+      all.termination = Termination::kNoReachableView;
       break;
     }
     if (g + 1 >= multi.max_grasps) {
       // One grasp only: the scan ends as that grasp's views did.
-      all.termination = multi.max_grasps == 1 ? r.termination : "max_grasps";
+      all.termination = multi.max_grasps == 1 ? ended : Termination::kMaxGrasps;
       break;
     }
-    // Put down, then candidates on the model so far.
+    // Put down, then candidates on the model so far, ranked by eq. 9 with the hand there.
     if (!robot.putDown()) {
-      all.termination = "regrasp_unsupported";
+      all.termination = Termination::kRegraspUnsupported;
       break;
     }
-    GraspGeneration gen =
-        generateGrasps(m, all.planning_model.mesh, T_B_O_rest, robot.joints(), multi.grasp);
-    std::snprintf(line, sizeof(line),
-                  "grasp candidates: %d poses, %d touching, %d stable, %d clear of the table, %zu "
-                  "reachable (%.2f s)",
-                  gen.tried, gen.touching, gen.stable, gen.table_free, gen.candidates.size(),
-                  gen.seconds);
-    log(line);
-    if (gen.candidates.empty()) {
-      all.termination = "no_reachable_grasp";
-      break;
-    }
-    const double rankS = rankGrasps(ranker, all.planning_model, multi.grasp, &gen.candidates);
-    const GraspCandidate& best = gen.candidates.front();
-    std::snprintf(line, sizeof(line), "ranked %zu grasps in %.2f s: best quality %.4f, ε %.4f",
-                  gen.candidates.size(), rankS, best.quality, best.epsilon);
-    log(line);
-    // Candidates are ranked by eq. 9 (the ranking planner) whatever the view planner is, so its
-    // own t_q decides; a baseline view planner's threshold is in other units.
-    if (best.quality < multi.ranking.t_q) {
-      all.termination = "no_grasp_above_threshold";
+    session.endGrasp();
+    GraspPlan plan = session.planGrasps(T_B_O_rest, robot.joints());
+    if (plan.above_threshold == 0) {
+      all.termination = session.summary().termination;
       break;
     }
     // The best candidate the robot manages to pick up and hold (a real hand may fail where the
@@ -241,31 +212,37 @@ void runGrasps(RobotInterface& robot, DepthSensor& sensor, const Iso3& T_O_palm0
     std::vector<Vec3> known_O;  // the observed surface so far, every 7th vertex
     for (size_t k = 0; k < all.model.mesh.vertices.size(); k += 7)
       if (all.model.observed[k]) known_O.push_back(all.model.mesh.vertices[k].cast<double>());
-    const PickOutcome pick = pickAndVerify(
-        robot, sensor, T_B_O_rest, known_O, gen.candidates,
-        [&](const GraspCandidate& c) { return c.quality >= multi.ranking.t_q; }, options, noise,
-        log);
+    const std::vector<GraspCandidate> usable(plan.candidates.begin(),
+                                             plan.candidates.begin() + plan.above_threshold);
+    const PickOutcome pick = pickAndVerify(robot, sensor, T_B_O_rest, known_O, usable,
+                                           session.options(), session.noise(), log);
     if (!pick.achieved) {
-      all.termination = "pick_up_failed";
+      all.termination = Termination::kPickUpFailed;
       break;
     }
-    const GraspCandidate& best_ = *pick.picked;
-    const std::optional<Iso3> achieved = pick.achieved;
-    T_O_palm = *achieved;
+    T_O_palm = *pick.achieved;
     next = GraspRecord{};
-    next.T_O_palm = *achieved;
-    next.candidates = int(gen.candidates.size());
-    next.tried = gen.tried;
-    next.quality = best_.quality;
-    next.epsilon = best_.epsilon;
-    next.generation_s = gen.seconds;
-    next.ranking_s = rankS;
+    next.T_O_palm = T_O_palm;
+    next.candidates = int(plan.candidates.size());
+    next.tried = plan.generation.tried;
+    next.quality = pick.picked->quality;
+    next.epsilon = pick.picked->epsilon;
+    next.generation_s = plan.generation.seconds;
+    next.ranking_s = plan.ranking_s;
     next.attempts = pick.attempts;
-    for (const GraspCandidate& c : gen.candidates) {
+    for (const GraspCandidate& c : plan.candidates) {
       if (int(next.ranked.size()) >= multi.keep_ranked) break;
       next.ranked.push_back({c.T_O_palm, c.q, c.quality, c.epsilon});
     }
   }
+  session.finish(all.termination);
+  const ScanSession::Summary sum = session.summary();
+  all.views = session.views();
+  all.view_evaluations = sum.view_evaluations;
+  all.view_refinements = sum.view_refinements;
+  all.planning_s = sum.planning_s;
+  all.fusion_s = sum.fusion_s;
+  all.frames = sum.frames;
 }
 }  // namespace
 
@@ -290,11 +267,10 @@ MultiGraspResult scanMultiGrasp(RobotInterface& robot, DepthSensor& sensor, cons
                                 const ScanOptions& options, const MultiGraspOptions& multi,
                                 const NoiseModelOptions& noise, const ScanProgress& progress) {
   const auto t0 = Clock::now();
-  validate(options, multi);
-  TsdfVolume volume = makeScanVolume(centre_O, options);
+  ScanSession session(robot.model(), sensor.camera(), noise, options, multi, centre_O);
+  session.setProgress(progress);
   MultiGraspResult out;
-  runGrasps(robot, sensor, T_O_palm0, centre_O, T_B_O_rest, options, multi, noise, progress, volume,
-            GraspRecord{}, out, Aabb());
+  runGrasps(robot, sensor, session, T_O_palm0, T_B_O_rest, GraspRecord{}, out, Aabb());
   out.scan.total_s = std::chrono::duration<double>(Clock::now() - t0).count();
   return out;
 }
@@ -314,18 +290,18 @@ MultiGraspResult scanFromTable(RobotInterface& robot, DepthSensor& sensor, const
   out.table_top = TableTopRecord{};
   TableTopRecord& tt = *out.table_top;
   ScanResult& all = out.scan;
-  auto finish = [&](const std::string& termination) {
+  auto finish = [&](Termination termination) {
     all.termination = termination;
     all.total_s = std::chrono::duration<double>(Clock::now() - t0).count();
     tt.seconds = tt.seconds > 0 ? tt.seconds : all.total_s;
-    log("table top: " + termination);
+    log("table top: " + terminationName(termination));
     return out;
   };
 
   // Frames of the object where it rests, the robot as it stands (its own pixels only carve).
   const Vec3 rest_B = T_B_O_rest.translation();
   const std::optional<Iso3> aim = m.camera().aimAt(rest_B + Vec3(0, 0, to.aim_height_m));
-  if (!aim) return finish("object_out_of_view");
+  if (!aim) return finish(Termination::kObjectOutOfView);
   sensor.setPose(*aim);
   const RobotOccluders scenes(m);
   const JointVector q = robot.joints();
@@ -369,7 +345,7 @@ MultiGraspResult scanFromTable(RobotInterface& robot, DepthSensor& sensor, const
     po.expected_plane = Plane{n, -n.dot(onTable_O)};
   }
   const std::optional<PlaneFit> fit = fitPlaneRansac(near, po);
-  if (!fit) return finish("object_not_found");
+  if (!fit) return finish(Termination::kObjectNotFound);
   tt.table_O = fit->plane;
   tt.table_inliers = fit->inliers;
   std::vector<Vec3> above;
@@ -384,7 +360,7 @@ MultiGraspResult scanFromTable(RobotInterface& robot, DepthSensor& sensor, const
                 "above it, %d in the object's cluster",
                 tt.frames, tt.points, tt.table_inliers, above.size(), tt.object_points);
   log(line);
-  if (tt.object_points < to.min_points) return finish("object_not_found");
+  if (tt.object_points < to.min_points) return finish(Termination::kObjectNotFound);
 
   // An object that the open hand cannot span in any direction is too large for it: its smallest
   // extent (upright principal axes; along the table normal, from the table to its top) beyond
@@ -405,7 +381,7 @@ MultiGraspResult scanFromTable(RobotInterface& robot, DepthSensor& sensor, const
                                         ? height
                                         : tt.axes.max[k] - tt.axes.min[k]);
     if (smallest > 0.85 * span)
-      return finish("object_too_large_for_hand");  // nothing fused: the model is empty
+      return finish(Termination::kObjectTooLargeForHand);  // nothing fused: the model is empty
   }
   // The volume: centred on the points' box, from the table plane to their top.
   const Vec3 n = fit->plane.n;
@@ -418,7 +394,7 @@ MultiGraspResult scanFromTable(RobotInterface& robot, DepthSensor& sensor, const
   const Vec3 onTable = box.center() - n * fit->plane.distance(box.center());
   const Vec3 centre_O = onTable + 0.5 * top * n;
   if (std::max(box.size().maxCoeff(), top) > options.volume_size_m - 0.02)
-    return finish("object_too_large_for_volume");  // nothing fused: the model is empty
+    return finish(Termination::kObjectTooLargeForVolume);  // nothing fused: the model is empty
   // Where the object may lie, for the arm's clearance on the first grasp's initial trajectory:
   // the points' box mirrored about the volume's centre (the camera saw one side), table to top.
   Aabb objectBox;
@@ -443,23 +419,23 @@ MultiGraspResult scanFromTable(RobotInterface& robot, DepthSensor& sensor, const
   }
   tt.volume_size_m = fitted.volume_size_m;
   tt.voxel_m = fitted.voxel_m;
-  TsdfVolume volume = makeScanVolume(centre_O, fitted);
+  ScanSession session(m, sensor.camera(), noise, fitted, multi, centre_O);
+  session.setProgress(progress);
   // Fuse: table pixels (on or below the plane) and robot pixels only carve.
-  const auto tf = Clock::now();
   for (int f = 0; f < tt.frames; ++f) {
     const DepthImage& d = frames[f];
-    std::vector<uint8_t> carve = robotMask[f];
+    std::vector<uint8_t> table(d.depth_m.size(), 0);
     for (int v = 0; v < d.height; ++v)
       for (int u = 0; u < d.width; ++u) {
         const size_t i = size_t(v) * d.width + u;
         const float z = d.depth_m[i];
         if (z > 0 && fit->plane.distance(T_O_C * (double(z) * K.rayZ1(u, v))) < to.above_table_m)
-          carve[i] = 1;
+          table[i] = 1;
       }
-    integrate(d, T_O_C, K, measurementSigma(d, K, noise), &volume, &carve);
+    session.addFrameOfObjectAt(d, q, *aim, T_B_O_rest, &table);
   }
-  all.frames += tt.frames;
-  all.fusion_s += std::chrono::duration<double>(Clock::now() - tf).count();
+  all.frames = session.summary().frames;
+  all.fusion_s = session.summary().fusion_s;
 
   // The first grasp: candidates on what the camera saw (the fused table-top model: the observed
   // surface, closed over what it hides up to the table; the table itself cut off 3 mm above its
@@ -467,10 +443,7 @@ MultiGraspResult scanFromTable(RobotInterface& robot, DepthSensor& sensor, const
   // by the arm's trajectory time; the robot picks the object up with the first that holds.
   GraspGeneration first;
   {
-    MeshOptions coarse = options.mesh;  // as Alg. 1 sees S_obj
-    coarse.stride = options.planning_stride;
-    coarse.method = options.planning_method;
-    const ObjectModel seen = extractModel(volume, coarse);
+    const ObjectModel seen = session.planningModel();
     Aabb keepBox = objectBox;
     keepBox.min.array() -= 0.02;
     keepBox.max.array() += 0.02;
@@ -508,19 +481,18 @@ MultiGraspResult scanFromTable(RobotInterface& robot, DepthSensor& sensor, const
   log(line);
   tt.seconds = std::chrono::duration<double>(Clock::now() - t0).count();
   if (first.candidates.empty()) {
-    all.model = extractModel(volume, options.mesh);
-    return finish(tt.stable == 0 ? "no_stable_grasp" : "no_reachable_grasp");
+    all.model = session.model();
+    return finish(tt.stable == 0 ? Termination::kNoStableGrasp : Termination::kNoReachableGrasp);
   }
   std::vector<Vec3> seen_O;
   for (size_t k = 0; k < object.size(); k += 5) seen_O.push_back(object[k]);
-  const PickOutcome pick = pickAndVerify(
-      robot, sensor, T_B_O_rest, seen_O, first.candidates,
-      [](const GraspCandidate&) { return true; }, options, noise, log);
+  const PickOutcome pick =
+      pickAndVerify(robot, sensor, T_B_O_rest, seen_O, first.candidates, options, noise, log);
   tt.attempts = pick.attempts;
   tt.attempt_poses = pick.attempt_poses;
   if (!pick.achieved) {
-    all.model = extractModel(volume, options.mesh);
-    return finish("pick_up_failed");
+    all.model = session.model();
+    return finish(Termination::kPickUpFailed);
   }
   const std::optional<Iso3> achieved = pick.achieved;
   const GraspCandidate* chosen = pick.picked;
@@ -530,8 +502,7 @@ MultiGraspResult scanFromTable(RobotInterface& robot, DepthSensor& sensor, const
   rec.candidates = tt.reachable;
   rec.tried = tt.tried;
   rec.generation_s = tt.seconds;
-  runGrasps(robot, sensor, *achieved, centre_O, T_B_O_rest, fitted, multi, noise, progress, volume,
-            rec, out, objectBox);
+  runGrasps(robot, sensor, session, *achieved, T_B_O_rest, rec, out, objectBox);
   all.total_s = std::chrono::duration<double>(Clock::now() - t0).count();
   return out;
 }

@@ -64,12 +64,12 @@ struct RankedGrasp {
 struct GraspRecord {
   Iso3 T_O_palm = Iso3::Identity();
   JointVector q;  // the robot's joints when the grasp's views began (hand as it holds the object)
-  int candidates = 0;       // ranked candidates this grasp was chosen from (0: the first grasp)
-  int tried = 0;            // candidate poses tried
-  double quality = 0;       // its best view quality when ranked
-  double epsilon = 0;       // its stability (Ferrari–Canny ε)
-  int views = 0;            // views taken with it
-  std::string termination;  // why its views ended
+  int candidates = 0;  // ranked candidates this grasp was chosen from (0: the first grasp)
+  int tried = 0;       // candidate poses tried
+  double quality = 0;  // its best view quality when ranked
+  double epsilon = 0;  // its stability (Ferrari–Canny ε)
+  int views = 0;       // views taken with it
+  Termination termination = Termination::kRunning;  // why its views ended
   double hole_area_m2 = 0;  // σ = 5 cm (unknown) area of the model after its views
   double mean_entropy = 0;  // of the model after its views
   double generation_s = 0, ranking_s = 0;

@@ -24,6 +24,27 @@ enum class HandMode {
 std::string handModeName(HandMode m);
 bool parseHandMode(const std::string& s, HandMode* out);
 
+// Why a scan (or one grasp's views) ended.
+enum class Termination {
+  kRunning,                  // not ended
+  kNoViewAboveThreshold,     // no reachable view reaches t_q (Alg. 1)
+  kMaxViews,                 // the grasp's view limit
+  kNoReachableView,          // the arm reaches no view with this grasp
+  kMaxGrasps,                // the grasp limit
+  kRegraspUnsupported,       // the robot cannot put the object down
+  kNoReachableGrasp,         // no grasp candidate is stable, clear of the table and reachable
+  kNoGraspAboveThreshold,    // no candidate promises a view above t_q
+  kPickUpFailed,             // no candidate picked the object up and held it
+  kObjectOutOfView,          // the camera cannot aim at the rest pose
+  kObjectNotFound,           // too few points above the table near the rest pose
+  kObjectTooLargeForHand,    // the open hand spans none of its extents
+  kObjectTooLargeForVolume,  // larger than options.volume_size_m
+  kNoStableGrasp,            // no first-grasp pose is force closure
+};
+// snake_case names as summary.json writes them (no_view_above_threshold, …; running).
+std::string terminationName(Termination t);
+bool parseTermination(const std::string& s, Termination* out);
+
 struct ScanOptions {
   double voxel_m = 0.002;       // volume voxel size, m
   double volume_size_m = 0.34;  // edge of the cubic volume around the grasped object, m
@@ -69,7 +90,7 @@ struct ScanResult {
   ObjectModel model;           // final S_obj, object frame
   ObjectModel planning_model;  // the same at the planning stride (what Alg. 1 would see next)
   std::vector<ViewRecord> views;
-  std::string termination;   // no_view_above_threshold | max_views | no_reachable_view
+  Termination termination = Termination::kRunning;
   int view_evaluations = 0;  // candidates scored by Alg. 1 (coarse pre-screen or full)
   int view_refinements = 0;  // of those, scored at full resolution
   double planning_s = 0, fusion_s = 0, total_s = 0;
@@ -77,15 +98,13 @@ struct ScanResult {
 };
 
 // Scans with the object held at T_O_palm (palm pose in the object frame); the robot must be
-// holding it already. `centre_O` is where the volume is centred (the object's expected centre).
-// With `volume` the views are fused into it (a model kept across grasps, in frame O); without,
-// into a new volume of options.volume_size_m around centre_O. `object_box_O`: where the object
-// is believed to lie before any model exists (the initial trajectory keeps the arm clear of it);
-// empty: a 10 cm cube around centre_O.
+// holding it already: a ScanSession around centre_O (the object's expected centre) driven by
+// runGraspViews. `object_box_O`: where the object is believed to lie before any model exists (the
+// initial trajectory keeps the arm clear of it); empty: a 10 cm cube around centre_O.
 ScanResult scanSingleGrasp(RobotInterface& robot, DepthSensor& sensor, const Iso3& T_O_palm,
                            const Vec3& centre_O, const ScanOptions& options,
                            const NoiseModelOptions& noise, const ScanProgress& progress = {},
-                           TsdfVolume* volume = nullptr, const Aabb& object_box_O = Aabb());
+                           const Aabb& object_box_O = Aabb());
 
 // The pixels of `depth` (taken from T_B_C with the robot at q) that are the robot's own surface:
 // the robot rendered there lies within t_hand_m of the measurement, at that pixel or within

@@ -1,0 +1,162 @@
+#pragma once
+// ScanSession: the scan as a state the caller drives (paper §IV). The caller owns the control
+// loop (a ROS node, its own driver, the simulator): it moves the robot, captures depth frames and
+// hands them to the session; the session keeps the model (the TSDF volume, frame O), fuses each
+// frame hand-aware (Fig. 3 c), and says where to look next (Alg. 1) and how to grasp next.
+//
+//   ScanSession s(robotModel, camera, noise, options, multi, centre_O);
+//   s.beginGrasp(T_O_palm, q);                       // the object is in the hand
+//   while (auto view = s.nextView(q_now)) {           // Alg. 1 (first: the initial trajectory)
+//     for (each frame along view->waypoints) s.addFrame(depth, q, T_B_C);
+//     s.finishView();                                 // optional: nextView calls it too
+//   }
+//   std::vector<GraspCandidate> next = s.planGrasps(T_B_O_rest, q_now).candidates;
+//   ... pick up with next[0] ... s.beginGrasp(T_O_palm_achieved, q);
+//   ObjectModel m = s.model();  s.save("scan.inhand");
+//
+// The scan drivers (scanSingleGrasp, scanMultiGrasp, scanFromTable) are thin loops over it.
+#include <filesystem>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "inhand/robot/robot_interface.h"
+#include "inhand/scan/multi_grasp.h"
+#include "inhand/sensor/depth_sensor.h"
+
+namespace inhand {
+
+// A view the session chose: move the arm along `waypoints` (joint space, the first is the state
+// it was planned from) and add the frames taken on the way.
+struct PlannedView {
+  bool initial = false;  // from the initial trajectory (not chosen by Alg. 1)
+  Vec3 dir_O = Vec3::Zero();
+  Iso3 T_O_C = Iso3::Identity();  // the camera pose in the object frame there
+  std::vector<JointVector> waypoints;
+  double quality = 0, cost_s = 0, score = 0;  // eq. 9, trajectory time, the Alg. 1 score
+  int candidates = 0;                         // Alg. 1 candidates scored for it
+  double planning_s = 0;
+};
+
+// What one added frame did.
+struct FrameReport {
+  int pixels = 0;        // valid depth pixels
+  int carve_pixels = 0;  // of those, only carving (the robot's own, or the caller's mask)
+  double seconds = 0;
+};
+
+// Ranked grasp candidates for the next grasp (planGrasps).
+struct GraspPlan {
+  std::vector<GraspCandidate> candidates;  // ranked, best first
+  int above_threshold = 0;                 // the first this many promise a view above t_q
+  GraspGeneration generation;              // every pose tried (candidates moved out)
+  double ranking_s = 0;
+};
+
+class ScanSession {
+ public:
+  struct Summary {
+    Termination termination = Termination::kRunning;
+    std::string message;  // why it ended, in words
+    int grasps = 0, views = 0, frames = 0;
+    int view_evaluations = 0, view_refinements = 0;
+    double planning_s = 0, fusion_s = 0;
+    std::string brief() const;  // one line
+  };
+
+  // A model in a cube of options.volume_size_m around centre_O (object frame O), voxels of
+  // options.voxel_m. Throws Error on invalid options.
+  ScanSession(const RobotModel& robot, const DepthCameraOptions& camera,
+              const NoiseModelOptions& noise, const ScanOptions& options,
+              const MultiGraspOptions& multi, const Vec3& centre_O);
+  ~ScanSession();
+  ScanSession(ScanSession&&) noexcept;
+  ScanSession& operator=(ScanSession&&) = delete;
+
+  const ScanOptions& options() const;
+  const MultiGraspOptions& multiOptions() const;
+  const RobotModel& robot() const;
+  const Vec3& centre() const;
+  const DepthCameraOptions& camera() const;
+  const NoiseModelOptions& noise() const;
+  // Where the pan-tilt points the camera for the views (base frame): the planner's presentation
+  // point at options.planner.range_m.
+  Iso3 cameraPose() const;
+  // Log lines and ground-truth coverage (ScanProgress) for what follows.
+  void setProgress(const ScanProgress& progress);
+  void log(const std::string& line) const;  // a line to the progress log (if any)
+
+  // The object is now in the hand: palm at T_O_palm in the object frame, the robot at q.
+  // `object_box_O`: where the object is believed to lie, for the arm's clearance on the initial
+  // trajectory (empty: a 10 cm cube around the centre). The first grasp of a session starts with
+  // the initial trajectory (options.initial_views directions); later grasps go to Alg. 1 at once.
+  void beginGrasp(const Iso3& T_O_palm, const JointVector& q, const Aabb& object_box_O = Aabb());
+  // The object has left the hand (put down): frames are no longer fused until the next grasp.
+  void endGrasp();
+  bool holding() const;
+  int graspIndex() const;  // 0-based index of the current (or last) grasp, -1 before any
+  const Iso3& graspPose() const;
+
+  // A depth frame taken from T_B_C (camera in the robot base frame) with the robot at q, the
+  // object in the hand: fused with T_O_C = T_O_palm · T_palm_B(q) · T_B_C; the robot's own
+  // pixels only carve (§IV), and with HandMode::kCarveAndEmpty the voxels inside the robot are
+  // emptied (Fig. 3 c). Counts toward the current view. Throws when no grasp is active or the
+  // image does not match the camera.
+  FrameReport addFrame(const DepthImage& depth, const JointVector& q, const Iso3& T_B_C);
+  // A depth frame of the object lying at T_B_O (not in the hand, e.g. on the table): the robot's
+  // pixels and those set in `carve` (same size as the image; may be null) only carve.
+  FrameReport addFrameOfObjectAt(const DepthImage& depth, const JointVector& q, const Iso3& T_B_C,
+                                 const Iso3& T_B_O, const std::vector<uint8_t>* carve = nullptr);
+
+  // The next view with the robot at q_now: while the first grasp's initial trajectory lasts, its
+  // next reachable direction; then Alg. 1 on the model so far. nullopt: this grasp's views are
+  // done (summary().termination: no_view_above_threshold, max_views or no_reachable_view). Frames
+  // added after it count toward it.
+  std::optional<PlannedView> nextView(const JointVector& q_now);
+  // Closes the current view's record with the model's figures after its frames (nextView and
+  // planGrasps call it when the caller has not). Returns the record.
+  const ViewRecord& finishView();
+  const std::vector<ViewRecord>& views() const;
+  const std::vector<int>& viewGrasps() const;  // the grasp index of each view
+
+  // Grasp candidates on the model so far with the object resting at T_B_O_rest and the robot at
+  // q_now, ranked by the best view Alg. 1 finds with the hand there (eq. 9, the ranking planner),
+  // the first `above_threshold` of them above its t_q. Sets the termination when none is.
+  GraspPlan planGrasps(const Iso3& T_B_O_rest, const JointVector& q_now);
+  // The best of them, or nullopt.
+  std::optional<GraspCandidate> nextGrasp(const Iso3& T_B_O_rest, const JointVector& q_now);
+
+  // The model (S_obj) at full resolution, and at the planning stride (what Alg. 1 sees).
+  ObjectModel model() const;
+  ObjectModel planningModel() const;
+  const TsdfVolume& volume() const;
+  TsdfVolume& volume();
+
+  // Ends the scan (the caller's reason; the session sets its own when it runs out of views or
+  // grasps).
+  void finish(Termination termination, const std::string& message = "");
+  Summary summary() const;
+
+  // A checkpoint: the volume, the grasp, the views so far and the counters, written atomically.
+  // load() resumes from it with the same robot, camera and options (the volume's size and voxel
+  // must match the file's; the error names the file and what differs).
+  void save(const std::filesystem::path& path) const;
+  static ScanSession load(const std::filesystem::path& path, const RobotModel& robot,
+                          const DepthCameraOptions& camera, const NoiseModelOptions& noise,
+                          const ScanOptions& options, const MultiGraspOptions& multi);
+
+ private:
+  struct State;
+  std::unique_ptr<State> s_;
+  FrameReport fuse(const DepthImage& depth, const JointVector& q, const Iso3& T_B_C,
+                   const Iso3& T_O_B, const std::vector<uint8_t>* carve, bool inHand);
+  void emptyInsideRobot(const JointVector& q, const Iso3& T_O_B);
+};
+
+// Drives the current grasp's views with a robot and a sensor: points the camera
+// (cameraPose), then for each view the session plans, executes its waypoints, adding every frame
+// the robot reports on the way, until nextView says the grasp is done. Returns why.
+Termination runGraspViews(ScanSession& session, RobotInterface& robot, DepthSensor& sensor);
+
+}  // namespace inhand

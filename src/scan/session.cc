@@ -1,0 +1,595 @@
+#include "inhand/scan/session.h"
+
+#include <chrono>
+#include <cstdio>
+#include <cstring>
+#include <fstream>
+
+#include "inhand/core/error.h"
+#include "inhand/core/file_util.h"
+#include "inhand/core/json_util.h"
+#include "inhand/core/parallel.h"
+#include "inhand/core/pose.h"
+#include "inhand/robot/collision.h"
+#include "inhand/sensor/render.h"
+
+namespace inhand {
+
+namespace {
+using Clock = std::chrono::steady_clock;
+double secondsSince(Clock::time_point t) {
+  return std::chrono::duration<double>(Clock::now() - t).count();
+}
+}  // namespace
+
+struct ScanSession::State {
+  State(const RobotModel& robot, const DepthCameraOptions& camera, const NoiseModelOptions& noise,
+        const ScanOptions& options, const MultiGraspOptions& multi, const Vec3& centre_O)
+      : model(&robot),
+        camera(camera),
+        noise(noise),
+        options(options),
+        multi(multi),
+        centre(centre_O),
+        volume(makeScanVolume(centre_O, options)),
+        planner(robot, camera, noise, options.planner),
+        ranker(robot, camera, noise, multi.ranking),
+        scenes(robot) {}
+
+  const RobotModel* model;
+  DepthCameraOptions camera;
+  NoiseModelOptions noise;
+  ScanOptions options;
+  MultiGraspOptions multi;
+  Vec3 centre;
+  TsdfVolume volume;
+  ViewPlanner planner, ranker;
+  RobotOccluders scenes;
+  std::vector<Aabb> linkBox;  // each link's collision primitives' box, link frame
+  ScanProgress progress;
+
+  // The grasp.
+  bool holding = false;
+  int grasp = -1;
+  Iso3 T_O_palm = Iso3::Identity();
+  JointVector qGrasp;  // the robot's joints when the grasp began (the hand as it holds)
+  Aabb objectBox;
+  std::shared_ptr<NearHandGrid> nearHand;
+  std::vector<Vec3> used;         // directions of this grasp's views
+  std::vector<Vec3> initialDirs;  // the initial trajectory's directions not yet tried
+  int alg1Views = 0;              // Alg. 1 views of this grasp
+
+  // The views.
+  std::vector<ViewRecord> views;
+  std::vector<int> viewGrasp;
+  bool viewOpen = false;
+
+  Summary summary;
+};
+
+ScanSession::ScanSession(const RobotModel& robot, const DepthCameraOptions& camera,
+                         const NoiseModelOptions& noise, const ScanOptions& options,
+                         const MultiGraspOptions& multi, const Vec3& centre_O) {
+  std::string problem = options.validate();
+  if (problem.empty()) problem = multi.validate();
+  if (!problem.empty()) throw Error("scan options: " + problem);
+  s_ = std::make_unique<State>(robot, camera, noise, options, multi, centre_O);
+  const RobotModel& m = robot;
+  s_->linkBox.resize(m.links().size());
+  for (size_t li = 0; li < m.links().size(); ++li)
+    for (const Primitive& p : m.links()[li].collision) {
+      const Aabb b = p.toMesh().bounds();
+      s_->linkBox[li].extend(b.min);
+      s_->linkBox[li].extend(b.max);
+    }
+}
+
+ScanSession::~ScanSession() = default;
+ScanSession::ScanSession(ScanSession&&) noexcept = default;
+
+const ScanOptions& ScanSession::options() const { return s_->options; }
+const MultiGraspOptions& ScanSession::multiOptions() const { return s_->multi; }
+const RobotModel& ScanSession::robot() const { return *s_->model; }
+const Vec3& ScanSession::centre() const { return s_->centre; }
+const DepthCameraOptions& ScanSession::camera() const { return s_->camera; }
+const NoiseModelOptions& ScanSession::noise() const { return s_->noise; }
+Iso3 ScanSession::cameraPose() const { return s_->planner.cameraPose(s_->options.planner.range_m); }
+void ScanSession::setProgress(const ScanProgress& progress) { s_->progress = progress; }
+bool ScanSession::holding() const { return s_->holding; }
+int ScanSession::graspIndex() const { return s_->grasp; }
+const Iso3& ScanSession::graspPose() const { return s_->T_O_palm; }
+const std::vector<ViewRecord>& ScanSession::views() const { return s_->views; }
+const std::vector<int>& ScanSession::viewGrasps() const { return s_->viewGrasp; }
+const TsdfVolume& ScanSession::volume() const { return s_->volume; }
+TsdfVolume& ScanSession::volume() { return s_->volume; }
+
+namespace {
+void checkJoints(const RobotModel& m, const JointVector& q, const char* where) {
+  if (q.size() != m.variableCount())
+    throw Error(std::string(where) + ": joint state of " + std::to_string(q.size()) +
+                " values, the robot has " + std::to_string(m.variableCount()));
+}
+}  // namespace
+
+void ScanSession::log(const std::string& line) const {
+  if (s_->progress.log) s_->progress.log(line);
+}
+
+void ScanSession::beginGrasp(const Iso3& T_O_palm, const JointVector& q, const Aabb& object_box_O) {
+  checkJoints(*s_->model, q, "beginGrasp");
+  if (s_->viewOpen) finishView();
+  State& s = *s_;
+  s.holding = true;
+  ++s.grasp;
+  s.summary.grasps = s.grasp + 1;
+  s.summary.termination = Termination::kRunning;
+  s.summary.message.clear();
+  s.T_O_palm = T_O_palm;
+  s.qGrasp = q;
+  s.objectBox = object_box_O;
+  if (s.objectBox.empty()) {
+    s.objectBox.extend(s.centre - Vec3::Constant(0.05));
+    s.objectBox.extend(s.centre + Vec3::Constant(0.05));
+  }
+  const HandGeometry hand(*s.model, q, T_O_palm);
+  s.nearHand = std::make_shared<NearHandGrid>(hand, s.options.planner.quality.t_hand_m,
+                                              s.options.planner.quality.near_hand_cell_m);
+  s.used.clear();
+  s.alg1Views = 0;
+  s.initialDirs.clear();
+  // The model exists after the first grasp: Alg. 1 from the start.
+  if (s.grasp == 0 && s.options.initial_views > 0)
+    s.initialDirs = fibonacciSphere(s.options.initial_views);
+}
+
+void ScanSession::endGrasp() {
+  if (s_->viewOpen) finishView();
+  s_->holding = false;
+}
+
+void ScanSession::emptyInsideRobot(const JointVector& q, const Iso3& T_O_B) {
+  // Fig. 3 (c): voxels inside the robot are empty. The paper marks the hand; every link is marked
+  // (the wrist and forearm too), at each frame's joint state: nothing of the object can be there.
+  const RobotModel& m = *s_->model;
+  TsdfVolume& volume = s_->volume;
+  const std::vector<Iso3> T = m.linkPoses(q);
+  for (size_t li = 0; li < m.links().size(); ++li) {
+    if (m.links()[li].collision.empty()) continue;
+    const Iso3 T_O_link = T_O_B * T[li];
+    Aabb b;  // the link's box in O
+    for (int c = 0; c < 8; ++c) b.extend(T_O_link * s_->linkBox[li].corner(c));
+    Vec3 lo = ((b.min - volume.origin()) / volume.voxelSize()).array().ceil();
+    Vec3 hi = ((b.max - volume.origin()) / volume.voxelSize()).array().floor();
+    lo = lo.cwiseMax(Vec3::Zero());
+    hi = hi.cwiseMin((volume.dims().cast<double>().array() - 1).matrix());
+    if ((lo.array() > hi.array()).any()) continue;
+    const Iso3 T_link_O = T_O_link.inverse();
+    parallelFor(int(lo.z()), int(hi.z()) + 1, [&](int z) {
+      for (int y = int(lo.y()); y <= int(hi.y()); ++y)
+        for (int x = int(lo.x()); x <= int(hi.x()); ++x) {
+          const Vec3 p = T_link_O * volume.point(x, y, z);
+          for (const Primitive& prim : m.links()[li].collision)
+            if (prim.contains(p)) {
+              const size_t i = volume.index(x, y, z);
+              // Measurements win over the hand model: a voxel the sensor saw behind the
+              // object's surface stays (a finger closed on the model can overlap the object).
+              if (volume.state(i) == VoxelState::kObserved && volume.distance(i) < 0) break;
+              volume.states()[i] = uint8_t(VoxelState::kEmpty);
+              volume.sumW()[i] = 0;
+              volume.sumWD()[i] = 0;
+              break;
+            }
+        }
+    });
+  }
+}
+
+FrameReport ScanSession::fuse(const DepthImage& depth, const JointVector& q, const Iso3& T_B_C,
+                              const Iso3& T_O_B, const std::vector<uint8_t>* extraCarve,
+                              bool inHand) {
+  const auto t0 = Clock::now();
+  State& s = *s_;
+  const CameraIntrinsics& K = s.camera.intrinsics;
+  if (depth.width != K.width || depth.height != K.height)
+    throw Error("depth frame: " + std::to_string(depth.width) + "x" + std::to_string(depth.height) +
+                " pixels, the camera's are " + std::to_string(K.width) + "x" +
+                std::to_string(K.height));
+  if (extraCarve && extraCarve->size() != depth.depth_m.size())
+    throw Error("carve mask: " + std::to_string(extraCarve->size()) + " values for " +
+                std::to_string(depth.depth_m.size()) + " pixels");
+  const Iso3 T_O_C = T_O_B * T_B_C;
+  std::vector<uint8_t> carve;
+  // The robot's own surfaces only carve (§IV); in the hand the table counts as the robot's (in
+  // the air it can only be background), on the table the caller's mask says where the table is.
+  if (s.options.hand_mode != HandMode::kNaive || !inHand)
+    carve = robotPixelMask(depth, T_B_C, q, s.scenes, s.camera, s.noise, s.options.t_hand_m,
+                           s.options.carve_radius_px, /*with_table=*/inHand);
+  if (extraCarve) {
+    if (carve.empty()) carve.assign(depth.depth_m.size(), 0);
+    for (size_t i = 0; i < carve.size(); ++i) carve[i] |= (*extraCarve)[i];
+  }
+  integrate(depth, T_O_C, K, measurementSigma(depth, K, s.noise), &s.volume,
+            carve.empty() ? nullptr : &carve);
+  if (inHand && s.options.hand_mode == HandMode::kCarveAndEmpty) emptyInsideRobot(q, T_O_B);
+  FrameReport r;
+  for (size_t i = 0; i < depth.depth_m.size(); ++i)
+    if (depth.depth_m[i] > 0) {
+      ++r.pixels;
+      if (!carve.empty() && carve[i]) ++r.carve_pixels;
+    }
+  ++s.summary.frames;
+  if (s.viewOpen) ++s.views.back().frames;
+  r.seconds = secondsSince(t0);
+  s.summary.fusion_s += r.seconds;
+  return r;
+}
+
+FrameReport ScanSession::addFrame(const DepthImage& depth, const JointVector& q,
+                                  const Iso3& T_B_C) {
+  if (!s_->holding) throw Error("addFrame: no grasp (beginGrasp first)");
+  checkJoints(*s_->model, q, "addFrame");
+  const Iso3 T_O_B = s_->T_O_palm * s_->model->tipPose(q).inverse();
+  return fuse(depth, q, T_B_C, T_O_B, nullptr, true);
+}
+
+FrameReport ScanSession::addFrameOfObjectAt(const DepthImage& depth, const JointVector& q,
+                                            const Iso3& T_B_C, const Iso3& T_B_O,
+                                            const std::vector<uint8_t>* carve) {
+  checkJoints(*s_->model, q, "addFrameOfObjectAt");
+  return fuse(depth, q, T_B_C, T_B_O.inverse(), carve, false);
+}
+
+std::optional<PlannedView> ScanSession::nextView(const JointVector& q_now) {
+  State& s = *s_;
+  if (!s.holding) throw Error("nextView: no grasp (beginGrasp first)");
+  checkJoints(*s.model, q_now, "nextView");
+  if (s.viewOpen) finishView();
+  const RobotModel& m = *s.model;
+  const GraspState g{s.T_O_palm, q_now};
+  // The initial trajectory: directions spread over the sphere, each move from where the arm is
+  // kept clear of the object in the hand (a forearm swinging through it would also empty its
+  // inside in the model).
+  while (!s.initialDirs.empty()) {
+    const Vec3 dir = s.initialDirs.front();
+    s.initialDirs.erase(s.initialDirs.begin());
+    const std::optional<ViewCandidate> c =
+        s.planner.reach({dir}, s.centre, s.objectBox, g, true)[0];
+    if (!c) {
+      log("initial view skipped: no collision-free move there");
+      continue;
+    }
+    PlannedView v;
+    v.initial = true;
+    v.dir_O = c->dir_O;
+    v.T_O_C = c->T_O_C;
+    v.waypoints = {q_now, m.withArm(q_now, c->arm)};
+    v.cost_s = trajectoryTime(m, m.arm(q_now), c->arm);
+    ViewRecord rec;
+    rec.initial = true;
+    rec.dir_O = v.dir_O;
+    rec.T_O_C = v.T_O_C;
+    rec.cost_s = v.cost_s;
+    s.views.push_back(rec);
+    s.viewGrasp.push_back(s.grasp);
+    s.used.push_back(c->dir_O);
+    s.viewOpen = true;
+    return v;
+  }
+  if (s.alg1Views >= s.options.max_views) {
+    finish(Termination::kMaxViews,
+           "the grasp's view limit (" + std::to_string(s.options.max_views) + ") is reached");
+    return std::nullopt;
+  }
+  const ObjectModel model = planningModel();
+  const auto tp = Clock::now();
+  const ViewSelection sel = s.planner.select(model, g, s.used, s.nearHand, &s.volume);
+  s.summary.planning_s += secondsSince(tp);
+  s.summary.view_evaluations += sel.evaluated;
+  s.summary.view_refinements += sel.refined;
+  if (!sel.best) {
+    if (sel.reachable == 0)
+      finish(Termination::kNoReachableView, "the arm reaches no view with this grasp");
+    else
+      finish(Termination::kNoViewAboveThreshold,
+             "no view reaches t_q (" + std::to_string(sel.evaluated) + " candidates)");
+    log("no view reaches t_q (" + std::to_string(sel.evaluated) + " candidates): done");
+    return std::nullopt;
+  }
+  const ViewCandidate& c = *sel.best;
+  ++s.alg1Views;
+  PlannedView v;
+  v.dir_O = c.dir_O;
+  v.T_O_C = c.T_O_C;
+  v.waypoints = {q_now, m.withArm(q_now, c.arm)};
+  v.quality = c.quality;
+  v.cost_s = c.cost_s;
+  v.score = c.score;
+  v.candidates = sel.evaluated;
+  v.planning_s = sel.total_s;
+  ViewRecord rec;
+  rec.dir_O = c.dir_O;
+  rec.T_O_C = c.T_O_C;
+  rec.quality = c.quality;
+  rec.cost_s = c.cost_s;
+  rec.score = c.score;
+  rec.candidates = sel.evaluated;
+  rec.planning_s = sel.total_s;
+  s.views.push_back(rec);
+  s.viewGrasp.push_back(s.grasp);
+  s.used.push_back(c.dir_O);
+  s.viewOpen = true;
+  char line[240];
+  std::snprintf(line, sizeof(line),
+                "view %d: quality %.4f, cost %.2f s, %d candidates, %d at full resolution (%.2f "
+                "s: IK %.2f, quality %.2f)",
+                s.alg1Views, rec.quality, rec.cost_s, rec.candidates, sel.refined, rec.planning_s,
+                sel.ik_s, sel.quality_s);
+  log(line);
+  return v;
+}
+
+const ViewRecord& ScanSession::finishView() {
+  State& s = *s_;
+  if (s.views.empty()) throw Error("finishView: no view");
+  ViewRecord& rec = s.views.back();
+  if (!s.viewOpen) return rec;
+  s.viewOpen = false;
+  const ObjectModel after = model();
+  rec.mean_entropy = after.meanEntropy();
+  rec.observed_fraction = after.observedAreaFraction();
+  if (s.progress.coverage) rec.coverage = s.progress.coverage(after);
+  char line[160];
+  std::snprintf(line, sizeof(line), "%s %zu: %d frames, mean entropy %.3f",
+                rec.initial ? "initial view" : "view", s.views.size(), rec.frames,
+                rec.mean_entropy);
+  log(line);
+  ++s.summary.views;
+  return rec;
+}
+
+GraspPlan ScanSession::planGrasps(const Iso3& T_B_O_rest, const JointVector& q_now) {
+  checkJoints(*s_->model, q_now, "planGrasps");
+  State& s = *s_;
+  if (s.viewOpen) finishView();
+  GraspPlan plan;
+  const ObjectModel S_obj = planningModel();
+  plan.generation = generateGrasps(*s.model, S_obj.mesh, T_B_O_rest, q_now, s.multi.grasp);
+  const GraspGeneration& gen = plan.generation;
+  char line[200];
+  std::snprintf(line, sizeof(line),
+                "grasp candidates: %d poses, %d touching, %d stable, %d clear of the table, %zu "
+                "reachable (%.2f s)",
+                gen.tried, gen.touching, gen.stable, gen.table_free, gen.candidates.size(),
+                gen.seconds);
+  log(line);
+  plan.candidates = std::move(plan.generation.candidates);
+  plan.generation.candidates.clear();
+  if (plan.candidates.empty()) {
+    finish(Termination::kNoReachableGrasp,
+           "no grasp candidate is stable, clear of the table and reachable");
+    return plan;
+  }
+  plan.ranking_s = rankGrasps(s.ranker, S_obj, s.multi.grasp, &plan.candidates);
+  const GraspCandidate& best = plan.candidates.front();
+  std::snprintf(line, sizeof(line), "ranked %zu grasps in %.2f s: best quality %.4f, ε %.4f",
+                plan.candidates.size(), plan.ranking_s, best.quality, best.epsilon);
+  log(line);
+  // Candidates are ranked by eq. 9 (the ranking planner) whatever the view planner is, so its
+  // own t_q decides; a baseline view planner's threshold is in other units.
+  const double t_q = s.multi.ranking.t_q;
+  while (plan.above_threshold < int(plan.candidates.size()) &&
+         plan.candidates[plan.above_threshold].quality >= t_q)
+    ++plan.above_threshold;
+  if (plan.above_threshold == 0)
+    finish(Termination::kNoGraspAboveThreshold, "no grasp candidate promises a view above t_q");
+  return plan;
+}
+
+std::optional<GraspCandidate> ScanSession::nextGrasp(const Iso3& T_B_O_rest,
+                                                     const JointVector& q_now) {
+  GraspPlan plan = planGrasps(T_B_O_rest, q_now);
+  if (plan.above_threshold == 0) return std::nullopt;
+  return plan.candidates.front();
+}
+
+ObjectModel ScanSession::model() const { return extractModel(s_->volume, s_->options.mesh); }
+
+ObjectModel ScanSession::planningModel() const {
+  MeshOptions planningMesh = s_->options.mesh;
+  planningMesh.stride = s_->options.planning_stride;
+  planningMesh.method = s_->options.planning_method;
+  return extractModel(s_->volume, planningMesh);
+}
+
+void ScanSession::finish(Termination termination, const std::string& message) {
+  s_->summary.termination = termination;
+  s_->summary.message = message.empty() ? terminationName(termination) : message;
+}
+
+ScanSession::Summary ScanSession::summary() const { return s_->summary; }
+
+std::string ScanSession::Summary::brief() const {
+  char line[240];
+  std::snprintf(line, sizeof(line),
+                "%s: %d grasps, %d views, %d frames (planning %.2f s, fusion %.2f s)",
+                terminationName(termination).c_str(), grasps, views, frames, planning_s, fusion_s);
+  return line;
+}
+
+// The checkpoint: "INHAND-SESSION 1\n", the JSON header's byte count and newline, the header,
+// then the volume's arrays (sumWD, sumW as float32, states as uint8), little-endian.
+namespace {
+constexpr char kMagic[] = "INHAND-SESSION 1\n";
+
+Json isoJson(const Iso3& T) {
+  Json j = Json::array();
+  for (int r = 0; r < 4; ++r)
+    for (int c = 0; c < 4; ++c) j.push_back(T.matrix()(r, c));
+  return j;
+}
+Iso3 isoFrom(const Json& j) {
+  Iso3 T = Iso3::Identity();
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 4; ++c) T.matrix()(r, c) = j.at(r * 4 + c).get<double>();
+  return T;
+}
+Json vecJson(const Vec3& v) { return {v.x(), v.y(), v.z()}; }
+Vec3 vecFrom(const Json& j) {
+  return {j.at(0).get<double>(), j.at(1).get<double>(), j.at(2).get<double>()};
+}
+}  // namespace
+
+void ScanSession::save(const std::filesystem::path& path) const {
+  const State& s = *s_;
+  if (s.viewOpen) throw Error("save: finish the current view first (finishView)");
+  Json h;
+  const TsdfVolume& v = s.volume;
+  h["volume"] = {{"dims", {v.dims().x(), v.dims().y(), v.dims().z()}},
+                 {"origin", vecJson(v.origin())},
+                 {"voxel_m", v.voxelSize()},
+                 {"truncation_m", v.truncation()}};
+  h["centre"] = vecJson(s.centre);
+  h["holding"] = s.holding;
+  h["grasp"] = s.grasp;
+  h["T_O_palm"] = isoJson(s.T_O_palm);
+  h["q_grasp"] = Json::array();
+  for (int i = 0; i < s.qGrasp.size(); ++i) h["q_grasp"].push_back(s.qGrasp[i]);
+  h["object_box"] = {vecJson(s.objectBox.min), vecJson(s.objectBox.max)};
+  for (const Vec3& d : s.used) h["used"].push_back(vecJson(d));
+  for (const Vec3& d : s.initialDirs) h["initial_dirs"].push_back(vecJson(d));
+  h["alg1_views"] = s.alg1Views;
+  for (size_t i = 0; i < s.views.size(); ++i) {
+    const ViewRecord& r = s.views[i];
+    h["views"].push_back({{"grasp", s.viewGrasp[i]},
+                          {"initial", r.initial},
+                          {"dir_O", vecJson(r.dir_O)},
+                          {"T_O_C", isoJson(r.T_O_C)},
+                          {"quality", r.quality},
+                          {"cost_s", r.cost_s},
+                          {"score", r.score},
+                          {"mean_entropy", r.mean_entropy},
+                          {"observed_fraction", r.observed_fraction},
+                          {"coverage", r.coverage},
+                          {"frames", r.frames},
+                          {"candidates", r.candidates},
+                          {"planning_s", r.planning_s}});
+  }
+  const Summary& m = s.summary;
+  h["summary"] = {{"termination", terminationName(m.termination)},
+                  {"message", m.message},
+                  {"grasps", m.grasps},
+                  {"views", m.views},
+                  {"frames", m.frames},
+                  {"view_evaluations", m.view_evaluations},
+                  {"view_refinements", m.view_refinements},
+                  {"planning_s", m.planning_s},
+                  {"fusion_s", m.fusion_s}};
+  const std::string header = h.dump();
+  writeFileAtomically(path, [&](const fs::path& tmp) {
+    std::ofstream f(tmp, std::ios::binary);
+    f << kMagic << header.size() << "\n" << header;
+    const size_t n = v.voxelCount();
+    f.write(reinterpret_cast<const char*>(v.sumWD()), std::streamsize(n * sizeof(float)));
+    f.write(reinterpret_cast<const char*>(v.sumW()), std::streamsize(n * sizeof(float)));
+    f.write(reinterpret_cast<const char*>(v.states()), std::streamsize(n));
+    if (!f) throw Error(path.string() + ": cannot write the checkpoint");
+  });
+}
+
+ScanSession ScanSession::load(const std::filesystem::path& path, const RobotModel& robot,
+                              const DepthCameraOptions& camera, const NoiseModelOptions& noise,
+                              const ScanOptions& options, const MultiGraspOptions& multi) {
+  std::ifstream f(path, std::ios::binary);
+  if (!f) throw Error(path.string() + ": cannot open the checkpoint");
+  auto bad = [&](const std::string& what) {
+    return Error(path.string() + ": not a scan checkpoint (" + what + ")");
+  };
+  char magic[sizeof(kMagic) - 1];
+  if (!f.read(magic, sizeof(magic)) || std::memcmp(magic, kMagic, sizeof(magic)) != 0)
+    throw bad("no INHAND-SESSION 1 header");
+  size_t bytes = 0;
+  if (!(f >> bytes) || f.get() != '\n' || bytes > (64u << 20)) throw bad("header size");
+  std::string text(bytes, '\0');
+  if (!f.read(text.data(), std::streamsize(bytes))) throw bad("header cut short");
+  Json h;
+  try {
+    h = Json::parse(text);
+    const Json& vj = h.at("volume");
+    const Vec3i dims(vj.at("dims").at(0).get<int>(), vj.at("dims").at(1).get<int>(),
+                     vj.at("dims").at(2).get<int>());
+    const Vec3 centre = vecFrom(h.at("centre"));
+    ScanSession session(robot, camera, noise, options, multi, centre);
+    State& s = *session.s_;
+    TsdfVolume& v = s.volume;
+    if (v.dims() != dims || std::abs(v.voxelSize() - vj.at("voxel_m").get<double>()) > 1e-12 ||
+        (v.origin() - vecFrom(vj.at("origin"))).norm() > 1e-9)
+      throw Error(path.string() + ": the checkpoint's volume (" + std::to_string(dims.x()) + "x" +
+                  std::to_string(dims.y()) + "x" + std::to_string(dims.z()) + " voxels of " +
+                  std::to_string(vj.at("voxel_m").get<double>()) +
+                  " m) differs from the options' (" + std::to_string(v.dims().x()) + "x" +
+                  std::to_string(v.dims().y()) + "x" + std::to_string(v.dims().z()) +
+                  " voxels of " + std::to_string(v.voxelSize()) + " m)");
+    const size_t n = v.voxelCount();
+    if (!f.read(reinterpret_cast<char*>(v.sumWD()), std::streamsize(n * sizeof(float))) ||
+        !f.read(reinterpret_cast<char*>(v.sumW()), std::streamsize(n * sizeof(float))) ||
+        !f.read(reinterpret_cast<char*>(v.states()), std::streamsize(n)))
+      throw bad("voxel data cut short");
+    for (size_t i = 0; i < n; ++i)
+      if (v.states()[i] > uint8_t(VoxelState::kObserved)) throw bad("invalid voxel state");
+    s.holding = h.at("holding").get<bool>();
+    s.grasp = h.at("grasp").get<int>();
+    s.T_O_palm = isoFrom(h.at("T_O_palm"));
+    s.objectBox = Aabb();
+    s.objectBox.extend(vecFrom(h.at("object_box").at(0)));
+    s.objectBox.extend(vecFrom(h.at("object_box").at(1)));
+    for (const Json& d : h.value("used", Json::array())) s.used.push_back(vecFrom(d));
+    for (const Json& d : h.value("initial_dirs", Json::array()))
+      s.initialDirs.push_back(vecFrom(d));
+    s.alg1Views = h.at("alg1_views").get<int>();
+    for (const Json& r : h.value("views", Json::array())) {
+      ViewRecord rec;
+      rec.initial = r.at("initial").get<bool>();
+      rec.dir_O = vecFrom(r.at("dir_O"));
+      rec.T_O_C = isoFrom(r.at("T_O_C"));
+      rec.quality = r.at("quality").get<double>();
+      rec.cost_s = r.at("cost_s").get<double>();
+      rec.score = r.at("score").get<double>();
+      rec.mean_entropy = r.at("mean_entropy").get<double>();
+      rec.observed_fraction = r.at("observed_fraction").get<double>();
+      rec.coverage = r.at("coverage").get<double>();
+      rec.frames = r.at("frames").get<int>();
+      rec.candidates = r.at("candidates").get<int>();
+      rec.planning_s = r.at("planning_s").get<double>();
+      s.views.push_back(rec);
+      s.viewGrasp.push_back(r.at("grasp").get<int>());
+    }
+    const Json& m = h.at("summary");
+    if (!parseTermination(m.at("termination").get<std::string>(), &s.summary.termination))
+      throw bad("unknown termination " + m.at("termination").get<std::string>());
+    s.summary.message = m.at("message").get<std::string>();
+    s.summary.grasps = m.at("grasps").get<int>();
+    s.summary.views = m.at("views").get<int>();
+    s.summary.frames = m.at("frames").get<int>();
+    s.summary.view_evaluations = m.at("view_evaluations").get<int>();
+    s.summary.view_refinements = m.at("view_refinements").get<int>();
+    s.summary.planning_s = m.at("planning_s").get<double>();
+    s.summary.fusion_s = m.at("fusion_s").get<double>();
+    const Json& qj = h.at("q_grasp");
+    if (s.grasp >= 0 && qj.size() != size_t(robot.variableCount()))
+      throw Error(path.string() + ": the checkpoint's joint state has " +
+                  std::to_string(qj.size()) + " values, the robot " +
+                  std::to_string(robot.variableCount()));
+    s.qGrasp = JointVector::Zero(Eigen::Index(qj.size()));
+    for (size_t i = 0; i < qj.size(); ++i) s.qGrasp[Eigen::Index(i)] = qj[i].get<double>();
+    if (s.holding) {  // the grasp's near-hand grid, rebuilt from the hand as it holds
+      const HandGeometry hand(robot, s.qGrasp, s.T_O_palm);
+      s.nearHand = std::make_shared<NearHandGrid>(hand, options.planner.quality.t_hand_m,
+                                                  options.planner.quality.near_hand_cell_m);
+    }
+    return session;
+  } catch (const Json::exception& e) {
+    throw bad(e.what());
+  }
+}
+
+}  // namespace inhand

@@ -1,0 +1,188 @@
+// ScanSession, the caller-driven scan: a loop of one's own gives the scan the drivers give, a
+// checkpoint resumes it exactly, and what it cannot use is refused with a reason.
+#include <gtest/gtest.h>
+
+#include <fstream>
+#include <set>
+
+#include "inhand/core/error.h"
+#include "inhand/geometry/builtin_objects.h"
+#include "inhand/scan/session.h"
+#include "inhand/sim/sim_world.h"
+#include "test_util.h"
+
+using namespace inhand;
+namespace fs = std::filesystem;
+
+namespace {
+
+using test::wam;
+
+ScanOptions fastOptions() {
+  ScanOptions o;
+  o.voxel_m = 0.003;
+  o.planner.directions = 80;
+  o.planner.rolls = 4;
+  o.max_views = 1;
+  return o;
+}
+
+// The coffee can held by the default grasp in a fresh simulator.
+struct Sim {
+  TriangleMesh can = loadObject("builtin:coffee_can");
+  std::pair<Iso3, JointVector> grasp = defaultGrasp(wam(), can);
+  SimWorld world;
+  SimRobot robot{&world};
+  SimSensor sensor{&world, DepthCameraOptions{}};
+  Sim() : world(wam(), can, grasp.first, DepthCameraOptions{}, NoiseModelOptions{}, simOptions()) {
+    world.q = grasp.second;
+  }
+  static SimOptions simOptions() {
+    SimOptions so;
+    so.frame_subsample = 10;
+    return so;
+  }
+  Vec3 centre() const { return grasp.first * Vec3(0, 0, wam().graspOffset()); }
+};
+
+void expectSameModel(const ObjectModel& a, const ObjectModel& b) {
+  ASSERT_EQ(a.mesh.vertices.size(), b.mesh.vertices.size());
+  ASSERT_EQ(a.mesh.triangles.size(), b.mesh.triangles.size());
+  for (size_t i = 0; i < a.mesh.vertices.size(); ++i) {
+    ASSERT_EQ(a.mesh.vertices[i], b.mesh.vertices[i]) << i;
+    ASSERT_EQ(a.variance[i], b.variance[i]) << i;
+  }
+}
+
+}  // namespace
+
+// The loop a user writes around their own robot (here the simulator), stopped after two views,
+// saved, the session dropped, loaded from the file and driven on: the same views and the same
+// model, voxel for voxel, as scanSingleGrasp in one go.
+TEST(Session, OwnLoopWithACheckpointGivesTheDriversScan) {
+  const ScanOptions o = fastOptions();
+  Sim a;
+  const ScanResult whole =
+      scanSingleGrasp(a.robot, a.sensor, a.grasp.first, a.centre(), o, NoiseModelOptions{});
+  ASSERT_GE(whole.views.size(), 4u);
+
+  Sim b;
+  test::TempDir dir;
+  const fs::path checkpoint = dir.path() / "scan.inhand";
+  MultiGraspOptions multi;
+  multi.max_grasps = 1;
+  {
+    ScanSession s(wam(), DepthCameraOptions{}, NoiseModelOptions{}, o, multi, b.centre());
+    s.beginGrasp(b.grasp.first, b.robot.joints());
+    b.sensor.setPose(s.cameraPose());
+    for (int k = 0; k < 2; ++k) {
+      const std::optional<PlannedView> v = s.nextView(b.robot.joints());
+      ASSERT_TRUE(v);
+      EXPECT_TRUE(v->initial);
+      b.robot.execute(v->waypoints, [&](const JointVector& q) {
+        s.addFrame(b.sensor.capture(), q, b.sensor.pose());
+      });
+      EXPECT_GT(s.finishView().frames, 0);
+    }
+    s.save(checkpoint);
+  }
+  ScanSession s =
+      ScanSession::load(checkpoint, wam(), DepthCameraOptions{}, NoiseModelOptions{}, o, multi);
+  EXPECT_EQ(s.views().size(), 2u);
+  EXPECT_TRUE(s.holding());
+  const Termination t = runGraspViews(s, b.robot, b.sensor);
+  EXPECT_EQ(t, whole.termination);
+  ASSERT_EQ(s.views().size(), whole.views.size());
+  for (size_t i = 0; i < whole.views.size(); ++i) {
+    EXPECT_EQ(s.views()[i].dir_O, whole.views[i].dir_O) << i;
+    EXPECT_EQ(s.views()[i].frames, whole.views[i].frames) << i;
+    EXPECT_EQ(s.views()[i].quality, whole.views[i].quality) << i;
+  }
+  EXPECT_EQ(s.summary().frames, whole.frames);
+  expectSameModel(s.model(), whole.model);
+}
+
+TEST(Session, RefusesWhatItCannotUseAndNamesIt) {
+  const ScanOptions o = fastOptions();
+  Sim sim;
+  ScanSession s(wam(), DepthCameraOptions{}, NoiseModelOptions{}, o, MultiGraspOptions{},
+                sim.centre());
+  const DepthImage frame = sim.sensor.capture();
+  auto message = [](const std::function<void()>& f) {
+    try {
+      f();
+    } catch (const Error& e) {
+      return std::string(e.what());
+    }
+    return std::string("no error");
+  };
+  EXPECT_NE(
+      message([&] { s.addFrame(frame, sim.robot.joints(), sim.sensor.pose()); }).find("no grasp"),
+      std::string::npos);
+  EXPECT_NE(message([&] { s.nextView(sim.robot.joints()); }).find("no grasp"), std::string::npos);
+  s.beginGrasp(sim.grasp.first, sim.robot.joints());
+  DepthImage small = frame;
+  small.width = 320;
+  small.height = 240;
+  small.depth_m.assign(320 * 240, 0.5f);
+  EXPECT_NE(message([&] {
+              s.addFrame(small, sim.robot.joints(), sim.sensor.pose());
+            }).find("320x240 pixels, the camera's are 640x480"),
+            std::string::npos);
+  EXPECT_NE(message([&] {
+              s.addFrame(frame, JointVector::Zero(3), sim.sensor.pose());
+            }).find("joint state of 3 values"),
+            std::string::npos);
+  EXPECT_EQ(s.summary().frames, 0) << "refused frames must not count";
+  std::vector<uint8_t> shortMask(10, 1);
+  EXPECT_NE(message([&] {
+              s.addFrameOfObjectAt(frame, sim.robot.joints(), sim.sensor.pose(), Iso3::Identity(),
+                                   &shortMask);
+            }).find("carve mask"),
+            std::string::npos);
+
+  // Checkpoints: a missing file, a file of something else, one cut short, one from other options.
+  test::TempDir dir;
+  auto loadMessage = [&](const fs::path& p, const ScanOptions& opts) {
+    return message([&] {
+      ScanSession::load(p, wam(), DepthCameraOptions{}, NoiseModelOptions{}, opts,
+                        MultiGraspOptions{});
+    });
+  };
+  const fs::path missing = dir.path() / "missing.inhand";
+  EXPECT_NE(loadMessage(missing, o).find(missing.string()), std::string::npos);
+  const fs::path other = dir.path() / "other.inhand";
+  std::ofstream(other) << "ply\nformat ascii 1.0\n";
+  EXPECT_NE(loadMessage(other, o).find("not a scan checkpoint"), std::string::npos);
+  const fs::path good = dir.path() / "good.inhand";
+  s.addFrame(frame, sim.robot.joints(), sim.sensor.pose());
+  s.save(good);
+  const fs::path cut = dir.path() / "cut.inhand";
+  fs::copy_file(good, cut);
+  fs::resize_file(cut, fs::file_size(good) / 2);
+  EXPECT_NE(loadMessage(cut, o).find("cut short"), std::string::npos);
+  ScanOptions finer = o;
+  finer.voxel_m = 0.002;
+  EXPECT_NE(loadMessage(good, finer).find("differs from the options'"), std::string::npos);
+  // The good one loads, with its frame.
+  const ScanSession back = ScanSession::load(good, wam(), DepthCameraOptions{}, NoiseModelOptions{},
+                                             o, MultiGraspOptions{});
+  EXPECT_EQ(back.summary().frames, 1);
+  expectSameModel(back.model(), s.model());
+}
+
+TEST(Session, TerminationNamesRoundTrip) {
+  std::set<std::string> names;
+  for (int k = 0; k <= int(Termination::kNoStableGrasp); ++k) {
+    const Termination t = Termination(k);
+    const std::string name = terminationName(t);
+    EXPECT_NE(name, "?") << k;
+    names.insert(name);
+    Termination back = Termination::kRunning;
+    ASSERT_TRUE(parseTermination(name, &back)) << name;
+    EXPECT_EQ(back, t);
+  }
+  EXPECT_EQ(names.size(), size_t(int(Termination::kNoStableGrasp) + 1));
+  Termination t;
+  EXPECT_FALSE(parseTermination("done", &t));
+}
