@@ -1,5 +1,6 @@
 #pragma once
 // inhand: every public header of the library (link inhand::inhand).
+#include "inhand/config/scan_config.h"
 #include "inhand/core/error.h"
 #include "inhand/core/fast_math.h"
 #include "inhand/core/file_util.h"
@@ -35,6 +36,7 @@
 #include "inhand/robot/wrench.h"
 #include "inhand/scan/multi_grasp.h"
 #include "inhand/scan/scan.h"
+#include "inhand/scan/session.h"
 #include "inhand/sensor/depth_camera.h"
 #include "inhand/sensor/depth_image.h"
 #include "inhand/sensor/depth_sensor.h"

@@ -78,6 +78,9 @@ int runEval(const EvalArgs& args);
 // `inhand report DIR`: rebuilds DIR/report.html (a scan) or DIR/index.html (an eval).
 int runReport(const std::string& dir);
 int runSnapshot(const SnapshotArgs& args);
+// `inhand config [FILE] [--reference]`: every scan option (FILE's over the defaults) as JSON, or
+// the Markdown reference of docs/config.md.
+int runConfig(const std::string& file, bool reference);
 int runRender(const RenderArgs& args);
 int runFuse(const FuseArgs& args);
 

@@ -113,6 +113,14 @@ int main(int argc, char** argv) {
   auto* rp = app.add_subcommand("report", "rebuild the HTML report of a scan or an eval directory");
   rp->add_option("dir", reportDir, "a scan's or an eval's output directory")->required();
 
+  std::string configFile;
+  bool configReference = false;
+  auto* cf = app.add_subcommand(
+      "config", "print every scan option with its value (JSON): the defaults, or FILE's over them");
+  cf->add_option("file", configFile, "a scan options JSON to check and complete");
+  cf->add_flag("--reference", configReference,
+               "print the options reference (Markdown, as in docs/config.md) instead");
+
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -122,6 +130,7 @@ int main(int argc, char** argv) {
     if (*sc) return inhand::app::runScan(scan);
     if (*ev) return inhand::app::runEval(eval);
     if (*rp) return inhand::app::runReport(reportDir);
+    if (*cf) return inhand::app::runConfig(configFile, configReference);
     if (*rb) return inhand::app::runRobot(robot);
     if (*s) return inhand::app::runSnapshot(snap);
     if (*r) return inhand::app::runRender(render);

@@ -5,6 +5,7 @@
 #include <set>
 
 #include "commands.h"
+#include "inhand/config/scan_config.h"
 #include "inhand/core/error.h"
 #include "inhand/core/file_util.h"
 #include "inhand/core/json_util.h"
@@ -22,303 +23,7 @@ namespace inhand::app {
 
 namespace fs = std::filesystem;
 
-namespace {
-
-// Reads JSON options into existing values; every key must be known and of the right type.
-class OptionReader {
- public:
-  OptionReader(const Json& j, std::string where) : j_(j), where_(std::move(where)) {
-    if (!j.is_object()) throw Error(where_ + ": expected an object");
-  }
-  const std::string& where() const { return where_; }
-  // Call after reading every known key: any other key is an error that names it.
-  void finish() const {
-    for (const auto& [key, value] : j_.items())
-      if (!seen_.count(key)) throw Error(where_ + ": unknown option \"" + key + "\"");
-  }
-  void num(const char* key, double* v) {
-    if (!take(key)) return;
-    if (!j_[key].is_number()) throw Error(where_ + "." + key + ": expected a number");
-    *v = j_[key].get<double>();
-  }
-  void integer(const char* key, int* v) {
-    if (!take(key)) return;
-    if (!j_[key].is_number_integer()) throw Error(where_ + "." + key + ": expected an integer");
-    *v = j_[key].get<int>();
-  }
-  void boolean(const char* key, bool* v) {
-    if (!take(key)) return;
-    if (!j_[key].is_boolean()) throw Error(where_ + "." + key + ": expected true or false");
-    *v = j_[key].get<bool>();
-  }
-  void numbers(const char* key, std::vector<double>* v) {
-    if (!take(key)) return;
-    const Json& a = j_[key];
-    if (!a.is_array()) throw Error(where_ + "." + key + ": expected an array of numbers");
-    v->clear();
-    for (const Json& x : a) {
-      if (!x.is_number()) throw Error(where_ + "." + key + ": expected an array of numbers");
-      v->push_back(x.get<double>());
-    }
-  }
-  void string(const char* key, std::string* v) {
-    if (!take(key)) return;
-    if (!j_[key].is_string()) throw Error(where_ + "." + key + ": expected a string");
-    *v = j_[key].get<std::string>();
-  }
-  std::optional<OptionReader> object(const char* key) {
-    if (!take(key)) return std::nullopt;
-    return std::optional<OptionReader>(std::in_place, j_[key], where_ + "." + key);
-  }
-
- private:
-  bool take(const char* key) {
-    seen_.insert(key);
-    return j_.contains(key);
-  }
-  const Json& j_;
-  std::string where_;
-  std::set<std::string> seen_;
-};
-
-struct AllOptions {
-  ScanOptions scan;
-  MultiGraspOptions multi;
-  SimOptions sim;
-  EvalOptions eval;
-  std::string robot;
-  std::string start = "table";  // table: the whole scan from the table top; held: given grasp
-};
-
-void readPlanner(OptionReader& p, ViewPlannerOptions* v) {
-  p.integer("directions", &v->directions);
-  p.num("min_angle_deg", &v->min_angle_deg);
-  p.num("range_m", &v->range_m);
-  p.numbers("fallback_ranges_m", &v->fallback_ranges_m);
-  p.integer("rolls", &v->rolls);
-  p.num("alpha_cost", &v->alpha_cost);
-  p.num("t_q", &v->t_q);
-  p.boolean("use_cost", &v->use_cost);
-  p.boolean("hand_occlusion", &v->hand_occlusion);
-  p.boolean("check_collisions", &v->check_collisions);
-  p.integer("ik_restarts", &v->ik_restarts);
-  std::string ikSolver;
-  p.string("ik_solver", &ikSolver);
-  if (!ikSolver.empty() && !parseIkMethod(ikSolver, &v->ik_solver))
-    throw Error(p.where() + ".ik_solver: must be dls or kdl_lma");
-  p.integer("prescreen_stride", &v->prescreen_stride);
-  p.integer("refine", &v->refine);
-  if (auto q = p.object("quality")) {
-    q->num("t_hand_m", &v->quality.t_hand_m);
-    q->num("max_incidence_deg", &v->quality.max_incidence_deg);
-    q->num("max_projector_incidence_deg", &v->quality.max_projector_incidence_deg);
-    q->num("near_hand_cell_m", &v->quality.near_hand_cell_m);
-    q->integer("pixel_stride", &v->quality.pixel_stride);
-    std::string visibility;
-    q->string("visibility", &visibility);
-    if (!visibility.empty() && !parsePrimaryVisibility(visibility, &v->quality.visibility))
-      throw Error(q->where() + ".visibility: must be auto, raster or ray_cast");
-    q->finish();
-  }
-  if (auto q = p.object("volumetric")) {
-    q->integer("ray_stride", &v->volumetric.ray_stride);
-    q->num("p_unknown", &v->volumetric.p_unknown);
-    q->num("p_free", &v->volumetric.p_free);
-    q->num("p_occupied", &v->volumetric.p_occupied);
-    q->num("min_visibility", &v->volumetric.min_visibility);
-    q->finish();
-  }
-  p.finish();
-}
-
-Json plannerJson(const ViewPlannerOptions& v) {
-  return {{"directions", v.directions},
-          {"min_angle_deg", v.min_angle_deg},
-          {"range_m", v.range_m},
-          {"fallback_ranges_m", v.fallback_ranges_m},
-          {"rolls", v.rolls},
-          {"alpha_cost", v.alpha_cost},
-          {"t_q", v.t_q},
-          {"use_cost", v.use_cost},
-          {"hand_occlusion", v.hand_occlusion},
-          {"check_collisions", v.check_collisions},
-          {"ik_restarts", v.ik_restarts},
-          {"ik_solver", ikMethodName(v.ik_solver)},
-          {"prescreen_stride", v.prescreen_stride},
-          {"refine", v.refine},
-          {"quality",
-           {{"t_hand_m", v.quality.t_hand_m},
-            {"max_incidence_deg", v.quality.max_incidence_deg},
-            {"max_projector_incidence_deg", v.quality.max_projector_incidence_deg},
-            {"near_hand_cell_m", v.quality.near_hand_cell_m},
-            {"pixel_stride", v.quality.pixel_stride},
-            {"visibility", primaryVisibilityName(v.quality.visibility)}}},
-          {"volumetric",
-           {{"ray_stride", v.volumetric.ray_stride},
-            {"p_unknown", v.volumetric.p_unknown},
-            {"p_free", v.volumetric.p_free},
-            {"p_occupied", v.volumetric.p_occupied},
-            {"min_visibility", v.volumetric.min_visibility}}}};
-}
-
-void readOptions(const fs::path& file, AllOptions* o) {
-  Json j = readJsonFile(file);
-  OptionReader r(j, file.string());
-  r.string("robot", &o->robot);
-  r.num("voxel_m", &o->scan.voxel_m);
-  r.num("volume_size_m", &o->scan.volume_size_m);
-  r.boolean("fit_volume", &o->scan.fit_volume);
-  r.num("t_hand_m", &o->scan.t_hand_m);
-  r.integer("carve_radius_px", &o->scan.carve_radius_px);
-  std::string mode;
-  r.string("hand_mode", &mode);
-  if (!mode.empty() && !parseHandMode(mode, &o->scan.hand_mode))
-    throw Error(file.string() + ".hand_mode: must be naive, carve or carve-empty");
-  r.integer("initial_views", &o->scan.initial_views);
-  r.integer("max_views", &o->scan.max_views);
-  r.integer("planning_stride", &o->scan.planning_stride);
-  std::string method;
-  r.string("planning_mesh", &method);
-  if (!method.empty() && !parseSurfaceMethod(method, &o->scan.planning_method))
-    throw Error(file.string() + ".planning_mesh: must be surface_nets or tetrahedra");
-  if (auto p = r.object("planner")) readPlanner(*p, &o->scan.planner);
-  r.integer("max_grasps", &o->multi.max_grasps);
-  r.string("start", &o->start);
-  if (o->start != "table" && o->start != "held")
-    throw Error(file.string() + ".start: must be table or held");
-  if (auto t = r.object("table_top")) {
-    TableTopOptions& v = o->multi.table_top;
-    t->integer("frames", &v.frames);
-    t->num("aim_height_m", &v.aim_height_m);
-    t->num("search_radius_m", &v.search_radius_m);
-    t->num("above_table_m", &v.above_table_m);
-    t->num("cluster_cell_m", &v.cluster_cell_m);
-    t->integer("min_points", &v.min_points);
-    t->num("plane_inlier_m", &v.plane.inlier_m);
-    t->integer("plane_iterations", &v.plane.iterations);
-    t->num("plane_max_tilt_deg", &v.plane.max_tilt_deg);
-    t->finish();
-  }
-  if (auto g = r.object("grasp")) {
-    GraspOptions& v = o->multi.grasp;
-    std::string approach;
-    g->string("approach", &approach);
-    if (!approach.empty() && !parseGraspApproach(approach, &v.approach))
-      throw Error(g->where() + ".approach: must be palm or first_contact");
-    g->integer("approaches", &v.approaches);
-    g->integer("rolls", &v.rolls);
-    g->numbers("spreads", &v.spreads);
-    g->numbers("preshapes", &v.preshapes);
-    g->numbers("edge_spreads", &v.edge_spreads);
-    g->num("edge_inset_m", &v.edge_inset_m);
-    g->num("friction", &v.friction);
-    g->integer("cone_edges", &v.cone_edges);
-    g->integer("wrench_directions", &v.wrench_directions);
-    g->num("contact_m", &v.contact_m);
-    g->num("contact_cell_m", &v.contact_cell_m);
-    g->num("min_epsilon", &v.min_epsilon);
-    g->num("stability_weight", &v.stability_weight);
-    g->integer("max_candidates", &v.max_candidates);
-    g->num("lift_m", &v.lift_m);
-    if (auto p = g->object("ranking")) readPlanner(*p, &o->multi.ranking);
-    g->finish();
-  }
-  if (auto mo = r.object("mesh")) {
-    mo->num("hole_sigma_m", &o->scan.mesh.hole_sigma_m);
-    mo->boolean("drop_floating_unknown", &o->scan.mesh.drop_floating_unknown);
-    mo->num("min_component_fraction", &o->scan.mesh.min_component_fraction);
-    mo->finish();
-  }
-  if (auto e = r.object("eval")) {
-    e->integer("samples", &o->eval.samples);
-    e->num("tau_m", &o->eval.tau_m);
-    e->numbers("fscore_m", &o->eval.fscore_m);
-    e->finish();
-  }
-  if (auto s = r.object("sim")) {
-    s->num("frame_rate_hz", &o->sim.frame_rate_hz);
-    s->integer("frame_subsample", &o->sim.frame_subsample);
-    s->boolean("noise", &o->sim.noise);
-    s->num("room_radius_m", &o->sim.room_radius_m);
-    s->boolean("check_hold", &o->sim.check_hold);
-    s->num("friction", &o->sim.friction);
-    s->num("hold_min_epsilon", &o->sim.hold_min_epsilon);
-    // The same two ways as grasp.approach, for the simulator's pick-up.
-    std::string pickUp;
-    s->string("pick_up", &pickUp);
-    GraspApproach a = GraspApproach::kPalm;
-    if (!pickUp.empty() && !parseGraspApproach(pickUp, &a))
-      throw Error(s->where() + ".pick_up: must be palm or first_contact");
-    if (!pickUp.empty()) o->sim.pick_up_first_contact = a == GraspApproach::kFirstContact;
-    s->finish();
-  }
-  r.finish();
-}
-
-Json optionsJson(const AllOptions& o) {
-  const ViewPlannerOptions& v = o.scan.planner;
-  const GraspOptions& g = o.multi.grasp;
-  return {{"robot", o.robot},
-          {"voxel_m", o.scan.voxel_m},
-          {"volume_size_m", o.scan.volume_size_m},
-          {"fit_volume", o.scan.fit_volume},
-          {"t_hand_m", o.scan.t_hand_m},
-          {"carve_radius_px", o.scan.carve_radius_px},
-          {"hand_mode", handModeName(o.scan.hand_mode)},
-          {"initial_views", o.scan.initial_views},
-          {"max_views", o.scan.max_views},
-          {"planning_stride", o.scan.planning_stride},
-          {"planning_mesh", surfaceMethodName(o.scan.planning_method)},
-          {"planner", plannerJson(v)},
-          {"max_grasps", o.multi.max_grasps},
-          {"start", o.start},
-          {"table_top",
-           {{"frames", o.multi.table_top.frames},
-            {"aim_height_m", o.multi.table_top.aim_height_m},
-            {"search_radius_m", o.multi.table_top.search_radius_m},
-            {"above_table_m", o.multi.table_top.above_table_m},
-            {"cluster_cell_m", o.multi.table_top.cluster_cell_m},
-            {"min_points", o.multi.table_top.min_points},
-            {"plane_inlier_m", o.multi.table_top.plane.inlier_m},
-            {"plane_iterations", o.multi.table_top.plane.iterations},
-            {"plane_max_tilt_deg", o.multi.table_top.plane.max_tilt_deg}}},
-          {"grasp",
-           {{"approach", graspApproachName(g.approach)},
-            {"approaches", g.approaches},
-            {"rolls", g.rolls},
-            {"spreads", g.spreads},
-            {"preshapes", g.preshapes},
-            {"edge_spreads", g.edge_spreads},
-            {"edge_inset_m", g.edge_inset_m},
-            {"friction", g.friction},
-            {"cone_edges", g.cone_edges},
-            {"wrench_directions", g.wrench_directions},
-            {"contact_m", g.contact_m},
-            {"contact_cell_m", g.contact_cell_m},
-            {"min_epsilon", g.min_epsilon},
-            {"stability_weight", g.stability_weight},
-            {"max_candidates", g.max_candidates},
-            {"lift_m", g.lift_m},
-            {"ranking", plannerJson(o.multi.ranking)}}},
-          {"mesh",
-           {{"hole_sigma_m", o.scan.mesh.hole_sigma_m},
-            {"drop_floating_unknown", o.scan.mesh.drop_floating_unknown},
-            {"min_component_fraction", o.scan.mesh.min_component_fraction}}},
-          {"eval",
-           {{"samples", o.eval.samples}, {"tau_m", o.eval.tau_m}, {"fscore_m", o.eval.fscore_m}}},
-          {"sim",
-           {{"frame_rate_hz", o.sim.frame_rate_hz},
-            {"frame_subsample", o.sim.frame_subsample},
-            {"noise", o.sim.noise},
-            {"room_radius_m", o.sim.room_radius_m},
-            {"check_hold", o.sim.check_hold},
-            {"friction", o.sim.friction},
-            {"hold_min_epsilon", o.sim.hold_min_epsilon},
-            {"pick_up", graspApproachName(o.sim.pick_up_first_contact ? GraspApproach::kFirstContact
-                                                                      : GraspApproach::kPalm)}}}};
-}
-
-}  // namespace
+namespace {}  // namespace
 
 // Every first-grasp pose tried, compactly: approach (palm z in O), roll, spread, preshape,
 // edge, ε, and what became of it.
@@ -339,7 +44,7 @@ static Json posesJson(const std::vector<GraspPoseRecord>& poses) {
 
 int runScan(const ScanArgs& args) {
   const auto t0 = std::chrono::steady_clock::now();
-  AllOptions o;
+  ScanConfig o;
   o.robot = args.robot;
   // The named planner first: a config file can still override any of its fields.
   if (!applyPlannerName(args.planner, &o.scan.planner)) {
@@ -347,7 +52,7 @@ int runScan(const ScanArgs& args) {
     for (const std::string& n : plannerNames()) names += (names.empty() ? "" : ", ") + n;
     throw Error("--planner: unknown planner \"" + args.planner + "\" (known: " + names + ")");
   }
-  if (!args.config.empty()) readOptions(args.config, &o);
+  if (!args.config.empty()) readScanConfigFile(args.config, &o);
   if (!args.robot.empty()) o.robot = args.robot;
   if (o.robot.empty())
     o.robot = (resourceDirectory("data", INHAND_DATA_DIR) / "robots/wam_barretthand.json").string();
@@ -357,10 +62,7 @@ int runScan(const ScanArgs& args) {
     throw Error("--hand-mode: must be naive, carve or carve-empty");
   o.scan.planner.seed = args.seed;
   o.sim.seed = args.seed;
-  if (std::string p = o.scan.validate(); !p.empty()) throw Error("scan options: " + p);
-  if (std::string p = o.multi.validate(); !p.empty()) throw Error("scan options: " + p);
-  if (std::string p = o.sim.validate(); !p.empty()) throw Error("simulation options: " + p);
-  if (std::string p = o.eval.validate(); !p.empty()) throw Error("eval options: " + p);
+  if (std::string p = o.validate(); !p.empty()) throw Error(p);
 
   RobotModel model = RobotModel::load(o.robot);
   TriangleMesh object = loadObject(args.object);
@@ -565,7 +267,7 @@ int runScan(const ScanArgs& args) {
          for (const GraspRecord& g : mr.grasps) t += g.ranking_s;
          return t;
        }()}};
-  summary["options"] = optionsJson(o);
+  summary["options"] = scanConfigJson(o);
   writeTextAtomically(out.path() / "summary.json", summary.dump(2) + "\n");
   // The report: a missing front-end install costs the report only, never the scan.
   try {
@@ -597,6 +299,19 @@ int runScan(const ScanArgs& args) {
     default:
       return 0;
   }
+}
+
+int runConfig(const std::string& file, bool reference) {
+  if (reference) {
+    std::fputs(scanConfigReference().c_str(), stdout);
+    return 0;
+  }
+  ScanConfig config;
+  if (!file.empty()) readScanConfigFile(file, &config);
+  if (std::string p = config.validate(); !p.empty())
+    throw Error((file.empty() ? std::string() : file + ": ") + p);
+  std::printf("%s\n", scanConfigJson(config).dump(2).c_str());
+  return 0;
 }
 
 }  // namespace inhand::app

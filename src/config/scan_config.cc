@@ -1,0 +1,340 @@
+#include "inhand/config/scan_config.h"
+
+#include <cstdio>
+#include <set>
+#include <sstream>
+#include <utility>
+#include <vector>
+
+#include "inhand/core/error.h"
+
+namespace inhand {
+
+namespace {
+
+template <class T>
+using Names = std::vector<std::pair<T, const char*>>;
+
+// "a, b or c"
+template <class T>
+std::string alternatives(const Names<T>& names) {
+  std::string s;
+  for (size_t i = 0; i < names.size(); ++i)
+    s += (i == 0 ? "" : i + 1 == names.size() ? " or " : ", ") + std::string(names[i].second);
+  return s;
+}
+
+const Names<HandMode> kHandModes = {{HandMode::kNaive, "naive"},
+                                    {HandMode::kCarveOnly, "carve"},
+                                    {HandMode::kCarveAndEmpty, "carve-empty"}};
+const Names<SurfaceMethod> kSurfaceMethods = {{SurfaceMethod::kSurfaceNets, "surface_nets"},
+                                              {SurfaceMethod::kTetrahedra, "tetrahedra"}};
+const Names<IkMethod> kIkMethods = {{IkMethod::kDampedLeastSquares, "dls"},
+                                    {IkMethod::kKdlLma, "kdl_lma"}};
+const Names<PrimaryVisibility> kVisibilities = {{PrimaryVisibility::kAuto, "auto"},
+                                                {PrimaryVisibility::kRaster, "raster"},
+                                                {PrimaryVisibility::kRayCast, "ray_cast"}};
+const Names<GraspApproach> kApproaches = {{GraspApproach::kPalm, "palm"},
+                                          {GraspApproach::kFirstContact, "first_contact"}};
+const Names<bool> kPickUps = {{false, "palm"}, {true, "first_contact"}};
+const Names<std::string> kStarts = {{"table", "table"}, {"held", "held"}};
+
+// The tables. Each visits every option of its struct with its key and meaning; the visitor
+// reads, writes or documents it.
+
+template <class V>
+void visitQuality(V& v, ViewQualityOptions& o) {
+  v.num("t_hand_m", o.t_hand_m, "hits this close to the hand are skipped (eq. 9), m");
+  v.num("max_incidence_deg", o.max_incidence_deg, "camera ray vs surface normal at most, degrees");
+  v.num("max_projector_incidence_deg", o.max_projector_incidence_deg,
+        "projector ray vs surface normal at most, degrees");
+  v.num("near_hand_cell_m", o.near_hand_cell_m, "resolution of the near-hand grid, m");
+  v.integer("pixel_stride", o.pixel_stride, "eq. 9 over every n-th pixel in u and v");
+  v.choice("visibility", o.visibility, kVisibilities,
+           "primary visibility: rasterised or ray cast (auto: raster where it is faster)");
+}
+
+template <class V>
+void visitVolumetric(V& v, VolumetricOptions& o) {
+  v.integer("ray_stride", o.ray_stride, "volumetric baselines: every n-th pixel in u and v");
+  v.num("p_unknown", o.p_unknown, "occupancy of an unknown voxel");
+  v.num("p_free", o.p_free, "occupancy of a voxel in front of the surface");
+  v.num("p_occupied", o.p_occupied, "occupancy of a voxel on or just behind the surface");
+  v.num("min_visibility", o.min_visibility, "a ray stops when its visibility falls below this");
+}
+
+template <class V>
+void visitPlanner(V& v, ViewPlannerOptions& o) {
+  v.integer("directions", o.directions, "candidate directions on the unit sphere (Alg. 1)");
+  v.num("min_angle_deg", o.min_angle_deg, "t_θ: minimum angle to every used view, degrees");
+  v.num("range_m", o.range_m, "preferred camera-to-object-centre distance, m");
+  v.numbers("fallback_ranges_m", o.fallback_ranges_m,
+            "ranges tried only where range_m has no IK solution, m");
+  v.integer("rolls", o.rolls, "rolls swept about each viewing direction");
+  v.num("alpha_cost", o.alpha_cost, "α_cost: score = quality − α_cost · trajectory seconds");
+  v.num("t_q", o.t_q, "t_q: minimum quality of a view that counts");
+  v.boolean("use_cost", o.use_cost, "false: score = quality (ablation)");
+  v.boolean("hand_occlusion", o.hand_occlusion,
+            "false: no robot occluders, no t_hand rule (ablation)");
+  v.boolean("check_collisions", o.check_collisions,
+            "reject candidates whose arm, hand or object hit the table or base");
+  v.integer("ik_restarts", o.ik_restarts, "random IK restarts after the seeded attempt");
+  v.choice("ik_solver", o.ik_solver, kIkMethods, "IK: damped least squares or KDL's LMA");
+  v.integer("prescreen_stride", o.prescreen_stride,
+            "coarse pass: every n-th pixel for every reachable candidate");
+  v.integer("refine", o.refine, "the best this many by the coarse pass are scored in full");
+  v.object("quality", "eq. 9", [&](V& s) { visitQuality(s, o.quality); });
+  v.object("volumetric", "the volumetric baselines (Isler et al. 2016)",
+           [&](V& s) { visitVolumetric(s, o.volumetric); });
+}
+
+template <class V>
+void visitConfig(V& v, ScanConfig& c) {
+  ScanOptions& s = c.scan;
+  MultiGraspOptions& m = c.multi;
+  v.string("robot", c.robot, "robot config JSON (empty: data/robots/wam_barretthand.json)");
+  v.num("voxel_m", s.voxel_m, "volume voxel size, m");
+  v.num("volume_size_m", s.volume_size_m, "edge of the cubic volume, m");
+  v.boolean("fit_volume", s.fit_volume,
+            "from the table: a cube of 1.5 × the object's extent + 4 cm, as many voxels across");
+  v.num("t_hand_m", s.t_hand_m, "measurements this close to the robot only carve (§IV), m");
+  v.integer("carve_radius_px", s.carve_radius_px, "… or this close to it in the image, pixels");
+  v.choice("hand_mode", s.hand_mode, kHandModes, "the robot's own measurements (Fig. 3 a, b, c)");
+  v.integer("initial_views", s.initial_views, "directions of the initial trajectory");
+  v.integer("max_views", s.max_views, "Alg. 1 views per grasp at most");
+  v.integer("planning_stride", s.planning_stride, "S_obj for planning from every n-th voxel");
+  v.choice("planning_mesh", s.planning_method, kSurfaceMethods, "S_obj for planning");
+  v.object("planner", "the view planner (Alg. 1)", [&](V& p) { visitPlanner(p, s.planner); });
+  v.integer("max_grasps", m.max_grasps, "grasps in all (1: no re-grasping)");
+  v.choice("start", c.start, kStarts, "table: from the table top (§V); held: at a given grasp");
+  v.object("table_top", "the table-top stage", [&](V& t) {
+    TableTopOptions& o = m.table_top;
+    t.integer("frames", o.frames, "depth frames of the object where it rests");
+    t.num("aim_height_m", o.aim_height_m, "the camera aims this far above the rest pose, m");
+    t.num("search_radius_m", o.search_radius_m, "object points within this of the rest pose, m");
+    t.num("above_table_m", o.above_table_m, "… and this far above the fitted table plane, m");
+    t.num("cluster_cell_m", o.cluster_cell_m, "the object: the largest cluster at this cell, m");
+    t.integer("min_points", o.min_points, "fewer object points: object_not_found");
+    t.num("plane_inlier_m", o.plane.inlier_m, "RANSAC: a point this close supports a plane, m");
+    t.integer("plane_iterations", o.plane.iterations, "RANSAC hypotheses");
+    t.num("plane_max_tilt_deg", o.plane.max_tilt_deg,
+          "RANSAC: planes tilted more from the table's normal lose, degrees");
+  });
+  v.object("grasp", "grasp candidates and their ranking", [&](V& g) {
+    GraspOptions& o = m.grasp;
+    g.choice("approach", o.approach, kApproaches,
+             "how the open hand comes in: palm slides to contact, or the whole hand to first "
+             "contact");
+    g.integer("approaches", o.approaches, "approach directions over the sphere");
+    g.integer("rolls", o.rolls, "palm rolls about each approach (over 180°)");
+    g.numbers("spreads", o.spreads, "spread joint values tried");
+    g.numbers("preshapes", o.preshapes,
+              "fingers this fraction of the way closed as the hand comes in");
+    g.numbers("edge_spreads", o.edge_spreads, "edge poses at each of these spreads");
+    g.num("edge_inset_m", o.edge_inset_m, "edge poses: the model ends this far beyond the palm, m");
+    g.num("friction", o.friction, "μ at each contact (stability)");
+    g.integer("cone_edges", o.cone_edges, "friction-cone linearisation");
+    g.integer("wrench_directions", o.wrench_directions, "directions sampled for ε");
+    g.num("contact_m", o.contact_m, "model points this close to the hand are in contact, m");
+    g.num("contact_cell_m", o.contact_cell_m, "contact pooling cell, m");
+    g.num("min_epsilon", o.min_epsilon, "ε below this: not a stable grasp");
+    g.num("stability_weight", o.stability_weight, "ranking score = quality + weight · ε");
+    g.integer("max_candidates", o.max_candidates, "ranked at most (the most stable first)");
+    g.num("lift_m", o.lift_m, "the object is lifted this far after the pick, m");
+    g.object("ranking", "Alg. 1 as used to rank grasp candidates",
+             [&](V& p) { visitPlanner(p, m.ranking); });
+  });
+  v.object("mesh", "the model's surface", [&](V& o) {
+    o.num("hole_sigma_m", s.mesh.hole_sigma_m, "σ of never-observed (hole-filled) surface, m");
+    o.boolean("drop_floating_unknown", s.mesh.drop_floating_unknown,
+              "drop components with no observed vertex");
+    o.num("min_component_fraction", s.mesh.min_component_fraction,
+          "drop components smaller than this fraction of the largest");
+  });
+  v.object("eval", "scoring against the true mesh (simulation)", [&](V& o) {
+    o.integer("samples", c.eval.samples, "points drawn on each surface");
+    o.num("tau_m", c.eval.tau_m, "coverage radius τ, m");
+    o.numbers("fscore_m", c.eval.fscore_m, "F-score thresholds, m");
+  });
+  v.object("sim", "the simulator", [&](V& o) {
+    o.num("frame_rate_hz", c.sim.frame_rate_hz, "sensor frame rate along trajectories, Hz");
+    o.integer("frame_subsample", c.sim.frame_subsample, "fuse every n-th frame");
+    o.boolean("noise", c.sim.noise, "sensor noise");
+    o.num("room_radius_m", c.sim.room_radius_m, "a room around the camera (0: none), m");
+    o.boolean("check_hold", c.sim.check_hold, "grasps must be force closure on the true object");
+    o.num("friction", c.sim.friction, "μ of the true contacts");
+    o.num("hold_min_epsilon", c.sim.hold_min_epsilon, "ε a grasp needs to hold");
+    o.choice("pick_up", c.sim.pick_up_first_contact, kPickUps,
+             "the simulated pick-up: palm backed off, or a guarded move to first contact");
+  });
+}
+
+class Reader {
+ public:
+  Reader(const Json& j, std::string where) : j_(j), where_(std::move(where)) {
+    if (!j.is_object()) throw Error(where_ + ": expected an object");
+  }
+  // After every known key: any other key is an error that names it.
+  void finish() const {
+    for (const auto& [key, value] : j_.items())
+      if (!seen_.count(key)) throw Error(where_ + ": unknown option \"" + key + "\"");
+  }
+  void num(const char* key, double& v, const char*) {
+    if (!take(key)) return;
+    if (!j_[key].is_number()) throw Error(at(key) + ": expected a number");
+    v = j_[key].get<double>();
+  }
+  void integer(const char* key, int& v, const char*) {
+    if (!take(key)) return;
+    if (!j_[key].is_number_integer()) throw Error(at(key) + ": expected an integer");
+    v = j_[key].get<int>();
+  }
+  void boolean(const char* key, bool& v, const char*) {
+    if (!take(key)) return;
+    if (!j_[key].is_boolean()) throw Error(at(key) + ": expected true or false");
+    v = j_[key].get<bool>();
+  }
+  void numbers(const char* key, std::vector<double>& v, const char*) {
+    if (!take(key)) return;
+    const Json& a = j_[key];
+    if (!a.is_array()) throw Error(at(key) + ": expected an array of numbers");
+    v.clear();
+    for (const Json& x : a) {
+      if (!x.is_number()) throw Error(at(key) + ": expected an array of numbers");
+      v.push_back(x.get<double>());
+    }
+  }
+  void string(const char* key, std::string& v, const char*) {
+    if (!take(key)) return;
+    if (!j_[key].is_string()) throw Error(at(key) + ": expected a string");
+    v = j_[key].get<std::string>();
+  }
+  template <class T>
+  void choice(const char* key, T& v, const Names<T>& names, const char*) {
+    if (!take(key)) return;
+    if (j_[key].is_string())
+      for (const auto& [value, name] : names)
+        if (j_[key].get<std::string>() == name) {
+          v = value;
+          return;
+        }
+    throw Error(at(key) + ": must be " + alternatives(names));
+  }
+  template <class F>
+  void object(const char* key, const char*, F visit) {
+    if (!take(key)) return;
+    Reader sub(j_[key], at(key));
+    visit(sub);
+    sub.finish();
+  }
+
+ private:
+  bool take(const char* key) {
+    seen_.insert(key);
+    return j_.contains(key);
+  }
+  std::string at(const char* key) const { return where_ + "." + key; }
+  const Json& j_;
+  std::string where_;
+  std::set<std::string> seen_;
+};
+
+class Writer {
+ public:
+  Json j = Json::object();
+  void num(const char* key, double& v, const char*) { j[key] = v; }
+  void integer(const char* key, int& v, const char*) { j[key] = v; }
+  void boolean(const char* key, bool& v, const char*) { j[key] = v; }
+  void numbers(const char* key, std::vector<double>& v, const char*) { j[key] = v; }
+  void string(const char* key, std::string& v, const char*) { j[key] = v; }
+  template <class T>
+  void choice(const char* key, T& v, const Names<T>& names, const char*) {
+    for (const auto& [value, name] : names)
+      if (value == v) j[key] = name;
+  }
+  template <class F>
+  void object(const char* key, const char*, F visit) {
+    Writer sub;
+    visit(sub);
+    j[key] = sub.j;
+  }
+};
+
+class Documenter {
+ public:
+  explicit Documenter(std::string prefix = "") : prefix_(std::move(prefix)) {}
+  std::ostringstream rows, sections;
+  void num(const char* key, double& v, const char* doc) { row(key, "number", Json(v).dump(), doc); }
+  void integer(const char* key, int& v, const char* doc) {
+    row(key, "integer", std::to_string(v), doc);
+  }
+  void boolean(const char* key, bool& v, const char* doc) {
+    row(key, "true/false", v ? "true" : "false", doc);
+  }
+  void numbers(const char* key, std::vector<double>& v, const char* doc) {
+    row(key, "numbers", Json(v).dump(), doc);
+  }
+  void string(const char* key, std::string& v, const char* doc) {
+    row(key, "string", v.empty() ? "(empty)" : "\"" + v + "\"", doc);
+  }
+  template <class T>
+  void choice(const char* key, T& v, const Names<T>& names, const char* doc) {
+    std::string def, all;
+    for (const auto& [value, name] : names) {
+      if (value == v) def = std::string("\"") + name + "\"";
+      all += (all.empty() ? "" : " \\| ") + std::string(name);
+    }
+    row(key, all, def, doc);
+  }
+  template <class F>
+  void object(const char* key, const char* doc, F visit) {
+    Documenter sub(prefix_ + key + ".");
+    visit(sub);
+    sections << "\n### `" << prefix_ << key << "`: " << doc << "\n\n"
+             << "| key | type | default | meaning |\n|---|---|---|---|\n"
+             << sub.rows.str() << sub.sections.str();
+  }
+
+ private:
+  void row(const char* key, const std::string& type, const std::string& def, const char* doc) {
+    rows << "| `" << prefix_ << key << "` | " << type << " | " << def << " | " << doc << " |\n";
+  }
+  std::string prefix_;
+};
+
+}  // namespace
+
+std::string ScanConfig::validate() const {
+  if (std::string p = scan.validate(); !p.empty()) return "scan options: " + p;
+  if (std::string p = multi.validate(); !p.empty()) return "scan options: " + p;
+  if (std::string p = sim.validate(); !p.empty()) return "simulation options: " + p;
+  if (std::string p = eval.validate(); !p.empty()) return "eval options: " + p;
+  return {};
+}
+
+void readScanConfig(const Json& j, const std::string& where, ScanConfig* config) {
+  Reader r(j, where);
+  visitConfig(r, *config);
+  r.finish();
+}
+
+void readScanConfigFile(const std::filesystem::path& file, ScanConfig* config) {
+  readScanConfig(readJsonFile(file), file.string(), config);
+}
+
+Json scanConfigJson(const ScanConfig& config) {
+  ScanConfig c = config;
+  Writer w;
+  visitConfig(w, c);
+  return w.j;
+}
+
+std::string scanConfigReference() {
+  ScanConfig defaults;
+  Documenter d;
+  visitConfig(d, defaults);
+  return "## Top level\n\n| key | type | default | meaning |\n|---|---|---|---|\n" + d.rows.str() +
+         d.sections.str();
+}
+
+}  // namespace inhand
