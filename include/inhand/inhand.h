@@ -1,6 +1,7 @@
 #pragma once
 // inhand: every public header of the library (link inhand::inhand).
 #include "inhand/config/scan_config.h"
+#include "inhand/config/simulated_scan.h"
 #include "inhand/core/error.h"
 #include "inhand/core/fast_math.h"
 #include "inhand/core/file_util.h"

@@ -5,7 +5,7 @@
 #include <set>
 
 #include "commands.h"
-#include "inhand/config/scan_config.h"
+#include "inhand/config/simulated_scan.h"
 #include "inhand/core/error.h"
 #include "inhand/core/file_util.h"
 #include "inhand/core/json_util.h"
@@ -91,42 +91,16 @@ int runScan(const ScanArgs& args) {
                 {"down_O", {p.down_O.x(), p.down_O.y(), p.down_O.z()}},
                 {"stable_poses", poses.size()}};
   }
-  // From the table the scan finds out itself (object_too_large_for_volume); held, it cannot.
+  // An object too large for the volume is refused before the output directory exists.
   if (o.start == "held" && object.bounds().size().maxCoeff() > o.scan.volume_size_m - 0.02)
     throw Error(args.object + ": the object (" + std::to_string(object.bounds().size().maxCoeff()) +
                 " m across) does not fit the scan volume (volume_size_m = " +
                 std::to_string(o.scan.volume_size_m) + " m)");
   StagedDirectory out(args.out);
-
-  DepthCameraOptions camera;
-  NoiseModelOptions noise;
-  // start "table": the object rests on the table, the arm at home (the whole scan, §V);
-  // "held": the robot already holds it at the simulator's default side grasp.
-  auto [T_O_palm, qGrasp] = defaultGrasp(model, object);
-  SimWorld world(model, object, T_O_palm, camera, noise, o.sim);
-  if (o.start == "held") {
-    world.q = qGrasp;
-  } else {
-    world.held = false;
-    world.q = model.home();
-  }
-  SimRobot robot(&world);
-  SimSensor sensor(&world, camera);
   ScanProgress progress;
   progress.log = [](const std::string& s) { std::fprintf(stderr, "scan: %s\n", s.c_str()); };
-  // The simulated object is known: score the model against it after every view (its frame O
-  // is the mesh's own input frame).
-  const GroundTruth truth(object, o.eval);
-  progress.coverage = [&](const ObjectModel& m) { return truth.coverage(m); };
-  // Held: the volume is centred where the robot expects a held object, grasp_offset_m in front of
-  // the palm. Table: on the points the camera sees there. The scan is never told the object's
-  // shape or size; frame O is the object's frame where it rests (the mesh's own input frame).
-  const Vec3 expected = T_O_palm * Vec3(0, 0, model.graspOffset());
-  MultiGraspResult mr =
-      o.start == "held"
-          ? scanMultiGrasp(robot, sensor, T_O_palm, expected, world.restPose(), o.scan, o.multi,
-                           noise, progress)
-          : scanFromTable(robot, sensor, world.restPose(), o.scan, o.multi, noise, progress);
+  const SimulatedScan sim = runSimulatedScan(model, object, o, progress);
+  const MultiGraspResult& mr = sim.result;
   const ScanResult& r = mr.scan;
 
   writePly(out.path() / "model.ply", r.model.mesh, &r.model.variance);
@@ -144,7 +118,7 @@ int runScan(const ScanArgs& args) {
       writePly(out.path() / "grasps" / (k + "_candidate_" + std::to_string(c + 1) + ".ply"),
                HandGeometry(model, gr.ranked[c].q, gr.ranked[c].T_O_palm).mesh());
   }
-  const SurfaceMetrics sm = truth.evaluate(r.model);
+  const SurfaceMetrics& sm = sim.metrics;
   Json views = Json::array();
   double trajectory = 0;
   std::vector<int> viewGrasp;  // 1-based grasp of each view
@@ -241,7 +215,7 @@ int runScan(const ScanArgs& args) {
         {"volume", {{"size_m", t.volume_size_m}, {"voxel_m", t.voxel_m}}},
         {"seconds", t.seconds}};
   }
-  const CameraIntrinsics& K = camera.intrinsics;
+  const CameraIntrinsics& K = sim.camera.intrinsics;
   summary["camera"] = {{"width", K.width}, {"height", K.height}, {"fx", K.fx},
                        {"fy", K.fy},       {"cx", K.cx},         {"cy", K.cy}};
   summary["view_evaluations"] = r.view_evaluations;

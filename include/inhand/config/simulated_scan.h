@@ -1,0 +1,24 @@
+#pragma once
+// The simulated scan as `inhand scan` runs it, for any front end (the CLI, Python): the
+// simulator built from a ScanConfig, the object resting on the table (or held at the simulator's
+// default grasp with start "held"), the scan driven to its end, the model scored against the
+// true mesh.
+#include "inhand/config/scan_config.h"
+
+namespace inhand {
+
+struct SimulatedScan {
+  MultiGraspResult result;
+  SurfaceMetrics metrics;              // the final model against the true mesh
+  Iso3 T_B_O_rest = Iso3::Identity();  // where the object rested
+  int drops = 0;                       // how often the simulated object fell
+  DepthCameraOptions camera;           // the simulated sensor
+};
+
+// `object`: the true mesh (frame O, the model's frame); the seed is config.sim.seed (noise) and
+// config.scan.planner.seed (IK). `progress.coverage` is set to the truth's coverage when empty.
+// Throws Error for invalid options or an object larger than the volume when held.
+SimulatedScan runSimulatedScan(const RobotModel& robot, const TriangleMesh& object,
+                               const ScanConfig& config, ScanProgress progress = {});
+
+}  // namespace inhand

@@ -1,0 +1,50 @@
+#include "inhand/config/simulated_scan.h"
+
+#include "inhand/core/error.h"
+
+namespace inhand {
+
+SimulatedScan runSimulatedScan(const RobotModel& model, const TriangleMesh& object,
+                               const ScanConfig& o, ScanProgress progress) {
+  if (std::string p = o.validate(); !p.empty()) throw Error(p);
+  if (o.start != "table" && o.start != "held") throw Error("start: must be table or held");
+  // From the table the scan finds out itself (object_too_large_for_volume); held, it cannot.
+  if (o.start == "held" && object.bounds().size().maxCoeff() > o.scan.volume_size_m - 0.02)
+    throw Error("the object (" + std::to_string(object.bounds().size().maxCoeff()) +
+                " m across) does not fit the scan volume (volume_size_m = " +
+                std::to_string(o.scan.volume_size_m) + " m)");
+  SimulatedScan out;
+  const DepthCameraOptions& camera = out.camera;
+  NoiseModelOptions noise;
+  // start "table": the object rests on the table, the arm at home (the whole scan, §V);
+  // "held": the robot already holds it at the simulator's default side grasp.
+  auto [T_O_palm, qGrasp] = defaultGrasp(model, object);
+  SimWorld world(model, object, T_O_palm, camera, noise, o.sim);
+  if (o.start == "held") {
+    world.q = qGrasp;
+  } else {
+    world.held = false;
+    world.q = model.home();
+  }
+  SimRobot robot(&world);
+  SimSensor sensor(&world, camera);
+  // The simulated object is known: score the model against it after every view (its frame O
+  // is the mesh's own input frame).
+  const GroundTruth truth(object, o.eval);
+  if (!progress.coverage)
+    progress.coverage = [&](const ObjectModel& m) { return truth.coverage(m); };
+  // Held: the volume is centred where the robot expects a held object, grasp_offset_m in front of
+  // the palm. Table: on the points the camera sees there. The scan is never told the object's
+  // shape or size; frame O is the object's frame where it rests (the mesh's own input frame).
+  out.T_B_O_rest = world.restPose();
+  const Vec3 expected = T_O_palm * Vec3(0, 0, model.graspOffset());
+  out.result = o.start == "held"
+                   ? scanMultiGrasp(robot, sensor, T_O_palm, expected, out.T_B_O_rest, o.scan,
+                                    o.multi, noise, progress)
+                   : scanFromTable(robot, sensor, out.T_B_O_rest, o.scan, o.multi, noise, progress);
+  out.metrics = truth.evaluate(out.result.scan.model);
+  out.drops = world.drops;
+  return out;
+}
+
+}  // namespace inhand
