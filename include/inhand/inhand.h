@@ -38,6 +38,7 @@
 #include "inhand/scan/multi_grasp.h"
 #include "inhand/scan/scan.h"
 #include "inhand/scan/session.h"
+#include "inhand/scan/table_top.h"
 #include "inhand/sensor/depth_camera.h"
 #include "inhand/sensor/depth_image.h"
 #include "inhand/sensor/depth_sensor.h"

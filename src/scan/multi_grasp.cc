@@ -10,6 +10,7 @@
 #include "inhand/core/error.h"
 #include "inhand/robot/collision.h"
 #include "inhand/scan/session.h"
+#include "inhand/scan/table_top.h"
 #include "inhand/sensor/render.h"
 
 namespace inhand {
@@ -299,8 +300,8 @@ MultiGraspResult scanFromTable(RobotInterface& robot, DepthSensor& sensor, const
   };
 
   // Frames of the object where it rests, the robot as it stands (its own pixels only carve).
-  const Vec3 rest_B = T_B_O_rest.translation();
-  const std::optional<Iso3> aim = m.camera().aimAt(rest_B + Vec3(0, 0, to.aim_height_m));
+  const std::optional<Iso3> aim =
+      m.camera().aimAt(T_B_O_rest.translation() + Vec3(0, 0, to.aim_height_m));
   if (!aim) return finish(Termination::kObjectOutOfView);
   sensor.setPose(*aim);
   const RobotOccluders scenes(m);
@@ -313,167 +314,35 @@ MultiGraspResult scanFromTable(RobotInterface& robot, DepthSensor& sensor, const
                                        options.t_hand_m, options.carve_radius_px,
                                        /*with_table=*/false));
   }
-  tt.frames = int(frames.size());
-  const Iso3 T_O_B = T_B_O_rest.inverse();
-  const Iso3 T_O_C = T_O_B * *aim;
-  // Points near the rest pose (frame O), with their pixel.
-  std::vector<Vec3> near;
-  std::vector<std::pair<int, size_t>> pixelOf;
-  for (int f = 0; f < tt.frames; ++f) {
-    const DepthImage& d = frames[f];
-    for (int v = 0; v < d.height; ++v)
-      for (int u = 0; u < d.width; ++u) {
-        const size_t i = size_t(v) * d.width + u;
-        const float z = d.depth_m[i];
-        if (!(z > 0) || robotMask[f][i]) continue;
-        const Vec3 p_C = double(z) * K.rayZ1(u, v);
-        const Vec3 p_B = *aim * p_C;
-        if ((p_B - rest_B).head<2>().norm() > to.search_radius_m ||
-            std::abs(p_B.z() - rest_B.z()) > 0.5)
-          continue;
-        near.push_back(T_O_B * p_B);
-        pixelOf.push_back({f, i});
-      }
-  }
-  tt.points = int(near.size());
-  PlaneFitOptions po = to.plane;
-  po.expected_normal = T_O_B.linear() * Vec3::UnitZ();
-  // The table the robot's config declares, in O (the fit finds where it really is).
-  {
-    const Vec3 n = po.expected_normal;
-    const Vec3 onTable_O = T_O_B * Vec3(rest_B.x(), rest_B.y(), m.table().topZ());
-    po.expected_plane = Plane{n, -n.dot(onTable_O)};
-  }
-  const std::optional<PlaneFit> fit = fitPlaneRansac(near, po);
-  if (!fit) return finish(Termination::kObjectNotFound);
-  tt.table_O = fit->plane;
-  tt.table_inliers = fit->inliers;
-  std::vector<Vec3> above;
-  for (const Vec3& p : near)
-    if (fit->plane.distance(p) > to.above_table_m) above.push_back(p);
-  // The object: the largest cluster above the table (stray returns dropped).
-  const std::vector<Vec3> object = above.empty() ? above : largestCluster(above, to.cluster_cell_m);
-  tt.object_points = int(object.size());
-  char line[240];
-  std::snprintf(line, sizeof(line),
-                "table top: %d frames, %d points near the rest pose, %d on the table plane, %zu "
-                "above it, %d in the object's cluster",
-                tt.frames, tt.points, tt.table_inliers, above.size(), tt.object_points);
-  log(line);
-  if (tt.object_points < to.min_points) return finish(Termination::kObjectNotFound);
+  const TableTopObject object =
+      findObjectOnTable(frames, robotMask, *aim, K, T_B_O_rest, m, options, to, &tt, log);
+  if (object.problem != Termination::kRunning) return finish(object.problem);  // nothing fused
 
-  // An object that the open hand cannot span in any direction is too large for it: its smallest
-  // extent (upright principal axes; along the table normal, from the table to its top) beyond
-  // 85 % of the open hand's extent along palm x (flat fingers: 328 mm for the BarrettHand).
-  tt.axes = principalAxesUpright(object, fit->plane.n);
-  {
-    const Aabb hb = HandGeometry(m, m.openHand(0.0), Iso3::Identity()).mesh().bounds();
-    const double span = hb.max.x() - hb.min.x();
-    // Height: the 99th percentile of the points' heights (as the axes' extents, 1 % trimmed:
-    // stray returns at depth edges).
-    std::vector<double> heights;
-    for (const Vec3& p : object) heights.push_back(fit->plane.distance(p));
-    std::nth_element(heights.begin(), heights.begin() + heights.size() * 99 / 100, heights.end());
-    const double height = heights[heights.size() * 99 / 100];
-    double smallest = std::numeric_limits<double>::infinity();
-    for (int k = 0; k < 3; ++k)
-      smallest = std::min(smallest, std::abs(tt.axes.axes.col(k).dot(fit->plane.n)) > 0.9
-                                        ? height
-                                        : tt.axes.max[k] - tt.axes.min[k]);
-    if (smallest > 0.85 * span)
-      return finish(Termination::kObjectTooLargeForHand);  // nothing fused: the model is empty
-  }
-  // The volume: centred on the points' box, from the table plane to their top.
-  const Vec3 n = fit->plane.n;
-  Aabb box;
-  double top = 0;
-  for (const Vec3& p : object) {
-    box.extend(p);
-    top = std::max(top, fit->plane.distance(p));
-  }
-  const Vec3 onTable = box.center() - n * fit->plane.distance(box.center());
-  const Vec3 centre_O = onTable + 0.5 * top * n;
-  if (std::max(box.size().maxCoeff(), top) > options.volume_size_m - 0.02)
-    return finish(Termination::kObjectTooLargeForVolume);  // nothing fused: the model is empty
-  // Where the object may lie, for the arm's clearance on the first grasp's initial trajectory:
-  // the points' box mirrored about the volume's centre (the camera saw one side), table to top.
-  Aabb objectBox;
-  for (int c = 0; c < 8; ++c) {
-    const Vec3 p = box.corner(c);
-    objectBox.extend(p);
-    objectBox.extend(2 * centre_O - p);
-  }
-  objectBox.extend(onTable);
-  objectBox.extend(onTable + top * n);
-  objectBox.min.array() -= 0.005;
-  objectBox.max.array() += 0.005;
-  // The volume fitted to the object (ScanOptions::fit_volume): as many voxels across as
-  // configured, over 1.5 times the object's largest extent plus 4 cm (at most volume_size_m), so
-  // a small object's thin walls get finer voxels at the same cost.
-  ScanOptions fitted = options;
-  if (options.fit_volume) {
-    const double extent = std::max((objectBox.max - objectBox.min).maxCoeff(), top);
-    const double size = std::min(options.volume_size_m, 1.5 * extent + 0.04);
-    fitted.voxel_m = options.voxel_m * size / options.volume_size_m;
-    fitted.volume_size_m = size;
-  }
+  // The volume fitted to the object, the frames fused into it: table pixels (on or below the
+  // plane) and robot pixels only carve.
+  const ScanOptions fitted = fitScanVolume(options, object);
   tt.volume_size_m = fitted.volume_size_m;
   tt.voxel_m = fitted.voxel_m;
-  ScanSession session(m, sensor.camera(), noise, fitted, multi, centre_O);
+  ScanSession session(m, sensor.camera(), noise, fitted, multi, object.centre_O);
   session.setProgress(progress);
-  // Fuse: table pixels (on or below the plane) and robot pixels only carve.
-  for (int f = 0; f < tt.frames; ++f) {
-    const DepthImage& d = frames[f];
-    std::vector<uint8_t> table(d.depth_m.size(), 0);
-    for (int v = 0; v < d.height; ++v)
-      for (int u = 0; u < d.width; ++u) {
-        const size_t i = size_t(v) * d.width + u;
-        const float z = d.depth_m[i];
-        if (z > 0 && fit->plane.distance(T_O_C * (double(z) * K.rayZ1(u, v))) < to.above_table_m)
-          table[i] = 1;
-      }
+  const Iso3 T_O_C = T_B_O_rest.inverse() * *aim;
+  for (const DepthImage& d : frames) {
+    const std::vector<uint8_t> table = tablePixels(d, T_O_C, K, object.table_O, to.above_table_m);
     session.addFrameOfObjectAt(d, q, *aim, T_B_O_rest, &table);
   }
   all.frames = session.summary().frames;
   all.fusion_s = session.summary().fusion_s;
 
-  // The first grasp: candidates on what the camera saw (the fused table-top model: the observed
-  // surface, closed over what it hides up to the table; the table itself cut off 3 mm above its
-  // plane), the hand stopping at that model and at the table, ranked by stability (ε) and then
-  // by the arm's trajectory time; the robot picks the object up with the first that holds.
-  GraspGeneration first;
-  {
-    const ObjectModel seen = session.planningModel();
-    Aabb keepBox = objectBox;
-    keepBox.min.array() -= 0.02;
-    keepBox.max.array() += 0.02;
-    TriangleMesh firstModel;
-    firstModel.vertices = seen.mesh.vertices;
-    for (const Tri& t : seen.mesh.triangles) {
-      bool keep = true;
-      for (int k = 0; k < 3 && keep; ++k) {
-        const Vec3 p = seen.mesh.vertices[t[k]].cast<double>();
-        keep = fit->plane.distance(p) > 0.003 && keepBox.contains(p);
-      }
-      if (keep) firstModel.triangles.push_back(t);
-    }
-    first = generateGrasps(m, firstModel, T_B_O_rest, robot.joints(), multi.grasp);
-  }
+  // The first grasp: candidates on what the camera saw, the robot picks the object up with the
+  // first that holds.
+  const GraspGeneration first = firstGrasps(session, object, T_B_O_rest, robot.joints());
   tt.tried = first.tried;
   tt.poses = first.poses;
   tt.touching = first.touching;
   tt.stable = first.stable;
   tt.table_free = first.table_free;
   tt.reachable = int(first.candidates.size());
-  // Most stable first; among equally stable (to 10 %), the cheaper arm motion.
-  for (GraspCandidate& c : first.candidates)
-    c.score = trajectoryTime(m, m.arm(robot.joints()), m.arm(c.q));
-  std::stable_sort(first.candidates.begin(), first.candidates.end(),
-                   [](const GraspCandidate& a, const GraspCandidate& b) {
-                     const double ea = std::floor(std::log(std::max(a.epsilon, 1e-9)) / 0.1);
-                     const double eb = std::floor(std::log(std::max(b.epsilon, 1e-9)) / 0.1);
-                     return ea != eb ? ea > eb : a.score < b.score;
-                   });
+  char line[200];
   std::snprintf(line, sizeof(line),
                 "first grasp: %d poses, %d touching, %d stable, %d clear of the table, %d "
                 "reachable (%.2f s)",
@@ -485,7 +354,7 @@ MultiGraspResult scanFromTable(RobotInterface& robot, DepthSensor& sensor, const
     return finish(tt.stable == 0 ? Termination::kNoStableGrasp : Termination::kNoReachableGrasp);
   }
   std::vector<Vec3> seen_O;
-  for (size_t k = 0; k < object.size(); k += 5) seen_O.push_back(object[k]);
+  for (size_t k = 0; k < object.points_O.size(); k += 5) seen_O.push_back(object.points_O[k]);
   const PickOutcome pick =
       pickAndVerify(robot, sensor, T_B_O_rest, seen_O, first.candidates, options, noise, log);
   tt.attempts = pick.attempts;
@@ -494,15 +363,13 @@ MultiGraspResult scanFromTable(RobotInterface& robot, DepthSensor& sensor, const
     all.model = session.model();
     return finish(Termination::kPickUpFailed);
   }
-  const std::optional<Iso3> achieved = pick.achieved;
-  const GraspCandidate* chosen = pick.picked;
   GraspRecord rec;
-  rec.epsilon = chosen->epsilon;
+  rec.epsilon = pick.picked->epsilon;
   rec.attempts = pick.attempts;
   rec.candidates = tt.reachable;
   rec.tried = tt.tried;
   rec.generation_s = tt.seconds;
-  runGrasps(robot, sensor, session, *achieved, T_B_O_rest, rec, out, objectBox);
+  runGrasps(robot, sensor, session, *pick.achieved, T_B_O_rest, rec, out, object.box_O);
   all.total_s = std::chrono::duration<double>(Clock::now() - t0).count();
   return out;
 }

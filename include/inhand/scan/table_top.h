@@ -1,0 +1,58 @@
+#pragma once
+// The table-top stage (paper §V) in steps a driver of one's own can call: find the object resting
+// on the table in a few depth frames, fit the volume to it, mark the table's pixels (they only
+// carve), and make the first grasp candidates on what the frames show. scanFromTable is these
+// steps over a ScanSession.
+#include <vector>
+
+#include "inhand/scan/session.h"
+
+namespace inhand {
+
+// What the table-top frames show.
+struct TableTopObject {
+  // kRunning: found; else kObjectNotFound, kObjectTooLargeForHand or kObjectTooLargeForVolume.
+  Termination problem = Termination::kRunning;
+  Plane table_O;                 // the fitted table plane, frame O
+  std::vector<Vec3> points_O;    // the object's points (the largest cluster above the table)
+  PrincipalAxes axes;            // of those, upright
+  double height_m = 0;           // their top above the table
+  Vec3 centre_O = Vec3::Zero();  // over the points' box, half-way from the table to the top
+  // Where the object may lie: the points' box mirrored about the centre (the camera saw one
+  // side), from the table to the top, plus 5 mm.
+  Aabb box_O;
+};
+
+// Finds the object resting at T_B_O_rest (frame O: the object's frame there) in depth frames
+// taken from T_B_C, the robot's pixels (robot_masks, per frame) left out: RANSAC fits the table
+// plane near where the robot's config puts the table, the points above it near the rest pose are
+// clustered and the largest cluster is the object. It is too large for the hand when its smallest
+// extent exceeds 85 % of the open hand's span, too large for the volume beyond
+// options.volume_size_m − 2 cm. `record` (optional) gets the counts; `log` one line.
+TableTopObject findObjectOnTable(const std::vector<DepthImage>& frames,
+                                 const std::vector<std::vector<uint8_t>>& robot_masks,
+                                 const Iso3& T_B_C, const CameraIntrinsics& K,
+                                 const Iso3& T_B_O_rest, const RobotModel& robot,
+                                 const ScanOptions& options, const TableTopOptions& table_top,
+                                 TableTopRecord* record = nullptr,
+                                 const std::function<void(const std::string&)>& log = {});
+
+// The scan options with the volume fitted to the object (ScanOptions::fit_volume): a cube of 1.5
+// times its largest extent + 4 cm (at most volume_size_m) with as many voxels across as
+// volume_size_m / voxel_m. Unchanged when fit_volume is off.
+ScanOptions fitScanVolume(const ScanOptions& options, const TableTopObject& object);
+
+// The pixels of `depth` (camera at T_O_C) whose points lie less than above_m above the table
+// plane (or below it): they only carve.
+std::vector<uint8_t> tablePixels(const DepthImage& depth, const Iso3& T_O_C,
+                                 const CameraIntrinsics& K, const Plane& table_O, double above_m);
+
+// First-grasp candidates on what the table-top frames fused into `session` show (its planning
+// model: the observed surface closed over what it hides, up to the table; the table cut off 3 mm
+// above its plane, and anything beyond 2 cm of object.box_O), the hand stopping at that model and
+// at the table (generateGrasps); most stable first (ε to 10 %), then the cheaper arm motion from
+// q_now.
+GraspGeneration firstGrasps(const ScanSession& session, const TableTopObject& object,
+                            const Iso3& T_B_O_rest, const JointVector& q_now);
+
+}  // namespace inhand

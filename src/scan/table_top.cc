@@ -1,0 +1,180 @@
+#include "inhand/scan/table_top.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <limits>
+
+#include "inhand/robot/collision.h"
+
+namespace inhand {
+
+namespace {
+
+// The smallest extent of the object: of its upright principal axes', the one along the table
+// normal measured from the table to its top (the 99th percentile of the points' heights, as the
+// axes' extents are 1 % trimmed: stray returns at depth edges).
+double smallestExtent(const TableTopObject& o) {
+  std::vector<double> heights;
+  for (const Vec3& p : o.points_O) heights.push_back(o.table_O.distance(p));
+  std::nth_element(heights.begin(), heights.begin() + heights.size() * 99 / 100, heights.end());
+  const double height = heights[heights.size() * 99 / 100];
+  double smallest = std::numeric_limits<double>::infinity();
+  for (int k = 0; k < 3; ++k)
+    smallest = std::min(smallest, std::abs(o.axes.axes.col(k).dot(o.table_O.n)) > 0.9
+                                      ? height
+                                      : o.axes.max[k] - o.axes.min[k]);
+  return smallest;
+}
+
+}  // namespace
+
+TableTopObject findObjectOnTable(const std::vector<DepthImage>& frames,
+                                 const std::vector<std::vector<uint8_t>>& robotMask,
+                                 const Iso3& T_B_C, const CameraIntrinsics& K,
+                                 const Iso3& T_B_O_rest, const RobotModel& m,
+                                 const ScanOptions& options, const TableTopOptions& to,
+                                 TableTopRecord* record,
+                                 const std::function<void(const std::string&)>& log) {
+  TableTopRecord local;
+  TableTopRecord& tt = record ? *record : local;
+  TableTopObject out;
+  const Vec3 rest_B = T_B_O_rest.translation();
+  const Iso3 T_O_B = T_B_O_rest.inverse();
+  // Points near the rest pose (frame O).
+  std::vector<Vec3> near;
+  tt.frames = int(frames.size());
+  for (size_t f = 0; f < frames.size(); ++f) {
+    const DepthImage& d = frames[f];
+    for (int v = 0; v < d.height; ++v)
+      for (int u = 0; u < d.width; ++u) {
+        const size_t i = size_t(v) * d.width + u;
+        const float z = d.depth_m[i];
+        if (!(z > 0) || robotMask[f][i]) continue;
+        const Vec3 p_B = T_B_C * (double(z) * K.rayZ1(u, v));
+        if ((p_B - rest_B).head<2>().norm() > to.search_radius_m ||
+            std::abs(p_B.z() - rest_B.z()) > 0.5)
+          continue;
+        near.push_back(T_O_B * p_B);
+      }
+  }
+  tt.points = int(near.size());
+  PlaneFitOptions po = to.plane;
+  po.expected_normal = T_O_B.linear() * Vec3::UnitZ();
+  // The table the robot's config declares, in O (the fit finds where it really is).
+  const Vec3 onTable_O = T_O_B * Vec3(rest_B.x(), rest_B.y(), m.table().topZ());
+  po.expected_plane = Plane{po.expected_normal, -po.expected_normal.dot(onTable_O)};
+  const std::optional<PlaneFit> fit = fitPlaneRansac(near, po);
+  if (!fit) {
+    out.problem = Termination::kObjectNotFound;
+    return out;
+  }
+  out.table_O = fit->plane;
+  tt.table_O = fit->plane;
+  tt.table_inliers = fit->inliers;
+  std::vector<Vec3> above;
+  for (const Vec3& p : near)
+    if (fit->plane.distance(p) > to.above_table_m) above.push_back(p);
+  // The object: the largest cluster above the table (stray returns dropped).
+  out.points_O = above.empty() ? above : largestCluster(above, to.cluster_cell_m);
+  tt.object_points = int(out.points_O.size());
+  if (log) {
+    char line[240];
+    std::snprintf(line, sizeof(line),
+                  "table top: %d frames, %d points near the rest pose, %d on the table plane, %zu "
+                  "above it, %d in the object's cluster",
+                  tt.frames, tt.points, tt.table_inliers, above.size(), tt.object_points);
+    log(line);
+  }
+  if (tt.object_points < to.min_points) {
+    out.problem = Termination::kObjectNotFound;
+    return out;
+  }
+  // Too large for the hand: the open hand spans none of its extents (85 % of the open hand's
+  // extent along palm x; flat fingers: 328 mm for the BarrettHand).
+  out.axes = principalAxesUpright(out.points_O, fit->plane.n);
+  tt.axes = out.axes;
+  const Aabb hb = HandGeometry(m, m.openHand(0.0), Iso3::Identity()).mesh().bounds();
+  if (smallestExtent(out) > 0.85 * (hb.max.x() - hb.min.x())) {
+    out.problem = Termination::kObjectTooLargeForHand;
+    return out;
+  }
+  // The volume: centred on the points' box, from the table plane to their top.
+  const Vec3 n = fit->plane.n;
+  Aabb box;
+  for (const Vec3& p : out.points_O) {
+    box.extend(p);
+    out.height_m = std::max(out.height_m, fit->plane.distance(p));
+  }
+  const Vec3 onTable = box.center() - n * fit->plane.distance(box.center());
+  out.centre_O = onTable + 0.5 * out.height_m * n;
+  if (std::max(box.size().maxCoeff(), out.height_m) > options.volume_size_m - 0.02) {
+    out.problem = Termination::kObjectTooLargeForVolume;
+    return out;
+  }
+  for (int c = 0; c < 8; ++c) {
+    const Vec3 p = box.corner(c);
+    out.box_O.extend(p);
+    out.box_O.extend(2 * out.centre_O - p);
+  }
+  out.box_O.extend(onTable);
+  out.box_O.extend(onTable + out.height_m * n);
+  out.box_O.min.array() -= 0.005;
+  out.box_O.max.array() += 0.005;
+  return out;
+}
+
+ScanOptions fitScanVolume(const ScanOptions& options, const TableTopObject& object) {
+  ScanOptions fitted = options;
+  if (options.fit_volume) {
+    const double extent =
+        std::max((object.box_O.max - object.box_O.min).maxCoeff(), object.height_m);
+    const double size = std::min(options.volume_size_m, 1.5 * extent + 0.04);
+    fitted.voxel_m = options.voxel_m * size / options.volume_size_m;
+    fitted.volume_size_m = size;
+  }
+  return fitted;
+}
+
+std::vector<uint8_t> tablePixels(const DepthImage& d, const Iso3& T_O_C, const CameraIntrinsics& K,
+                                 const Plane& table_O, double above_m) {
+  std::vector<uint8_t> table(d.depth_m.size(), 0);
+  for (int v = 0; v < d.height; ++v)
+    for (int u = 0; u < d.width; ++u) {
+      const size_t i = size_t(v) * d.width + u;
+      const float z = d.depth_m[i];
+      if (z > 0 && table_O.distance(T_O_C * (double(z) * K.rayZ1(u, v))) < above_m) table[i] = 1;
+    }
+  return table;
+}
+
+GraspGeneration firstGrasps(const ScanSession& session, const TableTopObject& object,
+                            const Iso3& T_B_O_rest, const JointVector& q_now) {
+  const RobotModel& m = session.robot();
+  const ObjectModel seen = session.planningModel();
+  Aabb keepBox = object.box_O;
+  keepBox.min.array() -= 0.02;
+  keepBox.max.array() += 0.02;
+  TriangleMesh model;
+  model.vertices = seen.mesh.vertices;
+  for (const Tri& t : seen.mesh.triangles) {
+    bool keep = true;
+    for (int k = 0; k < 3 && keep; ++k) {
+      const Vec3 p = seen.mesh.vertices[t[k]].cast<double>();
+      keep = object.table_O.distance(p) > 0.003 && keepBox.contains(p);
+    }
+    if (keep) model.triangles.push_back(t);
+  }
+  GraspGeneration first = generateGrasps(m, model, T_B_O_rest, q_now, session.multiOptions().grasp);
+  // Most stable first; among equally stable (to 10 %), the cheaper arm motion.
+  for (GraspCandidate& c : first.candidates) c.score = trajectoryTime(m, m.arm(q_now), m.arm(c.q));
+  std::stable_sort(first.candidates.begin(), first.candidates.end(),
+                   [](const GraspCandidate& a, const GraspCandidate& b) {
+                     const double ea = std::floor(std::log(std::max(a.epsilon, 1e-9)) / 0.1);
+                     const double eb = std::floor(std::log(std::max(b.epsilon, 1e-9)) / 0.1);
+                     return ea != eb ? ea > eb : a.score < b.score;
+                   });
+  return first;
+}
+
+}  // namespace inhand
