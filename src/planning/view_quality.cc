@@ -27,6 +27,19 @@ inline void addShadowPoint(ProjectorShadows* rows, int j, int i, double d, doubl
 constexpr int kPrefetch = 6;
 
 #if INHAND_FAST_MATH_AVX2
+// Eq. 9's integrand at a surface sample at depth d, with sensor variance σ_z² and surface variance
+// σ_t²: ½ ln(1 + σ_t²/σ_z²) · d²/(f_x f_y n_z), the pixel's footprint on the surface, written as
+// weight · ln(1 + ratio) with one division for both quotients: r = 1/(σ_z² f_x f_y n_z),
+// ratio = σ_t² f_x f_y n_z r, weight = ½ d² σ_z² r. Every path of eq. 9 goes through it (the
+// rasterised rows defer the division, the same numbers per row).
+struct Eq9Terms {
+  double weight, ratio;
+};
+inline Eq9Terms eq9Terms(double d, double sz2, double var, double fxfyNz) {
+  const double r = 1.0 / (sz2 * fxfyNz);
+  return {0.5 * d * d * sz2 * r, var * fxfyNz * r};
+}
+
 // terms[k] = x < 0 ? gain : gain·ln(1 + x), x = logArgs[k], four at a time as far as whole
 // fours go (the same values as one at a time); returns how many it did.
 __attribute__((target("avx2"))) size_t logTermsFour(const double* gains, const double* logArgs,
@@ -386,7 +399,8 @@ double ViewQualityScene::surfaceGain(const Ray& ray, float t, float hu, float hv
   // θ is only needed beyond the grazing threshold (the axial model is flat below it).
   const double sz = cosInc >= cosGrazing_ ? axialSigma(noise_, d, 0.0)
                                           : axialSigma(noise_, d, std::acos(std::min(1.0, cosInc)));
-  return 0.5 * std::log1p(var / (sz * sz)) * d * d / (K.fx * K.fy * nz);
+  const Eq9Terms e = eq9Terms(d, sz * sz, var, K.fx * K.fy * nz);
+  return e.weight * std::log1p(e.ratio);
 }
 
 bool ViewQualityScene::pixelWindow(const Iso3& T_O_C, int sp, RasterWindow* window) const {
@@ -563,20 +577,17 @@ void ViewQualityScene::rasterGains(const Iso3& T_O_C, const RasterWindow& w,
         } else {
           sz = axialSigma(noise_, d, std::acos(std::min(1.0, std::abs(nd) / std::sqrt(dir2))));
         }
-        // One division for both quotients: r = 1/(σ_z²·f²·n_z), σ_t²/σ_z² = σ_t²·f²·n_z·r and
-        // d²/(f²·n_z) = d²·σ_z²·r.
-        const double sz2 = sz * sz, a = fxfy * nz;
-        if (defer) {
+        if (defer) {  // eq9Terms, its division done later for a whole row
+          const double sz2 = sz * sz, a = fxfy * nz;
           pending.push_back({i, d, dist2, sz2 * a, 0.5 * d * d * sz2, var * a});
           continue;
         }
-        const double r = 1.0 / (sz2 * a);
-        const double weight = 0.5 * d * d * sz2 * r, ratio = var * a * r;
+        const Eq9Terms e = eq9Terms(d, sz * sz, var, fxfy * nz);
         if (logArgs) {  // the logarithm later, for the samples the projector sees
-          gains->push_back(weight);
-          logArgs->push_back(ratio);
+          gains->push_back(e.weight);
+          logArgs->push_back(e.ratio);
         } else {
-          gains->push_back(weight * log1pNonNegative(ratio));
+          gains->push_back(e.weight * log1pNonNegative(e.ratio));
         }
         const double dist = std::sqrt(dist2);
         if (rows) {
