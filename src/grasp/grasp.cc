@@ -88,45 +88,22 @@ std::vector<std::optional<PickLift>> pickAndLift(const RobotModel& robot,
 }
 }  // namespace
 
-GraspGeneration generateGrasps(const RobotModel& robot, const TriangleMesh& mesh, const Iso3& T_B_O,
-                               const JointVector& q_now, const GraspOptions& o) {
-  const auto t0 = std::chrono::steady_clock::now();
-  std::string problem = o.validate();
-  if (!problem.empty()) throw Error("grasp options: " + problem);
-  INHAND_CHECK(!robot.fingers().empty(), "the hand has no fingers to grasp with");
-  GraspGeneration out;
-  if (mesh.empty()) return out;
+namespace {
 
-  // Palm face (top of the palm geometry along palm z) and footprint.
-  Aabb palm;
-  for (const Primitive& p : robot.links()[robot.tipLink()].collision) {
-    Aabb b = p.toMesh().bounds();
-    palm.extend(b.min);
-    palm.extend(b.max);
-  }
-  // Surface samples with outward normals (vertices, plus a lattice on large triangles).
-  const std::vector<SurfacePoint> samples = surfaceSamples(mesh, 0.5 * o.contact_cell_m);
-  const Vec3 centre = mesh.bounds().center();
-  double rho = 0;
-  for (const SurfacePoint& sm : samples) rho = std::max(rho, (sm.p - centre).norm());
-  const double tableTop = robot.table().topZ();
-  // The table normal in O, and how far a palm may rise along it above the centre (to keep a hand
-  // on a short object clear of the table) with its axis still 1 cm below the object's top.
-  const Vec3 up = T_B_O.linear().transpose() * Vec3::UnitZ();
-  double maxRise = -0.01;
-  for (const SurfacePoint& sm : samples)
-    maxRise = std::max(maxRise, (sm.p - centre).dot(up) - 0.01);
+// A candidate pose: the palm's orientation in O (palm z into the object), the spread, whether it
+// is an edge pose, and the preshape (fraction of the fingers' closing range at the approach).
+struct Pose {
+  Mat3 R;
+  double spread;
+  bool edge;
+  double preshape = 0;
+};
 
-  // Every (approach, roll, spread) pose with the palm axis through the centre; then the edge
-  // poses, aligned with the model's principal axes (palm z along ± one axis, palm y along
-  // another, palm x either way along the third: the hand is not symmetric there). Closed to
-  // contact on both cores.
-  struct Pose {
-    Mat3 R;  // palm orientation in O; palm z points into the object
-    double spread;
-    bool edge;
-    double preshape = 0;  // fraction of the fingers' closing range at the approach
-  };
+// Every (approach, roll, spread, preshape) pose with the palm axis through the centre; then the
+// edge poses, aligned with the model's principal axes (palm z along ± one axis, palm y along
+// another, palm x either way along the third: the hand is not symmetric there).
+std::vector<Pose> candidatePoses(const RobotModel& robot, const std::vector<SurfacePoint>& samples,
+                                 const Vec3& centre, const GraspOptions& o) {
   std::vector<Pose> poses;
   for (const Vec3& d : fibonacciSphere(o.approaches))
     for (int r = 0; r < o.rolls; ++r) {
@@ -152,123 +129,183 @@ GraspGeneration generateGrasps(const RobotModel& robot, const TriangleMesh& mesh
           }
         }
   }
-  out.tried = int(poses.size());
-  out.poses.resize(poses.size());
-  for (size_t i = 0; i < poses.size(); ++i) {
-    GraspPoseRecord& rec = out.poses[i];
-    rec.approach_O = poses[i].R.col(2);
-    const Vec3 ref = poses[i].R.col(2).unitOrthogonal();
-    rec.roll_rad =
-        std::atan2(ref.cross(poses[i].R.col(0)).dot(poses[i].R.col(2)), ref.dot(poses[i].R.col(0)));
-    rec.spread = poses[i].spread;
-    rec.preshape = poses[i].preshape;
-    rec.edge = poses[i].edge;
-    rec.result = "no_contact";
+  return poses;
+}
+
+GraspPoseRecord poseRecord(const Pose& ps) {
+  GraspPoseRecord rec;
+  rec.approach_O = ps.R.col(2);
+  const Vec3 ref = ps.R.col(2).unitOrthogonal();
+  rec.roll_rad = std::atan2(ref.cross(ps.R.col(0)).dot(ps.R.col(2)), ref.dot(ps.R.col(0)));
+  rec.spread = ps.spread;
+  rec.preshape = ps.preshape;
+  rec.edge = ps.edge;
+  rec.result = "no_contact";
+  return rec;
+}
+
+// The lowest point (base z) of the hand at q with the palm at T_B_palm.
+double handLowestZ(const RobotModel& robot, const JointVector& q, const Iso3& T_B_palm) {
+  double lowest = std::numeric_limits<double>::infinity();
+  for (const Vec3f& v : HandGeometry(robot, q, T_B_palm).mesh().vertices)
+    lowest = std::min(lowest, double(v.z()));
+  return lowest;
+}
+
+// Brings one pose's hand to the model and closes it: what generateGrasps does per pose, with
+// what it shares across poses.
+class PoseCloser {
+ public:
+  PoseCloser(const RobotModel& robot, const TriangleMesh& mesh, const Iso3& T_B_O,
+             const GraspOptions& o, const std::vector<SurfacePoint>& samples,
+             const std::vector<Pose>& poses)
+      : robot_(robot),
+        T_B_O_(T_B_O),
+        o_(o),
+        samples_(samples),
+        centre_(mesh.bounds().center()),
+        up_(T_B_O.linear().transpose() * Vec3::UnitZ()),
+        closer_(robot, withTable(mesh, robot, T_B_O)),
+        modelCloser_(robot, mesh) {
+    // Palm face (top of the palm geometry along palm z) and footprint.
+    for (const Primitive& p : robot.links()[robot.tipLink()].collision) {
+      const Aabb b = p.toMesh().bounds();
+      palm_.extend(b.min);
+      palm_.extend(b.max);
+    }
+    for (const SurfacePoint& sm : samples_) rho_ = std::max(rho_, (sm.p - centre_).norm());
+    // How far a palm may rise along the table normal above the centre (to keep a hand on a
+    // short object clear of the table) with its axis still 1 cm below the object's top.
+    for (const SurfacePoint& sm : samples_)
+      maxRise_ = std::max(maxRise_, (sm.p - centre_).dot(up_) - 0.01);
+    // The preshaped hand's bounding box in the palm frame, per (spread, preshape).
+    for (const Pose& ps : poses)
+      if (!openHandBox_.count({ps.spread, ps.preshape}))
+        openHandBox_[{ps.spread, ps.preshape}] =
+            HandGeometry(robot, robot.preshapedHand(ps.spread, ps.preshape), Iso3::Identity())
+                .mesh()
+                .bounds();
   }
-  std::vector<std::optional<GraspCandidate>> found(poses.size());
-  // The hand stops at the model and at the table: approaching, and closing its fingers.
-  TriangleMesh obstacles = mesh;
-  obstacles.append(tableMeshInObject(robot, T_B_O));
-  const FingerCloser closer(robot, obstacles), modelCloser(robot, mesh);
-  // The preshaped hand's bounding box in the palm frame, per (spread, preshape).
-  std::map<std::pair<double, double>, Aabb> openHandBox;
-  for (const Pose& ps : poses)
-    if (!openHandBox.count({ps.spread, ps.preshape}))
-      openHandBox[{ps.spread, ps.preshape}] =
-          HandGeometry(robot, robot.preshapedHand(ps.spread, ps.preshape), Iso3::Identity())
-              .mesh()
-              .bounds();
-  parallelFor(0, int(poses.size()), [&](int i) {
-    const Pose& ps = poses[i];
+
+  // The candidate of pose i (index `pose`), or nullopt with rec.result saying why.
+  std::optional<GraspCandidate> operator()(const Pose& ps, int pose, GraspPoseRecord& rec) const {
     Iso3 T = Iso3::Identity();
     T.linear() = ps.R;
-    const Mat3& R = ps.R;
-    const JointVector q = robot.preshapedHand(ps.spread, ps.preshape);
-    // kFirstContact: the open hand comes in along −d, its palm axis through `origin`, from
-    // outside the object until any of its links touches the model.
-    // The travel starts where the open hand's box (palm frame) first reaches a sample inside
-    // its footprint: nothing can touch earlier.
-    Aabb handBox;
-    if (o.approach == GraspApproach::kFirstContact)
-      handBox = openHandBox.at({ps.spread, ps.preshape});
-    auto firstContact = [&](const Vec3& origin) {
-      double nearest = std::numeric_limits<double>::infinity();
-      for (const SurfacePoint& sm : samples) {
-        const Vec3 p = R.transpose() * (sm.p - origin);
-        if (p.x() < handBox.min.x() - 0.005 || p.x() > handBox.max.x() + 0.005 ||
-            p.y() < handBox.min.y() - 0.005 || p.y() > handBox.max.y() + 0.005)
-          continue;
-        nearest = std::min(nearest, p.z());
-      }
-      if (!std::isfinite(nearest)) return false;
-      const double start = handBox.max.z() - nearest + 0.01, travelMax = 2 * rho + 0.02;
-      T.translation() = origin - start * R.col(2);
-      const std::optional<double> travel = closer.freeTravel(q, T, R.col(2), travelMax);
-      if (!travel || *travel >= travelMax) return false;
-      T.translation() += *travel * R.col(2);
-      return true;
-    };
-    // kPalm: the palm slides along −d, its axis through `origin`, until its face touches the
-    // nearest sample in its footprint.
-    auto slide = [&](const Vec3& origin) {
-      if (o.approach == GraspApproach::kFirstContact) return firstContact(origin);
-      double nearest = std::numeric_limits<double>::infinity();
-      for (const SurfacePoint& sm : samples) {
-        const Vec3 p = R.transpose() * (sm.p - origin);
-        if (p.x() < palm.min.x() || p.x() > palm.max.x() || p.y() < palm.min.y() ||
-            p.y() > palm.max.y())
-          continue;
-        nearest = std::min(nearest, p.z());
-      }
-      if (!std::isfinite(nearest)) return false;
-      T.translation() = origin + R * Vec3(0, 0, nearest - palm.max.z() - 0.002);
-      return true;
-    };
+    const JointVector q = robot_.preshapedHand(ps.spread, ps.preshape);
     // Edge poses: the palm axis moves along palm x until the model's extent along it ends
     // `edge_inset_m` beyond the axis, so that fingers 1 and 2 (across palm y at a 90° spread)
     // straddle the object near its edge and finger 3 closes over that edge.
-    Vec3 origin = centre;
+    Vec3 origin = centre_;
     if (ps.edge) {
       double extent = -std::numeric_limits<double>::infinity();
-      for (const SurfacePoint& sm : samples)
-        extent = std::max(extent, (sm.p - centre).dot(R.col(0)));
-      origin += (extent - o.edge_inset_m) * R.col(0);
+      for (const SurfacePoint& sm : samples_)
+        extent = std::max(extent, (sm.p - centre_).dot(ps.R.col(0)));
+      origin += (extent - o_.edge_inset_m) * ps.R.col(0);
     }
-    if (!slide(origin)) return;
+    if (!approach(ps, q, origin, &T)) return std::nullopt;
     // On a short object the open hand reaches below the table top: the palm axis rises along
     // the table normal until the hand clears it (as for the first grasp), within maxRise.
-    double lowest = std::numeric_limits<double>::infinity();
-    for (const Vec3f& v : HandGeometry(robot, q, T_B_O * T).mesh().vertices)
-      lowest = std::min(lowest, double(v.z()));
-    const double rise = tableTop + 0.003 - lowest;
-    if (rise > 0 && rise > maxRise) {
-      out.poses[i].result = "table";
-      return;
+    const double rise = robot_.table().topZ() + 0.003 - handLowestZ(robot_, q, T_B_O_ * T);
+    if (rise > 0 && rise > maxRise_) {
+      rec.result = "table";
+      return std::nullopt;
     }
-    if (rise > 0 && !slide(origin + rise * up)) return;
+    if (rise > 0 && !approach(ps, q, origin + rise * up_, &T)) return std::nullopt;
     // 0.06 rad steps: the fingertip moves 9 mm per step, less than a link is thick (20 mm).
     // A finger stopped by the table short of the model lifts the hand off it (5 mm steps).
-    auto [closed, Tc] = closeOffTheTable(closer, modelCloser, q, T, 0.005, 0.03, 0.06);
-    T = Tc;
+    auto [closed, Tc] = closeOffTheTable(closer_, modelCloser_, q, T, 0.005, 0.03, 0.06);
     GraspCandidate c;
-    c.T_O_palm = T;
+    c.T_O_palm = Tc;
     c.q = closed.q;
     c.q_open = q;
-    c.pose = i;
+    c.pose = pose;
     // Contacts: model surface samples near the closed hand (a finger stopped by the table
     // touches nothing).
-    HandContacts hc = handContacts(robot, c.q, T, samples, o.contact_m, o.contact_cell_m);
+    HandContacts hc = handContacts(robot_, c.q, Tc, samples_, o_.contact_m, o_.contact_cell_m);
     c.contacts = std::move(hc.contacts);
     c.links_in_contact = hc.fingers_touching + int(hc.palm_touching);
     if (c.links_in_contact < 2) {
-      out.poses[i].result = "fewer_than_two_links";
-      return;
+      rec.result = "fewer_than_two_links";
+      return std::nullopt;
     }
-    c.epsilon =
-        forceClosureEpsilon(c.contacts, centre, rho, o.friction, o.cone_edges, o.wrench_directions);
-    out.poses[i].epsilon = c.epsilon;
-    found[i] = c;
-  });
+    c.epsilon = forceClosureEpsilon(c.contacts, centre_, rho_, o_.friction, o_.cone_edges,
+                                    o_.wrench_directions);
+    rec.epsilon = c.epsilon;
+    return c;
+  }
+
+ private:
+  static TriangleMesh withTable(const TriangleMesh& mesh, const RobotModel& robot,
+                                const Iso3& T_B_O) {
+    TriangleMesh obstacles = mesh;
+    obstacles.append(tableMeshInObject(robot, T_B_O));
+    return obstacles;
+  }
+
+  // Brings the preshaped hand (palm orientation ps.R, its axis through `origin`) to the model
+  // along palm z: kFirstContact, from outside until any link touches the model or the table
+  // (the travel starts where the open hand's box first reaches a sample inside its footprint:
+  // nothing can touch earlier); kPalm, until the palm face touches the nearest sample in its
+  // footprint. False when nothing is met.
+  bool approach(const Pose& ps, const JointVector& q, const Vec3& origin, Iso3* T) const {
+    const Mat3& R = ps.R;
+    const bool firstContact = o_.approach == GraspApproach::kFirstContact;
+    const Aabb box = firstContact ? openHandBox_.at({ps.spread, ps.preshape}) : palm_;
+    const double margin = firstContact ? 0.005 : 0.0;
+    double nearest = std::numeric_limits<double>::infinity();
+    for (const SurfacePoint& sm : samples_) {
+      const Vec3 p = R.transpose() * (sm.p - origin);
+      if (p.x() < box.min.x() - margin || p.x() > box.max.x() + margin ||
+          p.y() < box.min.y() - margin || p.y() > box.max.y() + margin)
+        continue;
+      nearest = std::min(nearest, p.z());
+    }
+    if (!std::isfinite(nearest)) return false;
+    if (!firstContact) {
+      T->translation() = origin + R * Vec3(0, 0, nearest - palm_.max.z() - 0.002);
+      return true;
+    }
+    const double start = box.max.z() - nearest + 0.01, travelMax = 2 * rho_ + 0.02;
+    T->translation() = origin - start * R.col(2);
+    const std::optional<double> travel = closer_.freeTravel(q, *T, R.col(2), travelMax);
+    if (!travel || *travel >= travelMax) return false;
+    T->translation() += *travel * R.col(2);
+    return true;
+  }
+
+  const RobotModel& robot_;
+  Iso3 T_B_O_;
+  const GraspOptions& o_;
+  std::vector<SurfacePoint> samples_;
+  Vec3 centre_, up_;
+  double rho_ = 0, maxRise_ = -0.01;
+  Aabb palm_;
+  FingerCloser closer_, modelCloser_;
+  std::map<std::pair<double, double>, Aabb> openHandBox_;
+};
+
+}  // namespace
+
+GraspGeneration generateGrasps(const RobotModel& robot, const TriangleMesh& mesh, const Iso3& T_B_O,
+                               const JointVector& q_now, const GraspOptions& o) {
+  const auto t0 = std::chrono::steady_clock::now();
+  std::string problem = o.validate();
+  if (!problem.empty()) throw Error("grasp options: " + problem);
+  INHAND_CHECK(!robot.fingers().empty(), "the hand has no fingers to grasp with");
+  GraspGeneration out;
+  if (mesh.empty()) return out;
+  // Surface samples with outward normals (vertices, plus a lattice on large triangles).
+  const std::vector<SurfacePoint> samples = surfaceSamples(mesh, 0.5 * o.contact_cell_m);
+  const std::vector<Pose> poses = candidatePoses(robot, samples, mesh.bounds().center(), o);
+  out.tried = int(poses.size());
+  for (const Pose& ps : poses) out.poses.push_back(poseRecord(ps));
+  // The hand stops at the model and at the table: approaching, and closing its fingers. Each
+  // pose closed to contact, on both cores.
+  const PoseCloser close(robot, mesh, T_B_O, o, samples, poses);
+  std::vector<std::optional<GraspCandidate>> found(poses.size());
+  parallelFor(0, int(poses.size()), [&](int i) { found[i] = close(poses[i], i, out.poses[i]); });
+  // Stable (force closure with ε ≥ min_epsilon), and the hand on the object resting on the table
+  // above the table top (fingers stop at the table top when they close: 1 mm tolerance).
   std::vector<GraspCandidate> kept;
   for (size_t i = 0; i < found.size(); ++i) {
     auto& f = found[i];
@@ -279,15 +316,7 @@ GraspGeneration generateGrasps(const RobotModel& robot, const TriangleMesh& mesh
       continue;
     }
     ++out.stable;
-    // The hand on the object resting on the table must stay above the table top.
-    HandGeometry hand(robot, f->q, T_B_O * f->T_O_palm);
-    bool clear = true;
-    for (const Vec3f& v : hand.mesh().vertices)
-      if (v.z() < tableTop - 0.001) {  // fingers stop at the table top when they close
-        clear = false;
-        break;
-      }
-    if (!clear) {
+    if (handLowestZ(robot, f->q, T_B_O * f->T_O_palm) < robot.table().topZ() - 0.001) {
       out.poses[i].result = "hand_in_table";
       continue;
     }
