@@ -130,6 +130,334 @@ std::pair<double, double> readRangeDeg(const Json& obj, const std::string& key,
 
 }  // namespace
 
+// Builds a RobotModel from a parsed URDF and the robot config, one part at a time (friend of
+// RobotModel). Every error names the file and field.
+struct RobotModelLoader {
+  RobotModel& m;
+  const Json& cfg;
+  const std::string cfgName, urdfName;
+  const fs::path urdfPath;
+
+  static Primitive collisionPrimitive(const urdf::Collision& col, const fs::path& urdfPath,
+                                      const std::string& where) {
+    Primitive p;
+    p.T_link_geom = toIso(col.origin);
+    const auto& g = *col.geometry;
+    switch (g.type) {
+      case urdf::Geometry::BOX: {
+        const auto& b = static_cast<const urdf::Box&>(g);
+        p.type = Primitive::Type::kBox;
+        p.size = Vec3(b.dim.x, b.dim.y, b.dim.z);
+        break;
+      }
+      case urdf::Geometry::CYLINDER: {
+        const auto& c = static_cast<const urdf::Cylinder&>(g);
+        p.type = Primitive::Type::kCylinder;
+        p.size = Vec3(c.radius, c.radius, c.length);
+        break;
+      }
+      case urdf::Geometry::SPHERE: {
+        const auto& s = static_cast<const urdf::Sphere&>(g);
+        p.type = Primitive::Type::kSphere;
+        p.size = Vec3::Constant(s.radius);
+        break;
+      }
+      case urdf::Geometry::MESH: {
+        const auto& mg = static_cast<const urdf::Mesh&>(g);
+        std::string file = mg.filename;
+        if (file.rfind("file://", 0) == 0) file = file.substr(7);
+        if (file.rfind("package://", 0) == 0)
+          throw Error(where + ": package:// mesh paths need ROS; use a path relative to the URDF");
+        fs::path mp = fs::path(file).is_relative() ? urdfPath.parent_path() / file : fs::path(file);
+        TriangleMesh mesh = importMesh(mp);
+        for (Vec3f& v : mesh.vertices)
+          v = v.cwiseProduct(Vec3f(float(mg.scale.x), float(mg.scale.y), float(mg.scale.z)));
+        p.type = Primitive::Type::kMesh;
+        p.mesh = std::make_shared<TriangleMesh>(std::move(mesh));
+        break;
+      }
+    }
+    if (p.type != Primitive::Type::kMesh && !(p.size.array() > 0).all())
+      throw Error(where + ": sizes must be positive");
+    return p;
+  }
+
+  // Links and joints of the URDF (name-sorted), the joint order, mimic tags.
+  void urdfModel(const urdf::ModelInterface& urdf) {
+    // Links and joints, in a deterministic (name-sorted) order.
+    for (const auto& [name, link] : urdf.links_) {
+      LinkInfo info;
+      info.name = name;
+      for (const auto& col : link->collision_array) {
+        if (!col || !col->geometry) continue;
+        info.collision.push_back(collisionPrimitive(
+            *col, urdfPath, urdfName + ": link " + name + ": collision geometry"));
+      }
+      m.links_.push_back(std::move(info));
+    }
+    for (const auto& [name, joint] : urdf.joints_) {
+      JointInfo j;
+      j.name = name;
+      j.parentLink = m.linkIndex(joint->parent_link_name);
+      j.childLink = m.linkIndex(joint->child_link_name);
+      j.T_parent_joint = toIso(joint->parent_to_joint_origin_transform);
+      Vec3 axis(joint->axis.x, joint->axis.y, joint->axis.z);
+      switch (joint->type) {
+        case urdf::Joint::REVOLUTE:
+          j.type = JointInfo::Type::kRevolute;
+          break;
+        case urdf::Joint::CONTINUOUS:
+          j.type = JointInfo::Type::kContinuous;
+          break;
+        case urdf::Joint::PRISMATIC:
+          j.type = JointInfo::Type::kPrismatic;
+          break;
+        case urdf::Joint::FIXED:
+          j.type = JointInfo::Type::kFixed;
+          break;
+        default:
+          throw Error(urdfName + ": joint " + name +
+                      ": floating and planar joints are not supported");
+      }
+      if (j.type != JointInfo::Type::kFixed) {
+        if (axis.norm() < 1e-9) throw Error(urdfName + ": joint " + name + ": zero axis");
+        j.axis = axis.normalized();
+        if (j.type == JointInfo::Type::kContinuous) {
+          j.lower = -M_PI;
+          j.upper = M_PI;
+        } else {
+          if (!joint->limits) throw Error(urdfName + ": joint " + name + ": missing <limit>");
+          j.lower = joint->limits->lower;
+          j.upper = joint->limits->upper;
+          if (!(j.lower <= j.upper))
+            throw Error(urdfName + ": joint " + name + ": limit lower > upper");
+        }
+        if (joint->limits) j.velocity = joint->limits->velocity;
+      }
+      m.joints_.push_back(j);
+    }
+    std::sort(m.joints_.begin(), m.joints_.end(),
+              [](const JointInfo& a, const JointInfo& b) { return a.name < b.name; });
+    for (int ji = 0; ji < int(m.joints_.size()); ++ji) {
+      JointInfo& j = m.joints_[ji];
+      m.links_[j.childLink].parentJoint = ji;
+      if (j.type != JointInfo::Type::kFixed) {
+        j.variable = int(m.variableJoint_.size());
+        m.variableJoint_.push_back(ji);
+      }
+    }
+    m.rootLink_ = m.linkIndex(urdf.getRoot()->name);
+    // Topological order: a joint after the joint of its parent link.
+    std::function<void(int)> visit = [&](int link) {
+      for (int ji = 0; ji < int(m.joints_.size()); ++ji)
+        if (m.joints_[ji].parentLink == link) {
+          m.jointOrder_.push_back(ji);
+          visit(m.joints_[ji].childLink);
+        }
+    };
+    visit(m.rootLink_);
+    // URDF mimic tags (the config's couplings below override them).
+    for (const auto& [name, joint] : urdf.joints_)
+      if (joint->mimic) {
+        JointInfo& j = m.joints_[m.jointIndex(name)];
+        int leader = m.variableIndex(joint->mimic->joint_name);
+        if (leader < 0 || j.variable < 0)
+          throw Error(urdfName + ": joint " + name + ": mimics unknown or fixed joint '" +
+                      joint->mimic->joint_name + "'");
+        j.mimicOf = leader;
+        j.mimicMultiplier = joint->mimic->multiplier;
+        j.mimicOffset = joint->mimic->offset;
+      }
+  }
+
+  int needLink(const Json& obj, const std::string& key, const std::string& where) const {
+    std::string n = requireString(obj, key, where);
+    int i = m.linkIndex(n);
+    if (i < 0) throw Error(where + "." + key + ": no link named '" + n + "' in " + urdfName);
+    return i;
+  }
+  int needVariable(const Json& obj, const std::string& key, const std::string& where) const {
+    std::string n = requireString(obj, key, where);
+    int ji = m.jointIndex(n);
+    if (ji < 0) throw Error(where + "." + key + ": no joint named '" + n + "' in " + urdfName);
+    if (m.joints_[ji].variable < 0)
+      throw Error(where + "." + key + ": joint '" + n + "' is fixed, it cannot be driven");
+    return m.joints_[ji].variable;
+  }
+
+  // The arm: the chain base_link → tip_link (KDL), its driven variables.
+  void armChain() {
+    m.baseLink_ = needLink(cfg, "base_link", cfgName);
+    m.tipLink_ = needLink(cfg, "tip_link", cfgName);
+    // Chain base → tip: walk up from the tip.
+    std::vector<int> chainJoints;
+    for (int link = m.tipLink_; link != m.baseLink_;) {
+      int ji = m.links_[link].parentJoint;
+      if (ji < 0)
+        throw Error(cfgName + ": tip_link '" + m.links_[m.tipLink_].name +
+                    "' is not below base_link '" + m.links_[m.baseLink_].name + "' in " + urdfName +
+                    ": the chain does not connect");
+      chainJoints.push_back(ji);
+      link = m.joints_[ji].parentLink;
+    }
+    std::reverse(chainJoints.begin(), chainJoints.end());
+    m.chain_ = std::make_shared<KDL::Chain>();
+    for (int ji : chainJoints) {
+      const JointInfo& j = m.joints_[ji];
+      KDL::Frame F = toKdl(j.T_parent_joint);
+      KDL::Vector axis = F.M * KDL::Vector(j.axis.x(), j.axis.y(), j.axis.z());
+      KDL::Joint kj(j.name + "_fixed", KDL::Joint::Fixed);
+      if (j.type == JointInfo::Type::kPrismatic)
+        kj = KDL::Joint(j.name, F.p, axis, KDL::Joint::TransAxis);
+      else if (j.type != JointInfo::Type::kFixed)
+        kj = KDL::Joint(j.name, F.p, axis, KDL::Joint::RotAxis);
+      m.chain_->addSegment(KDL::Segment(m.links_[j.childLink].name, kj, F));
+      if (j.variable >= 0) {
+        if (j.mimicOf >= 0)
+          throw Error(cfgName + ": arm joint '" + j.name + "' mimics another joint; not supported");
+        m.armVariables_.push_back(j.variable);
+      }
+    }
+    if (m.armVariables_.empty())
+      throw Error(cfgName + ": the chain base_link → tip_link has no joints");
+  }
+
+  // Joint speed limits and the home state.
+  void speedsAndHome() {
+    if (cfg.contains("joint_speeds_rad_s")) {
+      const Json& s = cfg["joint_speeds_rad_s"];
+      if (!s.is_object()) throw Error(cfgName + ": joint_speeds_rad_s: expected an object");
+      for (const auto& [name, v] : s.items()) {
+        int ji = m.jointIndex(name);
+        if (ji < 0)
+          throw Error(cfgName + ": joint_speeds_rad_s." + name + ": no such joint in " + urdfName);
+        if (!v.is_number() || !(v.get<double>() > 0))
+          throw Error(cfgName + ": joint_speeds_rad_s." + name + ": expected a positive number");
+        m.joints_[ji].velocity = v.get<double>();
+      }
+    }
+    for (int v : m.armVariables_)
+      if (!(m.variable(v).velocity > 0))
+        throw Error(cfgName + ": arm joint '" + m.variable(v).name +
+                    "' has no speed limit (URDF <limit velocity> or joint_speeds_rad_s)");
+    m.homeValues_.resize(m.variableJoint_.size());
+    for (int v = 0; v < m.variableCount(); ++v) {
+      const JointInfo& j = m.variable(v);
+      m.homeValues_[v] = std::clamp(0.0, j.lower, j.upper);
+    }
+    if (cfg.contains("home")) {
+      const Json& h = cfg["home"];
+      if (!h.is_object()) throw Error(cfgName + ": home: expected an object of joint values");
+      for (const auto& [name, v] : h.items()) {
+        int var = m.variableIndex(name);
+        if (var < 0)
+          throw Error(cfgName + ": home." + name + ": no such movable joint in " + urdfName);
+        if (!v.is_number()) throw Error(cfgName + ": home." + name + ": expected a number");
+        m.homeValues_[var] = v.get<double>();
+      }
+    }
+  }
+
+  // The hand: links, couplings, fingers (with the links that move with each), spread joint,
+  // grasp offset.
+  void handPart() {
+    const Json& hand = requireField(cfg, "hand", cfgName);
+    const std::string hw = cfgName + ": hand";
+    const Json& hl = requireField(hand, "links", hw);
+    if (!hl.is_array() || hl.empty())
+      throw Error(hw + ".links: expected a non-empty array of link names");
+    for (size_t i = 0; i < hl.size(); ++i) {
+      if (!hl[i].is_string())
+        throw Error(hw + ".links[" + std::to_string(i) + "]: expected a string");
+      int li = m.linkIndex(hl[i].get<std::string>());
+      if (li < 0)
+        throw Error(hw + ".links[" + std::to_string(i) + "]: no link named '" +
+                    hl[i].get<std::string>() + "' in " + urdfName);
+      m.handLinks_.push_back(li);
+    }
+    if (hand.contains("couplings")) {
+      const Json& cs = hand["couplings"];
+      if (!cs.is_array()) throw Error(hw + ".couplings: expected an array");
+      for (size_t i = 0; i < cs.size(); ++i) {
+        const std::string cw = hw + ".couplings[" + std::to_string(i) + "]";
+        int v = needVariable(cs[i], "joint", cw), leader = needVariable(cs[i], "follows", cw);
+        JointInfo& j = m.joints_[m.variableJoint_[v]];
+        j.mimicOf = leader;
+        j.mimicMultiplier = requireNumber(cs[i], "multiplier", cw);
+        j.mimicOffset = requireNumber(cs[i], "offset", cw);
+      }
+    }
+    const Json& fs = requireField(hand, "fingers", hw);
+    if (!fs.is_array() || fs.empty()) throw Error(hw + ".fingers: expected a non-empty array");
+    for (size_t i = 0; i < fs.size(); ++i) {
+      const std::string fw = hw + ".fingers[" + std::to_string(i) + "]";
+      FingerInfo f;
+      f.variable = needVariable(fs[i], "joint", fw);
+      f.open = requireNumber(fs[i], "open", fw);
+      f.closed = requireNumber(fs[i], "closed", fw);
+      const JointInfo& j = m.variable(f.variable);
+      for (double val : {f.open, f.closed})
+        if (val < j.lower - 1e-9 || val > j.upper + 1e-9)
+          throw Error(fw + ": open/closed value outside the joint's limits [" +
+                      std::to_string(j.lower) + ", " + std::to_string(j.upper) + "]");
+      // Links that move with the finger: below the finger joint or any joint that follows it.
+      std::set<int> moving;
+      for (int ji = 0; ji < int(m.joints_.size()); ++ji) {
+        const JointInfo& jj = m.joints_[ji];
+        if (jj.variable == f.variable || jj.mimicOf == f.variable) {
+          std::function<void(int)> collect = [&](int link) {
+            moving.insert(link);
+            for (const JointInfo& c : m.joints_)
+              if (c.parentLink == link) collect(c.childLink);
+          };
+          collect(jj.childLink);
+        }
+      }
+      for (int li : moving)
+        if (std::find(m.handLinks_.begin(), m.handLinks_.end(), li) != m.handLinks_.end())
+          f.links.push_back(li);
+      if (f.links.empty()) throw Error(fw + ": no hand link moves with joint '" + j.name + "'");
+      m.fingers_.push_back(f);
+    }
+    if (hand.contains("spread_joint")) m.spreadVariable_ = needVariable(hand, "spread_joint", hw);
+    if (hand.contains("grasp_offset_m")) {
+      m.graspOffset_ = requireNumber(hand, "grasp_offset_m", hw);
+      if (!(m.graspOffset_ > 0 && m.graspOffset_ < 1))
+        throw Error(hw + ".grasp_offset_m: must be in (0, 1) m");
+    }
+  }
+
+  // Where the robot stands: the camera's pan-tilt mount, the table, links next to the base.
+  void workcell() {
+    const Json& cam = requireField(cfg, "camera", cfgName);
+    const std::string camw = cfgName + ": camera";
+    m.camera_.panTilt_B = readVec3(cam, "pan_tilt_xyz", camw);
+    m.camera_.lookAt_B = readVec3(cam, "look_at_xyz", camw);
+    std::tie(m.camera_.panMin, m.camera_.panMax) =
+        readRangeDeg(cam, "pan_range_deg", camw, {-M_PI, M_PI});
+    std::tie(m.camera_.tiltMin, m.camera_.tiltMax) =
+        readRangeDeg(cam, "tilt_range_deg", camw, {-M_PI / 2, M_PI / 2});
+    if (!m.camera_.aimAt(m.camera_.lookAt_B))
+      throw Error(camw + ".look_at_xyz: outside the pan/tilt range of the camera");
+    const Json& table = requireField(cfg, "table", cfgName);
+    m.table_.center_B = readVec3(table, "center_xyz", cfgName + ": table");
+    m.table_.size = readVec3(table, "size_xyz", cfgName + ": table");
+    if (!(m.table_.size.array() > 0).all())
+      throw Error(cfgName + ": table.size_xyz: must be positive");
+    if (cfg.contains("base_adjacent_links")) {
+      const Json& a = cfg["base_adjacent_links"];
+      if (!a.is_array())
+        throw Error(cfgName + ": base_adjacent_links: expected an array of link names");
+      for (size_t i = 0; i < a.size(); ++i) {
+        if (!a[i].is_string() || m.linkIndex(a[i].get<std::string>()) < 0)
+          throw Error(cfgName + ": base_adjacent_links[" + std::to_string(i) +
+                      "]: no such link in " + urdfName);
+        m.baseAdjacent_.push_back(m.linkIndex(a[i].get<std::string>()));
+      }
+    }
+  }
+};
+
 RobotModel RobotModel::load(const fs::path& configPath, const fs::path& urdfOverride) {
   const std::string cfgName = configPath.string();
   Json cfg = readJsonFile(configPath);
@@ -151,304 +479,12 @@ RobotModel RobotModel::load(const fs::path& configPath, const fs::path& urdfOver
 
   RobotModel m;
   m.name_ = urdf->getName();
-  // Links and joints, in a deterministic (name-sorted) order.
-  for (const auto& [name, link] : urdf->links_) {
-    LinkInfo info;
-    info.name = name;
-    for (const auto& col : link->collision_array) {
-      if (!col || !col->geometry) continue;
-      Primitive p;
-      p.T_link_geom = toIso(col->origin);
-      const auto& g = *col->geometry;
-      const std::string where = urdfName + ": link " + name + ": collision geometry";
-      switch (g.type) {
-        case urdf::Geometry::BOX: {
-          const auto& b = static_cast<const urdf::Box&>(g);
-          p.type = Primitive::Type::kBox;
-          p.size = Vec3(b.dim.x, b.dim.y, b.dim.z);
-          break;
-        }
-        case urdf::Geometry::CYLINDER: {
-          const auto& c = static_cast<const urdf::Cylinder&>(g);
-          p.type = Primitive::Type::kCylinder;
-          p.size = Vec3(c.radius, c.radius, c.length);
-          break;
-        }
-        case urdf::Geometry::SPHERE: {
-          const auto& s = static_cast<const urdf::Sphere&>(g);
-          p.type = Primitive::Type::kSphere;
-          p.size = Vec3::Constant(s.radius);
-          break;
-        }
-        case urdf::Geometry::MESH: {
-          const auto& mg = static_cast<const urdf::Mesh&>(g);
-          std::string file = mg.filename;
-          if (file.rfind("file://", 0) == 0) file = file.substr(7);
-          if (file.rfind("package://", 0) == 0)
-            throw Error(where +
-                        ": package:// mesh paths need ROS; use a path relative to the URDF");
-          fs::path mp =
-              fs::path(file).is_relative() ? urdfPath.parent_path() / file : fs::path(file);
-          TriangleMesh mesh = importMesh(mp);
-          for (Vec3f& v : mesh.vertices)
-            v = v.cwiseProduct(Vec3f(float(mg.scale.x), float(mg.scale.y), float(mg.scale.z)));
-          p.type = Primitive::Type::kMesh;
-          p.mesh = std::make_shared<TriangleMesh>(std::move(mesh));
-          break;
-        }
-      }
-      if (p.type != Primitive::Type::kMesh && !(p.size.array() > 0).all())
-        throw Error(where + ": sizes must be positive");
-      info.collision.push_back(std::move(p));
-    }
-    m.links_.push_back(std::move(info));
-  }
-  for (const auto& [name, joint] : urdf->joints_) {
-    JointInfo j;
-    j.name = name;
-    j.parentLink = m.linkIndex(joint->parent_link_name);
-    j.childLink = m.linkIndex(joint->child_link_name);
-    j.T_parent_joint = toIso(joint->parent_to_joint_origin_transform);
-    Vec3 axis(joint->axis.x, joint->axis.y, joint->axis.z);
-    switch (joint->type) {
-      case urdf::Joint::REVOLUTE:
-        j.type = JointInfo::Type::kRevolute;
-        break;
-      case urdf::Joint::CONTINUOUS:
-        j.type = JointInfo::Type::kContinuous;
-        break;
-      case urdf::Joint::PRISMATIC:
-        j.type = JointInfo::Type::kPrismatic;
-        break;
-      case urdf::Joint::FIXED:
-        j.type = JointInfo::Type::kFixed;
-        break;
-      default:
-        throw Error(urdfName + ": joint " + name +
-                    ": floating and planar joints are not supported");
-    }
-    if (j.type != JointInfo::Type::kFixed) {
-      if (axis.norm() < 1e-9) throw Error(urdfName + ": joint " + name + ": zero axis");
-      j.axis = axis.normalized();
-      if (j.type == JointInfo::Type::kContinuous) {
-        j.lower = -M_PI;
-        j.upper = M_PI;
-      } else {
-        if (!joint->limits) throw Error(urdfName + ": joint " + name + ": missing <limit>");
-        j.lower = joint->limits->lower;
-        j.upper = joint->limits->upper;
-        if (!(j.lower <= j.upper))
-          throw Error(urdfName + ": joint " + name + ": limit lower > upper");
-      }
-      if (joint->limits) j.velocity = joint->limits->velocity;
-    }
-    m.joints_.push_back(j);
-  }
-  std::sort(m.joints_.begin(), m.joints_.end(),
-            [](const JointInfo& a, const JointInfo& b) { return a.name < b.name; });
-  for (int ji = 0; ji < int(m.joints_.size()); ++ji) {
-    JointInfo& j = m.joints_[ji];
-    m.links_[j.childLink].parentJoint = ji;
-    if (j.type != JointInfo::Type::kFixed) {
-      j.variable = int(m.variableJoint_.size());
-      m.variableJoint_.push_back(ji);
-    }
-  }
-  m.rootLink_ = m.linkIndex(urdf->getRoot()->name);
-  // Topological order: a joint after the joint of its parent link.
-  std::function<void(int)> visit = [&](int link) {
-    for (int ji = 0; ji < int(m.joints_.size()); ++ji)
-      if (m.joints_[ji].parentLink == link) {
-        m.jointOrder_.push_back(ji);
-        visit(m.joints_[ji].childLink);
-      }
-  };
-  visit(m.rootLink_);
-  // URDF mimic tags (the config's couplings below override them).
-  for (const auto& [name, joint] : urdf->joints_)
-    if (joint->mimic) {
-      JointInfo& j = m.joints_[m.jointIndex(name)];
-      int leader = m.variableIndex(joint->mimic->joint_name);
-      if (leader < 0 || j.variable < 0)
-        throw Error(urdfName + ": joint " + name + ": mimics unknown or fixed joint '" +
-                    joint->mimic->joint_name + "'");
-      j.mimicOf = leader;
-      j.mimicMultiplier = joint->mimic->multiplier;
-      j.mimicOffset = joint->mimic->offset;
-    }
-
-  // ---- config ----
-  auto needLink = [&](const Json& obj, const std::string& key, const std::string& where) {
-    std::string n = requireString(obj, key, where);
-    int i = m.linkIndex(n);
-    if (i < 0) throw Error(where + "." + key + ": no link named '" + n + "' in " + urdfName);
-    return i;
-  };
-  auto needVariable = [&](const Json& obj, const std::string& key, const std::string& where) {
-    std::string n = requireString(obj, key, where);
-    int ji = m.jointIndex(n);
-    if (ji < 0) throw Error(where + "." + key + ": no joint named '" + n + "' in " + urdfName);
-    if (m.joints_[ji].variable < 0)
-      throw Error(where + "." + key + ": joint '" + n + "' is fixed, it cannot be driven");
-    return m.joints_[ji].variable;
-  };
-  m.baseLink_ = needLink(cfg, "base_link", cfgName);
-  m.tipLink_ = needLink(cfg, "tip_link", cfgName);
-  // Chain base → tip: walk up from the tip.
-  std::vector<int> chainJoints;
-  for (int link = m.tipLink_; link != m.baseLink_;) {
-    int ji = m.links_[link].parentJoint;
-    if (ji < 0)
-      throw Error(cfgName + ": tip_link '" + m.links_[m.tipLink_].name +
-                  "' is not below base_link '" + m.links_[m.baseLink_].name + "' in " + urdfName +
-                  ": the chain does not connect");
-    chainJoints.push_back(ji);
-    link = m.joints_[ji].parentLink;
-  }
-  std::reverse(chainJoints.begin(), chainJoints.end());
-  m.chain_ = std::make_shared<KDL::Chain>();
-  for (int ji : chainJoints) {
-    const JointInfo& j = m.joints_[ji];
-    KDL::Frame F = toKdl(j.T_parent_joint);
-    KDL::Vector axis = F.M * KDL::Vector(j.axis.x(), j.axis.y(), j.axis.z());
-    KDL::Joint kj(j.name + "_fixed", KDL::Joint::Fixed);
-    if (j.type == JointInfo::Type::kPrismatic)
-      kj = KDL::Joint(j.name, F.p, axis, KDL::Joint::TransAxis);
-    else if (j.type != JointInfo::Type::kFixed)
-      kj = KDL::Joint(j.name, F.p, axis, KDL::Joint::RotAxis);
-    m.chain_->addSegment(KDL::Segment(m.links_[j.childLink].name, kj, F));
-    if (j.variable >= 0) {
-      if (j.mimicOf >= 0)
-        throw Error(cfgName + ": arm joint '" + j.name + "' mimics another joint; not supported");
-      m.armVariables_.push_back(j.variable);
-    }
-  }
-  if (m.armVariables_.empty())
-    throw Error(cfgName + ": the chain base_link → tip_link has no joints");
-
-  if (cfg.contains("joint_speeds_rad_s")) {
-    const Json& s = cfg["joint_speeds_rad_s"];
-    if (!s.is_object()) throw Error(cfgName + ": joint_speeds_rad_s: expected an object");
-    for (const auto& [name, v] : s.items()) {
-      int ji = m.jointIndex(name);
-      if (ji < 0)
-        throw Error(cfgName + ": joint_speeds_rad_s." + name + ": no such joint in " + urdfName);
-      if (!v.is_number() || !(v.get<double>() > 0))
-        throw Error(cfgName + ": joint_speeds_rad_s." + name + ": expected a positive number");
-      m.joints_[ji].velocity = v.get<double>();
-    }
-  }
-  for (int v : m.armVariables_)
-    if (!(m.variable(v).velocity > 0))
-      throw Error(cfgName + ": arm joint '" + m.variable(v).name +
-                  "' has no speed limit (URDF <limit velocity> or joint_speeds_rad_s)");
-  m.homeValues_.resize(m.variableJoint_.size());
-  for (int v = 0; v < m.variableCount(); ++v) {
-    const JointInfo& j = m.variable(v);
-    m.homeValues_[v] = std::clamp(0.0, j.lower, j.upper);
-  }
-  if (cfg.contains("home")) {
-    const Json& h = cfg["home"];
-    if (!h.is_object()) throw Error(cfgName + ": home: expected an object of joint values");
-    for (const auto& [name, v] : h.items()) {
-      int var = m.variableIndex(name);
-      if (var < 0)
-        throw Error(cfgName + ": home." + name + ": no such movable joint in " + urdfName);
-      if (!v.is_number()) throw Error(cfgName + ": home." + name + ": expected a number");
-      m.homeValues_[var] = v.get<double>();
-    }
-  }
-
-  const Json& hand = requireField(cfg, "hand", cfgName);
-  const std::string hw = cfgName + ": hand";
-  const Json& hl = requireField(hand, "links", hw);
-  if (!hl.is_array() || hl.empty())
-    throw Error(hw + ".links: expected a non-empty array of link names");
-  for (size_t i = 0; i < hl.size(); ++i) {
-    if (!hl[i].is_string())
-      throw Error(hw + ".links[" + std::to_string(i) + "]: expected a string");
-    int li = m.linkIndex(hl[i].get<std::string>());
-    if (li < 0)
-      throw Error(hw + ".links[" + std::to_string(i) + "]: no link named '" +
-                  hl[i].get<std::string>() + "' in " + urdfName);
-    m.handLinks_.push_back(li);
-  }
-  if (hand.contains("couplings")) {
-    const Json& cs = hand["couplings"];
-    if (!cs.is_array()) throw Error(hw + ".couplings: expected an array");
-    for (size_t i = 0; i < cs.size(); ++i) {
-      const std::string cw = hw + ".couplings[" + std::to_string(i) + "]";
-      int v = needVariable(cs[i], "joint", cw), leader = needVariable(cs[i], "follows", cw);
-      JointInfo& j = m.joints_[m.variableJoint_[v]];
-      j.mimicOf = leader;
-      j.mimicMultiplier = requireNumber(cs[i], "multiplier", cw);
-      j.mimicOffset = requireNumber(cs[i], "offset", cw);
-    }
-  }
-  const Json& fs = requireField(hand, "fingers", hw);
-  if (!fs.is_array() || fs.empty()) throw Error(hw + ".fingers: expected a non-empty array");
-  for (size_t i = 0; i < fs.size(); ++i) {
-    const std::string fw = hw + ".fingers[" + std::to_string(i) + "]";
-    FingerInfo f;
-    f.variable = needVariable(fs[i], "joint", fw);
-    f.open = requireNumber(fs[i], "open", fw);
-    f.closed = requireNumber(fs[i], "closed", fw);
-    const JointInfo& j = m.variable(f.variable);
-    for (double val : {f.open, f.closed})
-      if (val < j.lower - 1e-9 || val > j.upper + 1e-9)
-        throw Error(fw + ": open/closed value outside the joint's limits [" +
-                    std::to_string(j.lower) + ", " + std::to_string(j.upper) + "]");
-    // Links that move with the finger: below the finger joint or any joint that follows it.
-    std::set<int> moving;
-    for (int ji = 0; ji < int(m.joints_.size()); ++ji) {
-      const JointInfo& jj = m.joints_[ji];
-      if (jj.variable == f.variable || jj.mimicOf == f.variable) {
-        std::function<void(int)> collect = [&](int link) {
-          moving.insert(link);
-          for (const JointInfo& c : m.joints_)
-            if (c.parentLink == link) collect(c.childLink);
-        };
-        collect(jj.childLink);
-      }
-    }
-    for (int li : moving)
-      if (std::find(m.handLinks_.begin(), m.handLinks_.end(), li) != m.handLinks_.end())
-        f.links.push_back(li);
-    if (f.links.empty()) throw Error(fw + ": no hand link moves with joint '" + j.name + "'");
-    m.fingers_.push_back(f);
-  }
-  if (hand.contains("spread_joint")) m.spreadVariable_ = needVariable(hand, "spread_joint", hw);
-  if (hand.contains("grasp_offset_m")) {
-    m.graspOffset_ = requireNumber(hand, "grasp_offset_m", hw);
-    if (!(m.graspOffset_ > 0 && m.graspOffset_ < 1))
-      throw Error(hw + ".grasp_offset_m: must be in (0, 1) m");
-  }
-  const Json& cam = requireField(cfg, "camera", cfgName);
-  const std::string camw = cfgName + ": camera";
-  m.camera_.panTilt_B = readVec3(cam, "pan_tilt_xyz", camw);
-  m.camera_.lookAt_B = readVec3(cam, "look_at_xyz", camw);
-  std::tie(m.camera_.panMin, m.camera_.panMax) =
-      readRangeDeg(cam, "pan_range_deg", camw, {-M_PI, M_PI});
-  std::tie(m.camera_.tiltMin, m.camera_.tiltMax) =
-      readRangeDeg(cam, "tilt_range_deg", camw, {-M_PI / 2, M_PI / 2});
-  if (!m.camera_.aimAt(m.camera_.lookAt_B))
-    throw Error(camw + ".look_at_xyz: outside the pan/tilt range of the camera");
-  const Json& table = requireField(cfg, "table", cfgName);
-  m.table_.center_B = readVec3(table, "center_xyz", cfgName + ": table");
-  m.table_.size = readVec3(table, "size_xyz", cfgName + ": table");
-  if (!(m.table_.size.array() > 0).all())
-    throw Error(cfgName + ": table.size_xyz: must be positive");
-  if (cfg.contains("base_adjacent_links")) {
-    const Json& a = cfg["base_adjacent_links"];
-    if (!a.is_array())
-      throw Error(cfgName + ": base_adjacent_links: expected an array of link names");
-    for (size_t i = 0; i < a.size(); ++i) {
-      if (!a[i].is_string() || m.linkIndex(a[i].get<std::string>()) < 0)
-        throw Error(cfgName + ": base_adjacent_links[" + std::to_string(i) + "]: no such link in " +
-                    urdfName);
-      m.baseAdjacent_.push_back(m.linkIndex(a[i].get<std::string>()));
-    }
-  }
+  RobotModelLoader loader{m, cfg, cfgName, urdfName, urdfPath};
+  loader.urdfModel(*urdf);
+  loader.armChain();
+  loader.speedsAndHome();
+  loader.handPart();
+  loader.workcell();
   return m;
 }
 

@@ -132,6 +132,7 @@ class RobotModel {
   Iso3 tipPose(const JointVector& q) const;
 
  private:
+  friend struct RobotModelLoader;
   std::string name_;
   std::vector<LinkInfo> links_;
   std::vector<JointInfo> joints_;
