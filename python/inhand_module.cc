@@ -127,14 +127,8 @@ struct Session {
   std::unique_ptr<ScanSession> s;
 };
 
-}  // namespace
-
-PYBIND11_MODULE(_inhand, m) {
-  m.doc() = "inhand: autonomous in-hand 3D modelling of unknown objects (Krainin et al. 2011)";
-  py::register_exception<Error>(m, "Error", PyExc_RuntimeError);
-  m.def("_set_data_dir", [](const std::string& d) { dataDir() = d; });
-  m.def("_built_in_data_dir", [] { return std::string(INHAND_DATA_DIR); });
-
+// The bindings of the camera intrinsics and the model (arrays are views of its data).
+void bindCameraAndModel(py::module_& m) {
   py::class_<CameraIntrinsics>(m, "Camera", "pinhole intrinsics (pixels)")
       .def(py::init<>())
       .def(py::init([](int width, int height, double fx, double fy, double cx, double cy) {
@@ -209,7 +203,10 @@ PYBIND11_MODULE(_inhand, m) {
         return "Model(" + std::to_string(o.mesh.vertices.size()) + " vertices, " +
                std::to_string(o.mesh.triangles.size()) + " faces)";
       });
+}
 
+// The bindings of recorded frames and the volume.
+void bindFramesAndVolume(py::module_& m) {
   py::class_<Frames>(m, "Frames", "a directory of depth frames with camera poses")
       .def("__len__", [](const Frames& f) { return f.set.frames.size(); })
       .def(
@@ -291,7 +288,10 @@ PYBIND11_MODULE(_inhand, m) {
           },
           py::arg("surface") = "closed", py::arg("hole_sigma_m") = 0.05,
           "the model: closed (hole-filled over the unseen, the paper's) or the observed surface");
+}
 
+// The bindings of the robot model.
+void bindRobot(py::module_& m) {
   py::class_<RobotModel, std::shared_ptr<RobotModel>>(m, "Robot", "robot model (URDF + config)")
       .def_static(
           "load",
@@ -330,7 +330,10 @@ PYBIND11_MODULE(_inhand, m) {
             return matrixOf(r.tipPose(q));
           },
           py::arg("q"), "T_B_palm at joint state q");
+}
 
+// The bindings of ScanSession and what it returns.
+void bindSession(py::module_& m) {
   py::class_<PlannedView>(m, "PlannedView", "a view ScanSession chose")
       .def_readonly("initial", &PlannedView::initial)
       .def_property_readonly("dir_O", [](const PlannedView& v) { return Eigen::Vector3d(v.dir_O); })
@@ -454,7 +457,10 @@ PYBIND11_MODULE(_inhand, m) {
       .def(
           "save", [](const Session& s, const std::filesystem::path& p) { s.s->save(p); },
           py::arg("path"), "a checkpoint (written atomically)");
+}
 
+// The bindings of the simulator and the simulated scan.
+void bindSimulator(py::module_& m) {
   py::class_<Simulator>(m, "Simulator", "the simulated robot, camera, table and object")
       .def(py::init([](std::shared_ptr<RobotModel> robot, const std::string& object,
                        const py::object& options, uint64_t seed, const std::string& start) {
@@ -545,7 +551,10 @@ PYBIND11_MODULE(_inhand, m) {
                std::to_string(s.result.scan.views.size()) + " views, coverage " +
                std::to_string(s.metrics.coverage) + ")";
       });
+}
 
+// inhand.scan: the whole simulated scan.
+void bindScan(py::module_& m) {
   m.def(
       "scan",
       [](const std::string& object, std::shared_ptr<RobotModel> robot, const py::object& options,
@@ -570,4 +579,19 @@ PYBIND11_MODULE(_inhand, m) {
       py::arg("seed") = 1, py::arg("max_grasps") = py::none(), py::arg("log") = false,
       "the whole autonomous scan in the simulator (as inhand scan): object builtin:NAME or a "
       "mesh file");
+}
+
+}  // namespace
+
+PYBIND11_MODULE(_inhand, m) {
+  m.doc() = "inhand: autonomous in-hand 3D modelling of unknown objects (Krainin et al. 2011)";
+  py::register_exception<Error>(m, "Error", PyExc_RuntimeError);
+  m.def("_set_data_dir", [](const std::string& d) { dataDir() = d; });
+  m.def("_built_in_data_dir", [] { return std::string(INHAND_DATA_DIR); });
+  bindCameraAndModel(m);
+  bindFramesAndVolume(m);
+  bindRobot(m);
+  bindSession(m);
+  bindSimulator(m);
+  bindScan(m);
 }
