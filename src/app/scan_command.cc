@@ -42,8 +42,10 @@ static Json posesJson(const std::vector<GraspPoseRecord>& poses) {
   return out;
 }
 
-int runScan(const ScanArgs& args) {
-  const auto t0 = std::chrono::steady_clock::now();
+namespace {
+
+// The options of a scan: the named planner, the config file over it, the command line over both.
+ScanConfig scanConfigFor(const ScanArgs& args) {
   ScanConfig o;
   o.robot = args.robot;
   // The named planner first: a config file can still override any of its fields.
@@ -63,10 +65,13 @@ int runScan(const ScanArgs& args) {
   o.scan.planner.seed = args.seed;
   o.sim.seed = args.seed;
   if (std::string p = o.validate(); !p.empty()) throw Error(p);
+  return o;
+}
 
-  RobotModel model = RobotModel::load(o.robot);
-  TriangleMesh object = loadObject(args.object);
-  // The rest pose: the mesh as given, or one of its stable poses (frame O stays the mesh's).
+// The rest pose: the mesh as given, or one of its stable poses (frame O stays the mesh's). Sets
+// config->sim.R_B_O_rest; returns its summary.json record.
+Json applyRestPose(const ScanArgs& args, const TriangleMesh& object, ScanConfig* config) {
+  ScanConfig& o = *config;
   Json restJson = {{"pose", "as-is"}};
   if (args.rest_pose != "as-is") {
     char* end = nullptr;
@@ -91,34 +96,33 @@ int runScan(const ScanArgs& args) {
                 {"down_O", {p.down_O.x(), p.down_O.y(), p.down_O.z()}},
                 {"stable_poses", poses.size()}};
   }
-  // An object too large for the volume is refused before the output directory exists.
-  if (o.start == "held" && object.bounds().size().maxCoeff() > o.scan.volume_size_m - 0.02)
-    throw Error(args.object + ": the object (" + std::to_string(object.bounds().size().maxCoeff()) +
-                " m across) does not fit the scan volume (volume_size_m = " +
-                std::to_string(o.scan.volume_size_m) + " m)");
-  StagedDirectory out(args.out);
-  ScanProgress progress;
-  progress.log = [](const std::string& s) { std::fprintf(stderr, "scan: %s\n", s.c_str()); };
-  const SimulatedScan sim = runSimulatedScan(model, object, o, progress);
-  const MultiGraspResult& mr = sim.result;
-  const ScanResult& r = mr.scan;
+  return restJson;
+}
 
-  writePly(out.path() / "model.ply", r.model.mesh, &r.model.variance);
-  writePly(out.path() / "truth.ply", object);  // the simulated object, frame O
+// model.ply, truth.ply and, per grasp, the model after its views, the hand as it held the
+// object and the best candidates.
+void writeModels(const fs::path& dir, const RobotModel& model, const TriangleMesh& object,
+                 const MultiGraspResult& mr) {
+  const ScanResult& r = mr.scan;
+  writePly(dir / "model.ply", r.model.mesh, &r.model.variance);
+  writePly(dir / "truth.ply", object);  // the simulated object, frame O
   // Per grasp: the model after its views, the hand as it held the object, the best candidates.
-  fs::create_directories(out.path() / "grasps");
+  fs::create_directories(dir / "grasps");
   for (size_t g = 0; g < mr.grasps.size(); ++g) {
     const GraspRecord& gr = mr.grasps[g];
     const std::string k = "grasp_" + std::to_string(g + 1);
-    writePly(out.path() / "grasps" / (k + "_model.ply"), gr.model.mesh, &gr.model.variance);
+    writePly(dir / "grasps" / (k + "_model.ply"), gr.model.mesh, &gr.model.variance);
     if (int(gr.q.size()) == model.variableCount())
-      writePly(out.path() / "grasps" / (k + "_hand.ply"),
-               HandGeometry(model, gr.q, gr.T_O_palm).mesh());
+      writePly(dir / "grasps" / (k + "_hand.ply"), HandGeometry(model, gr.q, gr.T_O_palm).mesh());
     for (size_t c = 0; c < gr.ranked.size(); ++c)
-      writePly(out.path() / "grasps" / (k + "_candidate_" + std::to_string(c + 1) + ".ply"),
+      writePly(dir / "grasps" / (k + "_candidate_" + std::to_string(c + 1) + ".ply"),
                HandGeometry(model, gr.ranked[c].q, gr.ranked[c].T_O_palm).mesh());
   }
-  const SurfaceMetrics& sm = sim.metrics;
+}
+
+// Each view's record, with the trajectory time so far and its (1-based) grasp.
+Json viewsJson(const MultiGraspResult& mr) {
+  const ScanResult& r = mr.scan;
   Json views = Json::array();
   double trajectory = 0;
   std::vector<int> viewGrasp;  // 1-based grasp of each view
@@ -142,24 +146,10 @@ int runScan(const ScanArgs& args) {
                      {"trajectory_s", trajectory},
                      {"grasp", vi < viewGrasp.size() ? viewGrasp[vi] : int(mr.grasps.size())}});
   }
-  Json summary;
-  summary["object"] = args.object;
-  summary["robot"] = o.robot;
-  summary["seed"] = args.seed;
-  summary["planner"] = args.planner;
-  summary["termination"] = terminationName(r.termination);
-  summary["coverage"] = sm.coverage;
-  summary["accuracy_mm"] = {
-      {"mean", sm.accuracy_mean_mm}, {"rms", sm.accuracy_rms_mm}, {"p95", sm.accuracy_p95_mm}};
-  Json fs = Json::object();
-  for (size_t k = 0; k < sm.fscore.size(); ++k) {
-    char key[32];
-    std::snprintf(key, sizeof key, "%gmm", 1000 * o.eval.fscore_m[k]);
-    fs[key] = {{"f", sm.fscore[k]}, {"precision", sm.precision[k]}, {"recall", sm.recall[k]}};
-  }
-  summary["fscore"] = fs;
-  summary["trajectory_s"] = trajectory;
-  summary["views"] = views;
+  return views;
+}
+
+Json graspsJson(const MultiGraspResult& mr) {
   Json grasps = Json::array();
   for (const GraspRecord& g : mr.grasps) {
     Json ranked = Json::array();
@@ -181,40 +171,102 @@ int runScan(const ScanArgs& args) {
                       {"pick_up_attempts", g.attempts},
                       {"ranking_s", g.ranking_s}});
   }
-  summary["grasps"] = grasps;
+  return grasps;
+}
+
+Json tableTopJson(const TableTopRecord& t) {
+  const Vec3 n = t.table_O.n;
+  Json axes = Json::array();
+  for (int k = 0; k < 3; ++k)
+    axes.push_back({{"axis_O", {t.axes.axes(0, k), t.axes.axes(1, k), t.axes.axes(2, k)}},
+                    {"extent_m", t.axes.max[k] - t.axes.min[k]}});
+  return {{"frames", t.frames},
+          {"points", t.points},
+          {"table_inliers", t.table_inliers},
+          {"object_points", t.object_points},
+          {"table_plane_O", {n.x(), n.y(), n.z(), t.table_O.d}},
+          {"centroid_O", {t.axes.centroid.x(), t.axes.centroid.y(), t.axes.centroid.z()}},
+          {"principal_axes", axes},
+          {"grasp_poses_tried", t.tried},
+          {"grasp_poses_touching", t.touching},
+          {"grasp_poses_stable", t.stable},
+          {"grasp_poses_table_free", t.table_free},
+          {"grasp_poses_reachable", t.reachable},
+          {"grasp_rejected",
+           {{"no_two_link_contact", t.tried - t.touching},
+            {"not_force_closure", t.touching - t.stable},
+            {"hand_in_table", t.stable - t.table_free},
+            {"unreachable", t.table_free - t.reachable}}},
+          {"pick_up_attempts", t.attempts},
+          {"pick_up_poses", t.attempt_poses},
+          {"grasp_poses", posesJson(t.poses)},
+          {"volume", {{"size_m", t.volume_size_m}, {"voxel_m", t.voxel_m}}},
+          {"seconds", t.seconds}};
+}
+
+// Exit status: 3 no view reachable, 4 no grasp, 6 no object to scan (docs/commands.md).
+int exitStatus(Termination t) {
+  switch (t) {
+    case Termination::kNoReachableView:
+      return 3;
+    case Termination::kNoReachableGrasp:
+    case Termination::kPickUpFailed:
+    case Termination::kObjectTooLargeForHand:
+    case Termination::kNoStableGrasp:
+      return 4;
+    case Termination::kObjectNotFound:
+    case Termination::kObjectOutOfView:
+    case Termination::kObjectTooLargeForVolume:
+      return 6;
+    default:
+      return 0;
+  }
+}
+
+}  // namespace
+
+int runScan(const ScanArgs& args) {
+  const auto t0 = std::chrono::steady_clock::now();
+  ScanConfig o = scanConfigFor(args);
+  RobotModel model = RobotModel::load(o.robot);
+  TriangleMesh object = loadObject(args.object);
+  const Json restJson = applyRestPose(args, object, &o);
+  // An object too large for the volume is refused before the output directory exists.
+  if (o.start == "held" && object.bounds().size().maxCoeff() > o.scan.volume_size_m - 0.02)
+    throw Error(args.object + ": the object (" + std::to_string(object.bounds().size().maxCoeff()) +
+                " m across) does not fit the scan volume (volume_size_m = " +
+                std::to_string(o.scan.volume_size_m) + " m)");
+  StagedDirectory out(args.out);
+  ScanProgress progress;
+  progress.log = [](const std::string& s) { std::fprintf(stderr, "scan: %s\n", s.c_str()); };
+  const SimulatedScan sim = runSimulatedScan(model, object, o, progress);
+  const MultiGraspResult& mr = sim.result;
+  const ScanResult& r = mr.scan;
+  writeModels(out.path(), model, object, mr);
+  const SurfaceMetrics& sm = sim.metrics;
+  const Json views = viewsJson(mr);
+  Json summary;
+  summary["object"] = args.object;
+  summary["robot"] = o.robot;
+  summary["seed"] = args.seed;
+  summary["planner"] = args.planner;
+  summary["termination"] = terminationName(r.termination);
+  summary["coverage"] = sm.coverage;
+  summary["accuracy_mm"] = {
+      {"mean", sm.accuracy_mean_mm}, {"rms", sm.accuracy_rms_mm}, {"p95", sm.accuracy_p95_mm}};
+  Json fs = Json::object();
+  for (size_t k = 0; k < sm.fscore.size(); ++k) {
+    char key[32];
+    std::snprintf(key, sizeof key, "%gmm", 1000 * o.eval.fscore_m[k]);
+    fs[key] = {{"f", sm.fscore[k]}, {"precision", sm.precision[k]}, {"recall", sm.recall[k]}};
+  }
+  summary["fscore"] = fs;
+  summary["trajectory_s"] = views.empty() ? 0.0 : views.back()["trajectory_s"].get<double>();
+  summary["views"] = views;
+  summary["grasps"] = graspsJson(mr);
   summary["start"] = o.start;
   summary["rest_pose"] = restJson;
-  if (mr.table_top) {
-    const TableTopRecord& t = *mr.table_top;
-    const Vec3 n = t.table_O.n;
-    Json axes = Json::array();
-    for (int k = 0; k < 3; ++k)
-      axes.push_back({{"axis_O", {t.axes.axes(0, k), t.axes.axes(1, k), t.axes.axes(2, k)}},
-                      {"extent_m", t.axes.max[k] - t.axes.min[k]}});
-    summary["table_top"] = {
-        {"frames", t.frames},
-        {"points", t.points},
-        {"table_inliers", t.table_inliers},
-        {"object_points", t.object_points},
-        {"table_plane_O", {n.x(), n.y(), n.z(), t.table_O.d}},
-        {"centroid_O", {t.axes.centroid.x(), t.axes.centroid.y(), t.axes.centroid.z()}},
-        {"principal_axes", axes},
-        {"grasp_poses_tried", t.tried},
-        {"grasp_poses_touching", t.touching},
-        {"grasp_poses_stable", t.stable},
-        {"grasp_poses_table_free", t.table_free},
-        {"grasp_poses_reachable", t.reachable},
-        {"grasp_rejected",
-         {{"no_two_link_contact", t.tried - t.touching},
-          {"not_force_closure", t.touching - t.stable},
-          {"hand_in_table", t.stable - t.table_free},
-          {"unreachable", t.table_free - t.reachable}}},
-        {"pick_up_attempts", t.attempts},
-        {"pick_up_poses", t.attempt_poses},
-        {"grasp_poses", posesJson(t.poses)},
-        {"volume", {{"size_m", t.volume_size_m}, {"voxel_m", t.voxel_m}}},
-        {"seconds", t.seconds}};
-  }
+  if (mr.table_top) summary["table_top"] = tableTopJson(*mr.table_top);
   const CameraIntrinsics& K = sim.camera.intrinsics;
   summary["camera"] = {{"width", K.width}, {"height", K.height}, {"fx", K.fx},
                        {"fy", K.fy},       {"cx", K.cx},         {"cy", K.cy}};
@@ -257,22 +309,7 @@ int runScan(const ScanArgs& args) {
       terminationName(r.termination).c_str(), 100 * r.model.observedAreaFraction(),
       100 * sm.coverage, 1000 * o.eval.tau_m, sm.accuracy_mean_mm, r.model.meanEntropy(), r.total_s,
       args.out.c_str());
-  // Exit status: 3 no view reachable, 4 no grasp, 6 no object to scan (docs/commands.md).
-  switch (r.termination) {
-    case Termination::kNoReachableView:
-      return 3;
-    case Termination::kNoReachableGrasp:
-    case Termination::kPickUpFailed:
-    case Termination::kObjectTooLargeForHand:
-    case Termination::kNoStableGrasp:
-      return 4;
-    case Termination::kObjectNotFound:
-    case Termination::kObjectOutOfView:
-    case Termination::kObjectTooLargeForVolume:
-      return 6;
-    default:
-      return 0;
-  }
+  return exitStatus(r.termination);
 }
 
 int runConfig(const std::string& file, bool reference) {
