@@ -25,14 +25,13 @@ std::string& dataDir() {
 }
 
 Iso3 isoFrom(const Eigen::Matrix4d& m, const char* what) {
-  if ((m.row(3) - Eigen::RowVector4d(0, 0, 0, 1)).norm() > 1e-9)
-    throw Error(std::string(what) + ": the last row of a pose must be 0 0 0 1");
-  const Mat3 R = m.topLeftCorner<3, 3>();
-  if ((R.transpose() * R - Mat3::Identity()).norm() > 1e-6 || R.determinant() < 0)
-    throw Error(std::string(what) + ": not a rigid transform (rotation part not orthonormal)");
-  Iso3 T = Iso3::Identity();
-  T.matrix() = m;
-  return T;
+  std::array<double, 16> a{};
+  for (int r = 0; r < 4; ++r)
+    for (int c = 0; c < 4; ++c) a[size_t(r * 4 + c)] = m(r, c);
+  std::string why;
+  const std::optional<Iso3> T = poseFromRowMajor(a, &why);  // nearest rotation within 1e-2
+  if (!T) throw Error(std::string(what) + ": not a rigid transform: " + why);
+  return *T;
 }
 Eigen::Matrix4d matrixOf(const Iso3& T) { return T.matrix(); }
 

@@ -88,6 +88,24 @@ TEST(Pose, RowMajorRoundTripAndRejection) {
   scaled[5] = 2;
   EXPECT_FALSE(poseFromRowMajor(scaled, &why));
   EXPECT_NE(why.find("orthonormal"), std::string::npos);
+  // A pose file's 7 significant digits (|RᵀR − I| ~1e-7..1e-4) is accepted as the nearest
+  // rotation, within 1e-6 of the pose written; a rotation 5 % off is not; nor is a NaN.
+  std::array<double, 16> rounded = poseToRowMajor(T);
+  for (double& v : rounded) v = std::stod(std::to_string(v).substr(0, 9));
+  rounded[0] += 1e-4;  // and one entry off further, as real files have
+  double deviation = 0;
+  const auto near = poseFromRowMajor(rounded, &why, 1e-2, &deviation);
+  ASSERT_TRUE(near) << why;
+  EXPECT_GT(deviation, 5e-5);
+  EXPECT_NEAR((near->linear().transpose() * near->linear() - Mat3::Identity()).norm(), 0, 1e-12);
+  EXPECT_TRUE(near->isApprox(T, 1e-4));
+  auto off = poseToRowMajor(T);
+  off[0] *= 1.05;
+  EXPECT_FALSE(poseFromRowMajor(off, &why));
+  auto nan = poseToRowMajor(T);
+  nan[6] = std::nan("");
+  EXPECT_FALSE(poseFromRowMajor(nan, &why));
+  EXPECT_NE(why.find("non-finite"), std::string::npos);
 }
 
 TEST(Pose, FibonacciSphereIsEven) {

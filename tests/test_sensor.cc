@@ -169,6 +169,10 @@ TEST(DepthImage, PngRoundTripInMillimetres) {
   DepthImage back = readDepthPng(dir.path() / "d.png", 0.001, 640, 480);
   for (size_t i = 0; i < img.depth_m.size(); ++i)
     EXPECT_NEAR(back.depth_m[i], img.depth_m[i], 0.0005);
+  // 65535, the other "no depth" sentinel real sensors write, reads as no depth.
+  img.depth_m[5] = 65.535f;
+  writeDepthPng(dir.path() / "s.png", img);
+  EXPECT_EQ(readDepthPng(dir.path() / "s.png", 0.001, 640, 480).depth_m[5], 0.f);
 }
 
 TEST(DepthImage, BadFilesAreNamed) {

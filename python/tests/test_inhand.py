@@ -87,7 +87,7 @@ def test_errors_name_the_field(frames_dir, tmp_path):
         volume.integrate(np.zeros((240, 320), np.float32), np.eye(4), camera)
     skew = np.eye(4)
     skew[0, 1] = 0.5
-    with pytest.raises(inhand.Error, match="T_O_C: not a rigid transform"):
+    with pytest.raises(inhand.Error, match="T_O_C: not a rigid transform: rotation part is not orthonormal"):
         volume.integrate(np.zeros((480, 640), np.float32), skew, camera)
     with pytest.raises(inhand.Error, match="surface: must be closed or observed"):
         volume.extract(surface="open")

@@ -156,6 +156,11 @@ int runFuse(const FuseArgs& args) {
 
   const fs::path dir(args.frames);
   FrameSet set = readFrameSet(dir);
+  if (set.reorthonormalised > 0)
+    std::fprintf(stderr,
+                 "fuse: note: %d of %zu poses were not exactly orthonormal (max |R^T R - I| = "
+                 "%.2g); the nearest rotations were used\n",
+                 set.reorthonormalised, set.frames.size(), set.max_rotation_deviation);
   Aabb box;
   if (args.bounds) {
     const auto& b = *args.bounds;

@@ -20,8 +20,8 @@ Iso3 lookAt(const Vec3& eye_W, const Vec3& target_W, const Vec3& up_W) {
   return T;
 }
 
-std::optional<Iso3> poseFromRowMajor(const std::array<double, 16>& m, std::string* why,
-                                     double tol) {
+std::optional<Iso3> poseFromRowMajor(const std::array<double, 16>& m, std::string* why, double tol,
+                                     double* deviation) {
   auto fail = [&](const std::string& reason) -> std::optional<Iso3> {
     if (why) *why = reason;
     return std::nullopt;
@@ -31,14 +31,16 @@ std::optional<Iso3> poseFromRowMajor(const std::array<double, 16>& m, std::strin
   Mat4 M;
   for (int r = 0; r < 4; ++r)
     for (int c = 0; c < 4; ++c) M(r, c) = m[r * 4 + c];
-  if (std::abs(M(3, 0)) > tol || std::abs(M(3, 1)) > tol || std::abs(M(3, 2)) > tol ||
-      std::abs(M(3, 3) - 1.0) > tol)
+  const double rowTol = 1e-6;  // pose files write the bottom row exactly
+  if (std::abs(M(3, 0)) > rowTol || std::abs(M(3, 1)) > rowTol || std::abs(M(3, 2)) > rowTol ||
+      std::abs(M(3, 3) - 1.0) > rowTol)
     return fail("bottom row is not [0, 0, 0, 1]");
   Mat3 R = M.topLeftCorner<3, 3>();
   double det = R.determinant();
   if (std::abs(det) < 1e-9) return fail("rotation part is singular (determinant 0)");
   if (det < 0) return fail("rotation part has determinant < 0 (a reflection)");
   double err = (R.transpose() * R - Mat3::Identity()).cwiseAbs().maxCoeff();
+  if (deviation) *deviation = err;
   if (err > tol) {
     std::ostringstream s;
     s << "rotation part is not orthonormal (max |R^T R - I| = " << err << ")";

@@ -144,7 +144,9 @@ DepthImage readDepthPng(const std::filesystem::path& path, double scale, int exp
                   " (from the intrinsics)");
   }
   DepthImage image(w, h);
-  for (size_t i = 0; i < rows.size(); ++i) image.depth_m[i] = float(rows[i] * scale);
+  // 0 and 65535 are "no depth" (the sentinels sensors and their drivers write).
+  for (size_t i = 0; i < rows.size(); ++i)
+    image.depth_m[i] = rows[i] == 65535 ? 0.f : float(rows[i] * scale);
   return image;
 }
 

@@ -67,8 +67,13 @@ FrameSet readFrameSet(const fs::path& dir) {
       m[k] = T[k].get<double>();
     }
     std::string why;
-    auto pose = poseFromRowMajor(m, &why);
+    double deviation = 0;
+    auto pose = poseFromRowMajor(m, &why, 1e-2, &deviation);
     if (!pose) throw Error(where + ".T_O_C: not a rigid transform: " + why);
+    if (deviation > 1e-9) {
+      ++set.reorthonormalised;
+      set.max_rotation_deviation = std::max(set.max_rotation_deviation, deviation);
+    }
     rec.T_O_C = *pose;
     set.frames.push_back(rec);
   }

@@ -13,10 +13,12 @@ namespace inhand {
 Iso3 lookAt(const Vec3& eye_W, const Vec3& target_W, const Vec3& up_W = Vec3::UnitZ());
 
 // Builds a pose from 16 row-major numbers. Returns nullopt with a reason in *why when the matrix
-// is not a rigid transform (rotation not orthonormal within tol, det != +1, bottom row not 0 0 0 1,
-// non-finite entries).
+// is not a rigid transform (rotation farther than tol from orthonormal, det != +1, bottom row not
+// 0 0 0 1, non-finite entries). A rotation within tol is replaced by the nearest rotation: pose
+// files written with 7–8 significant digits deviate by ~1e-4 (max |RᵀR − I|), which
+// *deviation (when given) reports.
 std::optional<Iso3> poseFromRowMajor(const std::array<double, 16>& m, std::string* why,
-                                     double tol = 1e-4);
+                                     double tol = 1e-2, double* deviation = nullptr);
 std::array<double, 16> poseToRowMajor(const Iso3& T);
 
 // Re-orthonormalises the rotation part (nearest rotation, via SVD).

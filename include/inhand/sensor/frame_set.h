@@ -30,9 +30,15 @@ struct FrameSet {
   // Optional "bounds_O": {"min": [x,y,z], "max": [x,y,z]}: where the object is, in O (m). fuse
   // uses it for the volume unless --bounds is given.
   std::optional<Aabb> bounds_O;
+  // Poses whose rotation was not orthonormal to 1e-9 (max |RᵀR − I| up to 1e-2, as pose files
+  // with 7–8 significant digits give) were replaced by the nearest rotation: how many, and the
+  // largest deviation.
+  int reorthonormalised = 0;
+  double max_rotation_deviation = 0;
 };
 
-// Reads and validates DIR/frames.json (every field; poses must be rigid; every PNG must exist).
+// Reads and validates DIR/frames.json (every field; poses must be rigid to 1e-2, nearer ones are
+// re-orthonormalised; every PNG must exist).
 // Throws Error naming the file and field.
 FrameSet readFrameSet(const std::filesystem::path& dir);
 // Loads frame i's depth image, checking its size against the intrinsics.
