@@ -39,6 +39,7 @@
 #include "inhand/scan/scan.h"
 #include "inhand/scan/session.h"
 #include "inhand/scan/table_top.h"
+#include "inhand/scan/tracking.h"
 #include "inhand/sensor/depth_camera.h"
 #include "inhand/sensor/depth_image.h"
 #include "inhand/sensor/depth_sensor.h"

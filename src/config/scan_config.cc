@@ -105,6 +105,21 @@ void visitConfig(V& v, ScanConfig& c) {
   v.integer("planning_stride", s.planning_stride, "S_obj for planning from every n-th voxel");
   v.choice("planning_mesh", s.planning_method, kSurfaceMethods, "S_obj for planning");
   v.object("planner", "the view planner (Alg. 1)", [&](V& p) { visitPlanner(p, s.planner); });
+  v.object(
+      "tracking", "in-hand frames aligned with the hand and the model (arm error, §II)", [&](V& t) {
+        TrackingOptions& o = s.tracking;
+        t.boolean("enabled", o.enabled, "off: frames fused with the poses the robot reports");
+        t.integer("iterations", o.iterations, "ICP iterations per frame");
+        t.num("gate_m", o.gate_m, "depth gate of the first iteration, m");
+        t.num("final_gate_m", o.final_gate_m, "… shrinking to this, m");
+        t.integer("min_inliers", o.min_inliers, "fewer aligned points: the frame is not fused");
+        t.num("max_rms_m", o.max_rms_m, "a larger final residual: the frame is not fused, m");
+        t.num("max_correction_m", o.max_correction_m,
+              "a correction moving the palm farther: the frame is not fused, m");
+        t.num("hand_spacing_m", o.hand_spacing_m, "spacing of the hand's surface samples, m");
+        t.integer("max_object_points", o.max_object_points,
+                  "the model's observed surface, subsampled to this many points");
+      });
   v.integer("max_grasps", m.max_grasps, "grasps in all (1: no re-grasping)");
   v.choice("start", c.start, kStarts, "table: from the table top (§V); held: at a given grasp");
   v.object("table_top", "the table-top stage", [&](V& t) {
@@ -164,6 +179,8 @@ void visitConfig(V& v, ScanConfig& c) {
     o.boolean("check_hold", c.sim.check_hold, "grasps must be force closure on the true object");
     o.num("friction", c.sim.friction, "μ of the true contacts");
     o.num("hold_min_epsilon", c.sim.hold_min_epsilon, "ε a grasp needs to hold");
+    o.num("arm_error_m", c.sim.arm_error_m,
+          "joint offsets putting the palm this far from the reported joints' FK at home, m");
     o.choice("pick_up", c.sim.pick_up_first_contact, kPickUps,
              "the simulated pick-up: palm backed off, or a guarded move to first contact");
   });

@@ -85,8 +85,8 @@ struct PickOutcome {
   std::vector<std::string> attempts;
   std::vector<int> attempt_poses;
 };
-PickOutcome pickAndVerify(RobotInterface& robot, DepthSensor& sensor, const Iso3& T_B_O_rest,
-                          const std::vector<Vec3>& points_O,
+PickOutcome pickAndVerify(ScanSession& session, RobotInterface& robot, DepthSensor& sensor,
+                          const Iso3& T_B_O_rest, const std::vector<Vec3>& points_O,
                           const std::vector<GraspCandidate>& candidates, const ScanOptions& options,
                           const NoiseModelOptions& noise,
                           const std::function<void(const std::string&)>& log) {
@@ -130,11 +130,15 @@ PickOutcome pickAndVerify(RobotInterface& robot, DepthSensor& sensor, const Iso3
     if (const std::optional<Iso3> aim = m.camera().aimAt(heldBox.center())) {
       sensor.setPose(*aim);
       const DepthImage d = sensor.capture();
-      const std::vector<uint8_t> mask =
-          robotPixelMask(d, *aim, robot.joints(), scenes, sensor.camera(), noise, options.t_hand_m,
-                         options.carve_radius_px, /*with_table=*/false);
       const CameraIntrinsics& K = sensor.camera().intrinsics;
-      inHand = depthSupport(d, *aim, K, mask, held_B);
+      // The camera pose relative to where the hand really is (options.tracking; the pose as
+      // reported without it): the held points and the robot's pixels are seen from there.
+      const std::optional<Iso3> tracked =
+          session.trackedCameraPose(d, robot.joints(), *aim, *achieved);
+      const std::vector<uint8_t> mask =
+          robotPixelMask(d, tracked ? *tracked : *aim, robot.joints(), scenes, sensor.camera(),
+                         noise, options.t_hand_m, options.carve_radius_px, /*with_table=*/false);
+      if (tracked) inHand = depthSupport(d, *tracked, K, mask, held_B);
       onTable = depthSupport(d, *aim, K, mask, rest_B_points);
     }
     auto percent = [](double f) {
@@ -215,7 +219,7 @@ void runGrasps(RobotInterface& robot, DepthSensor& sensor, ScanSession& session,
       if (all.model.observed[k]) known_O.push_back(all.model.mesh.vertices[k].cast<double>());
     const std::vector<GraspCandidate> usable(plan.candidates.begin(),
                                              plan.candidates.begin() + plan.above_threshold);
-    const PickOutcome pick = pickAndVerify(robot, sensor, T_B_O_rest, known_O, usable,
+    const PickOutcome pick = pickAndVerify(session, robot, sensor, T_B_O_rest, known_O, usable,
                                            session.options(), session.noise(), log);
     if (!pick.achieved) {
       all.termination = Termination::kPickUpFailed;
@@ -355,8 +359,8 @@ MultiGraspResult scanFromTable(RobotInterface& robot, DepthSensor& sensor, const
   }
   std::vector<Vec3> seen_O;
   for (size_t k = 0; k < object.points_O.size(); k += 5) seen_O.push_back(object.points_O[k]);
-  const PickOutcome pick =
-      pickAndVerify(robot, sensor, T_B_O_rest, seen_O, first.candidates, options, noise, log);
+  const PickOutcome pick = pickAndVerify(session, robot, sensor, T_B_O_rest, seen_O,
+                                         first.candidates, options, noise, log);
   tt.attempts = pick.attempts;
   tt.attempt_poses = pick.attempt_poses;
   if (!pick.achieved) {

@@ -80,6 +80,8 @@ std::string ScanOptions::validate() const {
   if (!p.empty()) return "planner." + p;
   p = mesh.validate();
   if (!p.empty()) return "mesh." + p;
+  p = tracking.validate();
+  if (!p.empty()) return "tracking." + p;
   return {};
 }
 

@@ -55,6 +55,13 @@ struct ScanSession::State {
   JointVector qGrasp;  // the robot's joints when the grasp began (the hand as it holds)
   Aabb objectBox;
   std::shared_ptr<NearHandGrid> nearHand;
+  // Tracking: the hand's surface at the grasp's finger joints, the model's observed surface (both
+  // palm frame), the last frame's correction.
+  std::vector<SurfacePoint> handPoints, objectPoints;
+  std::vector<Vec3> objectOccluders;  // the whole model (observed or not), palm frame
+  JointVector handPointsQ;
+  // The last aligned frame's error in the palm frame: true palm = reported palm · correction.
+  Iso3 correction = Iso3::Identity();
   std::vector<Vec3> used;         // directions of this grasp's views
   std::vector<Vec3> initialDirs;  // the initial trajectory's directions not yet tried
   int alg1Views = 0;              // Alg. 1 views of this grasp
@@ -136,6 +143,8 @@ void ScanSession::beginGrasp(const Iso3& T_O_palm, const JointVector& q, const A
                                               s.options.planner.quality.near_hand_cell_m);
   s.used.clear();
   s.alg1Views = 0;
+  s.correction = Iso3::Identity();
+  if (s.options.tracking.enabled) refreshTrackingModel();
   s.initialDirs.clear();
   // The model exists after the first grasp: Alg. 1 from the start.
   if (s.grasp == 0 && s.options.initial_views > 0)
@@ -212,6 +221,7 @@ FrameReport ScanSession::fuse(const DepthImage& depth, const JointVector& q, con
             carve.empty() ? nullptr : &carve);
   if (inHand && s.options.hand_mode == HandMode::kCarveAndEmpty) emptyInsideRobot(q, T_O_B);
   FrameReport r;
+  r.T_B_C = T_B_C;
   for (size_t i = 0; i < depth.depth_m.size(); ++i)
     if (depth.depth_m[i] > 0) {
       ++r.pixels;
@@ -228,8 +238,103 @@ FrameReport ScanSession::addFrame(const DepthImage& depth, const JointVector& q,
                                   const Iso3& T_B_C) {
   if (!s_->holding) throw Error("addFrame: no grasp (beginGrasp first)");
   checkJoints(*s_->model, q, "addFrame");
-  const Iso3 T_O_B = s_->T_O_palm * s_->model->tipPose(q).inverse();
-  return fuse(depth, q, T_B_C, T_O_B, nullptr, true);
+  State& s = *s_;
+  Iso3 T_B_C_used = T_B_C;
+  TrackResult track;
+  if (s.options.tracking.enabled) {
+    const std::optional<Iso3> tracked = trackedCameraPose(depth, q, T_B_C, s.T_O_palm, &track);
+    if (!tracked) {
+      ++s.summary.frames_rejected;
+      FrameReport r;
+      r.fused = false;
+      r.rejected = track.reason;
+      r.tracking_inliers = track.inliers;
+      r.tracking_rms_m = track.rms_m;
+      log("frame not fused: " + track.reason);
+      return r;
+    }
+    T_B_C_used = *tracked;
+    fprintf(stderr, "track ok inl %d rms %.2f mm corr %.1f mm\n", track.inliers, track.rms_m * 1000,
+            (T_B_C_used.inverse() * s.model->tipPose(q)).translation().norm() * 0 +
+                ((T_B_C_used.inverse() * s.model->tipPose(q)).translation() -
+                 (T_B_C.inverse() * s.model->tipPose(q)).translation())
+                        .norm() *
+                    1000);
+    const Iso3 T_C_palm = T_B_C.inverse() * s.model->tipPose(q);
+    s.correction = T_C_palm.inverse() * track.correction * T_C_palm;
+  }
+  const Iso3 T_O_B = s.T_O_palm * s.model->tipPose(q).inverse();
+  FrameReport r = fuse(depth, q, T_B_C_used, T_O_B, nullptr, true);
+  r.tracking_inliers = track.inliers;
+  r.tracking_rms_m = track.rms_m;
+  return r;
+}
+
+void ScanSession::refreshTrackingModel(const ObjectModel* current) {
+  State& s = *s_;
+  const TrackingOptions& o = s.options.tracking;
+  s.objectPoints.clear();
+  const ObjectModel fresh = current ? ObjectModel() : planningModel();
+  const ObjectModel& m = current ? *current : fresh;
+  // The observed triangles' centroids and normals, every k-th, in the palm frame.
+  std::vector<size_t> observed;
+  for (size_t t = 0; t < m.mesh.triangles.size(); ++t) {
+    const Tri& f = m.mesh.triangles[t];
+    if (m.observed[size_t(f[0])] && m.observed[size_t(f[1])] && m.observed[size_t(f[2])])
+      observed.push_back(t);
+  }
+  const size_t step = o.max_object_points > 0
+                          ? std::max<size_t>(1, observed.size() / size_t(o.max_object_points) + 1)
+                          : observed.size() + 1;
+  const Iso3 T_palm_O = s.T_O_palm.inverse();
+  s.objectOccluders.clear();
+  const size_t every = std::max<size_t>(1, m.mesh.vertices.size() / 6000 + 1);
+  for (size_t k = 0; k < m.mesh.vertices.size(); k += every)
+    s.objectOccluders.push_back(T_palm_O * m.mesh.vertices[k].cast<double>());
+  for (size_t k = 0; k < observed.size(); k += step) {
+    const Tri& f = m.mesh.triangles[observed[k]];
+    const Vec3 a = m.mesh.vertices[size_t(f[0])].cast<double>();
+    const Vec3 b = m.mesh.vertices[size_t(f[1])].cast<double>();
+    const Vec3 c = m.mesh.vertices[size_t(f[2])].cast<double>();
+    const Vec3 n = (b - a).cross(c - a);
+    if (n.norm() < 1e-12) continue;
+    s.objectPoints.push_back({T_palm_O * ((a + b + c) / 3), T_palm_O.linear() * n.normalized()});
+  }
+}
+
+std::optional<Iso3> ScanSession::trackedCameraPose(const DepthImage& depth, const JointVector& q,
+                                                   const Iso3& T_B_C, const Iso3& T_O_palm,
+                                                   TrackResult* result) {
+  State& s = *s_;
+  if (!s.options.tracking.enabled) return T_B_C;
+  const auto t0 = Clock::now();
+  const RobotModel& m = *s.model;
+  // The hand's surface at the fingers' joints (rebuilt when they change).
+  if (s.handPointsQ.size() != q.size() || (s.handPointsQ - q).cwiseAbs().maxCoeff() > 1e-6) {
+    JointVector atHome = q;
+    s.handPoints = surfaceSamples(HandGeometry(m, q, Iso3::Identity()).mesh(),
+                                  s.options.tracking.hand_spacing_m);
+    s.handPointsQ = atHome;
+  }
+  std::vector<SurfacePoint> points = s.handPoints;
+  std::vector<Vec3> occluders;
+  // The model's points are in the palm frame of the grasp they were made for.
+  if ((T_O_palm.matrix() - s.T_O_palm.matrix()).cwiseAbs().maxCoeff() < 1e-9) {
+    points.insert(points.end(), s.objectPoints.begin(), s.objectPoints.end());
+    occluders = s.objectOccluders;
+  }
+  const Iso3 T_C_palm = T_B_C.inverse() * m.tipPose(q);
+  // Start from the last frame's error (it changes slowly along a trajectory), carried in the
+  // palm frame.
+  std::vector<Iso3> starts = {Iso3::Identity()};
+  if (!s.correction.isApprox(Iso3::Identity(), 1e-9))
+    starts.push_back(T_C_palm * s.correction * T_C_palm.inverse());
+  TrackResult r = alignToDepth(depth, s.camera.intrinsics, points, occluders, T_C_palm, starts,
+                               s.options.tracking);
+  s.summary.tracking_s += secondsSince(t0);
+  if (result) *result = r;
+  if (!r.ok) return std::nullopt;
+  return T_B_C * r.correction.inverse();
 }
 
 FrameReport ScanSession::addFrameOfObjectAt(const DepthImage& depth, const JointVector& q,
@@ -335,6 +440,7 @@ const ViewRecord& ScanSession::finishView() {
   if (!s.viewOpen) return rec;
   s.viewOpen = false;
   const ObjectModel after = model();
+  if (s.options.tracking.enabled) refreshTrackingModel(&after);
   rec.mean_entropy = after.meanEntropy();
   rec.observed_fraction = after.observedAreaFraction();
   if (s.progress.coverage) rec.coverage = s.progress.coverage(after);

@@ -19,8 +19,33 @@ std::string SimOptions::validate() const {
   if (!(hold_min_epsilon >= 0)) return "hold_min_epsilon must be >= 0";
   if (!R_B_O_rest.allFinite() || std::abs(R_B_O_rest.determinant() - 1) > 1e-6)
     return "the rest orientation must be a rotation";
+  if (!(arm_error_m >= 0 && arm_error_m <= 0.2)) return "arm_error_m must be in [0, 0.2] m";
   return {};
 }
+
+namespace {
+// Arm joint offsets in a direction drawn from the seed (uniform on the sphere of arm joint
+// space), scaled so that the palm moves error_m at the home configuration.
+JointVector armJointError(const RobotModel& m, double error_m, uint64_t seed) {
+  JointVector e = JointVector::Zero(m.variableCount());
+  if (error_m <= 0) return e;
+  Rng rng = makeRng(mixSeed(seed, 0xa4e));
+  std::normal_distribution<double> N(0, 1);
+  for (int v : m.armVariables()) e[v] = N(rng);
+  e /= e.norm();
+  const JointVector home = m.home();
+  const Vec3 p0 = m.tipPose(home).translation();
+  // The palm's displacement is nearly linear in the offsets' scale for small angles; two
+  // secant steps make it exact to a micrometre.
+  double s = 0.01;
+  for (int it = 0; it < 20; ++it) {
+    const double d = (m.tipPose(home + s * e).translation() - p0).norm();
+    if (std::abs(d - error_m) < 1e-6 || d <= 0) break;
+    s *= error_m / d;
+  }
+  return s * e;
+}
+}  // namespace
 
 SimWorld::SimWorld(const RobotModel& model, const TriangleMesh& object_O, const Iso3& grasp,
                    const DepthCameraOptions& camera, const NoiseModelOptions& noise,
@@ -35,6 +60,7 @@ SimWorld::SimWorld(const RobotModel& model, const TriangleMesh& object_O, const 
       robot_(model) {
   std::string p = options.validate();
   if (!p.empty()) throw Error("simulation options: " + p);
+  jointError = armJointError(model, options.arm_error_m, options.seed);
   objectMesh_ = object_O;
   objectSamples_ = surfaceSamples(object_O, 0.003);
   object_.addMesh(object_O);
@@ -44,7 +70,7 @@ SimWorld::SimWorld(const RobotModel& model, const TriangleMesh& object_O, const 
 }
 
 Iso3 SimWorld::objectPose() const {
-  return held ? model_->tipPose(q) * T_O_palm.inverse() : restPose();
+  return held ? model_->tipPose(trueJoints()) * T_O_palm.inverse() : restPose();
 }
 
 Iso3 SimWorld::restPose() const {
@@ -134,7 +160,8 @@ std::optional<Iso3> SimRobot::grasp(const Iso3& T_O_palm, const JointVector& q) 
 DepthImage SimWorld::render() {
   RayScene scene;
   scene.addInstance(object_, objectPose());
-  for (const Occluder& o : robot_.at(q, Iso3::Identity())) scene.addInstance(*o.scene, o.T_O_scene);
+  for (const Occluder& o : robot_.at(trueJoints(), Iso3::Identity()))
+    scene.addInstance(*o.scene, o.T_O_scene);
   if (options_.room_radius_m > 0)
     scene.addInstance(room_, Iso3(Eigen::Translation3d(model_->camera().panTilt_B)));
   scene.commit();

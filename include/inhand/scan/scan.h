@@ -10,6 +10,7 @@
 #include "inhand/mesh/extract.h"
 #include "inhand/planning/view_selection.h"
 #include "inhand/robot/robot_interface.h"
+#include "inhand/scan/tracking.h"
 #include "inhand/sensor/depth_sensor.h"
 #include "inhand/volume/integrate.h"
 
@@ -61,6 +62,7 @@ struct ScanOptions {
   // S_obj for planning by surface nets (a fifth of the triangles to ray cast; output: tetrahedra)
   SurfaceMethod planning_method = SurfaceMethod::kSurfaceNets;
   ViewPlannerOptions planner;
+  TrackingOptions tracking;  // in-hand frames aligned with hand and model (arm error, §II)
   MeshOptions mesh;
   VolumeOptions volume_budget;  // memory budget (voxel size above wins)
   std::string validate() const;

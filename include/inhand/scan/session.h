@@ -41,8 +41,13 @@ struct PlannedView {
 
 // What one added frame did.
 struct FrameReport {
-  int pixels = 0;        // valid depth pixels
-  int carve_pixels = 0;  // of those, only carving (the robot's own, or the caller's mask)
+  bool fused = true;  // false: tracking could not align it (not fused; `rejected` says why)
+  std::string rejected;
+  int pixels = 0;                 // valid depth pixels
+  int carve_pixels = 0;           // of those, only carving (the robot's own, or the caller's mask)
+  Iso3 T_B_C = Iso3::Identity();  // the camera pose it was fused with (tracked, or as given)
+  int tracking_inliers = 0;
+  double tracking_rms_m = 0;
   double seconds = 0;
 };
 
@@ -60,8 +65,9 @@ class ScanSession {
     Termination termination = Termination::kRunning;
     std::string message;  // why it ended, in words
     int grasps = 0, views = 0, frames = 0;
+    int frames_rejected = 0;  // in-hand frames tracking could not align (not fused)
     int view_evaluations = 0, view_refinements = 0;
-    double planning_s = 0, fusion_s = 0;
+    double planning_s = 0, fusion_s = 0, tracking_s = 0;
     std::string brief() const;  // one line
   };
 
@@ -104,6 +110,13 @@ class ScanSession {
   // emptied (Fig. 3 c). Counts toward the current view. Throws when no grasp is active or the
   // image does not match the camera.
   FrameReport addFrame(const DepthImage& depth, const JointVector& q, const Iso3& T_B_C);
+  // The camera pose (base frame) that aligns a frame taken from T_B_C, the robot at q, with the
+  // hand at q and the object held at T_O_palm (its model so far): options.tracking; T_B_C itself
+  // when tracking is off, nullopt when the frame cannot be aligned. addFrame uses it.
+  std::optional<Iso3> trackedCameraPose(const DepthImage& depth, const JointVector& q,
+                                        const Iso3& T_B_C, const Iso3& T_O_palm,
+                                        TrackResult* result = nullptr);
+
   // A depth frame of the object lying at T_B_O (not in the hand, e.g. on the table): the robot's
   // pixels and those set in `carve` (same size as the image; may be null) only carve.
   FrameReport addFrameOfObjectAt(const DepthImage& depth, const JointVector& q, const Iso3& T_B_C,
@@ -152,6 +165,8 @@ class ScanSession {
   FrameReport fuse(const DepthImage& depth, const JointVector& q, const Iso3& T_B_C,
                    const Iso3& T_O_B, const std::vector<uint8_t>* carve, bool inHand);
   void emptyInsideRobot(const JointVector& q, const Iso3& T_O_B);
+  // Tracking's object points from `current` (or a fresh planning model).
+  void refreshTrackingModel(const ObjectModel* current = nullptr);
 };
 
 // Drives the current grasp's views with a robot and a sensor: points the camera

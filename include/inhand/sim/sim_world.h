@@ -32,6 +32,12 @@ struct SimOptions {
   double hold_min_epsilon = 1e-4;
   // The object's orientation on the table (rotation from its mesh frame O to the base frame).
   Mat3 R_B_O_rest = Mat3::Identity();
+  // Arm error (paper §II: cable stretch puts the WAM's hand centimetres from where its motor
+  // encoders say): fixed offsets of the arm's joints from the angles the robot reports, drawn
+  // from the seed and scaled so that at the home configuration the palm is this far (m) from
+  // where forward kinematics of the reported joints puts it. The world (the rendered robot, the
+  // held object) moves with the true joints; the robot reports the others. 0: an exact arm.
+  double arm_error_m = 0.0;
   std::string validate() const;
 };
 
@@ -44,7 +50,9 @@ class SimWorld {
 
   const RobotModel& model() const { return *model_; }
   const SimOptions& options() const { return options_; }
-  JointVector q;  // the robot's state
+  JointVector q;           // the robot's state, as it reports it (motor encoders)
+  JointVector jointError;  // true joints = q + jointError (arm joints; SimOptions::arm_error_m)
+  JointVector trueJoints() const { return q + jointError; }
   Iso3 T_B_C;     // the camera's pose
   Iso3 T_O_palm;  // the grasp
   // Depth image at the current state, seeded by the frame counter.

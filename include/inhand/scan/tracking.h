@@ -1,0 +1,54 @@
+#pragma once
+// Tracking the hand in depth frames (paper §II and its reference [6], Krainin et al., IJRR 2011):
+// the arm's joint encoders put the hand centimetres from where it is (cable stretch), so each
+// in-hand frame's camera pose relative to the hand is refined by aligning the frame with what is
+// known to be rigid with the palm: the hand's own surface at the reported finger joints and the
+// object's observed surface so far. Point-to-plane ICP with projective data association: each
+// model point is projected into the image at the current estimate and paired with the measured
+// point at that pixel; pairs farther apart in depth than a gate that shrinks from gate_m to
+// final_gate_m are left out, as are points facing away from the camera.
+#include <string>
+#include <vector>
+
+#include "inhand/geometry/triangle_mesh.h"
+#include "inhand/sensor/depth_camera.h"
+#include "inhand/sensor/depth_image.h"
+
+namespace inhand {
+
+struct TrackingOptions {
+  bool enabled = false;            // off: frames are fused with the reported poses
+  int iterations = 15;             // ICP iterations per frame
+  double gate_m = 0.06;            // depth gate of the first iteration, m
+  double final_gate_m = 0.008;     // … shrinking geometrically to this, m
+  int min_inliers = 150;           // fewer pairs at the end: the frame is rejected (not fused)
+  double max_rms_m = 0.002;        // a final point-to-plane RMS above this: rejected
+  double max_correction_m = 0.12;  // a correction moving the palm farther: rejected, m
+  double hand_spacing_m = 0.004;   // spacing of the hand's surface samples, m
+  int max_object_points = 3000;    // the object's observed surface, subsampled to this
+  std::string validate() const;
+};
+
+struct TrackResult {
+  bool ok = false;
+  // The correction ΔT in the camera frame: T_C_palm = ΔT · T_C_palm(predicted).
+  Iso3 correction = Iso3::Identity();
+  int inliers = 0;
+  int see_through = 0;  // visible points the camera sees through (measured well behind them)
+  double rms_m = 0;
+  std::string reason;  // why not ok
+};
+
+// Aligns `points_palm` (surface points with outward normals in the palm frame) with the depth
+// frame, starting from each of `starts` (corrections: the reported pose, the previous frame's)
+// and keeping the best; the palm predicted at T_C_palm in the camera frame. Only points in front
+// of the model's other points are paired (`occluders_palm`, e.g. the object's whole model, hide
+// what lies behind them, as the points do each other). A result whose visible points the camera
+// sees through (measured more than 1.5 cm behind them) for more than a tenth of its pairs is not
+// ok: a wrong alignment, not an arm error.
+TrackResult alignToDepth(const DepthImage& depth, const CameraIntrinsics& K,
+                         const std::vector<SurfacePoint>& points_palm,
+                         const std::vector<Vec3>& occluders_palm, const Iso3& T_C_palm,
+                         const std::vector<Iso3>& starts, const TrackingOptions& options);
+
+}  // namespace inhand
