@@ -7,6 +7,7 @@
 #include "inhand/core/pose.h"
 #include "inhand/geometry/builtin_objects.h"
 #include "inhand/planning/view_selection.h"
+#include "inhand/scan/multi_grasp.h"
 #include "inhand/scan/session.h"
 #include "inhand/sim/sim_world.h"
 #include "test_util.h"
@@ -59,8 +60,10 @@ TEST(Tracking, RecoversTheArmErrorFromTheHandInTheFrame) {
     const DepthImage d = s.world.render();
     TrackingOptions o;
     o.enabled = true;
-    const TrackResult r = alignToDepth(d, DepthCameraOptions{}.intrinsics, handPoints(s.world.q),
-                                       {}, s.reportedT_C_palm(), {Iso3::Identity()}, o);
+    const TrackResult r =
+        alignToDepth(d, DepthCameraOptions{}.intrinsics, handPoints(s.world.q), {}, {},
+                     s.reportedT_C_palm(), {Iso3::Identity()},
+                     axialSigma(NoiseModelOptions{}, s.reportedT_C_palm().translation().z(), 0), o);
     const double before =
         (s.reportedT_C_palm().translation() - s.trueT_C_palm().translation()).norm();
     const Iso3 tracked = r.correction * s.reportedT_C_palm();

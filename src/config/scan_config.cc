@@ -113,7 +113,8 @@ void visitConfig(V& v, ScanConfig& c) {
         t.num("gate_m", o.gate_m, "depth gate of the first iteration, m");
         t.num("final_gate_m", o.final_gate_m, "… shrinking to this, m");
         t.integer("min_inliers", o.min_inliers, "fewer aligned points: the frame is not fused");
-        t.num("max_rms_m", o.max_rms_m, "a larger final residual: the frame is not fused, m");
+        t.num("max_rms_ratio", o.max_rms_ratio,
+              "a final residual above this many sensor σ: the frame is not fused");
         t.num("max_correction_m", o.max_correction_m,
               "a correction moving the palm farther: the frame is not fused, m");
         t.num("hand_spacing_m", o.hand_spacing_m, "spacing of the hand's surface samples, m");

@@ -1,5 +1,6 @@
 #include "inhand/scan/session.h"
 
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <cstring>
@@ -58,7 +59,8 @@ struct ScanSession::State {
   // Tracking: the hand's surface at the grasp's finger joints, the model's observed surface (both
   // palm frame), the last frame's correction.
   std::vector<SurfacePoint> handPoints, objectPoints;
-  std::vector<Vec3> objectOccluders;  // the whole model (observed or not), palm frame
+  std::vector<Vec3> objectOccluders;           // the whole model (observed or not), palm frame
+  std::vector<std::vector<Vec3>> linkSamples;  // the arm's links' surfaces (link frames)
   JointVector handPointsQ;
   // The last aligned frame's error in the palm frame: true palm = reported palm · correction.
   Iso3 correction = Iso3::Identity();
@@ -251,22 +253,20 @@ FrameReport ScanSession::addFrame(const DepthImage& depth, const JointVector& q,
       r.tracking_inliers = track.inliers;
       r.tracking_rms_m = track.rms_m;
       log("frame not fused: " + track.reason);
+      if (s.progress.frame) s.progress.frame(r, q, T_B_C);
       return r;
     }
     T_B_C_used = *tracked;
-    fprintf(stderr, "track ok inl %d rms %.2f mm corr %.1f mm\n", track.inliers, track.rms_m * 1000,
-            (T_B_C_used.inverse() * s.model->tipPose(q)).translation().norm() * 0 +
-                ((T_B_C_used.inverse() * s.model->tipPose(q)).translation() -
-                 (T_B_C.inverse() * s.model->tipPose(q)).translation())
-                        .norm() *
-                    1000);
     const Iso3 T_C_palm = T_B_C.inverse() * s.model->tipPose(q);
     s.correction = T_C_palm.inverse() * track.correction * T_C_palm;
   }
   const Iso3 T_O_B = s.T_O_palm * s.model->tipPose(q).inverse();
   FrameReport r = fuse(depth, q, T_B_C_used, T_O_B, nullptr, true);
   r.tracking_inliers = track.inliers;
+  r.tracking_hand_inliers = track.hand_inliers;
+  r.tracking_hand_see_through = track.hand_see_through;
   r.tracking_rms_m = track.rms_m;
+  if (s.progress.frame) s.progress.frame(r, q, T_B_C);
   return r;
 }
 
@@ -316,12 +316,30 @@ std::optional<Iso3> ScanSession::trackedCameraPose(const DepthImage& depth, cons
                                   s.options.tracking.hand_spacing_m);
     s.handPointsQ = atHome;
   }
-  std::vector<SurfacePoint> points = s.handPoints;
+  std::vector<SurfacePoint> objectPoints;
   std::vector<Vec3> occluders;
+  // The rest of the robot hides the hand as the hand hides itself (at the reported joints: near
+  // the hand the arm's error relative to it is small).
+  if (s.linkSamples.empty()) {
+    s.linkSamples.resize(m.links().size());
+    for (size_t li = 0; li < m.links().size(); ++li) {
+      if (std::find(m.handLinks().begin(), m.handLinks().end(), int(li)) != m.handLinks().end())
+        continue;
+      for (const Primitive& p : m.links()[li].collision)
+        for (const SurfacePoint& sp : surfaceSamples(p.toMesh(), 0.01))
+          s.linkSamples[li].push_back(sp.p);
+    }
+  }
+  {
+    const std::vector<Iso3> T_B_link = m.linkPoses(q);
+    const Iso3 T_palm_B = m.tipPose(q).inverse();
+    for (size_t li = 0; li < s.linkSamples.size(); ++li)
+      for (const Vec3& p : s.linkSamples[li]) occluders.push_back(T_palm_B * (T_B_link[li] * p));
+  }
   // The model's points are in the palm frame of the grasp they were made for.
   if ((T_O_palm.matrix() - s.T_O_palm.matrix()).cwiseAbs().maxCoeff() < 1e-9) {
-    points.insert(points.end(), s.objectPoints.begin(), s.objectPoints.end());
-    occluders = s.objectOccluders;
+    objectPoints = s.objectPoints;
+    occluders.insert(occluders.end(), s.objectOccluders.begin(), s.objectOccluders.end());
   }
   const Iso3 T_C_palm = T_B_C.inverse() * m.tipPose(q);
   // Start from the last frame's error (it changes slowly along a trajectory), carried in the
@@ -329,8 +347,9 @@ std::optional<Iso3> ScanSession::trackedCameraPose(const DepthImage& depth, cons
   std::vector<Iso3> starts = {Iso3::Identity()};
   if (!s.correction.isApprox(Iso3::Identity(), 1e-9))
     starts.push_back(T_C_palm * s.correction * T_C_palm.inverse());
-  TrackResult r = alignToDepth(depth, s.camera.intrinsics, points, occluders, T_C_palm, starts,
-                               s.options.tracking);
+  TrackResult r =
+      alignToDepth(depth, s.camera.intrinsics, s.handPoints, objectPoints, occluders, T_C_palm,
+                   starts, axialSigma(s.noise, T_C_palm.translation().z(), 0), s.options.tracking);
   s.summary.tracking_s += secondsSince(t0);
   if (result) *result = r;
   if (!r.ok) return std::nullopt;

@@ -10,11 +10,13 @@ std::string TrackingOptions::validate() const {
   if (!(final_gate_m > 0 && final_gate_m <= gate_m && gate_m < 1))
     return "gates must satisfy 0 < final_gate_m <= gate_m < 1 m";
   if (min_inliers < 6) return "min_inliers must be >= 6";
-  if (!(max_rms_m > 0)) return "max_rms_m must be > 0";
+  if (!(max_rms_ratio > 0)) return "max_rms_ratio must be > 0";
   if (!(max_correction_m > 0)) return "max_correction_m must be > 0";
   if (!(hand_spacing_m >= 0.001 && hand_spacing_m < 0.05))
     return "hand_spacing_m must be in [0.001, 0.05) m";
   if (max_object_points < 0) return "max_object_points must be >= 0";
+  if (!(prior >= 0 && prior < 1)) return "prior must be in [0, 1)";
+  if (!(object_weight >= 0 && object_weight <= 1)) return "object_weight must be in [0, 1]";
   return {};
 }
 
@@ -52,6 +54,7 @@ struct Pairs {
   Eigen::Matrix<double, 6, 6> A = Eigen::Matrix<double, 6, 6>::Zero();
   Eigen::Matrix<double, 6, 1> b = Eigen::Matrix<double, 6, 1>::Zero();
   int pairs = 0, seeThrough = 0;
+  int handPairs = 0, handSeeThrough = 0;  // of the first `handCount` points
   double sq = 0;
 };
 
@@ -59,12 +62,15 @@ struct Pairs {
 // equations of n·(y − x) = (x × n)·ω + n·t (Huber-weighted at half the final gate).
 Pairs pairUp(const DepthImage& depth, const CameraIntrinsics& K,
              const std::vector<SurfacePoint>& points, const std::vector<Vec3>& occluders,
-             const Iso3& T, double gate, double huber) {
+             const Iso3& T, double gate, double huber, size_t handCount, double objectWeight) {
+  const Vec3 c = T.translation();  // rotations about the palm: x' = x + ω × (x − c) + t
   PointBuffer buffer(K);
   for (const SurfacePoint& sp : points) buffer.add(T * sp.p);
   for (const Vec3& p : occluders) buffer.add(T * p);
   Pairs P;
-  for (const SurfacePoint& sp : points) {
+  for (size_t k = 0; k < points.size(); ++k) {
+    const SurfacePoint& sp = points[k];
+    const bool hand = k < handCount;
     const Vec3 x = T * sp.p;
     const Vec3 n = T.linear() * sp.n;
     if (x.z() <= 0.1 || n.dot(x) >= 0 || !buffer.visible(x)) continue;
@@ -73,43 +79,71 @@ Pairs pairUp(const DepthImage& depth, const CameraIntrinsics& K,
     if (u < 0 || v < 0 || u >= depth.width || v >= depth.height) continue;
     const float z = depth.depth_m[size_t(v) * depth.width + u];
     if (!(z > 0)) continue;
-    if (double(z) > x.z() + 0.015) ++P.seeThrough;
+    if (double(z) > x.z() + 0.015) {
+      ++P.seeThrough;
+      P.handSeeThrough += hand;
+    }
     if (std::abs(double(z) - x.z()) > gate) continue;
     const Vec3 y = double(z) * K.rayZ1(u, v);
     const double e = n.dot(y - x);
-    const double w = std::abs(e) < huber ? 1.0 : huber / std::abs(e);
+    const double w =
+        (hand ? 1.0 : objectWeight) * (std::abs(e) < huber ? 1.0 : huber / std::abs(e));
     Eigen::Matrix<double, 6, 1> J;
-    J.head<3>() = x.cross(n);
+    J.head<3>() = (x - c).cross(n);
     J.tail<3>() = n;
     P.A += w * J * J.transpose();
     P.b += w * J * e;
     ++P.pairs;
+    P.handPairs += hand;
     P.sq += e * e;
   }
   return P;
 }
 
 TrackResult alignFrom(const DepthImage& depth, const CameraIntrinsics& K,
-                      const std::vector<SurfacePoint>& points, const std::vector<Vec3>& occluders,
-                      const Iso3& T_C_palm, const Iso3& initial, const TrackingOptions& o) {
+                      const std::vector<SurfacePoint>& points, size_t handCount,
+                      const std::vector<Vec3>& occluders, const Iso3& T_C_palm, const Iso3& initial,
+                      int iterations, double sigma, const TrackingOptions& o) {
   TrackResult r;
   Iso3 D = initial;
   const double shrink = std::pow(o.final_gate_m / o.gate_m, 1.0 / std::max(1, o.iterations - 1));
   double gate = o.gate_m;
-  for (int it = 0; it < o.iterations; ++it, gate = std::max(o.final_gate_m, gate * shrink)) {
-    Pairs P = pairUp(depth, K, points, occluders, D * T_C_palm, gate, 0.5 * o.final_gate_m);
+  // The correction's parameters about the predicted palm: rotation vector and translation.
+  auto params = [&](const Iso3& D) {
+    const Iso3 T = D * T_C_palm;
+    Eigen::Matrix<double, 6, 1> x;
+    const Eigen::AngleAxisd aa(T.linear() * T_C_palm.linear().transpose());
+    x.head<3>() = aa.angle() * aa.axis();
+    x.tail<3>() = T.translation() - T_C_palm.translation();
+    return x;
+  };
+  for (int it = 0; it < iterations; ++it, gate = std::max(o.final_gate_m, gate * shrink)) {
+    const Iso3 T = D * T_C_palm;
+    Pairs P = pairUp(depth, K, points, occluders, T, gate, 0.5 * o.final_gate_m, handCount,
+                     o.object_weight);
     if (P.pairs < 6) break;
-    P.A.diagonal().array() += 1e-9;
+    // A weak prior towards the reported pose: directions the points do not constrain (a flat
+    // face seen head-on slides freely) stay where the robot says, the others follow the data
+    // (the prior is 0.2 % of their curvature).
+    Eigen::Matrix<double, 6, 1> lambda;
+    lambda.head<3>().setConstant(o.prior * P.pairs * 0.0025);  // ~(5 cm)² lever arms
+    lambda.tail<3>().setConstant(o.prior * P.pairs);
+    P.A.diagonal() += lambda;
+    P.b -= lambda.cwiseProduct(params(D));
     const Eigen::Matrix<double, 6, 1> d = P.A.ldlt().solve(P.b);
     Iso3 step = Iso3::Identity();
     const Vec3 w = d.head<3>();
     if (w.norm() > 1e-12)
       step.linear() = Eigen::AngleAxisd(w.norm(), w.normalized()).toRotationMatrix();
-    step.translation() = d.tail<3>();
-    D = step * D;  // the step applies to camera-frame points: x' = R x + t
+    // x' = R (x − c) + c + t, c the palm's current position.
+    const Vec3 c = T.translation();
+    step.translation() = c - step.linear() * c + d.tail<3>();
+    D = step * D;
   }
-  const Pairs last =
-      pairUp(depth, K, points, occluders, D * T_C_palm, o.final_gate_m, 0.5 * o.final_gate_m);
+  const Pairs last = pairUp(depth, K, points, occluders, D * T_C_palm, o.final_gate_m,
+                            0.5 * o.final_gate_m, handCount, o.object_weight);
+  r.hand_inliers = last.handPairs;
+  r.hand_see_through = last.handSeeThrough;
   r.correction = D;
   r.inliers = last.pairs;
   r.see_through = last.seeThrough;
@@ -119,7 +153,7 @@ TrackResult alignFrom(const DepthImage& depth, const CameraIntrinsics& K,
     r.reason = "too few points to align (" + std::to_string(r.inliers) + ")";
   else if (r.see_through * 10 > r.inliers)
     r.reason = "the camera sees through " + std::to_string(r.see_through) + " aligned points";
-  else if (r.rms_m > o.max_rms_m)
+  else if (r.rms_m > o.max_rms_ratio * sigma)
     r.reason = "alignment residual " + std::to_string(r.rms_m * 1000) + " mm";
   else if (moved > o.max_correction_m)
     r.reason = "correction of " + std::to_string(moved * 100) + " cm";
@@ -131,18 +165,25 @@ TrackResult alignFrom(const DepthImage& depth, const CameraIntrinsics& K,
 }  // namespace
 
 TrackResult alignToDepth(const DepthImage& depth, const CameraIntrinsics& K,
-                         const std::vector<SurfacePoint>& points,
+                         const std::vector<SurfacePoint>& hand,
+                         const std::vector<SurfacePoint>& object,
                          const std::vector<Vec3>& occluders, const Iso3& T_C_palm,
-                         const std::vector<Iso3>& starts, const TrackingOptions& o) {
+                         const std::vector<Iso3>& starts, double sigma, const TrackingOptions& o) {
+  std::vector<SurfacePoint> points = hand;
+  points.insert(points.end(), object.begin(), object.end());
   TrackResult best;
   bool first = true;
-  for (const Iso3& start : starts) {
-    TrackResult r = alignFrom(depth, K, points, occluders, T_C_palm, start, o);
-    // Ok beats not ok; then fewer see-through points per pair, then more pairs.
-    auto score = [](const TrackResult& t) { return t.inliers - 10.0 * t.see_through; };
-    if (first || (r.ok && !best.ok) || (r.ok == best.ok && score(r) > score(best))) best = r;
-    first = false;
-  }
+  // Each start as it is and after ICP from it; ok beats not ok, then the hand's fit decides:
+  // its aligned points less ten times those the camera sees through (the hand's geometry is
+  // known exactly; the model's is not).
+  auto score = [](const TrackResult& t) { return t.hand_inliers - 10.0 * t.hand_see_through; };
+  for (const Iso3& start : starts)
+    for (int iterations : {0, o.iterations}) {
+      const TrackResult r = alignFrom(depth, K, points, hand.size(), occluders, T_C_palm, start,
+                                      iterations, sigma, o);
+      if (first || (r.ok && !best.ok) || (r.ok == best.ok && score(r) > score(best))) best = r;
+      first = false;
+    }
   return best;
 }
 

@@ -81,11 +81,27 @@ struct ViewRecord {
   double planning_s = 0;
 };
 
+// What one added frame did.
+struct FrameReport {
+  bool fused = true;  // false: tracking could not align it (not fused; `rejected` says why)
+  std::string rejected;
+  int pixels = 0;                 // valid depth pixels
+  int carve_pixels = 0;           // of those, only carving (the robot's own, or the caller's mask)
+  Iso3 T_B_C = Iso3::Identity();  // the camera pose it was fused with (tracked, or as given)
+  int tracking_inliers = 0;       // points aligned with the frame (tracking)
+  int tracking_hand_inliers = 0, tracking_hand_see_through = 0;  // of the hand's
+  double tracking_rms_m = 0;
+  double seconds = 0;
+};
+
 struct ScanProgress {
   std::function<void(const std::string&)> log;  // one line per event (may be empty)
   // Ground-truth coverage of a model (set when the object's true mesh is known): recorded in
   // each view's record after its frames.
   std::function<double(const ObjectModel&)> coverage;
+  // Each in-hand frame as ScanSession::addFrame handled it, with the joints and the camera pose
+  // it was given (may be empty).
+  std::function<void(const FrameReport&, const JointVector& q, const Iso3& T_B_C)> frame;
 };
 
 struct ScanResult {

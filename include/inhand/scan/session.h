@@ -39,18 +39,6 @@ struct PlannedView {
   double planning_s = 0;
 };
 
-// What one added frame did.
-struct FrameReport {
-  bool fused = true;  // false: tracking could not align it (not fused; `rejected` says why)
-  std::string rejected;
-  int pixels = 0;                 // valid depth pixels
-  int carve_pixels = 0;           // of those, only carving (the robot's own, or the caller's mask)
-  Iso3 T_B_C = Iso3::Identity();  // the camera pose it was fused with (tracked, or as given)
-  int tracking_inliers = 0;
-  double tracking_rms_m = 0;
-  double seconds = 0;
-};
-
 // Ranked grasp candidates for the next grasp (planGrasps).
 struct GraspPlan {
   std::vector<GraspCandidate> candidates;  // ranked, best first

@@ -17,15 +17,19 @@
 namespace inhand {
 
 struct TrackingOptions {
-  bool enabled = false;            // off: frames are fused with the reported poses
-  int iterations = 15;             // ICP iterations per frame
-  double gate_m = 0.06;            // depth gate of the first iteration, m
-  double final_gate_m = 0.008;     // … shrinking geometrically to this, m
-  int min_inliers = 150;           // fewer pairs at the end: the frame is rejected (not fused)
-  double max_rms_m = 0.002;        // a final point-to-plane RMS above this: rejected
+  bool enabled = false;         // off: frames are fused with the reported poses
+  int iterations = 30;          // ICP iterations per frame
+  double gate_m = 0.06;         // depth gate of the first iteration, m
+  double final_gate_m = 0.008;  // … shrinking geometrically to this, m
+  int min_inliers = 150;        // fewer pairs at the end: the frame is rejected (not fused)
+  // A final point-to-plane RMS above this many times the sensor's axial σ at the palm's depth
+  // (the residual of a right alignment is the sensor's noise): rejected.
+  double max_rms_ratio = 1.2;
   double max_correction_m = 0.12;  // a correction moving the palm farther: rejected, m
-  double hand_spacing_m = 0.004;   // spacing of the hand's surface samples, m
-  int max_object_points = 3000;    // the object's observed surface, subsampled to this
+  double prior = 0.002;        // pull towards the reported pose, relative to the data's curvature
+  double object_weight = 0.3;  // the model's points against the hand's
+  double hand_spacing_m = 0.004;  // spacing of the hand's surface samples, m
+  int max_object_points = 3000;   // the object's observed surface, subsampled to this
   std::string validate() const;
 };
 
@@ -35,6 +39,7 @@ struct TrackResult {
   Iso3 correction = Iso3::Identity();
   int inliers = 0;
   int see_through = 0;  // visible points the camera sees through (measured well behind them)
+  int hand_inliers = 0, hand_see_through = 0;  // of those, the hand's
   double rms_m = 0;
   std::string reason;  // why not ok
 };
@@ -46,9 +51,14 @@ struct TrackResult {
 // what lies behind them, as the points do each other). A result whose visible points the camera
 // sees through (measured more than 1.5 cm behind them) for more than a tenth of its pairs is not
 // ok: a wrong alignment, not an arm error.
+// `hand_palm` are the hand's points (exact geometry), `object_palm` the model's (weighted by
+// options.object_weight; the model can be wrong where it was seen little); the best result is
+// chosen by the hand's fit. `sigma_m`: the sensor's axial noise at the palm's depth.
 TrackResult alignToDepth(const DepthImage& depth, const CameraIntrinsics& K,
-                         const std::vector<SurfacePoint>& points_palm,
+                         const std::vector<SurfacePoint>& hand_palm,
+                         const std::vector<SurfacePoint>& object_palm,
                          const std::vector<Vec3>& occluders_palm, const Iso3& T_C_palm,
-                         const std::vector<Iso3>& starts, const TrackingOptions& options);
+                         const std::vector<Iso3>& starts, double sigma_m,
+                         const TrackingOptions& options);
 
 }  // namespace inhand
