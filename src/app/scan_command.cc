@@ -274,6 +274,11 @@ int runScan(const ScanArgs& args) {
   summary["view_evaluations_full_resolution"] = r.view_refinements;
   summary["view_evaluations_per_s"] = r.planning_s > 0 ? r.view_evaluations / r.planning_s : 0.0;
   summary["frames"] = r.frames;
+  summary["in_hand_frames"] = {
+      {"fused", sim.frames_fused_in_hand},
+      {"rejected_by_tracking", sim.frames_rejected},
+      {"palm_error_mm",
+       {{"median", 1000 * sim.palm_error_median_m}, {"p95", 1000 * sim.palm_error_p95_m}}}};
   summary["mean_entropy"] = r.model.meanEntropy();
   summary["observed_fraction"] = r.model.observedAreaFraction();
   summary["vertices"] = r.model.mesh.vertices.size();

@@ -1,5 +1,7 @@
 #include "inhand/config/simulated_scan.h"
 
+#include <algorithm>
+
 #include "inhand/core/error.h"
 
 namespace inhand {
@@ -33,6 +35,19 @@ SimulatedScan runSimulatedScan(const RobotModel& model, const TriangleMesh& obje
   const GroundTruth truth(object, o.eval);
   if (!progress.coverage)
     progress.coverage = [&](const ObjectModel& m) { return truth.coverage(m); };
+  // Each fused in-hand frame's palm error against the true arm (SimOptions::arm_error_m).
+  std::vector<double> palmError;
+  int rejected = 0;
+  const auto userFrame = progress.frame;
+  progress.frame = [&](const FrameReport& r, const JointVector& q, const Iso3& T_B_C) {
+    if (userFrame) userFrame(r, q, T_B_C);
+    if (!r.fused) {
+      ++rejected;
+      return;
+    }
+    const Vec3 truePalm = (T_B_C.inverse() * model.tipPose(world.trueJoints())).translation();
+    palmError.push_back(((r.T_B_C.inverse() * model.tipPose(q)).translation() - truePalm).norm());
+  };
   // Held: the volume is centred where the robot expects a held object, grasp_offset_m in front of
   // the palm. Table: on the points the camera sees there. The scan is never told the object's
   // shape or size; frame O is the object's frame where it rests (the mesh's own input frame).
@@ -44,6 +59,13 @@ SimulatedScan runSimulatedScan(const RobotModel& model, const TriangleMesh& obje
                    : scanFromTable(robot, sensor, out.T_B_O_rest, o.scan, o.multi, noise, progress);
   out.metrics = truth.evaluate(out.result.scan.model);
   out.drops = world.drops;
+  out.frames_rejected = rejected;
+  out.frames_fused_in_hand = int(palmError.size());
+  if (!palmError.empty()) {
+    std::sort(palmError.begin(), palmError.end());
+    out.palm_error_median_m = palmError[palmError.size() / 2];
+    out.palm_error_p95_m = palmError[std::min(palmError.size() - 1, palmError.size() * 95 / 100)];
+  }
   return out;
 }
 

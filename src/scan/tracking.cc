@@ -3,6 +3,8 @@
 #include <cmath>
 #include <limits>
 
+#include "inhand/core/parallel.h"
+
 namespace inhand {
 
 std::string TrackingOptions::validate() const {
@@ -60,42 +62,72 @@ struct Pairs {
 
 // The pairs of the points visible at T (palm to camera) within `gate` in depth, and the normal
 // equations of n·(y − x) = (x × n)·ω + n·t (Huber-weighted at half the final gate).
-Pairs pairUp(const DepthImage& depth, const CameraIntrinsics& K,
-             const std::vector<SurfacePoint>& points, const std::vector<Vec3>& occluders,
-             const Iso3& T, double gate, double huber, size_t handCount, double objectWeight) {
-  const Vec3 c = T.translation();  // rotations about the palm: x' = x + ω × (x − c) + t
+// Which points are in front of the model's other points (and the occluders) at T.
+std::vector<int> visiblePoints(const CameraIntrinsics& K, const std::vector<SurfacePoint>& points,
+                               const std::vector<Vec3>& occluders, const Iso3& T) {
   PointBuffer buffer(K);
   for (const SurfacePoint& sp : points) buffer.add(T * sp.p);
   for (const Vec3& p : occluders) buffer.add(T * p);
-  Pairs P;
+  std::vector<int> visible;
   for (size_t k = 0; k < points.size(); ++k) {
-    const SurfacePoint& sp = points[k];
-    const bool hand = k < handCount;
-    const Vec3 x = T * sp.p;
-    const Vec3 n = T.linear() * sp.n;
-    if (x.z() <= 0.1 || n.dot(x) >= 0 || !buffer.visible(x)) continue;
-    const Vec2 uv = K.project(x);
-    const int u = int(std::lround(uv.x())), v = int(std::lround(uv.y()));
-    if (u < 0 || v < 0 || u >= depth.width || v >= depth.height) continue;
-    const float z = depth.depth_m[size_t(v) * depth.width + u];
-    if (!(z > 0)) continue;
-    if (double(z) > x.z() + 0.015) {
-      ++P.seeThrough;
-      P.handSeeThrough += hand;
+    const Vec3 x = T * points[k].p;
+    if (x.z() > 0.1 && (T.linear() * points[k].n).dot(x) < 0 && buffer.visible(x))
+      visible.push_back(int(k));
+  }
+  return visible;
+}
+
+// The pairs of the `visible` points at T within `gate` in depth (both cores).
+Pairs pairUp(const DepthImage& depth, const CameraIntrinsics& K,
+             const std::vector<SurfacePoint>& points, const std::vector<int>& visible,
+             const Iso3& T, double gate, double huber, size_t handCount, double objectWeight) {
+  const Vec3 c = T.translation();  // rotations about the palm: x' = x + ω × (x − c) + t
+  const int chunks = 8;
+  std::vector<Pairs> part(chunks);
+  parallelFor(0, chunks, [&](int chunk) {
+    Pairs& P = part[size_t(chunk)];
+    const size_t begin = visible.size() * size_t(chunk) / chunks;
+    const size_t end = visible.size() * size_t(chunk + 1) / chunks;
+    for (size_t i = begin; i < end; ++i) {
+      const size_t k = size_t(visible[i]);
+      const SurfacePoint& sp = points[k];
+      const bool hand = k < handCount;
+      const Vec3 x = T * sp.p;
+      const Vec3 n = T.linear() * sp.n;
+      if (x.z() <= 0.1 || n.dot(x) >= 0) continue;
+      const Vec2 uv = K.project(x);
+      const int u = int(std::lround(uv.x())), v = int(std::lround(uv.y()));
+      if (u < 0 || v < 0 || u >= depth.width || v >= depth.height) continue;
+      const float z = depth.depth_m[size_t(v) * depth.width + u];
+      if (!(z > 0)) continue;
+      if (double(z) > x.z() + 0.015) {
+        ++P.seeThrough;
+        P.handSeeThrough += hand;
+      }
+      if (std::abs(double(z) - x.z()) > gate) continue;
+      const Vec3 y = double(z) * K.rayZ1(u, v);
+      const double e = n.dot(y - x);
+      const double w =
+          (hand ? 1.0 : objectWeight) * (std::abs(e) < huber ? 1.0 : huber / std::abs(e));
+      Eigen::Matrix<double, 6, 1> J;
+      J.head<3>() = (x - c).cross(n);
+      J.tail<3>() = n;
+      P.A += w * J * J.transpose();
+      P.b += w * J * e;
+      ++P.pairs;
+      P.handPairs += hand;
+      P.sq += e * e;
     }
-    if (std::abs(double(z) - x.z()) > gate) continue;
-    const Vec3 y = double(z) * K.rayZ1(u, v);
-    const double e = n.dot(y - x);
-    const double w =
-        (hand ? 1.0 : objectWeight) * (std::abs(e) < huber ? 1.0 : huber / std::abs(e));
-    Eigen::Matrix<double, 6, 1> J;
-    J.head<3>() = (x - c).cross(n);
-    J.tail<3>() = n;
-    P.A += w * J * J.transpose();
-    P.b += w * J * e;
-    ++P.pairs;
-    P.handPairs += hand;
-    P.sq += e * e;
+  });
+  Pairs P;
+  for (const Pairs& q : part) {  // in chunk order: the same sums for any thread count
+    P.A += q.A;
+    P.b += q.b;
+    P.pairs += q.pairs;
+    P.seeThrough += q.seeThrough;
+    P.handPairs += q.handPairs;
+    P.handSeeThrough += q.handSeeThrough;
+    P.sq += q.sq;
   }
   return P;
 }
@@ -117,9 +149,12 @@ TrackResult alignFrom(const DepthImage& depth, const CameraIntrinsics& K,
     x.tail<3>() = T.translation() - T_C_palm.translation();
     return x;
   };
+  std::vector<int> visible;
   for (int it = 0; it < iterations; ++it, gate = std::max(o.final_gate_m, gate * shrink)) {
     const Iso3 T = D * T_C_palm;
-    Pairs P = pairUp(depth, K, points, occluders, T, gate, 0.5 * o.final_gate_m, handCount,
+    // Visibility changes little between iterations: every 8th.
+    if (it % 8 == 0) visible = visiblePoints(K, points, occluders, T);
+    Pairs P = pairUp(depth, K, points, visible, T, gate, 0.5 * o.final_gate_m, handCount,
                      o.object_weight);
     if (P.pairs < 6) break;
     // A weak prior towards the reported pose: directions the points do not constrain (a flat
@@ -140,8 +175,9 @@ TrackResult alignFrom(const DepthImage& depth, const CameraIntrinsics& K,
     step.translation() = c - step.linear() * c + d.tail<3>();
     D = step * D;
   }
-  const Pairs last = pairUp(depth, K, points, occluders, D * T_C_palm, o.final_gate_m,
-                            0.5 * o.final_gate_m, handCount, o.object_weight);
+  const Pairs last =
+      pairUp(depth, K, points, visiblePoints(K, points, occluders, D * T_C_palm), D * T_C_palm,
+             o.final_gate_m, 0.5 * o.final_gate_m, handCount, o.object_weight);
   r.hand_inliers = last.handPairs;
   r.hand_see_through = last.handSeeThrough;
   r.correction = D;

@@ -11,8 +11,12 @@ struct SimulatedScan {
   MultiGraspResult result;
   SurfaceMetrics metrics;              // the final model against the true mesh
   Iso3 T_B_O_rest = Iso3::Identity();  // where the object rested
-  int drops = 0;                       // how often the simulated object fell
-  DepthCameraOptions camera;           // the simulated sensor
+  // The fused in-hand frames' palm error (the pose fused with against the simulator's true palm,
+  // camera frame), m: median and 95th percentile; and the frames tracking refused.
+  double palm_error_median_m = 0, palm_error_p95_m = 0;
+  int frames_fused_in_hand = 0, frames_rejected = 0;
+  int drops = 0;              // how often the simulated object fell
+  DepthCameraOptions camera;  // the simulated sensor
 };
 
 // `object`: the true mesh (frame O, the model's frame); the seed is config.sim.seed (noise) and
