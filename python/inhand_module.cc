@@ -363,6 +363,8 @@ void bindSession(py::module_& m) {
       .def_readonly("view_evaluations", &ScanSession::Summary::view_evaluations)
       .def_readonly("planning_s", &ScanSession::Summary::planning_s)
       .def_readonly("fusion_s", &ScanSession::Summary::fusion_s)
+      .def_readonly("frames_rejected", &ScanSession::Summary::frames_rejected)
+      .def_readonly("tracking_s", &ScanSession::Summary::tracking_s)
       .def("__repr__", &ScanSession::Summary::brief);
 
   py::class_<Session>(m, "ScanSession", "the scan driven from the caller's own loop")
@@ -413,11 +415,20 @@ void bindSession(py::module_& m) {
             const Iso3 T = isoFrom(T_B_C, "T_B_C");
             py::gil_scoped_release release;
             const FrameReport r = s.s->addFrame(d, q, T);
-            return std::make_pair(r.pixels, r.carve_pixels);
+            py::gil_scoped_acquire acquire;
+            py::dict out;
+            out["fused"] = r.fused;
+            out["rejected"] = r.rejected;
+            out["pixels"] = r.pixels;
+            out["carve_pixels"] = r.carve_pixels;
+            out["T_B_C"] = matrixOf(r.T_B_C);
+            out["tracking_inliers"] = r.tracking_inliers;
+            return out;
           },
           py::arg("depth_m"), py::arg("q"), py::arg("T_B_C"),
-          "fuses a frame taken from T_B_C with the robot at q (hand-aware); returns (valid "
-          "pixels, of those carve-only)")
+          "fuses a frame taken from T_B_C with the robot at q (hand-aware, tracked when "
+          "options tracking.enabled); returns a dict: fused, rejected (why not), pixels, "
+          "carve_pixels, T_B_C (the pose fused with), tracking_inliers")
       .def(
           "next_view",
           [](Session& s, const Eigen::VectorXd& q) {

@@ -125,7 +125,11 @@ def test_session_driven_from_python_equals_the_cpp_scan(tmp_path):
     session.begin_grasp(T, sim.q)
     sim.point_camera(session.camera_pose())
     view = session.next_view(sim.q)
-    sim.execute(view.waypoints, lambda q: session.add_frame(sim.capture(), q, sim.camera_pose()))
+    reports = []
+    sim.execute(view.waypoints,
+                lambda q: reports.append(session.add_frame(sim.capture(), q, sim.camera_pose())))
+    assert reports and all(r["fused"] for r in reports)  # no tracking: every frame as reported
+    np.testing.assert_allclose(reports[-1]["T_B_C"], sim.camera_pose(), atol=1e-12)
     session.finish_view()
     checkpoint = str(tmp_path / "scan.inhand")
     session.save(checkpoint)
