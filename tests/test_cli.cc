@@ -106,6 +106,12 @@ TEST(Cli, BadInputIsNamedAndLeavesNoOutput) {
       "scan --object builtin:coffee_can --rest-pose on-side --out " + (dir.path() / "a").string(),
       "--rest-pose: must be as-is or a stable pose's index");
   expectError(
+      "scan --object builtin:coffee_can --tracking maybe --out " + (dir.path() / "a").string(),
+      "--tracking: must be on or off");
+  expectError(
+      "scan --object builtin:coffee_can --arm-error 0.5 --out " + (dir.path() / "a").string(),
+      "arm_error_m must be in [0, 0.2] m");
+  expectError(
       "render --object builtin:mug --views 3 --range 0.1 --out " + (dir.path() / "a").string(),
       "--range");
   expectError("fuse --frames " + (dir.path() / "none").string() + " --out " +

@@ -59,6 +59,8 @@ struct ScanArgs {
   std::string planner = "ig";       // view planner (see plannerNames())
   uint64_t seed = 1;                // sensor noise and IK restarts
   std::string rest_pose = "as-is";  // as-is (the mesh's own frame, dropped onto the table) or N
+  double arm_error_m = -1;          // overrides sim.arm_error_m when >= 0
+  std::string tracking;             // on | off: overrides tracking.enabled when set
 };
 
 int runScan(const ScanArgs& args);

@@ -91,6 +91,12 @@ int main(int argc, char** argv) {
                  "as-is (the mesh's frame, dropped onto the table) or N: the N-th most probable "
                  "stable pose (0: the most probable)")
       ->capture_default_str();
+  sc->add_option("--arm-error", scan.arm_error_m,
+                 "simulated arm error: the palm this far (m) from where the reported joints put "
+                 "it (overrides the config's sim.arm_error_m)");
+  sc->add_option("--tracking", scan.tracking,
+                 "on | off: align each in-hand frame with the hand and the model before fusing "
+                 "(overrides the config's tracking.enabled)");
 
   inhand::app::EvalArgs eval;
   auto* ev = app.add_subcommand(

@@ -62,6 +62,12 @@ ScanConfig scanConfigFor(const ScanArgs& args) {
   if (args.max_grasps != -1) o.multi.max_grasps = args.max_grasps;
   if (!args.hand_mode.empty() && !parseHandMode(args.hand_mode, &o.scan.hand_mode))
     throw Error("--hand-mode: must be naive, carve or carve-empty");
+  if (args.arm_error_m >= 0) o.sim.arm_error_m = args.arm_error_m;
+  if (!args.tracking.empty()) {
+    if (args.tracking != "on" && args.tracking != "off")
+      throw Error("--tracking: must be on or off, not \"" + args.tracking + "\"");
+    o.scan.tracking.enabled = args.tracking == "on";
+  }
   o.scan.planner.seed = args.seed;
   o.sim.seed = args.seed;
   if (std::string p = o.validate(); !p.empty()) throw Error(p);
