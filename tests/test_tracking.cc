@@ -132,6 +132,12 @@ TEST(Tracking, FollowsTheHandThroughAScanWithTwoCentimetresOfArmError) {
       "90th percentile %.2f mm\n",
       after.size(), s.summary().frames_rejected, medianBefore * 1000, medianAfter * 1000,
       p90 * 1000);
+  // A checkpoint keeps the refused frames' count (and the last error, to start from).
+  test::TempDir dir;
+  s.save(dir.path() / "t.inhand");
+  const ScanSession back = ScanSession::load(dir.path() / "t.inhand", wam(), DepthCameraOptions{},
+                                             NoiseModelOptions{}, o, multi);
+  EXPECT_EQ(back.summary().frames_rejected, s.summary().frames_rejected);
   EXPECT_GT(medianBefore, 0.015);
   EXPECT_LT(medianAfter, 0.0015);
   EXPECT_LT(p90, 0.004);

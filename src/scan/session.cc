@@ -583,6 +583,7 @@ void ScanSession::save(const std::filesystem::path& path) const {
   for (const Vec3& d : s.used) h["used"].push_back(vecJson(d));
   for (const Vec3& d : s.initialDirs) h["initial_dirs"].push_back(vecJson(d));
   h["alg1_views"] = s.alg1Views;
+  h["tracking_correction"] = isoJson(s.correction);  // the last frame's arm error (palm frame)
   for (size_t i = 0; i < s.views.size(); ++i) {
     const ViewRecord& r = s.views[i];
     h["views"].push_back({{"grasp", s.viewGrasp[i]},
@@ -605,6 +606,8 @@ void ScanSession::save(const std::filesystem::path& path) const {
                   {"grasps", m.grasps},
                   {"views", m.views},
                   {"frames", m.frames},
+                  {"frames_rejected", m.frames_rejected},
+                  {"tracking_s", m.tracking_s},
                   {"view_evaluations", m.view_evaluations},
                   {"view_refinements", m.view_refinements},
                   {"planning_s", m.planning_s},
@@ -695,6 +698,9 @@ ScanSession ScanSession::load(const std::filesystem::path& path, const RobotMode
     s.summary.grasps = m.at("grasps").get<int>();
     s.summary.views = m.at("views").get<int>();
     s.summary.frames = m.at("frames").get<int>();
+    s.summary.frames_rejected = m.value("frames_rejected", 0);
+    s.summary.tracking_s = m.value("tracking_s", 0.0);
+    if (h.contains("tracking_correction")) s.correction = isoFrom(h.at("tracking_correction"));
     s.summary.view_evaluations = m.at("view_evaluations").get<int>();
     s.summary.view_refinements = m.at("view_refinements").get<int>();
     s.summary.planning_s = m.at("planning_s").get<double>();
