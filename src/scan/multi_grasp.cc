@@ -330,9 +330,11 @@ MultiGraspResult scanFromTable(RobotInterface& robot, DepthSensor& sensor, const
   ScanSession session(m, sensor.camera(), noise, fitted, multi, object.centre_O);
   session.setProgress(progress);
   const Iso3 T_O_C = T_B_O_rest.inverse() * *aim;
-  for (const DepthImage& d : frames) {
-    const std::vector<uint8_t> table = tablePixels(d, T_O_C, K, object.table_O, to.above_table_m);
-    session.addFrameOfObjectAt(d, q, *aim, T_B_O_rest, &table);
+  for (size_t f = 0; f < frames.size(); ++f) {
+    std::vector<uint8_t> carve = tablePixels(frames[f], T_O_C, K, object.table_O, to.above_table_m);
+    for (size_t i = 0; i < carve.size(); ++i) carve[i] |= robotMask[f][i];
+    session.addFrameOfObjectAt(frames[f], q, *aim, T_B_O_rest, &carve,
+                               /*carve_includes_robot=*/true);
   }
   all.frames = session.summary().frames;
   all.fusion_s = session.summary().fusion_s;

@@ -197,7 +197,7 @@ void ScanSession::emptyInsideRobot(const JointVector& q, const Iso3& T_O_B) {
 
 FrameReport ScanSession::fuse(const DepthImage& depth, const JointVector& q, const Iso3& T_B_C,
                               const Iso3& T_O_B, const std::vector<uint8_t>* extraCarve,
-                              bool inHand) {
+                              bool inHand, bool maskRobot) {
   const auto t0 = Clock::now();
   State& s = *s_;
   const CameraIntrinsics& K = s.camera.intrinsics;
@@ -212,7 +212,7 @@ FrameReport ScanSession::fuse(const DepthImage& depth, const JointVector& q, con
   std::vector<uint8_t> carve;
   // The robot's own surfaces only carve (§IV); in the hand the table counts as the robot's (in
   // the air it can only be background), on the table the caller's mask says where the table is.
-  if (s.options.hand_mode != HandMode::kNaive || !inHand)
+  if (maskRobot)
     carve = robotPixelMask(depth, T_B_C, q, s.scenes, s.camera, s.noise, s.options.t_hand_m,
                            s.options.carve_radius_px, /*with_table=*/inHand);
   if (extraCarve) {
@@ -261,7 +261,8 @@ FrameReport ScanSession::addFrame(const DepthImage& depth, const JointVector& q,
     s.correction = T_C_palm.inverse() * track.correction * T_C_palm;
   }
   const Iso3 T_O_B = s.T_O_palm * s.model->tipPose(q).inverse();
-  FrameReport r = fuse(depth, q, T_B_C_used, T_O_B, nullptr, true);
+  FrameReport r =
+      fuse(depth, q, T_B_C_used, T_O_B, nullptr, true, s.options.hand_mode != HandMode::kNaive);
   r.tracking_inliers = track.inliers;
   r.tracking_hand_inliers = track.hand_inliers;
   r.tracking_hand_see_through = track.hand_see_through;
@@ -358,9 +359,10 @@ std::optional<Iso3> ScanSession::trackedCameraPose(const DepthImage& depth, cons
 
 FrameReport ScanSession::addFrameOfObjectAt(const DepthImage& depth, const JointVector& q,
                                             const Iso3& T_B_C, const Iso3& T_B_O,
-                                            const std::vector<uint8_t>* carve) {
+                                            const std::vector<uint8_t>* carve,
+                                            bool carve_includes_robot) {
   checkJoints(*s_->model, q, "addFrameOfObjectAt");
-  return fuse(depth, q, T_B_C, T_B_O.inverse(), carve, false);
+  return fuse(depth, q, T_B_C, T_B_O.inverse(), carve, false, !(carve && carve_includes_robot));
 }
 
 std::optional<PlannedView> ScanSession::nextView(const JointVector& q_now) {

@@ -106,9 +106,12 @@ class ScanSession {
                                         TrackResult* result = nullptr);
 
   // A depth frame of the object lying at T_B_O (not in the hand, e.g. on the table): the robot's
-  // pixels and those set in `carve` (same size as the image; may be null) only carve.
+  // pixels and those set in `carve` (same size as the image; may be null) only carve. With
+  // carve_includes_robot the caller's mask already has the robot's pixels (robotPixelMask, no
+  // table): they are not rendered again.
   FrameReport addFrameOfObjectAt(const DepthImage& depth, const JointVector& q, const Iso3& T_B_C,
-                                 const Iso3& T_B_O, const std::vector<uint8_t>* carve = nullptr);
+                                 const Iso3& T_B_O, const std::vector<uint8_t>* carve = nullptr,
+                                 bool carve_includes_robot = false);
 
   // The next view with the robot at q_now: while the first grasp's initial trajectory lasts, its
   // next reachable direction; then Alg. 1 on the model so far. nullopt: this grasp's views are
@@ -151,7 +154,8 @@ class ScanSession {
   struct State;
   std::unique_ptr<State> s_;
   FrameReport fuse(const DepthImage& depth, const JointVector& q, const Iso3& T_B_C,
-                   const Iso3& T_O_B, const std::vector<uint8_t>* carve, bool inHand);
+                   const Iso3& T_O_B, const std::vector<uint8_t>* carve, bool inHand,
+                   bool maskRobot);
   void emptyInsideRobot(const JointVector& q, const Iso3& T_O_B);
   // Tracking's object points from `current` (or a fresh planning model).
   void refreshTrackingModel(const ObjectModel* current = nullptr);
