@@ -284,15 +284,13 @@ void ScanSession::refreshTrackingModel(const ObjectModel* current) {
     if (m.observed[size_t(f[0])] && m.observed[size_t(f[1])] && m.observed[size_t(f[2])])
       observed.push_back(t);
   }
-  const size_t step = o.max_object_points > 0
-                          ? std::max<size_t>(1, observed.size() / size_t(o.max_object_points) + 1)
-                          : observed.size() + 1;
+  const size_t step = std::max<size_t>(1, observed.size() / std::max(1, o.max_object_points) + 1);
   const Iso3 T_palm_O = s.T_O_palm.inverse();
   s.objectOccluders.clear();
   const size_t every = std::max<size_t>(1, m.mesh.vertices.size() / 6000 + 1);
   for (size_t k = 0; k < m.mesh.vertices.size(); k += every)
     s.objectOccluders.push_back(T_palm_O * m.mesh.vertices[k].cast<double>());
-  for (size_t k = 0; k < observed.size(); k += step) {
+  for (size_t k = 0; o.max_object_points > 0 && k < observed.size(); k += step) {
     const Tri& f = m.mesh.triangles[observed[k]];
     const Vec3 a = m.mesh.vertices[size_t(f[0])].cast<double>();
     const Vec3 b = m.mesh.vertices[size_t(f[1])].cast<double>();
