@@ -35,6 +35,7 @@
 #include "inhand/robot/robot_interface.h"
 #include "inhand/robot/robot_model.h"
 #include "inhand/robot/wrench.h"
+#include "inhand/scan/checkpoint.h"
 #include "inhand/scan/multi_grasp.h"
 #include "inhand/scan/scan.h"
 #include "inhand/scan/session.h"

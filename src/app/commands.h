@@ -61,6 +61,7 @@ struct ScanArgs {
   std::string rest_pose = "as-is";  // as-is (the mesh's own frame, dropped onto the table) or N
   double arm_error_m = -1;          // overrides sim.arm_error_m when >= 0
   std::string tracking;             // on | off: overrides tracking.enabled when set
+  std::string resume;               // a scan's output directory with checkpoint.inhand: go on
 };
 
 int runScan(const ScanArgs& args);

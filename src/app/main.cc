@@ -72,31 +72,46 @@ int main(int argc, char** argv) {
 
   inhand::app::ScanArgs scan;
   auto* sc = app.add_subcommand("scan", "simulated autonomous scan of an object held by the robot");
-  sc->add_option("--object", scan.object, "builtin:NAME or a mesh file")->required();
-  sc->add_option("--out", scan.out, "output directory (new or empty)")->required();
-  sc->add_option("--robot", scan.robot,
-                 "robot config JSON (default: data/robots/wam_barretthand.json)");
-  sc->add_option("--config", scan.config, "JSON file of scan options (see README)");
-  sc->add_option("--max-grasps", scan.max_grasps,
-                 "grasps at most (default: the config's max_grasps, 3; 1: no re-grasping)");
-  sc->add_option("--max-views", scan.max_views, "next-best views per grasp at most");
-  sc->add_option("--hand-mode", scan.hand_mode,
-                 "naive | carve | carve-empty (paper Fig. 3 a, b, c)");
-  sc->add_option("--planner", scan.planner,
-                 "view planner: ig (inhand), ig-no-hand, ig-no-cost, random, area, "
-                 "unobserved-voxels, rear-side-entropy")
-      ->capture_default_str();
-  sc->add_option("--seed", scan.seed, "noise and IK seed")->capture_default_str();
-  sc->add_option("--rest-pose", scan.rest_pose,
-                 "as-is (the mesh's frame, dropped onto the table) or N: the N-th most probable "
-                 "stable pose (0: the most probable)")
-      ->capture_default_str();
-  sc->add_option("--arm-error", scan.arm_error_m,
-                 "simulated arm error: the palm this far (m) from where the reported joints put "
-                 "it (overrides the config's sim.arm_error_m)");
-  sc->add_option("--tracking", scan.tracking,
-                 "on | off: align each in-hand frame with the hand and the model before fusing "
-                 "(overrides the config's tracking.enabled)");
+  std::vector<CLI::Option*> scanOptions;
+  scanOptions.push_back(sc->add_option("--object", scan.object, "builtin:NAME or a mesh file"));
+  scanOptions.push_back(sc->add_option("--out", scan.out, "output directory (new or empty)"));
+  scanOptions.push_back(sc->add_option(
+      "--robot", scan.robot, "robot config JSON (default: data/robots/wam_barretthand.json)"));
+  scanOptions.push_back(
+      sc->add_option("--config", scan.config, "JSON file of scan options (see README)"));
+  scanOptions.push_back(
+      sc->add_option("--max-grasps", scan.max_grasps,
+                     "grasps at most (default: the config's max_grasps, 3; 1: no re-grasping)"));
+  scanOptions.push_back(
+      sc->add_option("--max-views", scan.max_views, "next-best views per grasp at most"));
+  scanOptions.push_back(sc->add_option("--hand-mode", scan.hand_mode,
+                                       "naive | carve | carve-empty (paper Fig. 3 a, b, c)"));
+  scanOptions.push_back(
+      sc->add_option("--planner", scan.planner,
+                     "view planner: ig (inhand), ig-no-hand, ig-no-cost, random, area, "
+                     "unobserved-voxels, rear-side-entropy")
+          ->capture_default_str());
+  scanOptions.push_back(
+      sc->add_option("--seed", scan.seed, "noise and IK seed")->capture_default_str());
+  scanOptions.push_back(
+      sc->add_option(
+            "--rest-pose", scan.rest_pose,
+            "as-is (the mesh's frame, dropped onto the table) or N: the N-th most probable "
+            "stable pose (0: the most probable)")
+          ->capture_default_str());
+  scanOptions.push_back(sc->add_option(
+      "--arm-error", scan.arm_error_m,
+      "simulated arm error: the palm this far (m) from where the reported joints put "
+      "it (overrides the config's sim.arm_error_m)"));
+  scanOptions.push_back(
+      sc->add_option("--tracking", scan.tracking,
+                     "on | off: align each in-hand frame with the hand and the model before fusing "
+                     "(overrides the config's tracking.enabled)"));
+  auto* resume =
+      sc->add_option("--resume", scan.resume,
+                     "DIR: go on with the interrupted scan in DIR (its checkpoint.inhand), "
+                     "with the options it was started with");
+  for (CLI::Option* o : scanOptions) resume->excludes(o);
 
   inhand::app::EvalArgs eval;
   auto* ev = app.add_subcommand(

@@ -1,4 +1,7 @@
 // `inhand scan`: the autonomous (multi-grasp) scan of a simulated object.
+#include <signal.h>
+
+#include <atomic>
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
@@ -16,14 +19,13 @@
 #include "inhand/geometry/stable_poses.h"
 #include "inhand/report/html_report.h"
 #include "inhand/robot/collision.h"
+#include "inhand/scan/checkpoint.h"
 #include "inhand/scan/multi_grasp.h"
 #include "inhand/sim/sim_world.h"
 
 namespace inhand::app {
 
 namespace fs = std::filesystem;
-
-namespace {}  // namespace
 
 // Every first-grasp pose tried, compactly: approach (palm z in O), roll, spread, preshape,
 // edge, ε, and what became of it.
@@ -210,9 +212,12 @@ Json tableTopJson(const TableTopRecord& t) {
           {"seconds", t.seconds}};
 }
 
-// Exit status: 3 no view reachable, 4 no grasp, 6 no object to scan (docs/commands.md).
+// Exit status: 3 no view reachable, 4 no grasp, 6 no object to scan, 130 interrupted
+// (docs/commands.md).
 int exitStatus(Termination t) {
   switch (t) {
+    case Termination::kInterrupted:
+      return 130;
     case Termination::kNoReachableView:
       return 3;
     case Termination::kNoReachableGrasp:
@@ -229,23 +234,121 @@ int exitStatus(Termination t) {
   }
 }
 
+// SIGINT and SIGTERM while a scan runs: the scan stops at its next frame and writes the model
+// so far and a checkpoint to resume from; a second signal ends the process at once (the default
+// action: output files are written atomically, the checkpoint stays).
+std::atomic<int> g_signal{0};
+extern "C" void onStopSignal(int sig) { g_signal = sig; }
+
+class StopSignals {
+ public:
+  StopSignals() {
+    g_signal = 0;
+    struct sigaction a {};
+    a.sa_handler = onStopSignal;
+    a.sa_flags = SA_RESETHAND;  // the second signal: default action
+    sigemptyset(&a.sa_mask);
+    sigaction(SIGINT, &a, &oldInt_);
+    sigaction(SIGTERM, &a, &oldTerm_);
+  }
+  ~StopSignals() {
+    sigaction(SIGINT, &oldInt_, nullptr);
+    sigaction(SIGTERM, &oldTerm_, nullptr);
+  }
+  StopSignals(const StopSignals&) = delete;
+  StopSignals& operator=(const StopSignals&) = delete;
+  static bool raised() { return g_signal != 0; }
+
+ private:
+  struct sigaction oldInt_ {
+  }, oldTerm_{};
+};
+
+constexpr const char* kCheckpointName = "checkpoint.inhand";
+
+// What a checkpoint keeps of the command line, so that --resume runs the same scan: the object
+// (as given and as a path to load), the options as resolved, the seed and the rest pose.
+Json argsJson(const ScanArgs& args, const ScanConfig& o) {
+  std::string load = args.object;
+  if (load.rfind("builtin:", 0) != 0) load = fs::absolute(load).lexically_normal().string();
+  return {{"object", args.object}, {"object_load", load},         {"planner", args.planner},
+          {"seed", args.seed},     {"rest_pose", args.rest_pose}, {"options", scanConfigJson(o)}};
+}
+
 }  // namespace
 
-int runScan(const ScanArgs& args) {
+int runScan(const ScanArgs& given) {
   const auto t0 = std::chrono::steady_clock::now();
-  ScanConfig o = scanConfigFor(args);
+  ScanArgs args = given;
+  ScanConfig o;
+  std::string objectToLoad;
+  const bool resuming = !args.resume.empty();
+  fs::path checkpoint;
+  if (resuming) {
+    // The scan goes on with the arguments and options it was started with.
+    checkpoint = fs::path(args.resume) / kCheckpointName;
+    if (!fs::exists(checkpoint))
+      throw Error(args.resume + ": no " + kCheckpointName +
+                  " (not the output of an interrupted scan, or the scan stopped before its first "
+                  "grasp began: run it again)");
+    const Json caller = readScanCheckpointExtra(checkpoint).value("caller", Json());
+    try {
+      args.object = caller.at("object").get<std::string>();
+      objectToLoad = caller.at("object_load").get<std::string>();
+      args.planner = caller.at("planner").get<std::string>();
+      args.seed = caller.at("seed").get<uint64_t>();
+      args.rest_pose = caller.at("rest_pose").get<std::string>();
+      readScanConfig(caller.at("options"), checkpoint.string() + ": options", &o);
+    } catch (const Json::exception& e) {
+      throw Error(checkpoint.string() + ": not a checkpoint of `inhand scan` (" + e.what() + ")");
+    }
+    if (std::string p = o.validate(); !p.empty()) throw Error(checkpoint.string() + ": " + p);
+    args.out = args.resume;
+  } else {
+    if (args.object.empty()) throw Error("--object is required (or --resume DIR)");
+    if (args.out.empty()) throw Error("--out is required (or --resume DIR)");
+    o = scanConfigFor(args);
+    objectToLoad = args.object;
+  }
   RobotModel model = RobotModel::load(o.robot);
-  TriangleMesh object = loadObject(args.object);
+  TriangleMesh object = loadObject(objectToLoad);
   const Json restJson = applyRestPose(args, object, &o);
   // An object too large for the volume is refused before the output directory exists.
   if (o.start == "held" && object.bounds().size().maxCoeff() > o.scan.volume_size_m - 0.02)
     throw Error(args.object + ": the object (" + std::to_string(object.bounds().size().maxCoeff()) +
                 " m across) does not fit the scan volume (volume_size_m = " +
                 std::to_string(o.scan.volume_size_m) + " m)");
-  StagedDirectory out(args.out);
+  StagedDirectory out(args.out, /*replace=*/resuming);
+  // The checkpoint lives in the output directory while the scan runs (a crash or a power cut
+  // leaves it there for --resume); a scan that ends removes it, one that is interrupted keeps
+  // it beside its outputs. A scan that fails (an error) leaves nothing it created.
+  bool createdOut = false;
+  if (!resuming) {
+    std::error_code ec;
+    createdOut = fs::create_directory(args.out, ec);
+    checkpoint = fs::path(args.out) / kCheckpointName;
+  }
+  struct Cleanup {
+    fs::path dir, file;
+    bool created, armed = true;
+    ~Cleanup() {
+      if (!armed || file.empty()) return;
+      std::error_code ec;
+      fs::remove(file, ec);
+      if (created) fs::remove(dir, ec);  // only when empty
+    }
+  } cleanup{args.out, resuming ? fs::path() : checkpoint, createdOut};
+  SimulatedScanCheckpoints checkpoints;
+  checkpoints.file = checkpoint;
+  checkpoints.resume = resuming;
+  checkpoints.extra = argsJson(args, o);
+  if (resuming) checkpoints.extra["object_load"] = objectToLoad;
+  StopSignals signals;
   ScanProgress progress;
   progress.log = [](const std::string& s) { std::fprintf(stderr, "scan: %s\n", s.c_str()); };
-  const SimulatedScan sim = runSimulatedScan(model, object, o, progress);
+  progress.interrupted = [] { return StopSignals::raised(); };
+  const SimulatedScan sim = runSimulatedScan(model, object, o, progress, checkpoints);
+  const bool interrupted = sim.result.scan.termination == Termination::kInterrupted;
   const MultiGraspResult& mr = sim.result;
   const ScanResult& r = mr.scan;
   writeModels(out.path(), model, object, mr);
@@ -305,6 +408,10 @@ int runScan(const ScanArgs& args) {
          return t;
        }()}};
   summary["options"] = scanConfigJson(o);
+  if (interrupted && fs::exists(checkpoint)) {
+    summary["resume"] = "inhand scan --resume " + args.out;
+    fs::copy_file(checkpoint, out.path() / kCheckpointName);
+  }
   writeTextAtomically(out.path() / "summary.json", summary.dump(2) + "\n");
   // The report: a missing front-end install costs the report only, never the scan.
   try {
@@ -312,7 +419,13 @@ int runScan(const ScanArgs& args) {
   } catch (const Error& e) {
     std::fprintf(stderr, "scan: warning: no report.html: %s\n", e.what());
   }
-  out.commit();
+  out.commit();  // replaces the directory that held the checkpoint
+  cleanup.armed = false;
+  if (interrupted)
+    std::fprintf(stderr,
+                 "scan: interrupted; the model so far is in %s, go on with: inhand scan "
+                 "--resume %s\n",
+                 args.out.c_str(), args.out.c_str());
   std::printf(
       "scan: %s: %zu grasps, %zu views, %d frames, %s; observed %.1f%% of the surface, "
       "coverage %.1f%% (%.0f mm), accuracy %.2f mm mean, mean entropy %.3f (%.1f s) -> %s\n",

@@ -3,11 +3,13 @@
 #include <algorithm>
 
 #include "inhand/core/error.h"
+#include "inhand/scan/checkpoint.h"
 
 namespace inhand {
 
 SimulatedScan runSimulatedScan(const RobotModel& model, const TriangleMesh& object,
-                               const ScanConfig& o, ScanProgress progress) {
+                               const ScanConfig& o, ScanProgress progress,
+                               const SimulatedScanCheckpoints& checkpoints) {
   if (std::string p = o.validate(); !p.empty()) throw Error(p);
   if (o.start != "table" && o.start != "held") throw Error("start: must be table or held");
   // From the table the scan finds out itself (object_too_large_for_volume); held, it cannot.
@@ -52,11 +54,34 @@ SimulatedScan runSimulatedScan(const RobotModel& model, const TriangleMesh& obje
   // the palm. Table: on the points the camera sees there. The scan is never told the object's
   // shape or size; frame O is the object's frame where it rests (the mesh's own input frame).
   out.T_B_O_rest = world.restPose();
-  const Vec3 expected = T_O_palm * Vec3(0, 0, model.graspOffset());
-  out.result = o.start == "held"
-                   ? scanMultiGrasp(robot, sensor, T_O_palm, expected, out.T_B_O_rest, o.scan,
-                                    o.multi, noise, progress)
-                   : scanFromTable(robot, sensor, out.T_B_O_rest, o.scan, o.multi, noise, progress);
+  if (!checkpoints.file.empty())
+    progress.checkpoint = [&](const ScanCheckpoint& c) {
+      saveScanCheckpoint(checkpoints.file, c,
+                         {{"sim", world.state()},
+                          {"palm_error_m", palmError},
+                          {"frames_rejected", rejected},
+                          {"caller", checkpoints.extra}});
+    };
+  if (checkpoints.resume) {
+    LoadedCheckpoint c =
+        loadScanCheckpoint(checkpoints.file, model, camera, noise, o.scan, o.multi);
+    try {
+      world.setState(c.extra.at("sim"));
+      palmError = c.extra.at("palm_error_m").get<std::vector<double>>();
+      rejected = c.extra.at("frames_rejected").get<int>();
+    } catch (const std::exception& e) {
+      throw Error(checkpoints.file.string() + ": not a simulated scan's checkpoint (" + e.what() +
+                  ")");
+    }
+    out.result = resumeScan(robot, sensor, std::move(c), progress);
+  } else {
+    const Vec3 expected = T_O_palm * Vec3(0, 0, model.graspOffset());
+    out.result =
+        o.start == "held"
+            ? scanMultiGrasp(robot, sensor, T_O_palm, expected, out.T_B_O_rest, o.scan, o.multi,
+                             noise, progress)
+            : scanFromTable(robot, sensor, out.T_B_O_rest, o.scan, o.multi, noise, progress);
+  }
   out.metrics = truth.evaluate(out.result.scan.model);
   out.drops = world.drops;
   out.frames_rejected = rejected;

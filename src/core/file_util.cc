@@ -64,12 +64,12 @@ std::string readTextFile(const fs::path& path) {
   return s.str();
 }
 
-StagedDirectory::StagedDirectory(const fs::path& target) : target_(target) {
+StagedDirectory::StagedDirectory(const fs::path& target, bool replace) : target_(target) {
   std::error_code ec;
   if (fs::exists(target_, ec)) {
     if (!fs::is_directory(target_, ec))
       throw Error(target_.string() + ": exists and is not a directory");
-    if (!fs::is_empty(target_, ec))
+    if (!replace && !fs::is_empty(target_, ec))
       throw Error(target_.string() +
                   ": directory exists and is not empty; choose a new output directory");
   }
@@ -90,10 +90,22 @@ StagedDirectory::~StagedDirectory() {
 
 void StagedDirectory::commit() {
   std::error_code ec;
-  if (fs::exists(target_, ec)) fs::remove(target_, ec);  // an empty directory (checked above)
+  // What the target holds now (nothing, or e.g. a checkpoint) is moved aside, the staged
+  // directory takes its name, then the old one is removed.
+  fs::path old;
+  if (fs::exists(target_, ec)) {
+    old = tempSibling(fs::absolute(target_).lexically_normal(), "old");
+    fs::rename(target_, old, ec);
+    if (ec) throw Error(target_.string() + ": cannot replace it (" + ec.message() + ")");
+  }
   fs::rename(staging_, target_, ec);
-  if (ec) throw Error(target_.string() + ": cannot move output into place (" + ec.message() + ")");
+  if (ec) {
+    std::error_code ignored;
+    if (!old.empty()) fs::rename(old, target_, ignored);
+    throw Error(target_.string() + ": cannot move output into place (" + ec.message() + ")");
+  }
   committed_ = true;
+  if (!old.empty()) fs::remove_all(old, ec);
 }
 
 fs::path resourceDirectory(const std::string& name, const fs::path& built_in) {

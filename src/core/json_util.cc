@@ -11,7 +11,7 @@ Json readJsonFile(const std::filesystem::path& path) {
   std::string text = readTextFile(path);
   try {
     return Json::parse(text);
-  } catch (const Json::parse_error& e) {
+  } catch (const Json::exception& e) {  // syntax, or a number beyond double (out_of_range)
     throw Error(path.string() + ": malformed JSON (" + e.what() + ")");
   }
 }
@@ -42,6 +42,26 @@ std::string requireString(const Json& obj, const std::string& key, const std::st
   const Json& v = requireField(obj, key, where);
   if (!v.is_string()) throw Error(where + "." + key + ": expected a string, got " + v.dump());
   return v.get<std::string>();
+}
+
+Json isoJson(const Iso3& T) {
+  Json j = Json::array();
+  for (int r = 0; r < 4; ++r)
+    for (int c = 0; c < 4; ++c) j.push_back(T.matrix()(r, c));
+  return j;
+}
+
+Iso3 isoFrom(const Json& j) {
+  Iso3 T = Iso3::Identity();
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 4; ++c) T.matrix()(r, c) = j.at(r * 4 + c).get<double>();
+  return T;
+}
+
+Json vecJson(const Vec3& v) { return {v.x(), v.y(), v.z()}; }
+
+Vec3 vecFrom(const Json& j) {
+  return {j.at(0).get<double>(), j.at(1).get<double>(), j.at(2).get<double>()};
 }
 
 }  // namespace inhand

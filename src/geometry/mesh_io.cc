@@ -10,6 +10,7 @@
 #include <cstring>
 #include <fstream>
 #include <functional>
+#include <limits>
 #include <sstream>
 
 #include "inhand/core/error.h"
@@ -27,12 +28,10 @@ TriangleMesh importMesh(const fs::path& path) {
   std::string ext = path.extension().string();
   std::transform(ext.begin(), ext.end(), ext.begin(),
                  [](unsigned char c) { return std::tolower(c); });
-  if (ext == ".ply") {
-    // Our own reader: assimp 5.2's PLY importer crashes on files with extra per-vertex
-    // properties (such as inhand's variance + colour models). Big-endian PLY still goes to assimp.
-    if (readTextFile(path).find("format binary_big_endian") == std::string::npos)
-      return welded(readPly(path).mesh);
-  }
+  // PLY: our own reader (assimp 5.2's PLY importer crashes on files with extra per-vertex
+  // properties such as inhand's variance + colour models, and hangs on some malformed
+  // big-endian files found by fuzzing).
+  if (ext == ".ply") return welded(readPly(path).mesh);
   Assimp::Importer importer;
   importer.SetPropertyInteger(AI_CONFIG_PP_RVC_FLAGS,
                               aiComponent_NORMALS | aiComponent_COLORS | aiComponent_TEXCOORDS |
@@ -147,9 +146,12 @@ int typeSize(const std::string& t) {
   return 0;
 }
 
-double decode(const char* p, const std::string& t) {
+double decode(const char* p, const std::string& t, bool bigEndian) {
   auto get = [&](auto v) {
-    std::memcpy(&v, p, sizeof(v));
+    char bytes[sizeof(v)];
+    std::memcpy(bytes, p, sizeof(v));
+    if (bigEndian) std::reverse(bytes, bytes + sizeof(v));
+    std::memcpy(&v, bytes, sizeof(v));
     return double(v);
   };
   if (t == "char" || t == "int8") return get(int8_t{});
@@ -198,10 +200,10 @@ PlyData readPly(const fs::path& path) {
       elements.back().props.push_back(p);
     }
   }
-  if (format != "binary_little_endian" && format != "ascii")
+  if (format != "binary_little_endian" && format != "binary_big_endian" && format != "ascii")
     throw Error(where + ": PLY format '" + format +
-                "' is not supported (binary_little_endian, ascii)");
-  const bool ascii = format == "ascii";
+                "' is not supported (ascii, binary_little_endian, binary_big_endian)");
+  const bool ascii = format == "ascii", bigEndian = format == "binary_big_endian";
   PlyData out;
   size_t pos = bodyStart;
   std::istringstream text(ascii ? data.substr(bodyStart) : std::string());
@@ -213,20 +215,41 @@ PlyData readPly(const fs::path& path) {
     }
     int n = typeSize(type);
     if (pos + size_t(n) > data.size()) throw Error(where + ": PLY body is truncated");
-    double v = decode(data.data() + pos, type);
+    double v = decode(data.data() + pos, type, bigEndian);
     pos += size_t(n);
     return v;
   };
+  // Every value takes at least a byte of the body: a count beyond that is a lie (a header that
+  // claims 10^9 vertices is an error, not an allocation).
+  const size_t bodyBytes = data.size() - std::min(bodyStart, data.size());
+  auto index = [&](double value, const char* what) {
+    if (!(value >= 0 && value <= double(std::numeric_limits<int>::max())) ||
+        value != std::floor(value))
+      throw Error(where + ": PLY " + what + " " + std::to_string(value) +
+                  " is not a non-negative integer");
+    return int(value);
+  };
   for (const PlyElement& e : elements) {
     const bool isVertex = e.name == "vertex", isFace = e.name == "face";
+    if (e.props.empty()) continue;  // nothing to read
+    if (e.count > bodyBytes)
+      throw Error(where + ": PLY element '" + e.name + "' claims " + std::to_string(e.count) +
+                  " entries, more than the file's " + std::to_string(bodyBytes) + " body bytes");
     for (size_t i = 0; i < e.count; ++i) {
       Vec3f v = Vec3f::Zero();
       for (const PlyProperty& p : e.props) {
         if (!p.countType.empty()) {
-          int n = int(readValue(p.countType));
-          std::vector<int> idx(std::max(n, 0));
-          for (int k = 0; k < n; ++k) idx[k] = int(readValue(p.type));
-          if (isFace && (p.name == "vertex_indices" || p.name == "vertex_index"))
+          const int n = index(readValue(p.countType), "list length");
+          if (size_t(n) > bodyBytes)
+            throw Error(where + ": PLY list of " + std::to_string(n) +
+                        " values is longer than the file");
+          const bool indices = isFace && (p.name == "vertex_indices" || p.name == "vertex_index");
+          std::vector<int> idx(size_t(n), 0);
+          for (int k = 0; k < n; ++k) {
+            const double value = readValue(p.type);
+            if (indices) idx[k] = index(value, "vertex index");
+          }
+          if (indices)
             for (int k = 1; k + 1 < n; ++k)
               out.mesh.triangles.emplace_back(idx[0], idx[k], idx[k + 1]);
           continue;

@@ -105,7 +105,8 @@ TriangleMesh transformed(const TriangleMesh& mesh, const Iso3& T) {
 TriangleMesh welded(const TriangleMesh& mesh, double tolerance_m) {
   struct KeyHash {
     size_t operator()(const std::array<int64_t, 3>& k) const {
-      return size_t(k[0] * 73856093 ^ k[1] * 19349663 ^ k[2] * 83492791);
+      return size_t(uint64_t(k[0]) * 73856093u ^ uint64_t(k[1]) * 19349663u ^
+                    uint64_t(k[2]) * 83492791u);
     }
   };
   std::unordered_map<std::array<int64_t, 3>, int, KeyHash> index;
@@ -129,8 +130,10 @@ TriangleMesh welded(const TriangleMesh& mesh, double tolerance_m) {
 
 std::string validateMesh(const TriangleMesh& mesh) {
   if (mesh.triangles.empty()) return "has no triangles";
-  for (const Vec3f& v : mesh.vertices)
+  for (const Vec3f& v : mesh.vertices) {
     if (!v.allFinite()) return "has a vertex with a non-finite coordinate";
+    if (v.cwiseAbs().maxCoeff() > 1e6f) return "has a vertex more than 10^6 m from the origin";
+  }
   const int n = static_cast<int>(mesh.vertices.size());
   for (const Tri& f : mesh.triangles)
     for (int k = 0; k < 3; ++k)

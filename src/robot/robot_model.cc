@@ -399,7 +399,8 @@ struct RobotModelLoader {
       for (double val : {f.open, f.closed})
         if (val < j.lower - 1e-9 || val > j.upper + 1e-9)
           throw Error(fw + ": open/closed value outside the joint's limits [" +
-                      std::to_string(j.lower) + ", " + std::to_string(j.upper) + "]");
+                      std::to_string(j.lower) + ", " + std::to_string(j.upper) + "] in " +
+                      urdfName);
       // Links that move with the finger: below the finger joint or any joint that follows it.
       std::set<int> moving;
       for (int ji = 0; ji < int(m.joints_.size()); ++ji) {

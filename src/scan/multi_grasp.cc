@@ -9,6 +9,7 @@
 
 #include "inhand/core/error.h"
 #include "inhand/robot/collision.h"
+#include "inhand/scan/checkpoint.h"
 #include "inhand/scan/session.h"
 #include "inhand/scan/table_top.h"
 #include "inhand/sensor/render.h"
@@ -94,6 +95,7 @@ PickOutcome pickAndVerify(ScanSession& session, RobotInterface& robot, DepthSens
   const RobotOccluders scenes(m);
   PickOutcome out;
   for (const GraspCandidate& c : candidates) {
+    if (session.progress().stopRequested()) break;
     out.attempt_poses.push_back(c.pose);
     std::optional<Iso3> achieved = robot.pickUp(c.T_O_palm, c.q_open);
     if (!achieved) {
@@ -160,25 +162,48 @@ PickOutcome pickAndVerify(ScanSession& session, RobotInterface& robot, DepthSens
   return out;
 }
 
-// The grasp loop from the first grasp on (the robot holds the object at T_O_palm0), over
-// `session`; `next` describes the first grasp, `box_O` where the object is believed to lie for
-// the first grasp's initial trajectory (empty: unknown).
+// The grasp loop from grasp `first` on (the robot holds the object at T_O_palm0), over
+// `session`; `next` describes that grasp, `box_O` where the object is believed to lie for the
+// first grasp's initial trajectory (empty: unknown). `resumed`: the grasp has begun already (a
+// checkpoint), its views go on.
 void runGrasps(RobotInterface& robot, DepthSensor& sensor, ScanSession& session,
                const Iso3& T_O_palm0, const Iso3& T_B_O_rest, GraspRecord next,
-               MultiGraspResult& out, const Aabb& box_O) {
+               MultiGraspResult& out, const Aabb& box_O, int first = 0, bool resumed = false) {
   const MultiGraspOptions& multi = session.multiOptions();
+  const ScanProgress& progress = session.progress();
   auto log = [&](const std::string& s) { session.log(s); };
   ScanResult& all = out.scan;
   Iso3 T_O_palm = T_O_palm0;
   next.T_O_palm = T_O_palm;
-  for (int g = 0;; ++g) {
-    log("grasp " + std::to_string(g + 1));
-    next.q = robot.joints();
-    const size_t viewsBefore = session.views().size();
-    session.beginGrasp(T_O_palm, robot.joints(), g == 0 ? box_O : Aabb());
-    const Termination ended = runGraspViews(session, robot, sensor);
+  for (int g = first;; ++g) {
+    auto checkpoint = [&] {
+      if (progress.checkpoint) progress.checkpoint({&session, &out, g, &next, T_B_O_rest, box_O});
+    };
+    if (progress.stopRequested()) {
+      all.termination = Termination::kInterrupted;
+      break;
+    }
+    if (!(resumed && g == first)) {
+      log("grasp " + std::to_string(g + 1));
+      next.q = robot.joints();
+      session.beginGrasp(T_O_palm, robot.joints(), g == 0 ? box_O : Aabb());
+      checkpoint();
+    } else {
+      log("grasp " + std::to_string(g + 1) + ", resumed after " +
+          std::to_string(session.views().size()) + " views");
+    }
+    const size_t viewsBefore = [&] {
+      size_t n = 0;  // the views of earlier grasps
+      for (int vg : session.viewGrasps()) n += vg < session.graspIndex();
+      return n;
+    }();
+    const Termination ended = runGraspViews(session, robot, sensor, checkpoint);
     all.model = session.model();
     all.planning_model = session.planningModel();
+    if (ended == Termination::kInterrupted) {
+      all.termination = ended;
+      break;
+    }
     GraspRecord rec = next;
     rec.model = all.planning_model;  // at the planning stride: a quarter of the triangles
     rec.views = int(session.views().size() - viewsBefore);
@@ -222,7 +247,8 @@ void runGrasps(RobotInterface& robot, DepthSensor& sensor, ScanSession& session,
     const PickOutcome pick = pickAndVerify(session, robot, sensor, T_B_O_rest, known_O, usable,
                                            session.options(), session.noise(), log);
     if (!pick.achieved) {
-      all.termination = Termination::kPickUpFailed;
+      all.termination =
+          progress.stopRequested() ? Termination::kInterrupted : Termination::kPickUpFailed;
       break;
     }
     T_O_palm = *pick.achieved;
@@ -318,6 +344,7 @@ MultiGraspResult scanFromTable(RobotInterface& robot, DepthSensor& sensor, const
                                        options.t_hand_m, options.carve_radius_px,
                                        /*with_table=*/false));
   }
+  if (progress.stopRequested()) return finish(Termination::kInterrupted);
   const TableTopObject object =
       findObjectOnTable(frames, robotMask, *aim, K, T_B_O_rest, m, options, to, &tt, log);
   if (object.problem != Termination::kRunning) return finish(object.problem);  // nothing fused
@@ -355,9 +382,11 @@ MultiGraspResult scanFromTable(RobotInterface& robot, DepthSensor& sensor, const
                 tt.tried, tt.touching, tt.stable, tt.table_free, tt.reachable, first.seconds);
   log(line);
   tt.seconds = std::chrono::duration<double>(Clock::now() - t0).count();
-  if (first.candidates.empty()) {
+  if (first.candidates.empty() || progress.stopRequested()) {
     all.model = session.model();
-    return finish(tt.stable == 0 ? Termination::kNoStableGrasp : Termination::kNoReachableGrasp);
+    return finish(progress.stopRequested() ? Termination::kInterrupted
+                  : tt.stable == 0         ? Termination::kNoStableGrasp
+                                           : Termination::kNoReachableGrasp);
   }
   std::vector<Vec3> seen_O;
   for (size_t k = 0; k < object.points_O.size(); k += 5) seen_O.push_back(object.points_O[k]);
@@ -367,7 +396,8 @@ MultiGraspResult scanFromTable(RobotInterface& robot, DepthSensor& sensor, const
   tt.attempt_poses = pick.attempt_poses;
   if (!pick.achieved) {
     all.model = session.model();
-    return finish(Termination::kPickUpFailed);
+    return finish(progress.stopRequested() ? Termination::kInterrupted
+                                           : Termination::kPickUpFailed);
   }
   GraspRecord rec;
   rec.epsilon = pick.picked->epsilon;
@@ -377,6 +407,20 @@ MultiGraspResult scanFromTable(RobotInterface& robot, DepthSensor& sensor, const
   rec.generation_s = tt.seconds;
   runGrasps(robot, sensor, session, *pick.achieved, T_B_O_rest, rec, out, object.box_O);
   all.total_s = std::chrono::duration<double>(Clock::now() - t0).count();
+  return out;
+}
+
+MultiGraspResult resumeScan(RobotInterface& robot, DepthSensor& sensor, LoadedCheckpoint c,
+                            const ScanProgress& progress) {
+  const auto t0 = Clock::now();
+  if (!c.session) throw Error("resumeScan: the checkpoint has no session");
+  ScanSession& session = *c.session;
+  session.setProgress(progress);
+  MultiGraspResult out = std::move(c.sofar);
+  const double before = out.scan.total_s;
+  runGrasps(robot, sensor, session, session.graspPose(), c.T_B_O_rest, c.current, out,
+            c.object_box_O, c.grasp, /*resumed=*/true);
+  out.scan.total_s = before + std::chrono::duration<double>(Clock::now() - t0).count();
   return out;
 }
 

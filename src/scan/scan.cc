@@ -49,6 +49,7 @@ constexpr std::pair<Termination, const char*> kTerminationNames[] = {
     {Termination::kObjectTooLargeForHand, "object_too_large_for_hand"},
     {Termination::kObjectTooLargeForVolume, "object_too_large_for_volume"},
     {Termination::kNoStableGrasp, "no_stable_grasp"},
+    {Termination::kInterrupted, "interrupted"},
 };
 }  // namespace
 
@@ -165,16 +166,27 @@ ScanResult scanSingleGrasp(RobotInterface& robot, DepthSensor& sensor, const Iso
   return result;
 }
 
-Termination runGraspViews(ScanSession& session, RobotInterface& robot, DepthSensor& sensor) {
+Termination runGraspViews(ScanSession& session, RobotInterface& robot, DepthSensor& sensor,
+                          const std::function<void()>& after_view) {
+  const ScanProgress& progress = session.progress();
   sensor.setPose(session.cameraPose());
-  while (const std::optional<PlannedView> view = session.nextView(robot.joints())) {
+  while (!progress.stopRequested()) {
+    const std::optional<PlannedView> view = session.nextView(robot.joints());
+    if (!view) return session.summary().termination;
+    bool stopped = false;
     robot.execute(view->waypoints, [&](const JointVector& q) {
+      // Once stopped, the rest of the motion is not fused (a real driver's arm finishes or is
+      // halted by its own controller).
+      if (stopped || (stopped = progress.stopRequested())) return;
       const DepthImage depth = sensor.capture();
       session.addFrame(depth, q, sensor.pose());
     });
     session.finishView();
+    if (stopped) break;
+    if (after_view) after_view();
   }
-  return session.summary().termination;
+  session.finish(Termination::kInterrupted, "interrupted by the caller");
+  return Termination::kInterrupted;
 }
 
 }  // namespace inhand

@@ -64,6 +64,7 @@ struct ScanSession::State {
   JointVector handPointsQ;
   // The last aligned frame's error in the palm frame: true palm = reported palm · correction.
   Iso3 correction = Iso3::Identity();
+  bool trackingFromFull = false;  // tracking's object points are from model(), not planningModel()
   std::vector<Vec3> used;         // directions of this grasp's views
   std::vector<Vec3> initialDirs;  // the initial trajectory's directions not yet tried
   int alg1Views = 0;              // Alg. 1 views of this grasp
@@ -104,6 +105,7 @@ const DepthCameraOptions& ScanSession::camera() const { return s_->camera; }
 const NoiseModelOptions& ScanSession::noise() const { return s_->noise; }
 Iso3 ScanSession::cameraPose() const { return s_->planner.cameraPose(s_->options.planner.range_m); }
 void ScanSession::setProgress(const ScanProgress& progress) { s_->progress = progress; }
+const ScanProgress& ScanSession::progress() const { return s_->progress; }
 bool ScanSession::holding() const { return s_->holding; }
 int ScanSession::graspIndex() const { return s_->grasp; }
 const Iso3& ScanSession::graspPose() const { return s_->T_O_palm; }
@@ -147,6 +149,7 @@ void ScanSession::beginGrasp(const Iso3& T_O_palm, const JointVector& q, const A
   s.alg1Views = 0;
   s.correction = Iso3::Identity();
   if (s.options.tracking.enabled) refreshTrackingModel();
+  s.trackingFromFull = false;
   s.initialDirs.clear();
   // The model exists after the first grasp: Alg. 1 from the start.
   if (s.grasp == 0 && s.options.initial_views > 0)
@@ -460,6 +463,7 @@ const ViewRecord& ScanSession::finishView() {
   s.viewOpen = false;
   const ObjectModel after = model();
   if (s.options.tracking.enabled) refreshTrackingModel(&after);
+  s.trackingFromFull = true;
   rec.mean_entropy = after.meanEntropy();
   rec.observed_fraction = after.observedAreaFraction();
   if (s.progress.coverage) rec.coverage = s.progress.coverage(after);
@@ -546,25 +550,9 @@ std::string ScanSession::Summary::brief() const {
 namespace {
 constexpr char kMagic[] = "INHAND-SESSION 1\n";
 
-Json isoJson(const Iso3& T) {
-  Json j = Json::array();
-  for (int r = 0; r < 4; ++r)
-    for (int c = 0; c < 4; ++c) j.push_back(T.matrix()(r, c));
-  return j;
-}
-Iso3 isoFrom(const Json& j) {
-  Iso3 T = Iso3::Identity();
-  for (int r = 0; r < 3; ++r)
-    for (int c = 0; c < 4; ++c) T.matrix()(r, c) = j.at(r * 4 + c).get<double>();
-  return T;
-}
-Json vecJson(const Vec3& v) { return {v.x(), v.y(), v.z()}; }
-Vec3 vecFrom(const Json& j) {
-  return {j.at(0).get<double>(), j.at(1).get<double>(), j.at(2).get<double>()};
-}
 }  // namespace
 
-void ScanSession::save(const std::filesystem::path& path) const {
+void ScanSession::save(const std::filesystem::path& path, const Json& extra) const {
   const State& s = *s_;
   if (s.viewOpen) throw Error("save: finish the current view first (finishView)");
   Json h;
@@ -584,6 +572,7 @@ void ScanSession::save(const std::filesystem::path& path) const {
   for (const Vec3& d : s.initialDirs) h["initial_dirs"].push_back(vecJson(d));
   h["alg1_views"] = s.alg1Views;
   h["tracking_correction"] = isoJson(s.correction);  // the last frame's arm error (palm frame)
+  h["tracking_from_full_model"] = s.trackingFromFull;
   for (size_t i = 0; i < s.views.size(); ++i) {
     const ViewRecord& r = s.views[i];
     h["views"].push_back({{"grasp", s.viewGrasp[i]},
@@ -612,6 +601,7 @@ void ScanSession::save(const std::filesystem::path& path) const {
                   {"view_refinements", m.view_refinements},
                   {"planning_s", m.planning_s},
                   {"fusion_s", m.fusion_s}};
+  if (!extra.is_null()) h["extra"] = extra;
   const std::string header = h.dump();
   writeFileAtomically(path, [&](const fs::path& tmp) {
     std::ofstream f(tmp, std::ios::binary);
@@ -626,7 +616,8 @@ void ScanSession::save(const std::filesystem::path& path) const {
 
 ScanSession ScanSession::load(const std::filesystem::path& path, const RobotModel& robot,
                               const DepthCameraOptions& camera, const NoiseModelOptions& noise,
-                              const ScanOptions& options, const MultiGraspOptions& multi) {
+                              const ScanOptions& options, const MultiGraspOptions& multi,
+                              Json* extra) {
   std::ifstream f(path, std::ios::binary);
   if (!f) throw Error(path.string() + ": cannot open the checkpoint");
   auto bad = [&](const std::string& what) {
@@ -717,6 +708,18 @@ ScanSession ScanSession::load(const std::filesystem::path& path, const RobotMode
       s.nearHand = std::make_shared<NearHandGrid>(hand, options.planner.quality.t_hand_m,
                                                   options.planner.quality.near_hand_cell_m);
     }
+    // Tracking's object points as they were (from the model after the last view, or the
+    // planning model when the grasp began).
+    s.trackingFromFull = h.value("tracking_from_full_model", false);
+    if (s.holding && options.tracking.enabled) {
+      if (s.trackingFromFull) {
+        const ObjectModel m = session.model();
+        session.refreshTrackingModel(&m);
+      } else {
+        session.refreshTrackingModel();
+      }
+    }
+    if (extra) *extra = h.value("extra", Json());
     return session;
   } catch (const Json::exception& e) {
     throw bad(e.what());

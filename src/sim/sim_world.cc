@@ -219,4 +219,47 @@ std::pair<Iso3, JointVector> defaultGrasp(const RobotModel& model, const Triangl
   return {T, r.q};
 }
 
+namespace {
+Json jointsJson(const JointVector& q) {
+  Json j = Json::array();
+  for (int i = 0; i < q.size(); ++i) j.push_back(q[i]);
+  return j;
+}
+JointVector jointsFrom(const Json& j, int n) {
+  if (!j.is_array() || int(j.size()) != n)
+    throw Error("simulator state: joint vector of " + std::to_string(j.size()) + " values, the " +
+                "robot has " + std::to_string(n));
+  JointVector q(n);
+  for (int i = 0; i < n; ++i) q[i] = j.at(size_t(i)).get<double>();
+  return q;
+}
+}  // namespace
+
+Json SimWorld::state() const {
+  return {{"q", jointsJson(q)},
+          {"joint_error", jointsJson(jointError)},
+          {"T_B_C", isoJson(T_B_C)},
+          {"T_O_palm", isoJson(T_O_palm)},
+          {"held", held},
+          {"slipping", slipping},
+          {"drops", drops},
+          {"frame", frame_}};
+}
+
+void SimWorld::setState(const Json& j) {
+  try {
+    const int n = model_->variableCount();
+    q = jointsFrom(j.at("q"), n);
+    jointError = jointsFrom(j.at("joint_error"), n);
+    T_B_C = isoFrom(j.at("T_B_C"));
+    T_O_palm = isoFrom(j.at("T_O_palm"));
+    held = j.at("held").get<bool>();
+    slipping = j.at("slipping").get<bool>();
+    drops = j.at("drops").get<int>();
+    frame_ = j.at("frame").get<uint64_t>();
+  } catch (const Json::exception& e) {
+    throw Error(std::string("simulator state: ") + e.what());
+  }
+}
+
 }  // namespace inhand

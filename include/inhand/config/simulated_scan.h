@@ -19,10 +19,22 @@ struct SimulatedScan {
   DepthCameraOptions camera;  // the simulated sensor
 };
 
+// Checkpoints of a simulated scan (scan/checkpoint.h): the scan's state, the simulator's and
+// `extra` (the caller's, e.g. its arguments) in one file, rewritten atomically at every point the
+// scan can resume from.
+struct SimulatedScanCheckpoints {
+  std::filesystem::path file;  // empty: no checkpoints
+  bool resume = false;         // go on from `file` (written by a scan with the same config)
+  Json extra;
+};
+
 // `object`: the true mesh (frame O, the model's frame); the seed is config.sim.seed (noise) and
 // config.scan.planner.seed (IK). `progress.coverage` is set to the truth's coverage when empty.
-// Throws Error for invalid options or an object larger than the volume when held.
+// With checkpoints.resume the scan goes on from the file and ends as the scan that wrote it
+// would have. Throws Error for invalid options, an object larger than the volume when held, or
+// a checkpoint that cannot be read.
 SimulatedScan runSimulatedScan(const RobotModel& robot, const TriangleMesh& object,
-                               const ScanConfig& config, ScanProgress progress = {});
+                               const ScanConfig& config, ScanProgress progress = {},
+                               const SimulatedScanCheckpoints& checkpoints = {});
 
 }  // namespace inhand

@@ -27,8 +27,9 @@ fs::path resourceDirectory(const std::string& name, const fs::path& built_in);
 // Without commit() (an exception, an early return) the temporary is removed.
 class StagedDirectory {
  public:
-  // Throws Error when `target` exists and is not an empty directory.
-  explicit StagedDirectory(const fs::path& target);
+  // Throws Error when `target` exists and is not an empty directory (with `replace`: when it
+  // exists and is not a directory). commit() replaces whatever the target holds then.
+  explicit StagedDirectory(const fs::path& target, bool replace = false);
   ~StagedDirectory();
   StagedDirectory(const StagedDirectory&) = delete;
   StagedDirectory& operator=(const StagedDirectory&) = delete;

@@ -5,6 +5,8 @@
 #include <nlohmann/json.hpp>
 #include <string>
 
+#include "inhand/core/types.h"
+
 namespace inhand {
 
 using Json = nlohmann::json;
@@ -17,5 +19,11 @@ const Json& requireField(const Json& obj, const std::string& key, const std::str
 double requireNumber(const Json& obj, const std::string& key, const std::string& where);
 int requireInt(const Json& obj, const std::string& key, const std::string& where);
 std::string requireString(const Json& obj, const std::string& key, const std::string& where);
+
+// Exact round trips for checkpoints: a pose as its 16 row-major numbers, a vector as 3.
+Json isoJson(const Iso3& T);
+Iso3 isoFrom(const Json& j);  // throws Json::exception on a malformed value
+Json vecJson(const Vec3& v);
+Vec3 vecFrom(const Json& j);
 
 }  // namespace inhand

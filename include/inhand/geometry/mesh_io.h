@@ -9,7 +9,8 @@
 
 namespace inhand {
 
-// Imports a mesh file with assimp (OBJ, PLY, STL, OFF, glTF, DAE, 3DS, … everything assimp reads).
+// Imports a mesh file: PLY with readPly, everything else with assimp (OBJ, STL, OFF, glTF, DAE,
+// 3DS, …).
 // Missing material files are ignored; all sub-meshes are merged with their node transforms applied;
 // vertices are welded. Coordinates are taken as metres. Throws Error naming the file on failure.
 TriangleMesh importMesh(const std::filesystem::path& path);
@@ -29,7 +30,7 @@ struct PlyData {
 void writePly(const std::filesystem::path& path, const TriangleMesh& mesh,
               const std::vector<float>* variance_m2 = nullptr);
 
-// Reads a PLY file (binary little-endian or ASCII) keeping every per-vertex scalar property.
+// Reads a PLY file (ASCII, binary little- or big-endian) keeping every per-vertex scalar property.
 // Faces must be a list property; polygons are fan-triangulated. Throws Error naming the file.
 PlyData readPly(const std::filesystem::path& path);
 

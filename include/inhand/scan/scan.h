@@ -26,6 +26,8 @@ std::string handModeName(HandMode m);
 bool parseHandMode(const std::string& s, HandMode* out);
 
 // Why a scan (or one grasp's views) ended.
+struct ScanCheckpoint;
+
 enum class Termination {
   kRunning,                  // not ended
   kNoViewAboveThreshold,     // no reachable view reaches t_q (Alg. 1)
@@ -41,6 +43,7 @@ enum class Termination {
   kObjectTooLargeForHand,    // the open hand spans none of its extents
   kObjectTooLargeForVolume,  // larger than options.volume_size_m
   kNoStableGrasp,            // no first-grasp pose is force closure
+  kInterrupted,              // the caller stopped it (ScanProgress::interrupted, e.g. SIGINT)
 };
 // snake_case names as summary.json writes them (no_view_above_threshold, …; running).
 std::string terminationName(Termination t);
@@ -102,6 +105,14 @@ struct ScanProgress {
   // Each in-hand frame as ScanSession::addFrame handled it, with the joints and the camera pose
   // it was given (may be empty).
   std::function<void(const FrameReport&, const JointVector& q, const Iso3& T_B_C)> frame;
+  // Asked before each step and at every frame: true ends the scan at the next frame with
+  // Termination::kInterrupted and the model so far (frames after it are not fused). For a
+  // SIGINT handler's flag; may be empty.
+  std::function<bool()> interrupted;
+  // Called at every point a scan can resume from (scan/checkpoint.h): when a grasp's views begin
+  // and after each view. May be empty.
+  std::function<void(const ScanCheckpoint&)> checkpoint;
+  bool stopRequested() const { return interrupted && interrupted(); }
 };
 
 struct ScanResult {

@@ -21,6 +21,7 @@
 #include <string>
 #include <vector>
 
+#include "inhand/core/json_util.h"
 #include "inhand/robot/robot_interface.h"
 #include "inhand/scan/multi_grasp.h"
 #include "inhand/sensor/depth_sensor.h"
@@ -79,6 +80,7 @@ class ScanSession {
   Iso3 cameraPose() const;
   // Log lines and ground-truth coverage (ScanProgress) for what follows.
   void setProgress(const ScanProgress& progress);
+  const ScanProgress& progress() const;
   void log(const std::string& line) const;  // a line to the progress log (if any)
 
   // The object is now in the hand: palm at T_O_palm in the object frame, the robot at q.
@@ -142,13 +144,15 @@ class ScanSession {
   void finish(Termination termination, const std::string& message = "");
   Summary summary() const;
 
-  // A checkpoint: the volume, the grasp, the views so far and the counters, written atomically.
-  // load() resumes from it with the same robot, camera and options (the volume's size and voxel
-  // must match the file's; the error names the file and what differs).
-  void save(const std::filesystem::path& path) const;
+  // A checkpoint: the volume, the grasp, the views so far and the counters, written atomically,
+  // with the caller's `extra` (e.g. its own loop's state; null: none). load() resumes from it
+  // with the same robot, camera and options (the volume's size and voxel must match the file's;
+  // the error names the file and what differs) and gives back `extra`.
+  void save(const std::filesystem::path& path, const Json& extra = Json()) const;
   static ScanSession load(const std::filesystem::path& path, const RobotModel& robot,
                           const DepthCameraOptions& camera, const NoiseModelOptions& noise,
-                          const ScanOptions& options, const MultiGraspOptions& multi);
+                          const ScanOptions& options, const MultiGraspOptions& multi,
+                          Json* extra = nullptr);
 
  private:
   struct State;
@@ -163,7 +167,11 @@ class ScanSession {
 
 // Drives the current grasp's views with a robot and a sensor: points the camera
 // (cameraPose), then for each view the session plans, executes its waypoints, adding every frame
-// the robot reports on the way, until nextView says the grasp is done. Returns why.
-Termination runGraspViews(ScanSession& session, RobotInterface& robot, DepthSensor& sensor);
+// the robot reports on the way, until nextView says the grasp is done. Calls `after_view` after
+// each view (e.g. to write a checkpoint). Ends with kInterrupted when the session's
+// progress.interrupted says so (checked before each view and at every frame; the view under way
+// keeps the frames fused before). Returns why it ended.
+Termination runGraspViews(ScanSession& session, RobotInterface& robot, DepthSensor& sensor,
+                          const std::function<void()>& after_view = {});
 
 }  // namespace inhand

@@ -4,6 +4,7 @@
 // scan uses; only they see the true object.
 #include <memory>
 
+#include "inhand/core/json_util.h"
 #include "inhand/geometry/ray_scene.h"
 #include "inhand/planning/view_quality.h"
 #include "inhand/robot/robot_interface.h"
@@ -68,6 +69,10 @@ class SimWorld {
   Iso3 restPose() const;
   // Whether the hand at q, T_O_palm holds the object (SimOptions::check_hold).
   bool graspHolds() const;
+  // The world's changing state (joints, arm error, camera, grasp, held, slipping, drops, the
+  // frame counter that seeds the noise), for checkpoints: setState(state()) continues exactly.
+  Json state() const;
+  void setState(const Json& state);  // throws Error on a state of another robot or malformed
 
  private:
   const RobotModel* model_;
