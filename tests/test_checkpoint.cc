@@ -1,0 +1,177 @@
+// Checkpoints and resume (scan/checkpoint.h): a scan stopped during a view, during a re-grasp or
+// during a later grasp's views, resumed from its last checkpoint, ends as the scan that was
+// never stopped: the same views, grasps and model, voxel for voxel.
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+#include <string>
+
+#include "inhand/config/simulated_scan.h"
+#include "inhand/core/error.h"
+#include "inhand/geometry/builtin_objects.h"
+#include "inhand/scan/checkpoint.h"
+#include "test_util.h"
+
+using namespace inhand;
+namespace fs = std::filesystem;
+
+namespace {
+
+// A short two-grasp scan from the table: coarse voxels, few directions, two views per grasp.
+ScanConfig fastConfig(bool tracking) {
+  ScanConfig c;
+  c.scan.voxel_m = 0.004;
+  c.scan.planner.directions = 60;
+  c.scan.planner.rolls = 4;
+  c.scan.initial_views = 2;
+  c.scan.max_views = 2;
+  c.multi.max_grasps = 2;
+  c.sim.frame_subsample = 8;
+  c.scan.tracking.enabled = tracking;
+  if (tracking) c.sim.arm_error_m = 0.01;
+  return c;
+}
+
+const TriangleMesh& object() {
+  static const TriangleMesh m = loadObject("builtin:coffee_can");
+  return m;
+}
+
+void expectSameScan(const SimulatedScan& a, const SimulatedScan& b) {
+  const MultiGraspResult &x = a.result, &y = b.result;
+  EXPECT_EQ(terminationName(x.scan.termination), terminationName(y.scan.termination));
+  ASSERT_EQ(x.grasps.size(), y.grasps.size());
+  for (size_t g = 0; g < x.grasps.size(); ++g) {
+    EXPECT_EQ(x.grasps[g].views, y.grasps[g].views) << g;
+    EXPECT_TRUE(x.grasps[g].T_O_palm.isApprox(y.grasps[g].T_O_palm, 0)) << g;
+    EXPECT_EQ(x.grasps[g].attempts, y.grasps[g].attempts) << g;
+    EXPECT_EQ(x.grasps[g].model.mesh.vertices.size(), y.grasps[g].model.mesh.vertices.size());
+  }
+  ASSERT_EQ(x.scan.views.size(), y.scan.views.size());
+  for (size_t v = 0; v < x.scan.views.size(); ++v) {
+    EXPECT_EQ(x.scan.views[v].dir_O, y.scan.views[v].dir_O) << v;
+    EXPECT_EQ(x.scan.views[v].frames, y.scan.views[v].frames) << v;
+  }
+  EXPECT_EQ(x.scan.frames, y.scan.frames);
+  EXPECT_EQ(a.frames_fused_in_hand, b.frames_fused_in_hand);
+  EXPECT_EQ(a.palm_error_median_m, b.palm_error_median_m);
+  ASSERT_EQ(x.scan.model.mesh.vertices.size(), y.scan.model.mesh.vertices.size());
+  ASSERT_EQ(x.scan.model.mesh.triangles.size(), y.scan.model.mesh.triangles.size());
+  for (size_t i = 0; i < x.scan.model.mesh.vertices.size(); ++i) {
+    ASSERT_EQ(x.scan.model.mesh.vertices[i], y.scan.model.mesh.vertices[i]) << i;
+    ASSERT_EQ(x.scan.model.variance[i], y.scan.model.variance[i]) << i;
+  }
+  EXPECT_EQ(x.table_top.has_value(), y.table_top.has_value());
+  if (x.table_top && y.table_top) {
+    EXPECT_EQ(x.table_top->attempts, y.table_top->attempts);
+    EXPECT_EQ(x.table_top->poses.size(), y.table_top->poses.size());
+  }
+}
+
+// Where to stop a scan: at the n-th in-hand frame, or when the log says a grasp's views ended.
+struct StopAt {
+  int frame = -1;            // stop once this many in-hand frames were handled
+  std::string log_contains;  // stop at the first log line containing this
+};
+
+SimulatedScan stoppedThenResumed(const ScanConfig& config, const StopAt& at,
+                                 const fs::path& checkpoint, SimulatedScan* stopped) {
+  bool stop = false;
+  int frames = 0;
+  ScanProgress p;
+  p.frame = [&](const FrameReport&, const JointVector&, const Iso3&) {
+    if (at.frame >= 0 && ++frames >= at.frame) stop = true;
+  };
+  p.log = [&](const std::string& line) {
+    if (!at.log_contains.empty() && line.find(at.log_contains) != std::string::npos) stop = true;
+  };
+  p.interrupted = [&] { return stop; };
+  SimulatedScanCheckpoints cp;
+  cp.file = checkpoint;
+  cp.extra = {{"who", "test"}};
+  *stopped = runSimulatedScan(test::wam(), object(), config, p, cp);
+  EXPECT_TRUE(fs::exists(checkpoint));
+  EXPECT_EQ(readScanCheckpointExtra(checkpoint).at("caller").at("who"), "test");
+  cp.resume = true;
+  return runSimulatedScan(test::wam(), object(), config, {}, cp);
+}
+
+struct Reference {
+  SimulatedScan scan;
+  int frames = 0;  // in-hand frames
+  explicit Reference(const ScanConfig& config) {
+    ScanProgress p;
+    p.frame = [&](const FrameReport&, const JointVector&, const Iso3&) { ++frames; };
+    scan = runSimulatedScan(test::wam(), object(), config, p);
+  }
+};
+
+const Reference& reference(bool tracking) {
+  static const Reference plain(fastConfig(false)), tracked(fastConfig(true));
+  return tracking ? tracked : plain;
+}
+
+}  // namespace
+
+TEST(Checkpoint, TheReferenceScanHasTwoGraspsToStopIn) {
+  const Reference& r = reference(false);
+  ASSERT_EQ(r.scan.result.grasps.size(), 2u) << terminationName(r.scan.result.scan.termination);
+  EXPECT_GE(r.scan.result.grasps[0].views, 2);
+  EXPECT_GE(r.scan.result.grasps[1].views, 1);
+}
+
+TEST(Checkpoint, StoppedDuringTheFirstGraspsSecondViewResumesToTheSameScan) {
+  const Reference& r = reference(false);
+  const int firstView = r.scan.result.scan.views.at(0).frames;
+  test::TempDir dir;
+  SimulatedScan stopped;
+  const SimulatedScan resumed = stoppedThenResumed(fastConfig(false), {firstView + 2, ""},
+                                                   dir.path() / "scan.inhand", &stopped);
+  EXPECT_EQ(stopped.result.scan.termination, Termination::kInterrupted);
+  EXPECT_LT(stopped.result.scan.frames, r.scan.result.scan.frames);
+  EXPECT_FALSE(stopped.result.scan.model.mesh.vertices.empty());  // the model so far
+  expectSameScan(r.scan, resumed);
+}
+
+TEST(Checkpoint, StoppedDuringTheRegraspResumesToTheSameScan) {
+  const Reference& r = reference(false);
+  test::TempDir dir;
+  SimulatedScan stopped;
+  // "grasp 1: N views (...)" is logged when its views have ended, before the put-down, the
+  // grasp planning and the pick-up: the stop comes during the re-grasp.
+  const SimulatedScan resumed = stoppedThenResumed(fastConfig(false), {-1, "grasp 1: "},
+                                                   dir.path() / "scan.inhand", &stopped);
+  EXPECT_EQ(stopped.result.scan.termination, Termination::kInterrupted);
+  EXPECT_EQ(stopped.result.grasps.size(), 1u);
+  expectSameScan(r.scan, resumed);
+}
+
+TEST(Checkpoint, StoppedDuringTheSecondGraspWithTrackingResumesToTheSameScan) {
+  const Reference& r = reference(true);
+  ASSERT_EQ(r.scan.result.grasps.size(), 2u);
+  test::TempDir dir;
+  SimulatedScan stopped;
+  const SimulatedScan resumed = stoppedThenResumed(fastConfig(true), {r.frames - 3, ""},
+                                                   dir.path() / "scan.inhand", &stopped);
+  EXPECT_EQ(stopped.result.scan.termination, Termination::kInterrupted);
+  EXPECT_EQ(stopped.result.grasps.size(), 1u);  // the second grasp's views were under way
+  expectSameScan(r.scan, resumed);
+}
+
+TEST(Checkpoint, RefusesAFileThatIsNotOneAndNamesIt) {
+  test::TempDir dir;
+  const fs::path bad = dir.path() / "not_a_checkpoint.inhand";
+  std::ofstream(bad) << "INHAND-SESSION 1\n5\n{\"a\":";
+  SimulatedScanCheckpoints cp;
+  cp.file = bad;
+  cp.resume = true;
+  try {
+    runSimulatedScan(test::wam(), object(), fastConfig(false), {}, cp);
+    FAIL() << "no error";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("not_a_checkpoint.inhand"), std::string::npos) << e.what();
+  }
+  cp.file = dir.path() / "missing.inhand";
+  EXPECT_THROW(runSimulatedScan(test::wam(), object(), fastConfig(false), {}, cp), Error);
+}
