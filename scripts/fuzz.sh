@@ -22,6 +22,7 @@ printf '%-14s %8s %12s %8s %8s\n' target seconds executions corpus crashes
 for t in "${targets[@]}"; do
   corpus="build-fuzz/corpus/$t"
   artifacts="build-fuzz/artifacts/$t/"
+  rm -rf "$artifacts"
   mkdir -p "$corpus" "$artifacts"
   cp -n fuzz/corpus/"$t"/* "$corpus"/ 2> /dev/null || true
   log="build-fuzz/fuzz_$t.log"

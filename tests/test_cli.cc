@@ -6,6 +6,11 @@
 #include <fstream>
 #include <functional>
 
+#include <fcntl.h>
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
 #include "inhand/core/file_util.h"
 #include "inhand/core/json_util.h"
 #include "inhand/geometry/builtin_objects.h"
@@ -561,4 +566,145 @@ TEST(Cli, ScanOfTheCrackerBoxMatchesTheRecordedScan) {
         }
       };
   same(got, want, "summary");
+}
+
+namespace {
+// Starts `inhand ARGS` (output to LOG) and returns its pid.
+pid_t spawn(const std::vector<std::string>& args, const fs::path& log) {
+  const pid_t pid = fork();
+  if (pid == 0) {
+    const int fd = open(log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    dup2(fd, 1);
+    dup2(fd, 2);
+    std::vector<char*> argv{const_cast<char*>(INHAND_BINARY)};
+    for (const std::string& a : args) argv.push_back(const_cast<char*>(a.c_str()));
+    argv.push_back(nullptr);
+    execv(INHAND_BINARY, argv.data());
+    _exit(127);
+  }
+  return pid;
+}
+int waitExit(pid_t pid) {
+  int status = 0;
+  waitpid(pid, &status, 0);
+  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+}
+}  // namespace
+
+// SIGINT during a scan: it ends cleanly with the model so far, termination "interrupted", exit
+// status 130 and its checkpoint; `inhand scan --resume` goes on and ends with the model of the
+// scan that was never interrupted, byte for byte. Whenever the signal lands, the outcome must be
+// the same.
+TEST(Cli, ScanInterruptedBySigintResumesToTheUninterruptedModel) {
+  test::TempDir dir;
+  writeTextAtomically(dir.path() / "quick.json", kQuickConfig);
+  const std::string common = "--object builtin:coffee_can --max-grasps 2 --max-views 2 --config " +
+                             (dir.path() / "quick.json").string();
+  const fs::path full = dir.path() / "full", cut = dir.path() / "cut";
+  ASSERT_EQ(run("scan " + common + " --out " + full.string(), dir).code, 0);
+  EXPECT_FALSE(fs::exists(full / "checkpoint.inhand"));  // a scan that ended keeps none
+
+  const pid_t pid =
+      spawn({"scan", "--object", "builtin:coffee_can", "--max-grasps", "2", "--max-views", "2",
+             "--config", (dir.path() / "quick.json").string(), "--out", cut.string()},
+            dir.path() / "cut.log");
+  // The first checkpoint is written when the first grasp's views begin; stop a moment later,
+  // during its views.
+  for (int i = 0; i < 2400 && !fs::exists(cut / "checkpoint.inhand"); ++i) usleep(50000);
+  ASSERT_TRUE(fs::exists(cut / "checkpoint.inhand"));
+  usleep(300000);
+  kill(pid, SIGINT);
+  ASSERT_EQ(waitExit(pid), 130) << readTextFile(dir.path() / "cut.log");
+  const Json stopped = readJsonFile(cut / "summary.json");
+  EXPECT_EQ(stopped.at("termination"), "interrupted");
+  EXPECT_TRUE(fs::exists(cut / "model.ply"));
+  EXPECT_TRUE(fs::exists(cut / "checkpoint.inhand"));
+
+  const Result resumed = run("scan --resume " + cut.string(), dir);
+  ASSERT_EQ(resumed.code, 0) << resumed.output;
+  EXPECT_NE(resumed.output.find("resumed after"), std::string::npos) << resumed.output;
+  EXPECT_FALSE(fs::exists(cut / "checkpoint.inhand"));
+  EXPECT_EQ(readTextFile(cut / "model.ply"), readTextFile(full / "model.ply"));
+  const Json a = readJsonFile(full / "summary.json"), b = readJsonFile(cut / "summary.json");
+  EXPECT_EQ(a.at("termination"), b.at("termination"));
+  EXPECT_EQ(a.at("frames"), b.at("frames"));
+  EXPECT_EQ(a.at("views").size(), b.at("views").size());
+  EXPECT_EQ(a.at("options"), b.at("options"));
+  // --resume takes no other options, and needs a checkpoint.
+  Result r = run("scan --resume " + cut.string() + " --seed 3", dir);
+  EXPECT_NE(r.code, 0);
+  EXPECT_NE(r.output.find("--resume"), std::string::npos) << r.output;
+  r = run("scan --resume " + full.string(), dir);
+  EXPECT_NE(r.code, 0);
+  EXPECT_NE(r.output.find("no checkpoint.inhand"), std::string::npos) << r.output;
+}
+
+// The bad inputs a user meets with files from other tools: each a clean non-zero exit whose
+// message names the file (and the key or line), and nothing written.
+TEST(Cli, BadFilesFromOtherToolsAreRefusedByName) {
+  test::TempDir dir;
+  auto expectError = [&](const std::string& args, const std::string& needle) {
+    const Result r = run(args, dir);
+    EXPECT_NE(r.code, 0) << args;
+    EXPECT_NE(r.output.find(needle), std::string::npos) << args << "\n" << r.output;
+  };
+  const fs::path frames = dir.path() / "frames";
+  ASSERT_EQ(run("render --object builtin:mug --views 2 --out " + frames.string(), dir).code, 0);
+  // A truncated PNG.
+  {
+    const fs::path png = frames / "depth_0001.png";
+    std::string bytes = readTextFile(png);
+    ASSERT_GT(bytes.size(), 200u);
+    std::ofstream(png, std::ios::binary | std::ios::trunc).write(bytes.data(), 200);
+    expectError("fuse --frames " + frames.string() + " --out " + (dir.path() / "m.ply").string(),
+                "depth_0001.png");
+  }
+  // A NaN in a pose (JSON has no NaN: written as NaN it is malformed, as null it is no number).
+  fs::create_directories(dir.path() / "nan");
+  for (const std::string nan : {"NaN", "null"}) {
+    Json j = readJsonFile(frames / "frames.json");
+    std::string text = j.dump();
+    const std::string first = j["frames"][0]["T_O_C"][0].dump();
+    text.replace(text.find("\"T_O_C\":[") + 9, first.size(), nan);
+    writeTextAtomically(dir.path() / "nan" / "frames.json", text);
+    fs::copy(frames / "depth_0000.png", dir.path() / "nan" / "depth_0000.png",
+             fs::copy_options::overwrite_existing);
+    expectError("fuse --frames " + (dir.path() / "nan").string() + " --out " +
+                    (dir.path() / "m.ply").string(),
+                "frames.json");
+  }
+  // A malformed OBJ.
+  writeTextAtomically(dir.path() / "bad.obj", "v 0 0 0\nv 1 0 0\nf 1 2 7\nf a b c\n");
+  expectError("scan --object " + (dir.path() / "bad.obj").string() + " --out " +
+                  (dir.path() / "out").string(),
+              "bad.obj");
+  // A config value of the wrong type: the key is named.
+  writeTextAtomically(dir.path() / "typed.json", R"({"planner": {"t_q": "high"}})");
+  expectError("scan --object builtin:mug --config " + (dir.path() / "typed.json").string() +
+                  " --out " + (dir.path() / "out").string(),
+              "planner.t_q");
+  // A URDF with a loop: a link that is its own ancestor.
+  std::string urdf = readTextFile(fs::path(INHAND_SOURCE_DIR) / "data/robots/wam_barretthand.urdf");
+  const std::string child = "<parent link=\"wam_link3\"/><child link=\"wam_link4\"/>";
+  ASSERT_NE(urdf.find(child), std::string::npos);
+  urdf.replace(urdf.find(child), child.size(),
+               "<parent link=\"wam_link3\"/><child link=\"wam_link2\"/>");
+  writeTextAtomically(dir.path() / "loop.urdf", urdf);
+  expectError("robot --config " +
+                  (fs::path(INHAND_SOURCE_DIR) / "data/robots/wam_barretthand.json").string() +
+                  " --urdf " + (dir.path() / "loop.urdf").string(),
+              "loop.urdf");
+  // A checkpoint that is not one.
+  fs::create_directories(dir.path() / "fake");
+  writeTextAtomically(dir.path() / "fake" / "checkpoint.inhand", "INHAND-SESSION 1\n3\n{}x");
+  expectError("scan --resume " + (dir.path() / "fake").string(), "checkpoint.inhand");
+  // Nothing was written beside the inputs.
+  EXPECT_FALSE(fs::exists(dir.path() / "m.ply"));
+  EXPECT_FALSE(fs::exists(dir.path() / "out"));
+  std::vector<std::string> left;
+  for (const auto& e : fs::directory_iterator(dir.path()))
+    left.push_back(e.path().filename().string());
+  std::sort(left.begin(), left.end());
+  EXPECT_EQ(left, (std::vector<std::string>{"bad.obj", "fake", "frames", "loop.urdf", "nan",
+                                            "typed.json"}));
 }
