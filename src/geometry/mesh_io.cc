@@ -6,7 +6,9 @@
 #include <assimp/Importer.hpp>
 
 #include <algorithm>
+#include <cctype>
 #include <cmath>
+#include <cstdlib>
 #include <cstring>
 #include <fstream>
 #include <functional>
@@ -20,6 +22,126 @@ namespace inhand {
 
 namespace fs = std::filesystem;
 
+namespace {
+
+// A whitespace-separated number starting at *p (advanced past it); false when there is none.
+bool parseNumber(const char*& p, const char* end, double* out) {
+  while (p < end && (*p == ' ' || *p == '\t' || *p == '\r')) ++p;
+  if (p >= end || *p == '\n') return false;
+  char* stop = nullptr;
+  std::string token;
+  const char* q = p;
+  while (q < end && !std::isspace(static_cast<unsigned char>(*q))) ++q;
+  token.assign(p, q);
+  *out = std::strtod(token.c_str(), &stop);
+  if (stop == token.c_str() || *stop != '\0') return false;
+  p = q;
+  return true;
+}
+
+// Wavefront OBJ: `v x y z [w]` and `f` with `i`, `i/t`, `i//n` or `i/t/n` corners (negative:
+// relative to the end), polygons fan-triangulated; every other statement ignored. Errors name
+// the line.
+TriangleMesh readObj(const fs::path& path) {
+  const std::string data = readTextFile(path);
+  TriangleMesh mesh;
+  const char* p = data.data();
+  const char* end = p + data.size();
+  int lineNo = 0;
+  auto fail = [&](const std::string& what) {
+    return Error(path.string() + ": line " + std::to_string(lineNo) + ": " + what);
+  };
+  std::vector<int> corners;
+  while (p < end) {
+    ++lineNo;
+    const char* eol = static_cast<const char*>(std::memchr(p, '\n', size_t(end - p)));
+    if (!eol) eol = end;
+    const char* q = p;
+    while (q < eol && (*q == ' ' || *q == '\t')) ++q;
+    if (eol - q >= 2 && q[0] == 'v' && (q[1] == ' ' || q[1] == '\t')) {
+      q += 2;
+      double c[3];
+      for (double& x : c)
+        if (!parseNumber(q, eol, &x)) throw fail("a vertex needs three numbers (v x y z)");
+      mesh.vertices.emplace_back(float(c[0]), float(c[1]), float(c[2]));
+    } else if (eol - q >= 2 && q[0] == 'f' && (q[1] == ' ' || q[1] == '\t')) {
+      q += 2;
+      corners.clear();
+      while (true) {
+        while (q < eol && (*q == ' ' || *q == '\t' || *q == '\r')) ++q;
+        if (q >= eol) break;
+        char* stop = nullptr;
+        const long i = std::strtol(q, &stop, 10);
+        if (stop == q) throw fail("a face corner is not a vertex index");
+        const long n = long(mesh.vertices.size());
+        const long index = i > 0 ? i - 1 : n + i;  // 1-based, or relative when negative
+        if (i == 0 || index < 0 || index >= n)
+          throw fail("face vertex index " + std::to_string(i) + " is not one of the " +
+                     std::to_string(n) + " vertices so far");
+        corners.push_back(int(index));
+        q = stop;
+        while (q < eol && !std::isspace(static_cast<unsigned char>(*q))) ++q;  // /t/n
+      }
+      if (corners.size() < 3) throw fail("a face needs three corners or more");
+      for (size_t k = 1; k + 1 < corners.size(); ++k)
+        mesh.triangles.emplace_back(corners[0], corners[k], corners[k + 1]);
+    }
+    p = eol + (eol < end ? 1 : 0);
+  }
+  return mesh;
+}
+
+// STL, binary (84-byte header and count, 50 bytes per triangle: the size must agree) or ASCII
+// (`vertex x y z`, three per facet).
+TriangleMesh readStl(const fs::path& path) {
+  const std::string data = readTextFile(path);
+  TriangleMesh mesh;
+  if (data.size() >= 84) {
+    uint32_t n = 0;
+    std::memcpy(&n, data.data() + 80, 4);
+    if (data.size() == 84 + 50 * uint64_t(n)) {
+      mesh.vertices.reserve(3 * size_t(n));
+      for (uint32_t t = 0; t < n; ++t) {
+        const char* f = data.data() + 84 + 50 * size_t(t) + 12;
+        for (int k = 0; k < 3; ++k) {
+          float v[3];
+          std::memcpy(v, f + 12 * k, 12);
+          mesh.vertices.emplace_back(v[0], v[1], v[2]);
+        }
+        mesh.triangles.emplace_back(int(3 * t), int(3 * t + 1), int(3 * t + 2));
+      }
+      return mesh;
+    }
+  }
+  if (data.compare(0, 5, "solid") != 0)
+    throw Error(path.string() + ": not an STL file (binary: " + std::to_string(data.size()) +
+                " bytes do not match its triangle count; ASCII: no 'solid')");
+  std::istringstream in(data);
+  std::string word;
+  int inFacet = 0;
+  while (in >> word) {
+    if (word == "vertex") {
+      double x, y, z;
+      if (!(in >> x >> y >> z))
+        throw Error(path.string() + ": STL vertex " + std::to_string(mesh.vertices.size() + 1) +
+                    " needs three numbers");
+      mesh.vertices.emplace_back(float(x), float(y), float(z));
+      if (++inFacet == 3) {
+        const int b = int(mesh.vertices.size()) - 3;
+        mesh.triangles.emplace_back(b, b + 1, b + 2);
+      }
+    } else if (word == "facet") {
+      inFacet = 0;
+    } else if (word == "endfacet" && inFacet != 3) {
+      throw Error(path.string() + ": STL facet " + std::to_string(mesh.triangles.size() + 1) +
+                  " has " + std::to_string(inFacet) + " vertices, not 3");
+    }
+  }
+  return mesh;
+}
+
+}  // namespace
+
 TriangleMesh importMesh(const fs::path& path) {
   std::error_code ec;
   if (!fs::exists(path, ec)) throw Error(path.string() + ": no such mesh file");
@@ -32,6 +154,14 @@ TriangleMesh importMesh(const fs::path& path) {
   // properties such as inhand's variance + colour models, and hangs on some malformed
   // big-endian files found by fuzzing).
   if (ext == ".ply") return welded(readPly(path).mesh);
+  // OBJ and STL: our own readers too (assimp 5.2's OBJ importer leaks, and takes gigabytes, on
+  // some malformed files found by fuzzing); their errors name the line.
+  if (ext == ".obj" || ext == ".stl") {
+    TriangleMesh mesh = ext == ".obj" ? readObj(path) : readStl(path);
+    std::string problem = validateMesh(mesh);
+    if (!problem.empty()) throw Error(path.string() + ": mesh " + problem);
+    return welded(mesh);
+  }
   Assimp::Importer importer;
   importer.SetPropertyInteger(AI_CONFIG_PP_RVC_FLAGS,
                               aiComponent_NORMALS | aiComponent_COLORS | aiComponent_TEXCOORDS |

@@ -240,11 +240,25 @@ struct RobotModelLoader {
               [](const JointInfo& a, const JointInfo& b) { return a.name < b.name; });
     for (int ji = 0; ji < int(m.joints_.size()); ++ji) {
       JointInfo& j = m.joints_[ji];
+      if (m.links_[j.childLink].parentJoint >= 0 || j.childLink == j.parentLink)
+        throw Error(urdfName + ": link '" + m.links_[j.childLink].name +
+                    "' is the child of two joints, or of its own joint: not a tree");
       m.links_[j.childLink].parentJoint = ji;
       if (j.type != JointInfo::Type::kFixed) {
         j.variable = int(m.variableJoint_.size());
         m.variableJoint_.push_back(ji);
       }
+    }
+    // No loops: from every link the walk up its parents ends within the link count (the walks
+    // below, the chain and the topological order, rely on it).
+    const int nLinks = int(m.links_.size());
+    for (int l = 0; l < nLinks; ++l) {
+      int steps = 0;
+      for (int link = l; m.links_[link].parentJoint >= 0;
+           link = m.joints_[m.links_[link].parentJoint].parentLink)
+        if (++steps > nLinks)
+          throw Error(urdfName + ": the joints form a loop through link '" + m.links_[l].name +
+                      "': not a tree");
     }
     m.rootLink_ = m.linkIndex(urdf.getRoot()->name);
     // Topological order: a joint after the joint of its parent link.

@@ -9,8 +9,8 @@
 
 namespace inhand {
 
-// Imports a mesh file: PLY with readPly, everything else with assimp (OBJ, STL, OFF, glTF, DAE,
-// 3DS, …).
+// Imports a mesh file: PLY, OBJ and STL with inhand's own readers (errors name the line or
+// field), everything else with assimp (OFF, glTF, DAE, 3DS, …).
 // Missing material files are ignored; all sub-meshes are merged with their node transforms applied;
 // vertices are welded. Coordinates are taken as metres. Throws Error naming the file on failure.
 TriangleMesh importMesh(const std::filesystem::path& path);
