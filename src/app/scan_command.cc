@@ -212,12 +212,15 @@ Json tableTopJson(const TableTopRecord& t) {
           {"seconds", t.seconds}};
 }
 
-// Exit status: 3 no view reachable, 4 no grasp, 6 no object to scan, 130 interrupted
+// Exit status: 3 no view reachable, 4 no grasp, 6 no object to scan, 7 object lost from the
+// hand (with no re-grasp left), 130 interrupted
 // (docs/commands.md).
 int exitStatus(Termination t) {
   switch (t) {
     case Termination::kInterrupted:
       return 130;
+    case Termination::kObjectLost:
+      return 7;
     case Termination::kNoReachableView:
       return 3;
     case Termination::kNoReachableGrasp:
@@ -388,6 +391,19 @@ int runScan(const ScanArgs& given) {
       {"rejected_by_tracking", sim.frames_rejected},
       {"palm_error_mm",
        {{"median", 1000 * sim.palm_error_median_m}, {"p95", 1000 * sim.palm_error_p95_m}}}};
+  summary["frames_not_fused"] = {{"tracking", r.frames_rejected},
+                                 {"dropped_or_empty", r.frames_dropped},
+                                 {"off_path", r.frames_off_path},
+                                 {"object_not_in_hand", r.frames_unsupported}};
+  summary["frames_repaired"] = r.frames_repaired;
+  summary["object_drops"] = sim.drops;
+  const SimFaultLog& f = sim.faults;
+  summary["faults_injected"] = {{"dropped_frames", f.dropped_frames},
+                                {"corrupted_frames", f.corrupted_frames},
+                                {"pose_jumps", f.pose_jumps},
+                                {"stopped_short", f.stopped_short},
+                                {"slips", f.slips},
+                                {"object_drops", f.object_drops}};
   summary["mean_entropy"] = r.model.meanEntropy();
   summary["observed_fraction"] = r.model.observedAreaFraction();
   summary["vertices"] = r.model.mesh.vertices.size();

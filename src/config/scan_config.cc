@@ -121,6 +121,18 @@ void visitConfig(V& v, ScanConfig& c) {
         t.integer("max_object_points", o.max_object_points,
                   "the model's observed surface, subsampled to this many points");
       });
+  v.object("checks", "in-hand frames that are not fused (docs/reliability.md)", [&](V& k) {
+    FrameChecks& o = s.checks;
+    k.num("min_valid_fraction", o.min_valid_fraction,
+          "fewer valid depth pixels than this fraction: an empty frame");
+    k.num("max_path_deviation_rad", o.max_path_deviation_rad,
+          "joints farther from the planned path: a jump, not fused (0: no check), rad");
+    k.num("min_support", o.min_support,
+          "the model's points in view the frame must bear out, or the object is not in the hand "
+          "(0: no check)");
+    k.integer("min_points", o.min_points, "… when at least this many are in view");
+    k.integer("lost_after", o.lost_after, "that many such frames in a row: object_lost");
+  });
   v.integer("max_grasps", m.max_grasps, "grasps in all (1: no re-grasping)");
   v.choice("start", c.start, kStarts, "table: from the table top (§V); held: at a given grasp");
   v.object("table_top", "the table-top stage", [&](V& t) {
@@ -184,6 +196,17 @@ void visitConfig(V& v, ScanConfig& c) {
           "joint offsets putting the palm this far from the reported joints' FK at home, m");
     o.choice("pick_up", c.sim.pick_up_first_contact, kPickUps,
              "the simulated pick-up: palm backed off, or a guarded move to first contact");
+    o.object("faults", "faults injected (all off by default; docs/reliability.md)", [&](V& f) {
+      SimFaults& x = c.sim.faults;
+      f.num("dropped_frames", x.dropped_frames, "fraction of frames that never arrive");
+      f.num("corrupted_frames", x.corrupted_frames,
+            "fraction corrupted: zeros, NaNs, a stripe of wrong depth (in turn)");
+      f.num("pose_jumps", x.pose_jumps, "fraction of joint states with an arm joint 0.3 rad off");
+      f.num("stopped_short", x.stopped_short, "fraction of motions stopped part-way");
+      f.num("slip_m", x.slip_m, "the object slips this far in the hand once per grasp, m");
+      f.integer("drop_in_motion", x.drop_in_motion,
+                "the object falls out of the hand during this motion (0-based; -1: never)");
+    });
   });
 }
 

@@ -84,6 +84,7 @@ SimulatedScan runSimulatedScan(const RobotModel& model, const TriangleMesh& obje
   }
   out.metrics = truth.evaluate(out.result.scan.model);
   out.drops = world.drops;
+  out.faults = world.faults;
   out.frames_rejected = rejected;
   out.frames_fused_in_hand = int(palmError.size());
   if (!palmError.empty()) {

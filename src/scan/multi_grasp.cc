@@ -41,6 +41,22 @@ std::string MultiGraspOptions::validate() const {
 namespace {
 using Clock = std::chrono::steady_clock;
 
+// A frame from the sensor that can be used: one that arrived (the camera's size) with depth in
+// it, non-finite depths as no return; up to `tries` captures. nullopt when none came.
+std::optional<DepthImage> captureUsable(DepthSensor& sensor, const FrameChecks& checks,
+                                        int tries = 5) {
+  const CameraIntrinsics& K = sensor.camera().intrinsics;
+  for (int t = 0; t < tries; ++t) {
+    DepthImage d = sensor.capture();
+    if (d.width != K.width || d.height != K.height) continue;
+    for (float& z : d.depth_m)
+      if (!(std::isfinite(z) && z >= 0)) z = 0;
+    if (d.validCount() < checks.min_valid_fraction * double(d.depth_m.size())) continue;
+    return d;
+  }
+  return std::nullopt;
+}
+
 void validate(const ScanOptions& options, const MultiGraspOptions& multi) {
   std::string problem = options.validate();
   if (problem.empty()) problem = multi.validate();
@@ -129,9 +145,14 @@ PickOutcome pickAndVerify(ScanSession& session, RobotInterface& robot, DepthSens
     double inHand = -1, onTable = -1;
     Aabb heldBox;
     for (const Vec3& p : held_B) heldBox.extend(p);
-    if (const std::optional<Iso3> aim = m.camera().aimAt(heldBox.center())) {
+    const std::optional<Iso3> aim = m.camera().aimAt(heldBox.center());
+    std::optional<DepthImage> frame;
+    if (aim) {
       sensor.setPose(*aim);
-      const DepthImage d = sensor.capture();
+      frame = captureUsable(sensor, options.checks);
+    }
+    if (aim && frame) {
+      const DepthImage& d = *frame;
       const CameraIntrinsics& K = sensor.camera().intrinsics;
       // The camera pose relative to where the hand really is (options.tracking; the pose as
       // reported without it): the held points and the robot's pixels are seen from there.
@@ -274,6 +295,11 @@ void runGrasps(RobotInterface& robot, DepthSensor& sensor, ScanSession& session,
   all.planning_s = sum.planning_s;
   all.fusion_s = sum.fusion_s;
   all.frames = sum.frames;
+  all.frames_rejected = sum.frames_rejected;
+  all.frames_dropped = sum.frames_dropped;
+  all.frames_off_path = sum.frames_off_path;
+  all.frames_unsupported = sum.frames_unsupported;
+  all.frames_repaired = sum.frames_repaired;
 }
 }  // namespace
 
@@ -339,7 +365,12 @@ MultiGraspResult scanFromTable(RobotInterface& robot, DepthSensor& sensor, const
   std::vector<DepthImage> frames;
   std::vector<std::vector<uint8_t>> robotMask;
   for (int f = 0; f < to.frames; ++f) {
-    frames.push_back(sensor.capture());
+    std::optional<DepthImage> d = captureUsable(sensor, options.checks);
+    if (!d) {
+      log("table top: no usable depth frame from the sensor");
+      continue;
+    }
+    frames.push_back(std::move(*d));
     robotMask.push_back(robotPixelMask(frames.back(), *aim, q, scenes, sensor.camera(), noise,
                                        options.t_hand_m, options.carve_radius_px,
                                        /*with_table=*/false));

@@ -50,6 +50,7 @@ constexpr std::pair<Termination, const char*> kTerminationNames[] = {
     {Termination::kObjectTooLargeForVolume, "object_too_large_for_volume"},
     {Termination::kNoStableGrasp, "no_stable_grasp"},
     {Termination::kInterrupted, "interrupted"},
+    {Termination::kObjectLost, "object_lost"},
 };
 }  // namespace
 
@@ -68,8 +69,19 @@ bool parseTermination(const std::string& s, Termination* out) {
   return false;
 }
 
+std::string FrameChecks::validate() const {
+  if (!(min_valid_fraction >= 0 && min_valid_fraction < 1))
+    return "min_valid_fraction must be in [0, 1)";
+  if (!(max_path_deviation_rad >= 0)) return "max_path_deviation_rad must be >= 0";
+  if (!(min_support >= 0 && min_support <= 1)) return "min_support must be in [0, 1]";
+  if (min_points < 1) return "min_points must be >= 1";
+  if (lost_after < 1) return "lost_after must be >= 1";
+  return {};
+}
+
 std::string ScanOptions::validate() const {
   if (!(voxel_m > 0 && voxel_m < 0.05)) return "voxel_m must be in (0, 0.05) m";
+  if (std::string p = checks.validate(); !p.empty()) return "checks." + p;
   if (!(volume_size_m > 10 * voxel_m && volume_size_m < 2))
     return "volume_size_m must be in (10 voxels, 2 m)";
   if (!(t_hand_m >= 0)) return "t_hand_m must be >= 0";
@@ -174,14 +186,16 @@ Termination runGraspViews(ScanSession& session, RobotInterface& robot, DepthSens
     const std::optional<PlannedView> view = session.nextView(robot.joints());
     if (!view) return session.summary().termination;
     bool stopped = false;
+    auto lost = [&] { return session.summary().termination == Termination::kObjectLost; };
     robot.execute(view->waypoints, [&](const JointVector& q) {
       // Once stopped, the rest of the motion is not fused (a real driver's arm finishes or is
-      // halted by its own controller).
-      if (stopped || (stopped = progress.stopRequested())) return;
+      // halted by its own controller); nor once the object is no longer in the hand.
+      if (stopped || (stopped = progress.stopRequested()) || lost()) return;
       const DepthImage depth = sensor.capture();
       session.addFrame(depth, q, sensor.pose());
     });
     session.finishView();
+    if (lost()) return Termination::kObjectLost;
     if (stopped) break;
     if (after_view) after_view();
   }

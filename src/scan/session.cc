@@ -60,6 +60,9 @@ struct ScanSession::State {
   // palm frame), the last frame's correction.
   std::vector<SurfacePoint> handPoints, objectPoints;
   std::vector<Vec3> objectOccluders;           // the whole model (observed or not), palm frame
+  std::vector<Vec3> supportPoints;             // measured model surface, palm frame (FrameChecks)
+  std::vector<JointVector> viewPath;           // the open view's waypoints (FrameChecks)
+  int unsupportedStreak = 0;                   // frames in a row not showing the object in the hand
   std::vector<std::vector<Vec3>> linkSamples;  // the arm's links' surfaces (link frames)
   JointVector handPointsQ;
   // The last aligned frame's error in the palm frame: true palm = reported palm · correction.
@@ -148,8 +151,9 @@ void ScanSession::beginGrasp(const Iso3& T_O_palm, const JointVector& q, const A
   s.used.clear();
   s.alg1Views = 0;
   s.correction = Iso3::Identity();
-  if (s.options.tracking.enabled) refreshTrackingModel();
+  if (modelPointsNeeded(s.options)) refreshTrackingModel();
   s.trackingFromFull = false;
+  s.unsupportedStreak = 0;
   s.initialDirs.clear();
   // The model exists after the first grasp: Alg. 1 from the start.
   if (s.grasp == 0 && s.options.initial_views > 0)
@@ -239,11 +243,56 @@ FrameReport ScanSession::fuse(const DepthImage& depth, const JointVector& q, con
   return r;
 }
 
-FrameReport ScanSession::addFrame(const DepthImage& depth, const JointVector& q,
+FrameReport ScanSession::addFrame(const DepthImage& input, const JointVector& q,
                                   const Iso3& T_B_C) {
   if (!s_->holding) throw Error("addFrame: no grasp (beginGrasp first)");
   checkJoints(*s_->model, q, "addFrame");
   State& s = *s_;
+  const FrameChecks& fc = s.options.checks;
+  auto refuse = [&](const std::string& why, int* counter) {
+    ++*counter;
+    FrameReport r;
+    r.fused = false;
+    r.rejected = why;
+    log("frame not fused: " + why);
+    if (s.progress.frame) s.progress.frame(r, q, T_B_C);
+    return r;
+  };
+  // What the sensor delivered: nothing, non-finite depths, too few returns.
+  if (input.width == 0 && input.height == 0)
+    return refuse("no image (a dropped frame)", &s.summary.frames_dropped);
+  const DepthImage* d = &input;
+  DepthImage repaired;
+  if (!std::all_of(input.depth_m.begin(), input.depth_m.end(),
+                   [](float z) { return std::isfinite(z) && z >= 0; })) {
+    repaired = input;
+    for (float& z : repaired.depth_m)
+      if (!(std::isfinite(z) && z >= 0)) z = 0;
+    d = &repaired;
+    ++s.summary.frames_repaired;
+  }
+  const DepthImage& depth = *d;
+  if (depth.validCount() < fc.min_valid_fraction * double(depth.depth_m.size()))
+    return refuse("an empty frame (" + std::to_string(depth.validCount()) + " depth pixels)",
+                  &s.summary.frames_dropped);
+  // The reported joints must lie on the path the arm was sent along.
+  if (fc.max_path_deviation_rad > 0 && s.viewOpen && s.viewPath.size() >= 2) {
+    const RobotModel& m = *s.model;
+    const Eigen::VectorXd a = m.arm(q);
+    double best = std::numeric_limits<double>::infinity();
+    for (size_t k = 1; k < s.viewPath.size(); ++k) {
+      const Eigen::VectorXd p = m.arm(s.viewPath[k - 1]), e = m.arm(s.viewPath[k]);
+      const Eigen::VectorXd d = e - p;
+      const double t =
+          d.squaredNorm() > 0 ? std::clamp((a - p).dot(d) / d.squaredNorm(), 0.0, 1.0) : 0.0;
+      best = std::min(best, (a - (p + t * d)).cwiseAbs().maxCoeff());
+    }
+    if (best > fc.max_path_deviation_rad) {
+      char why[160];
+      std::snprintf(why, sizeof why, "joints %.3f rad off the planned path (a jump)", best);
+      return refuse(why, &s.summary.frames_off_path);
+    }
+  }
   Iso3 T_B_C_used = T_B_C;
   TrackResult track;
   if (s.options.tracking.enabled) {
@@ -263,6 +312,37 @@ FrameReport ScanSession::addFrame(const DepthImage& depth, const JointVector& q,
     const Iso3 T_C_palm = T_B_C.inverse() * s.model->tipPose(q);
     s.correction = T_C_palm.inverse() * track.correction * T_C_palm;
   }
+  // The object must be where the hand holds it.
+  if (fc.min_support > 0 && !s.supportPoints.empty()) {
+    const Iso3 T_C_palm = T_B_C_used.inverse() * s.model->tipPose(q);
+    const CameraIntrinsics& K = s.camera.intrinsics;
+    int support = 0, against = 0;
+    for (const Vec3& p_palm : s.supportPoints) {
+      const Vec3 p = T_C_palm * p_palm;
+      if (p.z() <= 0.05) continue;
+      const Vec2 uv = K.project(p);
+      const int u = int(std::lround(uv.x())), v = int(std::lround(uv.y()));
+      if (u < 0 || v < 0 || u >= depth.width || v >= depth.height) continue;
+      const float z = depth.at(u, v);
+      if (!(z > 0)) continue;
+      if (std::abs(z - p.z()) < 0.02)
+        ++support;
+      else if (z > p.z() + 0.03)
+        ++against;
+    }
+    const int counted = support + against;
+    if (counted >= fc.min_points && support < fc.min_support * counted) {
+      char why[200];
+      std::snprintf(why, sizeof why,
+                    "the object is not where the hand holds it (%d of %d known surface points "
+                    "borne out)",
+                    support, counted);
+      if (++s.unsupportedStreak >= fc.lost_after)
+        finish(Termination::kObjectLost, "in-hand frames stopped showing the object");
+      return refuse(why, &s.summary.frames_unsupported);
+    }
+    s.unsupportedStreak = 0;
+  }
   const Iso3 T_O_B = s.T_O_palm * s.model->tipPose(q).inverse();
   FrameReport r =
       fuse(depth, q, T_B_C_used, T_O_B, nullptr, true, s.options.hand_mode != HandMode::kNaive);
@@ -272,6 +352,10 @@ FrameReport ScanSession::addFrame(const DepthImage& depth, const JointVector& q,
   r.tracking_rms_m = track.rms_m;
   if (s.progress.frame) s.progress.frame(r, q, T_B_C);
   return r;
+}
+
+bool ScanSession::modelPointsNeeded(const ScanOptions& o) {
+  return o.tracking.enabled || o.checks.min_support > 0;
 }
 
 void ScanSession::refreshTrackingModel(const ObjectModel* current) {
@@ -293,6 +377,15 @@ void ScanSession::refreshTrackingModel(const ObjectModel* current) {
   const size_t every = std::max<size_t>(1, m.mesh.vertices.size() / 6000 + 1);
   for (size_t k = 0; k < m.mesh.vertices.size(); k += every)
     s.objectOccluders.push_back(T_palm_O * m.mesh.vertices[k].cast<double>());
+  // The frame checks' points: measured vertices, at most about 2000.
+  s.supportPoints.clear();
+  size_t measured = 0;
+  for (uint8_t f : m.observed) measured += f != 0;
+  const size_t every2 = std::max<size_t>(1, measured / 2000 + 1);
+  for (size_t k = 0, seen = 0; k < m.mesh.vertices.size(); ++k)
+    if (m.observed[k] && seen++ % every2 == 0)
+      s.supportPoints.push_back(T_palm_O * m.mesh.vertices[k].cast<double>());
+  if (!s.options.tracking.enabled) return;
   for (size_t k = 0; o.max_object_points > 0 && k < observed.size(); k += step) {
     const Tri& f = m.mesh.triangles[observed[k]];
     const Vec3 a = m.mesh.vertices[size_t(f[0])].cast<double>();
@@ -400,6 +493,7 @@ std::optional<PlannedView> ScanSession::nextView(const JointVector& q_now) {
     s.viewGrasp.push_back(s.grasp);
     s.used.push_back(c->dir_O);
     s.viewOpen = true;
+    s.viewPath = v.waypoints;
     return v;
   }
   if (s.alg1Views >= s.options.max_views) {
@@ -445,6 +539,7 @@ std::optional<PlannedView> ScanSession::nextView(const JointVector& q_now) {
   s.viewGrasp.push_back(s.grasp);
   s.used.push_back(c.dir_O);
   s.viewOpen = true;
+  s.viewPath = v.waypoints;
   char line[240];
   std::snprintf(line, sizeof(line),
                 "view %d: quality %.4f, cost %.2f s, %d candidates, %d at full resolution (%.2f "
@@ -462,7 +557,7 @@ const ViewRecord& ScanSession::finishView() {
   if (!s.viewOpen) return rec;
   s.viewOpen = false;
   const ObjectModel after = model();
-  if (s.options.tracking.enabled) refreshTrackingModel(&after);
+  if (modelPointsNeeded(s.options)) refreshTrackingModel(&after);
   s.trackingFromFull = true;
   rec.mean_entropy = after.meanEntropy();
   rec.observed_fraction = after.observedAreaFraction();
@@ -573,6 +668,7 @@ void ScanSession::save(const std::filesystem::path& path, const Json& extra) con
   h["alg1_views"] = s.alg1Views;
   h["tracking_correction"] = isoJson(s.correction);  // the last frame's arm error (palm frame)
   h["tracking_from_full_model"] = s.trackingFromFull;
+  h["unsupported_streak"] = s.unsupportedStreak;
   for (size_t i = 0; i < s.views.size(); ++i) {
     const ViewRecord& r = s.views[i];
     h["views"].push_back({{"grasp", s.viewGrasp[i]},
@@ -596,6 +692,10 @@ void ScanSession::save(const std::filesystem::path& path, const Json& extra) con
                   {"views", m.views},
                   {"frames", m.frames},
                   {"frames_rejected", m.frames_rejected},
+                  {"frames_dropped", m.frames_dropped},
+                  {"frames_off_path", m.frames_off_path},
+                  {"frames_unsupported", m.frames_unsupported},
+                  {"frames_repaired", m.frames_repaired},
                   {"tracking_s", m.tracking_s},
                   {"view_evaluations", m.view_evaluations},
                   {"view_refinements", m.view_refinements},
@@ -690,6 +790,10 @@ ScanSession ScanSession::load(const std::filesystem::path& path, const RobotMode
     s.summary.views = m.at("views").get<int>();
     s.summary.frames = m.at("frames").get<int>();
     s.summary.frames_rejected = m.value("frames_rejected", 0);
+    s.summary.frames_dropped = m.value("frames_dropped", 0);
+    s.summary.frames_off_path = m.value("frames_off_path", 0);
+    s.summary.frames_unsupported = m.value("frames_unsupported", 0);
+    s.summary.frames_repaired = m.value("frames_repaired", 0);
     s.summary.tracking_s = m.value("tracking_s", 0.0);
     if (h.contains("tracking_correction")) s.correction = isoFrom(h.at("tracking_correction"));
     s.summary.view_evaluations = m.at("view_evaluations").get<int>();
@@ -711,7 +815,8 @@ ScanSession ScanSession::load(const std::filesystem::path& path, const RobotMode
     // Tracking's object points as they were (from the model after the last view, or the
     // planning model when the grasp began).
     s.trackingFromFull = h.value("tracking_from_full_model", false);
-    if (s.holding && options.tracking.enabled) {
+    s.unsupportedStreak = h.value("unsupported_streak", 0);
+    if (s.holding && modelPointsNeeded(options)) {
       if (s.trackingFromFull) {
         const ObjectModel m = session.model();
         session.refreshTrackingModel(&m);

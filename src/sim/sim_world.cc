@@ -11,6 +11,14 @@
 
 namespace inhand {
 
+std::string SimFaults::validate() const {
+  for (double f : {dropped_frames, corrupted_frames, pose_jumps, stopped_short})
+    if (!(f >= 0 && f <= 1)) return "fault rates must be in [0, 1]";
+  if (!(slip_m >= 0 && slip_m <= 0.05)) return "slip_m must be in [0, 0.05] m";
+  if (drop_in_motion < -1) return "drop_in_motion must be >= -1";
+  return {};
+}
+
 std::string SimOptions::validate() const {
   if (!(frame_rate_hz > 0)) return "frame_rate_hz must be > 0";
   if (frame_subsample < 1) return "frame_subsample must be >= 1";
@@ -20,6 +28,7 @@ std::string SimOptions::validate() const {
   if (!R_B_O_rest.allFinite() || std::abs(R_B_O_rest.determinant() - 1) > 1e-6)
     return "the rest orientation must be a rotation";
   if (!(arm_error_m >= 0 && arm_error_m <= 0.2)) return "arm_error_m must be in [0, 0.2] m";
+  if (std::string p = faults.validate(); !p.empty()) return "faults." + p;
   return {};
 }
 
@@ -104,6 +113,7 @@ bool SimRobot::putDown() {
 }
 
 std::optional<Iso3> SimRobot::pickUp(const Iso3& T_O_palm, const JointVector& q) {
+  world_->graspMotions = 0;
   std::optional<Iso3> T = grasp(T_O_palm, q);
   world_->slipping = T && !world_->graspHolds();
   return T;
@@ -168,28 +178,91 @@ DepthImage SimWorld::render() {
   RenderOptions ro;
   ro.noise = options_.noise;
   ro.seed = mixSeed(options_.seed, frame_++);
-  return renderDepth(scene, T_B_C, camera_, noise_, ro);
+  DepthImage d = renderDepth(scene, T_B_C, camera_, noise_, ro);
+  const SimFaults& f = options_.faults;
+  if (f.dropped_frames > 0 && faultDraw(0) < f.dropped_frames) {
+    ++faults.dropped_frames;
+    return DepthImage();
+  }
+  if (f.corrupted_frames > 0 && faultDraw(1) < f.corrupted_frames) {
+    switch (faults.corrupted_frames++ % 3) {
+      case 0:
+        std::fill(d.depth_m.begin(), d.depth_m.end(), 0.f);
+        break;
+      case 1:
+        for (size_t i = 0; i < d.depth_m.size(); i += 5)
+          d.depth_m[i] = std::numeric_limits<float>::quiet_NaN();
+        break;
+      default:
+        for (int v = d.height / 2 - 20; v < d.height / 2 + 20; ++v)
+          for (int u = 0; u < d.width; ++u) d.at(u, v) = 0.4f;
+    }
+  }
+  return d;
+}
+
+double SimWorld::faultDraw(int kind) {
+  const uint64_t h = mixSeed(options_.seed ^ 0x5EED0FFA17ull, faultDraws_++ * 8 + uint64_t(kind));
+  return double(h >> 11) * 0x1.0p-53;
 }
 
 void SimRobot::execute(const std::vector<JointVector>& waypoints,
                        const std::function<void(const JointVector&)>& on_state) {
   const RobotModel& m = world_->model();
   const SimOptions& o = world_->options();
+  const SimFaults& f = o.faults;
+  SimWorld& w = *world_;
+  // The motion's steps, and the faults that come during it.
+  std::vector<std::pair<size_t, int>> steps;  // (segment, step) per sensor frame time
+  std::vector<int> segmentSteps(waypoints.size(), 0);
+  for (size_t k = 1; k < waypoints.size(); ++k) {
+    const double duration = trajectoryTime(m, m.arm(waypoints[k - 1]), m.arm(waypoints[k]));
+    segmentSteps[k] = std::max(1, int(std::ceil(duration * o.frame_rate_hz)));
+    for (int s = 1; s <= segmentSteps[k]; ++s) steps.emplace_back(k, s);
+  }
+  if (steps.empty()) return;
   int tick = 0;
-  for (size_t w = 1; w < waypoints.size(); ++w) {
-    const JointVector& a = waypoints[w - 1];
-    const JointVector& b = waypoints[w];
-    double duration = trajectoryTime(m, m.arm(a), m.arm(b));
-    int steps = std::max(1, int(std::ceil(duration * o.frame_rate_hz)));
-    for (int s = 1; s <= steps; ++s) {
-      world_->q = a + (b - a) * (double(s) / steps);
-      if (world_->held && world_->slipping) {  // the grasp does not hold: the object falls
-        world_->held = false;
-        world_->slipping = false;
-        ++world_->drops;
+  size_t last = steps.size();  // steps taken
+  if (f.stopped_short > 0 && w.faultDraw(2) < f.stopped_short) {
+    last = std::max<size_t>(1, size_t(double(steps.size()) * (0.2 + 0.6 * w.faultDraw(3))));
+    ++w.faults.stopped_short;
+  }
+  const bool inHand = w.held;
+  size_t slipAt = steps.size(), dropAt = steps.size();
+  if (inHand) {
+    if (f.slip_m > 0 && w.graspMotions == 1) slipAt = steps.size() / 2;
+    if (f.drop_in_motion >= 0 && w.motions == f.drop_in_motion) dropAt = steps.size() / 2;
+    ++w.motions;
+    ++w.graspMotions;
+  }
+  for (size_t i = 0; i < last; ++i) {
+    const auto [k, s] = steps[i];
+    const JointVector& a = waypoints[k - 1];
+    const JointVector& b = waypoints[k];
+    w.q = a + (b - a) * (double(s) / segmentSteps[k]);
+    if (w.held && w.slipping) {  // the grasp does not hold: the object falls
+      w.held = false;
+      w.slipping = false;
+      ++w.drops;
+    }
+    if (i == slipAt && w.held) {  // the object slips in the hand
+      const Vec3 dir = Vec3(w.faultDraw(4) - 0.5, w.faultDraw(5) - 0.5, w.faultDraw(6) - 0.5);
+      w.T_O_palm.translation() += f.slip_m * dir.normalized();
+      ++w.faults.slips;
+    }
+    if (i == dropAt && w.held) {  // the object falls out of the hand
+      w.held = false;
+      ++w.drops;
+      ++w.faults.object_drops;
+    }
+    if (++tick % o.frame_subsample == 0 || i + 1 == last) {
+      JointVector reported = w.q;
+      if (f.pose_jumps > 0 && w.faultDraw(7) < f.pose_jumps) {
+        const std::vector<int>& arm = m.armVariables();
+        reported[arm[size_t(w.faultDraw(7) * double(arm.size())) % arm.size()]] += 0.3;
+        ++w.faults.pose_jumps;
       }
-      if (++tick % o.frame_subsample == 0 || (w + 1 == waypoints.size() && s == steps))
-        on_state(world_->q);
+      on_state(reported);
     }
   }
 }
@@ -243,7 +316,13 @@ Json SimWorld::state() const {
           {"held", held},
           {"slipping", slipping},
           {"drops", drops},
-          {"frame", frame_}};
+          {"frame", frame_},
+          {"fault_draws", faultDraws_},
+          {"motions", motions},
+          {"grasp_motions", graspMotions},
+          {"faults",
+           {faults.dropped_frames, faults.corrupted_frames, faults.pose_jumps, faults.stopped_short,
+            faults.slips, faults.object_drops}}};
 }
 
 void SimWorld::setState(const Json& j) {
@@ -257,6 +336,14 @@ void SimWorld::setState(const Json& j) {
     slipping = j.at("slipping").get<bool>();
     drops = j.at("drops").get<int>();
     frame_ = j.at("frame").get<uint64_t>();
+    faultDraws_ = j.value("fault_draws", uint64_t(0));
+    motions = j.value("motions", 0);
+    graspMotions = j.value("grasp_motions", 0);
+    if (j.contains("faults")) {
+      const std::vector<int> f = j.at("faults").get<std::vector<int>>();
+      if (f.size() != 6) throw Error("simulator state: faults: expected 6 counts");
+      faults = {f[0], f[1], f[2], f[3], f[4], f[5]};
+    }
   } catch (const Json::exception& e) {
     throw Error(std::string("simulator state: ") + e.what());
   }

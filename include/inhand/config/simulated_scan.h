@@ -16,6 +16,7 @@ struct SimulatedScan {
   double palm_error_median_m = 0, palm_error_p95_m = 0;
   int frames_fused_in_hand = 0, frames_rejected = 0;
   int drops = 0;              // how often the simulated object fell
+  SimFaultLog faults;         // what the simulator injected (SimOptions::faults)
   DepthCameraOptions camera;  // the simulated sensor
 };
 

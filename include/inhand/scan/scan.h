@@ -44,10 +44,29 @@ enum class Termination {
   kObjectTooLargeForVolume,  // larger than options.volume_size_m
   kNoStableGrasp,            // no first-grasp pose is force closure
   kInterrupted,              // the caller stopped it (ScanProgress::interrupted, e.g. SIGINT)
+  kObjectLost,               // in-hand frames stopped showing the object where the hand held it
 };
 // snake_case names as summary.json writes them (no_view_above_threshold, …; running).
 std::string terminationName(Termination t);
 bool parseTermination(const std::string& s, Termination* out);
+
+// What ScanSession::addFrame refuses to fuse, as real sensors and arms deliver it now and then.
+// A refused frame is counted (Summary) and reported (FrameReport::rejected); the scan goes on.
+struct FrameChecks {
+  // An empty image (0 x 0) is a dropped frame; non-finite or negative depths are no return.
+  double min_valid_fraction = 0.002;  // fewer valid pixels than this: an empty frame
+  // Reported joints farther than this (rad, any arm joint) from the view's planned path: a
+  // jump in the joint states, not a pose to fuse with (0: no check).
+  double max_path_deviation_rad = 0.05;
+  // The object must be where the hand holds it: of the model's measured surface points in view
+  // (at least min_points of them), the fraction the frame bears out (within 2 cm; against: seen
+  // more than 3 cm behind) must reach min_support, or the frame is not fused; lost_after such
+  // frames in a row end the grasp's views with object_lost (0: no check).
+  double min_support = 0.2;
+  int min_points = 100;
+  int lost_after = 3;
+  std::string validate() const;
+};
 
 struct ScanOptions {
   double voxel_m = 0.002;       // volume voxel size, m
@@ -66,6 +85,7 @@ struct ScanOptions {
   SurfaceMethod planning_method = SurfaceMethod::kSurfaceNets;
   ViewPlannerOptions planner;
   TrackingOptions tracking;  // in-hand frames aligned with hand and model (arm error, §II)
+  FrameChecks checks;        // in-hand frames that are not fused
   MeshOptions mesh;
   VolumeOptions volume_budget;  // memory budget (voxel size above wins)
   std::string validate() const;
@@ -124,6 +144,10 @@ struct ScanResult {
   int view_refinements = 0;  // of those, scored at full resolution
   double planning_s = 0, fusion_s = 0, total_s = 0;
   int frames = 0;
+  // In-hand frames not fused (ScanSession::Summary): tracking could not align them; dropped or
+  // empty; joints off the planned path; the object not in the hand. And frames repaired.
+  int frames_rejected = 0, frames_dropped = 0, frames_off_path = 0, frames_unsupported = 0,
+      frames_repaired = 0;
 };
 
 // Scans with the object held at T_O_palm (palm pose in the object frame); the robot must be

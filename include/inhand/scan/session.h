@@ -55,6 +55,9 @@ class ScanSession {
     std::string message;  // why it ended, in words
     int grasps = 0, views = 0, frames = 0;
     int frames_rejected = 0;  // in-hand frames tracking could not align (not fused)
+    // In-hand frames refused by options.checks: dropped or empty, joints off the planned path,
+    // the object not where the hand holds it; and frames whose non-finite depths were dropped.
+    int frames_dropped = 0, frames_off_path = 0, frames_unsupported = 0, frames_repaired = 0;
     int view_evaluations = 0, view_refinements = 0;
     double planning_s = 0, fusion_s = 0, tracking_s = 0;
     std::string brief() const;  // one line
@@ -163,6 +166,7 @@ class ScanSession {
   void emptyInsideRobot(const JointVector& q, const Iso3& T_O_B);
   // Tracking's object points from `current` (or a fresh planning model).
   void refreshTrackingModel(const ObjectModel* current = nullptr);
+  static bool modelPointsNeeded(const ScanOptions& o);  // tracking or the frame checks
 };
 
 // Drives the current grasp's views with a robot and a sensor: points the camera

@@ -14,6 +14,30 @@
 
 namespace inhand {
 
+// Faults the simulator injects (all off by default; each drawn from the seed, so a run
+// repeats): what real sensors, arms and grasps do now and then.
+struct SimFaults {
+  double dropped_frames = 0;  // fraction of frames that never arrive (an empty image)
+  // Fraction that arrive corrupted, in turn: all zeros, NaN in a fifth of the pixels, a stripe
+  // of 40 rows at a constant wrong depth (0.4 m).
+  double corrupted_frames = 0;
+  double pose_jumps = 0;     // fraction of reported joint states with one arm joint 0.3 rad off
+  double stopped_short = 0;  // fraction of motions the arm stops part-way (20–80 %)
+  // The object slips in the hand this far (m, a random direction), once, halfway through the
+  // second motion with it in the hand of every grasp (0: never).
+  double slip_m = 0;
+  // The object falls out of the hand halfway through this motion with it in the hand (0-based,
+  // counting every motion of the scan; -1: never). It lands where it rested.
+  int drop_in_motion = -1;
+  std::string validate() const;
+};
+
+// What the simulator injected (SimFaults).
+struct SimFaultLog {
+  int dropped_frames = 0, corrupted_frames = 0, pose_jumps = 0, stopped_short = 0, slips = 0,
+      object_drops = 0;
+};
+
 struct SimOptions {
   double frame_rate_hz = 30.0;  // sensor frame rate along trajectories
   int frame_subsample = 3;      // integrate every n-th frame
@@ -39,6 +63,7 @@ struct SimOptions {
   // where forward kinematics of the reported joints puts it. The world (the rendered robot, the
   // held object) moves with the true joints; the robot reports the others. 0: an exact arm.
   double arm_error_m = 0.0;
+  SimFaults faults;
   std::string validate() const;
 };
 
@@ -56,12 +81,18 @@ class SimWorld {
   JointVector trueJoints() const { return q + jointError; }
   Iso3 T_B_C;     // the camera's pose
   Iso3 T_O_palm;  // the grasp
-  // Depth image at the current state, seeded by the frame counter.
+  // Depth image at the current state, seeded by the frame counter (with SimOptions::faults: at
+  // times empty or corrupted).
   DepthImage render();
+  // A uniform number in [0, 1) for fault `kind`, from the seed and a counter (part of state()).
+  double faultDraw(int kind);
+  int motions = 0;          // arm motions with the object in the hand so far
+  int graspMotions = 0;     // … since the object was last picked up
   Iso3 objectPose() const;  // T_B_O at the current state
   bool held = true;         // false: the object rests on the table at restPose()
   bool slipping = false;    // held by a grasp that does not hold: falls at the next motion
   int drops = 0;            // how often the object fell
+  SimFaultLog faults;       // what SimOptions::faults injected so far
   const TriangleMesh& objectMesh() const { return objectMesh_; }
   const std::vector<SurfacePoint>& objectSamples() const { return objectSamples_; }
   // Where the object rests on the table: turned by SimOptions::R_B_O_rest, its lowest point on
@@ -84,6 +115,7 @@ class SimWorld {
   TriangleMesh objectMesh_;
   std::vector<SurfacePoint> objectSamples_;  // for the pick-up clearance test
   uint64_t frame_ = 0;
+  uint64_t faultDraws_ = 0;
 };
 
 class SimRobot : public RobotInterface {
