@@ -1,6 +1,10 @@
 #include "inhand/core/parallel.h"
 
+#include <tbb/global_control.h>
+
 #include <condition_variable>
+#include <cstdlib>
+#include <memory>
 #include <cstdint>
 #include <mutex>
 
@@ -87,3 +91,42 @@ void runOnThreads(int helpers, void (*task)(void*), void* ctx) {
 }
 
 }  // namespace inhand::detail
+
+namespace inhand {
+namespace {
+int defaultThreads() {
+  if (const char* env = std::getenv("INHAND_THREADS")) {
+    char* end = nullptr;
+    const long n = std::strtol(env, &end, 10);
+    if (end != env && *end == '\0' && n >= 1 && n <= 1024) return int(n);
+  }
+  return std::max(1, int(std::thread::hardware_concurrency()));
+}
+std::atomic<int> g_threads{0};  // 0: not yet decided
+std::unique_ptr<tbb::global_control>& tbbLimit() {
+  static std::unique_ptr<tbb::global_control> limit;
+  return limit;
+}
+std::once_flag g_envApplied;
+}  // namespace
+
+int threadCount() {
+  // The environment's setting reaches TBB too, on first use.
+  std::call_once(g_envApplied, [] {
+    if (g_threads.load() == 0 && std::getenv("INHAND_THREADS")) setThreadCount(defaultThreads());
+  });
+  const int n = g_threads.load();
+  return n > 0 ? n : defaultThreads();
+}
+
+void setThreadCount(int n) {
+  static std::mutex m;
+  std::lock_guard<std::mutex> lock(m);
+  g_threads = n > 0 ? n : 0;
+  tbbLimit().reset();
+  const int effective = n > 0 ? n : defaultThreads();
+  tbbLimit() = std::make_unique<tbb::global_control>(
+      tbb::global_control::max_allowed_parallelism, size_t(effective));
+}
+
+}  // namespace inhand

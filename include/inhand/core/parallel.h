@@ -11,6 +11,12 @@
 
 namespace inhand {
 
+// Threads inhand uses: the INHAND_THREADS environment variable when set (a positive integer),
+// else one per core. setThreadCount(n) changes it for what follows (TBB's parallelism included;
+// 0: back to the default). Results do not depend on it (tests/test_determinism.cc).
+int threadCount();
+void setThreadCount(int n);
+
 // Calls fn(i) for i in [begin, end) on all cores, in chunks of at least `grain` items.
 template <typename Fn>
 void parallelFor(int begin, int end, Fn&& fn, int grain = 1) {
@@ -43,7 +49,7 @@ template <typename Fn>
 void parallelForThreads(int begin, int end, Fn&& fn) {
   const int n = end - begin;
   if (n <= 0) return;
-  const int threads = std::max(1, std::min<int>(n, int(std::thread::hardware_concurrency())));
+  const int threads = std::max(1, std::min<int>(n, threadCount()));
   struct Context {
     Fn& fn;
     int end;
