@@ -1,4 +1,5 @@
 #include "inhand/scan/session.h"
+#include "inhand/sensor/depth_image.h"
 
 #include <algorithm>
 #include <chrono>
@@ -317,9 +318,12 @@ FrameReport ScanSession::addFrame(const DepthImage& input, const JointVector& q,
     const Iso3 T_C_palm = T_B_C_used.inverse() * s.model->tipPose(q);
     const CameraIntrinsics& K = s.camera.intrinsics;
     int support = 0, against = 0;
+    const DepthCameraOptions& cam = s.camera;
     for (const Vec3& p_palm : s.supportPoints) {
       const Vec3 p = T_C_palm * p_palm;
-      if (p.z() <= 0.05) continue;
+      // Only points the sensor could measure count (nearer than its minimum range, the object
+      // gives no return, and the pixel may see past its edge).
+      if (p.z() < cam.min_range_m || p.z() > cam.max_range_m) continue;
       const Vec2 uv = K.project(p);
       const int u = int(std::lround(uv.x())), v = int(std::lround(uv.y()));
       if (u < 0 || v < 0 || u >= depth.width || v >= depth.height) continue;
