@@ -16,8 +16,11 @@ declare -A faults=(
   [stopped_short]='{"stopped_short": 0.3}'
   [slip_3mm]='{"slip_m": 0.003}'
   [object_dropped]='{"drop_in_motion": 3}'
+  [refused_motions]='{"refused_motions": 0.3}'
+  [failed_pickups]='{"failed_pickups": 0.5}'
 )
-order=(clean dropped_frames corrupted_frames pose_jumps stopped_short slip_3mm object_dropped)
+order=(clean dropped_frames corrupted_frames pose_jumps stopped_short slip_3mm object_dropped
+  refused_motions failed_pickups)
 for name in "${order[@]}"; do
   printf '{"sim": {"faults": %s}}\n' "${faults[$name]}" > "$out/$name.json"
   for object in cracker_box coffee_can; do

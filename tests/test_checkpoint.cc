@@ -20,14 +20,7 @@ namespace {
 
 // A short two-grasp scan from the table: coarse voxels, few directions, two views per grasp.
 ScanConfig fastConfig(bool tracking) {
-  ScanConfig c;
-  c.scan.voxel_m = 0.004;
-  c.scan.planner.directions = 60;
-  c.scan.planner.rolls = 4;
-  c.scan.initial_views = 2;
-  c.scan.max_views = 2;
-  c.multi.max_grasps = 2;
-  c.sim.frame_subsample = 8;
+  ScanConfig c = test::quickScanConfig();
   c.scan.tracking.enabled = tracking;
   if (tracking) c.sim.arm_error_m = 0.01;
   return c;

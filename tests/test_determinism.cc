@@ -17,14 +17,7 @@ namespace {
 // (fusion, Alg. 1, grasp generation and ranking, tracking's pair sums).
 std::string scanBytes(int threads, const test::TempDir& dir) {
   setThreadCount(threads);
-  ScanConfig c;
-  c.scan.voxel_m = 0.004;
-  c.scan.planner.directions = 60;
-  c.scan.planner.rolls = 4;
-  c.scan.initial_views = 2;
-  c.scan.max_views = 2;
-  c.multi.max_grasps = 2;
-  c.sim.frame_subsample = 8;
+  ScanConfig c = test::quickScanConfig();
   c.sim.arm_error_m = 0.01;
   c.scan.tracking.enabled = true;
   const SimulatedScan s = runSimulatedScan(test::wam(), loadObject("builtin:cracker_box"), c);

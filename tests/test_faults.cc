@@ -12,14 +12,7 @@ namespace {
 
 // A short two-grasp scan of the coffee can from the table.
 ScanConfig fastConfig() {
-  ScanConfig c;
-  c.scan.voxel_m = 0.004;
-  c.scan.planner.directions = 60;
-  c.scan.planner.rolls = 4;
-  c.scan.initial_views = 2;
-  c.scan.max_views = 3;
-  c.multi.max_grasps = 2;
-  c.sim.frame_subsample = 8;
+  ScanConfig c = test::quickScanConfig(3);
   c.eval.samples = 6000;
   return c;
 }
@@ -114,4 +107,22 @@ TEST(Faults, AnObjectThatSlipsIsRecordedAndTheScanEnds) {
   EXPECT_GE(s.faults.slips, 1);
   EXPECT_NE(s.result.scan.termination, Termination::kRunning);
   EXPECT_FALSE(s.result.scan.model.mesh.vertices.empty());
+}
+
+TEST(Faults, RefusedMotionsAreReplannedAndFailedPickUpsTryTheNextCandidate) {
+  SimFaults f;
+  f.refused_motions = 0.5;
+  f.failed_pickups = 0.5;
+  const SimulatedScan s = scanWith(f);
+  EXPECT_GT(s.faults.refused_motions, 0);
+  EXPECT_GT(s.faults.failed_pickups, 0);
+  // Each failed pick-up is an attempt that met nothing; the scan went on to the next candidate.
+  int noContact = 0;
+  if (s.result.table_top)
+    for (const std::string& a : s.result.table_top->attempts) noContact += a == "no_contact";
+  for (const GraspRecord& g : s.result.grasps)
+    for (const std::string& a : g.attempts) noContact += a == "no_contact";
+  EXPECT_GE(noContact, s.faults.failed_pickups);
+  EXPECT_NE(s.result.scan.termination, Termination::kRunning);
+  EXPECT_GE(s.metrics.coverage, clean().metrics.coverage - 0.05);
 }

@@ -82,4 +82,16 @@ ObjectModel unweldedModel(const TriangleMesh& mesh,
   return m;
 }
 
+ScanConfig quickScanConfig(int max_views) {
+  ScanConfig c;
+  c.scan.voxel_m = 0.004;
+  c.scan.planner.directions = 60;
+  c.scan.planner.rolls = 4;
+  c.scan.initial_views = 2;
+  c.scan.max_views = max_views;
+  c.multi.max_grasps = 2;
+  c.sim.frame_subsample = 8;
+  return c;
+}
+
 }  // namespace inhand::test

@@ -5,6 +5,7 @@
 #include <string>
 #include <vector>
 
+#include "inhand/config/scan_config.h"
 #include "inhand/geometry/ray_scene.h"
 #include "inhand/mesh/extract.h"
 #include "inhand/robot/robot_model.h"
@@ -40,5 +41,9 @@ ObjectModel unweldedModel(const TriangleMesh& mesh,
 
 // The paper's robot from data/robots (loaded once).
 const RobotModel& wam();
+
+// A short whole scan from the table for tests: 4 mm voxels, 60 directions × 4 rolls, two
+// initial views, `max_views` Alg. 1 views per grasp, two grasps, every 8th frame fused.
+ScanConfig quickScanConfig(int max_views = 2);
 
 }  // namespace inhand::test

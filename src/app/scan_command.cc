@@ -403,7 +403,9 @@ int runScan(const ScanArgs& given) {
                                 {"pose_jumps", f.pose_jumps},
                                 {"stopped_short", f.stopped_short},
                                 {"slips", f.slips},
-                                {"object_drops", f.object_drops}};
+                                {"object_drops", f.object_drops},
+                                {"refused_motions", f.refused_motions},
+                                {"failed_pickups", f.failed_pickups}};
   summary["mean_entropy"] = r.model.meanEntropy();
   summary["observed_fraction"] = r.model.observedAreaFraction();
   summary["vertices"] = r.model.mesh.vertices.size();

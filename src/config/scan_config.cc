@@ -203,6 +203,9 @@ void visitConfig(V& v, ScanConfig& c) {
             "fraction corrupted: zeros, NaNs, a stripe of wrong depth (in turn)");
       f.num("pose_jumps", x.pose_jumps, "fraction of joint states with an arm joint 0.3 rad off");
       f.num("stopped_short", x.stopped_short, "fraction of motions stopped part-way");
+      f.num("refused_motions", x.refused_motions,
+            "fraction of motions the arm refuses (it stays where it is)");
+      f.num("failed_pickups", x.failed_pickups, "fraction of pick-ups that reach nothing");
       f.num("slip_m", x.slip_m, "the object slips this far in the hand once per grasp, m");
       f.integer("drop_in_motion", x.drop_in_motion,
                 "the object falls out of the hand during this motion (0-based; -1: never)");

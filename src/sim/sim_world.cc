@@ -12,7 +12,8 @@
 namespace inhand {
 
 std::string SimFaults::validate() const {
-  for (double f : {dropped_frames, corrupted_frames, pose_jumps, stopped_short})
+  for (double f : {dropped_frames, corrupted_frames, pose_jumps, stopped_short, refused_motions,
+                   failed_pickups})
     if (!(f >= 0 && f <= 1)) return "fault rates must be in [0, 1]";
   if (!(slip_m >= 0 && slip_m <= 0.05)) return "slip_m must be in [0, 0.05] m";
   if (drop_in_motion < -1) return "drop_in_motion must be >= -1";
@@ -114,6 +115,11 @@ bool SimRobot::putDown() {
 
 std::optional<Iso3> SimRobot::pickUp(const Iso3& T_O_palm, const JointVector& q) {
   world_->graspMotions = 0;
+  const double failed = world_->options().faults.failed_pickups;
+  if (failed > 0 && world_->faultDraw(9) < failed) {
+    ++world_->faults.failed_pickups;
+    return std::nullopt;
+  }
   std::optional<Iso3> T = grasp(T_O_palm, q);
   world_->slipping = T && !world_->graspHolds();
   return T;
@@ -221,6 +227,11 @@ void SimRobot::execute(const std::vector<JointVector>& waypoints,
     for (int s = 1; s <= segmentSteps[k]; ++s) steps.emplace_back(k, s);
   }
   if (steps.empty()) return;
+  if (f.refused_motions > 0 && w.faultDraw(8) < f.refused_motions) {
+    ++w.faults.refused_motions;
+    on_state(w.q);  // it stays where it is
+    return;
+  }
   int tick = 0;
   size_t last = steps.size();  // steps taken
   if (f.stopped_short > 0 && w.faultDraw(2) < f.stopped_short) {
@@ -341,8 +352,8 @@ void SimWorld::setState(const Json& j) {
     graspMotions = j.value("grasp_motions", 0);
     if (j.contains("faults")) {
       const std::vector<int> f = j.at("faults").get<std::vector<int>>();
-      if (f.size() != 6) throw Error("simulator state: faults: expected 6 counts");
-      faults = {f[0], f[1], f[2], f[3], f[4], f[5]};
+      if (f.size() != 8) throw Error("simulator state: faults: expected 8 counts");
+      faults = {f[0], f[1], f[2], f[3], f[4], f[5], f[6], f[7]};
     }
   } catch (const Json::exception& e) {
     throw Error(std::string("simulator state: ") + e.what());

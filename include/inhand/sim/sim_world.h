@@ -23,6 +23,10 @@ struct SimFaults {
   double corrupted_frames = 0;
   double pose_jumps = 0;     // fraction of reported joint states with one arm joint 0.3 rad off
   double stopped_short = 0;  // fraction of motions the arm stops part-way (20–80 %)
+  // Fraction of motions the arm's controller refuses (a planning or IK failure on the robot's
+  // side: it stays where it is), and of pick-ups that fail (the hand reaches nothing).
+  double refused_motions = 0;
+  double failed_pickups = 0;
   // The object slips in the hand this far (m, a random direction), once, halfway through the
   // second motion with it in the hand of every grasp (0: never).
   double slip_m = 0;
@@ -35,7 +39,7 @@ struct SimFaults {
 // What the simulator injected (SimFaults).
 struct SimFaultLog {
   int dropped_frames = 0, corrupted_frames = 0, pose_jumps = 0, stopped_short = 0, slips = 0,
-      object_drops = 0;
+      object_drops = 0, refused_motions = 0, failed_pickups = 0;
 };
 
 struct SimOptions {
