@@ -394,7 +394,8 @@ int runScan(const ScanArgs& given) {
   summary["frames_not_fused"] = {{"tracking", r.frames_rejected},
                                  {"dropped_or_empty", r.frames_dropped},
                                  {"off_path", r.frames_off_path},
-                                 {"object_not_in_hand", r.frames_unsupported}};
+                                 {"object_not_in_hand", r.frames_unsupported},
+                                 {"in_known_free_space", r.frames_in_free_space}};
   summary["frames_repaired"] = r.frames_repaired;
   summary["object_drops"] = sim.drops;
   const SimFaultLog& f = sim.faults;

@@ -132,6 +132,9 @@ void visitConfig(V& v, ScanConfig& c) {
           "(0: no check)");
     k.integer("min_points", o.min_points, "… when at least this many are in view");
     k.integer("lost_after", o.lost_after, "that many such frames in a row: object_lost");
+    k.num("max_free_space_fraction", o.max_free_space_fraction,
+          "at most this fraction of a frame's depth in the volume where the model knows space is "
+          "empty (1: no check)");
   });
   v.integer("max_grasps", m.max_grasps, "grasps in all (1: no re-grasping)");
   v.choice("start", c.start, kStarts, "table: from the table top (§V); held: at a given grasp");

@@ -300,6 +300,7 @@ void runGrasps(RobotInterface& robot, DepthSensor& sensor, ScanSession& session,
   all.frames_off_path = sum.frames_off_path;
   all.frames_unsupported = sum.frames_unsupported;
   all.frames_repaired = sum.frames_repaired;
+  all.frames_in_free_space = sum.frames_in_free_space;
 }
 }  // namespace
 

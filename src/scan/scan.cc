@@ -76,6 +76,8 @@ std::string FrameChecks::validate() const {
   if (!(min_support >= 0 && min_support <= 1)) return "min_support must be in [0, 1]";
   if (min_points < 1) return "min_points must be >= 1";
   if (lost_after < 1) return "lost_after must be >= 1";
+  if (!(max_free_space_fraction > 0 && max_free_space_fraction <= 1))
+    return "max_free_space_fraction must be in (0, 1]";
   return {};
 }
 

@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <fstream>
 
@@ -227,6 +228,36 @@ FrameReport ScanSession::fuse(const DepthImage& depth, const JointVector& q, con
     if (carve.empty()) carve.assign(depth.depth_m.size(), 0);
     for (size_t i = 0; i < carve.size(); ++i) carve[i] |= (*extraCarve)[i];
   }
+  // In the hand: measurements that land where the model knows space is empty (seen through
+  // before) are not the object (a stripe of wrong depth, a reflection): a frame with many of
+  // them is not fused.
+  if (inHand && s.options.checks.max_free_space_fraction < 1) {
+    const TsdfVolume& vol = s.volume;
+    const Vec3i& dims = vol.dims();
+    int inside = 0, inEmpty = 0;
+    for (int v = 0; v < depth.height; v += 2)
+      for (int u = 0; u < depth.width; u += 2) {
+        const size_t i = size_t(v) * depth.width + u;
+        const float z = depth.depth_m[i];
+        if (!(z > 0) || (!carve.empty() && carve[i])) continue;
+        const Vec3 g = (T_O_C * (double(z) * K.rayZ1(u, v)) - vol.origin()) / vol.voxelSize();
+        const int x = int(std::lround(g.x())), y = int(std::lround(g.y())),
+                  w = int(std::lround(g.z()));
+        if (x < 0 || y < 0 || w < 0 || x >= dims.x() || y >= dims.y() || w >= dims.z()) continue;
+        ++inside;
+        inEmpty += vol.state(vol.index(x, y, w)) == VoxelState::kEmpty;
+      }
+    if (std::getenv("INHAND_DEBUG_FREE_SPACE"))
+      std::fprintf(stderr, "free space: %d of %d\n", inEmpty, inside);
+    if (inside >= s.options.checks.min_points &&
+        inEmpty > s.options.checks.max_free_space_fraction * inside) {
+      FrameReport r;
+      r.fused = false;
+      r.rejected = "depth where the model knows space is empty (" + std::to_string(inEmpty) +
+                   " of " + std::to_string(inside) + " sampled pixels in the volume)";
+      return r;
+    }
+  }
   integrate(depth, T_O_C, K, measurementSigma(depth, K, s.noise), &s.volume,
             carve.empty() ? nullptr : &carve);
   if (inHand && s.options.hand_mode == HandMode::kCarveAndEmpty) emptyInsideRobot(q, T_O_B);
@@ -350,6 +381,7 @@ FrameReport ScanSession::addFrame(const DepthImage& input, const JointVector& q,
   const Iso3 T_O_B = s.T_O_palm * s.model->tipPose(q).inverse();
   FrameReport r =
       fuse(depth, q, T_B_C_used, T_O_B, nullptr, true, s.options.hand_mode != HandMode::kNaive);
+  if (!r.fused) return refuse(r.rejected, &s.summary.frames_in_free_space);
   r.tracking_inliers = track.inliers;
   r.tracking_hand_inliers = track.hand_inliers;
   r.tracking_hand_see_through = track.hand_see_through;
@@ -699,6 +731,7 @@ void ScanSession::save(const std::filesystem::path& path, const Json& extra) con
                   {"frames_dropped", m.frames_dropped},
                   {"frames_off_path", m.frames_off_path},
                   {"frames_unsupported", m.frames_unsupported},
+                  {"frames_in_free_space", m.frames_in_free_space},
                   {"frames_repaired", m.frames_repaired},
                   {"tracking_s", m.tracking_s},
                   {"view_evaluations", m.view_evaluations},
@@ -797,6 +830,7 @@ ScanSession ScanSession::load(const std::filesystem::path& path, const RobotMode
     s.summary.frames_dropped = m.value("frames_dropped", 0);
     s.summary.frames_off_path = m.value("frames_off_path", 0);
     s.summary.frames_unsupported = m.value("frames_unsupported", 0);
+    s.summary.frames_in_free_space = m.value("frames_in_free_space", 0);
     s.summary.frames_repaired = m.value("frames_repaired", 0);
     s.summary.tracking_s = m.value("tracking_s", 0.0);
     if (h.contains("tracking_correction")) s.correction = isoFrom(h.at("tracking_correction"));

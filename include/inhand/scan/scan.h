@@ -65,6 +65,10 @@ struct FrameChecks {
   double min_support = 0.2;
   int min_points = 100;
   int lost_after = 3;
+  // Of the frame's depth pixels (every 2nd row and column, not the robot's) that land in the
+  // volume, at most this fraction may land where the model knows space is empty (seen through
+  // before), or the frame is not fused (1: no check).
+  double max_free_space_fraction = 0.2;
   std::string validate() const;
 };
 
@@ -147,7 +151,7 @@ struct ScanResult {
   // In-hand frames not fused (ScanSession::Summary): tracking could not align them; dropped or
   // empty; joints off the planned path; the object not in the hand. And frames repaired.
   int frames_rejected = 0, frames_dropped = 0, frames_off_path = 0, frames_unsupported = 0,
-      frames_repaired = 0;
+      frames_repaired = 0, frames_in_free_space = 0;
 };
 
 // Scans with the object held at T_O_palm (palm pose in the object frame); the robot must be

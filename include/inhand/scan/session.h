@@ -58,6 +58,7 @@ class ScanSession {
     // In-hand frames refused by options.checks: dropped or empty, joints off the planned path,
     // the object not where the hand holds it; and frames whose non-finite depths were dropped.
     int frames_dropped = 0, frames_off_path = 0, frames_unsupported = 0, frames_repaired = 0;
+    int frames_in_free_space = 0;  // depth where the model knows space is empty
     int view_evaluations = 0, view_refinements = 0;
     double planning_s = 0, fusion_s = 0, tracking_s = 0;
     std::string brief() const;  // one line
