@@ -95,6 +95,27 @@ std::optional<Iso3> CameraMount::aimAt(const Vec3& target_B) const {
 
 namespace {
 
+// The offset of the first byte that does not belong to a well-formed UTF-8 sequence (NUL
+// included), or npos.
+size_t invalidUtf8At(const std::string& text) {
+  const auto* b = reinterpret_cast<const unsigned char*>(text.data());
+  const size_t n = text.size();
+  for (size_t i = 0; i < n;) {
+    const unsigned c = b[i];
+    const size_t len = c == 0             ? 0
+                       : c < 0x80         ? 1
+                       : (c >> 5) == 0x6  ? 2
+                       : (c >> 4) == 0xE  ? 3
+                       : (c >> 3) == 0x1E ? 4
+                                          : 0;
+    if (len == 0 || i + len > n) return i;
+    for (size_t k = 1; k < len; ++k)
+      if ((b[i + k] & 0xC0) != 0x80) return i;
+    i += len;
+  }
+  return std::string::npos;
+}
+
 Iso3 toIso(const urdf::Pose& p) {
   double x, y, z, w;
   p.rotation.getQuaternion(x, y, z, w);
@@ -489,6 +510,10 @@ RobotModel RobotModel::load(const fs::path& configPath, const fs::path& urdfOver
   }
   const std::string urdfName = urdfPath.string();
   std::string xml = readTextFile(urdfPath);
+  // TinyXML (under urdfdom) reads past the end of the text after a truncated multi-byte UTF-8
+  // sequence (found by fuzzing): the text must be valid UTF-8 before it gets there.
+  if (const size_t bad = invalidUtf8At(xml); bad != std::string::npos)
+    throw Error(urdfName + ": not valid UTF-8 text (byte " + std::to_string(bad) + ")");
   urdf::ModelInterfaceSharedPtr urdf = urdf::parseURDF(xml);
   if (!urdf) throw Error(urdfName + ": malformed URDF (urdfdom could not parse it; see above)");
 
