@@ -107,6 +107,7 @@ TEST(Session, RefusesWhatItCannotUseAndNamesIt) {
   Sim sim;
   ScanSession s(wam(), DepthCameraOptions{}, NoiseModelOptions{}, o, MultiGraspOptions{},
                 sim.centre());
+  sim.sensor.setPose(s.cameraPose());  // a frame of the object (an empty one is not fused)
   const DepthImage frame = sim.sensor.capture();
   auto message = [](const std::function<void()>& f) {
     try {

@@ -333,7 +333,7 @@ Json SimWorld::state() const {
           {"grasp_motions", graspMotions},
           {"faults",
            {faults.dropped_frames, faults.corrupted_frames, faults.pose_jumps, faults.stopped_short,
-            faults.slips, faults.object_drops}}};
+            faults.slips, faults.object_drops, faults.refused_motions, faults.failed_pickups}}};
 }
 
 void SimWorld::setState(const Json& j) {
