@@ -3,7 +3,7 @@
 # (default 60) from its seed corpus (fuzz/corpus/<target>, copied: the repository's corpus is
 # not changed). Usage: scripts/fuzz.sh [SECONDS] [TARGET...]. A crash stops with a non-zero exit;
 # the input is in build-fuzz/artifacts/<target>/. Prints a table row per target: executions,
-# corpus size, crashes.
+# corpus size, crashes. FUZZ_SEED=N fixes libFuzzer's seed (CI: 1); unset, each run differs.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 seconds="${1:-60}"
@@ -33,7 +33,7 @@ for t in "${targets[@]}"; do
   [ "$t" = urdf ] && leaks=0
   set +e
   ASAN_OPTIONS=detect_leaks=$leaks "build-fuzz/fuzz/fuzz_$t" "$corpus" -max_total_time="$seconds" \
-    -detect_leaks=$leaks \
+    -detect_leaks=$leaks -seed="${FUZZ_SEED:-0}" \
     -timeout=10 -rss_limit_mb=2048 -malloc_limit_mb=1024 -max_len=65536 -print_final_stats=1 \
     -artifact_prefix="$artifacts" -jobs="$(nproc)" -workers="$(nproc)" > "$log" 2>&1
   rc=$?
