@@ -3,9 +3,9 @@
 #include <tbb/global_control.h>
 
 #include <condition_variable>
+#include <cstdint>
 #include <cstdlib>
 #include <memory>
-#include <cstdint>
 #include <mutex>
 
 namespace inhand::detail {
@@ -125,8 +125,8 @@ void setThreadCount(int n) {
   g_threads = n > 0 ? n : 0;
   tbbLimit().reset();
   const int effective = n > 0 ? n : defaultThreads();
-  tbbLimit() = std::make_unique<tbb::global_control>(
-      tbb::global_control::max_allowed_parallelism, size_t(effective));
+  tbbLimit() = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism,
+                                                     size_t(effective));
 }
 
 }  // namespace inhand
