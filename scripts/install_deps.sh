@@ -11,6 +11,11 @@ packages=(
   python3-dev pybind11-dev python3-numpy python3-pytest
   nodejs npm chromium
 )
+# Slurm for `inhand eval --backend slurm` on a single-node cluster of this machine
+# (scripts/slurm-local.sh) and its test: only when asked.
+if [ "${INHAND_WITH_SLURM:-0}" = 1 ]; then
+  packages+=(slurmctld slurmd slurm-client munge)
+fi
 missing=()
 for p in "${packages[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q 'install ok installed' || missing+=("$p")

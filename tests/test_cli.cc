@@ -21,18 +21,8 @@
 using namespace inhand;
 
 namespace {
-struct Result {
-  int code;
-  std::string output;
-};
-Result run(const std::string& args, const test::TempDir& dir) {
-  fs::path log = dir.path() / "log.txt";
-  std::string cmd = std::string(INHAND_BINARY) + " " + args + " > " + log.string() + " 2>&1";
-  int status = std::system(cmd.c_str());
-  Result r{WIFEXITED(status) ? WEXITSTATUS(status) : -1, readTextFile(log)};
-  fs::remove(log);
-  return r;
-}
+using Result = test::CommandResult;
+Result run(const std::string& args, const test::TempDir& dir) { return test::runInhand(args, dir); }
 }  // namespace
 
 TEST(Cli, RenderThenFuseMakesAClosedColouredModel) {
@@ -571,24 +561,9 @@ TEST(Cli, ScanOfTheCrackerBoxMatchesTheRecordedScan) {
 namespace {
 // Starts `inhand ARGS` (output to LOG) and returns its pid.
 pid_t spawn(const std::vector<std::string>& args, const fs::path& log) {
-  const pid_t pid = fork();
-  if (pid == 0) {
-    const int fd = open(log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-    dup2(fd, 1);
-    dup2(fd, 2);
-    std::vector<char*> argv{const_cast<char*>(INHAND_BINARY)};
-    for (const std::string& a : args) argv.push_back(const_cast<char*>(a.c_str()));
-    argv.push_back(nullptr);
-    execv(INHAND_BINARY, argv.data());
-    _exit(127);
-  }
-  return pid;
+  return test::spawnInhand(args, log);
 }
-int waitExit(pid_t pid) {
-  int status = 0;
-  waitpid(pid, &status, 0);
-  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-}
+using test::waitExit;
 }  // namespace
 
 // SIGINT during a scan: it ends cleanly with the model so far, termination "interrupted", exit

@@ -1,9 +1,12 @@
 #include "test_util.h"
 
+#include <fcntl.h>
+#include <sys/wait.h>
 #include <unistd.h>
 
 #include <atomic>
 
+#include "inhand/core/file_util.h"
 #include "inhand/core/pose.h"
 
 namespace inhand::test {
@@ -92,6 +95,39 @@ ScanConfig quickScanConfig(int max_views) {
   c.multi.max_grasps = 2;
   c.sim.frame_subsample = 8;
   return c;
+}
+
+CommandResult runInhand(const std::string& args, const TempDir& dir) {
+  const std::filesystem::path log = dir.path() / "log.txt";
+  const std::string cmd = std::string(INHAND_BINARY) + " " + args + " > " + log.string() + " 2>&1";
+  const int status = std::system(cmd.c_str());
+  CommandResult r{WIFEXITED(status) ? WEXITSTATUS(status) : -1, readTextFile(log)};
+  std::filesystem::remove(log);
+  return r;
+}
+
+int spawnInhand(const std::vector<std::string>& args, const std::filesystem::path& log,
+                bool own_group) {
+  const pid_t pid = fork();
+  if (pid == 0) {
+    if (own_group) setpgid(0, 0);
+    const int fd = open(log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    dup2(fd, 1);
+    dup2(fd, 2);
+    std::vector<char*> argv{const_cast<char*>(INHAND_BINARY)};
+    for (const std::string& a : args) argv.push_back(const_cast<char*>(a.c_str()));
+    argv.push_back(nullptr);
+    execv(INHAND_BINARY, argv.data());
+    _exit(127);
+  }
+  if (own_group) setpgid(pid, pid);  // either side may run first
+  return pid;
+}
+
+int waitExit(int pid) {
+  int status = 0;
+  waitpid(pid, &status, 0);
+  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
 }
 
 }  // namespace inhand::test

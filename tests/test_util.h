@@ -25,6 +25,21 @@ class TempDir {
   std::filesystem::path path_;
 };
 
+// The `inhand` executable run with `args` (a shell command line), its output captured.
+struct CommandResult {
+  int code;            // exit status (-1 when it did not exit)
+  std::string output;  // stdout and stderr
+};
+CommandResult runInhand(const std::string& args, const TempDir& dir);
+
+// `inhand ARGS...` started in the background, stdout and stderr into `log`; with
+// `own_group`, in a process group of its own (kill(-pid, SIGINT) reaches it and its children,
+// as Ctrl-C in a terminal does).
+int spawnInhand(const std::vector<std::string>& args, const std::filesystem::path& log,
+                bool own_group = false);
+// The exit status of a spawned process (-1 when it did not exit).
+int waitExit(int pid);
+
 // Renders `mesh` from each camera pose (T_O_C) and fuses the images into `volume`.
 void renderAndFuse(const TriangleMesh& mesh, const std::vector<Iso3>& poses, bool noise,
                    TsdfVolume* volume);

@@ -76,8 +76,15 @@ struct EvalArgs {
   int max_views = -1;                // passed to every run when >= 0
   int jobs = 0;                      // runs at a time; 0: one per core
   std::string rest_poses = "as-is";  // comma-separated: as-is and/or stable pose indices
+  std::string backend = "local";     // local | slurm
+  bool backend_given = false;  // --backend was on the command line (--resume keeps eval.json's)
+  std::string slurm_args;      // extra sbatch options
+  bool no_wait = false;        // slurm: submit and return
+  std::string resume;          // an eval directory: run again what did not finish
 };
 int runEval(const EvalArgs& args);
+// `inhand eval-task DIR LIST` (hidden): one run of an eval as a Slurm array task.
+int runEvalTask(const std::string& dir, const std::string& list);
 // `inhand report DIR`: rebuilds DIR/report.html (a scan) or DIR/index.html (an eval).
 int runReport(const std::string& dir);
 int runSnapshot(const SnapshotArgs& args);

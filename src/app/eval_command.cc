@@ -1,9 +1,6 @@
-// `inhand eval`: every (object, planner, seed) scan, each in its own `inhand scan` process (a run
-// that fails cannot take the others down), `jobs` at a time, then one table of the results.
-#include <fcntl.h>
-#include <spawn.h>
-#include <sys/wait.h>
-#include <unistd.h>
+// `inhand eval`: every (object, rest pose, planner, seed) scan, each in its own `inhand scan`
+// process (a run that fails cannot take the others down), on this machine `jobs` at a time or as
+// a Slurm job array, then one table of the results; `inhand report` and `inhand eval --resume`.
 
 #include <algorithm>
 #include <atomic>
@@ -19,6 +16,7 @@
 #include <thread>
 
 #include "commands.h"
+#include "eval_runs.h"
 #include "inhand/core/error.h"
 #include "inhand/core/file_util.h"
 #include "inhand/core/json_util.h"
@@ -26,8 +24,6 @@
 #include "inhand/geometry/stable_poses.h"
 #include "inhand/planning/view_selection.h"
 #include "inhand/report/html_report.h"
-
-extern char** environ;
 
 namespace inhand::app {
 
@@ -48,36 +44,6 @@ std::vector<std::string> splitList(const std::string& s) {
 std::string objectName(const std::string& spec) {
   if (spec.rfind("builtin:", 0) == 0) return spec.substr(8);
   return fs::path(spec).stem().string();
-}
-
-struct Run {
-  std::string object, name, planner;
-  std::string rest_pose = "as-is";  // passed to `inhand scan --rest-pose`
-  int seed = 0;
-  fs::path dir, log;
-  int status = -1;
-  double wall_s = 0;
-  Json summary;  // null when the run wrote none
-};
-
-// Runs `argv` with stdout and stderr to `log`; returns its exit status (128+signal if killed).
-int runProcess(const std::vector<std::string>& argv, const fs::path& log) {
-  posix_spawn_file_actions_t fa;
-  posix_spawn_file_actions_init(&fa);
-  posix_spawn_file_actions_addopen(&fa, 1, log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-  posix_spawn_file_actions_adddup2(&fa, 1, 2);
-  std::vector<char*> args;
-  for (const std::string& a : argv) args.push_back(const_cast<char*>(a.c_str()));
-  args.push_back(nullptr);
-  pid_t pid = 0;
-  const int rc = posix_spawn(&pid, argv[0].c_str(), &fa, nullptr, args.data(), environ);
-  posix_spawn_file_actions_destroy(&fa);
-  if (rc != 0) throw Error("cannot start " + argv[0] + ": " + std::strerror(rc));
-  int st = 0;
-  while (waitpid(pid, &st, 0) < 0)
-    if (errno != EINTR) throw Error("waitpid failed");
-  if (WIFEXITED(st)) return WEXITSTATUS(st);
-  return 128 + (WIFSIGNALED(st) ? WTERMSIG(st) : 0);
 }
 
 // Views (1-based, initial views included) and cumulative trajectory seconds until coverage first
@@ -134,7 +100,7 @@ std::string num(double x) {
 }
 
 // results.csv, results.md, curves.csv and curves.json in `dir` from the runs.
-void tabulate(const fs::path& dir, const std::vector<Run>& runs,
+void tabulate(const fs::path& dir, const std::vector<EvalRun>& runs,
               const std::vector<std::string>& objects, const std::vector<std::string>& planners,
               const std::string& description) {
   // results.csv: one row per run.
@@ -149,10 +115,10 @@ void tabulate(const fs::path& dir, const std::vector<Run>& runs,
   curves << "object,planner,seed,view,grasp,initial,coverage,mean_entropy,trajectory_s,quality,"
             "cost_s\n";
   Json curvesJson = Json::array();
-  for (const Run& r : runs) {
+  for (const EvalRun& r : runs) {
     csv << csvField(r.name) << "," << r.planner << "," << r.seed << "," << r.status << ",";
     if (!r.summary.is_object()) {
-      csv << "error" << std::string(22, ',') << "\n";
+      csv << (r.exited ? "error" : "missing") << std::string(22, ',') << "\n";
       continue;
     }
     const Json& s = r.summary;
@@ -175,9 +141,7 @@ void tabulate(const fs::path& dir, const std::vector<Run>& runs,
     Json c = {{"object", r.name},
               {"planner", r.planner},
               {"seed", r.seed},
-              {"report", (fs::path("runs") / r.name / r.planner /
-                          ("seed" + std::to_string(r.seed)) / "report.html")
-                             .string()}};
+              {"report", (r.rel / "report.html").string()}};
     Json cov = Json::array(), ent = Json::array(), traj = Json::array();
     for (size_t i = 0; i < views.size(); ++i) {
       const Json& v = views[i];
@@ -209,7 +173,7 @@ void tabulate(const fs::path& dir, const std::vector<Run>& runs,
   for (const std::string& o : objects)
     for (const std::string& p : planners) {
       Stat v90, v95, v99, t90, t95, t99, cov, acc, gr, nv, plan;
-      for (const Run& r : runs) {
+      for (const EvalRun& r : runs) {
         if (r.name != o || r.planner != p) continue;
         if (!r.summary.is_object()) {
           for (Stat* st : {&v90, &v95, &v99, &t90, &t95, &t99, &cov, &acc, &gr, &nv, &plan})
@@ -266,14 +230,223 @@ void tabulate(const fs::path& dir, const std::vector<Run>& runs,
 
 }  // namespace
 
+namespace {
+
+std::string runTitle(const EvalRun& r) {
+  return r.name + " " + r.planner + " seed " + std::to_string(r.seed);
+}
+
+// One line when a run ends.
+void printRunEnd(size_t k, size_t n, const EvalRun& r, double wall_s) {
+  char took[32] = "";
+  if (wall_s >= 0) std::snprintf(took, sizeof took, " (%.0f s)", wall_s);
+  if (r.finished())
+    std::fprintf(stderr, "eval: [%zu/%zu] %s: coverage %.1f%%, %zu views, %s%s\n", k, n,
+                 runTitle(r).c_str(), 100 * r.summary.value("coverage", 0.0),
+                 r.summary["views"].size(),
+                 r.summary.value("termination", std::string("?")).c_str(), took);
+  else
+    std::fprintf(stderr, "eval: [%zu/%zu] %s: %s (exit %d, see %s)%s\n", k, n, runTitle(r).c_str(),
+                 r.status == 130 ? "interrupted" : "FAILED", r.status, r.log().c_str(), took);
+}
+
+// Why a run has no result, in words.
+std::string unfinishedReason(const fs::path& dir, const EvalRun& r) {
+  if (!r.exited && !r.summary.is_object() && !fs::exists(dir / r.log())) return "not started";
+  if (!r.exited)
+    return "no exit status: it did not end (a task killed or cancelled, or still running); "
+           "see " +
+           r.log().string();
+  if (r.status == 130) return "interrupted (exit 130); it goes on from its checkpoint";
+  if (r.status > 128) return "killed by signal " + std::to_string(r.status - 128);
+  return "failed (exit " + std::to_string(r.status) + "); see " + r.log().string();
+}
+
+// Lists the runs that did not finish; returns how many.
+int listUnfinished(const std::vector<EvalRun>& runs, const std::string& dir) {
+  int n = 0;
+  for (const EvalRun& r : runs) n += !r.finished();
+  if (n == 0) return 0;
+  std::fprintf(stderr, "eval: %d of %zu runs did not finish:\n", n, runs.size());
+  for (const EvalRun& r : runs)
+    if (!r.finished())
+      std::fprintf(stderr, "  %s: %s\n", runTitle(r).c_str(), unfinishedReason(dir, r).c_str());
+  std::fprintf(stderr, "eval: run them again with: inhand eval --resume %s\n", dir.c_str());
+  return n;
+}
+
+void writeTables(const fs::path& dir, const EvalPlan& plan) {
+  tabulate(dir, plan.runs, plan.objects, plan.planners, plan.description);
+  try {
+    writeEvalIndex(dir, webDirectory());
+  } catch (const Error& e) {
+    std::fprintf(stderr, "eval: warning: no index.html: %s\n", e.what());
+  }
+}
+
+// The runs of `todo` on this machine, `jobs` at a time. A stop signal (Ctrl-C) lets the runs
+// under way end (each scan takes the signal too and writes its checkpoint) and starts no more;
+// returns false then.
+bool runLocally(const fs::path& dir, EvalPlan* plan, const std::vector<size_t>& todo, int jobs) {
+  const std::string self = selfExecutable();
+  StopOnSignal stop;
+  std::atomic<size_t> next{0}, done{0};
+  std::mutex printLock;
+  auto worker = [&] {
+    for (size_t i = next++; i < todo.size() && !StopOnSignal::raised(); i = next++) {
+      EvalRun& r = plan->runs[todo[i]];
+      const auto ts = std::chrono::steady_clock::now();
+      executeRun(dir, self, plan->scan, r);
+      loadState(dir, &r);
+      const double wall =
+          std::chrono::duration<double>(std::chrono::steady_clock::now() - ts).count();
+      std::lock_guard<std::mutex> lock(printLock);
+      printRunEnd(++done, todo.size(), r, wall);
+    }
+  };
+  std::vector<std::thread> pool;
+  for (int j = 1; j < std::min<int>(jobs, int(todo.size())); ++j) pool.emplace_back(worker);
+  worker();
+  for (auto& t : pool) t.join();
+  return !StopOnSignal::raised();
+}
+
+// Waits until Slurm has none of the eval's jobs, printing each run of `todo` as it ends. A stop
+// signal ends the wait (the jobs go on); returns false then.
+bool waitForSlurm(const fs::path& dir, EvalPlan* plan, const std::vector<size_t>& todo) {
+  StopOnSignal stop;
+  std::vector<bool> seen(todo.size(), false);
+  size_t done = 0;
+  for (;;) {
+    const bool active = !activeSlurmJobs(dir).empty();
+    for (size_t i = 0; i < todo.size(); ++i) {
+      EvalRun& r = plan->runs[todo[i]];
+      if (seen[i] || !fs::exists(dir / r.exitFile())) continue;
+      loadState(dir, &r);
+      if (!r.exited) continue;
+      seen[i] = true;
+      printRunEnd(++done, todo.size(), r, -1);
+    }
+    if (!active) return true;
+    for (int k = 0; k < 20; ++k) {
+      if (StopOnSignal::raised()) {
+        std::fprintf(stderr,
+                     "eval: stopped waiting; the Slurm jobs go on. When they end: inhand report "
+                     "%s\n",
+                     dir.c_str());
+        return false;
+      }
+      std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    }
+  }
+}
+
+int threadsForJobs(int jobs) {
+  return jobs > 0 ? jobs : std::max(1u, std::thread::hardware_concurrency());
+}
+
+// Submits `todo` to Slurm, then waits and tabulates (or, with --no-wait, says how to go on).
+int slurmRunsThenTables(const EvalArgs& args, const fs::path& dir, EvalPlan* plan,
+                        const std::vector<size_t>& todo) {
+  SlurmOptions so;
+  so.args = args.slurm_args;
+  so.throttle = args.jobs;
+  const std::vector<std::string> ids = submitSlurm(dir, selfExecutable(), todo, so);
+  std::string idList;
+  for (const std::string& id : ids) idList += (idList.empty() ? "" : ", ") + id;
+  std::fprintf(stderr, "eval: submitted %zu runs to Slurm as job array %s (logs in %s/slurm)\n",
+               todo.size(), idList.c_str(), dir.c_str());
+  if (args.no_wait) {
+    std::printf(
+        "eval: submitted; when the jobs end (squeue -j %s): inhand report %s; runs that did not "
+        "finish: inhand eval --resume %s\n",
+        idList.c_str(), dir.c_str(), dir.c_str());
+    return 0;
+  }
+  const bool waited = waitForSlurm(dir, plan, todo);
+  for (EvalRun& r : plan->runs) loadState(dir, &r);
+  writeTables(dir, *plan);
+  if (!waited) return 130;
+  const int failed = listUnfinished(plan->runs, dir.string());
+  std::printf("eval: %zu runs (%d did not finish) -> %s/results.md\n", plan->runs.size(), failed,
+              dir.c_str());
+  return failed ? 5 : 0;
+}
+
+// `inhand eval --resume DIR`: the runs that did not finish, again.
+int resumeEval(const EvalArgs& args) {
+  const fs::path dir = args.resume;
+  if (!fs::is_directory(dir)) throw Error(args.resume + ": not a directory");
+  EvalPlan plan = readEvalPlan(dir);
+  const std::string backend = args.backend_given ? args.backend : plan.backend;
+  if (backend == "slurm") checkSlurmTools();
+  if (fs::exists(dir / "slurm" / "jobs.json")) {
+    const std::vector<std::string> active = activeSlurmJobs(dir);
+    if (!active.empty()) {
+      std::string ids;
+      for (const std::string& id : active) ids += (ids.empty() ? "" : ", ") + id;
+      throw Error(args.resume + ": Slurm job " + ids +
+                  " of this eval is still queued or running; wait for it (squeue) or cancel it "
+                  "(scancel) first");
+    }
+  }
+  std::vector<size_t> todo;
+  int fromCheckpoint = 0;
+  for (size_t i = 0; i < plan.runs.size(); ++i) {
+    loadState(dir, &plan.runs[i]);
+    if (plan.runs[i].finished()) continue;
+    todo.push_back(i);
+    fromCheckpoint += fs::exists(dir / plan.runs[i].rel / "checkpoint.inhand");
+  }
+  if (todo.empty()) {
+    writeTables(dir, plan);
+    std::printf("eval: every run of %s has finished; tables rebuilt -> %s/results.md\n",
+                dir.c_str(), dir.c_str());
+    return 0;
+  }
+  std::fprintf(stderr, "eval: %zu of %zu runs again (%d from their checkpoints), %s\n", todo.size(),
+               plan.runs.size(), fromCheckpoint,
+               backend == "slurm" ? "as a Slurm job array" : "on this machine");
+  // The exit statuses of the earlier attempts go: a run is shown as it ends again.
+  for (size_t i : todo) {
+    std::error_code ec;
+    fs::remove(dir / plan.runs[i].exitFile(), ec);
+    plan.runs[i].exited = false;
+  }
+  if (backend != plan.backend) {
+    plan.backend = backend;
+    writeEvalPlan(dir, plan);
+  }
+  if (backend == "slurm") return slurmRunsThenTables(args, dir, &plan, todo);
+  const bool complete = runLocally(dir, &plan, todo, threadsForJobs(args.jobs));
+  writeTables(dir, plan);
+  const int failed = listUnfinished(plan.runs, dir.string());
+  std::printf("eval: %zu runs (%d did not finish) -> %s/results.md\n", plan.runs.size(), failed,
+              dir.c_str());
+  return !complete ? 130 : failed ? 5 : 0;
+}
+
+}  // namespace
+
 int runEval(const EvalArgs& args) {
   const auto t0 = std::chrono::steady_clock::now();
+  if (args.backend != "local" && args.backend != "slurm")
+    throw Error("--backend: \"" + args.backend + "\" is neither local nor slurm");
+  if (args.backend != "slurm" && !args.slurm_args.empty())
+    throw Error("--slurm-args: only with --backend slurm");
+  if (args.backend != "slurm" && args.no_wait) throw Error("--no-wait: only with --backend slurm");
+  if (args.jobs < 0 || args.jobs > 10000)
+    throw Error("--jobs: must be in 0..10000 (0: one per core, or no Slurm limit)");
+  if (!args.resume.empty()) return resumeEval(args);
+  if (args.objects.empty()) throw Error("--objects is required (or --resume DIR)");
+  if (args.out.empty()) throw Error("--out is required (or --resume DIR)");
   const std::vector<std::string> objects = splitList(args.objects);
   const std::vector<std::string> planners = splitList(args.planners);
   if (objects.empty()) throw Error("--objects: give at least one object (comma-separated)");
   if (planners.empty()) throw Error("--planners: give at least one planner (comma-separated)");
   if (args.seeds < 1 || args.seeds > 1000) throw Error("--seeds: must be in 1..1000");
-  if (args.jobs < 0 || args.jobs > 64) throw Error("--jobs: must be in 0..64 (0: one per core)");
+  if (args.backend == "local" && args.jobs > 64)
+    throw Error("--jobs: must be in 0..64 on this machine (0: one per core)");
   const std::vector<std::string> known = plannerNames();
   for (const std::string& p : planners)
     if (std::find(known.begin(), known.end(), p) == known.end())
@@ -309,117 +482,82 @@ int runEval(const EvalArgs& args) {
                     std::to_string(count - 1) + "), not " + std::to_string(maxPose));
     }
   }
-  // One entry per (object, rest pose): its name is the object's, with @N for pose N.
-  struct Entry {
-    std::string spec, name, rest_pose;
-  };
-  std::vector<Entry> entries;
-  for (const std::string& o : objects)
-    for (const std::string& rp : restPoses)
-      entries.push_back({o, objectName(o) + (rp == "as-is" ? "" : "@" + rp), rp});
   if (!args.config.empty()) readJsonFile(args.config);  // readable JSON (scan checks the keys)
+  if (args.backend == "slurm") checkSlurmTools();
 
-  char self[4096];
-  const ssize_t len = readlink("/proc/self/exe", self, sizeof(self) - 1);
-  if (len <= 0) throw Error("cannot find the inhand executable (/proc/self/exe)");
-  self[len] = 0;
-
-  StagedDirectory out(args.out);
-  std::vector<Run> runs;
-  for (const Entry& e : entries)
-    for (const std::string& p : planners)
-      for (int s = 1; s <= args.seeds; ++s) {
-        Run r;
-        r.object = e.spec;
-        r.name = e.name;
-        r.rest_pose = e.rest_pose;
-        r.planner = p;
-        r.seed = s;
-        const fs::path rel = fs::path("runs") / r.name / p / ("seed" + std::to_string(s));
-        r.dir = out.path() / rel;
-        r.log = out.path() / "runs" / r.name / p / ("seed" + std::to_string(s) + ".log");
-        fs::create_directories(r.log.parent_path());
-        runs.push_back(r);
-      }
-  const int jobs = args.jobs > 0 ? args.jobs : std::max(1u, std::thread::hardware_concurrency());
-  std::fprintf(stderr,
-               "eval: %zu runs (%zu objects × %zu rest poses × %zu planners × %d seeds), %d at a "
-               "time\n",
-               runs.size(), objects.size(), restPoses.size(), planners.size(), args.seeds, jobs);
-  std::atomic<size_t> next{0}, done{0};
-  std::mutex printLock;
-  auto worker = [&] {
-    for (size_t i = next++; i < runs.size(); i = next++) {
-      Run& r = runs[i];
-      std::vector<std::string> argv{
-          self,           "scan",      "--object", r.object, "--out",
-          r.dir.string(), "--planner", r.planner,  "--seed", std::to_string(r.seed),
-          "--rest-pose",  r.rest_pose};
-      if (!args.config.empty()) argv.insert(argv.end(), {"--config", args.config});
-      if (args.max_grasps >= 0)
-        argv.insert(argv.end(), {"--max-grasps", std::to_string(args.max_grasps)});
-      if (args.max_views >= 0)
-        argv.insert(argv.end(), {"--max-views", std::to_string(args.max_views)});
-      const auto ts = std::chrono::steady_clock::now();
-      r.status = runProcess(argv, r.log);
-      writeTextAtomically(fs::path(r.log).replace_extension(".exit"),
-                          std::to_string(r.status) + "\n");
-      r.wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - ts).count();
-      const fs::path sj = r.dir / "summary.json";
-      if (fs::exists(sj)) {
-        try {
-          r.summary = readJsonFile(sj);
-        } catch (const Error&) {
-          r.summary = nullptr;
+  EvalPlan plan;
+  plan.planners = planners;
+  plan.seeds = args.seeds;
+  plan.backend = args.backend;
+  plan.scan.config = !args.config.empty();
+  plan.scan.max_grasps = args.max_grasps;
+  plan.scan.max_views = args.max_views;
+  for (const std::string& o : objects)
+    for (const std::string& rp : restPoses) {
+      const std::string name = objectName(o) + (rp == "as-is" ? "" : "@" + rp);
+      plan.objects.push_back(name);
+      // A mesh file by its absolute path: the runs may start elsewhere (Slurm, --resume).
+      const std::string spec =
+          o.rfind("builtin:", 0) == 0 ? o : fs::absolute(o).lexically_normal().string();
+      for (const std::string& p : planners)
+        for (int s = 1; s <= args.seeds; ++s) {
+          EvalRun r;
+          r.object = spec;
+          r.name = name;
+          r.rest_pose = rp;
+          r.planner = p;
+          r.seed = s;
+          r.rel = fs::path("runs") / name / p / ("seed" + std::to_string(s));
+          plan.runs.push_back(r);
         }
-      }
-      std::lock_guard<std::mutex> lock(printLock);
-      const size_t k = ++done;
-      if (r.summary.is_object())
-        std::fprintf(stderr,
-                     "eval: [%zu/%zu] %s %s seed %d: coverage %.1f%%, %zu views, %s (%.0f s)\n", k,
-                     runs.size(), r.name.c_str(), r.planner.c_str(), r.seed,
-                     100 * r.summary.value("coverage", 0.0), r.summary["views"].size(),
-                     r.summary.value("termination", std::string("?")).c_str(), r.wall_s);
-      else
-        std::fprintf(stderr, "eval: [%zu/%zu] %s %s seed %d: FAILED (exit %d, see %s)\n", k,
-                     runs.size(), r.name.c_str(), r.planner.c_str(), r.seed, r.status,
-                     r.log.lexically_relative(out.path()).c_str());
     }
-  };
-  std::vector<std::thread> pool;
-  for (int j = 1; j < std::min<int>(jobs, int(runs.size())); ++j) pool.emplace_back(worker);
-  worker();
-  for (auto& t : pool) t.join();
-
-  const double total = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   std::ostringstream desc;
-  desc << runs.size() << " runs: objects " << args.objects << "; planners " << args.planners
+  desc << plan.runs.size() << " runs: objects " << args.objects << "; planners " << args.planners
        << "; seeds 1.." << args.seeds;
   if (args.rest_poses != "as-is") desc << "; --rest-poses " << args.rest_poses;
   if (args.max_grasps >= 0) desc << "; --max-grasps " << args.max_grasps;
   if (args.max_views >= 0) desc << "; --max-views " << args.max_views;
   if (!args.config.empty()) desc << "; --config " << args.config;
-  std::vector<std::string> objectNames;
-  for (const Entry& e : entries) objectNames.push_back(e.name);
-  writeTextAtomically(out.path() / "eval.json", Json({{"description", desc.str()},
-                                                      {"objects", objectNames},
-                                                      {"planners", planners},
-                                                      {"seeds", args.seeds}})
-                                                        .dump(1) +
-                                                    "\n");
-  tabulate(out.path(), runs, objectNames, planners, desc.str());
-  try {
-    writeEvalIndex(out.path(), webDirectory());
-  } catch (const Error& e) {
-    std::fprintf(stderr, "eval: warning: no index.html: %s\n", e.what());
+  plan.description = desc.str();
+  std::vector<size_t> all(plan.runs.size());
+  for (size_t i = 0; i < all.size(); ++i) all[i] = i;
+  const int jobs = threadsForJobs(args.jobs);
+  std::fprintf(stderr, "eval: %zu runs (%zu objects × %zu rest poses × %zu planners × %d seeds), ",
+               plan.runs.size(), objects.size(), restPoses.size(), planners.size(), args.seeds);
+  if (args.backend == "slurm")
+    std::fprintf(stderr, "a Slurm job array\n");
+  else
+    std::fprintf(stderr, "%d at a time\n", jobs);
+
+  if (args.backend == "slurm") {
+    // The runs write into the eval directory itself (the tasks may run on other nodes and this
+    // command may not wait): it is set up first, and removed again when the submission fails.
+    StagedDirectory staged(args.out);
+    writeEvalPlan(staged.path(), plan);
+    if (!args.config.empty()) fs::copy_file(args.config, staged.path() / "config.json");
+    fs::create_directories(staged.path() / "runs");
+    staged.commit();
+    const fs::path dir = fs::absolute(args.out).lexically_normal();
+    try {
+      return slurmRunsThenTables(args, dir, &plan, all);
+    } catch (const Error&) {
+      std::error_code ec;
+      if (!fs::exists(dir / "slurm" / "jobs.json")) fs::remove_all(dir, ec);
+      throw;
+    }
   }
+
+  StagedDirectory out(args.out);
+  writeEvalPlan(out.path(), plan);
+  if (!args.config.empty()) fs::copy_file(args.config, out.path() / "config.json");
+  const bool complete = runLocally(out.path(), &plan, all, jobs);
+  const double total = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  writeTables(out.path(), plan);
   out.commit();
-  int failed = 0;
-  for (const Run& r : runs) failed += !r.summary.is_object();
-  std::printf("eval: %zu runs (%d failed) in %.0f s -> %s/results.md\n", runs.size(), failed, total,
-              args.out.c_str());
-  return failed ? 5 : 0;
+  const int failed = listUnfinished(plan.runs, args.out);
+  std::printf("eval: %zu runs (%d failed) in %.0f s -> %s/results.md\n", plan.runs.size(), failed,
+              total, args.out.c_str());
+  return !complete ? 130 : failed ? 5 : 0;
 }
 
 int runReport(const std::string& dir) {
@@ -429,27 +567,12 @@ int runReport(const std::string& dir) {
     writeScanReport(dir, web);
     std::printf("report: %s/report.html\n", dir.c_str());
   } else if (fs::exists(fs::path(dir) / "eval.json")) {
-    // Rebuild the tables from the runs' own files, then the index.
-    const Json e = readJsonFile(fs::path(dir) / "eval.json");
-    const auto objects = e.at("objects").get<std::vector<std::string>>();
-    const auto planners = e.at("planners").get<std::vector<std::string>>();
-    std::vector<Run> runs;
-    for (const std::string& o : objects)
-      for (const std::string& p : planners)
-        for (int sd = 1; sd <= e.at("seeds").get<int>(); ++sd) {
-          Run r;
-          r.object = r.name = o;
-          r.planner = p;
-          r.seed = sd;
-          const fs::path base = fs::path(dir) / "runs" / o / p;
-          r.dir = base / ("seed" + std::to_string(sd));
-          const fs::path exitFile = base / ("seed" + std::to_string(sd) + ".exit");
-          if (fs::exists(exitFile)) r.status = std::stoi(readTextFile(exitFile));
-          if (fs::exists(r.dir / "summary.json")) r.summary = readJsonFile(r.dir / "summary.json");
-          runs.push_back(r);
-        }
-    tabulate(dir, runs, objects, planners, e.at("description").get<std::string>());
+    // Rebuild the tables from whatever the runs left, then the index.
+    EvalPlan plan = readEvalPlan(dir);
+    for (EvalRun& r : plan.runs) loadState(dir, &r);
+    tabulate(dir, plan.runs, plan.objects, plan.planners, plan.description);
     writeEvalIndex(dir, web);
+    listUnfinished(plan.runs, dir);
     std::printf("report: %s/index.html\n", dir.c_str());
   } else {
     throw Error(dir + ": neither a scan (summary.json) nor an eval (eval.json)");

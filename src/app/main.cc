@@ -116,19 +116,47 @@ int main(int argc, char** argv) {
   inhand::app::EvalArgs eval;
   auto* ev = app.add_subcommand(
       "eval", "scan objects with several view planners and seeds; tabulate against ground truth");
-  ev->add_option("--objects", eval.objects, "comma-separated objects: builtin:NAME or mesh files")
-      ->required();
-  ev->add_option("--planners", eval.planners, "comma-separated planners")->capture_default_str();
-  ev->add_option("--seeds", eval.seeds, "seeds 1..N per object and planner")->capture_default_str();
-  ev->add_option("--out", eval.out, "output directory (new or empty)")->required();
-  ev->add_option("--config", eval.config, "scan options JSON for every run");
-  ev->add_option("--max-grasps", eval.max_grasps, "grasps per run at most (default: scan's)");
-  ev->add_option("--max-views", eval.max_views, "next-best views per grasp at most");
-  ev->add_option("--jobs", eval.jobs, "runs at a time (0: one per core)")->capture_default_str();
-  ev->add_option("--rest-poses", eval.rest_poses,
-                 "comma-separated: as-is and/or stable pose indices (0: the most probable); "
-                 "each object is scanned in each")
+  std::vector<CLI::Option*> evalPlan;
+  evalPlan.push_back(ev->add_option("--objects", eval.objects,
+                                    "comma-separated objects: builtin:NAME or mesh files"));
+  evalPlan.push_back(ev->add_option("--planners", eval.planners, "comma-separated planners")
+                         ->capture_default_str());
+  evalPlan.push_back(ev->add_option("--seeds", eval.seeds, "seeds 1..N per object and planner")
+                         ->capture_default_str());
+  evalPlan.push_back(ev->add_option("--out", eval.out, "output directory (new or empty)"));
+  evalPlan.push_back(ev->add_option("--config", eval.config, "scan options JSON for every run"));
+  evalPlan.push_back(
+      ev->add_option("--max-grasps", eval.max_grasps, "grasps per run at most (default: scan's)"));
+  evalPlan.push_back(
+      ev->add_option("--max-views", eval.max_views, "next-best views per grasp at most"));
+  evalPlan.push_back(ev->add_option("--rest-poses", eval.rest_poses,
+                                    "comma-separated: as-is and/or stable pose indices (0: the "
+                                    "most probable); each object is scanned in each")
+                         ->capture_default_str());
+  ev->add_option("--jobs", eval.jobs,
+                 "runs at a time (local: 0 = one per core; slurm: array tasks at once, 0 = no "
+                 "limit)")
       ->capture_default_str();
+  auto* backendOpt = ev->add_option("--backend", eval.backend,
+                                    "local: runs on this machine; slurm: one Slurm job array "
+                                    "(the output directory must be on a file system the nodes "
+                                    "share)")
+                         ->capture_default_str();
+  ev->add_option("--slurm-args", eval.slurm_args,
+                 "extra sbatch options, e.g. \"--partition=cpu --time=01:00:00 --mem=4G "
+                 "--cpus-per-task=2\"");
+  ev->add_flag("--no-wait", eval.no_wait,
+               "slurm: submit and return (then: inhand report DIR, or --resume DIR)");
+  auto* evalResume = ev->add_option("--resume", eval.resume,
+                                    "DIR: run again what did not finish in the eval DIR "
+                                    "(interrupted scans go on from their checkpoints)");
+  for (CLI::Option* o : evalPlan) evalResume->excludes(o);
+
+  std::string taskDir, taskList;
+  auto* et = app.add_subcommand("eval-task", "one run of an eval, as a Slurm array task");
+  et->group("");  // not listed: `inhand eval --backend slurm` submits it
+  et->add_option("dir", taskDir, "the eval directory")->required();
+  et->add_option("list", taskList, "the file of run indices, one per array task")->required();
 
   std::string reportDir;
   auto* rp = app.add_subcommand("report", "rebuild the HTML report of a scan or an eval directory");
@@ -149,7 +177,11 @@ int main(int argc, char** argv) {
   }
   try {
     if (*sc) return inhand::app::runScan(scan);
-    if (*ev) return inhand::app::runEval(eval);
+    if (*ev) {
+      eval.backend_given = backendOpt->count() > 0;
+      return inhand::app::runEval(eval);
+    }
+    if (*et) return inhand::app::runEvalTask(taskDir, taskList);
     if (*rp) return inhand::app::runReport(reportDir);
     if (*cf) return inhand::app::runConfig(configFile, configReference);
     if (*rb) return inhand::app::runRobot(robot);

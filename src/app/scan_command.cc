@@ -301,6 +301,10 @@ int runScan(const ScanArgs& given) {
       args.planner = caller.at("planner").get<std::string>();
       args.seed = caller.at("seed").get<uint64_t>();
       args.rest_pose = caller.at("rest_pose").get<std::string>();
+      // What the planner's name sets that is not an option (the baselines' metric), then the
+      // options as they were.
+      if (!applyPlannerName(args.planner, &o.scan.planner))
+        throw Error(checkpoint.string() + ": unknown planner \"" + args.planner + "\"");
       readScanConfig(caller.at("options"), checkpoint.string() + ": options", &o);
     } catch (const Json::exception& e) {
       throw Error(checkpoint.string() + ": not a checkpoint of `inhand scan` (" + e.what() + ")");

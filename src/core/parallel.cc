@@ -1,5 +1,6 @@
 #include "inhand/core/parallel.h"
 
+#include <sched.h>
 #include <tbb/global_control.h>
 
 #include <condition_variable>
@@ -100,6 +101,11 @@ int defaultThreads() {
     const long n = std::strtol(env, &end, 10);
     if (end != env && *end == '\0' && n >= 1 && n <= 1024) return int(n);
   }
+  // The CPUs this process may run on (taskset, a container's or a batch system's CPU set), not
+  // every core of the machine.
+  cpu_set_t set;
+  CPU_ZERO(&set);
+  if (sched_getaffinity(0, sizeof set, &set) == 0 && CPU_COUNT(&set) > 0) return CPU_COUNT(&set);
   return std::max(1, int(std::thread::hardware_concurrency()));
 }
 std::atomic<int> g_threads{0};  // 0: not yet decided
