@@ -170,16 +170,18 @@ int executeRun(const fs::path& dir, const std::string& self, const EvalScanOptio
   std::error_code ec;
   fs::remove(dir / run.exitFile(), ec);
   const bool resume = fs::exists(out / "checkpoint.inhand");
+  // A killed scan's staging directories (.seedN.partial.*, .seedN.old.*) go.
+  const std::string prefix = "." + seedName(run) + ".";
+  std::vector<fs::path> stale;
+  for (const auto& e : fs::directory_iterator(out.parent_path(), ec))
+    if (e.path().filename().string().rfind(prefix, 0) == 0) stale.push_back(e.path());
+  for (const fs::path& p : stale) fs::remove_all(p, ec);
   std::vector<std::string> argv;
   if (resume) {
     argv = {self, "scan", "--resume", out.string()};
   } else {
-    // What an earlier attempt left (a directory without a checkpoint, staging directories of a
-    // killed scan: .seedN.partial.*) goes.
+    // What an earlier attempt left without a checkpoint goes too.
     fs::remove_all(out, ec);
-    const std::string prefix = "." + seedName(run) + ".";
-    for (const auto& e : fs::directory_iterator(out.parent_path(), ec))
-      if (e.path().filename().string().rfind(prefix, 0) == 0) fs::remove_all(e.path(), ec);
     fs::create_directories(out.parent_path(), ec);
     argv = {self,          "scan",       "--object",  run.object, "--out",
             out.string(),  "--planner",  run.planner, "--seed",   std::to_string(run.seed),
