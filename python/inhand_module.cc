@@ -217,11 +217,21 @@ void bindFramesAndVolume(py::module_& m) {
             DepthImage d = loadFrameDepth(f.dir, f.set, size_t(i));
             py::object frame = py::module_::import("types").attr("SimpleNamespace")();
             frame.attr("depth_m") = depthArray(std::move(d));
-            frame.attr("T_O_C") = matrixOf(f.set.frames[size_t(i)].T_O_C);
-            frame.attr("file") = f.set.frames[size_t(i)].file;
+            const FrameRecord& r = f.set.frames[size_t(i)];
+            frame.attr("T_O_C") = r.has_T_O_C ? py::cast(matrixOf(r.T_O_C)) : py::none();
+            frame.attr("file") = r.file;
+            // A robot's frame: the joints by name, the camera in the base frame, the palm in
+            // the object frame (None where the file gives none).
+            py::dict q;
+            for (const auto& [name, value] : r.q) q[py::str(name)] = value;
+            frame.attr("q") = q.empty() ? py::object(py::none()) : py::object(q);
+            frame.attr("T_B_C") = r.T_B_C ? py::cast(matrixOf(*r.T_B_C)) : py::none();
+            const std::optional<Iso3> palm = r.T_O_palm ? r.T_O_palm : f.set.T_O_palm;
+            frame.attr("T_O_palm") = palm ? py::cast(matrixOf(*palm)) : py::none();
             return frame;
           },
-          "frame i: .depth_m (H×W float32, m), .T_O_C (4×4), .file")
+          "frame i: .depth_m (H×W float32, m), .T_O_C (4×4, or None), .file; from a robot also "
+          ".q (dict of joint values), .T_B_C and .T_O_palm (4×4)")
       .def_property_readonly("camera", [](const Frames& f) { return f.set.intrinsics; })
       .def_property_readonly("bounds_min",
                              [](const Frames& f) -> std::optional<Eigen::Vector3d> {

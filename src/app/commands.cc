@@ -7,6 +7,7 @@
 
 #include <unistd.h>
 
+#include "inhand/config/scan_config.h"
 #include "inhand/core/error.h"
 #include "inhand/core/file_util.h"
 #include "inhand/core/json_util.h"
@@ -20,6 +21,7 @@
 #include "inhand/report/snapshot.h"
 #include "inhand/robot/collision.h"
 #include "inhand/robot/reachability.h"
+#include "inhand/scan/session.h"
 #include "inhand/sensor/frame_set.h"
 #include "inhand/sensor/render.h"
 #include "inhand/volume/integrate.h"
@@ -128,6 +130,156 @@ Aabb autoBounds(const fs::path& dir, const FrameSet& set, double margin) {
   return box;
 }
 
+// Writes the model and its summary; neither stays when the other cannot be written.
+void writeFusedModel(const fs::path& outPath, const fs::path& summaryPath, const ObjectModel& model,
+                     const Json& summary) {
+  writePly(outPath, model.mesh, &model.variance);
+  try {
+    writeTextAtomically(summaryPath, summary.dump(2) + "\n");
+  } catch (...) {
+    std::error_code ec;
+    fs::remove(outPath, ec);  // no half-finished result
+    throw;
+  }
+}
+
+// The robot's joints of frame `where` as a JointVector: every variable of the model by name.
+JointVector jointsOf(const RobotModel& model, const FrameRecord& rec, const std::string& where) {
+  JointVector q = model.home();
+  std::vector<bool> given(size_t(model.variableCount()), false);
+  for (const auto& [name, value] : rec.q) {
+    const int v = model.variableIndex(name);
+    if (v < 0)
+      throw Error(where + ".q." + name + ": the robot " + model.name() + " has no such joint");
+    q[v] = value;
+    given[size_t(v)] = true;
+  }
+  for (int v = 0; v < model.variableCount(); ++v)
+    if (!given[size_t(v)]) throw Error(where + ".q: no value for joint " + model.variable(v).name);
+  return q;
+}
+
+// `inhand fuse --robot`: the frames as a robot holding the object gave them (joints, camera in the
+// base frame, the grasp), fused by a ScanSession: the robot's own pixels carve only, the voxels
+// inside it are emptied, tracking aligns each frame with the hand and the model so far.
+int fuseWithRobot(const FuseArgs& args, const fs::path& dir, const FrameSet& set, const Aabb& box,
+                  const fs::path& outPath, const fs::path& summaryPath, const MeshOptions& mo,
+                  Clock::time_point t0) {
+  // Everything the frames give is checked before any work.
+  const RobotModel model = RobotModel::load(args.robot);
+  ScanConfig config;
+  if (!args.config.empty()) readScanConfigFile(args.config, &config);
+  ScanOptions o = config.scan;
+  if (!args.tracking.empty()) {
+    if (args.tracking != "on" && args.tracking != "off")
+      throw Error("--tracking: must be on or off, not \"" + args.tracking + "\"");
+    o.tracking.enabled = args.tracking == "on";
+  } else {
+    o.tracking.enabled = true;
+  }
+  // The volume: a cube around the bounds' centre, as large as their largest side, of --voxel.
+  o.voxel_m = args.voxel_m;
+  o.volume_size_m = box.size().maxCoeff();
+  o.fit_volume = false;
+  o.volume_budget.memory_budget_mb = args.memory_mb;
+  o.mesh.hole_sigma_m = mo.hole_sigma_m;
+  if (args.truncation_m > 0) o.volume_budget.truncation_m = args.truncation_m;
+  if (std::string p = o.validate(); !p.empty()) throw Error(p);
+  const std::string file = (dir / "frames.json").string();
+  std::vector<JointVector> qs;
+  std::vector<Iso3> palms;
+  for (size_t i = 0; i < set.frames.size(); ++i) {
+    const FrameRecord& rec = set.frames[i];
+    const std::string where = file + ": frames[" + std::to_string(i) + "]";
+    if (rec.q.empty()) throw Error(where + ": no q (the joints; --robot needs them)");
+    if (!rec.T_B_C) throw Error(where + ": no T_B_C (the camera in the base frame)");
+    if (!rec.T_O_palm && !set.T_O_palm)
+      throw Error(where + ": no T_O_palm, here or at the top (the palm in the object frame)");
+    qs.push_back(jointsOf(model, rec, where));
+    palms.push_back(rec.T_O_palm ? *rec.T_O_palm : *set.T_O_palm);
+  }
+  DepthCameraOptions camera;
+  camera.intrinsics = set.intrinsics;
+  NoiseModelOptions noise;
+  ScanSession session(model, camera, noise, o, config.multi, box.center());
+  std::fprintf(stderr, "fuse: %zu frames with %s, tracking %s, voxels of %.1f mm\n",
+               set.frames.size(), model.name().c_str(), o.tracking.enabled ? "on" : "off",
+               1000 * o.voxel_m);
+  Json tracked = Json::array();
+  int fused = 0, grasps = 0;
+  for (size_t i = 0; i < set.frames.size(); ++i) {
+    if (!session.holding() || !palms[i].isApprox(session.graspPose(), 1e-9)) {
+      if (session.holding()) session.endGrasp();
+      session.beginGrasp(palms[i], qs[i]);
+      ++grasps;
+    }
+    const DepthImage depth = loadFrameDepth(dir, set, i);
+    const FrameReport r = session.addFrame(depth, qs[i], *set.frames[i].T_B_C);
+    fused += r.fused;
+    Json t = {{"file", set.frames[i].file}, {"fused", r.fused}};
+    if (r.fused) {
+      const Iso3 T_O_B = palms[i] * model.tipPose(qs[i]).inverse();
+      t["T_B_C"] = poseToRowMajor(r.T_B_C);
+      t["T_O_C"] = poseToRowMajor(T_O_B * r.T_B_C);
+      const Vec3 moved = (r.T_B_C.translation() - set.frames[i].T_B_C->translation());
+      t["camera_correction_mm"] = 1000 * moved.norm();
+    } else {
+      t["rejected"] = r.rejected;
+    }
+    tracked.push_back(t);
+    progress("fuse: frames", i + 1, set.frames.size());
+  }
+  auto tMesh = Clock::now();
+  ObjectModel result = session.model();
+  if (args.surface == "observed") result = result.observedSurface();
+  const double meshS = secondsSince(tMesh);
+  if (result.mesh.empty())
+    throw Error(dir.string() +
+                ": the frames produced no surface inside the bounds; check T_O_palm (palm in the "
+                "object frame), T_B_C (camera in the robot's base frame) and the bounds");
+  const ScanSession::Summary& sum = session.summary();
+  Json summary;
+  summary["model"] = outPath.filename().string();
+  summary["frames"] = set.frames.size();
+  summary["frames_fused"] = fused;
+  summary["grasps"] = grasps;
+  summary["robot"] = args.robot;
+  summary["tracking"] = o.tracking.enabled;
+  summary["frames_not_fused"] = {{"tracking", sum.frames_rejected},
+                                 {"dropped_or_empty", sum.frames_dropped},
+                                 {"object_not_in_hand", sum.frames_unsupported},
+                                 {"in_known_free_space", sum.frames_in_free_space}};
+  summary["frames_tracked"] = "frames_tracked.json";
+  summary["vertices"] = result.mesh.vertices.size();
+  summary["triangles"] = result.mesh.triangles.size();
+  summary["surface"] = args.surface;
+  summary["closed"] = result.mesh.isClosed();
+  summary["mean_entropy"] = result.meanEntropy();
+  summary["observed_fraction"] = result.observedAreaFraction();
+  summary["surface_area_m2"] = result.mesh.area();
+  summary["hole_area_m2"] = result.holeArea();
+  summary["timing_s"] = {{"fusion", sum.fusion_s},
+                         {"tracking", sum.tracking_s},
+                         {"mesh", meshS},
+                         {"total", secondsSince(t0)}};
+  writeFusedModel(outPath, summaryPath, result, summary);
+  try {
+    writeTextAtomically(fs::absolute(outPath).parent_path() / "frames_tracked.json",
+                        Json({{"frames", tracked}}).dump(1) + "\n");
+  } catch (...) {
+    std::error_code ec;
+    fs::remove(outPath, ec);
+    fs::remove(summaryPath, ec);
+    throw;
+  }
+  std::printf(
+      "fuse: %zu frames (%d fused, %d grasps, tracking %s) -> %s: %zu vertices, observed %.1f%% "
+      "of the surface (%.2f s; corrected poses in frames_tracked.json)\n",
+      set.frames.size(), fused, grasps, o.tracking.enabled ? "on" : "off", outPath.c_str(),
+      result.mesh.vertices.size(), 100 * result.observedAreaFraction(), secondsSince(t0));
+  return 0;
+}
+
 }  // namespace
 
 int runFuse(const FuseArgs& args) {
@@ -161,6 +313,15 @@ int runFuse(const FuseArgs& args) {
                  "fuse: note: %d of %zu poses were not exactly orthonormal (max |R^T R - I| = "
                  "%.2g); the nearest rotations were used\n",
                  set.reorthonormalised, set.frames.size(), set.max_rotation_deviation);
+  if (args.robot.empty()) {
+    if (!args.config.empty() || !args.tracking.empty())
+      throw Error(std::string(args.config.empty() ? "--tracking" : "--config") +
+                  ": only with --robot");
+    for (size_t i = 0; i < set.frames.size(); ++i)
+      if (!set.frames[i].has_T_O_C)
+        throw Error((dir / "frames.json").string() + ": frames[" + std::to_string(i) +
+                    "] has no T_O_C, only the robot's q and T_B_C: fuse with --robot CONFIG");
+  }
   Aabb box;
   if (args.bounds) {
     const auto& b = *args.bounds;
@@ -170,9 +331,14 @@ int runFuse(const FuseArgs& args) {
       throw Error("--bounds: each min must be below its max (xmin ymin zmin xmax ymax zmax)");
   } else if (set.bounds_O) {
     box = *set.bounds_O;
+  } else if (!args.robot.empty()) {
+    throw Error((dir / "frames.json").string() +
+                ": no bounds_O; give --bounds around the object (with the robot in view, the "
+                "measured points would take in the arm)");
   } else {
     box = autoBounds(dir, set, args.margin_m);
   }
+  if (!args.robot.empty()) return fuseWithRobot(args, dir, set, box, outPath, summaryPath, mo, t0);
   TsdfVolume volume(box, vo);
   std::fprintf(stderr, "fuse: volume %d x %d x %d voxels of %.1f mm (%.0f MiB)\n",
                volume.dims().x(), volume.dims().y(), volume.dims().z(), vo.voxel_size_m * 1000,
@@ -223,14 +389,7 @@ int runFuse(const FuseArgs& args) {
                          {"load_and_integrate", loadAndIntegrateS},
                          {"mesh", meshS},
                          {"total", secondsSince(t0)}};
-  writePly(outPath, model.mesh, &model.variance);
-  try {
-    writeTextAtomically(summaryPath, summary.dump(2) + "\n");
-  } catch (...) {
-    std::error_code ec;
-    fs::remove(outPath, ec);  // no half-finished result
-    throw;
-  }
+  writeFusedModel(outPath, summaryPath, model, summary);
   std::printf(
       "fuse: %zu frames -> %s: %zu vertices, %zu triangles, observed %.1f%% of the "
       "surface, mean entropy %.3f nats (%.2f s; summary %s)\n",

@@ -29,6 +29,9 @@ struct FuseArgs {
   double memory_mb = 2048;                      // volume memory budget
   double hole_sigma_m = 0.05;                   // σ of never-observed surface
   std::string surface = "closed";  // closed (hole-filled, the paper's) or observed (measured only)
+  std::string robot;               // robot config: fuse the frames' q and T_B_C in a ScanSession
+  std::string config;              // with robot: scan options JSON (tracking, hand mode, checks)
+  std::string tracking;            // with robot: on | off (default on)
 };
 
 struct SnapshotArgs {
@@ -62,6 +65,7 @@ struct ScanArgs {
   double arm_error_m = -1;          // overrides sim.arm_error_m when >= 0
   std::string tracking;             // on | off: overrides tracking.enabled when set
   std::string resume;               // a scan's output directory with checkpoint.inhand: go on
+  bool save_frames = false;         // OUT/frames: the in-hand frames as the robot gave them
 };
 
 int runScan(const ScanArgs& args);

@@ -48,6 +48,14 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   f->add_option("--hole-sigma", fuse.hole_sigma_m, "sigma of never-observed surface, m")
       ->capture_default_str();
+  f->add_option("--robot", fuse.robot,
+                "robot config JSON: fuse each frame with the joints (q) and camera pose (T_B_C) "
+                "it gives, the robot's own pixels carving only, tracking the hand (writes "
+                "frames_tracked.json beside the model)");
+  f->add_option("--config", fuse.config,
+                "with --robot: scan options JSON (tracking, hand_mode, "
+                "checks; see docs/config.md)");
+  f->add_option("--tracking", fuse.tracking, "with --robot: on | off (default: on)");
   f->add_option("--surface", fuse.surface,
                 "closed: the model closed over what was never seen (hole-filled, red); observed: "
                 "the measured surface alone (an open mesh)")
@@ -107,6 +115,10 @@ int main(int argc, char** argv) {
       sc->add_option("--tracking", scan.tracking,
                      "on | off: align each in-hand frame with the hand and the model before fusing "
                      "(overrides the config's tracking.enabled)"));
+  scanOptions.push_back(sc->add_flag(
+      "--save-frames", scan.save_frames,
+      "write the in-hand depth frames with the joints and camera poses the robot reported to "
+      "OUT/frames (frames.json: the input of `inhand fuse --robot`)"));
   auto* resume =
       sc->add_option("--resume", scan.resume,
                      "DIR: go on with the interrupted scan in DIR (its checkpoint.inhand), "

@@ -5,6 +5,7 @@
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
+#include <optional>
 #include <set>
 
 #include "commands.h"
@@ -21,6 +22,8 @@
 #include "inhand/robot/collision.h"
 #include "inhand/scan/checkpoint.h"
 #include "inhand/scan/multi_grasp.h"
+#include "inhand/scan/session.h"
+#include "inhand/sensor/frame_set.h"
 #include "inhand/sim/sim_world.h"
 
 namespace inhand::app {
@@ -278,6 +281,46 @@ Json argsJson(const ScanArgs& args, const ScanConfig& o) {
           {"seed", args.seed},     {"rest_pose", args.rest_pose}, {"options", scanConfigJson(o)}};
 }
 
+// `--save-frames`: each in-hand frame as the robot delivered it (depth PNG, reported joints,
+// camera pose in the base frame, the grasp as the scan knows it), in the format `inhand fuse
+// --robot` reads. T_O_C is what the reported joints give (no tracking); bounds_O is the scan's
+// volume. Dropped frames (no image) are not recorded.
+class FrameRecorder {
+ public:
+  FrameRecorder(const RobotModel& model, const fs::path& dir) : model_(&model), dir_(dir) {}
+  void add(const ScanSession& s, const DepthImage& depth, const JointVector& q, const Iso3& T_B_C) {
+    if (depth.width == 0 || depth.height == 0) return;
+    if (set_.frames.empty()) {
+      fs::create_directories(dir_);
+      set_.intrinsics = s.camera().intrinsics;
+    }
+    char name[32];
+    std::snprintf(name, sizeof name, "depth_%05zu.png", set_.frames.size());
+    writeDepthPng(dir_ / name, depth, set_.depth_scale_m);
+    FrameRecord r;
+    r.file = name;
+    r.T_O_palm = s.graspPose();
+    r.T_B_C = T_B_C;
+    r.T_O_C = s.graspPose() * model_->tipPose(q).inverse() * T_B_C;
+    for (int v = 0; v < model_->variableCount(); ++v)
+      r.q.emplace_back(model_->variable(v).name, q[v]);
+    set_.frames.push_back(std::move(r));
+    const double half = 0.5 * s.options().volume_size_m;
+    set_.bounds_O = Aabb{s.centre() - Vec3::Constant(half), s.centre() + Vec3::Constant(half)};
+  }
+  // Writes frames.json; false when no frame was recorded.
+  bool finish() {
+    if (set_.frames.empty()) return false;
+    writeFrameSet(dir_, set_);
+    return true;
+  }
+
+ private:
+  const RobotModel* model_;
+  fs::path dir_;
+  FrameSet set_;
+};
+
 }  // namespace
 
 int runScan(const ScanArgs& given) {
@@ -354,7 +397,15 @@ int runScan(const ScanArgs& given) {
   ScanProgress progress;
   progress.log = [](const std::string& s) { std::fprintf(stderr, "scan: %s\n", s.c_str()); };
   progress.interrupted = [] { return StopSignals::raised(); };
+  std::optional<FrameRecorder> recorder;
+  if (args.save_frames) {
+    recorder.emplace(model, out.path() / "frames");
+    progress.frame_input = [&](const ScanSession& s, const DepthImage& d, const JointVector& q,
+                               const Iso3& T_B_C) { recorder->add(s, d, q, T_B_C); };
+  }
   const SimulatedScan sim = runSimulatedScan(model, object, o, progress, checkpoints);
+  if (recorder && !recorder->finish())
+    std::fprintf(stderr, "scan: --save-frames: no in-hand frame to save\n");
   const bool interrupted = sim.result.scan.termination == Termination::kInterrupted;
   const MultiGraspResult& mr = sim.result;
   const ScanResult& r = mr.scan;

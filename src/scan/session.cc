@@ -280,6 +280,7 @@ FrameReport ScanSession::addFrame(const DepthImage& input, const JointVector& q,
   if (!s_->holding) throw Error("addFrame: no grasp (beginGrasp first)");
   checkJoints(*s_->model, q, "addFrame");
   State& s = *s_;
+  if (s.progress.frame_input) s.progress.frame_input(*this, input, q, T_B_C);
   const FrameChecks& fc = s.options.checks;
   auto refuse = [&](const std::string& why, int* counter) {
     ++*counter;

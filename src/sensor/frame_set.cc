@@ -1,5 +1,7 @@
 #include "inhand/sensor/frame_set.h"
 
+#include <cmath>
+
 #include "inhand/core/error.h"
 #include "inhand/core/file_util.h"
 #include "inhand/core/json_util.h"
@@ -8,6 +10,30 @@
 namespace inhand {
 
 namespace fs = std::filesystem;
+
+namespace {
+
+// A rigid transform from 16 row-major numbers; counts re-orthonormalised ones in `set`.
+Iso3 readPose(const Json& T, const std::string& where, FrameSet* set) {
+  if (!T.is_array() || T.size() != 16)
+    throw Error(where + ": expected an array of 16 numbers (row-major 4x4)");
+  std::array<double, 16> m{};
+  for (size_t k = 0; k < 16; ++k) {
+    if (!T[k].is_number()) throw Error(where + "[" + std::to_string(k) + "]: not a number");
+    m[k] = T[k].get<double>();
+  }
+  std::string why;
+  double deviation = 0;
+  auto pose = poseFromRowMajor(m, &why, 1e-2, &deviation);
+  if (!pose) throw Error(where + ": not a rigid transform: " + why);
+  if (deviation > 1e-9) {
+    ++set->reorthonormalised;
+    set->max_rotation_deviation = std::max(set->max_rotation_deviation, deviation);
+  }
+  return *pose;
+}
+
+}  // namespace
 
 FrameSet readFrameSet(const fs::path& dir) {
   std::error_code ec;
@@ -48,6 +74,7 @@ FrameSet readFrameSet(const fs::path& dir) {
       throw Error(bw + ": each min must be below its max");
     set.bounds_O = box;
   }
+  if (j.contains("T_O_palm")) set.T_O_palm = readPose(j["T_O_palm"], name + ": T_O_palm", &set);
   const Json& frames = requireField(j, "frames", name);
   if (!frames.is_array()) throw Error(name + ": frames: expected an array");
   if (frames.empty()) throw Error(name + ": frames: the array is empty");
@@ -58,23 +85,27 @@ FrameSet readFrameSet(const fs::path& dir) {
     if (rec.file.empty()) throw Error(where + ".file: empty file name");
     if (!fs::is_regular_file(dir / rec.file, ec))
       throw Error(where + ".file: " + (dir / rec.file).string() + " does not exist");
-    const Json& T = requireField(frames[i], "T_O_C", where);
-    if (!T.is_array() || T.size() != 16)
-      throw Error(where + ".T_O_C: expected an array of 16 numbers (row-major 4x4)");
-    std::array<double, 16> m{};
-    for (size_t k = 0; k < 16; ++k) {
-      if (!T[k].is_number()) throw Error(where + ".T_O_C[" + std::to_string(k) + "]: not a number");
-      m[k] = T[k].get<double>();
+    if (frames[i].contains("q")) {
+      const Json& q = frames[i]["q"];
+      if (!q.is_object() || q.empty())
+        throw Error(where + ".q: expected an object of joint names and values");
+      for (auto it = q.begin(); it != q.end(); ++it) {
+        if (!it.value().is_number() || !std::isfinite(it.value().get<double>()))
+          throw Error(where + ".q." + it.key() + ": not a number");
+        rec.q.emplace_back(it.key(), it.value().get<double>());
+      }
     }
-    std::string why;
-    double deviation = 0;
-    auto pose = poseFromRowMajor(m, &why, 1e-2, &deviation);
-    if (!pose) throw Error(where + ".T_O_C: not a rigid transform: " + why);
-    if (deviation > 1e-9) {
-      ++set.reorthonormalised;
-      set.max_rotation_deviation = std::max(set.max_rotation_deviation, deviation);
+    if (frames[i].contains("T_B_C"))
+      rec.T_B_C = readPose(frames[i]["T_B_C"], where + ".T_B_C", &set);
+    if (frames[i].contains("T_O_palm"))
+      rec.T_O_palm = readPose(frames[i]["T_O_palm"], where + ".T_O_palm", &set);
+    if (frames[i].contains("T_O_C")) {
+      rec.T_O_C = readPose(frames[i]["T_O_C"], where + ".T_O_C", &set);
+    } else if (!rec.q.empty() && rec.T_B_C) {
+      rec.has_T_O_C = false;
+    } else {
+      throw Error(where + ": no T_O_C (give T_O_C, or q and T_B_C for fuse --robot)");
     }
-    rec.T_O_C = *pose;
     set.frames.push_back(rec);
   }
   return set;
@@ -92,9 +123,20 @@ void writeFrameSet(const fs::path& dir, const FrameSet& set) {
                      {"fx", set.intrinsics.fx},       {"fy", set.intrinsics.fy},
                      {"cx", set.intrinsics.cx},       {"cy", set.intrinsics.cy}};
   Json frames = Json::array();
-  for (const FrameRecord& f : set.frames)
-    frames.push_back({{"file", f.file}, {"T_O_C", poseToRowMajor(f.T_O_C)}});
+  for (const FrameRecord& f : set.frames) {
+    Json r = {{"file", f.file}};
+    if (f.has_T_O_C) r["T_O_C"] = poseToRowMajor(f.T_O_C);
+    if (!f.q.empty()) {
+      Json q = Json::object();
+      for (const auto& [name, value] : f.q) q[name] = value;
+      r["q"] = q;
+    }
+    if (f.T_B_C) r["T_B_C"] = poseToRowMajor(*f.T_B_C);
+    if (f.T_O_palm) r["T_O_palm"] = poseToRowMajor(*f.T_O_palm);
+    frames.push_back(r);
+  }
   j["frames"] = frames;
+  if (set.T_O_palm) j["T_O_palm"] = poseToRowMajor(*set.T_O_palm);
   if (set.bounds_O)
     j["bounds_O"] = {
         {"min", {set.bounds_O->min.x(), set.bounds_O->min.y(), set.bounds_O->min.z()}},

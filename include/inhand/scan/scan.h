@@ -25,9 +25,10 @@ enum class HandMode {
 std::string handModeName(HandMode m);
 bool parseHandMode(const std::string& s, HandMode* out);
 
-// Why a scan (or one grasp's views) ended.
 struct ScanCheckpoint;
+class ScanSession;
 
+// Why a scan (or one grasp's views) ended.
 enum class Termination {
   kRunning,                  // not ended
   kNoViewAboveThreshold,     // no reachable view reaches t_q (Alg. 1)
@@ -129,6 +130,11 @@ struct ScanProgress {
   // Each in-hand frame as ScanSession::addFrame handled it, with the joints and the camera pose
   // it was given (may be empty).
   std::function<void(const FrameReport&, const JointVector& q, const Iso3& T_B_C)> frame;
+  // Each in-hand frame as given to ScanSession::addFrame, before any check: what a robot
+  // delivers, for recording it (`inhand scan --save-frames`). May be empty.
+  std::function<void(const ScanSession&, const DepthImage&, const JointVector& q,
+                     const Iso3& T_B_C)>
+      frame_input;
   // Asked before each step and at every frame: true ends the scan at the next frame with
   // Termination::kInterrupted and the model so far (frames after it are not fused). For a
   // SIGINT handler's flag; may be empty.

@@ -7,9 +7,16 @@
 //     }, "frames": [ { "file": "depth_0000.png", "T_O_C": [16 numbers, row-major] }, … ],
 //     "bounds_O": { "min": [x, y, z], "max": [x, y, z] } }   (optional)
 // T_O_C is the camera pose in the object frame (maps camera points into the object frame).
+// Frames from a robot holding the object may carry, for `inhand fuse --robot`, the joints as the
+// robot reported them and the camera in its base frame, and the palm's pose in the object frame
+// (per frame, or once at the top for every frame):
+//     "T_O_palm": [16 numbers],                                       (top level, optional)
+//     "frames": [ { "file": ..., "q": { "joint_name": value, … }, "T_B_C": [16 numbers],
+//                   "T_O_palm": [16 numbers] (optional), "T_O_C": (optional with q and T_B_C) } ]
 #include <filesystem>
 #include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "inhand/geometry/triangle_mesh.h"
@@ -19,8 +26,15 @@
 namespace inhand {
 
 struct FrameRecord {
+  FrameRecord() = default;
+  FrameRecord(std::string file_, const Iso3& T_O_C_) : file(std::move(file_)), T_O_C(T_O_C_) {}
   std::string file;  // PNG path relative to the directory
   Iso3 T_O_C = Iso3::Identity();
+  bool has_T_O_C = true;  // false: only the robot's fields give the pose (fuse --robot)
+  // The robot's fields (all optional): joints as reported, by name (radians or metres), the
+  // camera in the robot's base frame, the palm in the object frame (else FrameSet::T_O_palm).
+  std::vector<std::pair<std::string, double>> q;
+  std::optional<Iso3> T_B_C, T_O_palm;
 };
 
 struct FrameSet {
@@ -30,6 +44,7 @@ struct FrameSet {
   // Optional "bounds_O": {"min": [x,y,z], "max": [x,y,z]}: where the object is, in O (m). fuse
   // uses it for the volume unless --bounds is given.
   std::optional<Aabb> bounds_O;
+  std::optional<Iso3> T_O_palm;  // the palm in the object frame, for frames that give none
   // Poses whose rotation was not orthonormal to 1e-9 (max |RᵀR − I| up to 1e-2, as pose files
   // with 7–8 significant digits give) were replaced by the nearest rotation: how many, and the
   // largest deviation.
