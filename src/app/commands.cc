@@ -13,6 +13,7 @@
 #include "inhand/core/json_util.h"
 #include "inhand/core/pose.h"
 #include "inhand/core/random.h"
+#include "inhand/eval/metrics.h"
 #include "inhand/geometry/builtin_objects.h"
 #include "inhand/geometry/mesh_io.h"
 #include "inhand/geometry/primitives.h"
@@ -491,6 +492,54 @@ int runSnapshot(const SnapshotArgs& args) {
   so.tile_px = args.size_px;
   writeRgbPng(args.out, renderSnapshot(mesh, colors, so));
   std::printf("snapshot: %s -> %s\n", args.model.c_str(), args.out.c_str());
+  return 0;
+}
+
+int runCompare(const std::string& modelPath, const std::string& truthSpec, double observedVariance,
+               bool json) {
+  if (!(observedVariance > 0)) throw Error("--observed-variance: must be > 0 (m²)");
+  const TriangleMesh truth = loadObject(truthSpec);
+  PlyData ply;
+  ObjectModel model;
+  if (fs::path(modelPath).extension() == ".ply") {
+    ply = readPly(modelPath);
+    model.mesh = std::move(ply.mesh);
+  } else {
+    model.mesh = loadObject(modelPath);
+  }
+  if (model.mesh.triangles.empty()) throw Error(modelPath + ": no triangles");
+  const auto it = ply.vertexProperties.find("variance");
+  if (it != ply.vertexProperties.end()) model.variance = it->second;
+  for (size_t i = 0; i < model.mesh.vertices.size(); ++i)
+    model.observed.push_back(model.variance.empty() || model.variance[i] < observedVariance);
+  if (model.variance.empty()) model.variance.assign(model.mesh.vertices.size(), 0.f);
+  const EvalOptions eo;
+  const SurfaceMetrics m = GroundTruth(truth, eo).evaluate(model);
+  if (json) {
+    Json fsj = Json::object();
+    for (size_t k = 0; k < m.fscore.size(); ++k) {
+      char key[32];
+      std::snprintf(key, sizeof key, "%gmm", 1000 * eo.fscore_m[k]);
+      fsj[key] = {{"f", m.fscore[k]}, {"precision", m.precision[k]}, {"recall", m.recall[k]}};
+    }
+    std::printf("%s\n", Json({{"model", modelPath},
+                              {"truth", truthSpec},
+                              {"coverage", m.coverage},
+                              {"accuracy_mm",
+                               {{"mean", m.accuracy_mean_mm},
+                                {"rms", m.accuracy_rms_mm},
+                                {"p95", m.accuracy_p95_mm}}},
+                              {"fscore", fsj},
+                              {"observed_area_m2", m.observed_area_m2}})
+                            .dump(2)
+                            .c_str());
+  } else {
+    std::printf(
+        "compare: %s against %s: coverage %.1f%% (%.0f mm), accuracy %.2f mm mean, %.2f "
+        "mm p95, F-score %.3f at %.0f mm\n",
+        modelPath.c_str(), truthSpec.c_str(), 100 * m.coverage, 1000 * eo.tau_m, m.accuracy_mean_mm,
+        m.accuracy_p95_mm, m.fscore.empty() ? 0.0 : m.fscore[0], 1000 * eo.fscore_m[0]);
+  }
   return 0;
 }
 

@@ -97,5 +97,10 @@ int runSnapshot(const SnapshotArgs& args);
 int runConfig(const std::string& file, bool reference);
 int runRender(const RenderArgs& args);
 int runFuse(const FuseArgs& args);
+// `inhand compare MODEL --truth MESH`: coverage, accuracy and F-scores of a model against the true
+// surface (as `inhand scan` and `eval` score theirs); vertices with a variance property at or
+// above `observed_variance` (m²) count as hole-filled.
+int runCompare(const std::string& model, const std::string& truth, double observed_variance,
+               bool json);
 
 }  // namespace inhand::app

@@ -68,6 +68,20 @@ int main(int argc, char** argv) {
   s->add_option("--out", snap.out, "output PNG")->required();
   s->add_option("--size", snap.size_px, "pixels per view")->capture_default_str();
 
+  std::string compareModel, compareTruth;
+  double compareVariance = 1e-4;
+  bool compareJson = false;
+  auto* cmp = app.add_subcommand(
+      "compare", "score a model against the true surface: coverage, accuracy, F-scores");
+  cmp->add_option("model", compareModel, "the model: PLY (with per-vertex variance) or a mesh")
+      ->required();
+  cmp->add_option("--truth", compareTruth, "the true surface: builtin:NAME or a mesh file")
+      ->required();
+  cmp->add_option("--observed-variance", compareVariance,
+                  "vertices with a variance at or above this (m²) are hole-filled, not observed")
+      ->capture_default_str();
+  cmp->add_flag("--json", compareJson, "print JSON");
+
   inhand::app::RobotArgs robot;
   auto* rb = app.add_subcommand("robot", "check a robot: chain, limits, speeds, reachability map");
   rb->add_option("--config", robot.config, "robot config JSON (names the URDF)")->required();
@@ -197,6 +211,8 @@ int main(int argc, char** argv) {
     if (*rp) return inhand::app::runReport(reportDir);
     if (*cf) return inhand::app::runConfig(configFile, configReference);
     if (*rb) return inhand::app::runRobot(robot);
+    if (*cmp)
+      return inhand::app::runCompare(compareModel, compareTruth, compareVariance, compareJson);
     if (*s) return inhand::app::runSnapshot(snap);
     if (*r) return inhand::app::runRender(render);
     if (*f) {
