@@ -781,3 +781,32 @@ TEST(Cli, FuseRobotTracksTheHandInFramesARobotRecorded) {
   EXPECT_FALSE(fs::exists(dir.path() / "x.ply"));
   EXPECT_FALSE(fs::exists(dir.path() / "x.json"));
 }
+
+// `inhand compare`: a mesh against itself is exact; a 10 cm cube moved 5 mm along x leaves its ±x
+// faces (a third of the surface) 5 mm from the truth and the rest on it: accuracy ≈ 5/3 mm,
+// coverage ≈ 2/3 (less the 5 mm strips that overhang).
+TEST(Cli, CompareScoresAModelAgainstTheTrueSurface) {
+  test::TempDir dir;
+  const TriangleMesh box = makeBox(Vec3(0.1, 0.1, 0.1));
+  TriangleMesh moved = box;
+  for (auto& v : moved.vertices) v.x() += 0.005f;
+  writePly(dir.path() / "box.ply", box);
+  writePly(dir.path() / "moved.ply", moved);
+  Result r = run("compare " + (dir.path() / "box.ply").string() + " --truth " +
+                     (dir.path() / "box.ply").string() + " --json",
+                 dir);
+  ASSERT_EQ(r.code, 0) << r.output;
+  Json j = Json::parse(r.output);
+  EXPECT_DOUBLE_EQ(j.at("coverage").get<double>(), 1.0);
+  EXPECT_LT(j["accuracy_mm"].at("mean").get<double>(), 1e-3);
+  r = run("compare " + (dir.path() / "moved.ply").string() + " --truth " +
+              (dir.path() / "box.ply").string() + " --json",
+          dir);
+  ASSERT_EQ(r.code, 0) << r.output;
+  j = Json::parse(r.output);
+  EXPECT_NEAR(j["accuracy_mm"].at("mean").get<double>(), 5.0 / 3.0, 0.15);
+  EXPECT_NEAR(j.at("coverage").get<double>(), 2.0 / 3.0 - 4 * 0.02 / 6.0, 0.03);
+  r = run("compare " + (dir.path() / "nothing.ply").string() + " --truth builtin:mug", dir);
+  EXPECT_EQ(r.code, 1);
+  EXPECT_NE(r.output.find("nothing.ply"), std::string::npos) << r.output;
+}
