@@ -174,6 +174,44 @@ TEST(Fusion, OptimisedIntegrationMatchesReference) {
   EXPECT_NEAR(double(fastUpdated), double(refUpdated), 1e-4 * double(refUpdated));
 }
 
+// σ only where the volume projects and not for carve-only pixels (what the scan computes) fuses
+// exactly as σ everywhere: integrate reads no other; the restricted σ equal the full ones.
+TEST(Fusion, SigmaRestrictedToTheVolumeAndUncarvedPixelsFusesTheSame) {
+  RayScene scene;
+  scene.addMesh(makeBox(Vec3(0.3, 0.3, 0.02)), Iso3(Eigen::Translation3d(0, 0, -0.06)));  // a table
+  scene.addMesh(makeSphere(0.04, 4));
+  scene.commit();
+  DepthCameraOptions cam;
+  NoiseModelOptions nm;
+  VolumeOptions vo;
+  TsdfVolume full(cube(0.06), vo), part(cube(0.06), vo);
+  int rectsSmaller = 0;
+  for (const Iso3& T : test::viewsAround(6, 0.6)) {
+    DepthImage d = renderDepth(scene, T, cam, nm, RenderOptions());
+    std::vector<uint8_t> carve(d.depth_m.size(), 0);
+    for (size_t i = 0; i < carve.size(); i += 7) carve[i] = 1;
+    const PixelRect rect = volumeImageRect(full, T, cam.intrinsics);
+    rectsSmaller += (rect.u1 - rect.u0) * (rect.v1 - rect.v0) < d.width * d.height / 2;
+    const std::vector<float> all = measurementSigma(d, cam.intrinsics, nm);
+    const std::vector<float> some = measurementSigma(d, cam.intrinsics, nm, &rect, &carve);
+    for (int v = 0; v < d.height; ++v)
+      for (int u = 0; u < d.width; ++u) {
+        const size_t i = size_t(v) * d.width + u;
+        const bool inside = u >= rect.u0 && u < rect.u1 && v >= rect.v0 && v < rect.v1;
+        ASSERT_EQ(some[i], inside && !carve[i] ? all[i] : 0.f) << u << " " << v;
+      }
+    integrate(d, T, cam.intrinsics, all, &full, &carve);
+    integrate(d, T, cam.intrinsics, some, &part, &carve);
+  }
+  EXPECT_EQ(rectsSmaller, 6);  // the test restricts something
+  EXPECT_GT(full.countState(VoxelState::kObserved), 1000u);
+  for (size_t i = 0; i < full.voxelCount(); ++i) {
+    ASSERT_EQ(full.state(i), part.state(i)) << i;
+    ASSERT_EQ(full.sumW()[i], part.sumW()[i]) << i;
+    ASSERT_EQ(full.sumWD()[i], part.sumWD()[i]) << i;
+  }
+}
+
 TEST(Fusion, CarveOnlyPixelsAddNoSurface) {
   VolumeOptions vo;
   TsdfVolume vol(cube(0.1), vo);

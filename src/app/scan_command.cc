@@ -470,6 +470,9 @@ int runScan(const ScanArgs& given) {
       {"total", std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count()},
       {"planning", r.planning_s},
       {"fusion", r.fusion_s},
+      {"tracking", r.tracking_s},
+      {"simulation", sim.render_s},
+      {"fusion_ms_per_frame", r.frames > 0 ? 1000 * r.fusion_s / r.frames : 0.0},
       {"grasp_generation",
        [&] {
          double t = 0;

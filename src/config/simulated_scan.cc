@@ -85,6 +85,8 @@ SimulatedScan runSimulatedScan(const RobotModel& model, const TriangleMesh& obje
   out.metrics = truth.evaluate(out.result.scan.model);
   out.drops = world.drops;
   out.faults = world.faults;
+  out.render_s = world.render_s;
+  out.renders = world.renders;
   out.frames_rejected = rejected;
   out.frames_fused_in_hand = int(palmError.size());
   if (!palmError.empty()) {

@@ -294,6 +294,7 @@ void runGrasps(RobotInterface& robot, DepthSensor& sensor, ScanSession& session,
   all.view_refinements = sum.view_refinements;
   all.planning_s = sum.planning_s;
   all.fusion_s = sum.fusion_s;
+  all.tracking_s = sum.tracking_s;
   all.frames = sum.frames;
   all.frames_rejected = sum.frames_rejected;
   all.frames_dropped = sum.frames_dropped;

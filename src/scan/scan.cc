@@ -173,6 +173,7 @@ ScanResult scanSingleGrasp(RobotInterface& robot, DepthSensor& sensor, const Iso
   result.view_refinements = s.view_refinements;
   result.planning_s = s.planning_s;
   result.fusion_s = s.fusion_s;
+  result.tracking_s = s.tracking_s;
   result.frames = s.frames;
   result.model = session.model();
   result.planning_model = session.planningModel();

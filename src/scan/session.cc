@@ -187,10 +187,12 @@ void ScanSession::emptyInsideRobot(const JointVector& q, const Iso3& T_O_B) {
     parallelFor(int(lo.z()), int(hi.z()) + 1, [&](int z) {
       for (int y = int(lo.y()); y <= int(hi.y()); ++y)
         for (int x = int(lo.x()); x <= int(hi.x()); ++x) {
+          const size_t i = volume.index(x, y, z);
+          // An empty voxel has no sums: emptying it again changes nothing.
+          if (volume.state(i) == VoxelState::kEmpty) continue;
           const Vec3 p = T_link_O * volume.point(x, y, z);
           for (const Primitive& prim : m.links()[li].collision)
             if (prim.contains(p)) {
-              const size_t i = volume.index(x, y, z);
               // Measurements win over the hand model: a voxel the sensor saw behind the
               // object's surface stays (a finger closed on the model can overlap the object).
               if (volume.state(i) == VoxelState::kObserved && volume.distance(i) < 0) break;
@@ -258,7 +260,10 @@ FrameReport ScanSession::fuse(const DepthImage& depth, const JointVector& q, con
       return r;
     }
   }
-  integrate(depth, T_O_C, K, measurementSigma(depth, K, s.noise), &s.volume,
+  // σ only where voxels can project, and not for pixels that only carve (integrate reads neither).
+  const PixelRect rect = volumeImageRect(s.volume, T_O_C, K);
+  integrate(depth, T_O_C, K,
+            measurementSigma(depth, K, s.noise, &rect, carve.empty() ? nullptr : &carve), &s.volume,
             carve.empty() ? nullptr : &carve);
   if (inHand && s.options.hand_mode == HandMode::kCarveAndEmpty) emptyInsideRobot(q, T_O_B);
   FrameReport r;

@@ -1,6 +1,7 @@
 #include "inhand/sim/sim_world.h"
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 
 #include "inhand/core/error.h"
@@ -174,6 +175,15 @@ std::optional<Iso3> SimRobot::grasp(const Iso3& T_O_palm, const JointVector& q) 
 }
 
 DepthImage SimWorld::render() {
+  const auto t0 = std::chrono::steady_clock::now();
+  struct Timed {
+    std::chrono::steady_clock::time_point t0;
+    double* total;
+    ~Timed() {
+      *total += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    }
+  } timed{t0, &render_s};
+  ++renders;
   RayScene scene;
   scene.addInstance(object_, objectPose());
   for (const Occluder& o : robot_.at(trueJoints(), Iso3::Identity()))

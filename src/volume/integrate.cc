@@ -9,15 +9,47 @@
 
 namespace inhand {
 
+PixelRect volumeImageRect(const TsdfVolume& volume, const Iso3& T_O_C, const CameraIntrinsics& K) {
+  const PixelRect all{0, 0, K.width, K.height};
+  const Iso3 T_C_O = T_O_C.inverse();
+  const Vec3 lo = volume.origin();
+  const Vec3 hi = volume.point(volume.dims().x() - 1, volume.dims().y() - 1, volume.dims().z() - 1);
+  double u0 = 1e300, v0 = 1e300, u1 = -1e300, v1 = -1e300;
+  for (int c = 0; c < 8; ++c) {
+    const Vec3 p_O((c & 1) ? hi.x() : lo.x(), (c & 2) ? hi.y() : lo.y(), (c & 4) ? hi.z() : lo.z());
+    const Vec3 p = T_C_O * p_O;
+    if (!(p.z() > 1e-6)) return all;
+    const Vec2 uv = K.project(p);
+    u0 = std::min(u0, uv.x());
+    v0 = std::min(v0, uv.y());
+    u1 = std::max(u1, uv.x());
+    v1 = std::max(v1, uv.y());
+  }
+  // Voxels round to the nearest pixel: floor(x + 0.5); one more pixel each side for safety.
+  auto clampTo = [](double x, int n) { return int(std::clamp(x, 0.0, double(n))); };
+  PixelRect r;
+  r.u0 = clampTo(std::floor(u0 + 0.5) - 1, K.width);
+  r.v0 = clampTo(std::floor(v0 + 0.5) - 1, K.height);
+  r.u1 = clampTo(std::floor(u1 + 0.5) + 2, K.width);
+  r.v1 = clampTo(std::floor(v1 + 0.5) + 2, K.height);
+  return r;
+}
+
 std::vector<float> measurementSigma(const DepthImage& depth, const CameraIntrinsics& K,
-                                    const NoiseModelOptions& noise) {
+                                    const NoiseModelOptions& noise, const PixelRect* region,
+                                    const std::vector<uint8_t>* carve_only) {
   const int w = depth.width, h = depth.height;
   std::vector<float> sigma(size_t(w) * h, 0.f);
+  INHAND_CHECK(!carve_only || carve_only->size() == sigma.size(), "carve mask size != depth size");
+  const PixelRect r = region ? *region : PixelRect{0, 0, w, h};
   auto point = [&](int u, int v) { return Vec3(K.rayZ1(u, v) * double(depth.at(u, v))); };
-  parallelFor(0, h, [&](int v) {
-    for (int u = 0; u < w; ++u) {
+  // Below the grazing angle the incidence does not enter the noise model: no acos needed there.
+  const double cosGrazing = std::cos(noise.grazing_start_deg * M_PI / 180.0);
+  parallelFor(std::max(0, r.v0), std::min(h, r.v1), [&](int v) {
+    for (int u = std::max(0, r.u0); u < std::min(w, r.u1); ++u) {
       double D = depth.at(u, v);
       if (!(D > 0)) continue;
+      if (carve_only && (*carve_only)[size_t(v) * w + u]) continue;
       const Vec3 P = point(u, v);
       bool edge = false;
       // Tangent along each image axis from the neighbours that lie on the same surface.
@@ -40,8 +72,10 @@ std::vector<float> measurementSigma(const DepthImage& depth, const CameraIntrins
       Vec3 tu = tangent(1, 0), tv = tangent(0, 1);
       Vec3 n = tu.cross(tv);
       double theta = 0.0;
-      if (n.norm() > 0)
-        theta = std::acos(std::min(1.0, std::abs(n.normalized().dot(P.normalized()))));
+      if (n.norm() > 0) {
+        const double c = std::min(1.0, std::abs(n.normalized().dot(P.normalized())));
+        theta = c > cosGrazing ? 0.0 : std::acos(c);
+      }
       double s = axialSigma(noise, D, theta);
       if (edge) s *= noise.discontinuity_factor;
       sigma[size_t(v) * w + u] = float(s);

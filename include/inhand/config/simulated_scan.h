@@ -17,6 +17,8 @@ struct SimulatedScan {
   int frames_fused_in_hand = 0, frames_rejected = 0;
   int drops = 0;              // how often the simulated object fell
   SimFaultLog faults;         // what the simulator injected (SimOptions::faults)
+  double render_s = 0;        // rendering the simulated sensor's images (what a robot does not pay)
+  int renders = 0;            // … how many images
   DepthCameraOptions camera;  // the simulated sensor
 };
 

@@ -97,6 +97,8 @@ class SimWorld {
   bool slipping = false;    // held by a grasp that does not hold: falls at the next motion
   int drops = 0;            // how often the object fell
   SimFaultLog faults;       // what SimOptions::faults injected so far
+  double render_s = 0;      // time spent rendering the simulated sensor's images
+  int renders = 0;          // … how many
   const TriangleMesh& objectMesh() const { return objectMesh_; }
   const std::vector<SurfacePoint>& objectSamples() const { return objectSamples_; }
   // Where the object rests on the table: turned by SimOptions::R_B_O_rest, its lowest point on

@@ -24,11 +24,27 @@ struct IntegrationStats {
   int64_t updated = 0;  // voxels whose state or sums changed
 };
 
+// Pixels [u0, u1) × [v0, v1) of an image.
+struct PixelRect {
+  int u0 = 0, v0 = 0, u1 = 0, v1 = 0;
+  bool empty() const { return u0 >= u1 || v0 >= v1; }
+};
+
+// The pixels a volume's voxels can project to from camera pose T_O_C (the image rectangle of
+// its eight corners, a pixel wider each side, clipped to the image); the whole image when a
+// corner lies behind the camera. integrate() reads no pixel outside it.
+PixelRect volumeImageRect(const TsdfVolume& volume, const Iso3& T_O_C, const CameraIntrinsics& K);
+
 // Per-pixel measurement σ (m) of a depth image: the axial noise model at the pixel's depth and its
 // incidence angle (normal estimated from neighbouring pixels), multiplied by
 // noise.discontinuity_factor next to depth discontinuities and missing returns. 0 where no depth.
+// With `region`, only its pixels get a σ (0 elsewhere); with `carve_only`, pixels flagged there
+// get none either (integrate() uses no σ of a carve-only pixel). Both leave the σ of every other
+// pixel as it would be without them.
 std::vector<float> measurementSigma(const DepthImage& depth, const CameraIntrinsics& K,
-                                    const NoiseModelOptions& noise);
+                                    const NoiseModelOptions& noise,
+                                    const PixelRect* region = nullptr,
+                                    const std::vector<uint8_t>* carve_only = nullptr);
 
 // Optimised kernel: both cores, rows of voxels clipped analytically to the camera frustum.
 // `sigma_m` is measurementSigma's output; `carve_only` (optional, width·height) flags pixels that
