@@ -26,7 +26,8 @@ std::string errorOf(const std::string& json) {
 // read over the defaults and written again: the same JSON. A key read into another member than
 // the one it is written from, or not read at all, breaks this.
 TEST(Config, EveryOptionReadsBackIntoTheMemberItWasWrittenFrom) {
-  const Json defaults = scanConfigJson(ScanConfig{});
+  const ScanConfig initial;
+  const Json defaults = scanConfigJson(initial);
   Json changed = defaults;
   int leaves = 0;
   std::function<void(Json&)> change = [&](Json& j) {

@@ -185,6 +185,7 @@ int fuseWithRobot(const FuseArgs& args, const fs::path& dir, const FrameSet& set
   o.volume_budget.memory_budget_mb = args.memory_mb;
   o.mesh.hole_sigma_m = mo.hole_sigma_m;
   if (args.truncation_m > 0) o.volume_budget.truncation_m = args.truncation_m;
+  o.volume_budget.band_sigmas = args.band_sigmas;
   if (std::string p = o.validate(); !p.empty()) throw Error(p);
   const std::string file = (dir / "frames.json").string();
   std::vector<JointVector> qs;
@@ -296,6 +297,7 @@ int runFuse(const FuseArgs& args) {
   VolumeOptions vo;
   vo.voxel_size_m = args.voxel_m;
   vo.truncation_m = args.truncation_m;
+  vo.band_sigmas = args.band_sigmas;
   vo.memory_budget_mb = args.memory_mb;
   if (std::string p = vo.validate(); !p.empty()) throw Error("volume options: " + p);
   MeshOptions mo;

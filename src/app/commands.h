@@ -24,6 +24,7 @@ struct FuseArgs {
   std::string summary;                          // summary JSON; empty: MODEL.json beside MODEL.ply
   double voxel_m = 0.002;                       // voxel size
   double truncation_m = 0.0;                    // band half-width; 0: 4 voxels
+  double band_sigmas = 2.0;                     // behind-surface band: this many σ (0: μ)
   std::optional<std::array<double, 6>> bounds;  // xmin ymin zmin xmax ymax zmax in O; else auto
   double margin_m = 0.02;                       // auto bounds: margin around the measured points
   double memory_mb = 2048;                      // volume memory budget

@@ -37,6 +37,10 @@ int main(int argc, char** argv) {
   f->add_option("--truncation", fuse.truncation_m,
                 "signed-distance band half-width, m (0: 4 voxels)")
       ->capture_default_str();
+  f->add_option("--band-sigmas", fuse.band_sigmas,
+                "each measurement's band half-width in its sigmas (at least a voxel, at most "
+                "--truncation); 0: the truncation for every measurement")
+      ->capture_default_str();
   f->add_option("--bounds", bounds,
                 "volume bounds in the object frame: xmin ymin zmin xmax ymax zmax (m); default: "
                 "frames.json bounds_O, else the measured points")

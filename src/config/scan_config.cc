@@ -95,6 +95,11 @@ void visitConfig(V& v, ScanConfig& c) {
   v.string("robot", c.robot, "robot config JSON (empty: data/robots/wam_barretthand.json)");
   v.num("voxel_m", s.voxel_m, "volume voxel size, m");
   v.num("volume_size_m", s.volume_size_m, "edge of the cubic volume, m");
+  v.num("truncation_m", s.volume_budget.truncation_m,
+        "half-width μ of the signed-distance band, m (0: 4 voxels)");
+  v.num("band_sigmas", s.volume_budget.band_sigmas,
+        "a measurement counts this many of its σ behind its surface (at least a voxel, at most "
+        "μ), so that both sides of a thin wall are kept; 0: μ");
   v.boolean("fit_volume", s.fit_volume,
             "from the table: a cube of 1.5 × the object's extent + 4 cm, as many voxels across");
   v.num("t_hand_m", s.t_hand_m, "measurements this close to the robot only carve (§IV), m");

@@ -91,6 +91,12 @@ std::string ScanOptions::validate() const {
   if (max_views < 0) return "max_views must be >= 0";
   if (planning_stride < 1 || planning_stride > 4) return "planning_stride must be in 1..4";
   if (carve_radius_px < 0 || carve_radius_px > 10) return "carve_radius_px must be in 0..10";
+  if (!(volume_budget.truncation_m >= 0 && volume_budget.truncation_m < 0.1))
+    return "truncation_m must be in [0, 0.1) m (0: 4 voxels)";
+  if (volume_budget.truncation_m > 0 && volume_budget.truncation_m < voxel_m)
+    return "truncation_m must be at least one voxel (voxel_m)";
+  if (!(volume_budget.band_sigmas >= 0 && volume_budget.band_sigmas <= 100))
+    return "band_sigmas must be in [0, 100]";
   std::string p = planner.validate();
   if (!p.empty()) return "planner." + p;
   p = mesh.validate();

@@ -86,6 +86,20 @@ std::vector<float> measurementSigma(const DepthImage& depth, const CameraIntrins
 
 namespace {
 
+// Per-pixel band half-width: VolumeOptions::band_sigmas·σ within [one voxel, μ]; μ where the
+// pixel has no σ (carve-only pixels, no depth) or without band_sigmas.
+std::vector<float> bandImage(const std::vector<float>& sigma, const TsdfVolume& volume) {
+  const float mu = float(volume.truncation());
+  std::vector<float> band(sigma.size(), mu);
+  const double k = volume.bandSigmas();
+  if (k > 0) {
+    const float lo = std::min(mu, float(volume.voxelSize()));
+    for (size_t i = 0; i < sigma.size(); ++i)
+      if (sigma[i] > 0) band[i] = std::clamp(float(k) * sigma[i], lo, mu);
+  }
+  return band;
+}
+
 void checkInputs(const DepthImage& depth, const CameraIntrinsics& K,
                  const std::vector<float>& sigma, const std::vector<uint8_t>* carve) {
   INHAND_CHECK(depth.width == K.width && depth.height == K.height, "depth size != intrinsics");
@@ -93,9 +107,11 @@ void checkInputs(const DepthImage& depth, const CameraIntrinsics& K,
   INHAND_CHECK(!carve || carve->size() == depth.depth_m.size(), "carve mask size != depth size");
 }
 
-// The per-voxel update rule shared by both kernels. Returns whether the voxel changed.
-inline bool updateVoxel(float d, float mu, float weight, bool carveOnly, float* sumWD, float* sumW,
-                        uint8_t* state) {
+// The per-voxel update rule shared by both kernels. `back`: how far behind the measured surface
+// the measurement counts (μ, or k·σ with VolumeOptions::band_sigmas); `mu`: the volume's μ, the
+// band in front of it. Returns whether the voxel changed.
+inline bool updateVoxel(float d, float back, float mu, float weight, bool carveOnly, float* sumWD,
+                        float* sumW, uint8_t* state) {
   // A carve-only measurement is of a known surface (the robot's own): the space in front of it
   // is free right up to it, not only beyond the band.
   if (carveOnly) {
@@ -119,7 +135,9 @@ inline bool updateVoxel(float d, float mu, float weight, bool carveOnly, float* 
     }
     return false;
   }
-  if (d < -mu) return false;
+  // Behind the surface only as far as `back`: what lies farther behind may be the other side of
+  // a thin wall, which this measurement did not see.
+  if (d < -back) return false;
   *sumWD += weight * d;
   *sumW += weight;
   *state = uint8_t(VoxelState::kObserved);
@@ -147,11 +165,13 @@ IntegrationStats integrate(const DepthImage& depth, const Iso3& T_O_C, const Cam
   std::vector<float> weight(sigma_m.size());
   for (size_t i = 0; i < weight.size(); ++i)
     weight[i] = sigma_m[i] > 0 ? 1.f / (sigma_m[i] * sigma_m[i]) : 0.f;
+  const std::vector<float> band = bandImage(sigma_m, *volume);
+  const float muFull = float(volume->truncation());
+  const float* B = band.data();
   const Iso3 T_C_O = T_O_C.inverse();
   const Mat3 R = T_C_O.linear();
   const Vec3 step = R.col(0) * volume->voxelSize();  // camera-frame step along voxel x
   const Vec3i dims = volume->dims();
-  const float mu = float(volume->truncation());
   const float fx = float(K.fx), fy = float(K.fy), cx = float(K.cx), cy = float(K.cy);
   const float* D = depth.depth_m.data();
   const uint8_t* carve = carve_only ? carve_only->data() : nullptr;
@@ -198,11 +218,12 @@ IntegrationStats integrate(const DepthImage& depth, const Iso3& T_O_C, const Cam
         const float Dm = D[p];
         if (!(Dm > 0.f)) continue;
         const float d = Dm - Z;
-        if (d < -mu) continue;
+        const float mup = B[p];
+        if (d < -mup) continue;
         ++myVisited;
         const size_t i = base + size_t(x);
-        myUpdated +=
-            updateVoxel(d, mu, weight[p], carve && carve[p], &sumWD[i], &sumW[i], &state[i]);
+        myUpdated += updateVoxel(d, mup, muFull, weight[p], carve && carve[p], &sumWD[i], &sumW[i],
+                                 &state[i]);
       }
     }
     visited += myVisited;
@@ -218,6 +239,7 @@ IntegrationStats integrateReference(const DepthImage& depth, const Iso3& T_O_C,
   const Iso3 T_C_O = T_O_C.inverse();
   const Vec3i dims = volume->dims();
   const float mu = float(volume->truncation());
+  const double k = volume->bandSigmas();
   IntegrationStats stats;
   for (int z = 0; z < dims.z(); ++z)
     for (int y = 0; y < dims.y(); ++y)
@@ -229,16 +251,21 @@ IntegrationStats integrateReference(const DepthImage& depth, const Iso3& T_O_C,
         if (u < 0 || v < 0 || u >= K.width || v >= K.height) continue;
         float Dm = depth.at(u, v);
         if (!(Dm > 0)) continue;
-        float d = float(Dm - p_C.z());
-        if (d < -mu) continue;
-        ++stats.visited;
-        size_t i = volume->index(x, y, z);
         size_t p = size_t(v) * K.width + u;
         float s = sigma_m[p];
+        // The band: k·σ within [one voxel, μ] (written out here, not shared with the fast kernel).
+        float mup = mu;
+        if (k > 0 && s > 0)
+          mup = float(std::min(double(mu),
+                               std::max(std::min(double(mu), volume->voxelSize()), k * double(s))));
+        float d = float(Dm - p_C.z());
+        if (d < -mup) continue;
+        ++stats.visited;
+        size_t i = volume->index(x, y, z);
         float wgt = s > 0 ? 1.f / (s * s) : 0.f;
         bool carve = carve_only && (*carve_only)[p];
-        stats.updated += updateVoxel(d, mu, wgt, carve, &volume->sumWD()[i], &volume->sumW()[i],
-                                     &volume->states()[i]);
+        stats.updated += updateVoxel(d, mup, mu, wgt, carve, &volume->sumWD()[i],
+                                     &volume->sumW()[i], &volume->states()[i]);
       }
   return stats;
 }

@@ -14,6 +14,7 @@ std::string VolumeOptions::validate() const {
   if (truncation_m > 0 && truncation_m < voxel_size_m)
     return "truncation_m must be at least one voxel (voxel_size_m)";
   if (!(memory_budget_mb > 0)) return "memory_budget_mb must be > 0";
+  if (!(band_sigmas >= 0 && band_sigmas <= 100)) return "band_sigmas must be in [0, 100]";
   return {};
 }
 
@@ -29,6 +30,7 @@ TsdfVolume::TsdfVolume(const Aabb& box, const VolumeOptions& options) {
     throw Error("volume bounds are empty or not finite");
   voxel_ = options.voxel_size_m;
   truncation_ = options.truncation();
+  bandSigmas_ = options.band_sigmas;
   origin_ = box.min;
   dims_ = dimsFor(box, voxel_);
   double needed = megabytesFor(dims_);

@@ -92,7 +92,11 @@ struct ScanOptions {
   TrackingOptions tracking;  // in-hand frames aligned with hand and model (arm error, §II)
   FrameChecks checks;        // in-hand frames that are not fused
   MeshOptions mesh;
-  VolumeOptions volume_budget;  // memory budget (voxel size above wins)
+  // Memory budget, truncation and band (voxel size above wins): measurements count 2σ behind
+  // their surface, so that thin walls keep both sides (docs/volume.md).
+  struct Volume : VolumeOptions {
+    Volume() { band_sigmas = 2.0; }
+  } volume_budget;
   std::string validate() const;
 };
 

@@ -14,8 +14,11 @@ namespace inhand {
 enum class VoxelState : uint8_t { kUnknown = 0, kEmpty = 1, kObserved = 2 };
 
 struct VolumeOptions {
-  double voxel_size_m = 0.002;     // edge of a voxel, m
-  double truncation_m = 0.0;       // half-width μ of the signed-distance band, m; 0: 4 voxels
+  double voxel_size_m = 0.002;  // edge of a voxel, m
+  double truncation_m = 0.0;    // half-width μ of the signed-distance band, m; 0: 4 voxels
+  // > 0: each measurement's band is this many of its σ (at least a voxel, at most μ), so that the
+  // two sides of a wall thinner than μ do not cancel; 0: μ for every measurement.
+  double band_sigmas = 0.0;
   double memory_budget_mb = 2048;  // a volume needing more memory than this is refused, MiB
 
   double truncation() const { return truncation_m > 0 ? truncation_m : 4.0 * voxel_size_m; }
@@ -40,6 +43,7 @@ class TsdfVolume {
   const Vec3& origin() const { return origin_; }
   double voxelSize() const { return voxel_; }
   double truncation() const { return truncation_; }
+  double bandSigmas() const { return bandSigmas_; }  // VolumeOptions::band_sigmas
   size_t voxelCount() const { return state_.size(); }
   size_t index(int x, int y, int z) const {
     return (size_t(z) * size_t(dims_.y()) + size_t(y)) * size_t(dims_.x()) + size_t(x);
@@ -66,6 +70,7 @@ class TsdfVolume {
   Vec3 origin_;
   double voxel_;
   double truncation_;
+  double bandSigmas_ = 0;
   std::vector<float> sumWD_, sumW_;
   std::vector<uint8_t> state_;
 };
