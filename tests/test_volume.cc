@@ -2,6 +2,7 @@
 
 #include "inhand/core/error.h"
 #include "inhand/core/pose.h"
+#include "inhand/eval/metrics.h"
 #include "inhand/geometry/primitives.h"
 #include "inhand/mesh/extract.h"
 #include "test_util.h"
@@ -249,4 +250,45 @@ TEST(Volume, MemoryBudgetRefusalGivesSize) {
 TEST(Mesh, EntropyOfGaussian) {
   EXPECT_NEAR(gaussianEntropy(1.0), 0.5 * std::log(2 * M_PI * M_E), 1e-12);
   EXPECT_NEAR(gaussianEntropy(0.05 * 0.05), 0.5 * std::log(2 * M_PI * M_E) + std::log(0.05), 1e-12);
+}
+
+namespace {
+// Mean and p95 distance (mm) of the fused model's observed surface to the true one, with
+// coverage, for `mesh` seen from 40 views all around at 0.6 m and fused with `band_sigmas`.
+SurfaceMetrics thinWallFusion(const TriangleMesh& mesh, double band_sigmas) {
+  VolumeOptions vo;
+  vo.band_sigmas = band_sigmas;
+  const Aabb b = mesh.bounds();
+  TsdfVolume vol(Aabb{b.min - Vec3::Constant(0.02), b.max + Vec3::Constant(0.02)}, vo);
+  std::vector<Iso3> poses;
+  for (const Vec3& d : fibonacciSphere(40))
+    poses.push_back(lookAt(b.center() + 0.6 * d, b.center(), Vec3::UnitZ()));
+  test::renderAndFuse(mesh, poses, /*noise=*/true, &vol);
+  return GroundTruth(mesh).evaluate(extractModel(vol));
+}
+}  // namespace
+
+// Thin walls (a 1.5 mm plate, a cup with 2 mm walls, both thinner than the 8 mm band and the
+// plate thinner than a 2 mm voxel) seen from both sides: with the band behind each measurement
+// at 2σ, the error stays below the sensor's σ at 0.6 m (1.28 mm); with the full band the two
+// sides cancel and the plate's error is above it.
+TEST(Fusion, ThinWallsSeenFromBothSidesKeepBothSides) {
+  NoiseModelOptions nm;
+  const double sigma_mm = 1000 * axialSigma(nm, 0.6, 0.0);
+  const TriangleMesh plate = makeBox(Vec3(0.1, 0.1, 0.0015));
+  const TriangleMesh cup = makeRevolution(
+      {{0, 0}, {0.04, 0}, {0.04, 0.08}, {0.038, 0.08}, {0.038, 0.002}, {0, 0.002}}, 96);
+  const SurfaceMetrics p = thinWallFusion(plate, 2.0), p0 = thinWallFusion(plate, 0.0);
+  const SurfaceMetrics c = thinWallFusion(cup, 2.0), c0 = thinWallFusion(cup, 0.0);
+  std::printf(
+      "plate: %.2f mm mean, %.2f p95 (full band %.2f, %.2f); cup: %.2f, %.2f (%.2f, %.2f)"
+      "; sigma %.2f mm\n",
+      p.accuracy_mean_mm, p.accuracy_p95_mm, p0.accuracy_mean_mm, p0.accuracy_p95_mm,
+      c.accuracy_mean_mm, c.accuracy_p95_mm, c0.accuracy_mean_mm, c0.accuracy_p95_mm, sigma_mm);
+  EXPECT_LT(p.accuracy_mean_mm, sigma_mm);
+  EXPECT_LT(c.accuracy_mean_mm, sigma_mm);
+  EXPECT_GT(p.coverage, 0.98);
+  EXPECT_GT(c.coverage, 0.95);
+  EXPECT_GT(p0.accuracy_mean_mm, sigma_mm);  // the failure the band fixes
+  EXPECT_LT(c.accuracy_mean_mm, c0.accuracy_mean_mm);
 }

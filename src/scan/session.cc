@@ -243,11 +243,19 @@ FrameReport ScanSession::fuse(const DepthImage& depth, const JointVector& q, con
         const float z = depth.depth_m[i];
         if (!(z > 0) || (!carve.empty() && carve[i])) continue;
         const Vec3 g = (T_O_C * (double(z) * K.rayZ1(u, v)) - vol.origin()) / vol.voxelSize();
-        const int x = int(std::lround(g.x())), y = int(std::lround(g.y())),
-                  w = int(std::lround(g.z()));
-        if (x < 0 || y < 0 || w < 0 || x >= dims.x() || y >= dims.y() || w >= dims.z()) continue;
+        const int x = int(std::floor(g.x())), y = int(std::floor(g.y())),
+                  w = int(std::floor(g.z()));
+        if (x < 0 || y < 0 || w < 0 || x + 1 >= dims.x() || y + 1 >= dims.y() || w + 1 >= dims.z())
+          continue;
         ++inside;
-        inEmpty += vol.state(vol.index(x, y, w)) == VoxelState::kEmpty;
+        // In known-empty space only when the whole voxel cell around the point is: a surface
+        // point's cell always has a corner in the surface's band or behind it, while rays that
+        // grazed the surface may have emptied the voxel nearest to it.
+        bool allEmpty = true;
+        for (int c = 0; c < 8 && allEmpty; ++c)
+          allEmpty = vol.state(vol.index(x + (c & 1), y + ((c >> 1) & 1), w + ((c >> 2) & 1))) ==
+                     VoxelState::kEmpty;
+        inEmpty += allEmpty;
       }
     if (std::getenv("INHAND_DEBUG_FREE_SPACE"))
       std::fprintf(stderr, "free space: %d of %d\n", inEmpty, inside);

@@ -92,11 +92,9 @@ struct ScanOptions {
   TrackingOptions tracking;  // in-hand frames aligned with hand and model (arm error, §II)
   FrameChecks checks;        // in-hand frames that are not fused
   MeshOptions mesh;
-  // Memory budget, truncation and band (voxel size above wins): measurements count 2σ behind
-  // their surface, so that thin walls keep both sides (docs/volume.md).
-  struct Volume : VolumeOptions {
-    Volume() { band_sigmas = 2.0; }
-  } volume_budget;
+  // Memory budget, truncation and the band behind each measurement (voxel size above wins;
+  // band_sigmas 0 here, the paper's fixed band; `inhand fuse` uses 2: docs/volume.md).
+  VolumeOptions volume_budget;
   std::string validate() const;
 };
 
