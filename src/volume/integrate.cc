@@ -86,20 +86,6 @@ std::vector<float> measurementSigma(const DepthImage& depth, const CameraIntrins
 
 namespace {
 
-// Per-pixel band half-width: VolumeOptions::band_sigmas·σ within [one voxel, μ]; μ where the
-// pixel has no σ (carve-only pixels, no depth) or without band_sigmas.
-std::vector<float> bandImage(const std::vector<float>& sigma, const TsdfVolume& volume) {
-  const float mu = float(volume.truncation());
-  std::vector<float> band(sigma.size(), mu);
-  const double k = volume.bandSigmas();
-  if (k > 0) {
-    const float lo = std::min(mu, float(volume.voxelSize()));
-    for (size_t i = 0; i < sigma.size(); ++i)
-      if (sigma[i] > 0) band[i] = std::clamp(float(k) * sigma[i], lo, mu);
-  }
-  return band;
-}
-
 void checkInputs(const DepthImage& depth, const CameraIntrinsics& K,
                  const std::vector<float>& sigma, const std::vector<uint8_t>* carve) {
   INHAND_CHECK(depth.width == K.width && depth.height == K.height, "depth size != intrinsics");
@@ -161,12 +147,20 @@ IntegrationStats integrate(const DepthImage& depth, const Iso3& T_O_C, const Cam
                            const std::vector<uint8_t>* carve_only) {
   checkInputs(depth, K, sigma_m, carve_only);
   const int w = K.width, h = K.height;
-  // Weight image w = 1/σ² (0 where no depth), so the kernel reads one float per voxel.
-  std::vector<float> weight(sigma_m.size());
-  for (size_t i = 0; i < weight.size(); ++i)
-    weight[i] = sigma_m[i] > 0 ? 1.f / (sigma_m[i] * sigma_m[i]) : 0.f;
-  const std::vector<float> band = bandImage(sigma_m, *volume);
+  // Weight w = 1/σ² and band per pixel, so the kernel reads two floats per voxel; only where the
+  // volume's voxels can project (the kernel reads no other pixel).
+  const PixelRect rect = volumeImageRect(*volume, T_O_C, K);
+  std::vector<float> weight(sigma_m.size()), band(sigma_m.size());
   const float muFull = float(volume->truncation());
+  const float k = float(volume->bandSigmas());
+  const float bandMin = std::min(muFull, float(volume->voxelSize()));
+  for (int v = rect.v0; v < rect.v1; ++v)
+    for (int u = rect.u0; u < rect.u1; ++u) {
+      const size_t i = size_t(v) * w + u;
+      const float s = sigma_m[i];
+      weight[i] = s > 0 ? 1.f / (s * s) : 0.f;
+      band[i] = k > 0 && s > 0 ? std::clamp(k * s, bandMin, muFull) : muFull;
+    }
   const float* B = band.data();
   const Iso3 T_C_O = T_O_C.inverse();
   const Mat3 R = T_C_O.linear();
