@@ -144,7 +144,13 @@ HandGeometry::HandGeometry(const RobotModel& model, const JointVector& q, const 
     : model_(&model) {
   std::vector<Iso3> T = model.linkPoses(q);
   Iso3 T_F_B = T_F_palm * T[model.tipLink()].inverse();
-  for (int li : model.handLinks()) T_F_link_.push_back(T_F_B * T[li]);
+  for (int li : model.handLinks()) {
+    T_F_link_.push_back(T_F_B * T[li]);
+    T_link_F_.push_back(T_F_link_.back().inverse());
+    std::vector<Iso3> geoms;
+    for (const Primitive& p : model.links()[li].collision) geoms.push_back(p.T_link_geom.inverse());
+    T_geom_link_.push_back(std::move(geoms));
+  }
 }
 
 TriangleMesh HandGeometry::mesh() const {
@@ -157,7 +163,7 @@ TriangleMesh HandGeometry::mesh() const {
 
 bool HandGeometry::contains(const Vec3& p_F) const {
   for (size_t k = 0; k < T_F_link_.size(); ++k) {
-    Vec3 p_link = T_F_link_[k].inverse() * p_F;
+    const Vec3 p_link = T_link_F_[k] * p_F;
     for (const Primitive& p : model_->links()[model_->handLinks()[k]].collision)
       if (p.contains(p_link)) return true;
   }
@@ -168,9 +174,11 @@ double HandGeometry::distance(const Vec3& p_F, int* nearest) const {
   double best = std::numeric_limits<double>::infinity();
   if (nearest) *nearest = -1;
   for (size_t k = 0; k < T_F_link_.size(); ++k) {
-    const Vec3 p_link = T_F_link_[k].inverse() * p_F;
-    for (const Primitive& p : model_->links()[model_->handLinks()[k]].collision) {
-      Vec3 q = p.T_link_geom.inverse() * p_link;
+    const Vec3 p_link = T_link_F_[k] * p_F;
+    const std::vector<Primitive>& prims = model_->links()[model_->handLinks()[k]].collision;
+    for (size_t j = 0; j < prims.size(); ++j) {
+      const Primitive& p = prims[j];
+      const Vec3 q = T_geom_link_[k][j] * p_link;
       double d;
       switch (p.type) {
         case Primitive::Type::kBox: {

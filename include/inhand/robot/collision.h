@@ -52,6 +52,10 @@ class HandGeometry {
  private:
   const RobotModel* model_;
   std::vector<Iso3> T_F_link_;
+  // Their inverses, and each link's primitives' T_geom_link, computed once (distance() is the
+  // grasp search's innermost call).
+  std::vector<Iso3> T_link_F_;
+  std::vector<std::vector<Iso3>> T_geom_link_;
 };
 
 struct FingerClosing {
