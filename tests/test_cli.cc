@@ -249,12 +249,7 @@ TEST(Cli, ScanWritesModelAndSummaryAndRejectsBadConfig) {
 }
 
 namespace {
-// A quick scan config for the report and eval tests: coarse voxels, few candidates.
-const char* kQuickConfig = R"({"voxel_m": 0.004, "initial_views": 2,
-    "planner": {"directions": 40, "rolls": 4, "fallback_ranges_m": []},
-    "grasp": {"approaches": 16, "rolls": 2, "max_candidates": 6,
-              "ranking": {"directions": 24, "rolls": 2}},
-    "sim": {"frame_subsample": 10}, "eval": {"samples": 4000}})";
+const char* const kQuickConfig = test::quickConfigJson();
 }  // namespace
 
 TEST(Cli, ScanReportOpensInHeadlessChromium) {

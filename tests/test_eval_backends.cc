@@ -17,12 +17,7 @@ using namespace inhand;
 
 namespace {
 
-// A quick scan: coarse voxels, few candidates, every 10th frame.
-const char* kQuickConfig = R"({"voxel_m": 0.004, "initial_views": 2,
-    "planner": {"directions": 40, "rolls": 4, "fallback_ranges_m": []},
-    "grasp": {"approaches": 16, "rolls": 2, "max_candidates": 6,
-              "ranking": {"directions": 24, "rolls": 2}},
-    "sim": {"frame_subsample": 10}, "eval": {"samples": 4000}})";
+const char* const kQuickConfig = test::quickConfigJson();
 
 std::vector<std::string> splitCsvLine(const std::string& line) {
   std::vector<std::string> out;

@@ -97,6 +97,14 @@ ScanConfig quickScanConfig(int max_views) {
   return c;
 }
 
+const char* quickConfigJson() {
+  return R"({"voxel_m": 0.004, "initial_views": 2,
+    "planner": {"directions": 40, "rolls": 4, "fallback_ranges_m": []},
+    "grasp": {"approaches": 16, "rolls": 2, "max_candidates": 6,
+              "ranking": {"directions": 24, "rolls": 2}},
+    "sim": {"frame_subsample": 10}, "eval": {"samples": 4000}})";
+}
+
 CommandResult runInhand(const std::string& args, const TempDir& dir) {
   const std::filesystem::path log = dir.path() / "log.txt";
   const std::string cmd = std::string(INHAND_BINARY) + " " + args + " > " + log.string() + " 2>&1";

@@ -57,6 +57,10 @@ ObjectModel unweldedModel(const TriangleMesh& mesh,
 // The paper's robot from data/robots (loaded once).
 const RobotModel& wam();
 
+// A quick scan config for command-line tests (`inhand scan --config`): 4 mm voxels, 40
+// directions × 4 rolls, two initial views, few grasp candidates, every 10th frame.
+const char* quickConfigJson();
+
 // A short whole scan from the table for tests: 4 mm voxels, 60 directions × 4 rolls, two
 // initial views, `max_views` Alg. 1 views per grasp, two grasps, every 8th frame fused.
 ScanConfig quickScanConfig(int max_views = 2);

@@ -131,6 +131,19 @@ Aabb autoBounds(const fs::path& dir, const FrameSet& set, double margin) {
   return box;
 }
 
+// The fused model's figures in `fuse`'s summary.
+void addModelFigures(const ObjectModel& model, const std::string& surface, Json* summary) {
+  Json& s = *summary;
+  s["vertices"] = model.mesh.vertices.size();
+  s["triangles"] = model.mesh.triangles.size();
+  s["surface"] = surface;
+  s["closed"] = model.mesh.isClosed();
+  s["mean_entropy"] = model.meanEntropy();
+  s["observed_fraction"] = model.observedAreaFraction();
+  s["surface_area_m2"] = model.mesh.area();
+  s["hole_area_m2"] = model.holeArea();
+}
+
 // Writes the model and its summary; neither stays when the other cannot be written.
 void writeFusedModel(const fs::path& outPath, const fs::path& summaryPath, const ObjectModel& model,
                      const Json& summary) {
@@ -252,14 +265,7 @@ int fuseWithRobot(const FuseArgs& args, const fs::path& dir, const FrameSet& set
                                  {"object_not_in_hand", sum.frames_unsupported},
                                  {"in_known_free_space", sum.frames_in_free_space}};
   summary["frames_tracked"] = "frames_tracked.json";
-  summary["vertices"] = result.mesh.vertices.size();
-  summary["triangles"] = result.mesh.triangles.size();
-  summary["surface"] = args.surface;
-  summary["closed"] = result.mesh.isClosed();
-  summary["mean_entropy"] = result.meanEntropy();
-  summary["observed_fraction"] = result.observedAreaFraction();
-  summary["surface_area_m2"] = result.mesh.area();
-  summary["hole_area_m2"] = result.holeArea();
+  addModelFigures(result, args.surface, &summary);
   summary["timing_s"] = {{"fusion", sum.fusion_s},
                          {"tracking", sum.tracking_s},
                          {"mesh", meshS},
@@ -371,14 +377,7 @@ int runFuse(const FuseArgs& args) {
   Json summary;
   summary["model"] = fs::path(outPath).filename().string();
   summary["frames"] = set.frames.size();
-  summary["vertices"] = model.mesh.vertices.size();
-  summary["triangles"] = model.mesh.triangles.size();
-  summary["surface"] = args.surface;
-  summary["closed"] = model.mesh.isClosed();
-  summary["mean_entropy"] = model.meanEntropy();
-  summary["observed_fraction"] = model.observedAreaFraction();
-  summary["surface_area_m2"] = model.mesh.area();
-  summary["hole_area_m2"] = model.holeArea();
+  addModelFigures(model, args.surface, &summary);
   summary["volume"] = {
       {"voxel_size_m", volume.voxelSize()},
       {"truncation_m", volume.truncation()},
