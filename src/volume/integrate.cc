@@ -1,5 +1,7 @@
 #include "inhand/volume/integrate.h"
 
+#include <emmintrin.h>
+
 #include <algorithm>
 #include <atomic>
 #include <cmath>
@@ -162,6 +164,7 @@ IntegrationStats integrate(const DepthImage& depth, const Iso3& T_O_C, const Cam
       band[i] = k > 0 && s > 0 ? std::clamp(k * s, bandMin, muFull) : muFull;
     }
   const float* B = band.data();
+  const bool useBand = k > 0;
   const Iso3 T_C_O = T_O_C.inverse();
   const Mat3 R = T_C_O.linear();
   const Vec3 step = R.col(0) * volume->voxelSize();  // camera-frame step along voxel x
@@ -197,27 +200,58 @@ IntegrationStats integrate(const DepthImage& depth, const Iso3& T_O_C, const Cam
       const float ax = float(a.x()), ay = float(a.y()), az = float(a.z());
       const float sx = float(step.x()), sy = float(step.y()), sz = float(step.z());
       const size_t base = volume->index(0, y, z);
-      for (int x = x0; x <= x1; ++x) {
+      // One voxel from its depth Z and its projection (fu, fv) + 0.5.
+      // Captured by value: the compiler keeps them in registers (through references it reloads
+      // them after every store to the volume).
+      auto voxel = [D, B, useBand, W = weight.data(), carve, w, h, muFull, base, sumWD, sumW, state,
+                    &myVisited, &myUpdated](int x, float Z, float fu, float fv) {
+        if (Z <= 0.f) return;
+        // Nearest pixel. Truncation equals floor for non-negative values, and is much cheaper
+        // than std::floor without SSE4.1; negatives are rejected first.
+        if (!(fu >= 0.f && fv >= 0.f)) return;
+        const int u = int(fu), v = int(fv);
+        if (u >= w || v >= h) return;
+        const int p = v * w + u;
+        const float Dm = D[p];
+        if (!(Dm > 0.f)) return;
+        const float d = Dm - Z;
+        const float mup = useBand ? B[p] : muFull;  // predictable: the same for every voxel
+        if (d < -mup) return;
+        ++myVisited;
+        const size_t i = base + size_t(x);
+        myUpdated +=
+            updateVoxel(d, mup, muFull, W[p], carve && carve[p], &sumWD[i], &sumW[i], &state[i]);
+      };
+      // Four voxels at a time: depth, its reciprocal and the projection in SSE2, each operation
+      // the scalar one in the same order (IEEE single precision, no fused multiply-add), so the
+      // pixels are those of the scalar loop below to the last bit.
+      int x = x0;
+      const __m128 vax = _mm_set1_ps(ax), vay = _mm_set1_ps(ay), vaz = _mm_set1_ps(az);
+      const __m128 vsx = _mm_set1_ps(sx), vsy = _mm_set1_ps(sy), vsz = _mm_set1_ps(sz);
+      const __m128 vfx = _mm_set1_ps(fx), vfy = _mm_set1_ps(fy), vcx = _mm_set1_ps(cx),
+                   vcy = _mm_set1_ps(cy), half = _mm_set1_ps(0.5f), one = _mm_set1_ps(1.f);
+      alignas(16) float Zs[4], us[4], vs[4];
+      for (; x + 3 <= x1; x += 4) {
+        const __m128 xf = _mm_set_ps(float(x + 3), float(x + 2), float(x + 1), float(x));
+        const __m128 Z = _mm_add_ps(vaz, _mm_mul_ps(xf, vsz));
+        const __m128 inv = _mm_div_ps(one, Z);
+        const __m128 fu = _mm_add_ps(
+            _mm_add_ps(_mm_mul_ps(_mm_mul_ps(vfx, _mm_add_ps(vax, _mm_mul_ps(xf, vsx))), inv), vcx),
+            half);
+        const __m128 fv = _mm_add_ps(
+            _mm_add_ps(_mm_mul_ps(_mm_mul_ps(vfy, _mm_add_ps(vay, _mm_mul_ps(xf, vsy))), inv), vcy),
+            half);
+        _mm_store_ps(Zs, Z);
+        _mm_store_ps(us, fu);
+        _mm_store_ps(vs, fv);
+        for (int l = 0; l < 4; ++l) voxel(x + l, Zs[l], us[l], vs[l]);
+      }
+      for (; x <= x1; ++x) {
         const float Z = az + float(x) * sz;
         if (Z <= 0.f) continue;
         const float inv = 1.f / Z;
-        // Nearest pixel. Truncation equals floor for non-negative values, and is much cheaper
-        // than std::floor without SSE4.1; negatives are rejected first.
-        const float fu = fx * (ax + float(x) * sx) * inv + cx + 0.5f;
-        const float fv = fy * (ay + float(x) * sy) * inv + cy + 0.5f;
-        if (!(fu >= 0.f && fv >= 0.f)) continue;
-        const int u = int(fu), v = int(fv);
-        if (u >= w || v >= h) continue;
-        const int p = v * w + u;
-        const float Dm = D[p];
-        if (!(Dm > 0.f)) continue;
-        const float d = Dm - Z;
-        const float mup = B[p];
-        if (d < -mup) continue;
-        ++myVisited;
-        const size_t i = base + size_t(x);
-        myUpdated += updateVoxel(d, mup, muFull, weight[p], carve && carve[p], &sumWD[i], &sumW[i],
-                                 &state[i]);
+        voxel(x, Z, fx * (ax + float(x) * sx) * inv + cx + 0.5f,
+              fy * (ay + float(x) * sy) * inv + cy + 0.5f);
       }
     }
     visited += myVisited;
