@@ -709,6 +709,12 @@ TEST(Cli, FuseRobotTracksTheHandInFramesARobotRecorded) {
               (dir.path() / "quick.json").string() + " --out " + scan.string(),
           dir);
   ASSERT_EQ(r.code, 0) << r.output;
+  // The scan's own tracking figures against the simulator's truth.
+  const Json tr = readJsonFile(scan / "summary.json").at("tracking");
+  EXPECT_TRUE(tr.at("enabled").get<bool>());
+  EXPECT_LT(tr["palm_error_mm"].at("median").get<double>(), 2.0) << tr;
+  EXPECT_LT(tr["object_pose_error_mm"].at("median").get<double>(), 2.0) << tr;
+  EXPECT_GT(tr.at("ms_per_frame").get<double>(), 0.0);
   const Json fj = readJsonFile(frames / "frames.json");
   ASSERT_GE(fj.at("frames").size(), 8u);
   const Json& f0 = fj["frames"][0];

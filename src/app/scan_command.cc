@@ -446,6 +446,16 @@ int runScan(const ScanArgs& given) {
       {"rejected_by_tracking", sim.frames_rejected},
       {"palm_error_mm",
        {{"median", 1000 * sim.palm_error_median_m}, {"p95", 1000 * sim.palm_error_p95_m}}}};
+  summary["tracking"] = {
+      {"enabled", o.scan.tracking.enabled},
+      {"palm_error_mm",
+       {{"median", 1000 * sim.palm_error_median_m}, {"p95", 1000 * sim.palm_error_p95_m}}},
+      {"object_pose_error_mm",
+       {{"median", 1000 * sim.object_error_median_m}, {"p95", 1000 * sim.object_error_p95_m}}},
+      {"frames_rejected", r.frames_rejected},
+      {"ms_per_frame", sim.frames_fused_in_hand + r.frames_rejected > 0
+                           ? 1000 * r.tracking_s / (sim.frames_fused_in_hand + r.frames_rejected)
+                           : 0.0}};
   summary["frames_not_fused"] = {{"tracking", r.frames_rejected},
                                  {"dropped_or_empty", r.frames_dropped},
                                  {"off_path", r.frames_off_path},

@@ -38,8 +38,18 @@ SimulatedScan runSimulatedScan(const RobotModel& model, const TriangleMesh& obje
   if (!progress.coverage)
     progress.coverage = [&](const ObjectModel& m) { return truth.coverage(m); };
   // Each fused in-hand frame's palm error against the true arm (SimOptions::arm_error_m).
-  std::vector<double> palmError;
+  // … and the object's pose error: how far the pose the frame was fused with (the scan's grasp,
+  // the reported joints, the tracked camera) puts the object's centre from where it truly is.
+  std::vector<double> palmError, objectError;
   int rejected = 0;
+  Iso3 scanGrasp = world.T_O_palm;  // the grasp as the scan knows it (ScanSession::graspPose)
+  const Vec3 centre_O = object.bounds().center();
+  const auto userInput = progress.frame_input;
+  progress.frame_input = [&](const ScanSession& s, const DepthImage& d, const JointVector& q,
+                             const Iso3& T_B_C) {
+    scanGrasp = s.graspPose();
+    if (userInput) userInput(s, d, q, T_B_C);
+  };
   const auto userFrame = progress.frame;
   progress.frame = [&](const FrameReport& r, const JointVector& q, const Iso3& T_B_C) {
     if (userFrame) userFrame(r, q, T_B_C);
@@ -49,6 +59,9 @@ SimulatedScan runSimulatedScan(const RobotModel& model, const TriangleMesh& obje
     }
     const Vec3 truePalm = (T_B_C.inverse() * model.tipPose(world.trueJoints())).translation();
     palmError.push_back(((r.T_B_C.inverse() * model.tipPose(q)).translation() - truePalm).norm());
+    const Iso3 fused_T_O_C = scanGrasp * model.tipPose(q).inverse() * r.T_B_C;
+    const Iso3 true_T_O_C = world.objectPose().inverse() * world.T_B_C;
+    objectError.push_back((fused_T_O_C * (true_T_O_C.inverse() * centre_O) - centre_O).norm());
   };
   // Held: the volume is centred where the robot expects a held object, grasp_offset_m in front of
   // the palm. Table: on the points the camera sees there. The scan is never told the object's
@@ -59,6 +72,7 @@ SimulatedScan runSimulatedScan(const RobotModel& model, const TriangleMesh& obje
       saveScanCheckpoint(checkpoints.file, c,
                          {{"sim", world.state()},
                           {"palm_error_m", palmError},
+                          {"object_error_m", objectError},
                           {"frames_rejected", rejected},
                           {"caller", checkpoints.extra}});
     };
@@ -68,6 +82,7 @@ SimulatedScan runSimulatedScan(const RobotModel& model, const TriangleMesh& obje
     try {
       world.setState(c.extra.at("sim"));
       palmError = c.extra.at("palm_error_m").get<std::vector<double>>();
+      objectError = c.extra.value("object_error_m", std::vector<double>());
       rejected = c.extra.at("frames_rejected").get<int>();
     } catch (const std::exception& e) {
       throw Error(checkpoints.file.string() + ": not a simulated scan's checkpoint (" + e.what() +
@@ -93,6 +108,12 @@ SimulatedScan runSimulatedScan(const RobotModel& model, const TriangleMesh& obje
     std::sort(palmError.begin(), palmError.end());
     out.palm_error_median_m = palmError[palmError.size() / 2];
     out.palm_error_p95_m = palmError[std::min(palmError.size() - 1, palmError.size() * 95 / 100)];
+  }
+  if (!objectError.empty()) {
+    std::sort(objectError.begin(), objectError.end());
+    out.object_error_median_m = objectError[objectError.size() / 2];
+    out.object_error_p95_m =
+        objectError[std::min(objectError.size() - 1, objectError.size() * 95 / 100)];
   }
   return out;
 }
