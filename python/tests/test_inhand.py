@@ -50,6 +50,38 @@ def test_frames_are_float32_metres_with_rigid_poses(frames_dir):
         frames[8]
 
 
+def test_frames_from_a_robot_carry_joints_camera_and_grasp(frames_dir, tmp_path):
+    """frames.json with the robot's fields (q, T_B_C, T_O_palm at the top) and no T_O_C: the
+    frames give them back as they were written; plain fuse refuses them by frame."""
+    import json
+    import shutil
+    robot_dir = tmp_path / "robot_frames"
+    shutil.copytree(frames_dir, robot_dir)
+    with open(robot_dir / "frames.json") as f:
+        j = json.load(f)
+    T_B_C = np.eye(4)
+    T_B_C[:3, 3] = [0.1, -0.2, 0.3]
+    T_O_palm = np.eye(4)
+    T_O_palm[:3, :3] = [[0, -1, 0], [1, 0, 0], [0, 0, 1]]
+    j["T_O_palm"] = T_O_palm.flatten().tolist()
+    for k, fr in enumerate(j["frames"]):
+        del fr["T_O_C"]
+        fr["q"] = {"j1": 0.25 * k, "j2": -1.0}
+        fr["T_B_C"] = T_B_C.flatten().tolist()
+    with open(robot_dir / "frames.json", "w") as f:
+        json.dump(j, f)
+    frames = inhand.load_frames(str(robot_dir))
+    f = frames[3]
+    assert f.T_O_C is None
+    assert f.q == {"j1": 0.75, "j2": -1.0}
+    np.testing.assert_array_equal(f.T_B_C, T_B_C)
+    np.testing.assert_array_equal(f.T_O_palm, T_O_palm)
+    r = subprocess.run([BINARY, "fuse", "--frames", str(robot_dir), "--out",
+                        str(tmp_path / "m.ply")], capture_output=True, text=True)
+    assert r.returncode == 1 and "frames[0] has no T_O_C" in r.stderr
+    assert not (tmp_path / "m.ply").exists()
+
+
 def test_volume_from_python_equals_inhand_fuse(frames_dir, tmp_path):
     cli_ply = str(tmp_path / "cli.ply")
     subprocess.run([BINARY, "fuse", "--frames", frames_dir, "--out", cli_ply], check=True,
