@@ -317,8 +317,18 @@ bool waitForSlurm(const fs::path& dir, EvalPlan* plan, const std::vector<size_t>
   StopOnSignal stop;
   std::vector<bool> seen(todo.size(), false);
   size_t done = 0;
+  auto lastNews = std::chrono::steady_clock::now();
   for (;;) {
-    const bool active = !activeSlurmJobs(dir).empty();
+    const std::vector<std::string> jobs = activeSlurmJobs(dir);
+    const bool active = !jobs.empty();
+    // A line a minute while nothing ends (jobs pending behind others, or a node that is down).
+    if (std::chrono::steady_clock::now() - lastNews > std::chrono::seconds(60) && active) {
+      std::string ids;
+      for (const std::string& id : jobs) ids += (ids.empty() ? "" : ",") + id;
+      std::fprintf(stderr, "eval: waiting for Slurm: %zu of %zu runs ended (squeue -j %s)\n", done,
+                   todo.size(), ids.c_str());
+      lastNews = std::chrono::steady_clock::now();
+    }
     for (size_t i = 0; i < todo.size(); ++i) {
       EvalRun& r = plan->runs[todo[i]];
       if (seen[i] || !fs::exists(dir / r.exitFile())) continue;
@@ -326,6 +336,7 @@ bool waitForSlurm(const fs::path& dir, EvalPlan* plan, const std::vector<size_t>
       if (!r.exited) continue;
       seen[i] = true;
       printRunEnd(++done, todo.size(), r, -1);
+      lastNews = std::chrono::steady_clock::now();
     }
     if (!active) return true;
     for (int k = 0; k < 20; ++k) {
