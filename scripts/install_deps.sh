@@ -16,6 +16,10 @@ packages=(
 if [ "${INHAND_WITH_SLURM:-0}" = 1 ]; then
   packages+=(slurmctld slurmd slurm-client munge)
 fi
+# Open3D for bench/bench_open3d (the integration benchmark against it): only when asked.
+if [ "${INHAND_WITH_OPEN3D:-0}" = 1 ]; then
+  packages+=(libopen3d-dev)
+fi
 missing=()
 for p in "${packages[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q 'install ok installed' || missing+=("$p")
