@@ -24,14 +24,17 @@ def load(out):
         for path in sorted(glob.glob(os.path.join(d, "runs", "*", "ig", "seed*", "summary.json"))):
             s = json.load(open(path))
             f = s.get("in_hand_frames", {})
+            # Palm error under "tracking" (older summaries: under "in_hand_frames").
+            palm = s.get("tracking", f).get("palm_error_mm", {})
             rows.append({
                 "arm_error_cm": error * 100, "tracking": tracking,
                 "object": s["object"].replace("builtin:", ""),
                 "seed": s["seed"], "termination": s["termination"],
                 "coverage": s["coverage"], "accuracy_mean_mm": s["accuracy_mm"]["mean"],
                 "accuracy_p95_mm": s["accuracy_mm"]["p95"],
-                "palm_error_median_mm": f.get("palm_error_mm", {}).get("median", float("nan")),
-                "frames_fused": f.get("fused", 0), "frames_rejected": f.get("rejected_by_tracking", 0),
+                "palm_error_median_mm": palm.get("median", float("nan")),
+                "frames_fused": f.get("fused", 0),
+                "frames_rejected": f.get("not_fused", f.get("rejected_by_tracking", 0)),
                 "grasps": len(s["grasps"]),
             })
     return rows

@@ -441,11 +441,9 @@ int runScan(const ScanArgs& given) {
   summary["view_evaluations_full_resolution"] = r.view_refinements;
   summary["view_evaluations_per_s"] = r.planning_s > 0 ? r.view_evaluations / r.planning_s : 0.0;
   summary["frames"] = r.frames;
-  summary["in_hand_frames"] = {
-      {"fused", sim.frames_fused_in_hand},
-      {"rejected_by_tracking", sim.frames_rejected},
-      {"palm_error_mm",
-       {{"median", 1000 * sim.palm_error_median_m}, {"p95", 1000 * sim.palm_error_p95_m}}}};
+  // In-hand frames fused and not (for any reason: frames_not_fused says which).
+  summary["in_hand_frames"] = {{"fused", sim.frames_fused_in_hand},
+                               {"not_fused", sim.frames_rejected}};
   summary["tracking"] = {
       {"enabled", o.scan.tracking.enabled},
       {"palm_error_mm",

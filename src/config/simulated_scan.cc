@@ -104,17 +104,15 @@ SimulatedScan runSimulatedScan(const RobotModel& model, const TriangleMesh& obje
   out.renders = world.renders;
   out.frames_rejected = rejected;
   out.frames_fused_in_hand = int(palmError.size());
-  if (!palmError.empty()) {
-    std::sort(palmError.begin(), palmError.end());
-    out.palm_error_median_m = palmError[palmError.size() / 2];
-    out.palm_error_p95_m = palmError[std::min(palmError.size() - 1, palmError.size() * 95 / 100)];
-  }
-  if (!objectError.empty()) {
-    std::sort(objectError.begin(), objectError.end());
-    out.object_error_median_m = objectError[objectError.size() / 2];
-    out.object_error_p95_m =
-        objectError[std::min(objectError.size() - 1, objectError.size() * 95 / 100)];
-  }
+  // Median and 95th percentile (0 without values).
+  auto medianP95 = [](std::vector<double> v, double* median, double* p95) {
+    if (v.empty()) return;
+    std::sort(v.begin(), v.end());
+    *median = v[v.size() / 2];
+    *p95 = v[std::min(v.size() - 1, v.size() * 95 / 100)];
+  };
+  medianP95(palmError, &out.palm_error_median_m, &out.palm_error_p95_m);
+  medianP95(objectError, &out.object_error_median_m, &out.object_error_p95_m);
   return out;
 }
 

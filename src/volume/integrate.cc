@@ -149,22 +149,22 @@ IntegrationStats integrate(const DepthImage& depth, const Iso3& T_O_C, const Cam
                            const std::vector<uint8_t>* carve_only) {
   checkInputs(depth, K, sigma_m, carve_only);
   const int w = K.width, h = K.height;
-  // Weight w = 1/σ² and band per pixel, so the kernel reads two floats per voxel; only where the
-  // volume's voxels can project (the kernel reads no other pixel).
+  // Weight w = 1/σ² and band per pixel, so the kernel reads one or two floats per voxel; only where
+  // the volume's voxels can project (the kernel reads no other pixel).
   const PixelRect rect = volumeImageRect(*volume, T_O_C, K);
-  std::vector<float> weight(sigma_m.size()), band(sigma_m.size());
   const float muFull = float(volume->truncation());
   const float k = float(volume->bandSigmas());
   const float bandMin = std::min(muFull, float(volume->voxelSize()));
+  const bool useBand = k > 0;  // else every measurement's band is μ: no band image
+  std::vector<float> weight(sigma_m.size()), band(useBand ? sigma_m.size() : 0);
   for (int v = rect.v0; v < rect.v1; ++v)
     for (int u = rect.u0; u < rect.u1; ++u) {
       const size_t i = size_t(v) * w + u;
       const float s = sigma_m[i];
       weight[i] = s > 0 ? 1.f / (s * s) : 0.f;
-      band[i] = k > 0 && s > 0 ? std::clamp(k * s, bandMin, muFull) : muFull;
+      if (useBand) band[i] = s > 0 ? std::clamp(k * s, bandMin, muFull) : muFull;
     }
   const float* B = band.data();
-  const bool useBand = k > 0;
   const Iso3 T_C_O = T_O_C.inverse();
   const Mat3 R = T_C_O.linear();
   const Vec3 step = R.col(0) * volume->voxelSize();  // camera-frame step along voxel x

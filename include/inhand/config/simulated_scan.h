@@ -12,14 +12,14 @@ struct SimulatedScan {
   SurfaceMetrics metrics;              // the final model against the true mesh
   Iso3 T_B_O_rest = Iso3::Identity();  // where the object rested
   // The fused in-hand frames' palm error (the pose fused with against the simulator's true palm,
-  // camera frame), m: median and 95th percentile; and the frames tracking refused.
+  // camera frame), m: median and 95th percentile.
   double palm_error_median_m = 0, palm_error_p95_m = 0;
   // The fused in-hand frames' object pose error: the object's centre as the fused pose puts it
   // against where it is (the scan's grasp, the reported joints and the tracked camera against the
   // simulator's truth), m.
   double object_error_median_m = 0, object_error_p95_m = 0;
-  int frames_fused_in_hand = 0, frames_rejected = 0;
-  int drops = 0;              // how often the simulated object fell
+  int frames_fused_in_hand = 0, frames_rejected = 0;  // rejected: not fused, for any reason
+  int drops = 0;                                      // how often the simulated object fell
   SimFaultLog faults;         // what the simulator injected (SimOptions::faults)
   double render_s = 0;        // rendering the simulated sensor's images (what a robot does not pay)
   int renders = 0;            // … how many images
