@@ -7,9 +7,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
-#include <cstring>
 #include <filesystem>
-#include <fstream>
 #include <map>
 #include <mutex>
 #include <sstream>
@@ -275,6 +273,15 @@ int listUnfinished(const std::vector<EvalRun>& runs, const std::string& dir) {
   return n;
 }
 
+// The eval's last words: what did not finish, the count, the exit status (130 when a stop
+// signal cut it short, 5 when a run did not finish).
+int endOfEval(const EvalPlan& plan, const std::string& dir, bool complete) {
+  const int failed = listUnfinished(plan.runs, dir);
+  std::printf("eval: %zu runs (%d did not finish) -> %s/results.md\n", plan.runs.size(), failed,
+              dir.c_str());
+  return !complete ? 130 : failed ? 5 : 0;
+}
+
 void writeTables(const fs::path& dir, const EvalPlan& plan) {
   tabulate(dir, plan.runs, plan.objects, plan.planners, plan.description);
   try {
@@ -378,10 +385,7 @@ int slurmRunsThenTables(const EvalArgs& args, const fs::path& dir, EvalPlan* pla
   for (EvalRun& r : plan->runs) loadState(dir, &r);
   writeTables(dir, *plan);
   if (!waited) return 130;
-  const int failed = listUnfinished(plan->runs, dir.string());
-  std::printf("eval: %zu runs (%d did not finish) -> %s/results.md\n", plan->runs.size(), failed,
-              dir.c_str());
-  return failed ? 5 : 0;
+  return endOfEval(*plan, dir.string(), true);
 }
 
 // `inhand eval --resume DIR`: the runs that did not finish, again.
@@ -431,10 +435,7 @@ int resumeEval(const EvalArgs& args) {
   if (backend == "slurm") return slurmRunsThenTables(args, dir, &plan, todo);
   const bool complete = runLocally(dir, &plan, todo, threadsForJobs(args.jobs));
   writeTables(dir, plan);
-  const int failed = listUnfinished(plan.runs, dir.string());
-  std::printf("eval: %zu runs (%d did not finish) -> %s/results.md\n", plan.runs.size(), failed,
-              dir.c_str());
-  return !complete ? 130 : failed ? 5 : 0;
+  return endOfEval(plan, dir.string(), complete);
 }
 
 }  // namespace
@@ -562,13 +563,11 @@ int runEval(const EvalArgs& args) {
   writeEvalPlan(out.path(), plan);
   if (!args.config.empty()) fs::copy_file(args.config, out.path() / "config.json");
   const bool complete = runLocally(out.path(), &plan, all, jobs);
-  const double total = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   writeTables(out.path(), plan);
   out.commit();
-  const int failed = listUnfinished(plan.runs, args.out);
-  std::printf("eval: %zu runs (%d failed) in %.0f s -> %s/results.md\n", plan.runs.size(), failed,
-              total, args.out.c_str());
-  return !complete ? 130 : failed ? 5 : 0;
+  std::fprintf(stderr, "eval: %.0f s\n",
+               std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+  return endOfEval(plan, args.out, complete);
 }
 
 int runReport(const std::string& dir) {
