@@ -54,13 +54,25 @@ int main(int argc, char** argv) {
                   terminationName(session.summary().termination).c_str());
       if (grasp == 1 || !arm.putDown()) break;
       session.endGrasp();
-      const std::optional<GraspCandidate> next = session.nextGrasp(world.restPose(), arm.joints());
-      if (!next) break;
-      const std::optional<Iso3> achieved = arm.pickUp(next->T_O_palm, next->q_open);
-      if (!achieved) break;
-      T_O_palm = *achieved;
-      arm.execute({arm.joints(), robot.withArm(arm.joints(), robot.arm(next->q_lift))},
-                  [](const JointVector&) {});  // lift
+      // The candidates in their order; a pick-up that does not hold is followed by the next.
+      // A real robot checks the hold with its own sensing (`inhand scan` compares the depth
+      // image with the model); here the simulator knows.
+      const GraspPlan plan = session.planGrasps(world.restPose(), arm.joints());
+      bool holding = false;
+      for (int k = 0; k < plan.above_threshold && !holding; ++k) {
+        const GraspCandidate& c = plan.candidates[size_t(k)];
+        const std::optional<Iso3> achieved = arm.pickUp(c.T_O_palm, c.q_open);
+        if (!achieved) continue;
+        arm.execute({arm.joints(), robot.withArm(arm.joints(), robot.arm(c.q_lift))},
+                    [](const JointVector&) {});  // lift
+        if (!world.held) {
+          std::printf("grasp candidate %d did not hold: the next\n", k + 1);
+          continue;
+        }
+        T_O_palm = *achieved;
+        holding = true;
+      }
+      if (!holding) break;
     }
     std::filesystem::create_directories(out);
     session.save(out / "scan.inhand");  // a checkpoint to resume from (ScanSession::load)

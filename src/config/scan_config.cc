@@ -31,6 +31,8 @@ const Names<SurfaceMethod> kSurfaceMethods = {{SurfaceMethod::kSurfaceNets, "sur
                                               {SurfaceMethod::kTetrahedra, "tetrahedra"}};
 const Names<IkMethod> kIkMethods = {{IkMethod::kDampedLeastSquares, "dls"},
                                     {IkMethod::kKdlLma, "kdl_lma"}};
+const Names<StopRule> kStopRules = {{StopRule::kRelative, "relative"},
+                                    {StopRule::kAbsolute, "absolute"}};
 const Names<PrimaryVisibility> kVisibilities = {{PrimaryVisibility::kAuto, "auto"},
                                                 {PrimaryVisibility::kRaster, "raster"},
                                                 {PrimaryVisibility::kRayCast, "ray_cast"}};
@@ -71,8 +73,18 @@ void visitPlanner(V& v, ViewPlannerOptions& o) {
   v.numbers("fallback_ranges_m", o.fallback_ranges_m,
             "ranges tried only where range_m has no IK solution, m");
   v.integer("rolls", o.rolls, "rolls swept about each viewing direction");
-  v.num("alpha_cost", o.alpha_cost, "α_cost: score = quality − α_cost · trajectory seconds");
-  v.num("t_q", o.t_q, "t_q: minimum quality of a view that counts");
+  v.num("alpha_cost", o.alpha_cost,
+        "α_cost: score = quality − α_cost · trajectory seconds (absolute rule)");
+  v.choice("stop", o.stop, kStopRules,
+           "relative: t_q and α_cost scale with S_obj's surface area, every planner stops when no "
+           "view's eq. 9 gain reaches t_q; absolute: the paper's t_q and α_cost, each planner on "
+           "its own threshold");
+  v.num("t_q", o.t_q, "t_q: minimum quality of a view that counts (absolute rule)");
+  v.num("t_q_relative", o.t_q_relative,
+        "relative rule: t_q = this · S_obj's area, nats per m² (0.036: 1% of the surface seen "
+        "for the first time)");
+  v.num("alpha_cost_relative", o.alpha_cost_relative,
+        "relative rule: α_cost = this · S_obj's area, per second");
   v.boolean("use_cost", o.use_cost, "false: score = quality (ablation)");
   v.boolean("hand_occlusion", o.hand_occlusion,
             "false: no robot occluders, no t_hand rule (ablation)");

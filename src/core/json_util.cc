@@ -1,6 +1,7 @@
 #include "inhand/core/json_util.h"
 
 #include <cmath>
+#include <limits>
 
 #include "inhand/core/error.h"
 #include "inhand/core/file_util.h"
@@ -62,6 +63,10 @@ Json vecJson(const Vec3& v) { return {v.x(), v.y(), v.z()}; }
 
 Vec3 vecFrom(const Json& j) {
   return {j.at(0).get<double>(), j.at(1).get<double>(), j.at(2).get<double>()};
+}
+
+double numberOrNan(const Json& j) {
+  return j.is_null() ? std::numeric_limits<double>::quiet_NaN() : j.get<double>();
 }
 
 }  // namespace inhand

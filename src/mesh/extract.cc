@@ -51,6 +51,18 @@ double ObjectModel::observedAreaFraction() const {
   return total > 0 ? seen / total : 0.0;
 }
 
+double ObjectModel::unresolvedInformation(double sigma_ref_m) const {
+  const double ref = sigma_ref_m * sigma_ref_m;
+  double sum = 0;
+  for (int t = 0; t < int(mesh.triangles.size()); ++t) {
+    const Tri& f = mesh.triangles[t];
+    double h = 0;
+    for (int k = 0; k < 3; ++k) h += std::max(0.0, 0.5 * std::log(double(variance[f[k]]) / ref));
+    sum += mesh.triangleArea(t) * h / 3;
+  }
+  return sum;
+}
+
 double ObjectModel::holeArea() const {
   double hole = 0;
   for (int t = 0; t < int(mesh.triangles.size()); ++t) {

@@ -37,6 +37,8 @@ std::string ViewPlannerOptions::validate() const {
   if (rolls < 1) return "rolls must be >= 1";
   if (!(alpha_cost >= 0)) return "alpha_cost must be >= 0";
   if (!(t_q >= 0)) return "t_q must be >= 0";
+  if (!(t_q_relative >= 0)) return "t_q_relative must be >= 0";
+  if (!(alpha_cost_relative >= 0)) return "alpha_cost_relative must be >= 0";
   if (ik_restarts < 0) return "ik_restarts must be >= 0";
   if (!(prescreen_stride >= 1 && prescreen_stride <= 16))
     return "prescreen_stride must be in [1, 16]";
@@ -45,6 +47,16 @@ std::string ViewPlannerOptions::validate() const {
   if (!q.empty()) return "volumetric." + q;
   q = quality.validate();
   return q.empty() ? "" : "quality." + q;
+}
+
+const char* stopRuleName(StopRule r) { return r == StopRule::kAbsolute ? "absolute" : "relative"; }
+
+double viewThreshold(const ViewPlannerOptions& o, double area_m2) {
+  return o.stop == StopRule::kRelative ? o.t_q_relative * area_m2 : o.t_q;
+}
+
+double costWeight(const ViewPlannerOptions& o, double area_m2) {
+  return o.stop == StopRule::kRelative ? o.alpha_cost_relative * area_m2 : o.alpha_cost;
 }
 
 std::vector<std::string> plannerNames() {
@@ -207,6 +219,15 @@ ViewSelection ViewPlanner::select(ViewQualityScene& scene, const GraspState& gra
   ViewSelection out;
   if (S_obj.mesh.empty()) return out;
   const Vec3 centre = S_obj.mesh.bounds().center();
+  const double area = S_obj.mesh.area();
+  const bool eq9 = o.metric == ViewMetric::kInformationGain &&
+                   o.quality.integrand == QualityIntegrand::kInformationGain;
+  // Under the relative rule every planner stops when no view's eq. 9 gain reaches t_q; a
+  // baseline then picks by its own metric with no threshold of its own.
+  const bool commonStop = o.stop == StopRule::kRelative && !eq9;
+  out.t_q = viewThreshold(o, area);
+  const double ownThreshold = commonStop ? -std::numeric_limits<double>::infinity() : out.t_q;
+  const double alpha = costWeight(o, area);
 
   // Line 5: directions at least t_θ from every used view.
   const double cosMin = std::cos(o.min_angle_deg * M_PI / 180);
@@ -261,7 +282,8 @@ ViewSelection ViewPlanner::select(ViewQualityScene& scene, const GraspState& gra
                                   occ);
     }
     c.pixel_stride = stride;
-    c.score = c.quality - (o.use_cost ? o.alpha_cost * c.cost_s : 0.0);
+    if (eq9) c.gain = stride == o.quality.pixel_stride ? c.quality : NAN;
+    c.score = c.quality - (o.use_cost ? alpha * c.cost_s : 0.0);
   };
   auto evaluateAll = [&](const std::vector<size_t>& ks, int stride) {
     parallelForThreads(0, int(ks.size()), [&](int i) { evaluate(ks[size_t(i)], stride); });
@@ -276,7 +298,7 @@ ViewSelection ViewPlanner::select(ViewQualityScene& scene, const GraspState& gra
   auto pick = [&](const std::vector<size_t>& pool) -> std::optional<ViewCandidate> {
     std::vector<const ViewCandidate*> order;
     for (size_t k : pool)
-      if (chosen[k]->quality >= o.t_q) order.push_back(&*chosen[k]);
+      if (chosen[k]->quality >= ownThreshold) order.push_back(&*chosen[k]);
     std::sort(order.begin(), order.end(),
               [&](const ViewCandidate* a, const ViewCandidate* b) { return better(*a, *b); });
     for (const ViewCandidate* c : order)
@@ -288,9 +310,53 @@ ViewSelection ViewPlanner::select(ViewQualityScene& scene, const GraspState& gra
   const bool coarseToFine = o.metric == ViewMetric::kInformationGain && o.refine > 0 &&
                             o.prescreen_stride > fine && reachable.size() > size_t(o.refine);
   out.evaluated = int(reachable.size());
+  // eq. 9 for the baselines under the relative rule (on a scene of its own for `area`).
+  std::optional<ViewQualityScene> own;
+  ViewQualityScene* gainScene = &scene;
+  if (commonStop && o.quality.integrand != QualityIntegrand::kInformationGain) {
+    ViewQualityOptions q = o.quality;
+    q.integrand = QualityIntegrand::kInformationGain;
+    own.emplace(S_obj, camera_, noise_, q);
+    own->setNearHand(o.hand_occlusion ? scene.nearHand() : nullptr);
+    gainScene = &*own;
+  }
+  auto gainOf = [&](const ViewCandidate& c, int stride) {
+    std::vector<Occluder> occ;
+    if (o.hand_occlusion) occ = occluders_.at(model_->withArm(grasp.q, c.arm), c.T_B_O.inverse());
+    return gainScene->quality(c.T_O_C, occ, nullptr, stride);
+  };
+  if (commonStop) {
+    // eq. 9 of every reachable candidate, coarse to fine as ig's own pass: the largest decides.
+    const int coarseStride = o.refine > 0 && o.prescreen_stride > fine ? o.prescreen_stride : fine;
+    std::vector<double> coarseGain(chosen.size(), 0.0);
+    parallelForThreads(0, int(reachable.size()), [&](int i) {
+      coarseGain[reachable[size_t(i)]] = gainOf(*chosen[reachable[size_t(i)]], coarseStride);
+    });
+    std::vector<size_t> order = reachable;
+    std::stable_sort(order.begin(), order.end(),
+                     [&](size_t a, size_t b) { return coarseGain[a] > coarseGain[b]; });
+    if (coarseStride != fine && o.refine > 0 && order.size() > size_t(o.refine))
+      order.resize(size_t(o.refine));
+    if (coarseStride != fine) {
+      parallelForThreads(0, int(order.size()), [&](int i) {
+        chosen[order[size_t(i)]]->gain = gainOf(*chosen[order[size_t(i)]], fine);
+      });
+    } else {
+      for (size_t k : order) chosen[k]->gain = coarseGain[k];
+    }
+    out.max_gain = 0;
+    for (size_t k : order) out.max_gain = std::max(out.max_gain, chosen[k]->gain);
+    out.refined = int(order.size());
+    if (out.max_gain < out.t_q) {
+      out.quality_s = secs(tQ);
+      for (size_t k : reachable) out.candidates.push_back(*chosen[k]);
+      out.total_s = secs(t0);
+      return out;
+    }
+  }
   if (!coarseToFine) {
     evaluateAll(reachable, fine);
-    out.refined = out.evaluated;
+    if (!commonStop) out.refined = out.evaluated;
     out.best = pick(reachable);
   } else {
     evaluateAll(reachable, o.prescreen_stride);
@@ -301,7 +367,7 @@ ViewSelection ViewPlanner::select(ViewQualityScene& scene, const GraspState& gra
     for (size_t next = 0; next < coarse.size() && !out.best;) {
       std::vector<size_t> batch;
       for (; next < coarse.size() && batch.size() < size_t(o.refine); ++next)
-        if (refined.empty() || chosen[coarse[next]]->quality >= 0.5 * o.t_q)
+        if (refined.empty() || chosen[coarse[next]]->quality >= 0.5 * out.t_q)
           batch.push_back(coarse[next]);
       if (batch.empty()) break;
       evaluateAll(batch, fine);
@@ -310,6 +376,9 @@ ViewSelection ViewPlanner::select(ViewQualityScene& scene, const GraspState& gra
     }
     out.refined = int(refined.size());
   }
+  // The chosen baseline view's own eq. 9 gain at full resolution (the planner's prediction).
+  if (commonStop && out.best && std::isnan(out.best->gain))
+    out.best->gain = gainOf(*out.best, fine);
   out.quality_s = secs(tQ);
   for (size_t k : reachable) out.candidates.push_back(*chosen[k]);
   out.total_s = secs(t0);

@@ -70,6 +70,8 @@ Json graspJson(const GraspRecord& g) {
           {"candidates", g.candidates},
           {"tried", g.tried},
           {"quality", g.quality},
+          {"t_q", g.t_q},
+          {"model_area_m2", g.model_area_m2},
           {"epsilon", std::isfinite(g.epsilon) ? Json(g.epsilon) : Json()},
           {"views", g.views},
           {"termination", terminationName(g.termination)},
@@ -88,6 +90,8 @@ GraspRecord graspFrom(const Json& j) {
   g.candidates = j.at("candidates").get<int>();
   g.tried = j.at("tried").get<int>();
   g.quality = j.at("quality").get<double>();
+  g.t_q = j.value("t_q", 0.0);
+  g.model_area_m2 = j.value("model_area_m2", 0.0);
   g.epsilon = j.at("epsilon").is_null() ? std::numeric_limits<double>::quiet_NaN()
                                         : j.at("epsilon").get<double>();
   g.views = j.at("views").get<int>();

@@ -278,6 +278,8 @@ void runGrasps(RobotInterface& robot, DepthSensor& sensor, ScanSession& session,
     next.candidates = int(plan.candidates.size());
     next.tried = plan.generation.tried;
     next.quality = pick.picked->quality;
+    next.t_q = plan.t_q;
+    next.model_area_m2 = plan.model_area_m2;
     next.epsilon = pick.picked->epsilon;
     next.generation_s = plan.generation.seconds;
     next.ranking_s = plan.ranking_s;

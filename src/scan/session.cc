@@ -581,6 +581,8 @@ std::optional<PlannedView> ScanSession::nextView(const JointVector& q_now) {
   rec.dir_O = c.dir_O;
   rec.T_O_C = c.T_O_C;
   rec.quality = c.quality;
+  rec.gain = c.gain;
+  rec.t_q = sel.t_q;
   rec.cost_s = c.cost_s;
   rec.score = c.score;
   rec.candidates = sel.evaluated;
@@ -610,6 +612,7 @@ const ViewRecord& ScanSession::finishView() {
   if (modelPointsNeeded(s.options)) refreshTrackingModel(&after);
   s.trackingFromFull = true;
   rec.mean_entropy = after.meanEntropy();
+  rec.unresolved = after.unresolvedInformation(axialSigma(s.noise, s.options.planner.range_m, 0.0));
   rec.observed_fraction = after.observedAreaFraction();
   if (s.progress.coverage) rec.coverage = s.progress.coverage(after);
   char line[160];
@@ -650,12 +653,18 @@ GraspPlan ScanSession::planGrasps(const Iso3& T_B_O_rest, const JointVector& q_n
   log(line);
   // Candidates are ranked by eq. 9 (the ranking planner) whatever the view planner is, so its
   // own t_q decides; a baseline view planner's threshold is in other units.
-  const double t_q = s.multi.ranking.t_q;
+  plan.model_area_m2 = S_obj.mesh.area();
+  plan.t_q = viewThreshold(s.multi.ranking, plan.model_area_m2);
+  const double t_q = plan.t_q;
   while (plan.above_threshold < int(plan.candidates.size()) &&
          plan.candidates[plan.above_threshold].quality >= t_q)
     ++plan.above_threshold;
-  if (plan.above_threshold == 0)
-    finish(Termination::kNoGraspAboveThreshold, "no grasp candidate promises a view above t_q");
+  if (plan.above_threshold == 0) {
+    std::snprintf(line, sizeof(line),
+                  "no grasp candidate promises a view above t_q (best %.5f < t_q %.5f)",
+                  best.quality, t_q);
+    finish(Termination::kNoGraspAboveThreshold, line);
+  }
   return plan;
 }
 
@@ -726,6 +735,9 @@ void ScanSession::save(const std::filesystem::path& path, const Json& extra) con
                           {"dir_O", vecJson(r.dir_O)},
                           {"T_O_C", isoJson(r.T_O_C)},
                           {"quality", r.quality},
+                          {"gain", r.gain},
+                          {"t_q", r.t_q},
+                          {"unresolved", r.unresolved},
                           {"cost_s", r.cost_s},
                           {"score", r.score},
                           {"mean_entropy", r.mean_entropy},
@@ -822,6 +834,9 @@ ScanSession ScanSession::load(const std::filesystem::path& path, const RobotMode
       rec.dir_O = vecFrom(r.at("dir_O"));
       rec.T_O_C = isoFrom(r.at("T_O_C"));
       rec.quality = r.at("quality").get<double>();
+      rec.gain = numberOrNan(r.value("gain", Json()));
+      rec.t_q = numberOrNan(r.value("t_q", Json()));
+      rec.unresolved = r.value("unresolved", 0.0);
       rec.cost_s = r.at("cost_s").get<double>();
       rec.score = r.at("score").get<double>();
       rec.mean_entropy = r.at("mean_entropy").get<double>();

@@ -24,6 +24,8 @@ std::string requireString(const Json& obj, const std::string& key, const std::st
 Json isoJson(const Iso3& T);
 Iso3 isoFrom(const Json& j);  // throws Json::exception on a malformed value
 Json vecJson(const Vec3& v);
+// A number, or NaN for null (nlohmann writes NaN as null); throws on anything else.
+double numberOrNan(const Json& j);
 Vec3 vecFrom(const Json& j);
 
 }  // namespace inhand

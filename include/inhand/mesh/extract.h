@@ -45,6 +45,10 @@ struct ObjectModel {
   double meanEntropy() const;
   // Area fraction of triangles whose three vertices are observed.
   double observedAreaFraction() const;
+  // ∫ max(0, ½ ln(σ²/σ_ref²)) dA over the surface (σ² interpolated linearly over each triangle
+  // from its corners, by the mean of the corners' logs), nats·m²: what eq. 9 could still gain if
+  // every point were measured once with σ_ref.
+  double unresolvedInformation(double sigma_ref_m) const;
   // Area (m²) of triangles with at least one hole-filled vertex.
   double holeArea() const;
   // The measured surface alone: the triangles whose three vertices are observed (an open mesh,

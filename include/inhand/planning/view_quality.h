@@ -122,6 +122,7 @@ class ViewQualityScene {
 
   // Sets the grasp's near-hand grid (no grid: no t_hand rule).
   void setNearHand(std::shared_ptr<const NearHandGrid> grid);
+  const std::shared_ptr<const NearHandGrid>& nearHand() const { return nearHand_; }
 
   // eq. 9 for a camera at T_O_C among `occluders` (robot surfaces in frame O). Looks only at the
   // pixels inside the projection of the model's bounding box (no pixel outside can hit S_obj),

@@ -10,6 +10,7 @@
 // Camera placement: the camera stays on its pan-tilt unit aimed at one presentation point, at the
 // view range from the unit towards the config's look_at point; the arm turns the object in front
 // of it. Pan/tilt are not searched jointly with roll.
+#include <limits>
 #include <optional>
 #include <string>
 #include <vector>
@@ -29,6 +30,19 @@ enum class ViewMetric {
   kRearSideEntropy,   // Isler et al. 2016 (see volumetric.h), needs the volume
 };
 
+// When a view counts and when the planner is done (§III-B's t_q).
+enum class StopRule {
+  // t_q and α_cost scale with the surface area A of S_obj (eq. 9 is an area integral, nats·m²):
+  // a view counts when its eq. 9 gain is at least t_q_relative·A, and α_cost = α_relative·A, so
+  // an object scaled by s stops after the same views. Every planner stops on this rule: a
+  // baseline still chooses by its own metric, among the same candidates, but the pass ends when
+  // no reachable view's eq. 9 gain reaches the threshold.
+  kRelative,
+  // The paper's absolute t_q and α_cost; a baseline stops on its own threshold in its own units.
+  kAbsolute,
+};
+const char* stopRuleName(StopRule r);  // relative, absolute
+
 struct ViewPlannerOptions {
   ViewMetric metric = ViewMetric::kInformationGain;
   VolumetricOptions volumetric;  // for the volumetric metrics
@@ -37,8 +51,15 @@ struct ViewPlannerOptions {
   double range_m = 0.7;          // preferred camera-to-object-centre distance
   std::vector<double> fallback_ranges_m{0.6, 0.8, 0.9};  // tried only where range_m has no IK
   int rolls = 8;                                         // rolls swept about the viewing direction
-  double alpha_cost = 0.0005;    // α_cost: quality units per second of trajectory
-  double t_q = 0.005;            // t_q: minimum quality of a view that counts
+  double alpha_cost = 0.0005;  // α_cost: quality units per second of trajectory
+  double t_q = 0.005;          // t_q: minimum quality of a view that counts (absolute rule)
+  StopRule stop = StopRule::kRelative;
+  // Relative rule: t_q = t_q_relative·A(S_obj) and α_cost = alpha_cost_relative·A(S_obj).
+  // 0.036 nats is what eq. 9 gives for 1% of the surface seen for the first time (σ 5 cm before,
+  // the sensor's σ at 0.7 m after: ½ ln(1 + 0.05²/0.00137²) = 3.6 nats per m²); α keeps the
+  // paper's ratio t_q/α_cost = 10 s of trajectory.
+  double t_q_relative = 0.036;
+  double alpha_cost_relative = 0.0036;
   bool use_cost = true;          // false: score = q (ablation)
   bool hand_occlusion = true;    // false: no robot occluders, no t_hand rule (ablation)
   bool check_collisions = true;  // reject candidates whose arm, hand or object hit table/base
@@ -64,11 +85,17 @@ struct ViewCandidate {
   Iso3 T_B_O = Iso3::Identity();  // object pose in the base frame there
   Eigen::VectorXd arm;            // IK solution
   double cost_s = 0, quality = 0, score = 0;
+  // eq. 9 at full resolution (nats·m²): `quality` for ig; for a baseline under the relative rule
+  // its eq. 9 gain as well; NaN where not evaluated.
+  double gain = std::numeric_limits<double>::quiet_NaN();
   int pixel_stride = 1;  // the stride `quality` was evaluated at
 };
 
 struct ViewSelection {
   std::optional<ViewCandidate> best;  // none: no reachable view reaches t_q
+  double t_q = 0;                     // the threshold the pass used (in eq. 9 units, nats·m²,
+                                      // under the relative rule)
+  double max_gain = 0;                // relative rule: the largest eq. 9 gain found
   int directions = 0;                 // after the t_θ filter
   int reachable = 0;                  // with an IK solution (and collision-free)
   int evaluated = 0;                  // candidates scored (eq. 9, coarse or full)
@@ -92,6 +119,11 @@ std::vector<std::string> plannerNames();
 // above): ig 0.005 (the paper's t_q); area 2 cm² of unknown surface; unobserved-voxels 300 voxels;
 // rear-side-entropy 5000 bits; random 0 (it ends at the view budget).
 bool applyPlannerName(const std::string& name, ViewPlannerOptions* options);
+
+// The threshold and the cost weight for a model of surface area `area_m2` (the relative rule
+// scales them with it; the absolute one returns t_q and alpha_cost).
+double viewThreshold(const ViewPlannerOptions& options, double area_m2);
+double costWeight(const ViewPlannerOptions& options, double area_m2);
 
 class ViewPlanner {
  public:

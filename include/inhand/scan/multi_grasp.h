@@ -67,8 +67,10 @@ struct GraspRecord {
   int candidates = 0;  // ranked candidates this grasp was chosen from (0: the first grasp)
   int tried = 0;       // candidate poses tried
   double quality = 0;  // its best view quality when ranked
-  double epsilon = 0;  // its stability (Ferrari–Canny ε)
-  int views = 0;       // views taken with it
+  double t_q = 0;      // the threshold that quality passed (relative rule: scaled by the area)
+  double model_area_m2 = 0;                         // of the planning model it was ranked on
+  double epsilon = 0;                               // its stability (Ferrari–Canny ε)
+  int views = 0;                                    // views taken with it
   Termination termination = Termination::kRunning;  // why its views ended
   double hole_area_m2 = 0;  // σ = 5 cm (unknown) area of the model after its views
   double mean_entropy = 0;  // of the model after its views

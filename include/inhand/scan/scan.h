@@ -4,6 +4,7 @@
 // until no view reaches t_q or a view limit; every depth frame along every trajectory is fused
 // with the pose the robot reports (T_O_C = T_O_palm · T_palm_B(q) · T_B_C), hand-aware (§IV).
 #include <functional>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -103,6 +104,14 @@ struct ViewRecord {
   Vec3 dir_O = Vec3::Zero();
   Iso3 T_O_C = Iso3::Identity();  // the chosen camera pose in the object frame
   double quality = 0, cost_s = 0, score = 0;
+  // eq. 9 gain the planner predicted for the view (nats·m²; for a baseline, computed under the
+  // relative rule) and the threshold in force; NaN when unknown (initial views).
+  double gain = std::numeric_limits<double>::quiet_NaN();
+  double t_q = std::numeric_limits<double>::quiet_NaN();
+  // Information the model leaves unresolved after the view (ObjectModel::unresolvedInformation at
+  // the sensor's σ at the view range), nats·m²: the drop from the view before is the realised
+  // gain, in eq. 9's units.
+  double unresolved = 0;
   double mean_entropy = 0;  // of the model after the view's frames
   double observed_fraction = 0;
   double coverage = -1;  // of the true surface after the view (ScanProgress::coverage), −1: unknown

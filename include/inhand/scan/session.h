@@ -44,6 +44,8 @@ struct PlannedView {
 struct GraspPlan {
   std::vector<GraspCandidate> candidates;  // ranked, best first
   int above_threshold = 0;                 // the first this many promise a view above t_q
+  double t_q = 0;                          // the threshold (relative rule: scaled by the area)
+  double model_area_m2 = 0;                // of the planning model the candidates were ranked on
   GraspGeneration generation;              // every pose tried (candidates moved out)
   double ranking_s = 0;
 };
