@@ -62,6 +62,9 @@ py::dict viewDict(const ViewRecord& r, int grasp) {
   d["dir_O"] = Eigen::Vector3d(r.dir_O);
   d["T_O_C"] = matrixOf(r.T_O_C);
   d["quality"] = r.quality;
+  d["predicted_gain"] = r.gain;  // NaN for the initial views
+  d["t_q"] = r.t_q;
+  d["unresolved"] = r.unresolved;
   d["cost_s"] = r.cost_s;
   d["score"] = r.score;
   d["mean_entropy"] = r.mean_entropy;

@@ -175,3 +175,8 @@ def test_session_driven_from_python_equals_the_cpp_scan(tmp_path):
     np.testing.assert_array_equal(model.variance, cpp.model.variance)
     assert [v["frames"] for v in resumed.views] == [v["frames"] for v in cpp.views]
     assert cpp.coverage > 0.5
+    # Each Alg. 1 view met the threshold in force, and the unresolved information fell.
+    for v in cpp.views:
+        if not v["initial"]:
+            assert v["predicted_gain"] >= v["t_q"] > 0
+    assert cpp.views[-1]["unresolved"] < cpp.views[0]["unresolved"]

@@ -63,6 +63,7 @@ struct ScanArgs {
   std::string planner = "ig";       // view planner (see plannerNames())
   uint64_t seed = 1;                // sensor noise and IK restarts
   std::string rest_pose = "as-is";  // as-is (the mesh's own frame, dropped onto the table) or N
+  double scale = 1.0;               // the mesh's coordinates times this (e.g. 0.001 for mm)
   double arm_error_m = -1;          // overrides sim.arm_error_m when >= 0
   std::string tracking;             // on | off: overrides tracking.enabled when set
   std::string resume;               // a scan's output directory with checkpoint.inhand: go on

@@ -125,6 +125,10 @@ int main(int argc, char** argv) {
             "as-is (the mesh's frame, dropped onto the table) or N: the N-th most probable "
             "stable pose (0: the most probable)")
           ->capture_default_str());
+  scanOptions.push_back(sc->add_option("--scale", scan.scale,
+                                       "the object mesh's coordinates times this, about its "
+                                       "frame's origin (0.001: a mesh in millimetres)")
+                            ->capture_default_str());
   scanOptions.push_back(sc->add_option(
       "--arm-error", scan.arm_error_m,
       "simulated arm error: the palm this far (m) from where the reported joints put "

@@ -282,8 +282,9 @@ constexpr const char* kCheckpointName = "checkpoint.inhand";
 Json argsJson(const ScanArgs& args, const ScanConfig& o) {
   std::string load = args.object;
   if (load.rfind("builtin:", 0) != 0) load = fs::absolute(load).lexically_normal().string();
-  return {{"object", args.object}, {"object_load", load},         {"planner", args.planner},
-          {"seed", args.seed},     {"rest_pose", args.rest_pose}, {"options", scanConfigJson(o)}};
+  return {{"object", args.object},       {"object_load", load},         {"planner", args.planner},
+          {"seed", args.seed},           {"rest_pose", args.rest_pose}, {"scale", args.scale},
+          {"options", scanConfigJson(o)}};
 }
 
 // `--save-frames`: each in-hand frame as the robot delivered it (depth PNG, reported joints,
@@ -349,6 +350,7 @@ int runScan(const ScanArgs& given) {
       args.planner = caller.at("planner").get<std::string>();
       args.seed = caller.at("seed").get<uint64_t>();
       args.rest_pose = caller.at("rest_pose").get<std::string>();
+      args.scale = caller.value("scale", 1.0);
       // What the planner's name sets that is not an option (the baselines' metric), then the
       // options as they were.
       if (!applyPlannerName(args.planner, &o.scan.planner))
@@ -366,7 +368,11 @@ int runScan(const ScanArgs& given) {
     objectToLoad = args.object;
   }
   RobotModel model = RobotModel::load(o.robot);
+  if (!(std::isfinite(args.scale) && args.scale > 0))
+    throw Error("--scale: must be a positive number, not " + std::to_string(args.scale));
   TriangleMesh object = loadObject(objectToLoad);
+  if (args.scale != 1.0)
+    for (auto& v : object.vertices) v *= float(args.scale);
   const Json restJson = applyRestPose(args, object, &o);
   // An object too large for the volume is refused before the output directory exists.
   if (o.start == "held" && object.bounds().size().maxCoeff() > o.scan.volume_size_m - 0.02)
@@ -419,6 +425,7 @@ int runScan(const ScanArgs& given) {
   const Json views = viewsJson(mr);
   Json summary;
   summary["object"] = args.object;
+  summary["object_scale"] = args.scale;
   summary["robot"] = o.robot;
   summary["seed"] = args.seed;
   summary["planner"] = args.planner;
