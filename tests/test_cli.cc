@@ -252,6 +252,34 @@ namespace {
 const char* const kQuickConfig = test::quickConfigJson();
 }  // namespace
 
+// --scale multiplies the object's coordinates (a mesh in millimetres: 0.001); a scale that is not
+// a positive number is refused before anything is written.
+TEST(Cli, ScaleResizesTheObjectAndRefusesNonsense) {
+  test::TempDir dir;
+  writeTextAtomically(dir.path() / "held.json", R"({"start": "held", "voxel_m": 0.004,
+    "initial_views": 1, "sim": {"frame_subsample": 10}, "eval": {"samples": 2000}})");
+  for (const char* bad : {"0", "-1", "nan"}) {
+    const fs::path out = dir.path() / (std::string("bad") + bad);
+    Result r = run(
+        std::string("scan --object builtin:pill_bottle --scale ") + bad + " --out " + out.string(),
+        dir);
+    EXPECT_EQ(r.code, 1) << r.output;
+    EXPECT_NE(r.output.find("--scale"), std::string::npos) << r.output;
+    EXPECT_FALSE(fs::exists(out));
+  }
+  const fs::path out = dir.path() / "half";
+  Result r =
+      run("scan --object builtin:pill_bottle --scale 0.5 --max-grasps 1 --max-views 0 "
+          "--config " +
+              (dir.path() / "held.json").string() + " --out " + out.string(),
+          dir);
+  ASSERT_EQ(r.code, 0) << r.output;
+  const Vec3 full = loadObject("builtin:pill_bottle").bounds().size();
+  const Vec3 half = readPly(out / "truth.ply").mesh.bounds().size();
+  EXPECT_NEAR((half - 0.5 * full).cwiseAbs().maxCoeff(), 0.0, 1e-6);
+  EXPECT_EQ(readJsonFile(out / "summary.json").at("object_scale").get<double>(), 0.5);
+}
+
 TEST(Cli, ScanReportOpensInHeadlessChromium) {
   test::TempDir dir;
   writeTextAtomically(dir.path() / "quick.json", kQuickConfig);
