@@ -49,8 +49,6 @@ std::string ViewPlannerOptions::validate() const {
   return q.empty() ? "" : "quality." + q;
 }
 
-const char* stopRuleName(StopRule r) { return r == StopRule::kAbsolute ? "absolute" : "relative"; }
-
 double viewThreshold(const ViewPlannerOptions& o, double area_m2) {
   return o.stop == StopRule::kRelative ? o.t_q_relative * area_m2 : o.t_q;
 }
@@ -344,10 +342,10 @@ ViewSelection ViewPlanner::select(ViewQualityScene& scene, const GraspState& gra
     } else {
       for (size_t k : order) chosen[k]->gain = coarseGain[k];
     }
-    out.max_gain = 0;
-    for (size_t k : order) out.max_gain = std::max(out.max_gain, chosen[k]->gain);
+    double maxGain = 0;
+    for (size_t k : order) maxGain = std::max(maxGain, chosen[k]->gain);
     out.refined = int(order.size());
-    if (out.max_gain < out.t_q) {
+    if (maxGain < out.t_q) {
       out.quality_s = secs(tQ);
       for (size_t k : reachable) out.candidates.push_back(*chosen[k]);
       out.total_s = secs(t0);
@@ -367,7 +365,7 @@ ViewSelection ViewPlanner::select(ViewQualityScene& scene, const GraspState& gra
     for (size_t next = 0; next < coarse.size() && !out.best;) {
       std::vector<size_t> batch;
       for (; next < coarse.size() && batch.size() < size_t(o.refine); ++next)
-        if (refined.empty() || chosen[coarse[next]]->quality >= 0.5 * out.t_q)
+        if (refined.empty() || chosen[coarse[next]]->quality >= 0.5 * ownThreshold)
           batch.push_back(coarse[next]);
       if (batch.empty()) break;
       evaluateAll(batch, fine);

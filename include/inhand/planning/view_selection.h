@@ -41,7 +41,6 @@ enum class StopRule {
   // The paper's absolute t_q and α_cost; a baseline stops on its own threshold in its own units.
   kAbsolute,
 };
-const char* stopRuleName(StopRule r);  // relative, absolute
 
 struct ViewPlannerOptions {
   ViewMetric metric = ViewMetric::kInformationGain;
@@ -95,7 +94,6 @@ struct ViewSelection {
   std::optional<ViewCandidate> best;  // none: no reachable view reaches t_q
   double t_q = 0;                     // the threshold the pass used (in eq. 9 units, nats·m²,
                                       // under the relative rule)
-  double max_gain = 0;                // relative rule: the largest eq. 9 gain found
   int directions = 0;                 // after the t_θ filter
   int reachable = 0;                  // with an IK solution (and collision-free)
   int evaluated = 0;                  // candidates scored (eq. 9, coarse or full)
