@@ -115,6 +115,64 @@ TEST(Render, OptimisedMatchesScalarReference) {
   EXPECT_GT(returns, 5000);
 }
 
+// The analytic background (the simulator's room) against the same sphere as a fine mesh: the
+// object's pixels are the same, the room's agree to within the mesh's chordal sag, and the object
+// shadows the room where the projector cannot see it.
+TEST(Render, AnalyticBackgroundMatchesATessellatedSphere) {
+  const double radius = 2.5;
+  const Vec3 centre(0.1, -0.05, 0.0);
+  const TriangleMesh box = makeBox(Vec3(0.06, 0.158, 0.21));
+  RayScene analytic;
+  analytic.addMesh(box);
+  analytic.commit();
+  RayScene meshed;
+  meshed.addMesh(box);
+  const TriangleMesh room = makeSphere(radius, 6);
+  meshed.addMesh(room, Iso3(Eigen::Translation3d(centre)));
+  meshed.commit();
+  DepthCameraOptions cam;
+  const Iso3 T_O_C = lookAt(Vec3(0.5, 0.3, 0.35), Vec3::Zero());
+  RenderOptions ro;
+  ro.noise = false;
+  std::vector<int> ga, gm;
+  DepthImage a = renderDepth(meshed, T_O_C, cam, NoiseModelOptions{}, ro, &gm);
+  ro.background_centre = centre;
+  ro.background_radius_m = radius;
+  DepthImage b = renderDepth(analytic, T_O_C, cam, NoiseModelOptions{}, ro, &ga);
+  // The largest sag of the mesh: its longest edge's chord below the sphere.
+  double longest = 0;
+  for (const Tri& t : room.triangles)
+    for (int k = 0; k < 3; ++k)
+      longest = std::max(
+          longest,
+          double((room.vertices[size_t(t[k])] - room.vertices[size_t(t[(k + 1) % 3])]).norm()));
+  const double sag = radius - std::sqrt(radius * radius - 0.25 * longest * longest);
+  int object = 0, background = 0, shadowed = 0, differ = 0;
+  for (size_t i = 0; i < a.depth_m.size(); ++i) {
+    if (ga[i] == 0) {
+      ++object;
+      EXPECT_EQ(gm[i], 0);
+      EXPECT_FLOAT_EQ(b.depth_m[i], a.depth_m[i]);
+    } else if (ga[i] == 1) {
+      ++background;
+      if (gm[i] != 1) {
+        ++differ;  // a shadow edge a sub-millimetre shift of the wall moves
+        continue;
+      }
+      // depth is z in the camera; the ray's length differs from it by at most 1/cos of the FOV
+      EXPECT_NEAR(b.depth_m[i], a.depth_m[i], 1.5 * sag);
+      EXPECT_GE(b.depth_m[i], a.depth_m[i] - 1e-4);  // the mesh lies inside the sphere
+    } else {
+      shadowed += gm[i] < 0;
+    }
+  }
+  EXPECT_GT(object, 5000);
+  EXPECT_GT(background, 200000);
+  EXPECT_GT(shadowed, 100);  // the box's projector shadow on the room
+  EXPECT_LT(differ, background / 1000);
+  EXPECT_EQ(analytic.geometryCount(), 1);
+}
+
 // A box in front of a wall casts a projector shadow on the wall: exactly the wall pixels whose
 // point the projector cannot see return nothing.
 TEST(Render, ProjectorShadowMatchesAnalyticOcclusion) {

@@ -453,6 +453,7 @@ int runScan(const ScanArgs& given) {
   summary["view_evaluations_full_resolution"] = r.view_refinements;
   summary["view_evaluations_per_s"] = r.planning_s > 0 ? r.view_evaluations / r.planning_s : 0.0;
   summary["frames"] = r.frames;
+  summary["simulated_frames"] = sim.renders;  // depth images the simulated sensor rendered
   // In-hand frames fused and not (for any reason: frames_not_fused says which).
   summary["in_hand_frames"] = {{"fused", sim.frames_fused_in_hand},
                                {"not_fused", sim.frames_rejected}};

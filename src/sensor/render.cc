@@ -30,31 +30,72 @@ Ray pixelRay(const Iso3& T_S_C, const CameraIntrinsics& K, double u, double v) {
   return r;
 }
 
-// Angle (rad) between a surface normal and a direction, two-sided.
-double incidence(const Vec3& normal, const Vec3& dir) {
+// Cosine of the angle between a surface normal and a direction, two-sided (0 when either is 0).
+double cosIncidence(const Vec3& normal, const Vec3& dir) {
   double nn = normal.norm(), dn = dir.norm();
-  if (nn == 0 || dn == 0) return M_PI / 2;
-  return std::acos(std::min(1.0, std::abs(normal.dot(dir)) / (nn * dn)));
+  if (nn == 0 || dn == 0) return 0;
+  return std::min(1.0, std::abs(normal.dot(dir)) / (nn * dn));
 }
+
+// The angle itself (rad).
+double incidence(const Vec3& normal, const Vec3& dir) {
+  return std::acos(cosIncidence(normal, dir));
+}
+
+// The cosines of the sensor's incidence limits: an angle exceeds a limit when its cosine is
+// below the limit's (acos falls as its argument rises), so no arccosine is needed per pixel.
+struct IncidenceLimits {
+  double camera, projector;
+  explicit IncidenceLimits(const DepthCameraOptions& cam)
+      : camera(std::cos(cam.max_incidence_deg * M_PI / 180)),
+        projector(std::cos(cam.max_projector_incidence_deg * M_PI / 180)) {}
+};
 
 // The geometric part of whether the sensor returns a depth for this hit: in range, not too oblique
 // for the camera or the projector. Returns the shadow ray towards the projector when it does.
 bool acceptHit(const Hit& hit, const Ray& ray, const Vec3& projector_S,
-               const DepthCameraOptions& cam, Ray* shadow) {
+               const DepthCameraOptions& cam, const IncidenceLimits& limits, Ray* shadow) {
   if (!hit.valid()) return false;
   double z = hit.t;
   if (z < cam.min_range_m || z > cam.max_range_m) return false;
   Vec3 n = hit.normal.cast<double>();
-  if (incidence(n, ray.dir.cast<double>()) > cam.max_incidence_deg * M_PI / 180) return false;
+  if (cosIncidence(n, ray.dir.cast<double>()) < limits.camera) return false;
   Vec3 x = (ray.origin + hit.t * ray.dir).cast<double>();
   Vec3 toProjector = projector_S - x;
-  if (incidence(n, toProjector) > cam.max_projector_incidence_deg * M_PI / 180) return false;
+  if (cosIncidence(n, toProjector) < limits.projector) return false;
   double dist = toProjector.norm();
   shadow->origin = x.cast<float>();
   shadow->dir = (toProjector / dist).cast<float>();
   shadow->tnear = float(kSurfaceOffset_m);
   shadow->tfar = float(dist - kSurfaceOffset_m);
   return true;
+}
+
+// Rays that missed the scene hit the inside of the background sphere (when there is one): the far
+// root of |o + t·d − c|² = r², the normal pointing back in. Rays that start outside it, or whose
+// far root lies behind the ray's start, stay misses.
+void hitBackground(const RayScene& scene, const RenderOptions& o, const Ray* rays, Hit* hits,
+                   size_t count) {
+  if (!(o.background_radius_m > 0)) return;
+  const int id = scene.geometryCount();
+  const double r2 = o.background_radius_m * o.background_radius_m;
+  parallelFor(
+      0, int(count),
+      [&](int i) {
+        Hit& h = hits[i];
+        if (h.valid()) return;
+        const Vec3 d = rays[i].dir.cast<double>();
+        const Vec3 oc = rays[i].origin.cast<double>() - o.background_centre;
+        const double a = d.squaredNorm(), b = oc.dot(d), c = oc.squaredNorm() - r2;
+        const double disc = b * b - a * c;
+        if (!(a > 0) || disc < 0) return;
+        const double t = (-b + std::sqrt(disc)) / a;
+        if (!(t > rays[i].tnear) || !(t < rays[i].tfar)) return;
+        h.t = float(t);
+        h.geometry = id;
+        h.normal = (-(oc + t * d)).cast<float>();
+      },
+      4096);
 }
 
 }  // namespace
@@ -88,6 +129,7 @@ DepthImage renderDepth(const RayScene& scene, const Iso3& T_S_C, const DepthCame
   parallelFor(
       0, n, [&](int i) { rays[i] = pixelRay(T_S_C, K, order[i] % w, order[i] / w); }, 4096);
   scene.intersect(rays.data(), hits.data(), n);
+  hitBackground(scene, options, rays.data(), hits.data(), size_t(n));
 
   if (options.noise) {
     // Lateral noise: the return comes from a point displaced by N(0, σ_L(θ)) pixels, so re-cast
@@ -105,16 +147,19 @@ DepthImage renderDepth(const RayScene& scene, const Iso3& T_S_C, const DepthCame
         },
         4096);
     scene.intersect(rays.data(), hits.data(), n);
+    hitBackground(scene, options, rays.data(), hits.data(), size_t(n));
   }
 
   std::vector<Ray>& shadows = scratch.shadows;
   std::vector<uint8_t>& ok = scratch.ok;
   std::vector<uint8_t>& blocked = scratch.blocked;
+  const IncidenceLimits limits(camera);
   shadows.resize(n);
   ok.assign(n, 0);
   blocked.assign(n, 0);
   parallelFor(
-      0, n, [&](int i) { ok[i] = acceptHit(hits[i], rays[i], projector_S, camera, &shadows[i]); },
+      0, n,
+      [&](int i) { ok[i] = acceptHit(hits[i], rays[i], projector_S, camera, limits, &shadows[i]); },
       4096);
   // Compact the shadow rays so packets stay full.
   std::vector<int>& shadowIndex = scratch.shadowIndex;
@@ -132,6 +177,7 @@ DepthImage renderDepth(const RayScene& scene, const Iso3& T_S_C, const DepthCame
   DepthImage out(w, h);
   if (geometry_out) geometry_out->assign(n, -1);
   const double f = K.fx;
+  const double cosGrazing = std::cos(noise.grazing_start_deg * M_PI / 180);
   parallelFor(
       0, n,
       [&](int i) {
@@ -139,7 +185,9 @@ DepthImage renderDepth(const RayScene& scene, const Iso3& T_S_C, const DepthCame
         int p = order[i];
         double z = hits[i].t;
         if (options.noise) {
-          double theta = incidence(hits[i].normal.cast<double>(), rays[i].dir.cast<double>());
+          // The angle matters to the axial σ only beyond grazing_start_deg.
+          const double c = cosIncidence(hits[i].normal.cast<double>(), rays[i].dir.cast<double>());
+          const double theta = c < cosGrazing ? std::acos(c) : 0.0;
           z += axialSigma(noise, z, theta) * gaussianAt(options.seed, 3 * uint64_t(p) + 2);
           if (noise.quantize) z = quantizeDepth(z, f, camera.baseline_m(), noise.disparity_step_px);
           if (z < camera.min_range_m || z > camera.max_range_m) return;
@@ -161,7 +209,7 @@ DepthImage renderDepthReference(const RayScene& scene, const Iso3& T_S_C,
       Ray ray = pixelRay(T_S_C, K, u, v);
       Hit hit = scene.intersectOne(ray);
       Ray shadow;
-      if (!acceptHit(hit, ray, projector_S, camera, &shadow)) continue;
+      if (!acceptHit(hit, ray, projector_S, camera, IncidenceLimits(camera), &shadow)) continue;
       if (scene.intersectOne(shadow).valid()) continue;  // projector cannot see the point
       out.at(u, v) = hit.t;
     }

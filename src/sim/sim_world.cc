@@ -76,8 +76,6 @@ SimWorld::SimWorld(const RobotModel& model, const TriangleMesh& object_O, const 
   objectSamples_ = surfaceSamples(object_O, 0.003);
   object_.addMesh(object_O);
   object_.commit();
-  if (options.room_radius_m > 0) room_.addMesh(makeSphere(options.room_radius_m, 3));
-  room_.commit();
 }
 
 Iso3 SimWorld::objectPose() const {
@@ -188,10 +186,10 @@ DepthImage SimWorld::render() {
   scene.addInstance(object_, objectPose());
   for (const Occluder& o : robot_.at(trueJoints(), Iso3::Identity()))
     scene.addInstance(*o.scene, o.T_O_scene);
-  if (options_.room_radius_m > 0)
-    scene.addInstance(room_, Iso3(Eigen::Translation3d(model_->camera().panTilt_B)));
   scene.commit();
   RenderOptions ro;
+  ro.background_centre = model_->camera().panTilt_B;  // the room
+  ro.background_radius_m = options_.room_radius_m;
   ro.noise = options_.noise;
   ro.seed = mixSeed(options_.seed, frame_++);
   DepthImage d = renderDepth(scene, T_B_C, camera_, noise_, ro);

@@ -14,6 +14,12 @@ namespace inhand {
 struct RenderOptions {
   bool noise = true;  // false: exact depth of the first hit (failure modes still apply)
   uint64_t seed = 1;  // noise seed; the same seed gives the same image on any thread count
+  // A background behind everything: rays that miss the scene hit the inside of this sphere
+  // (centre in the scene's frame, radius; 0: none), computed in closed form rather than cast
+  // (a room around the camera gives every pixel a return: as many pixels again as the scene).
+  // Its returns get the geometry id scene.geometryCount().
+  Vec3 background_centre = Vec3::Zero();
+  double background_radius_m = 0;
 };
 
 // Renders the depth image seen by a camera at T_S_C (camera pose in the scene's frame S).

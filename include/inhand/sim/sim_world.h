@@ -116,7 +116,7 @@ class SimWorld {
   DepthCameraOptions camera_;
   NoiseModelOptions noise_;
   SimOptions options_;
-  RayScene object_, room_;
+  RayScene object_;
   RobotOccluders robot_;
   TriangleMesh objectMesh_;
   std::vector<SurfacePoint> objectSamples_;  // for the pick-up clearance test
