@@ -115,6 +115,49 @@ TEST(Render, OptimisedMatchesScalarReference) {
   EXPECT_GT(returns, 5000);
 }
 
+// A region renders exactly the whole image's pixels there (noise is seeded per pixel) and
+// nothing elsewhere; without projector shadows the shadowed pixels return the surface.
+TEST(Render, RegionAndNoShadowOptions) {
+  RayScene scene;
+  scene.addMesh(makeBox(Vec3(0.1, 0.1, 0.1)), Iso3(Eigen::Translation3d(0, 0, 0.7)));
+  scene.addMesh(makeBox(Vec3(3, 3, 0.02)), Iso3(Eigen::Translation3d(0, 0, 1.01)));
+  scene.commit();
+  DepthCameraOptions cam;
+  RenderOptions ro;
+  ro.seed = 7;
+  const DepthImage whole = renderDepth(scene, Iso3::Identity(), cam, NoiseModelOptions{}, ro);
+  ro.region_u0 = 101;
+  ro.region_v0 = 50;
+  ro.region_u1 = 383;
+  ro.region_v1 = 301;
+  const DepthImage part = renderDepth(scene, Iso3::Identity(), cam, NoiseModelOptions{}, ro);
+  int inside = 0;
+  for (int v = 0; v < whole.height; ++v)
+    for (int u = 0; u < whole.width; ++u) {
+      const bool in = u >= 101 && u < 383 && v >= 50 && v < 301;
+      if (in) {
+        ASSERT_EQ(part.at(u, v), whole.at(u, v)) << u << " " << v;
+        inside += part.at(u, v) > 0;
+      } else {
+        ASSERT_EQ(part.at(u, v), 0.f) << u << " " << v;
+      }
+    }
+  EXPECT_GT(inside, 50000);
+  RenderOptions exact;
+  exact.noise = false;
+  const DepthImage shadowed = renderDepth(scene, Iso3::Identity(), cam, NoiseModelOptions{}, exact);
+  exact.projector_shadows = false;
+  const DepthImage lit = renderDepth(scene, Iso3::Identity(), cam, NoiseModelOptions{}, exact);
+  int holes = 0;
+  for (size_t i = 0; i < lit.depth_m.size(); ++i) {
+    if (shadowed.depth_m[i] > 0) {
+      EXPECT_EQ(lit.depth_m[i], shadowed.depth_m[i]);
+    }
+    holes += shadowed.depth_m[i] == 0 && lit.depth_m[i] > 0;
+  }
+  EXPECT_GT(holes, 1000);  // the box's projector shadow on the wall
+}
+
 // The analytic background (the simulator's room) against the same sphere as a fine mesh: the
 // object's pixels are the same, the room's agree to within the mesh's chordal sag, and the object
 // shadows the room where the projector cannot see it.

@@ -1,5 +1,7 @@
 #include <gtest/gtest.h>
 
+#include <cstring>
+
 #include "inhand/core/error.h"
 #include "inhand/core/pose.h"
 #include "inhand/eval/metrics.h"
@@ -178,6 +180,49 @@ TEST(Fusion, OptimisedIntegrationMatchesReference) {
     EXPECT_LT(double(differ), 1e-4 * double(fast.voxelCount())) << "band_sigmas " << k;
     EXPECT_GT(refUpdated, 100000) << "band_sigmas " << k;
     EXPECT_NEAR(double(fastUpdated), double(refUpdated), 1e-4 * double(refUpdated)) << k;
+  }
+}
+
+// Skipping the bricks a frame cannot change leaves every voxel as visiting them all does, to the
+// bit: a box and a thin plate seen from all round (so bricks go empty, lie in front, behind and in
+// the band), the camera close enough that bricks straddle it, a carve-only stripe, both bands.
+TEST(Fusion, SkippingUnchangedBricksChangesNoVoxel) {
+  RayScene scene;
+  scene.addMesh(makeBox(Vec3(0.06, 0.158, 0.21)));
+  scene.addMesh(makeBox(Vec3(0.1, 0.0015, 0.08)), Iso3(Eigen::Translation3d(0, 0.11, 0)));
+  scene.commit();
+  DepthCameraOptions cam;
+  NoiseModelOptions nm;
+  for (double k : {0.0, 2.0}) {
+    VolumeOptions vo;
+    vo.band_sigmas = k;
+    TsdfVolume culled(cube(0.34), vo), every(cube(0.34), vo);
+    int64_t updatedCulled = 0, updatedEvery = 0, visitedCulled = 0, visitedEvery = 0;
+    int frame = 0;
+    std::vector<Iso3> views = test::viewsAround(12, 0.7);
+    views.push_back(lookAt(Vec3(0.05, 0.2, 0.12), Vec3::Zero()));  // inside the volume
+    for (const Iso3& T : views) {
+      RenderOptions ro;
+      ro.seed = uint64_t(++frame);
+      DepthImage d = renderDepth(scene, T, cam, nm, ro);
+      std::vector<uint8_t> carve(d.depth_m.size(), 0);
+      for (int v = 200; v < 260; ++v)
+        for (int u = 0; u < d.width; ++u) carve[size_t(v) * d.width + u] = frame % 3 == 0;
+      const auto sigma = measurementSigma(d, cam.intrinsics, nm);
+      const IntegrationStats a = integrate(d, T, cam.intrinsics, sigma, &culled, &carve, true);
+      const IntegrationStats b = integrate(d, T, cam.intrinsics, sigma, &every, &carve, false);
+      updatedCulled += a.updated;
+      updatedEvery += b.updated;
+      visitedCulled += a.visited;
+      visitedEvery += b.visited;
+    }
+    const size_t n = culled.voxelCount();
+    EXPECT_EQ(std::memcmp(culled.states(), every.states(), n), 0) << k;
+    EXPECT_EQ(std::memcmp(culled.sumW(), every.sumW(), n * sizeof(float)), 0) << k;
+    EXPECT_EQ(std::memcmp(culled.sumWD(), every.sumWD(), n * sizeof(float)), 0) << k;
+    EXPECT_EQ(updatedCulled, updatedEvery) << k;
+    EXPECT_GT(updatedEvery, 1000000) << k;
+    EXPECT_LT(double(visitedCulled), 0.97 * double(visitedEvery)) << k;  // it does skip
   }
 }
 

@@ -117,13 +117,26 @@ std::vector<uint8_t> robotPixelMask(const DepthImage& depth, const Iso3& T_B_C,
                                     const JointVector& q, const RobotOccluders& robotScenes,
                                     const DepthCameraOptions& camera,
                                     const NoiseModelOptions& noise, double t_hand_m, int radius_px,
-                                    bool with_table) {
+                                    bool with_table, const PixelRect* region) {
   RayScene robotScene;
   for (const Occluder& o : robotScenes.at(q, Iso3::Identity(), with_table))
     robotScene.addInstance(*o.scene, o.T_O_scene);
   robotScene.commit();
+  const int W = depth.width, H = depth.height, R = radius_px;
+  const PixelRect r = region ? PixelRect{std::max(0, region->u0), std::max(0, region->v0),
+                                         std::min(W, region->u1), std::min(H, region->v1)}
+                             : PixelRect{0, 0, W, H};
+  std::vector<uint8_t> mask(depth.depth_m.size(), 0);
+  if (r.empty()) return mask;
   RenderOptions exact;
   exact.noise = false;
+  exact.projector_shadows = false;  // the robot's surface wherever the camera sees it
+  if (region) {
+    exact.region_u0 = r.u0 - R;
+    exact.region_v0 = r.v0 - R;
+    exact.region_u1 = r.u1 + R;
+    exact.region_v1 = r.v1 + R;
+  }
   DepthCameraOptions cam = camera;
   cam.max_incidence_deg = 89;
   cam.max_projector_incidence_deg = 89;
@@ -132,10 +145,8 @@ std::vector<uint8_t> robotPixelMask(const DepthImage& depth, const Iso3& T_B_C,
   // A measurement is the robot's when the robot's rendered surface lies within t_hand of it at
   // that pixel or within radius_px of it: the sensor's lateral noise moves returns across the
   // robot's silhouette by a pixel or two.
-  std::vector<uint8_t> mask(depth.depth_m.size(), 0);
-  const int W = depth.width, H = depth.height, R = radius_px;
-  parallelFor(0, H, [&](int v) {
-    for (int u = 0; u < W; ++u) {
+  parallelFor(r.v0, r.v1, [&](int v) {
+    for (int u = r.u0; u < r.u1; ++u) {
       const float d = depth.depth_m[size_t(v) * W + u];
       if (!(d > 0)) continue;
       bool robot = false;

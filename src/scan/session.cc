@@ -221,11 +221,13 @@ FrameReport ScanSession::fuse(const DepthImage& depth, const JointVector& q, con
                 std::to_string(depth.depth_m.size()) + " pixels");
   const Iso3 T_O_C = T_O_B * T_B_C;
   std::vector<uint8_t> carve;
+  // The pixels the volume's voxels project to: the only ones fusion reads.
+  const PixelRect rect = volumeImageRect(s.volume, T_O_C, K);
   // The robot's own surfaces only carve (§IV); in the hand the table counts as the robot's (in
   // the air it can only be background), on the table the caller's mask says where the table is.
   if (maskRobot)
     carve = robotPixelMask(depth, T_B_C, q, s.scenes, s.camera, s.noise, s.options.t_hand_m,
-                           s.options.carve_radius_px, /*with_table=*/inHand);
+                           s.options.carve_radius_px, /*with_table=*/inHand, &rect);
   if (extraCarve) {
     if (carve.empty()) carve.assign(depth.depth_m.size(), 0);
     for (size_t i = 0; i < carve.size(); ++i) carve[i] |= (*extraCarve)[i];
@@ -269,7 +271,6 @@ FrameReport ScanSession::fuse(const DepthImage& depth, const JointVector& q, con
     }
   }
   // σ only where voxels can project, and not for pixels that only carve (integrate reads neither).
-  const PixelRect rect = volumeImageRect(s.volume, T_O_C, K);
   integrate(depth, T_O_C, K,
             measurementSigma(depth, K, s.noise, &rect, carve.empty() ? nullptr : &carve), &s.volume,
             carve.empty() ? nullptr : &carve);

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <limits>
 
 #include "inhand/core/error.h"
 #include "inhand/core/parallel.h"
@@ -142,11 +143,114 @@ inline void clipLinear(double a, double b, double* lo, double* hi) {
     *hi = -1;  // never satisfied
 }
 
+constexpr int kBrick = 8;      // voxels per brick edge
+constexpr int kDepthTile = 8;  // pixels per depth tile edge
+
+// The nearest and farthest depth returned in each kDepthTile² tile of the image's `rect`
+// (+inf / −inf where the tile has none).
+class DepthTiles {
+ public:
+  DepthTiles(const DepthImage& depth, const PixelRect& rect) : rect_(rect) {
+    tw_ = (rect.u1 - rect.u0 + kDepthTile - 1) / kDepthTile;
+    th_ = (rect.v1 - rect.v0 + kDepthTile - 1) / kDepthTile;
+    if (rect.empty()) tw_ = th_ = 0;
+    lo_.assign(size_t(tw_) * th_, std::numeric_limits<float>::infinity());
+    hi_.assign(size_t(tw_) * th_, -std::numeric_limits<float>::infinity());
+    for (int v = rect.v0; v < rect.v1; ++v) {
+      const size_t row = size_t((v - rect.v0) / kDepthTile) * tw_;
+      for (int u = rect.u0; u < rect.u1; ++u) {
+        const float D = depth.at(u, v);
+        if (!(D > 0.f)) continue;
+        const size_t t = row + size_t((u - rect.u0) / kDepthTile);
+        lo_[t] = std::min(lo_[t], D);
+        hi_[t] = std::max(hi_[t], D);
+      }
+    }
+  }
+  // The depth range over pixels [u0, u1] × [v0, v1] (inclusive, clipped to the rect); false when
+  // none of them has a depth.
+  bool range(int u0, int v0, int u1, int v1, float* lo, float* hi) const {
+    u0 = std::max(u0, rect_.u0);
+    v0 = std::max(v0, rect_.v0);
+    u1 = std::min(u1, rect_.u1 - 1);
+    v1 = std::min(v1, rect_.v1 - 1);
+    if (u0 > u1 || v0 > v1) return false;
+    *lo = std::numeric_limits<float>::infinity();
+    *hi = -std::numeric_limits<float>::infinity();
+    for (int ty = (v0 - rect_.v0) / kDepthTile; ty <= (v1 - rect_.v0) / kDepthTile; ++ty)
+      for (int tx = (u0 - rect_.u0) / kDepthTile; tx <= (u1 - rect_.u0) / kDepthTile; ++tx) {
+        const size_t t = size_t(ty) * tw_ + size_t(tx);
+        *lo = std::min(*lo, lo_[t]);
+        *hi = std::max(*hi, hi_[t]);
+      }
+    return *lo <= *hi;
+  }
+
+ private:
+  PixelRect rect_;
+  int tw_ = 0, th_ = 0;
+  std::vector<float> lo_, hi_;
+};
+
+// Whether a brick of voxels is certain to be left unchanged by the frame, from its corners alone:
+// none of its voxels projects onto a pixel with a depth; or all lie more than μ behind every depth
+// their pixels can hold (d < −μ ≤ −band: no update); or all lie more than μ in front of them and
+// every voxel is already empty (d > μ changes only unknown and observed voxels, and carve-only
+// pixels only unknown ones). The margin covers the kernel's single-precision depth and pixel.
+struct BrickCull {
+  const TsdfVolume& volume;
+  const Iso3& T_C_O;
+  const CameraIntrinsics& K;
+  const DepthTiles& tiles;
+  float mu;
+  bool skip(const Vec3i& b) const {
+    const Vec3i dims = volume.dims();
+    const Vec3i lo = b * kBrick;
+    const Vec3i hi = (lo + Vec3i::Constant(kBrick - 1)).cwiseMin(dims - Vec3i::Ones());
+    double zMin = 1e300, zMax = -1e300, uMin = 1e300, uMax = -1e300, vMin = 1e300, vMax = -1e300;
+    for (int c = 0; c < 8; ++c) {
+      const Vec3 p = T_C_O * volume.point((c & 1) ? hi.x() : lo.x(), (c & 2) ? hi.y() : lo.y(),
+                                          (c & 4) ? hi.z() : lo.z());
+      if (!(p.z() > 1e-3)) return false;  // near or behind the camera: no shortcut
+      zMin = std::min(zMin, p.z());
+      zMax = std::max(zMax, p.z());
+      const Vec2 uv = K.project(p);
+      uMin = std::min(uMin, uv.x());
+      uMax = std::max(uMax, uv.x());
+      vMin = std::min(vMin, uv.y());
+      vMax = std::max(vMax, uv.y());
+    }
+    // Far off the image (and outside int's range): no voxel projects onto a pixel.
+    const double big = 1e6;
+    if (uMax < -big || vMax < -big || uMin > big || vMin > big) return true;
+    // A voxel reads pixel floor(u + 0.5): one more pixel each side for rounding.
+    float dLo, dHi;
+    if (!tiles.range(int(std::floor(uMin + 0.5)) - 1, int(std::floor(vMin + 0.5)) - 1,
+                     int(std::floor(uMax + 0.5)) + 1, int(std::floor(vMax + 0.5)) + 1, &dLo, &dHi))
+      return true;
+    const double margin = 1e-4 + 1e-5 * zMax;
+    if (zMin - double(dHi) > double(mu) + margin) return true;              // all behind the band
+    if (double(dLo) - zMax > double(mu) + margin) return allEmpty(lo, hi);  // all in front
+    return false;
+  }
+  bool allEmpty(const Vec3i& lo, const Vec3i& hi) const {
+    const uint8_t* st = volume.states();
+    const uint8_t e = uint8_t(VoxelState::kEmpty);
+    for (int z = lo.z(); z <= hi.z(); ++z)
+      for (int y = lo.y(); y <= hi.y(); ++y) {
+        const uint8_t* row = st + volume.index(lo.x(), y, z);
+        for (int x = 0; x <= hi.x() - lo.x(); ++x)
+          if (row[x] != e) return false;
+      }
+    return true;
+  }
+};
+
 }  // namespace
 
 IntegrationStats integrate(const DepthImage& depth, const Iso3& T_O_C, const CameraIntrinsics& K,
                            const std::vector<float>& sigma_m, TsdfVolume* volume,
-                           const std::vector<uint8_t>* carve_only) {
+                           const std::vector<uint8_t>* carve_only, bool skip_unchanged_bricks) {
   checkInputs(depth, K, sigma_m, carve_only);
   const int w = K.width, h = K.height;
   // Weight w = 1/σ² and band per pixel, so the kernel reads one or two floats per voxel; only where
@@ -165,6 +269,7 @@ IntegrationStats integrate(const DepthImage& depth, const Iso3& T_O_C, const Cam
       if (useBand) band[i] = s > 0 ? std::clamp(k * s, bandMin, muFull) : muFull;
     }
   const float* B = band.data();
+  const DepthTiles tiles(depth, rect);
   const Iso3 T_C_O = T_O_C.inverse();
   const Mat3 R = T_C_O.linear();
   const Vec3 step = R.col(0) * volume->voxelSize();  // camera-frame step along voxel x
@@ -176,83 +281,108 @@ IntegrationStats integrate(const DepthImage& depth, const Iso3& T_O_C, const Cam
   float* sumW = volume->sumW();
   uint8_t* state = volume->states();
   std::atomic<int64_t> visited{0}, updated{0};
-  const int rows = dims.y() * dims.z();
-  tbb::parallel_for(tbb::blocked_range<int>(0, rows, 64), [&](const tbb::blocked_range<int>& r) {
+  // Bricks of kBrick³ voxels that this frame cannot change are skipped (BrickCull); the others are
+  // processed row by row, consecutive ones as one span.
+  const Vec3i bricks = (dims + Vec3i::Constant(kBrick - 1)) / kBrick;
+  const BrickCull cull{*volume, T_C_O, K, tiles, muFull};
+  const int brickRows = bricks.y() * bricks.z();
+  tbb::parallel_for(tbb::blocked_range<int>(0, brickRows, 1), [&](const tbb::blocked_range<int>&
+                                                                      r) {
     int64_t myVisited = 0, myUpdated = 0;
-    for (int row = r.begin(); row != r.end(); ++row) {
-      const int y = row % dims.y(), z = row / dims.y();
-      const Vec3 a = T_C_O * volume->point(0, y, z);  // camera coords of voxel x = 0
-      // Clip x to where the voxel is in front of the camera and projects inside the image:
-      // z > 0 and −0.5 ≤ fx·X/Z + cx < w − 0.5 (same for v) are linear in x once multiplied by Z.
-      double lo = 0, hi = dims.x() - 1;
-      clipLinear(a.z() - 1e-6, step.z(), &lo, &hi);
-      clipLinear(K.fx * a.x() + (K.cx + 0.5) * a.z(), K.fx * step.x() + (K.cx + 0.5) * step.z(),
-                 &lo, &hi);
-      clipLinear(-K.fx * a.x() + (w - 0.5 - K.cx) * a.z(),
-                 -K.fx * step.x() + (w - 0.5 - K.cx) * step.z(), &lo, &hi);
-      clipLinear(K.fy * a.y() + (K.cy + 0.5) * a.z(), K.fy * step.y() + (K.cy + 0.5) * step.z(),
-                 &lo, &hi);
-      clipLinear(-K.fy * a.y() + (h - 0.5 - K.cy) * a.z(),
-                 -K.fy * step.y() + (h - 0.5 - K.cy) * step.z(), &lo, &hi);
-      if (lo > hi) continue;
-      const int x0 = std::max(0, int(std::floor(lo)) - 1),
-                x1 = std::min(dims.x() - 1, int(std::ceil(hi)) + 1);
-      const float ax = float(a.x()), ay = float(a.y()), az = float(a.z());
-      const float sx = float(step.x()), sy = float(step.y()), sz = float(step.z());
-      const size_t base = volume->index(0, y, z);
-      // One voxel from its depth Z and its projection (fu, fv) + 0.5.
-      // Captured by value: the compiler keeps them in registers (through references it reloads
-      // them after every store to the volume).
-      auto voxel = [D, B, useBand, W = weight.data(), carve, w, h, muFull, base, sumWD, sumW, state,
-                    &myVisited, &myUpdated](int x, float Z, float fu, float fv) {
-        if (Z <= 0.f) return;
-        // Nearest pixel. Truncation equals floor for non-negative values, and is much cheaper
-        // than std::floor without SSE4.1; negatives are rejected first.
-        if (!(fu >= 0.f && fv >= 0.f)) return;
-        const int u = int(fu), v = int(fv);
-        if (u >= w || v >= h) return;
-        const int p = v * w + u;
-        const float Dm = D[p];
-        if (!(Dm > 0.f)) return;
-        const float d = Dm - Z;
-        const float mup = useBand ? B[p] : muFull;  // predictable: the same for every voxel
-        if (d < -mup) return;
-        ++myVisited;
-        const size_t i = base + size_t(x);
-        myUpdated +=
-            updateVoxel(d, mup, muFull, W[p], carve && carve[p], &sumWD[i], &sumW[i], &state[i]);
-      };
-      // Four voxels at a time: depth, its reciprocal and the projection in SSE2, each operation
-      // the scalar one in the same order (IEEE single precision, no fused multiply-add), so the
-      // pixels are those of the scalar loop below to the last bit.
-      int x = x0;
-      const __m128 vax = _mm_set1_ps(ax), vay = _mm_set1_ps(ay), vaz = _mm_set1_ps(az);
-      const __m128 vsx = _mm_set1_ps(sx), vsy = _mm_set1_ps(sy), vsz = _mm_set1_ps(sz);
-      const __m128 vfx = _mm_set1_ps(fx), vfy = _mm_set1_ps(fy), vcx = _mm_set1_ps(cx),
-                   vcy = _mm_set1_ps(cy), half = _mm_set1_ps(0.5f), one = _mm_set1_ps(1.f);
-      alignas(16) float Zs[4], us[4], vs[4];
-      for (; x + 3 <= x1; x += 4) {
-        const __m128 xf = _mm_set_ps(float(x + 3), float(x + 2), float(x + 1), float(x));
-        const __m128 Z = _mm_add_ps(vaz, _mm_mul_ps(xf, vsz));
-        const __m128 inv = _mm_div_ps(one, Z);
-        const __m128 fu = _mm_add_ps(
-            _mm_add_ps(_mm_mul_ps(_mm_mul_ps(vfx, _mm_add_ps(vax, _mm_mul_ps(xf, vsx))), inv), vcx),
-            half);
-        const __m128 fv = _mm_add_ps(
-            _mm_add_ps(_mm_mul_ps(_mm_mul_ps(vfy, _mm_add_ps(vay, _mm_mul_ps(xf, vsy))), inv), vcy),
-            half);
-        _mm_store_ps(Zs, Z);
-        _mm_store_ps(us, fu);
-        _mm_store_ps(vs, fv);
-        for (int l = 0; l < 4; ++l) voxel(x + l, Zs[l], us[l], vs[l]);
+    std::vector<std::pair<int, int>> spans;  // voxel x ranges [first, last] of bricks to process
+    for (int brickRow = r.begin(); brickRow != r.end(); ++brickRow) {
+      const int by = brickRow % bricks.y(), bz = brickRow / bricks.y();
+      spans.clear();
+      for (int bx = 0; bx < bricks.x(); ++bx) {
+        if (skip_unchanged_bricks && cull.skip(Vec3i(bx, by, bz))) continue;
+        const int first = bx * kBrick, last = std::min(dims.x(), first + kBrick) - 1;
+        if (!spans.empty() && spans.back().second + 1 == first)
+          spans.back().second = last;
+        else
+          spans.emplace_back(first, last);
       }
-      for (; x <= x1; ++x) {
-        const float Z = az + float(x) * sz;
-        if (Z <= 0.f) continue;
-        const float inv = 1.f / Z;
-        voxel(x, Z, fx * (ax + float(x) * sx) * inv + cx + 0.5f,
-              fy * (ay + float(x) * sy) * inv + cy + 0.5f);
-      }
+      if (spans.empty()) continue;
+      for (int z = bz * kBrick; z < std::min(dims.z(), (bz + 1) * kBrick); ++z)
+        for (int y = by * kBrick; y < std::min(dims.y(), (by + 1) * kBrick); ++y) {
+          const Vec3 a = T_C_O * volume->point(0, y, z);  // camera coords of voxel x = 0
+          // Clip x to where the voxel is in front of the camera and projects inside the image:
+          // z > 0 and −0.5 ≤ fx·X/Z + cx < w − 0.5 (same for v) are linear in x once multiplied by
+          // Z.
+          double lo = 0, hi = dims.x() - 1;
+          clipLinear(a.z() - 1e-6, step.z(), &lo, &hi);
+          clipLinear(K.fx * a.x() + (K.cx + 0.5) * a.z(), K.fx * step.x() + (K.cx + 0.5) * step.z(),
+                     &lo, &hi);
+          clipLinear(-K.fx * a.x() + (w - 0.5 - K.cx) * a.z(),
+                     -K.fx * step.x() + (w - 0.5 - K.cx) * step.z(), &lo, &hi);
+          clipLinear(K.fy * a.y() + (K.cy + 0.5) * a.z(), K.fy * step.y() + (K.cy + 0.5) * step.z(),
+                     &lo, &hi);
+          clipLinear(-K.fy * a.y() + (h - 0.5 - K.cy) * a.z(),
+                     -K.fy * step.y() + (h - 0.5 - K.cy) * step.z(), &lo, &hi);
+          if (lo > hi) continue;
+          const int rowX0 = std::max(0, int(std::floor(lo)) - 1),
+                    rowX1 = std::min(dims.x() - 1, int(std::ceil(hi)) + 1);
+          const float ax = float(a.x()), ay = float(a.y()), az = float(a.z());
+          const float sx = float(step.x()), sy = float(step.y()), sz = float(step.z());
+          const size_t base = volume->index(0, y, z);
+          // One voxel from its depth Z and its projection (fu, fv) + 0.5.
+          // Captured by value: the compiler keeps them in registers (through references it reloads
+          // them after every store to the volume).
+          auto voxel = [D, B, useBand, W = weight.data(), carve, w, h, muFull, base, sumWD, sumW,
+                        state, &myVisited, &myUpdated](int x, float Z, float fu, float fv) {
+            if (Z <= 0.f) return;
+            // Nearest pixel. Truncation equals floor for non-negative values, and is much cheaper
+            // than std::floor without SSE4.1; negatives are rejected first.
+            if (!(fu >= 0.f && fv >= 0.f)) return;
+            const int u = int(fu), v = int(fv);
+            if (u >= w || v >= h) return;
+            const int p = v * w + u;
+            const float Dm = D[p];
+            if (!(Dm > 0.f)) return;
+            const float d = Dm - Z;
+            const float mup = useBand ? B[p] : muFull;  // predictable: the same for every voxel
+            if (d < -mup) return;
+            ++myVisited;
+            const size_t i = base + size_t(x);
+            myUpdated += updateVoxel(d, mup, muFull, W[p], carve && carve[p], &sumWD[i], &sumW[i],
+                                     &state[i]);
+          };
+          // Four voxels at a time: depth, its reciprocal and the projection in SSE2, each operation
+          // the scalar one in the same order (IEEE single precision, no fused multiply-add), so the
+          // pixels are those of the scalar loop below to the last bit.
+          const __m128 vax = _mm_set1_ps(ax), vay = _mm_set1_ps(ay), vaz = _mm_set1_ps(az);
+          const __m128 vsx = _mm_set1_ps(sx), vsy = _mm_set1_ps(sy), vsz = _mm_set1_ps(sz);
+          const __m128 vfx = _mm_set1_ps(fx), vfy = _mm_set1_ps(fy), vcx = _mm_set1_ps(cx),
+                       vcy = _mm_set1_ps(cy), half = _mm_set1_ps(0.5f), one = _mm_set1_ps(1.f);
+          alignas(16) float Zs[4], us[4], vs[4];
+          for (const auto& [spanFirst, spanLast] : spans) {
+            const int x0 = std::max(rowX0, spanFirst), x1 = std::min(rowX1, spanLast);
+            int x = x0;
+            for (; x + 3 <= x1; x += 4) {
+              const __m128 xf = _mm_set_ps(float(x + 3), float(x + 2), float(x + 1), float(x));
+              const __m128 Z = _mm_add_ps(vaz, _mm_mul_ps(xf, vsz));
+              const __m128 inv = _mm_div_ps(one, Z);
+              const __m128 fu = _mm_add_ps(
+                  _mm_add_ps(_mm_mul_ps(_mm_mul_ps(vfx, _mm_add_ps(vax, _mm_mul_ps(xf, vsx))), inv),
+                             vcx),
+                  half);
+              const __m128 fv = _mm_add_ps(
+                  _mm_add_ps(_mm_mul_ps(_mm_mul_ps(vfy, _mm_add_ps(vay, _mm_mul_ps(xf, vsy))), inv),
+                             vcy),
+                  half);
+              _mm_store_ps(Zs, Z);
+              _mm_store_ps(us, fu);
+              _mm_store_ps(vs, fv);
+              for (int l = 0; l < 4; ++l) voxel(x + l, Zs[l], us[l], vs[l]);
+            }
+            for (; x <= x1; ++x) {
+              const float Z = az + float(x) * sz;
+              if (Z <= 0.f) continue;
+              const float inv = 1.f / Z;
+              voxel(x, Z, fx * (ax + float(x) * sx) * inv + cx + 0.5f,
+                    fy * (ay + float(x) * sy) * inv + cy + 0.5f);
+            }
+          }
+        }
     }
     visited += myVisited;
     updated += myUpdated;

@@ -124,8 +124,9 @@ struct ViewRecord {
 struct FrameReport {
   bool fused = true;  // false: tracking could not align it (not fused; `rejected` says why)
   std::string rejected;
-  int pixels = 0;                 // valid depth pixels
-  int carve_pixels = 0;           // of those, only carving (the robot's own, or the caller's mask)
+  int pixels = 0;        // valid depth pixels
+  int carve_pixels = 0;  // of those, only carving (the robot's own where the volume is in view,
+                         // or the caller's mask)
   Iso3 T_B_C = Iso3::Identity();  // the camera pose it was fused with (tracked, or as given)
   int tracking_inliers = 0;       // points aligned with the frame (tracking)
   int tracking_hand_inliers = 0, tracking_hand_see_through = 0;  // of the hand's
@@ -185,11 +186,13 @@ ScanResult scanSingleGrasp(RobotInterface& robot, DepthSensor& sensor, const Iso
 // the robot rendered there lies within t_hand_m of the measurement, at that pixel or within
 // radius_px of it (the sensor's lateral noise moves returns across its silhouette). With
 // with_table the robot config's table counts as the robot's (as in the air, where it only carves).
+// With `region` only its pixels are classified (0 elsewhere; the robot is rendered there and
+// radius_px around it), e.g. volumeImageRect: the pixels fusion reads.
 std::vector<uint8_t> robotPixelMask(const DepthImage& depth, const Iso3& T_B_C,
                                     const JointVector& q, const RobotOccluders& robotScenes,
                                     const DepthCameraOptions& camera,
                                     const NoiseModelOptions& noise, double t_hand_m, int radius_px,
-                                    bool with_table = true);
+                                    bool with_table = true, const PixelRect* region = nullptr);
 
 // The volume a scan centred at centre_O uses.
 TsdfVolume makeScanVolume(const Vec3& centre_O, const ScanOptions& options);

@@ -20,6 +20,12 @@ struct RenderOptions {
   // Its returns get the geometry id scene.geometryCount().
   Vec3 background_centre = Vec3::Zero();
   double background_radius_m = 0;
+  // false: no projector shadows (a return wherever the camera sees a surface within its
+  // incidence limit), for rendering a known surface's depth rather than a sensor's image.
+  bool projector_shadows = true;
+  // Only the pixels [u0, u1) × [v0, v1) are rendered (the rest return nothing); u1 or v1 < 0:
+  // the whole image.
+  int region_u0 = 0, region_v0 = 0, region_u1 = -1, region_v1 = -1;
 };
 
 // Renders the depth image seen by a camera at T_S_C (camera pose in the scene's frame S).
