@@ -46,6 +46,28 @@ TEST(SurfaceDistance, IndexMatchesBruteForceReference) {
   }
 }
 
+// within(p, r) against the reference distance, for radii about the index's cells and points
+// near the surface (where the answer turns), some far outside the grid.
+TEST(SurfaceDistance, WithinMatchesTheReferenceDistance) {
+  const TriangleMesh mesh = makeSphere(0.05, 4);
+  const TriangleDistanceIndex index(mesh);
+  Rng rng = makeRng(11);
+  std::uniform_real_distribution<double> U(-1, 1), R(0.0, 0.01);
+  int in = 0, out = 0;
+  for (int i = 0; i < 4000; ++i) {
+    Vec3 d(U(rng), U(rng), U(rng));
+    d.normalize();
+    const double radius = i % 5 == 0 ? 0.3 : 0.05 + 0.01 * U(rng);
+    const Vec3 p = radius * d;
+    const double r = R(rng), ref = index.distanceReference(p);
+    if (std::abs(ref - r) < 1e-9) continue;  // on the boundary: either answer
+    EXPECT_EQ(index.within(p, r), ref <= r) << p.transpose() << " r " << r << " d " << ref;
+    (ref <= r ? in : out) += 1;
+  }
+  EXPECT_GT(in, 1000);
+  EXPECT_GT(out, 1000);
+}
+
 TEST(SurfaceDistance, UniformSamplesLieOnTheSurfaceInProportionToArea) {
   // Box 0.2 × 0.1 × 0.05: the ±x faces hold 0.005 / 0.035 of the area each.
   const TriangleMesh box = makeBox(Vec3(0.2, 0.1, 0.05));

@@ -54,8 +54,15 @@ double fractionWithin(const std::vector<double>& d, double r) {
 
 double GroundTruth::coverage(const ObjectModel& model) const {
   const TriangleDistanceIndex observed(model.mesh, observedTriangles(model));
-  if (observed.empty()) return 0;
-  return fractionWithin(distances(observed, truthSamples_, options_.tau_m), options_.tau_m);
+  if (observed.empty() || truthSamples_.empty()) return 0;
+  std::vector<uint8_t> in(truthSamples_.size());
+  parallelFor(
+      0, int(truthSamples_.size()),
+      [&](int i) { in[size_t(i)] = observed.within(truthSamples_[size_t(i)], options_.tau_m); },
+      256);
+  size_t n = 0;
+  for (uint8_t x : in) n += x;
+  return double(n) / double(truthSamples_.size());
 }
 
 SurfaceMetrics GroundTruth::evaluate(const ObjectModel& model) const {

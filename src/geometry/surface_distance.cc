@@ -127,6 +127,33 @@ double TriangleDistanceIndex::distanceReference(const Vec3& p) const {
   return best;
 }
 
+bool TriangleDistanceIndex::within(const Vec3& p, double r) const {
+  if (tris_.empty() || !(r >= 0)) return false;
+  const double r2 = r * r;
+  auto near = [&](size_t c) {
+    for (uint32_t j = start_[c]; j < start_[c + 1]; ++j) {
+      const T& t = tris_[items_[j]];
+      if ((closestPointOnTriangle(p, t.a, t.b, t.c) - p).squaredNorm() <= r2) return true;
+    }
+    return false;
+  };
+  Vec3i c0, lo, hi;
+  for (int k = 0; k < 3; ++k) {
+    c0[k] = std::clamp(int(std::floor((p[k] - origin_[k]) / cell_)), 0, dims_[k] - 1);
+    // Cells beyond r of p hold no triangle within r (a triangle is listed in every cell its box
+    // overlaps, so one within r of p overlaps a cell within r of p).
+    lo[k] = std::clamp(int(std::floor((p[k] - r - origin_[k]) / cell_)), 0, dims_[k] - 1);
+    hi[k] = std::clamp(int(std::floor((p[k] + r - origin_[k]) / cell_)), 0, dims_[k] - 1);
+  }
+  auto cell = [&](int x, int y, int z) { return (size_t(z) * dims_.y() + y) * dims_.x() + x; };
+  if (near(cell(c0.x(), c0.y(), c0.z()))) return true;  // most often there
+  for (int z = lo.z(); z <= hi.z(); ++z)
+    for (int y = lo.y(); y <= hi.y(); ++y)
+      for (int x = lo.x(); x <= hi.x(); ++x)
+        if (Vec3i(x, y, z) != c0 && near(cell(x, y, z))) return true;
+  return false;
+}
+
 double TriangleDistanceIndex::distance(const Vec3& p, double max_m) const {
   double best2 = std::numeric_limits<double>::infinity();
   if (tris_.empty()) return best2;

@@ -170,6 +170,25 @@ bool HandGeometry::contains(const Vec3& p_F) const {
   return false;
 }
 
+double HandGeometry::primitiveDistance(const Primitive& p, const Vec3& q,
+                                       const Vec3& p_link) const {
+  switch (p.type) {
+    case Primitive::Type::kBox: {
+      Vec3 e = q.cwiseAbs() - 0.5 * p.size;
+      return e.cwiseMax(0.0).norm() + std::min(e.maxCoeff(), 0.0);
+    }
+    case Primitive::Type::kCylinder: {
+      Vec2 e(std::hypot(q.x(), q.y()) - p.size.x(), std::abs(q.z()) - 0.5 * p.size.z());
+      return e.cwiseMax(0.0).norm() + std::min(e.maxCoeff(), 0.0);
+    }
+    case Primitive::Type::kSphere:
+      return q.norm() - p.size.x();
+    case Primitive::Type::kMesh:
+    default:
+      return p.contains(p_link) ? 0.0 : std::numeric_limits<double>::infinity();
+  }
+}
+
 double HandGeometry::distance(const Vec3& p_F, int* nearest) const {
   double best = std::numeric_limits<double>::infinity();
   if (nearest) *nearest = -1;
@@ -177,33 +196,68 @@ double HandGeometry::distance(const Vec3& p_F, int* nearest) const {
     const Vec3 p_link = T_link_F_[k] * p_F;
     const std::vector<Primitive>& prims = model_->links()[model_->handLinks()[k]].collision;
     for (size_t j = 0; j < prims.size(); ++j) {
-      const Primitive& p = prims[j];
-      const Vec3 q = T_geom_link_[k][j] * p_link;
-      double d;
-      switch (p.type) {
-        case Primitive::Type::kBox: {
-          Vec3 e = q.cwiseAbs() - 0.5 * p.size;
-          d = e.cwiseMax(0.0).norm() + std::min(e.maxCoeff(), 0.0);
-          break;
-        }
-        case Primitive::Type::kCylinder: {
-          Vec2 e(std::hypot(q.x(), q.y()) - p.size.x(), std::abs(q.z()) - 0.5 * p.size.z());
-          d = e.cwiseMax(0.0).norm() + std::min(e.maxCoeff(), 0.0);
-          break;
-        }
-        case Primitive::Type::kSphere:
-          d = q.norm() - p.size.x();
-          break;
-        case Primitive::Type::kMesh:
-        default:
-          d = p.contains(p_link) ? 0.0 : std::numeric_limits<double>::infinity();
-          break;
-      }
+      const double d = primitiveDistance(prims[j], T_geom_link_[k][j] * p_link, p_link);
       if (d < best) {
         best = d;
         if (nearest) *nearest = model_->handLinks()[k];
       }
     }
+  }
+  return best;
+}
+
+double HandGeometry::distanceWithin(const Vec3& p_F, double limit, int* nearest) const {
+  if (boxes_F_.empty()) {
+    std::vector<std::vector<Aabb>> boxes(T_F_link_.size());
+    for (size_t k = 0; k < T_F_link_.size(); ++k)
+      for (const Primitive& p : model_->links()[model_->handLinks()[k]].collision) {
+        // The primitive's own box in its geometry frame (a mesh's in the link frame).
+        Aabb local;
+        Iso3 T_F_local = T_F_link_[k] * p.T_link_geom;
+        if (p.type == Primitive::Type::kMesh) {
+          local = p.toMesh().bounds();
+          T_F_local = T_F_link_[k];
+        } else {
+          const Vec3 half = p.type == Primitive::Type::kBox ? Vec3(0.5 * p.size)
+                            : p.type == Primitive::Type::kCylinder
+                                ? Vec3(p.size.x(), p.size.x(), 0.5 * p.size.z())
+                                : Vec3::Constant(p.size.x());
+          local.extend(-half);
+          local.extend(half);
+        }
+        Aabb box;
+        for (int c = 0; c < 8; ++c)
+          box.extend(T_F_local * Vec3((c & 1) ? local.max.x() : local.min.x(),
+                                      (c & 2) ? local.max.y() : local.min.y(),
+                                      (c & 4) ? local.max.z() : local.min.z()));
+        boxes[k].push_back(box);
+      }
+    boxes_F_ = std::move(boxes);
+  }
+  double best = std::numeric_limits<double>::infinity();
+  if (nearest) *nearest = -1;
+  for (size_t k = 0; k < T_F_link_.size(); ++k) {
+    const std::vector<Primitive>& prims = model_->links()[model_->handLinks()[k]].collision;
+    bool linkNear = false;
+    Vec3 p_link;
+    for (size_t j = 0; j < prims.size(); ++j) {
+      const Aabb& b = boxes_F_[k][j];
+      if (((p_F - b.min).array() < -limit).any() || ((p_F - b.max).array() > limit).any())
+        continue;  // farther than `limit` from the primitive
+      if (!linkNear) {
+        p_link = T_link_F_[k] * p_F;
+        linkNear = true;
+      }
+      const double d = primitiveDistance(prims[j], T_geom_link_[k][j] * p_link, p_link);
+      if (d < best) {
+        best = d;
+        if (nearest) *nearest = model_->handLinks()[k];
+      }
+    }
+  }
+  if (best > limit) {
+    if (nearest) *nearest = -1;
+    return std::numeric_limits<double>::infinity();
   }
   return best;
 }

@@ -77,7 +77,7 @@ HandContacts handContacts(const RobotModel& robot, const JointVector& q, const I
     if (((p - hb.min).array() < -contact_m).any() || ((p - hb.max).array() > contact_m).any())
       continue;
     int link = -1;
-    if (hand.distance(p, &link) > contact_m) continue;
+    if (hand.distanceWithin(p, contact_m, &link) > contact_m) continue;
     if (const int finger = robot.fingerOfLink(link); finger >= 0) touch[finger] = 1;
     if ((T_palm_O * p).z() < palmTop + 0.002 + contact_m) out.palm_touching = true;
     auto key = std::make_tuple(int(std::floor(p.x() / cell_m)), int(std::floor(p.y() / cell_m)),

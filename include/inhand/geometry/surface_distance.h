@@ -29,6 +29,8 @@ class TriangleDistanceIndex {
   // Distance from p to the nearest indexed triangle; +inf when the index is empty. With
   // `max_m` finite, any value ≥ max_m may be returned as soon as none nearer can exist.
   double distance(const Vec3& p, double max_m = std::numeric_limits<double>::infinity()) const;
+  // Whether some indexed triangle lies within r of p (distance(p) ≤ r), stopping at the first.
+  bool within(const Vec3& p, double r) const;
   // Brute-force reference: every indexed triangle.
   double distanceReference(const Vec3& p) const;
 

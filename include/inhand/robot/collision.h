@@ -46,6 +46,9 @@ class HandGeometry {
   // spheres; mesh links give 0 inside and +infinity outside. `nearest` (optional) receives the
   // model's index of the nearest link.
   double distance(const Vec3& p_F, int* nearest = nullptr) const;
+  // distance() where it is at most `limit` (the same value and nearest link), +infinity beyond
+  // it: only the primitives whose box in F, grown by `limit`, holds p_F are measured.
+  double distanceWithin(const Vec3& p_F, double limit, int* nearest = nullptr) const;
   // Link poses T_F_link of the hand links, in handLinks() order.
   const std::vector<Iso3>& linkPoses() const { return T_F_link_; }
 
@@ -56,6 +59,9 @@ class HandGeometry {
   // grasp search's innermost call).
   std::vector<Iso3> T_link_F_;
   std::vector<std::vector<Iso3>> T_geom_link_;
+  // Each primitive's bounding box in F (per link, per primitive), computed when first needed.
+  mutable std::vector<std::vector<Aabb>> boxes_F_;
+  double primitiveDistance(const Primitive& p, const Vec3& p_geom, const Vec3& p_link) const;
 };
 
 struct FingerClosing {
