@@ -133,6 +133,25 @@ TEST(Random, GaussianAtHasUnitMomentsAndIsReproducible) {
   EXPECT_NE(gaussianAt(42, 17), gaussianAt(43, 17));
 }
 
+TEST(Random, GaussianPairsAreUncorrelatedWithUnitMoments) {
+  double s[2] = {0, 0}, s2[2] = {0, 0}, cross = 0;
+  const int n = 200000;
+  for (int i = 0; i < n; ++i) {
+    const auto [a, b] = gaussianPairAt(42, i);
+    s[0] += a;
+    s[1] += b;
+    s2[0] += a * a;
+    s2[1] += b * b;
+    cross += a * b;
+  }
+  for (int k = 0; k < 2; ++k) {
+    EXPECT_NEAR(s[k] / n, 0.0, 0.01);
+    EXPECT_NEAR(s2[k] / n, 1.0, 0.01);
+  }
+  EXPECT_NEAR(cross / n, 0.0, 0.01);
+  EXPECT_NEAR(gaussianPairAt(42, 17).first, gaussianAt(42, 17), 1e-12);
+}
+
 TEST(FileUtil, AtomicWriteLeavesNothingOnFailure) {
   test::TempDir dir;
   fs::path p = dir.path() / "out.txt";

@@ -149,8 +149,8 @@ DepthImage renderDepth(const RayScene& scene, const Iso3& T_S_C, const DepthCame
           int p = order[i];
           double theta = incidence(hits[i].normal.cast<double>(), rays[i].dir.cast<double>());
           double s = lateralSigmaPx(noise, theta);
-          double du = s * gaussianAt(options.seed, 3 * uint64_t(p));
-          double dv = s * gaussianAt(options.seed, 3 * uint64_t(p) + 1);
+          const auto [gu, gv] = gaussianPairAt(options.seed, 3 * uint64_t(p));
+          const double du = s * gu, dv = s * gv;
           rays[i] = pixelRay(T_S_C, K, p % w + du, p / w + dv);
         },
         4096);

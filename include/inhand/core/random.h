@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstdint>
 #include <random>
+#include <utility>
 
 namespace inhand {
 
@@ -29,6 +30,16 @@ inline double gaussianAt(uint64_t seed, uint64_t index) {
   double u1 = (double(a >> 11) + 0.5) * (1.0 / 9007199254740992.0);  // (0, 1)
   double u2 = double(b >> 11) * (1.0 / 9007199254740992.0);          // [0, 1)
   return std::sqrt(-2.0 * std::log(u1)) * std::cos(6.283185307179586 * u2);
+}
+
+// Two independent standard normal samples from one (seed, index), both outputs of Box–Muller:
+// the first is gaussianAt(seed, index), the second its sine partner (for half the cost of two).
+inline std::pair<double, double> gaussianPairAt(uint64_t seed, uint64_t index) {
+  uint64_t a = mixSeed(seed, 2 * index), b = mixSeed(seed, 2 * index + 1);
+  double u1 = (double(a >> 11) + 0.5) * (1.0 / 9007199254740992.0);  // (0, 1)
+  double u2 = double(b >> 11) * (1.0 / 9007199254740992.0);          // [0, 1)
+  const double r = std::sqrt(-2.0 * std::log(u1)), phi = 6.283185307179586 * u2;
+  return {r * std::cos(phi), r * std::sin(phi)};
 }
 
 }  // namespace inhand
