@@ -640,3 +640,43 @@ TEST(Hand, FingersStoppedByTheTableLiftTheHandUntilTheyGripAFlatObject) {
   EXPECT_FALSE(closeTable.handTouches(closed.q, clear));
   EXPECT_GT(forceClosureEpsilon(hc.contacts, Vec3(0, 0, 0.2925), 0.06, 0.5, 8, 1000), 0);
 }
+
+// Closing against the object alone, told which steps a closing against object and table found
+// free, gives what closing from scratch gives (finger values, contacts, free steps): the disc on
+// the table above, the hand at heights from touching the table to well above it, several
+// preshapes and spreads.
+TEST(Hand, ClosingResumedFromASupersetsFreeStepsIsTheSame) {
+  const RobotModel& m = wam();
+  const TriangleMesh table =
+      transformed(makeBox(Vec3(0.8, 0.8, 0.05)), Iso3(Eigen::Translation3d(0, 0, 0.325)));
+  const TriangleMesh disc =
+      transformed(makeCylinder(0.06, 0.015, 64), Iso3(Eigen::Translation3d(0, 0, 0.2925)));
+  TriangleMesh both = table;
+  both.append(disc);
+  const FingerCloser closeBoth(m, both), closeDisc(m, disc);
+  int resumed = 0, contacts = 0;
+  for (double spread : {0.0, 0.5, 1.0})
+    for (double preshape : {0.0, 0.25, 0.5}) {
+      const JointVector q = m.preshapedHand(spread, preshape);
+      const std::optional<double> travel =
+          closeBoth.freeTravel(q, Iso3::Identity(), Vec3::UnitZ(), 0.5);
+      ASSERT_TRUE(travel);
+      for (double up : {0.0, 0.004, 0.01, 0.02, 0.04}) {
+        const Iso3 T(Eigen::Translation3d(0, 0, *travel - up));
+        const ClosingResult superset = closeBoth.close(q, T, 0.06, 1e-4);
+        const ClosingResult fresh = closeDisc.close(q, T, 0.06, 1e-4);
+        const ClosingResult resume = closeDisc.close(q, T, 0.06, 1e-4, &superset);
+        EXPECT_EQ(resume.q, fresh.q);
+        ASSERT_EQ(resume.fingers.size(), fresh.fingers.size());
+        for (size_t k = 0; k < fresh.fingers.size(); ++k) {
+          EXPECT_EQ(resume.fingers[k].value, fresh.fingers[k].value);
+          EXPECT_EQ(resume.fingers[k].contact, fresh.fingers[k].contact);
+          EXPECT_EQ(resume.fingers[k].free_steps, fresh.fingers[k].free_steps);
+          resumed += superset.fingers[k].free_steps > 0;
+          contacts += fresh.fingers[k].contact;
+        }
+      }
+    }
+  EXPECT_GT(resumed, 20);
+  EXPECT_GT(contacts, 20);
+}

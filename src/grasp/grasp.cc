@@ -159,14 +159,29 @@ class PoseCloser {
   PoseCloser(const RobotModel& robot, const TriangleMesh& mesh, const Iso3& T_B_O,
              const GraspOptions& o, const std::vector<SurfacePoint>& samples,
              const std::vector<Pose>& poses)
+      : PoseCloser(robot, mesh, T_B_O, o, samples, poses, closers(robot, mesh, T_B_O)) {}
+
+ private:
+  // The two closers' collision hierarchies (model with table, model alone), one per core.
+  static std::vector<FingerCloser> closers(const RobotModel& robot, const TriangleMesh& mesh,
+                                           const Iso3& T_B_O) {
+    std::vector<std::optional<FingerCloser>> built(2);
+    parallelForThreads(0, 2, [&](int i) {
+      built[size_t(i)].emplace(robot, i == 0 ? withTable(mesh, robot, T_B_O) : mesh);
+    });
+    return {*built[0], *built[1]};
+  }
+  PoseCloser(const RobotModel& robot, const TriangleMesh& mesh, const Iso3& T_B_O,
+             const GraspOptions& o, const std::vector<SurfacePoint>& samples,
+             const std::vector<Pose>& poses, const std::vector<FingerCloser>& closers)
       : robot_(robot),
         T_B_O_(T_B_O),
         o_(o),
         samples_(samples),
         centre_(mesh.bounds().center()),
         up_(T_B_O.linear().transpose() * Vec3::UnitZ()),
-        closer_(robot, withTable(mesh, robot, T_B_O)),
-        modelCloser_(robot, mesh) {
+        closer_(closers[0]),
+        modelCloser_(closers[1]) {
     // Palm face (top of the palm geometry along palm z) and footprint.
     for (const Primitive& p : robot.links()[robot.tipLink()].collision) {
       const Aabb b = p.toMesh().bounds();
@@ -187,6 +202,7 @@ class PoseCloser {
                 .bounds();
   }
 
+ public:
   // The candidate of pose i (index `pose`), or nullopt with rec.result saying why.
   std::optional<GraspCandidate> operator()(const Pose& ps, int pose, GraspPoseRecord& rec) const {
     Iso3 T = Iso3::Identity();

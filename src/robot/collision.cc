@@ -327,7 +327,7 @@ ClosingResult closeFingers(const RobotModel& model, const JointVector& qIn, cons
 }
 
 ClosingResult FingerCloser::close(const JointVector& qIn, const Iso3& T_O_palm, double step,
-                                  double tolerance) const {
+                                  double tolerance, const ClosingResult* free_from) const {
   INHAND_CHECK(step > 0 && tolerance > 0, "closing step and tolerance must be positive");
   const RobotModel& model = *model_;
   const GeomPtr& object = geometry_->object;
@@ -335,7 +335,12 @@ ClosingResult FingerCloser::close(const JointVector& qIn, const Iso3& T_O_palm, 
   const Iso3 I = Iso3::Identity();
   ClosingResult result;
   result.q = qIn;
-  for (const FingerInfo& f : model.fingers()) {
+  INHAND_CHECK(!free_from || free_from->fingers.size() == model.fingers().size(),
+               "free_from: one closing per finger");
+  for (size_t fi = 0; fi < model.fingers().size(); ++fi) {
+    const FingerInfo& f = model.fingers()[fi];
+    // Steps already known free (a finger's links depend only on its own joints and the spread).
+    const int known = free_from ? free_from->fingers[fi].free_steps : -1;
     // Collision of this finger's links at finger value v (other joints as in result.q).
     auto touches = [&](double v) {
       JointVector q = result.q;
@@ -357,12 +362,19 @@ ClosingResult FingerCloser::close(const JointVector& qIn, const Iso3& T_O_palm, 
     const double dir = f.closed >= f.open ? 1.0 : -1.0, span = std::abs(f.closed - start);
     double free = start;
     fc.value = f.closed;
-    if (touches(start)) {
+    if (known < 0 && touches(start)) {
       fc.value = start;
       fc.contact = true;
     } else {
-      for (double s = step; s < span + step; s += step) {
+      int i = 0;
+      fc.free_steps = 0;
+      for (double s = step; s < span + step; s += step, ++i) {
         double v = start + dir * std::min(s, span);
+        if (i < known) {  // free of the superset, so of this object
+          free = v;
+          fc.free_steps = i + 1;
+          continue;
+        }
         if (touches(v)) {
           double hit = v;
           while (std::abs(hit - free) > tolerance) {
@@ -374,6 +386,7 @@ ClosingResult FingerCloser::close(const JointVector& qIn, const Iso3& T_O_palm, 
           break;
         }
         free = v;
+        fc.free_steps = i + 1;
       }
     }
     result.q[f.variable] = fc.value;
@@ -394,7 +407,7 @@ std::pair<ClosingResult, Iso3> closeOffTheTable(const FingerCloser& both,
     ClosingResult r = both.close(q, T, closing_step, 1e-4);
     if (off + step > max_backoff + 1e-9) return {r, T};
     bool blocked = false;
-    const ClosingResult alone = object.close(q, T, closing_step, 1e-4);
+    const ClosingResult alone = object.close(q, T, closing_step, 1e-4, &r);
     for (size_t k = 0; k < r.fingers.size(); ++k) {
       const FingerInfo& f = both.model().fingers()[k];
       const double dir = f.closed >= f.open ? 1.0 : -1.0;

@@ -67,6 +67,9 @@ class HandGeometry {
 struct FingerClosing {
   double value = 0;      // the finger joint's value where it stopped
   bool contact = false;  // stopped by touching the object (else it reached `closed`)
+  // How many of the closing's steps were free of contact before it touched (all of them when it
+  // did not; -1 when it touched where it started).
+  int free_steps = -1;
 };
 
 struct ClosingResult {
@@ -88,8 +91,11 @@ class FingerCloser {
  public:
   FingerCloser(const RobotModel& model, const TriangleMesh& object_O);
   const RobotModel& model() const { return *model_; }
+  // With `free_from` (a closing of the same q, pose and step against a superset of this object,
+  // e.g. the object and the table), the steps it found free are not checked again: they are free
+  // of this object too (the same result, fewer collision checks).
   ClosingResult close(const JointVector& q, const Iso3& T_O_palm, double step = 0.02,
-                      double tolerance = 1e-4) const;
+                      double tolerance = 1e-4, const ClosingResult* free_from = nullptr) const;
   // Whether any hand link (palm included) at q, palm at T_O_palm, touches the object's surface.
   // (A link wholly inside the object does not touch it: approach from outside.)
   bool handTouches(const JointVector& q, const Iso3& T_O_palm) const;
