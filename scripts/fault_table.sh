@@ -22,7 +22,9 @@ declare -A faults=(
 order=(clean dropped_frames corrupted_frames pose_jumps stopped_short slip_3mm object_dropped
   refused_motions failed_pickups)
 for name in "${order[@]}"; do
-  printf '{"sim": {"faults": %s}}\n' "${faults[$name]}" > "$out/$name.json"
+  # Every third sensor frame (SUBSAMPLE): the setting docs/reliability_faults.md was measured with.
+  printf '{"sim": {"faults": %s, "frame_subsample": %s}}\n' "${faults[$name]}" "${SUBSAMPLE:-3}" \
+    > "$out/$name.json"
   for object in cracker_box coffee_can; do
     for seed in 1 2; do
       dir="$out/${name}_${object}_$seed"

@@ -494,14 +494,15 @@ int runScan(const ScanArgs& given) {
       {"tracking", r.tracking_s},
       {"simulation", sim.render_s},
       {"fusion_ms_per_frame", r.frames > 0 ? 1000 * r.fusion_s / r.frames : 0.0},
+      // Every grasp planning, the one that ended the scan included.
       {"grasp_generation",
        [&] {
-         double t = 0;
+         double t = mr.unused_generation_s;
          for (const GraspRecord& g : mr.grasps) t += g.generation_s;
          return t;
        }()},
       {"grasp_ranking", [&] {
-         double t = 0;
+         double t = mr.unused_ranking_s;
          for (const GraspRecord& g : mr.grasps) t += g.ranking_s;
          return t;
        }()}};

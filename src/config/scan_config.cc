@@ -206,7 +206,7 @@ void visitConfig(V& v, ScanConfig& c) {
   });
   v.object("sim", "the simulator", [&](V& o) {
     o.num("frame_rate_hz", c.sim.frame_rate_hz, "sensor frame rate along trajectories, Hz");
-    o.integer("frame_subsample", c.sim.frame_subsample, "fuse every n-th frame");
+    o.integer("frame_subsample", c.sim.frame_subsample, "deliver every n-th sensor frame to the scan (1: all)");
     o.boolean("noise", c.sim.noise, "sensor noise");
     o.num("room_radius_m", c.sim.room_radius_m, "a room around the camera (0: none), m");
     o.boolean("check_hold", c.sim.check_hold, "grasps must be force closure on the true object");

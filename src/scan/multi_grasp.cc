@@ -256,6 +256,8 @@ void runGrasps(RobotInterface& robot, DepthSensor& sensor, ScanSession& session,
     GraspPlan plan = session.planGrasps(T_B_O_rest, robot.joints());
     if (plan.above_threshold == 0) {
       all.termination = session.summary().termination;
+      out.unused_generation_s += plan.generation.seconds;
+      out.unused_ranking_s += plan.ranking_s;
       break;
     }
     // The best candidate the robot manages to pick up and hold (a real hand may fail where the
@@ -270,6 +272,8 @@ void runGrasps(RobotInterface& robot, DepthSensor& sensor, ScanSession& session,
     if (!pick.achieved) {
       all.termination =
           progress.stopRequested() ? Termination::kInterrupted : Termination::kPickUpFailed;
+      out.unused_generation_s += plan.generation.seconds;
+      out.unused_ranking_s += plan.ranking_s;
       break;
     }
     T_O_palm = *pick.achieved;

@@ -83,6 +83,9 @@ struct GraspRecord {
 struct MultiGraspResult {
   ScanResult scan;  // views of all grasps, model, timings; termination of the whole scan
   std::vector<GraspRecord> grasps;
+  // The grasp planning that led to no further grasp (no candidate above t_q, none reachable or
+  // none picked up): its time is in no GraspRecord.
+  double unused_generation_s = 0, unused_ranking_s = 0;
   std::optional<TableTopRecord> table_top;  // when the scan began with the object on the table
 };
 

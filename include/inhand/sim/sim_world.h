@@ -44,7 +44,7 @@ struct SimFaultLog {
 
 struct SimOptions {
   double frame_rate_hz = 30.0;  // sensor frame rate along trajectories
-  int frame_subsample = 3;      // integrate every n-th frame
+  int frame_subsample = 1;      // deliver every n-th frame to the scan (1: every frame, 30 Hz)
   bool noise = true;            // sensor noise
   uint64_t seed = 1;            // noise seed
   double room_radius_m = 2.5;   // background: a room around the camera (0: none)
