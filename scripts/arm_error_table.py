@@ -110,7 +110,8 @@ def main(out, docs):
                          f"{g['palm_error_median_mm']:.2f} | {refused} of {fused + refused} | {per} |")
     open(os.path.join(docs, "arm_error.md"), "w").write(
         "# Arm error and tracking: the sweep\n\n"
-        "Whole scans from the table at default settings (3 grasps at most), ig planner; the simulated arm's "
+        "Whole scans from the table at default settings (3 grasps at most) but every third sensor frame "
+        "(`\"sim\": {\"frame_subsample\": 3}`), ig planner; the simulated arm's "
         "joints offset so that the palm is the given distance from where the reported joints put it (at "
         "home); with and without tracking. Means over objects and seeds; palm error: the fused in-hand "
         "frames' palm position against the true one (median per run, then the mean). Produced by "
