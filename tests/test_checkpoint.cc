@@ -22,6 +22,7 @@ namespace {
 ScanConfig fastConfig(bool tracking) {
   ScanConfig c = test::quickScanConfig();
   c.scan.tracking.enabled = tracking;
+  c.scan.tracking.filter = tracking;  // its state goes through the checkpoint too
   if (tracking) c.sim.arm_error_m = 0.01;
   return c;
 }

@@ -137,6 +137,14 @@ void visitConfig(V& v, ScanConfig& c) {
         t.num("hand_spacing_m", o.hand_spacing_m, "spacing of the hand's surface samples, m");
         t.integer("max_object_points", o.max_object_points,
                   "the model's observed surface, subsampled to this many points");
+        t.boolean("filter", o.filter,
+                  "corrections Kalman-filtered over frames (a random walk); off: each frame's own");
+        t.num("drift_m", o.drift_m, "the correction's drift per radian of joint motion, m");
+        t.num("drift_rad", o.drift_rad, "… and of its rotation, rad");
+        t.num("frame_drift_m", o.frame_drift_m, "the correction's drift per frame, m");
+        t.num("frame_drift_rad", o.frame_drift_rad, "… and of its rotation, rad");
+        t.num("pair_information", o.pair_information,
+              "each aligned point pair counts as this fraction of an independent measurement");
       });
   v.object("checks", "in-hand frames that are not fused (docs/reliability.md)", [&](V& k) {
     FrameChecks& o = s.checks;
@@ -206,7 +214,8 @@ void visitConfig(V& v, ScanConfig& c) {
   });
   v.object("sim", "the simulator", [&](V& o) {
     o.num("frame_rate_hz", c.sim.frame_rate_hz, "sensor frame rate along trajectories, Hz");
-    o.integer("frame_subsample", c.sim.frame_subsample, "deliver every n-th sensor frame to the scan (1: all)");
+    o.integer("frame_subsample", c.sim.frame_subsample,
+              "deliver every n-th sensor frame to the scan (1: all)");
     o.boolean("noise", c.sim.noise, "sensor noise");
     o.num("room_radius_m", c.sim.room_radius_m, "a room around the camera (0: none), m");
     o.boolean("check_hold", c.sim.check_hold, "grasps must be force closure on the true object");

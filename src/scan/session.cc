@@ -69,6 +69,12 @@ struct ScanSession::State {
   JointVector handPointsQ;
   // The last aligned frame's error in the palm frame: true palm = reported palm · correction.
   Iso3 correction = Iso3::Identity();
+  // TrackingOptions::filter: the correction's estimate (palm frame: rotation vector, translation),
+  // its covariance and the joints of the last tracked frame; started at the grasp's first frame.
+  bool filterStarted = false;
+  Eigen::Matrix<double, 6, 1> filterX = Eigen::Matrix<double, 6, 1>::Zero();
+  Eigen::Matrix<double, 6, 6> filterP = Eigen::Matrix<double, 6, 6>::Identity();
+  JointVector filterQ;
   bool trackingFromFull = false;  // tracking's object points are from model(), not planningModel()
   std::vector<Vec3> used;         // directions of this grasp's views
   std::vector<Vec3> initialDirs;  // the initial trajectory's directions not yet tried
@@ -153,6 +159,7 @@ void ScanSession::beginGrasp(const Iso3& T_O_palm, const JointVector& q, const A
   s.used.clear();
   s.alg1Views = 0;
   s.correction = Iso3::Identity();
+  s.filterStarted = false;
   if (modelPointsNeeded(s.options)) refreshTrackingModel();
   s.trackingFromFull = false;
   s.unsupportedStreak = 0;
@@ -496,10 +503,56 @@ std::optional<Iso3> ScanSession::trackedCameraPose(const DepthImage& depth, cons
   TrackResult r =
       alignToDepth(depth, s.camera.intrinsics, s.handPoints, objectPoints, occluders, T_C_palm,
                    starts, axialSigma(s.noise, T_C_palm.translation().z(), 0), s.options.tracking);
+  if (s.options.tracking.filter) filterCorrection(q, T_C_palm, &r);
   s.summary.tracking_s += secondsSince(t0);
   if (result) *result = r;
   if (!r.ok) return std::nullopt;
   return T_B_C * r.correction.inverse();
+}
+
+void ScanSession::filterCorrection(const JointVector& q, const Iso3& T_C_palm, TrackResult* r) {
+  State& s = *s_;
+  const TrackingOptions& o = s.options.tracking;
+  using Vec6 = Eigen::Matrix<double, 6, 1>;
+  using Mat6 = Eigen::Matrix<double, 6, 6>;
+  // Predict: a random walk, wider the more the joints moved (the arm's error depends on its
+  // configuration) and a little every frame.
+  if (!s.filterStarted) {
+    s.filterX.setZero();  // the reported pose, give or take 0.1 rad and 5 cm
+    s.filterP.setZero();
+    s.filterP.diagonal() << Vec6(0.01, 0.01, 0.01, 0.0025, 0.0025, 0.0025);
+    s.filterStarted = true;
+  } else {
+    const double moved = (s.model->arm(q) - s.model->arm(s.filterQ)).norm();
+    const double rot = o.frame_drift_rad + o.drift_rad * moved;
+    const double trans = o.frame_drift_m + o.drift_m * moved;
+    s.filterP.diagonal().head<3>().array() += rot * rot;
+    s.filterP.diagonal().tail<3>().array() += trans * trans;
+  }
+  s.filterQ = q;
+  if (!r->ok) return;
+  // The frame's alignment as a measurement of the palm-frame correction: camera-frame parameters
+  // about the palm are blockdiag(R, R) times the palm-frame ones (R: the palm's rotation).
+  const Iso3 C = T_C_palm.inverse() * r->correction * T_C_palm;
+  const Eigen::AngleAxisd aa(C.linear());
+  Vec6 z;
+  z.head<3>() = aa.angle() * aa.axis();
+  z.tail<3>() = C.translation();
+  Mat6 G = Mat6::Zero();
+  G.topLeftCorner<3, 3>() = T_C_palm.linear();
+  G.bottomRightCorner<3, 3>() = T_C_palm.linear();
+  const Mat6 info = o.pair_information * (G.transpose() * r->information * G);
+  const Mat6 priorInfo = s.filterP.inverse();
+  const Mat6 posterior = priorInfo + info;
+  const Eigen::LDLT<Mat6> solve(posterior);
+  s.filterX = solve.solve(priorInfo * s.filterX + info * z);
+  s.filterP = solve.solve(Mat6::Identity());
+  // Fused with the filtered correction.
+  Iso3 F = Iso3::Identity();
+  const Vec3 w = s.filterX.head<3>();
+  if (w.norm() > 1e-12) F.linear() = Eigen::AngleAxisd(w.norm(), w.normalized()).toRotationMatrix();
+  F.translation() = s.filterX.tail<3>();
+  r->correction = T_C_palm * F * T_C_palm.inverse();
 }
 
 FrameReport ScanSession::addFrameOfObjectAt(const DepthImage& depth, const JointVector& q,
@@ -727,6 +780,12 @@ void ScanSession::save(const std::filesystem::path& path, const Json& extra) con
   for (const Vec3& d : s.initialDirs) h["initial_dirs"].push_back(vecJson(d));
   h["alg1_views"] = s.alg1Views;
   h["tracking_correction"] = isoJson(s.correction);  // the last frame's arm error (palm frame)
+  if (s.filterStarted) {
+    h["tracking_filter"]["x"] = std::vector<double>(s.filterX.data(), s.filterX.data() + 6);
+    h["tracking_filter"]["P"] = std::vector<double>(s.filterP.data(), s.filterP.data() + 36);
+    h["tracking_filter"]["q"] =
+        std::vector<double>(s.filterQ.data(), s.filterQ.data() + s.filterQ.size());
+  }
   h["tracking_from_full_model"] = s.trackingFromFull;
   h["unsupported_streak"] = s.unsupportedStreak;
   for (size_t i = 0; i < s.views.size(); ++i) {
@@ -864,6 +923,18 @@ ScanSession ScanSession::load(const std::filesystem::path& path, const RobotMode
     s.summary.frames_repaired = m.value("frames_repaired", 0);
     s.summary.tracking_s = m.value("tracking_s", 0.0);
     if (h.contains("tracking_correction")) s.correction = isoFrom(h.at("tracking_correction"));
+    s.filterStarted = h.contains("tracking_filter");
+    if (s.filterStarted) {
+      const Json& f = h.at("tracking_filter");
+      const auto x = f.at("x").get<std::vector<double>>();
+      const auto P = f.at("P").get<std::vector<double>>();
+      const auto fq = f.at("q").get<std::vector<double>>();
+      if (x.size() != 6 || P.size() != 36 || int(fq.size()) != s.model->variableCount())
+        throw Error("tracking_filter: wrong sizes");
+      s.filterX = Eigen::Map<const Eigen::Matrix<double, 6, 1>>(x.data());
+      s.filterP = Eigen::Map<const Eigen::Matrix<double, 6, 6>>(P.data());
+      s.filterQ = Eigen::Map<const Eigen::VectorXd>(fq.data(), Eigen::Index(fq.size()));
+    }
     s.summary.view_evaluations = m.at("view_evaluations").get<int>();
     s.summary.view_refinements = m.at("view_refinements").get<int>();
     s.summary.planning_s = m.at("planning_s").get<double>();

@@ -19,6 +19,9 @@ std::string TrackingOptions::validate() const {
   if (max_object_points < 0) return "max_object_points must be >= 0";
   if (!(prior >= 0 && prior < 1)) return "prior must be in [0, 1)";
   if (!(object_weight >= 0 && object_weight <= 1)) return "object_weight must be in [0, 1]";
+  if (!(drift_m >= 0 && drift_rad >= 0 && frame_drift_m > 0 && frame_drift_rad > 0))
+    return "drift_m and drift_rad must be >= 0, frame_drift_m and frame_drift_rad > 0";
+  if (!(pair_information > 0 && pair_information <= 1)) return "pair_information must be in (0, 1]";
   return {};
 }
 
@@ -184,6 +187,8 @@ TrackResult alignFrom(const DepthImage& depth, const CameraIntrinsics& K,
   r.inliers = last.pairs;
   r.see_through = last.seeThrough;
   r.rms_m = last.pairs > 0 ? std::sqrt(last.sq / last.pairs) : 0;
+  const double spread = std::max(r.rms_m, 0.5 * sigma);
+  r.information = last.A / (spread * spread);
   const double moved = ((D * T_C_palm).translation() - T_C_palm.translation()).norm();
   if (r.inliers < o.min_inliers)
     r.reason = "too few points to align (" + std::to_string(r.inliers) + ")";

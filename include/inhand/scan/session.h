@@ -169,6 +169,9 @@ class ScanSession {
   void emptyInsideRobot(const JointVector& q, const Iso3& T_O_B);
   // Tracking's object points from `current` (or a fresh planning model).
   void refreshTrackingModel(const ObjectModel* current = nullptr);
+  // TrackingOptions::filter: the frame's alignment `r` (taken with the robot at q, the palm
+  // predicted at T_C_palm) through the Kalman filter; r->correction becomes the filtered one.
+  void filterCorrection(const JointVector& q, const Iso3& T_C_palm, TrackResult* r);
   static bool modelPointsNeeded(const ScanOptions& o);  // tracking or the frame checks
 };
 

@@ -30,6 +30,17 @@ struct TrackingOptions {
   double object_weight = 0.3;  // the model's points against the hand's
   double hand_spacing_m = 0.004;  // spacing of the hand's surface samples, m
   int max_object_points = 3000;   // the object's observed surface, subsampled to this
+  // The frames' corrections filtered over time (a Kalman filter on the palm-frame correction, a
+  // random walk): each frame's alignment is a measurement with the information of its point
+  // pairs; the correction may change by drift_m/drift_rad per radian the arm's joints move and
+  // by frame_drift_m/frame_drift_rad per frame. false: each frame is fused with its own
+  // alignment.
+  bool filter = false;
+  double drift_m = 0.05, drift_rad = 0.05;                // per radian of joint motion
+  double frame_drift_m = 0.0001, frame_drift_rad = 5e-4;  // per frame
+  // The point pairs' information is scaled by this: their errors are not independent (the
+  // model's own error, projective association), a pair counts as this fraction of one.
+  double pair_information = 0.1;
   std::string validate() const;
 };
 
@@ -41,6 +52,10 @@ struct TrackResult {
   int see_through = 0;  // visible points the camera sees through (measured well behind them)
   int hand_inliers = 0, hand_see_through = 0;  // of those, the hand's
   double rms_m = 0;
+  // The information (inverse covariance) of the correction's parameters about the predicted palm,
+  // camera frame (rotation vector, then translation): the final pairs' normal equations over the
+  // residual's variance (max(rms, σ/2)²).
+  Eigen::Matrix<double, 6, 6> information = Eigen::Matrix<double, 6, 6>::Zero();
   std::string reason;  // why not ok
 };
 
