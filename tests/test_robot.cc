@@ -604,6 +604,22 @@ TEST(RobotConfig, ErrorsNameTheField) {
   expectError(c, "malformed URDF");
 }
 
+namespace {
+// Frame O: palm z (the approach) is +z; a table's face at z = 0.30 and a disc 15 mm thick, Ø 120
+// mm on it: the table, the disc, and both in one mesh.
+struct DiscOnTable {
+  TriangleMesh table, disc, both;
+};
+DiscOnTable discOnTable() {
+  DiscOnTable s;
+  s.table = transformed(makeBox(Vec3(0.8, 0.8, 0.05)), Iso3(Eigen::Translation3d(0, 0, 0.325)));
+  s.disc = transformed(makeCylinder(0.06, 0.015, 64), Iso3(Eigen::Translation3d(0, 0, 0.2925)));
+  s.both = s.table;
+  s.both.append(s.disc);
+  return s;
+}
+}  // namespace
+
 // A flat object on a table (a disc 15 mm thick, Ø 120 mm), the hand coming down on it with its
 // fingers spread wider than the disc (preshape 25 %, 35° of flexion): the fingertips meet the
 // table first; closing against object and table, they touch nothing of the disc; closeOffTheTable
@@ -611,13 +627,7 @@ TEST(RobotConfig, ErrorsNameTheField) {
 // the table.
 TEST(Hand, FingersStoppedByTheTableLiftTheHandUntilTheyGripAFlatObject) {
   const RobotModel& m = wam();
-  // Frame O: palm z (the approach) is +z; the table's face at z = 0.30, the disc on it.
-  const TriangleMesh table =
-      transformed(makeBox(Vec3(0.8, 0.8, 0.05)), Iso3(Eigen::Translation3d(0, 0, 0.325)));
-  const TriangleMesh disc =
-      transformed(makeCylinder(0.06, 0.015, 64), Iso3(Eigen::Translation3d(0, 0, 0.2925)));
-  TriangleMesh both = table;
-  both.append(disc);
+  const auto [table, disc, both] = discOnTable();
   const FingerCloser closeBoth(m, both), closeDisc(m, disc), closeTable(m, table);
   const JointVector q = m.preshapedHand(0.0, 0.25);
   const std::optional<double> travel =
@@ -647,12 +657,7 @@ TEST(Hand, FingersStoppedByTheTableLiftTheHandUntilTheyGripAFlatObject) {
 // preshapes and spreads.
 TEST(Hand, ClosingResumedFromASupersetsFreeStepsIsTheSame) {
   const RobotModel& m = wam();
-  const TriangleMesh table =
-      transformed(makeBox(Vec3(0.8, 0.8, 0.05)), Iso3(Eigen::Translation3d(0, 0, 0.325)));
-  const TriangleMesh disc =
-      transformed(makeCylinder(0.06, 0.015, 64), Iso3(Eigen::Translation3d(0, 0, 0.2925)));
-  TriangleMesh both = table;
-  both.append(disc);
+  const auto [table, disc, both] = discOnTable();
   const FingerCloser closeBoth(m, both), closeDisc(m, disc);
   int resumed = 0, contacts = 0;
   for (double spread : {0.0, 0.5, 1.0})
