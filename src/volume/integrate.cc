@@ -260,7 +260,11 @@ IntegrationStats integrate(const DepthImage& depth, const Iso3& T_O_C, const Cam
   const float k = float(volume->bandSigmas());
   const float bandMin = std::min(muFull, float(volume->voxelSize()));
   const bool useBand = k > 0;  // else every measurement's band is μ: no band image
-  std::vector<float> weight(sigma_m.size()), band(useBand ? sigma_m.size() : 0);
+  // Per-thread buffers of the image's size: only the rect's entries are written and read, so they
+  // are neither cleared nor allocated again frame after frame.
+  thread_local std::vector<float> weight, band;
+  if (weight.size() < sigma_m.size()) weight.resize(sigma_m.size());
+  if (useBand && band.size() < sigma_m.size()) band.resize(sigma_m.size());
   for (int v = rect.v0; v < rect.v1; ++v)
     for (int u = rect.u0; u < rect.u1; ++u) {
       const size_t i = size_t(v) * w + u;
@@ -268,7 +272,10 @@ IntegrationStats integrate(const DepthImage& depth, const Iso3& T_O_C, const Cam
       weight[i] = s > 0 ? 1.f / (s * s) : 0.f;
       if (useBand) band[i] = s > 0 ? std::clamp(k * s, bandMin, muFull) : muFull;
     }
+  // Pointers taken here, on this thread: inside the parallel loop `weight` and `band` would name
+  // the worker threads' own buffers.
   const float* B = band.data();
+  const float* Wt = weight.data();
   const DepthTiles tiles(depth, rect);
   const Iso3 T_C_O = T_O_C.inverse();
   const Mat3 R = T_C_O.linear();
@@ -327,8 +334,8 @@ IntegrationStats integrate(const DepthImage& depth, const Iso3& T_O_C, const Cam
           // One voxel from its depth Z and its projection (fu, fv) + 0.5.
           // Captured by value: the compiler keeps them in registers (through references it reloads
           // them after every store to the volume).
-          auto voxel = [D, B, useBand, W = weight.data(), carve, w, h, muFull, base, sumWD, sumW,
-                        state, &myVisited, &myUpdated](int x, float Z, float fu, float fv) {
+          auto voxel = [D, B, useBand, W = Wt, carve, w, h, muFull, base, sumWD, sumW, state,
+                        &myVisited, &myUpdated](int x, float Z, float fu, float fv) {
             if (Z <= 0.f) return;
             // Nearest pixel. Truncation equals floor for non-negative values, and is much cheaper
             // than std::floor without SSE4.1; negatives are rejected first.
