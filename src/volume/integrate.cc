@@ -45,7 +45,15 @@ std::vector<float> measurementSigma(const DepthImage& depth, const CameraIntrins
   std::vector<float> sigma(size_t(w) * h, 0.f);
   INHAND_CHECK(!carve_only || carve_only->size() == sigma.size(), "carve mask size != depth size");
   const PixelRect r = region ? *region : PixelRect{0, 0, w, h};
-  auto point = [&](int u, int v) { return Vec3(K.rayZ1(u, v) * double(depth.at(u, v))); };
+  // K.rayZ1's two quotients per column and row, computed once (the same values: a point is
+  // rayZ1(u, v) · D to the last bit).
+  std::vector<double> xs(static_cast<size_t>(w)), ys(static_cast<size_t>(h));
+  for (int u = 0; u < w; ++u) xs[size_t(u)] = (double(u) - K.cx) / K.fx;
+  for (int v = 0; v < h; ++v) ys[size_t(v)] = (double(v) - K.cy) / K.fy;
+  auto point = [&](int u, int v) {
+    const double D = double(depth.at(u, v));
+    return Vec3(xs[size_t(u)] * D, ys[size_t(v)] * D, 1.0 * D);
+  };
   // Below the grazing angle the incidence does not enter the noise model: no acos needed there.
   const double cosGrazing = std::cos(noise.grazing_start_deg * M_PI / 180.0);
   parallelFor(std::max(0, r.v0), std::min(h, r.v1), [&](int v) {
