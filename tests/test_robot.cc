@@ -685,3 +685,33 @@ TEST(Hand, ClosingResumedFromASupersetsFreeStepsIsTheSame) {
   EXPECT_GT(resumed, 20);
   EXPECT_GT(contacts, 20);
 }
+
+// distanceWithin against distance: the same value and nearest link wherever the hand is within
+// the limit, +infinity and no link beyond it; points around a half-closed hand, some inside it.
+TEST(Hand, DistanceWithinALimitMatchesTheFullDistance) {
+  const RobotModel& m = wam();
+  const Iso3 T_F_palm = lookAt(Vec3(0.1, -0.05, 0.2), Vec3::Zero());
+  const HandGeometry hand(m, m.preshapedHand(0.5, 0.5), T_F_palm);
+  const Aabb box = hand.mesh().bounds();
+  Rng rng = makeRng(17);
+  std::uniform_real_distribution<double> U(0, 1);
+  int within = 0, beyond = 0;
+  for (int i = 0; i < 20000; ++i) {
+    const Vec3 p = box.min - Vec3::Constant(0.01) +
+                   (box.size() + Vec3::Constant(0.02)).cwiseProduct(Vec3(U(rng), U(rng), U(rng)));
+    const double limit = i % 2 ? 0.003 : 0.01;
+    int linkAll = -2, linkNear = -2;
+    const double all = hand.distance(p, &linkAll), near = hand.distanceWithin(p, limit, &linkNear);
+    if (all <= limit) {
+      EXPECT_EQ(near, all) << p.transpose();
+      EXPECT_EQ(linkNear, linkAll);
+      ++within;
+    } else {
+      EXPECT_TRUE(std::isinf(near)) << p.transpose() << " " << all;
+      EXPECT_EQ(linkNear, -1);
+      ++beyond;
+    }
+  }
+  EXPECT_GT(within, 500);
+  EXPECT_GT(beyond, 5000);
+}

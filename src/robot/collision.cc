@@ -148,8 +148,31 @@ HandGeometry::HandGeometry(const RobotModel& model, const JointVector& q, const 
     T_F_link_.push_back(T_F_B * T[li]);
     T_link_F_.push_back(T_F_link_.back().inverse());
     std::vector<Iso3> geoms;
-    for (const Primitive& p : model.links()[li].collision) geoms.push_back(p.T_link_geom.inverse());
+    std::vector<Aabb> boxes;
+    for (const Primitive& p : model.links()[li].collision) {
+      geoms.push_back(p.T_link_geom.inverse());
+      // The primitive's box in its geometry frame, then its eight corners in F.
+      Aabb local;
+      if (p.type == Primitive::Type::kMesh) {
+        local = p.mesh->bounds();
+      } else {
+        const Vec3 half = p.type == Primitive::Type::kBox ? Vec3(0.5 * p.size)
+                          : p.type == Primitive::Type::kCylinder
+                              ? Vec3(p.size.x(), p.size.x(), 0.5 * p.size.z())
+                              : Vec3::Constant(p.size.x());
+        local.extend(-half);
+        local.extend(half);
+      }
+      const Iso3 T_F_geom = T_F_link_.back() * p.T_link_geom;
+      Aabb box;
+      for (int c = 0; c < 8; ++c)
+        box.extend(T_F_geom * Vec3((c & 1) ? local.max.x() : local.min.x(),
+                                   (c & 2) ? local.max.y() : local.min.y(),
+                                   (c & 4) ? local.max.z() : local.min.z()));
+      boxes.push_back(box);
+    }
     T_geom_link_.push_back(std::move(geoms));
+    boxes_F_.push_back(std::move(boxes));
   }
 }
 
@@ -207,33 +230,6 @@ double HandGeometry::distance(const Vec3& p_F, int* nearest) const {
 }
 
 double HandGeometry::distanceWithin(const Vec3& p_F, double limit, int* nearest) const {
-  if (boxes_F_.empty()) {
-    std::vector<std::vector<Aabb>> boxes(T_F_link_.size());
-    for (size_t k = 0; k < T_F_link_.size(); ++k)
-      for (const Primitive& p : model_->links()[model_->handLinks()[k]].collision) {
-        // The primitive's own box in its geometry frame (a mesh's in the link frame).
-        Aabb local;
-        Iso3 T_F_local = T_F_link_[k] * p.T_link_geom;
-        if (p.type == Primitive::Type::kMesh) {
-          local = p.toMesh().bounds();
-          T_F_local = T_F_link_[k];
-        } else {
-          const Vec3 half = p.type == Primitive::Type::kBox ? Vec3(0.5 * p.size)
-                            : p.type == Primitive::Type::kCylinder
-                                ? Vec3(p.size.x(), p.size.x(), 0.5 * p.size.z())
-                                : Vec3::Constant(p.size.x());
-          local.extend(-half);
-          local.extend(half);
-        }
-        Aabb box;
-        for (int c = 0; c < 8; ++c)
-          box.extend(T_F_local * Vec3((c & 1) ? local.max.x() : local.min.x(),
-                                      (c & 2) ? local.max.y() : local.min.y(),
-                                      (c & 4) ? local.max.z() : local.min.z()));
-        boxes[k].push_back(box);
-      }
-    boxes_F_ = std::move(boxes);
-  }
   double best = std::numeric_limits<double>::infinity();
   if (nearest) *nearest = -1;
   for (size_t k = 0; k < T_F_link_.size(); ++k) {

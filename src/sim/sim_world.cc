@@ -6,7 +6,6 @@
 
 #include "inhand/core/error.h"
 #include "inhand/core/random.h"
-#include "inhand/geometry/primitives.h"
 #include "inhand/robot/collision.h"
 #include "inhand/robot/wrench.h"
 

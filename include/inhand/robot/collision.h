@@ -59,8 +59,8 @@ class HandGeometry {
   // grasp search's innermost call).
   std::vector<Iso3> T_link_F_;
   std::vector<std::vector<Iso3>> T_geom_link_;
-  // Each primitive's bounding box in F (per link, per primitive), computed when first needed.
-  mutable std::vector<std::vector<Aabb>> boxes_F_;
+  // Each primitive's bounding box in F, per link and primitive (distanceWithin).
+  std::vector<std::vector<Aabb>> boxes_F_;
   double primitiveDistance(const Primitive& p, const Vec3& p_geom, const Vec3& p_link) const;
 };
 
