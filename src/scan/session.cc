@@ -930,7 +930,9 @@ ScanSession ScanSession::load(const std::filesystem::path& path, const RobotMode
       const auto P = f.at("P").get<std::vector<double>>();
       const auto fq = f.at("q").get<std::vector<double>>();
       if (x.size() != 6 || P.size() != 36 || int(fq.size()) != s.model->variableCount())
-        throw Error("tracking_filter: wrong sizes");
+        throw bad("tracking_filter: " + std::to_string(x.size()) + " values in x, " +
+                  std::to_string(P.size()) + " in P, " + std::to_string(fq.size()) +
+                  " joints (6, 36 and the robot's)");
       s.filterX = Eigen::Map<const Eigen::Matrix<double, 6, 1>>(x.data());
       s.filterP = Eigen::Map<const Eigen::Matrix<double, 6, 6>>(P.data());
       s.filterQ = Eigen::Map<const Eigen::VectorXd>(fq.data(), Eigen::Index(fq.size()));

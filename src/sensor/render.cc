@@ -169,19 +169,20 @@ DepthImage renderDepth(const RayScene& scene, const Iso3& T_S_C, const DepthCame
       0, n,
       [&](int i) { ok[i] = acceptHit(hits[i], rays[i], projector_S, camera, limits, &shadows[i]); },
       4096);
-  // Compact the shadow rays so packets stay full.
-  std::vector<int>& shadowIndex = scratch.shadowIndex;
-  shadowIndex.clear();
-  for (int i = 0; i < n; ++i)
-    if (ok[i]) shadowIndex.push_back(i);
-  std::vector<Ray>& compact = scratch.compact;
-  compact.resize(shadowIndex.size());
-  for (size_t k = 0; k < shadowIndex.size(); ++k) compact[k] = shadows[shadowIndex[k]];
-  std::vector<uint8_t>& compactBlocked = scratch.compactBlocked;
-  compactBlocked.assign(shadowIndex.size(), 0);
-  if (options.projector_shadows)
+  if (options.projector_shadows) {
+    // Compact the shadow rays so packets stay full.
+    std::vector<int>& shadowIndex = scratch.shadowIndex;
+    shadowIndex.clear();
+    for (int i = 0; i < n; ++i)
+      if (ok[i]) shadowIndex.push_back(i);
+    std::vector<Ray>& compact = scratch.compact;
+    compact.resize(shadowIndex.size());
+    for (size_t k = 0; k < shadowIndex.size(); ++k) compact[k] = shadows[shadowIndex[k]];
+    std::vector<uint8_t>& compactBlocked = scratch.compactBlocked;
+    compactBlocked.resize(shadowIndex.size());
     scene.occluded(compact.data(), compactBlocked.data(), compact.size());
-  for (size_t k = 0; k < shadowIndex.size(); ++k) blocked[shadowIndex[k]] = compactBlocked[k];
+    for (size_t k = 0; k < shadowIndex.size(); ++k) blocked[shadowIndex[k]] = compactBlocked[k];
+  }
 
   DepthImage out(w, h);
   if (geometry_out) geometry_out->assign(size_t(w) * h, -1);
