@@ -145,6 +145,9 @@ void visitConfig(V& v, ScanConfig& c) {
         t.num("frame_drift_rad", o.frame_drift_rad, "… and of its rotation, rad");
         t.num("pair_information", o.pair_information,
               "each aligned point pair counts as this fraction of an independent measurement");
+        t.boolean("in_hand", o.in_hand,
+                  "after each pick-up the object's pose in the hand from a frame (the model "
+                  "aligned with it); off: as the robot reports it");
       });
   v.object("checks", "in-hand frames that are not fused (docs/reliability.md)", [&](V& k) {
     FrameChecks& o = s.checks;
@@ -223,6 +226,9 @@ void visitConfig(V& v, ScanConfig& c) {
     o.num("hold_min_epsilon", c.sim.hold_min_epsilon, "ε a grasp needs to hold");
     o.num("arm_error_m", c.sim.arm_error_m,
           "joint offsets putting the palm this far from the reported joints' FK at home, m");
+    o.boolean("grasp_error", c.sim.grasp_error,
+              "the arm's error also at pick-ups: the object sits in the hand off where the "
+              "reported joints say");
     o.choice("pick_up", c.sim.pick_up_first_contact, kPickUps,
              "the simulated pick-up: palm backed off, or a guarded move to first contact");
     o.object("faults", "faults injected (all off by default; docs/reliability.md)", [&](V& f) {

@@ -161,6 +161,28 @@ PickOutcome pickAndVerify(ScanSession& session, RobotInterface& robot, DepthSens
       const std::vector<uint8_t> mask =
           robotPixelMask(d, tracked ? *tracked : *aim, robot.joints(), scenes, sensor.camera(),
                          noise, options.t_hand_m, options.carve_radius_px, /*with_table=*/false);
+      if (tracked && options.tracking.enabled && options.tracking.in_hand) {
+        // Where the object sits in the hand: the arm's error where it grasped moved it from
+        // where the joints say.
+        TrackResult reg;
+        const JointVector q = robot.joints();
+        if (const std::optional<Iso3> T =
+                session.registerHeldObject(d, mask, q, *tracked, *achieved, &reg)) {
+          char line[160];
+          std::snprintf(line, sizeof line,
+                        "the object in the hand: %.1f mm from where the joints put it (%d points, "
+                        "rms %.2f mm)",
+                        1000 * (T->translation() - achieved->translation()).norm(), reg.inliers,
+                        1000 * reg.rms_m);
+          log(line);
+          achieved = *T;
+          const Iso3 T_B_O = m.tipPose(q) * achieved->inverse();
+          for (size_t k = 0; k < points_O.size(); ++k) held_B[k] = T_B_O * points_O[k];
+        } else {
+          log("the object in the hand: not registered (" + reg.reason +
+              "); where the joints put it");
+        }
+      }
       if (tracked) inHand = depthSupport(d, *tracked, K, mask, held_B);
       onTable = depthSupport(d, *aim, K, mask, rest_B_points);
     }

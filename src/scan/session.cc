@@ -510,6 +510,50 @@ std::optional<Iso3> ScanSession::trackedCameraPose(const DepthImage& depth, cons
   return T_B_C * r.correction.inverse();
 }
 
+std::optional<Iso3> ScanSession::registerHeldObject(const DepthImage& depth,
+                                                    const std::vector<uint8_t>& robot_mask,
+                                                    const JointVector& q, const Iso3& T_B_C,
+                                                    const Iso3& T_O_palm, TrackResult* result) {
+  State& s = *s_;
+  checkJoints(*s.model, q, "registerHeldObject");
+  if (robot_mask.size() != depth.depth_m.size())
+    throw Error("registerHeldObject: the robot mask does not match the image");
+  const auto t0 = Clock::now();
+  const ObjectModel m = planningModel();
+  // The observed triangles' centroids and normals (about max(2000, max_object_points)), the
+  // whole model's vertices as occluders; all in the object frame.
+  std::vector<size_t> observed;
+  for (size_t t = 0; t < m.mesh.triangles.size(); ++t) {
+    const Tri& f = m.mesh.triangles[t];
+    if (m.observed[size_t(f[0])] && m.observed[size_t(f[1])] && m.observed[size_t(f[2])])
+      observed.push_back(t);
+  }
+  const int budget = std::max(2000, s.options.tracking.max_object_points);
+  const size_t step = std::max<size_t>(1, observed.size() / size_t(budget) + 1);
+  std::vector<SurfacePoint> points;
+  for (size_t k = 0; k < observed.size(); k += step) {
+    const Tri& f = m.mesh.triangles[observed[k]];
+    const Vec3 a = m.mesh.vertices[size_t(f[0])].cast<double>();
+    const Vec3 b = m.mesh.vertices[size_t(f[1])].cast<double>();
+    const Vec3 c = m.mesh.vertices[size_t(f[2])].cast<double>();
+    const Vec3 n = (b - a).cross(c - a);
+    if (n.norm() > 1e-12) points.push_back({(a + b + c) / 3, n.normalized()});
+  }
+  std::vector<Vec3> occluders;
+  const size_t every = std::max<size_t>(1, m.mesh.vertices.size() / 6000 + 1);
+  for (size_t k = 0; k < m.mesh.vertices.size(); k += every)
+    occluders.push_back(m.mesh.vertices[k].cast<double>());
+  const Iso3 T_C_palm = T_B_C.inverse() * s.model->tipPose(q);
+  const Iso3 T_C_O = T_C_palm * T_O_palm.inverse();
+  const TrackResult r =
+      alignBodyToDepth(depth, robot_mask, s.camera.intrinsics, points, occluders, T_C_O,
+                       axialSigma(s.noise, T_C_O.translation().z(), 0), s.options.tracking);
+  s.summary.tracking_s += secondsSince(t0);
+  if (result) *result = r;
+  if (!r.ok) return std::nullopt;
+  return (r.correction * T_C_O).inverse() * T_C_palm;
+}
+
 void ScanSession::filterCorrection(const JointVector& q, const Iso3& T_C_palm, TrackResult* r) {
   State& s = *s_;
   const TrackingOptions& o = s.options.tracking;

@@ -1,5 +1,6 @@
 #include "inhand/scan/tracking.h"
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 
@@ -63,6 +64,55 @@ struct Pairs {
   double sq = 0;
 };
 
+// Where the body may be seen in the frame (its depths and the pixels something else hides) and
+// each pixel's distance to the nearest such pixel (pixels; chamfer 1/√2): a point of the body
+// that projects outside it lies past the body's true outline and is pulled back across it.
+struct Silhouette {
+  int width = 0, height = 0;
+  std::vector<float> dist;
+  float at(int u, int v) const {
+    u = std::clamp(u, 0, width - 1);
+    v = std::clamp(v, 0, height - 1);
+    return dist[size_t(v) * width + u];
+  }
+};
+
+Silhouette silhouette(const DepthImage& depth, const std::vector<uint8_t>& hidden, double near,
+                      double far) {
+  Silhouette s;
+  s.width = depth.width;
+  s.height = depth.height;
+  const float inf = 1e9f;
+  s.dist.assign(depth.depth_m.size(), inf);
+  for (size_t i = 0; i < depth.depth_m.size(); ++i) {
+    const float z = depth.depth_m[i];
+    if ((!hidden.empty() && hidden[i]) || (z >= near && z <= far)) s.dist[i] = 0;
+  }
+  const float d1 = 1.0f, d2 = 1.41421356f;
+  const int w = s.width, h = s.height;
+  for (int v = 0; v < h; ++v)
+    for (int u = 0; u < w; ++u) {
+      float& d = s.dist[size_t(v) * w + u];
+      if (u > 0) d = std::min(d, s.dist[size_t(v) * w + u - 1] + d1);
+      if (v > 0) {
+        d = std::min(d, s.dist[size_t(v - 1) * w + u] + d1);
+        if (u > 0) d = std::min(d, s.dist[size_t(v - 1) * w + u - 1] + d2);
+        if (u + 1 < w) d = std::min(d, s.dist[size_t(v - 1) * w + u + 1] + d2);
+      }
+    }
+  for (int v = h - 1; v >= 0; --v)
+    for (int u = w - 1; u >= 0; --u) {
+      float& d = s.dist[size_t(v) * w + u];
+      if (u + 1 < w) d = std::min(d, s.dist[size_t(v) * w + u + 1] + d1);
+      if (v + 1 < h) {
+        d = std::min(d, s.dist[size_t(v + 1) * w + u] + d1);
+        if (u + 1 < w) d = std::min(d, s.dist[size_t(v + 1) * w + u + 1] + d2);
+        if (u > 0) d = std::min(d, s.dist[size_t(v + 1) * w + u - 1] + d2);
+      }
+    }
+  return s;
+}
+
 // The pairs of the points visible at T (palm to camera) within `gate` in depth, and the normal
 // equations of n·(y − x) = (x × n)·ω + n·t (Huber-weighted at half the final gate).
 // Which points are in front of the model's other points (and the occluders) at T.
@@ -83,7 +133,8 @@ std::vector<int> visiblePoints(const CameraIntrinsics& K, const std::vector<Surf
 // The pairs of the `visible` points at T within `gate` in depth (both cores).
 Pairs pairUp(const DepthImage& depth, const CameraIntrinsics& K,
              const std::vector<SurfacePoint>& points, const std::vector<int>& visible,
-             const Iso3& T, double gate, double huber, size_t handCount, double objectWeight) {
+             const Iso3& T, double gate, double huber, size_t handCount, double objectWeight,
+             const Silhouette* outline = nullptr) {
   const Vec3 c = T.translation();  // rotations about the palm: x' = x + ω × (x − c) + t
   const int chunks = 8;
   std::vector<Pairs> part(chunks);
@@ -102,6 +153,30 @@ Pairs pairUp(const DepthImage& depth, const CameraIntrinsics& K,
       const int u = int(std::lround(uv.x())), v = int(std::lround(uv.y()));
       if (u < 0 || v < 0 || u >= depth.width || v >= depth.height) continue;
       const float z = depth.depth_m[size_t(v) * depth.width + u];
+      if (outline) {
+        // Outside the outline: the distance to it (in metres at the point's depth), pulled
+        // along the distance's gradient in the image.
+        const float d = outline->at(u, v);
+        if (d > 0.5f) {
+          const double gu = 0.5 * (outline->at(u + 1, v) - outline->at(u - 1, v));
+          const double gv = 0.5 * (outline->at(u, v + 1) - outline->at(u, v - 1));
+          const double scale = x.z() / K.fx;  // metres per pixel
+          Eigen::Matrix<double, 1, 3> dd;     // ∂d/∂x (pixels per metre)
+          dd << gu * K.fx / x.z(), gv * K.fy / x.z(),
+              -(gu * K.fx * x.x() + gv * K.fy * x.y()) / (x.z() * x.z());
+          Eigen::Matrix<double, 3, 6> dx;  // x' = x + ω × (x − c) + t
+          const Vec3 r = x - c;
+          dx.leftCols<3>() << 0, r.z(), -r.y(), -r.z(), 0, r.x(), r.y(), -r.x(), 0;
+          dx.rightCols<3>().setIdentity();
+          const Eigen::Matrix<double, 6, 1> J = scale * (dd * dx).transpose();
+          const double e = -scale * d;
+          const double w = std::abs(e) < huber ? 1.0 : huber / std::abs(e);
+          P.A += w * J * J.transpose();
+          P.b += w * J * e;
+          ++P.seeThrough;
+          continue;
+        }
+      }
       if (!(z > 0)) continue;
       if (double(z) > x.z() + 0.015) {
         ++P.seeThrough;
@@ -138,7 +213,8 @@ Pairs pairUp(const DepthImage& depth, const CameraIntrinsics& K,
 TrackResult alignFrom(const DepthImage& depth, const CameraIntrinsics& K,
                       const std::vector<SurfacePoint>& points, size_t handCount,
                       const std::vector<Vec3>& occluders, const Iso3& T_C_palm, const Iso3& initial,
-                      int iterations, double sigma, const TrackingOptions& o) {
+                      int iterations, double sigma, const TrackingOptions& o,
+                      const Silhouette* outline = nullptr) {
   TrackResult r;
   Iso3 D = initial;
   const double shrink = std::pow(o.final_gate_m / o.gate_m, 1.0 / std::max(1, o.iterations - 1));
@@ -158,7 +234,7 @@ TrackResult alignFrom(const DepthImage& depth, const CameraIntrinsics& K,
     // Visibility changes little between iterations: every 8th.
     if (it % 8 == 0) visible = visiblePoints(K, points, occluders, T);
     Pairs P = pairUp(depth, K, points, visible, T, gate, 0.5 * o.final_gate_m, handCount,
-                     o.object_weight);
+                     o.object_weight, outline);
     if (P.pairs < 6) break;
     // A weak prior towards the reported pose: directions the points do not constrain (a flat
     // face seen head-on slides freely) stay where the robot says, the others follow the data
@@ -226,6 +302,28 @@ TrackResult alignToDepth(const DepthImage& depth, const CameraIntrinsics& K,
       first = false;
     }
   return best;
+}
+
+TrackResult alignBodyToDepth(const DepthImage& depth, const std::vector<uint8_t>& hidden,
+                             const CameraIntrinsics& K, const std::vector<SurfacePoint>& points_X,
+                             const std::vector<Vec3>& occluders_X, const Iso3& T_C_X,
+                             double sigma_m, const TrackingOptions& options) {
+  TrackingOptions o = options;
+  o.object_weight = 1;      // no hand: the body's points alone
+  DepthImage body = depth;  // hidden pixels pair with nothing
+  if (!hidden.empty())
+    for (size_t i = 0; i < hidden.size() && i < body.depth_m.size(); ++i)
+      if (hidden[i]) body.depth_m[i] = 0;
+  // The outline: pixels within 5 cm of the body's depths as given, and the hidden ones.
+  double near = std::numeric_limits<double>::infinity(), far = 0;
+  for (const SurfacePoint& sp : points_X) {
+    const double z = (T_C_X * sp.p).z();
+    near = std::min(near, z);
+    far = std::max(far, z);
+  }
+  const Silhouette outline = silhouette(depth, hidden, near - 0.05, far + 0.05);
+  return alignFrom(body, K, points_X, 0, occluders_X, T_C_X, Iso3::Identity(), o.iterations,
+                   sigma_m, o, &outline);
 }
 
 }  // namespace inhand

@@ -123,8 +123,19 @@ std::optional<Iso3> SimRobot::pickUp(const Iso3& T_O_palm, const JointVector& q)
   return T;
 }
 
-std::optional<Iso3> SimRobot::grasp(const Iso3& T_O_palm, const JointVector& q) {
+std::optional<Iso3> SimRobot::grasp(const Iso3& T_O_palm_planned, const JointVector& q) {
   const RobotModel& m = world_->model();
+  // The arm's error at the pick configuration: the palm reaches delta (palm frame) from where the
+  // plan put it, while the encoders report the plan. The hand moves and closes from there; the
+  // robot reports the grasp as its joints see it: the plan moved as the palm moved relative to
+  // its start.
+  const Iso3 delta = m.tipPose(q).inverse() * m.tipPose(q + world_->jointError);
+  const bool exact = !world_->options().grasp_error || world_->jointError.isZero(0);
+  const Iso3 T_O_palm = exact ? T_O_palm_planned : T_O_palm_planned * delta;
+  auto reported = [&](const Iso3& T_true) -> Iso3 {
+    if (exact) return T_true;
+    return T_O_palm_planned * (T_O_palm.inverse() * T_true);
+  };
   const JointVector open = q;  // the preshape the hand comes in with
   if (world_->options().pick_up_first_contact) {
     // A guarded move along the planned palm axis, from 25 cm short of the planned pose (more
@@ -144,9 +155,8 @@ std::optional<Iso3> SimRobot::grasp(const Iso3& T_O_palm, const JointVector& q) 
     auto [closed, Tc] = closeOffTheTable(closer, objectOnly, open, T, 0.005, 0.03, 0.02);
     world_->T_O_palm = Tc;
     world_->q = closed.q;
-    T = Tc;
     world_->held = true;
-    return T;
+    return reported(Tc);
   }
   Iso3 T = T_O_palm;
   const Vec3 back = -T_O_palm.linear().col(2);  // palm z points into the object
@@ -168,7 +178,7 @@ std::optional<Iso3> SimRobot::grasp(const Iso3& T_O_palm, const JointVector& q) 
   world_->T_O_palm = T;
   world_->q = closeFingers(m, open, T, world_->objectMesh()).q;
   world_->held = true;
-  return T;
+  return reported(T);
 }
 
 DepthImage SimWorld::render() {

@@ -23,8 +23,10 @@ class RobotInterface {
   // Re-grasping (§IV). putDown: returns the held object to its resting pose on the table and
   // lets go. pickUp: grasps it there, aiming for the palm at T_O_palm with the joints q (the arm
   // at the pick configuration, fingers closed to contact), and holds it; returns the grasp as
-  // achieved (palm pose in the object frame: a real driver would measure it, e.g. by registering
-  // a depth frame to the model), or nullopt. A driver that cannot re-grasp returns false /
+  // achieved (palm pose in the object frame, as the arm's joints imply it), or nullopt. With
+  // TrackingOptions::in_hand the scan then registers the object's model to the frame after the
+  // lift (ScanSession::registerHeldObject): an arm that misses its target by centimetres grasps
+  // the object that far from where its joints say. A driver that cannot re-grasp returns false /
   // nullopt (the scan then ends after its first grasp).
   virtual bool putDown() { return false; }
   virtual std::optional<Iso3> pickUp(const Iso3& /*T_O_palm*/, const JointVector& /*q*/) {

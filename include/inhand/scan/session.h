@@ -112,6 +112,16 @@ class ScanSession {
   std::optional<Iso3> trackedCameraPose(const DepthImage& depth, const JointVector& q,
                                         const Iso3& T_B_C, const Iso3& T_O_palm,
                                         TrackResult* result = nullptr);
+  // The object's pose in the hand after a pick-up, from a frame of it held: the arm's error
+  // where it grasped can put the object centimetres from where the reported joints say. The
+  // model so far (its observed surface) is aligned with the frame (alignBodyToDepth; the robot's
+  // pixels, `robot_mask`, may hide it), starting from the grasp as reported (`T_O_palm`), the
+  // camera at T_B_C relative to the palm at q (as tracked). Returns the grasp that aligns it, or
+  // nullopt when the alignment fails its checks (`result->reason`).
+  std::optional<Iso3> registerHeldObject(const DepthImage& depth,
+                                         const std::vector<uint8_t>& robot_mask,
+                                         const JointVector& q, const Iso3& T_B_C,
+                                         const Iso3& T_O_palm, TrackResult* result = nullptr);
 
   // A depth frame of the object lying at T_B_O (not in the hand, e.g. on the table): the robot's
   // pixels and those set in `carve` (same size as the image; may be null) only carve. With

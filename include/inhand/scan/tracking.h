@@ -41,6 +41,10 @@ struct TrackingOptions {
   // The point pairs' information is scaled by this: their errors are not independent (the
   // model's own error, projective association), a pair counts as this fraction of one.
   double pair_information = 0.1;
+  // After each pick-up, the object's pose in the hand from the first frame of it held
+  // (ScanSession::registerHeldObject): the model so far aligned with the frame; false: the grasp
+  // as the robot reports it.
+  bool in_hand = false;
   std::string validate() const;
 };
 
@@ -75,5 +79,19 @@ TrackResult alignToDepth(const DepthImage& depth, const CameraIntrinsics& K,
                          const std::vector<Vec3>& occluders_palm, const Iso3& T_C_palm,
                          const std::vector<Iso3>& starts, double sigma_m,
                          const TrackingOptions& options);
+
+// Aligns a rigid body's surface points (`points_X`, with outward normals, in its frame X) with
+// the depth frame, from X at T_C_X: the object's model with its pose in the hand unknown after a
+// pick-up. `hidden` (empty, or one per pixel): pixels of something in front that may hide the
+// body (the robot's); they pair with nothing. Point-to-plane pairs as alignToDepth (same gates
+// and checks, every point weighted alike), and an outline term: projective association alone
+// slides a body sideways slowly and stops where a face seen head-on fits (anywhere in its own
+// plane), so a point that projects where the frame shows neither the body (depths within 5 cm
+// of its own) nor a hidden pixel is pulled by its image distance to the nearest one. The
+// correction: T_C_X = correction · T_C_X(given).
+TrackResult alignBodyToDepth(const DepthImage& depth, const std::vector<uint8_t>& hidden,
+                             const CameraIntrinsics& K, const std::vector<SurfacePoint>& points_X,
+                             const std::vector<Vec3>& occluders_X, const Iso3& T_C_X,
+                             double sigma_m, const TrackingOptions& options);
 
 }  // namespace inhand

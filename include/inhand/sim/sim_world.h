@@ -67,6 +67,10 @@ struct SimOptions {
   // where forward kinematics of the reported joints puts it. The world (the rendered robot, the
   // held object) moves with the true joints; the robot reports the others. 0: an exact arm.
   double arm_error_m = 0.0;
+  // The arm's error also at the pick-up: the palm comes in from where the true joints put it, so
+  // the object sits in the hand off where the reported joints say (a real arm's case). false: the
+  // hand grasps the object exactly as planned (the error shows only while it is held).
+  bool grasp_error = false;
   SimFaults faults;
   std::string validate() const;
 };
@@ -140,7 +144,10 @@ class SimRobot : public RobotInterface {
   // Without, the palm is backed off (2 mm steps, up to 5 cm) until it is clear of the true
   // object. The guarded move and the fingers stop at the table too. Then the fingers close on
   // the true object from the preshape in q (its finger values; an open hand when they are open),
-  // and SimOptions::check_hold decides whether the grasp holds.
+  // and SimOptions::check_hold decides whether the grasp holds. With SimOptions::grasp_error
+  // the palm starts from where the true joints put it, off the plan, and the grasp returned is
+  // what the reported joints say (the plan, moved as the palm moved): the object sits in the
+  // hand that far from where the robot believes.
   std::optional<Iso3> pickUp(const Iso3& T_O_palm, const JointVector& q) override;
 
  private:
