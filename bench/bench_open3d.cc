@@ -8,7 +8,8 @@
 // 0.34 m cube, and a tight cube around the object (its largest side + 2 cm). For each, every
 // frame is integrated in turn into a fresh volume, three rounds; printed: milliseconds per frame
 // (median round) for Open3D's Integrate, inhand's integrate with σ per pixel computed as in
-// `inhand fuse` (the whole fusion of a frame), and inhand's integrate alone (σ precomputed).
+// `inhand fuse` and a scan (the whole fusion of a frame: σ only for the pixels the volume's
+// voxels can project to), and inhand's integrate alone (σ precomputed).
 // Open3D's voxels hold a truncated distance and a weight; inhand's Σw·d, Σw and a state
 // (unknown / empty / observed) and weights 1/σ², so the work per voxel is alike.
 #include <open3d/Open3D.h>
@@ -75,8 +76,10 @@ Row compare(const std::vector<Frame>& frames, const DepthCameraOptions& cam,
 
     TsdfVolume a(box, vo);
     t = Clock::now();
-    for (const Frame& f : frames)
-      integrate(f.depth, f.T_O_C, K, measurementSigma(f.depth, K, noise), &a);
+    for (const Frame& f : frames) {
+      const PixelRect rect = volumeImageRect(a, f.T_O_C, K);  // as a scan and `inhand fuse` do
+      integrate(f.depth, f.T_O_C, K, measurementSigma(f.depth, K, noise, &rect), &a);
+    }
     fuse.push_back(msSince(t) / double(frames.size()));
 
     TsdfVolume b(box, vo);

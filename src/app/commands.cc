@@ -359,7 +359,9 @@ int runFuse(const FuseArgs& args) {
   for (size_t i = 0; i < set.frames.size(); ++i) {
     DepthImage depth = loadFrameDepth(dir, set, i);
     auto ti = Clock::now();
-    std::vector<float> sigma = measurementSigma(depth, set.intrinsics, noise);
+    // σ only where the volume's voxels can project (integrate reads no other pixel).
+    const PixelRect rect = volumeImageRect(volume, set.frames[i].T_O_C, set.intrinsics);
+    std::vector<float> sigma = measurementSigma(depth, set.intrinsics, noise, &rect);
     updated += integrate(depth, set.frames[i].T_O_C, set.intrinsics, sigma, &volume).updated;
     integrateS += secondsSince(ti);
     progress("fuse: frames", i + 1, set.frames.size());
