@@ -1,6 +1,8 @@
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <fstream>
+#include <random>
 
 #include "inhand/core/error.h"
 #include "inhand/core/file_util.h"
@@ -714,4 +716,52 @@ TEST(Hand, DistanceWithinALimitMatchesTheFullDistance) {
   }
   EXPECT_GT(within, 500);
   EXPECT_GT(beyond, 5000);
+}
+
+// The arm's joint offsets recovered from the palm's error at one configuration carry that error
+// to a configuration nearby (the pick-up after the lift, tracking.in_hand): 200 draws of offsets
+// that put the palm 1-3 cm off, a random configuration and one up to 0.3 rad away per joint. The
+// offsets reproduce the error they were solved from, and predict the other better than taking
+// the error to be the same there.
+TEST(Robot, ArmOffsetsFromThePalmsErrorCarryItToANearbyConfiguration) {
+  const RobotModel& m = wam();
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> U(-1, 1);
+  std::vector<double> same, carried;
+  for (int draw = 0; draw < 200; ++draw) {
+    JointVector q1 = m.home(), e = JointVector::Zero(m.variableCount());
+    for (int v : m.armVariables()) {
+      const JointInfo& j = m.variable(v);
+      q1[v] = 0.5 * (j.lower + j.upper) + 0.4 * U(rng) * (j.upper - j.lower);
+      e[v] = U(rng);
+    }
+    // Scaled so that the palm is 1-3 cm off at q1.
+    const double want = 0.02 + 0.01 * U(rng);
+    double s = 0.01;
+    for (int it = 0; it < 20; ++it) {
+      const double d = (m.tipPose(q1 + s * e).translation() - m.tipPose(q1).translation()).norm();
+      if (d <= 0) break;
+      s *= want / d;
+    }
+    e *= s;
+    JointVector q2 = q1;
+    for (int v : m.armVariables()) q2[v] += 0.3 * U(rng);
+    const Iso3 error1 = m.tipPose(q1).inverse() * m.tipPose(q1 + e);
+    const Iso3 error2 = m.tipPose(q2).inverse() * m.tipPose(q2 + e);
+    const JointVector found = armOffsetsFromPalmError(m, q1, error1);
+    const Iso3 back = m.tipPose(q1).inverse() * m.tipPose(q1 + found);
+    // Within the damping's pull towards zero (far below tracking's own error).
+    EXPECT_LT((back.translation() - error1.translation()).norm(), 3e-4);
+    EXPECT_LT(Eigen::AngleAxisd(back.linear().transpose() * error1.linear()).angle(), 1e-3);
+    const Iso3 predicted = m.tipPose(q2).inverse() * m.tipPose(q2 + found);
+    same.push_back((error1.translation() - error2.translation()).norm());
+    carried.push_back((predicted.translation() - error2.translation()).norm());
+  }
+  std::sort(same.begin(), same.end());
+  std::sort(carried.begin(), carried.end());
+  std::printf(
+      "palm error at the second configuration: median %.2f mm off taken the same, %.2f mm "
+      "carried by the offsets (90th percentile %.2f / %.2f mm)\n",
+      1000 * same[100], 1000 * carried[100], 1000 * same[180], 1000 * carried[180]);
+  EXPECT_LT(carried[100], 0.5 * same[100]);
 }

@@ -658,4 +658,35 @@ double trajectoryTime(const RobotModel& model, const Eigen::VectorXd& a, const E
   return ((b - a).cwiseAbs().array() / v.array()).maxCoeff();
 }
 
+JointVector armOffsetsFromPalmError(const RobotModel& model, const JointVector& q,
+                                    const Iso3& palmError) {
+  using Vec6 = Eigen::Matrix<double, 6, 1>;
+  auto twist = [](const Iso3& T) {  // rotation vector, translation
+    const Eigen::AngleAxisd aa(T.linear());
+    Vec6 x;
+    x.head<3>() = aa.angle() * aa.axis();
+    x.tail<3>() = T.translation();
+    return x;
+  };
+  const std::vector<int>& arm = model.armVariables();
+  const Eigen::Index n = Eigen::Index(arm.size());
+  JointVector e = JointVector::Zero(q.size());
+  const Iso3 target = model.tipPose(q) * palmError;
+  for (int it = 0; it < 5; ++it) {
+    const Iso3 T = model.tipPose(q + e);
+    const Vec6 r = twist(T.inverse() * target);
+    if (r.norm() < 1e-12) break;
+    Eigen::MatrixXd J(6, n);
+    for (Eigen::Index k = 0; k < n; ++k) {
+      JointVector d = q + e;
+      d[arm[size_t(k)]] += 1e-6;
+      J.col(k) = twist(T.inverse() * model.tipPose(d)) / 1e-6;
+    }
+    const Eigen::MatrixXd A = J.transpose() * J + 1e-4 * Eigen::MatrixXd::Identity(n, n);
+    const Eigen::VectorXd step = A.ldlt().solve(J.transpose() * r);
+    for (Eigen::Index k = 0; k < n; ++k) e[arm[size_t(k)]] += step[k];
+  }
+  return e;
+}
+
 }  // namespace inhand

@@ -163,25 +163,34 @@ PickOutcome pickAndVerify(ScanSession& session, RobotInterface& robot, DepthSens
                          noise, options.t_hand_m, options.carve_radius_px, /*with_table=*/false);
       if (tracked && options.tracking.enabled && options.tracking.in_hand) {
         // Where the object sits in the hand: the arm's error where it grasped moved it from
-        // where the joints say.
-        TrackResult reg;
+        // where the joints say. The palm's error that tracking sees in the lift's frame, as
+        // joint offsets (armOffsetsFromPalmError), gives the palm's error at the pick (the palm
+        // was that far off when it met the object, which has not moved since); then the model
+        // is registered with the frame from there.
         const JointVector q = robot.joints();
+        const Iso3 T_C_reported = aim->inverse() * m.tipPose(q);
+        const Iso3 palmError = T_C_reported.inverse() * (tracked->inverse() * m.tipPose(q));
+        // The joint offsets that explain it, then the palm's error they give at the pick.
+        const JointVector e = armOffsetsFromPalmError(m, q, palmError);
+        const Iso3 pickError = m.tipPose(c.q_open).inverse() * m.tipPose(c.q_open + e);
+        // achieved = planned · motion (the guarded move, in the palm frame): the error enters
+        // before it.
+        const Iso3 carried = c.T_O_palm * pickError * (c.T_O_palm.inverse() * *achieved);
+        Iso3 grasp = carried;
+        TrackResult reg;
         if (const std::optional<Iso3> T =
-                session.registerHeldObject(d, mask, q, *tracked, *achieved, &reg)) {
-          char line[160];
-          std::snprintf(line, sizeof line,
-                        "the object in the hand: %.1f mm from where the joints put it (%d points, "
-                        "rms %.2f mm)",
-                        1000 * (T->translation() - achieved->translation()).norm(), reg.inliers,
-                        1000 * reg.rms_m);
-          log(line);
-          achieved = *T;
-          const Iso3 T_B_O = m.tipPose(q) * achieved->inverse();
-          for (size_t k = 0; k < points_O.size(); ++k) held_B[k] = T_B_O * points_O[k];
-        } else {
-          log("the object in the hand: not registered (" + reg.reason +
-              "); where the joints put it");
-        }
+                session.registerHeldObject(d, mask, q, *tracked, carried, &reg))
+          grasp = *T;
+        char line[160];
+        std::snprintf(line, sizeof line,
+                      "the object in the hand: %.1f mm from where the joints put it by the arm's "
+                      "error, %.1f mm more by the model ",
+                      1000 * (carried.translation() - achieved->translation()).norm(),
+                      1000 * (grasp.translation() - carried.translation()).norm());
+        log(line + (reg.ok ? std::string("(registered)") : "(not registered: " + reg.reason + ")"));
+        achieved = grasp;
+        const Iso3 T_B_O = m.tipPose(q) * achieved->inverse();
+        for (size_t k = 0; k < points_O.size(); ++k) held_B[k] = T_B_O * points_O[k];
       }
       if (tracked) inHand = depthSupport(d, *tracked, K, mask, held_B);
       onTable = depthSupport(d, *aim, K, mask, rest_B_points);

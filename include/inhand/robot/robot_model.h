@@ -156,4 +156,12 @@ class RobotModel {
 double trajectoryTime(const RobotModel& model, const Eigen::VectorXd& armA,
                       const Eigen::VectorXd& armB);
 
+// The arm's joint offsets e (arm variables; the arm truly at q + e while it reports q) that put
+// the palm where it was seen at q: tipPose(q + e) = tipPose(q) · palmError. Damped Gauss-Newton
+// from zero (five steps, numerical Jacobian): of the offsets that explain the six numbers (a
+// seven-joint arm has one more), the smallest. With them the palm's error at another
+// configuration q2 is tipPose(q2)⁻¹ · tipPose(q2 + e).
+JointVector armOffsetsFromPalmError(const RobotModel& model, const JointVector& q,
+                                    const Iso3& palmError);
+
 }  // namespace inhand
