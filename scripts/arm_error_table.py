@@ -130,9 +130,11 @@ def main(out, docs):
                   "the true joints put it, so the object sits in the hand off where the reported joints "
                   "say (a real arm's case; off in the table above: there the hand grasps as planned and "
                   "the error shows only while the object is held). Tracking on; the object's pose in the "
-                  "hand as the joints report it, or registered from the frame after each lift "
-                  "(`\"tracking\": {\"in_hand\": true}`: the model so far aligned with the frame, "
-                  "point-to-plane pairs and the object's outline). Object pose error: how far each fused "
+                  "hand as the joints report it, or estimated from the frame after each lift "
+                  "(`\"tracking\": {\"in_hand\": true}`: the palm's error tracking sees there, as "
+                  "joint offsets, carried to the pick configuration, then the model so far aligned "
+                  "with the frame by point-to-plane pairs and the object's outline). Object pose "
+                  "error: how far each fused "
                   "frame's pose puts the object's centre from the truth (median per run, then the mean).",
                   "",
                   "| arm error | object's pose in the hand | runs | accuracy mean (mm) | accuracy p95 (mm) | "
@@ -148,7 +150,7 @@ def main(out, docs):
                     f"{100 * mean([r['coverage'] for r in rs if r['object'] == o]):.0f} %"
                     for o in sorted({r["object"] for r in rs}))
                 glines.append(
-                    f"| {e:g} cm | {'registered' if t else 'as reported'} | {len(rs)} | "
+                    f"| {e:g} cm | {'estimated' if t else 'as reported'} | {len(rs)} | "
                     f"{mean([r['accuracy_mean_mm'] for r in rs]):.2f} | "
                     f"{mean([r['accuracy_p95_mm'] for r in rs]):.2f} | "
                     f"{100 * mean([r['coverage'] for r in rs]):.1f} % | "
