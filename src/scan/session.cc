@@ -400,10 +400,21 @@ FrameReport ScanSession::addFrame(const DepthImage& input, const JointVector& q,
     }
     s.unsupportedStreak = 0;
   }
-  const Iso3 T_O_B = s.T_O_palm * s.model->tipPose(q).inverse();
+  // With tracking, the robot as the frame shows it: the joint offsets that put the palm where
+  // the frame says (armOffsetsFromPalmError) place the other links too, for the robot's pixels
+  // and the space inside it (Fig. 3 c); the camera where it reported itself, the palm as
+  // tracked. Without, the reported joints.
+  JointVector qSeen = q;
+  Iso3 T_B_C_seen = T_B_C_used;
+  if (s.options.tracking.enabled) {
+    qSeen = q + armOffsetsFromPalmError(*s.model, q, s.correction);
+    T_B_C_seen = T_B_C;
+  }
+  const Iso3 T_O_B = s.T_O_palm * s.model->tipPose(qSeen).inverse();
   FrameReport r =
-      fuse(depth, q, T_B_C_used, T_O_B, nullptr, true, s.options.hand_mode != HandMode::kNaive);
+      fuse(depth, qSeen, T_B_C_seen, T_O_B, nullptr, true, s.options.hand_mode != HandMode::kNaive);
   if (!r.fused) return refuse(r.rejected, &s.summary.frames_in_free_space);
+  r.T_B_C = T_B_C_used;  // the camera relative to the palm at the reported joints
   r.tracking_inliers = track.inliers;
   r.tracking_hand_inliers = track.hand_inliers;
   r.tracking_hand_see_through = track.hand_see_through;
