@@ -126,6 +126,39 @@ const TsdfVolume& ScanSession::volume() const { return s_->volume; }
 TsdfVolume& ScanSession::volume() { return s_->volume; }
 
 namespace {
+
+// The model's observed triangles (all three vertices observed): centroids and outward normals,
+// every k-th so that about `budget` remain (none for budget <= 0), moved by T.
+std::vector<SurfacePoint> observedSurface(const ObjectModel& m, int budget, const Iso3& T) {
+  std::vector<size_t> observed;
+  for (size_t t = 0; t < m.mesh.triangles.size(); ++t) {
+    const Tri& f = m.mesh.triangles[t];
+    if (m.observed[size_t(f[0])] && m.observed[size_t(f[1])] && m.observed[size_t(f[2])])
+      observed.push_back(t);
+  }
+  std::vector<SurfacePoint> points;
+  const size_t step = std::max<size_t>(1, observed.size() / size_t(std::max(1, budget)) + 1);
+  for (size_t k = 0; budget > 0 && k < observed.size(); k += step) {
+    const Tri& f = m.mesh.triangles[observed[k]];
+    const Vec3 a = m.mesh.vertices[size_t(f[0])].cast<double>();
+    const Vec3 b = m.mesh.vertices[size_t(f[1])].cast<double>();
+    const Vec3 c = m.mesh.vertices[size_t(f[2])].cast<double>();
+    const Vec3 n = (b - a).cross(c - a);
+    if (n.norm() < 1e-12) continue;
+    points.push_back({T * ((a + b + c) / 3), T.linear() * n.normalized()});
+  }
+  return points;
+}
+
+// Every k-th vertex of the model (about 6000), moved by T: what hides the surface behind it.
+std::vector<Vec3> modelOccluders(const ObjectModel& m, const Iso3& T) {
+  std::vector<Vec3> out;
+  const size_t every = std::max<size_t>(1, m.mesh.vertices.size() / 6000 + 1);
+  for (size_t k = 0; k < m.mesh.vertices.size(); k += every)
+    out.push_back(T * m.mesh.vertices[k].cast<double>());
+  return out;
+}
+
 void checkJoints(const RobotModel& m, const JointVector& q, const char* where) {
   if (q.size() != m.variableCount())
     throw Error(std::string(where) + ": joint state of " + std::to_string(q.size()) +
@@ -433,19 +466,8 @@ void ScanSession::refreshTrackingModel(const ObjectModel* current) {
   s.objectPoints.clear();
   const ObjectModel fresh = current ? ObjectModel() : planningModel();
   const ObjectModel& m = current ? *current : fresh;
-  // The observed triangles' centroids and normals, every k-th, in the palm frame.
-  std::vector<size_t> observed;
-  for (size_t t = 0; t < m.mesh.triangles.size(); ++t) {
-    const Tri& f = m.mesh.triangles[t];
-    if (m.observed[size_t(f[0])] && m.observed[size_t(f[1])] && m.observed[size_t(f[2])])
-      observed.push_back(t);
-  }
-  const size_t step = std::max<size_t>(1, observed.size() / std::max(1, o.max_object_points) + 1);
   const Iso3 T_palm_O = s.T_O_palm.inverse();
-  s.objectOccluders.clear();
-  const size_t every = std::max<size_t>(1, m.mesh.vertices.size() / 6000 + 1);
-  for (size_t k = 0; k < m.mesh.vertices.size(); k += every)
-    s.objectOccluders.push_back(T_palm_O * m.mesh.vertices[k].cast<double>());
+  s.objectOccluders = modelOccluders(m, T_palm_O);
   // The frame checks' points: measured vertices, at most about 2000.
   s.supportPoints.clear();
   size_t measured = 0;
@@ -454,16 +476,8 @@ void ScanSession::refreshTrackingModel(const ObjectModel* current) {
   for (size_t k = 0, seen = 0; k < m.mesh.vertices.size(); ++k)
     if (m.observed[k] && seen++ % every2 == 0)
       s.supportPoints.push_back(T_palm_O * m.mesh.vertices[k].cast<double>());
-  if (!s.options.tracking.enabled) return;
-  for (size_t k = 0; o.max_object_points > 0 && k < observed.size(); k += step) {
-    const Tri& f = m.mesh.triangles[observed[k]];
-    const Vec3 a = m.mesh.vertices[size_t(f[0])].cast<double>();
-    const Vec3 b = m.mesh.vertices[size_t(f[1])].cast<double>();
-    const Vec3 c = m.mesh.vertices[size_t(f[2])].cast<double>();
-    const Vec3 n = (b - a).cross(c - a);
-    if (n.norm() < 1e-12) continue;
-    s.objectPoints.push_back({T_palm_O * ((a + b + c) / 3), T_palm_O.linear() * n.normalized()});
-  }
+  if (s.options.tracking.enabled)
+    s.objectPoints = observedSurface(m, o.max_object_points, T_palm_O);
 }
 
 std::optional<Iso3> ScanSession::trackedCameraPose(const DepthImage& depth, const JointVector& q,
@@ -531,29 +545,11 @@ std::optional<Iso3> ScanSession::registerHeldObject(const DepthImage& depth,
     throw Error("registerHeldObject: the robot mask does not match the image");
   const auto t0 = Clock::now();
   const ObjectModel m = planningModel();
-  // The observed triangles' centroids and normals (about max(2000, max_object_points)), the
-  // whole model's vertices as occluders; all in the object frame.
-  std::vector<size_t> observed;
-  for (size_t t = 0; t < m.mesh.triangles.size(); ++t) {
-    const Tri& f = m.mesh.triangles[t];
-    if (m.observed[size_t(f[0])] && m.observed[size_t(f[1])] && m.observed[size_t(f[2])])
-      observed.push_back(t);
-  }
-  const int budget = std::max(2000, s.options.tracking.max_object_points);
-  const size_t step = std::max<size_t>(1, observed.size() / size_t(budget) + 1);
-  std::vector<SurfacePoint> points;
-  for (size_t k = 0; k < observed.size(); k += step) {
-    const Tri& f = m.mesh.triangles[observed[k]];
-    const Vec3 a = m.mesh.vertices[size_t(f[0])].cast<double>();
-    const Vec3 b = m.mesh.vertices[size_t(f[1])].cast<double>();
-    const Vec3 c = m.mesh.vertices[size_t(f[2])].cast<double>();
-    const Vec3 n = (b - a).cross(c - a);
-    if (n.norm() > 1e-12) points.push_back({(a + b + c) / 3, n.normalized()});
-  }
-  std::vector<Vec3> occluders;
-  const size_t every = std::max<size_t>(1, m.mesh.vertices.size() / 6000 + 1);
-  for (size_t k = 0; k < m.mesh.vertices.size(); k += every)
-    occluders.push_back(m.mesh.vertices[k].cast<double>());
+  // The observed surface (about max(2000, max_object_points) points) and the whole model as
+  // occluders, in the object frame.
+  const std::vector<SurfacePoint> points =
+      observedSurface(m, std::max(2000, s.options.tracking.max_object_points), Iso3::Identity());
+  const std::vector<Vec3> occluders = modelOccluders(m, Iso3::Identity());
   const Iso3 T_C_palm = T_B_C.inverse() * s.model->tipPose(q);
   const Iso3 T_C_O = T_C_palm * T_O_palm.inverse();
   const TrackResult r =
