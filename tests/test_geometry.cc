@@ -353,6 +353,45 @@ TEST(SurfaceSamples, CoverACoarseBoxOnItsSurfaceWithOutwardNormals) {
   for (int f = 0; f < 6; ++f) EXPECT_GT(perFace[f], 10) << f;
 }
 
+// About one point per spacing² of area whatever the tessellation: a cylinder of 256 long slivers
+// and one of 16 faces get about the same count, and so the area over the spacing squared (the
+// lattice of surfaceSamples puts (L/s)²/2 points on every sliver of length L).
+TEST(SurfaceSamples, EvenSamplesFollowTheAreaNotTheTriangles) {
+  const double r = 0.02, h = 0.3, s = 0.005;
+  const double area = 2 * M_PI * r * h + 2 * M_PI * r * r;
+  std::vector<size_t> counts;
+  for (int segments : {16, 256}) {
+    const TriangleMesh cyl = makeCylinder(r, h, segments);
+    const std::vector<SurfacePoint> e = evenSurfaceSamples(cyl, s);
+    counts.push_back(e.size());
+    EXPECT_GT(double(e.size()), 0.6 * area / (s * s)) << segments;
+    EXPECT_LT(double(e.size()), 1.5 * area / (s * s)) << segments;
+    for (const SurfacePoint& p : e) {
+      const double radial = p.p.head<2>().norm();
+      const bool side = std::abs(radial - r) < 1e-3 * r + r * (1 - std::cos(M_PI / segments));
+      const bool cap = std::abs(std::abs(p.p.z()) - 0.5 * h) < 1e-6 && radial <= r + 1e-6;
+      EXPECT_TRUE(side || cap) << p.p.transpose();
+      EXPECT_NEAR(p.n.norm(), 1.0, 1e-9);
+      if (cap)
+        EXPECT_GT(p.n.z() * p.p.z(), 0.0);
+      else
+        EXPECT_GT(p.n.head<2>().dot(p.p.head<2>()), 0.0);
+    }
+  }
+  EXPECT_LT(std::abs(double(counts[0]) - double(counts[1])), 0.25 * double(counts[1]));
+  EXPECT_GT(surfaceSamples(makeCylinder(r, h, 256), s).size(), 10 * counts[1]);
+  // A 1 mm plate keeps both faces.
+  const std::vector<SurfacePoint> plate = evenSurfaceSamples(makeBox(Vec3(0.1, 0.1, 0.001)), s);
+  int up = 0, down = 0;
+  for (const SurfacePoint& p : plate) {
+    up += p.n.z() > 0.99;
+    down += p.n.z() < -0.99;
+  }
+  EXPECT_GT(up, 0.8 * 0.01 / (s * s));
+  EXPECT_GT(down, 0.8 * 0.01 / (s * s));
+  EXPECT_TRUE(evenSurfaceSamples(makeBox(Vec3(0.1, 0.1, 0.1)), 0.0).empty());
+}
+
 // ---- rasteriser ---------------------------------------------------------------------------------
 
 namespace {

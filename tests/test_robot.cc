@@ -765,3 +765,41 @@ TEST(Robot, ArmOffsetsFromThePalmsErrorCarryItToANearbyConfiguration) {
       1000 * same[100], 1000 * carried[100], 1000 * same[180], 1000 * carried[180]);
   EXPECT_LT(carried[100], 0.5 * same[100]);
 }
+
+// Gravity's generalised forces are the slope of the potential energy Σ −m g·c(q) (central
+// differences of the links' centres of mass through forward kinematics), at random
+// configurations; the WAM's base joint turns about the vertical and carries no torque.
+TEST(Robot, GravityTorquesAreTheSlopeOfThePotentialEnergy) {
+  const RobotModel& m = wam();
+  const Vec3 g(0, 0, -9.81);
+  auto potential = [&](const JointVector& q) {
+    const std::vector<Iso3> T = m.linkPoses(q);
+    double U = 0;
+    for (size_t l = 0; l < m.links().size(); ++l)
+      U -= m.links()[l].mass * g.dot(T[l] * m.links()[l].com);
+    return U;
+  };
+  double total = 0;
+  for (const LinkInfo& l : m.links()) total += l.mass;
+  EXPECT_GT(total, 20.0);  // the WAM's links and the hand
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> U(-1, 1);
+  for (int draw = 0; draw < 20; ++draw) {
+    JointVector q = m.home();
+    for (int v : m.armVariables()) {
+      const JointInfo& j = m.variable(v);
+      q[v] = 0.5 * (j.lower + j.upper) + 0.45 * U(rng) * (j.upper - j.lower);
+    }
+    const JointVector tau = m.gravityTorques(q, g);
+    const double h = 1e-6;
+    for (int v : m.armVariables()) {
+      JointVector a = q, b = q;
+      a[v] += h;
+      b[v] -= h;
+      const double slope = -(potential(a) - potential(b)) / (2 * h);
+      EXPECT_NEAR(tau[v], slope, 1e-5 + 1e-6 * std::abs(slope)) << "variable " << v;
+    }
+    EXPECT_NEAR(tau[m.armVariables()[0]], 0.0, 1e-9);
+    EXPECT_GT(tau.norm(), 1.0);
+  }
+}

@@ -225,7 +225,15 @@ void visitConfig(V& v, ScanConfig& c) {
     o.num("friction", c.sim.friction, "μ of the true contacts");
     o.num("hold_min_epsilon", c.sim.hold_min_epsilon, "ε a grasp needs to hold");
     o.num("arm_error_m", c.sim.arm_error_m,
-          "joint offsets putting the palm this far from the reported joints' FK at home, m");
+          "the arm's error: with gravity's part, the palm this far from the reported joints' "
+          "FK at home, m");
+    o.num("arm_error_gravity", c.sim.arm_error_gravity,
+          "joint sag proportional to gravity's torque at the configuration (URDF masses), as a "
+          "fraction of the fixed offsets at home");
+    o.num("arm_error_drift", c.sim.arm_error_drift,
+          "slow drift of every joint (periods 20-120 s), RMS as a fraction of the fixed offsets");
+    o.num("arm_error_noise", c.sim.arm_error_noise,
+          "per-frame joint noise, RMS as a fraction of the fixed offsets");
     o.boolean("grasp_error", c.sim.grasp_error,
               "the arm's error also at pick-ups: the object sits in the hand off where the "
               "reported joints say");

@@ -164,4 +164,65 @@ std::vector<SurfacePoint> surfaceSamples(const TriangleMesh& mesh, double spacin
   return samples;
 }
 
+std::vector<SurfacePoint> evenSurfaceSamples(const TriangleMesh& mesh, double spacing) {
+  std::vector<SurfacePoint> samples;
+  if (!(spacing > 0)) return samples;
+  struct Key {
+    int64_t x, y, z;
+    int side;
+    bool operator==(const Key& k) const {
+      return x == k.x && y == k.y && z == k.z && side == k.side;
+    }
+  };
+  struct Hash {
+    size_t operator()(const Key& k) const {
+      return size_t(k.x * 73856093) ^ size_t(k.y * 19349663) ^ size_t(k.z * 83492791) ^
+             size_t(k.side);
+    }
+  };
+  std::unordered_map<Key, char, Hash> taken;
+  auto keep = [&](const Vec3& p, const Vec3& n) {
+    int axis = 0;
+    n.cwiseAbs().maxCoeff(&axis);
+    const Key k{int64_t(std::floor(p.x() / spacing)), int64_t(std::floor(p.y() / spacing)),
+                int64_t(std::floor(p.z() / spacing)), 2 * axis + (n[axis] < 0)};
+    if (taken.emplace(k, 0).second) samples.push_back({p, n});
+  };
+  struct Piece {
+    Vec3 a, b, c;
+  };
+  std::vector<Piece> stack;
+  for (const Tri& f : mesh.triangles) {
+    const Vec3 a = mesh.vertices[f[0]].cast<double>(), b = mesh.vertices[f[1]].cast<double>(),
+               c = mesh.vertices[f[2]].cast<double>();
+    const Vec3 cross = (b - a).cross(c - a);
+    if (!(cross.norm() > 0)) continue;
+    const Vec3 n = cross.normalized();
+    stack.assign(1, {a, b, c});
+    while (!stack.empty()) {
+      const Piece t = stack.back();
+      stack.pop_back();
+      const double ab = (t.b - t.a).squaredNorm(), bc = (t.c - t.b).squaredNorm(),
+                   ca = (t.a - t.c).squaredNorm();
+      const double longest = std::max({ab, bc, ca});
+      if (longest <= spacing * spacing) {
+        keep((t.a + t.b + t.c) / 3.0, n);
+      } else if (longest == ab) {  // split the longest edge at its midpoint
+        const Vec3 m = 0.5 * (t.a + t.b);
+        stack.push_back({t.a, m, t.c});
+        stack.push_back({m, t.b, t.c});
+      } else if (longest == bc) {
+        const Vec3 m = 0.5 * (t.b + t.c);
+        stack.push_back({t.a, t.b, m});
+        stack.push_back({t.a, m, t.c});
+      } else {
+        const Vec3 m = 0.5 * (t.c + t.a);
+        stack.push_back({t.a, t.b, m});
+        stack.push_back({m, t.b, t.c});
+      }
+    }
+  }
+  return samples;
+}
+
 }  // namespace inhand

@@ -209,6 +209,15 @@ struct RobotModelLoader {
     for (const auto& [name, link] : urdf.links_) {
       LinkInfo info;
       info.name = name;
+      if (link->inertial) {
+        info.mass = link->inertial->mass;
+        const urdf::Vector3& c = link->inertial->origin.position;
+        info.com = Vec3(c.x, c.y, c.z);
+        if (!(info.mass >= 0) || !info.com.allFinite())
+          throw Error(urdfName + ": link " + name +
+                      ": inertial: mass must be >= 0 and the "
+                      "origin finite");
+      }
       for (const auto& col : link->collision_array) {
         if (!col || !col->geometry) continue;
         info.collision.push_back(collisionPrimitive(
@@ -652,6 +661,28 @@ std::vector<Iso3> RobotModel::linkPoses(const JointVector& qIn) const {
 }
 
 Iso3 RobotModel::tipPose(const JointVector& q) const { return linkPoses(q)[tipLink_]; }
+
+JointVector RobotModel::gravityTorques(const JointVector& q, const Vec3& g_B) const {
+  const std::vector<Iso3> T = linkPoses(q);
+  JointVector tau = JointVector::Zero(variableCount());
+  // Each link's weight acts on every joint between it and the root.
+  for (size_t l = 0; l < links_.size(); ++l) {
+    if (!(links_[l].mass > 0)) continue;
+    const Vec3 c = T[l] * links_[l].com;
+    const Vec3 f = links_[l].mass * g_B;
+    for (int ji = links_[l].parentJoint; ji >= 0;
+         ji = links_[size_t(joints_[size_t(ji)].parentLink)].parentJoint) {
+      const JointInfo& j = joints_[size_t(ji)];
+      if (j.variable < 0 || j.mimicOf >= 0) continue;
+      const Iso3 T_B_joint = T[size_t(j.parentLink)] * j.T_parent_joint;
+      const Vec3 a = T_B_joint.linear() * j.axis;
+      tau[j.variable] += j.type == JointInfo::Type::kPrismatic
+                             ? a.dot(f)
+                             : a.dot((c - T_B_joint.translation()).cross(f));
+    }
+  }
+  return tau;
+}
 
 double trajectoryTime(const RobotModel& model, const Eigen::VectorXd& a, const Eigen::VectorXd& b) {
   Eigen::VectorXd v = model.armVelocity();

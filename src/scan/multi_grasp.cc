@@ -156,8 +156,10 @@ PickOutcome pickAndVerify(ScanSession& session, RobotInterface& robot, DepthSens
       const CameraIntrinsics& K = sensor.camera().intrinsics;
       // The camera pose relative to where the hand really is (options.tracking; the pose as
       // reported without it): the held points and the robot's pixels are seen from there.
+      TrackResult liftTrack;
       const std::optional<Iso3> tracked =
-          session.trackedCameraPose(d, robot.joints(), *aim, *achieved);
+          session.trackedCameraPose(d, robot.joints(), *aim, *achieved, &liftTrack);
+      if (!tracked) log("tracking refused the lift's frame: " + liftTrack.reason);
       const std::vector<uint8_t> mask =
           robotPixelMask(d, tracked ? *tracked : *aim, robot.joints(), scenes, sensor.camera(),
                          noise, options.t_hand_m, options.carve_radius_px, /*with_table=*/false);

@@ -490,8 +490,8 @@ std::optional<Iso3> ScanSession::trackedCameraPose(const DepthImage& depth, cons
   // The hand's surface at the fingers' joints (rebuilt when they change).
   if (s.handPointsQ.size() != q.size() || (s.handPointsQ - q).cwiseAbs().maxCoeff() > 1e-6) {
     JointVector atHome = q;
-    s.handPoints = surfaceSamples(HandGeometry(m, q, Iso3::Identity()).mesh(),
-                                  s.options.tracking.hand_spacing_m);
+    s.handPoints = evenSurfaceSamples(HandGeometry(m, q, Iso3::Identity()).mesh(),
+                                      s.options.tracking.hand_spacing_m);
     s.handPointsQ = atHome;
   }
   std::vector<SurfacePoint> objectPoints;
@@ -504,7 +504,7 @@ std::optional<Iso3> ScanSession::trackedCameraPose(const DepthImage& depth, cons
       if (std::find(m.handLinks().begin(), m.handLinks().end(), int(li)) != m.handLinks().end())
         continue;
       for (const Primitive& p : m.links()[li].collision)
-        for (const SurfacePoint& sp : surfaceSamples(p.toMesh(), 0.01))
+        for (const SurfacePoint& sp : evenSurfaceSamples(p.toMesh(), 0.01))
           s.linkSamples[li].push_back(sp.p);
     }
   }

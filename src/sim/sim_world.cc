@@ -5,8 +5,10 @@
 #include <cmath>
 
 #include "inhand/core/error.h"
+#include "inhand/core/pose.h"
 #include "inhand/core/random.h"
 #include "inhand/robot/collision.h"
+#include "inhand/robot/ik.h"
 #include "inhand/robot/wrench.h"
 
 namespace inhand {
@@ -29,33 +31,49 @@ std::string SimOptions::validate() const {
   if (!R_B_O_rest.allFinite() || std::abs(R_B_O_rest.determinant() - 1) > 1e-6)
     return "the rest orientation must be a rotation";
   if (!(arm_error_m >= 0 && arm_error_m <= 0.2)) return "arm_error_m must be in [0, 0.2] m";
+  for (double f : {arm_error_gravity, arm_error_drift, arm_error_noise})
+    if (!(f >= 0 && f <= 5)) return "arm_error_gravity, _drift and _noise must be in [0, 5]";
   if (std::string p = faults.validate(); !p.empty()) return "faults." + p;
   return {};
 }
 
 namespace {
-// Arm joint offsets in a direction drawn from the seed (uniform on the sphere of arm joint
-// space), scaled so that the palm moves error_m at the home configuration.
-JointVector armJointError(const RobotModel& m, double error_m, uint64_t seed) {
+// A unit direction in arm joint space drawn from the seed (uniform on the sphere).
+JointVector armDirection(const RobotModel& m, uint64_t seed) {
   JointVector e = JointVector::Zero(m.variableCount());
-  if (error_m <= 0) return e;
   Rng rng = makeRng(mixSeed(seed, 0xa4e));
   std::normal_distribution<double> N(0, 1);
   for (int v : m.armVariables()) e[v] = N(rng);
-  e /= e.norm();
-  const JointVector home = m.home();
-  const Vec3 p0 = m.tipPose(home).translation();
-  // The palm's displacement is nearly linear in the offsets' scale for small angles; two
-  // secant steps make it exact to a micrometre.
-  double s = 0.01;
-  for (int it = 0; it < 20; ++it) {
-    const double d = (m.tipPose(home + s * e).translation() - p0).norm();
-    if (std::abs(d - error_m) < 1e-6 || d <= 0) break;
-    s *= error_m / d;
-  }
-  return s * e;
+  return e.norm() > 0 ? JointVector(e / e.norm()) : e;
 }
+
+// The gravity torques on the arm's joints at q (zero elsewhere).
+JointVector armGravity(const RobotModel& m, const JointVector& q) {
+  const JointVector tau = m.gravityTorques(q);
+  JointVector out = JointVector::Zero(m.variableCount());
+  for (int v : m.armVariables()) out[v] = tau[v];
+  return out;
+}
+
 }  // namespace
+
+std::vector<JointVector> presentationConfigurations(const RobotModel& m) {
+  const Vec3 centre = m.camera().lookAt_B;
+  std::vector<Iso3> targets;
+  for (const Vec3& d : fibonacciSphere(24)) {
+    Iso3 T = Iso3::Identity();
+    T.linear() = Eigen::Quaterniond::FromTwoVectors(Vec3::UnitZ(), d).toRotationMatrix();
+    T.translation() = centre - m.graspOffset() * d;
+    targets.push_back(T);
+  }
+  const JointVector home = m.home();
+  std::vector<JointVector> out;
+  for (const auto& arm : solveIkBatch(m, targets, m.arm(home), 0x5eed))
+    if (arm) out.push_back(m.withArm(home, *arm));
+  return out;
+}
+
+namespace {}  // namespace
 
 SimWorld::SimWorld(const RobotModel& model, const TriangleMesh& object_O, const Iso3& grasp,
                    const DepthCameraOptions& camera, const NoiseModelOptions& noise,
@@ -70,11 +88,74 @@ SimWorld::SimWorld(const RobotModel& model, const TriangleMesh& object_O, const 
       robot_(model) {
   std::string p = options.validate();
   if (!p.empty()) throw Error("simulation options: " + p);
-  jointError = armJointError(model, options.arm_error_m, options.seed);
+  jointError = JointVector::Zero(model.variableCount());
+  if (options.arm_error_m > 0) {
+    const JointVector e = armDirection(model, options.seed);
+    std::vector<JointVector> configs = presentationConfigurations(model);
+    if (configs.empty()) configs.push_back(model.home());
+    // Gravity's torques relative to their RMS where objects are presented.
+    double sq = 0;
+    for (const JointVector& q : configs) sq += armGravity(model, q).squaredNorm();
+    gravityTypical_ = std::sqrt(sq / double(configs.size()));
+    const double g = gravityTypical_ > 0 ? options.arm_error_gravity / gravityTypical_ : 0.0;
+    // The fixed offsets' scale for which the palm's error (with gravity's part) has the
+    // median arm_error_m over those configurations: nearly linear in the scale for small
+    // angles, a few secant steps make it exact to a micrometre.
+    auto median = [&](double scale) {
+      std::vector<double> d;
+      for (const JointVector& q : configs)
+        d.push_back((model.tipPose(q + scale * (e + g * armGravity(model, q))).translation() -
+                     model.tipPose(q).translation())
+                        .norm());
+      std::nth_element(d.begin(), d.begin() + long(d.size() / 2), d.end());
+      return d[d.size() / 2];
+    };
+    armScale_ = 0.01;
+    for (int it = 0; it < 20; ++it) {
+      const double d = median(armScale_);
+      if (std::abs(d - options.arm_error_m) < 1e-7 || d <= 0) break;
+      armScale_ *= options.arm_error_m / d;
+    }
+    jointError = armScale_ * e;
+    Rng rng = makeRng(mixSeed(options.seed, 0xd81f7));
+    std::uniform_real_distribution<double> U(0, 1);
+    driftPeriod_.resize(model.variableCount(), 2);
+    driftPhase_.resize(model.variableCount(), 2);
+    for (int v = 0; v < model.variableCount(); ++v)
+      for (int k = 0; k < 2; ++k) {
+        driftPeriod_(v, k) = 20 + 100 * U(rng);
+        driftPhase_(v, k) = 2 * M_PI * U(rng);
+      }
+  }
   objectMesh_ = object_O;
   objectSamples_ = surfaceSamples(object_O, 0.003);
   object_.addMesh(object_O);
   object_.commit();
+}
+
+JointVector SimWorld::jointErrorAt(const JointVector& qr) const {
+  JointVector e = jointError;
+  if (armScale_ <= 0) return e;
+  const RobotModel& m = *model_;
+  const double n = std::sqrt(double(std::max(1, m.armDof())));
+  const uint64_t f = frame_ > 0 ? frame_ - 1 : 0;  // the last frame rendered
+  if (options_.arm_error_drift > 0) {
+    const double t = double(f) * options_.frame_subsample / options_.frame_rate_hz;
+    for (int v : m.armVariables())
+      e[v] += armScale_ * options_.arm_error_drift / n *
+              (std::sin(2 * M_PI * t / driftPeriod_(v, 0) + driftPhase_(v, 0)) +
+               std::sin(2 * M_PI * t / driftPeriod_(v, 1) + driftPhase_(v, 1)));
+  }
+  if (options_.arm_error_noise > 0) {
+    Rng rng = makeRng(mixSeed(mixSeed(options_.seed, 0x6e01), f));
+    std::normal_distribution<double> N(0, 1);
+    for (int v : m.armVariables()) e[v] += armScale_ * options_.arm_error_noise / n * N(rng);
+  }
+  // Gravity's torques at the reported configuration (those at the true one differ by a second-
+  // order amount: a hundredth of the sag at 2 cm).
+  if (options_.arm_error_gravity > 0 && gravityTypical_ > 0)
+    e += armScale_ * options_.arm_error_gravity / gravityTypical_ * armGravity(m, qr);
+  return e;
 }
 
 Iso3 SimWorld::objectPose() const {
@@ -129,8 +210,9 @@ std::optional<Iso3> SimRobot::grasp(const Iso3& T_O_palm_planned, const JointVec
   // plan put it, while the encoders report the plan. The hand moves and closes from there; the
   // robot reports the grasp as its joints see it: the plan moved as the palm moved relative to
   // its start.
-  const Iso3 delta = m.tipPose(q).inverse() * m.tipPose(q + world_->jointError);
-  const bool exact = !world_->options().grasp_error || world_->jointError.isZero(0);
+  const JointVector error = world_->jointErrorAt(q);
+  const Iso3 delta = m.tipPose(q).inverse() * m.tipPose(q + error);
+  const bool exact = !world_->options().grasp_error || error.isZero(0);
   const Iso3 T_O_palm = exact ? T_O_palm_planned : T_O_palm_planned * delta;
   auto reported = [&](const Iso3& T_true) -> Iso3 {
     if (exact) return T_true;
@@ -191,6 +273,7 @@ DepthImage SimWorld::render() {
     }
   } timed{t0, &render_s};
   ++renders;
+  const uint64_t frame = frame_++;  // the arm's error and the noise at this frame
   RayScene scene;
   scene.addInstance(object_, objectPose());
   for (const Occluder& o : robot_.at(trueJoints(), Iso3::Identity()))
@@ -200,7 +283,7 @@ DepthImage SimWorld::render() {
   ro.background_centre = model_->camera().panTilt_B;  // the room
   ro.background_radius_m = options_.room_radius_m;
   ro.noise = options_.noise;
-  ro.seed = mixSeed(options_.seed, frame_++);
+  ro.seed = mixSeed(options_.seed, frame);
   DepthImage d = renderDepth(scene, T_B_C, camera_, noise_, ro);
   const SimFaults& f = options_.faults;
   if (f.dropped_frames > 0 && faultDraw(0) < f.dropped_frames) {

@@ -68,6 +68,13 @@ struct SurfacePoint {
 };
 std::vector<SurfacePoint> surfaceSamples(const TriangleMesh& mesh, double spacing_m);
 
+// Points on the surface about `spacing_m` apart whatever the triangles' shapes and sizes (long
+// slivers and fine tessellations alike): triangles split along their longest edge until no edge
+// is longer than `spacing_m`, the pieces' centroids kept one per cube of that size and normal
+// direction (six, by the normal's dominant axis, so that both sides of a thin part stay), each
+// with its triangle's outward normal. In mesh order: the same points for the same mesh.
+std::vector<SurfacePoint> evenSurfaceSamples(const TriangleMesh& mesh, double spacing_m);
+
 // Checks indices and finite coordinates; returns an empty string when valid, else the problem.
 std::string validateMesh(const TriangleMesh& mesh);
 

@@ -38,6 +38,8 @@ struct LinkInfo {
   std::string name;
   int parentJoint = -1;  // index into joints(); -1 for the URDF root
   std::vector<Primitive> collision;
+  double mass = 0;          // kg, from the URDF's <inertial> (0 without one)
+  Vec3 com = Vec3::Zero();  // centre of mass in the link frame, m
 };
 
 struct JointInfo {
@@ -130,6 +132,10 @@ class RobotModel {
   // T_B_link for every link (base frame), couplings applied to a copy of q.
   std::vector<Iso3> linkPoses(const JointVector& q) const;
   Iso3 tipPose(const JointVector& q) const;
+  // The generalised force gravity `g_B` (base frame, m/s²) puts on each driven joint at q from
+  // the weights of the links it carries (URDF masses at their centres of mass): N·m for
+  // revolute joints, N for prismatic ones; 0 for coupled (mimic) joints and without masses.
+  JointVector gravityTorques(const JointVector& q, const Vec3& g_B = Vec3(0, 0, -9.81)) const;
 
  private:
   friend struct RobotModelLoader;

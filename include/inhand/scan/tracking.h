@@ -29,7 +29,7 @@ struct TrackingOptions {
   double prior = 0.002;        // pull towards the reported pose, relative to the data's curvature
   double object_weight = 0.3;  // the model's points against the hand's
   double hand_spacing_m = 0.004;  // spacing of the hand's surface samples, m
-  int max_object_points = 3000;   // the object's observed surface, subsampled to this
+  int max_object_points = 400;    // the object's observed surface, subsampled to this
   // The frames' corrections filtered over time (a Kalman filter on the palm-frame correction, a
   // random walk): each frame's alignment is a measurement with the information of its point
   // pairs; the correction may change by drift_m/drift_rad per radian the arm's joints move and

@@ -62,11 +62,26 @@ struct SimOptions {
   // The object's orientation on the table (rotation from its mesh frame O to the base frame).
   Mat3 R_B_O_rest = Mat3::Identity();
   // Arm error (paper §II: cable stretch puts the WAM's hand centimetres from where its motor
-  // encoders say): fixed offsets of the arm's joints from the angles the robot reports, drawn
-  // from the seed and scaled so that at the home configuration the palm is this far (m) from
-  // where forward kinematics of the reported joints puts it. The world (the rendered robot, the
-  // held object) moves with the true joints; the robot reports the others. 0: an exact arm.
+  // encoders say): offsets of the arm's joints from the angles the robot reports, fixed ones
+  // drawn from the seed plus the parts below, scaled so that where objects are presented to the
+  // camera the palm is at the median this far (m) from where forward kinematics of the reported
+  // joints puts it. The world (the rendered robot, the held object) moves with the true joints;
+  // the robot reports the others. 0: an exact arm.
   double arm_error_m = 0.0;
+  // The error's parts that change, each as a fraction of the fixed offsets' size (so that
+  // arm_error_m scales them all; 0 turns a part off):
+  // - gravity: joint compliance (cable stretch under load), offsets proportional to the torque
+  //   the links' weights put on each joint at the true configuration (URDF masses;
+  //   RobotModel::gravityTorques), this fraction of the fixed offsets' norm at a typical
+  //   configuration (the torques' RMS over presentationConfigurations);
+  // - drift: a slow wander of every joint (two sines each, periods 20-120 s of sensor time),
+  //   this fraction in RMS;
+  // - noise: per-frame joint noise (independent per frame), this fraction in RMS.
+  // With the fixed offsets and gravity's part, the palm's error has the median arm_error_m over
+  // the configurations that present an object to the camera (presentationConfigurations).
+  double arm_error_gravity = 0.5;
+  double arm_error_drift = 0.2;
+  double arm_error_noise = 0.02;
   // The arm's error also at the pick-up: the palm comes in from where the true joints put it, so
   // the object sits in the hand off where the reported joints say (a real arm's case). false: the
   // hand grasps the object exactly as planned (the error shows only while it is held).
@@ -74,6 +89,11 @@ struct SimOptions {
   SimFaults faults;
   std::string validate() const;
 };
+
+// Arm configurations presenting an object at the camera's nominal point (CameraMount::lookAt_B):
+// the palm graspOffset() short of it along its axis, from 24 directions around it; those IK
+// reaches from home. SimOptions::arm_error_m is the palm's median error over these.
+std::vector<JointVector> presentationConfigurations(const RobotModel& model);
 
 class SimWorld {
  public:
@@ -84,9 +104,14 @@ class SimWorld {
 
   const RobotModel& model() const { return *model_; }
   const SimOptions& options() const { return options_; }
-  JointVector q;           // the robot's state, as it reports it (motor encoders)
-  JointVector jointError;  // true joints = q + jointError (arm joints; SimOptions::arm_error_m)
-  JointVector trueJoints() const { return q + jointError; }
+  JointVector q;  // the robot's state, as it reports it (motor encoders)
+  // The arm's fixed joint offsets (SimOptions::arm_error_m; arm joints, zero elsewhere).
+  JointVector jointError;
+  // The arm's whole error with the robot reporting q, at the last frame rendered (the fixed
+  // offsets, gravity's part at the true configuration, drift at that frame's time, that frame's
+  // noise): the arm is truly at q + jointErrorAt(q).
+  JointVector jointErrorAt(const JointVector& q) const;
+  JointVector trueJoints() const { return q + jointErrorAt(q); }
   Iso3 T_B_C;     // the camera's pose
   Iso3 T_O_palm;  // the grasp
   // Depth image at the current state, seeded by the frame counter (with SimOptions::faults: at
@@ -126,6 +151,11 @@ class SimWorld {
   std::vector<SurfacePoint> objectSamples_;  // for the pick-up clearance test
   uint64_t frame_ = 0;
   uint64_t faultDraws_ = 0;
+  // The arm error's changing parts (from the options and seed): the scale of its unit parts,
+  // gravity's typical torque norm (RMS over configurations), each arm joint's drift periods (s)
+  // and phases.
+  double armScale_ = 0, gravityTypical_ = 0;
+  Eigen::MatrixXd driftPeriod_, driftPhase_;
 };
 
 class SimRobot : public RobotInterface {
