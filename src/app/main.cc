@@ -131,12 +131,12 @@ int main(int argc, char** argv) {
                             ->capture_default_str());
   scanOptions.push_back(sc->add_option(
       "--arm-error", scan.arm_error_m,
-      "simulated arm error: the palm this far (m) from where the reported joints put "
+      "simulated arm error: the palm's median distance (m) from where the reported joints put "
       "it (overrides the config's sim.arm_error_m)"));
   scanOptions.push_back(
       sc->add_option("--tracking", scan.tracking,
                      "on | off: align each in-hand frame with the hand and the model before fusing "
-                     "(overrides the config's tracking.enabled)"));
+                     "(default on; overrides the config's tracking.enabled)"));
   scanOptions.push_back(sc->add_flag(
       "--save-frames", scan.save_frames,
       "write the in-hand depth frames with the joints and camera poses the robot reported to "

@@ -348,6 +348,14 @@ FrameReport ScanSession::addFrame(const DepthImage& input, const JointVector& q,
   // What the sensor delivered: nothing, non-finite depths, too few returns.
   if (input.width == 0 && input.height == 0)
     return refuse("no image (a dropped frame)", &s.summary.frames_dropped);
+  const CameraIntrinsics& K = s.camera.intrinsics;
+  if (input.width != K.width || input.height != K.height)
+    throw Error("depth frame: " + std::to_string(input.width) + "x" + std::to_string(input.height) +
+                " pixels, the camera's are " + std::to_string(K.width) + "x" +
+                std::to_string(K.height));
+  if (input.depth_m.size() != size_t(K.width) * size_t(K.height))
+    throw Error("depth frame: " + std::to_string(input.depth_m.size()) + " depths for " +
+                std::to_string(K.width) + "x" + std::to_string(K.height) + " pixels");
   const DepthImage* d = &input;
   DepthImage repaired;
   if (!std::all_of(input.depth_m.begin(), input.depth_m.end(),

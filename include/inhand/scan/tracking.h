@@ -17,7 +17,7 @@
 namespace inhand {
 
 struct TrackingOptions {
-  bool enabled = false;         // off: frames are fused with the reported poses
+  bool enabled = true;          // off: frames are fused with the reported poses
   int iterations = 30;          // ICP iterations per frame
   double gate_m = 0.06;         // depth gate of the first iteration, m
   double final_gate_m = 0.008;  // … shrinking geometrically to this, m
