@@ -148,6 +148,9 @@ void visitConfig(V& v, ScanConfig& c) {
         t.boolean("in_hand", o.in_hand,
                   "after each pick-up the object's pose in the hand from a frame (the model "
                   "aligned with it); off: as the robot reports it");
+        t.num("in_hand_significance", o.in_hand_significance,
+              "a pick-up's palm error is carried to the grasp only when its squared "
+              "Mahalanobis distance exceeds this (χ²(6) at 99 %)");
       });
   v.object("checks", "in-hand frames that are not fused (docs/reliability.md)", [&](V& k) {
     FrameChecks& o = s.checks;

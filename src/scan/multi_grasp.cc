@@ -171,7 +171,14 @@ PickOutcome pickAndVerify(ScanSession& session, RobotInterface& robot, DepthSens
         // is registered with the frame from there.
         const JointVector q = robot.joints();
         const Iso3 T_C_reported = aim->inverse() * m.tipPose(q);
-        const Iso3 palmError = T_C_reported.inverse() * (tracked->inverse() * m.tipPose(q));
+        // Only an error the frame shows beyond its own noise is carried (an exact arm's lift
+        // frame alone would move the object a millimetre or two for the rest of the grasp).
+        const double palmSignificance =
+            correctionSignificance(liftTrack, T_C_reported, options.tracking.pair_information);
+        const Iso3 palmError =
+            palmSignificance > options.tracking.in_hand_significance
+                ? Iso3(T_C_reported.inverse() * (tracked->inverse() * m.tipPose(q)))
+                : Iso3::Identity();
         // The joint offsets that explain it, then the palm's error they give at the pick.
         const JointVector e = armOffsetsFromPalmError(m, q, palmError);
         const Iso3 pickError = m.tipPose(c.q_open).inverse() * m.tipPose(c.q_open + e);
@@ -183,11 +190,12 @@ PickOutcome pickAndVerify(ScanSession& session, RobotInterface& robot, DepthSens
         if (const std::optional<Iso3> T =
                 session.registerHeldObject(d, mask, q, *tracked, carried, &reg))
           grasp = *T;
-        char line[160];
+        char line[240];
         std::snprintf(line, sizeof line,
                       "the object in the hand: %.1f mm from where the joints put it by the arm's "
-                      "error, %.1f mm more by the model ",
+                      "error (significance %.0f), %.1f mm more by the model ",
                       1000 * (carried.translation() - achieved->translation()).norm(),
+                      palmSignificance,
                       1000 * (grasp.translation() - carried.translation()).norm());
         log(line + (reg.ok ? std::string("(registered)") : "(not registered: " + reg.reason + ")"));
         achieved = grasp;

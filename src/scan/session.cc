@@ -76,6 +76,10 @@ struct ScanSession::State {
   Eigen::Matrix<double, 6, 6> filterP = Eigen::Matrix<double, 6, 6>::Identity();
   JointVector filterQ;
   bool trackingFromFull = false;  // tracking's object points are from model(), not planningModel()
+  // The model's occluders in the palm frame of a grasp other than the current one (the lift's),
+  // and that grasp: rebuilt when it changes.
+  std::vector<Vec3> liftOccluders;
+  Iso3 liftOccludersFor = Iso3::Identity();
   std::vector<Vec3> used;         // directions of this grasp's views
   std::vector<Vec3> initialDirs;  // the initial trajectory's directions not yet tried
   int alg1Views = 0;              // Alg. 1 views of this grasp
@@ -526,6 +530,15 @@ std::optional<Iso3> ScanSession::trackedCameraPose(const DepthImage& depth, cons
   if ((T_O_palm.matrix() - s.T_O_palm.matrix()).cwiseAbs().maxCoeff() < 1e-9) {
     objectPoints = s.objectPoints;
     occluders.insert(occluders.end(), s.objectOccluders.begin(), s.objectOccluders.end());
+  } else {
+    // Another grasp (a pick-up's check): the model is not aligned with the hand there (the
+    // object may sit elsewhere in it), but it still hides the hand's points behind it, which
+    // would otherwise pair with the object's depths.
+    if (s.liftOccluders.empty() || !s.liftOccludersFor.isApprox(T_O_palm, 1e-12)) {
+      s.liftOccluders = modelOccluders(planningModel(), T_O_palm.inverse());
+      s.liftOccludersFor = T_O_palm;
+    }
+    occluders.insert(occluders.end(), s.liftOccluders.begin(), s.liftOccluders.end());
   }
   const Iso3 T_C_palm = T_B_C.inverse() * m.tipPose(q);
   // Start from the last frame's error (it changes slowly along a trajectory), carried in the

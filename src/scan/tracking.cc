@@ -9,6 +9,7 @@
 namespace inhand {
 
 std::string TrackingOptions::validate() const {
+  if (!(in_hand_significance >= 0)) return "in_hand_significance must be >= 0";
   if (iterations < 1 || iterations > 200) return "iterations must be in 1..200";
   if (!(final_gate_m > 0 && final_gate_m <= gate_m && gate_m < 1))
     return "gates must satisfy 0 < final_gate_m <= gate_m < 1 m";
@@ -280,6 +281,14 @@ TrackResult alignFrom(const DepthImage& depth, const CameraIntrinsics& K,
 }
 
 }  // namespace
+
+double correctionSignificance(const TrackResult& r, const Iso3& T_C_X, double pair_information) {
+  Eigen::Matrix<double, 6, 1> x;
+  const Eigen::AngleAxisd aa(r.correction.linear());
+  x.head<3>() = aa.angle() * aa.axis();
+  x.tail<3>() = (r.correction * T_C_X).translation() - T_C_X.translation();
+  return x.dot(pair_information * (r.information * x));
+}
 
 TrackResult alignToDepth(const DepthImage& depth, const CameraIntrinsics& K,
                          const std::vector<SurfacePoint>& hand,

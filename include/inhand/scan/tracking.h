@@ -45,6 +45,12 @@ struct TrackingOptions {
   // (ScanSession::registerHeldObject): the model so far aligned with the frame; false: the grasp
   // as the robot reports it.
   bool in_hand = false;
+  // What a pick-up's frame must show before the palm's error there is carried to the pick: the
+  // correction's squared Mahalanobis distance under its alignment's information (times
+  // pair_information) above this. 16.81: χ² with 6 degrees of freedom at 99 %, a correction the
+  // frame's noise alone gives once in a hundred (an exact arm's lift frame would otherwise move
+  // the object in the hand by a millimetre or two for the rest of the grasp).
+  double in_hand_significance = 16.81;
   std::string validate() const;
 };
 
@@ -79,6 +85,11 @@ TrackResult alignToDepth(const DepthImage& depth, const CameraIntrinsics& K,
                          const std::vector<Vec3>& occluders_palm, const Iso3& T_C_palm,
                          const std::vector<Iso3>& starts, double sigma_m,
                          const TrackingOptions& options);
+
+// How far a result's correction lies from no correction in units of its own uncertainty: the
+// squared Mahalanobis distance of its parameters (rotation vector, translation of the body
+// predicted at T_C_X) under `information` · `pair_information`.
+double correctionSignificance(const TrackResult& r, const Iso3& T_C_X, double pair_information);
 
 // Aligns a rigid body's surface points (`points_X`, with outward normals, in its frame X) with
 // the depth frame, from X at T_C_X: the object's model with its pose in the hand unknown after a
