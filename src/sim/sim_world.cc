@@ -73,8 +73,6 @@ std::vector<JointVector> presentationConfigurations(const RobotModel& m) {
   return out;
 }
 
-namespace {}  // namespace
-
 SimWorld::SimWorld(const RobotModel& model, const TriangleMesh& object_O, const Iso3& grasp,
                    const DepthCameraOptions& camera, const NoiseModelOptions& noise,
                    const SimOptions& options)
