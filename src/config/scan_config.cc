@@ -228,11 +228,11 @@ void visitConfig(V& v, ScanConfig& c) {
     o.num("friction", c.sim.friction, "μ of the true contacts");
     o.num("hold_min_epsilon", c.sim.hold_min_epsilon, "ε a grasp needs to hold");
     o.num("arm_error_m", c.sim.arm_error_m,
-          "the arm's error: with gravity's part, the palm this far from the reported joints' "
-          "FK at home, m");
+          "the arm's error: the palm's median distance from the reported joints' FK where "
+          "objects are presented (fixed offsets and gravity's sag), m");
     o.num("arm_error_gravity", c.sim.arm_error_gravity,
           "joint sag proportional to gravity's torque at the configuration (URDF masses), as a "
-          "fraction of the fixed offsets at home");
+          "fraction of the fixed offsets at a typical configuration");
     o.num("arm_error_drift", c.sim.arm_error_drift,
           "slow drift of every joint (periods 20-120 s), RMS as a fraction of the fixed offsets");
     o.num("arm_error_noise", c.sim.arm_error_noise,

@@ -71,7 +71,7 @@ struct SimOptions {
   // The error's parts that change, each as a fraction of the fixed offsets' size (so that
   // arm_error_m scales them all; 0 turns a part off):
   // - gravity: joint compliance (cable stretch under load), offsets proportional to the torque
-  //   the links' weights put on each joint at the true configuration (URDF masses;
+  //   the links' weights put on each joint at the reported configuration (URDF masses;
   //   RobotModel::gravityTorques), this fraction of the fixed offsets' norm at a typical
   //   configuration (the torques' RMS over presentationConfigurations);
   // - drift: a slow wander of every joint (two sines each, periods 20-120 s of sensor time),
@@ -108,8 +108,8 @@ class SimWorld {
   // The arm's fixed joint offsets (SimOptions::arm_error_m; arm joints, zero elsewhere).
   JointVector jointError;
   // The arm's whole error with the robot reporting q, at the last frame rendered (the fixed
-  // offsets, gravity's part at the true configuration, drift at that frame's time, that frame's
-  // noise): the arm is truly at q + jointErrorAt(q).
+  // offsets, gravity's part at q, drift at that frame's time, that frame's noise): the arm is truly
+  // at q + jointErrorAt(q).
   JointVector jointErrorAt(const JointVector& q) const;
   JointVector trueJoints() const { return q + jointErrorAt(q); }
   Iso3 T_B_C;     // the camera's pose
