@@ -163,6 +163,17 @@ std::vector<Vec3> modelOccluders(const ObjectModel& m, const Iso3& T) {
   return out;
 }
 
+// A depth frame must have the camera's size, one depth per pixel.
+void checkFrameSize(const DepthImage& d, const CameraIntrinsics& K) {
+  if (d.width != K.width || d.height != K.height)
+    throw Error("depth frame: " + std::to_string(d.width) + "x" + std::to_string(d.height) +
+                " pixels, the camera's are " + std::to_string(K.width) + "x" +
+                std::to_string(K.height));
+  if (d.depth_m.size() != size_t(K.width) * size_t(K.height))
+    throw Error("depth frame: " + std::to_string(d.depth_m.size()) + " depths for " +
+                std::to_string(K.width) + "x" + std::to_string(K.height) + " pixels");
+}
+
 void checkJoints(const RobotModel& m, const JointVector& q, const char* where) {
   if (q.size() != m.variableCount())
     throw Error(std::string(where) + ": joint state of " + std::to_string(q.size()) +
@@ -256,10 +267,7 @@ FrameReport ScanSession::fuse(const DepthImage& depth, const JointVector& q, con
   const auto t0 = Clock::now();
   State& s = *s_;
   const CameraIntrinsics& K = s.camera.intrinsics;
-  if (depth.width != K.width || depth.height != K.height)
-    throw Error("depth frame: " + std::to_string(depth.width) + "x" + std::to_string(depth.height) +
-                " pixels, the camera's are " + std::to_string(K.width) + "x" +
-                std::to_string(K.height));
+  checkFrameSize(depth, K);
   if (extraCarve && extraCarve->size() != depth.depth_m.size())
     throw Error("carve mask: " + std::to_string(extraCarve->size()) + " values for " +
                 std::to_string(depth.depth_m.size()) + " pixels");
@@ -352,14 +360,7 @@ FrameReport ScanSession::addFrame(const DepthImage& input, const JointVector& q,
   // What the sensor delivered: nothing, non-finite depths, too few returns.
   if (input.width == 0 && input.height == 0)
     return refuse("no image (a dropped frame)", &s.summary.frames_dropped);
-  const CameraIntrinsics& K = s.camera.intrinsics;
-  if (input.width != K.width || input.height != K.height)
-    throw Error("depth frame: " + std::to_string(input.width) + "x" + std::to_string(input.height) +
-                " pixels, the camera's are " + std::to_string(K.width) + "x" +
-                std::to_string(K.height));
-  if (input.depth_m.size() != size_t(K.width) * size_t(K.height))
-    throw Error("depth frame: " + std::to_string(input.depth_m.size()) + " depths for " +
-                std::to_string(K.width) + "x" + std::to_string(K.height) + " pixels");
+  checkFrameSize(input, s.camera.intrinsics);
   const DepthImage* d = &input;
   DepthImage repaired;
   if (!std::all_of(input.depth_m.begin(), input.depth_m.end(),
@@ -480,6 +481,7 @@ void ScanSession::refreshTrackingModel(const ObjectModel* current) {
   const ObjectModel& m = current ? *current : fresh;
   const Iso3 T_palm_O = s.T_O_palm.inverse();
   s.objectOccluders = modelOccluders(m, T_palm_O);
+  s.liftOccluders.clear();  // the model changed
   // The frame checks' points: measured vertices, at most about 2000.
   s.supportPoints.clear();
   size_t measured = 0;
