@@ -254,7 +254,8 @@ void bindFramesAndVolume(py::module_& m) {
 
   py::class_<TsdfVolume>(m, "Volume", "the TSDF volume with per-voxel variance (§III)")
       .def(py::init([](const Eigen::Vector3d& lo, const Eigen::Vector3d& hi, double voxel_m,
-                       double truncation_m, double memory_mb, double band_sigmas) {
+                       double truncation_m, double memory_mb, double band_sigmas,
+                       bool smooth_depth) {
              if (!((hi - lo).array() > 0).all())
                throw Error("Volume: bounds_max must exceed bounds_min on every axis");
              Aabb box;
@@ -265,12 +266,13 @@ void bindFramesAndVolume(py::module_& m) {
              o.truncation_m = truncation_m;
              o.memory_budget_mb = memory_mb;
              o.band_sigmas = band_sigmas;
+             o.smooth_depth = smooth_depth;
              if (std::string p = o.validate(); !p.empty()) throw Error("Volume: " + p);
              return TsdfVolume(box, o);
            }),
            py::arg("bounds_min"), py::arg("bounds_max"), py::arg("voxel_m") = 0.002,
            py::arg("truncation_m") = 0.0, py::arg("memory_mb") = 2048.0,
-           py::arg("band_sigmas") = 2.0)
+           py::arg("band_sigmas") = 2.0, py::arg("smooth_depth") = true)
       .def_property_readonly("dims", [](const TsdfVolume& v) { return Eigen::Vector3i(v.dims()); })
       .def_property_readonly("voxel_m", &TsdfVolume::voxelSize)
       .def_property_readonly("origin",

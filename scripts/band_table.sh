@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
-# The band behind each measurement (scan/fuse option band_sigmas) against the full band: each
-# object rendered from 40 views all around (`inhand render`, 0.7 m, seeded noise), fused at 2 mm
-# voxels with band_sigmas 0 (the full 8 mm band) and 2 (the default), scored against its mesh
-# (`inhand compare`). Writes OUT/band_table.md (default docs/volume_band.md) and .csv.
+# The reach behind each measurement (scan/fuse option band_sigmas) and depth smoothing against the
+# paper's full band: each object rendered from 40 views all around (`inhand render`, 0.7 m, seeded
+# noise), fused at 2 mm voxels with band_sigmas 0 and raw depths (the full 8 mm band), band_sigmas
+# 2 and raw depths, and band_sigmas 2 with smoothed depths (the default), scored against its mesh
+# (`inhand compare`). Writes OUT.md (default docs/volume_band.md) and OUT.csv.
 # Usage: scripts/band_table.sh [OUT.md]   (the build must exist; meshes from ../shared/objects)
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -46,29 +47,34 @@ write("cup_2mm.obj", v, f)
 PY
 objects+=("$work/objects/plate_1p5mm.obj" "$work/objects/cup_2mm.obj")
 csv="${out%.md}.csv"
-echo "object,band_sigmas,coverage,accuracy_mean_mm,accuracy_p95_mm,fscore_2mm" > "$csv.tmp"
+echo "object,band_sigmas,smooth_depth,coverage,accuracy_mean_mm,accuracy_p95_mm,fscore_2mm" > "$csv.tmp"
 {
   echo "# Thin walls: the band behind each measurement"
   echo
   echo "\`bash scripts/band_table.sh\`: each object rendered from 40 views all around at 0.7 m"
-  echo "(\`inhand render\`), fused at 2 mm voxels (\`inhand fuse --band-sigmas K\`), scored by"
-  echo "\`inhand compare\` (coverage within 3 mm; accuracy of the observed surface)."
+  echo "(\`inhand render\`), fused at 2 mm voxels (\`inhand fuse --band-sigmas K --smooth-depth S\`),"
+  echo "scored by \`inhand compare\` (coverage within 3 mm; accuracy of the observed surface). Each"
+  echo "cell: the paper's full band on raw depths (K 0, S false) / the reach of 2σ behind the smoothed"
+  echo "surface on raw depths (2, false) / the same on smoothed depths (2, true: the default)."
   echo
-  echo "| object | coverage % (0 / 2) | mean mm (0 / 2) | p95 mm (0 / 2) | F-score 2 mm (0 / 2) |"
+  echo "| object | coverage % | mean mm | p95 mm | F-score 2 mm |"
   echo "|---|---|---|---|---|"
 } > "$out.tmp"
 for f in "${objects[@]}"; do
   name="$(basename "$f" .obj)"
   "$inhand" render --object "$f" --views 40 --out "$work/$name" > /dev/null 2>&1
   row=()
-  for k in 0 2; do
-    "$inhand" fuse --frames "$work/$name" --band-sigmas "$k" --out "$work/$name/k$k.ply" > /dev/null 2>&1
-    j="$("$inhand" compare "$work/$name/k$k.ply" --truth "$f" --json)"
+  for setting in "0 false" "2 false" "2 true"; do
+    read -r k smooth <<< "$setting"
+    ply="$work/$name/k$k-$smooth.ply"
+    "$inhand" fuse --frames "$work/$name" --band-sigmas "$k" --smooth-depth "$smooth" --out "$ply" \
+      > /dev/null 2>&1
+    j="$("$inhand" compare "$ply" --truth "$f" --json)"
     vals="$(/usr/bin/python3 -c 'import json,sys; d=json.loads(sys.argv[1]); print("%.1f %.2f %.2f %.3f" % (100*d["coverage"], d["accuracy_mm"]["mean"], d["accuracy_mm"]["p95"], d["fscore"]["2mm"]["f"]))' "$j")"
     row+=($vals)
-    echo "$name,$k,${vals// /,}" >> "$csv.tmp"
+    echo "$name,$k,$smooth,${vals// /,}" >> "$csv.tmp"
   done
-  echo "| $name | ${row[0]} / ${row[4]} | ${row[1]} / ${row[5]} | ${row[2]} / ${row[6]} | ${row[3]} / ${row[7]} |" >> "$out.tmp"
+  echo "| $name | ${row[0]} / ${row[4]} / ${row[8]} | ${row[1]} / ${row[5]} / ${row[9]} | ${row[2]} / ${row[6]} / ${row[10]} | ${row[3]} / ${row[7]} / ${row[11]} |" >> "$out.tmp"
   echo "band_table: $name done" >&2
 done
 mv "$csv.tmp" "$csv"

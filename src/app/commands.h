@@ -25,6 +25,7 @@ struct FuseArgs {
   double voxel_m = 0.002;                       // voxel size
   double truncation_m = 0.0;                    // band half-width; 0: 4 voxels
   double band_sigmas = 2.0;                     // behind-surface band: this many σ (0: μ)
+  bool smooth_depth = true;                     // voxels updated from the smoothed surface
   std::optional<std::array<double, 6>> bounds;  // xmin ymin zmin xmax ymax zmax in O; else auto
   double margin_m = 0.02;                       // auto bounds: margin around the measured points
   double memory_mb = 2048;                      // volume memory budget

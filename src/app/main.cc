@@ -38,8 +38,13 @@ int main(int argc, char** argv) {
                 "signed-distance band half-width, m (0: 4 voxels)")
       ->capture_default_str();
   f->add_option("--band-sigmas", fuse.band_sigmas,
-                "each measurement's band half-width in its sigmas (at least a voxel, at most "
-                "--truncation); 0: the truncation for every measurement")
+                "how far each measurement reaches behind its smoothed surface, in its sigmas (at "
+                "least a voxel across the surface, at most --truncation); 0: the truncation "
+                "behind its depth")
+      ->capture_default_str();
+  f->add_option("--smooth-depth", fuse.smooth_depth,
+                "true | false: update the voxels from each pixel's surface smoothed over its 5x5 "
+                "neighbourhood (a fitted plane) rather than its raw depth")
       ->capture_default_str();
   f->add_option("--bounds", bounds,
                 "volume bounds in the object frame: xmin ymin zmin xmax ymax zmax (m); default: "

@@ -110,8 +110,12 @@ void visitConfig(V& v, ScanConfig& c) {
   v.num("truncation_m", s.volume_budget.truncation_m,
         "half-width μ of the signed-distance band, m (0: 4 voxels)");
   v.num("band_sigmas", s.volume_budget.band_sigmas,
-        "a measurement counts this many of its σ behind its surface (at least a voxel, at most "
-        "μ), so that both sides of a thin wall are kept; 0: μ");
+        "a measurement reaches this many of its σ behind its smoothed surface (at least a voxel "
+        "across the surface, at most μ), so that both sides of a thin wall are kept; 0: μ behind "
+        "its depth");
+  v.boolean("smooth_depth", s.volume_budget.smooth_depth,
+            "update the voxels from each pixel's surface smoothed over its 5×5 neighbourhood "
+            "(a fitted plane) rather than from its raw depth");
   v.boolean("fit_volume", s.fit_volume,
             "from the table: a cube of 1.5 × the object's extent + 4 cm, as many voxels across");
   v.num("t_hand_m", s.t_hand_m, "measurements this close to the robot only carve (§IV), m");

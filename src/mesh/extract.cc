@@ -1,6 +1,7 @@
 #include "inhand/mesh/extract.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 
 #include "inhand/core/parallel.h"
@@ -216,6 +217,44 @@ ObjectModel extractModel(const TsdfVolume& volume, const MeshOptions& options) {
         }
       }
   });
+  // An unknown sample next to an observed one that lies less than their distance in front of the
+  // surface is behind that measured surface: its signed distance is at least the neighbour's less
+  // their distance (a distance changes by at most that much), the tightest such bound over its 26
+  // neighbours (the contouring's edges include the cubes' diagonals). The crossing then sits where
+  // the measurement puts it and counts as observed (the measured end's variance) instead of a hole
+  // vertex pulled towards the measured voxel by −μ: a reach behind the surface narrower than μ
+  // (VolumeOptions::band_sigmas) leaves voxels a little behind some measured surfaces unknown.
+  std::vector<uint8_t> behindMeasured(grid.values.size(), 0);
+  {
+    const float h = float(grid.spacing);
+    const std::array<float, 4> stepLength{0.f, h, std::sqrt(2.f) * h, std::sqrt(3.f) * h};
+    std::vector<float> bound(grid.values.size(), -mu);
+    parallelFor(1, grid.dims.z() - 1, [&](int z) {
+      for (int y = 1; y < grid.dims.y() - 1; ++y)
+        for (int x = 1; x < grid.dims.x() - 1; ++x) {
+          const size_t g = grid.index(x, y, z);
+          if (voxelOf[g] == UINT32_MAX || !isUnknown(voxelOf[g])) continue;
+          float best = -mu;
+          for (int dz = -1; dz <= 1; ++dz)
+            for (int dy = -1; dy <= 1; ++dy)
+              for (int dx = -1; dx <= 1; ++dx) {
+                const int steps = std::abs(dx) + std::abs(dy) + std::abs(dz);
+                if (steps == 0) continue;
+                const size_t nb = grid.index(x + dx, y + dy, z + dz);
+                const uint32_t vn = voxelOf[nb];
+                if (vn == UINT32_MAX || volume.state(vn) != VoxelState::kObserved) continue;
+                const float dn = grid.values[nb], len = stepLength[size_t(steps)];
+                if (dn > 0.f && dn < len) best = std::max(best, dn - len);
+              }
+          if (best > -mu) {
+            bound[g] = best;
+            behindMeasured[g] = 1;
+          }
+        }
+    });
+    for (size_t g = 0; g < grid.values.size(); ++g)
+      if (behindMeasured[g]) grid.values[g] = bound[g];
+  }
   ContourResult c =
       options.method == SurfaceMethod::kSurfaceNets ? surfaceNets(grid) : contour(grid);
   ObjectModel model;
@@ -234,10 +273,17 @@ ObjectModel extractModel(const TsdfVolume& volume, const MeshOptions& options) {
   auto crossingVariance = [&](const EdgeVertex& e) {
     uint32_t va = voxelOf[e.a], vb = voxelOf[e.b];
     VoxelState sa = stateOf(va), sb = stateOf(vb);
+    // Behind a measured surface (above): the crossing is that measurement's.
+    if (behindMeasured[e.a] && sb == VoxelState::kObserved)
+      return std::min(volume.variance(vb), holeVar);
+    if (behindMeasured[e.b] && sa == VoxelState::kObserved)
+      return std::min(volume.variance(va), holeVar);
     if (sa == VoxelState::kUnknown || sb == VoxelState::kUnknown) return holeVar;
     float var;
     if (sa == VoxelState::kObserved && sb == VoxelState::kObserved)
-      var = (1 - e.t) * volume.variance(va) + e.t * volume.variance(vb);
+      // The end in front of the surface: every measurement of the surface reaches it, while one
+      // reaches only so far behind (VolumeOptions::band_sigmas).
+      var = grid.values[e.a] > 0 ? volume.variance(va) : volume.variance(vb);
     else if (sa == VoxelState::kObserved)
       var = volume.variance(va);
     else if (sb == VoxelState::kObserved)

@@ -2,6 +2,8 @@
 
 #include <emmintrin.h>
 
+#include <Eigen/Dense>
+
 #include <algorithm>
 #include <atomic>
 #include <cmath>
@@ -104,11 +106,77 @@ void checkInputs(const DepthImage& depth, const CameraIntrinsics& K,
   INHAND_CHECK(!carve || carve->size() == depth.depth_m.size(), "carve mask size != depth size");
 }
 
-// The per-voxel update rule shared by both kernels. `back`: how far behind the measured surface
-// the measurement counts (μ, or k·σ with VolumeOptions::band_sigmas); `mu`: the volume's μ, the
-// band in front of it. Returns whether the voxel changed.
-inline bool updateVoxel(float d, float back, float mu, float weight, bool carveOnly, float* sumWD,
-                        float* sumW, uint8_t* state) {
+}  // namespace
+
+SmoothedSurface smoothedSurface(const DepthImage& depth, const CameraIntrinsics& K, int u, int v,
+                                float max_jump) {
+  const float D = depth.at(u, v);
+  if (!(D > 0.f)) return {};
+  // Least-squares plane z = a + b·du + c·dv through the neighbours on the same surface.
+  double n = 0, su = 0, sv = 0, suu = 0, suv = 0, svv = 0, sz = 0, suz = 0, svz = 0;
+  const int r = kSmoothingRadius;
+  for (int dv = -r; dv <= r; ++dv) {
+    const int vv = v + dv;
+    if (vv < 0 || vv >= depth.height) continue;
+    for (int du = -r; du <= r; ++du) {
+      const int uu = u + du;
+      if (uu < 0 || uu >= depth.width) continue;
+      const float Dn = depth.at(uu, vv);
+      if (!(Dn > 0.f) || std::abs(Dn - D) > max_jump) continue;
+      const double z = double(Dn) - double(D);  // relative to the centre: well conditioned
+      n += 1;
+      su += du;
+      sv += dv;
+      suu += du * du;
+      suv += du * dv;
+      svv += dv * dv;
+      sz += z;
+      suz += du * z;
+      svz += dv * z;
+    }
+  }
+  SmoothedSurface out;
+  out.depth = float(double(D) + sz / n);  // too few neighbours for a plane: their mean, head-on
+  out.cos_incidence = 1.f;
+  if (n < 6) return out;
+  Eigen::Vector3d abc;
+  const int full = (2 * r + 1) * (2 * r + 1);
+  if (int(n) == full) {
+    // The whole neighbourhood: symmetric offsets make the normal equations diagonal.
+    const double s2 = double(full) * r * (r + 1) / 3.0;  // Σ du² over the square
+    abc = Eigen::Vector3d(sz / n, suz / s2, svz / s2);
+  } else {
+    Eigen::Matrix3d A;
+    A << n, su, sv, su, suu, suv, sv, suv, svv;
+    if (!(std::abs(A.determinant()) > 1e-6)) return out;
+    abc = A.ldlt().solve(Eigen::Vector3d(sz, suz, svz));
+    if (!abc.allFinite()) return out;
+  }
+  const double Z = double(D) + abc(0);
+  out.depth = float(Z);
+  // The plane's normal from its tangents along u and v: P(u, v) = Z(u, v)·ray(u, v).
+  const Vec3 ray = K.rayZ1(u, v);
+  const Vec3 tu = abc(1) * ray + Vec3(Z / K.fx, 0, 0), tv = abc(2) * ray + Vec3(0, Z / K.fy, 0);
+  const Vec3 nrm = tu.cross(tv);
+  if (nrm.norm() > 0) out.cos_incidence = float(std::abs(nrm.normalized().dot(ray.normalized())));
+  return out;
+}
+
+float farLimit(float D, const SmoothedSurface& surface, float sigma, float k, float voxel,
+               float mu) {
+  if (!(k > 0.f) || !(sigma > 0.f)) return D + mu;
+  const float c = std::max(surface.cos_incidence, kMinBandCosine);
+  const float band = std::min(mu, std::max(k * sigma, voxel / c));
+  return std::min(D + mu, surface.depth + band);
+}
+
+namespace {
+
+// The per-voxel update rule shared by both kernels, for a voxel that lies within the
+// measurement's reach behind its surface (farLimit). `mu`: the volume's μ, the band in front of
+// the surface. Returns whether the voxel changed.
+inline bool updateVoxel(float d, float mu, float weight, bool carveOnly, float* sumWD, float* sumW,
+                        uint8_t* state) {
   // A carve-only measurement is of a known surface (the robot's own): the space in front of it
   // is free right up to it, not only beyond the band.
   if (carveOnly) {
@@ -132,9 +200,6 @@ inline bool updateVoxel(float d, float back, float mu, float weight, bool carveO
     }
     return false;
   }
-  // Behind the surface only as far as `back`: what lies farther behind may be the other side of
-  // a thin wall, which this measurement did not see.
-  if (d < -back) return false;
   *sumWD += weight * d;
   *sumW += weight;
   *state = uint8_t(VoxelState::kObserved);
@@ -266,31 +331,64 @@ IntegrationStats integrate(const DepthImage& depth, const Iso3& T_O_C, const Cam
   const PixelRect rect = volumeImageRect(*volume, T_O_C, K);
   const float muFull = float(volume->truncation());
   const float k = float(volume->bandSigmas());
-  const float bandMin = std::min(muFull, float(volume->voxelSize()));
-  const bool useBand = k > 0;  // else every measurement's band is μ: no band image
+  const float voxelF = float(volume->voxelSize());
+  const bool useBand = k > 0;  // else every measurement reaches μ behind its depth: no far image
+  const bool smooth = volume->smoothDepth();
   // Per-thread buffers of the image's size: only the rect's entries are written and read, so they
   // are neither cleared nor allocated again frame after frame.
-  thread_local std::vector<float> weight, band;
+  thread_local std::vector<float> weight, farZ;
+  thread_local DepthImage smoothed;
   if (weight.size() < sigma_m.size()) weight.resize(sigma_m.size());
-  if (useBand && band.size() < sigma_m.size()) band.resize(sigma_m.size());
-  for (int v = rect.v0; v < rect.v1; ++v)
+  if (useBand && farZ.size() < sigma_m.size()) farZ.resize(sigma_m.size());
+  if (smooth && (smoothed.width != depth.width || smoothed.height != depth.height ||
+                 smoothed.depth_m.size() != depth.depth_m.size()))
+    smoothed = depth;
+  // Pointers taken here, on this thread: inside the parallel loops the thread_local names would
+  // be the worker threads' own buffers.
+  // The volume's depth range in this camera (its corners).
+  float zNear = std::numeric_limits<float>::infinity(), zFar = -zNear;
+  {
+    const Iso3 T = T_O_C.inverse();
+    const Vec3 lo = volume->origin();
+    const Vec3 hi =
+        volume->point(volume->dims().x() - 1, volume->dims().y() - 1, volume->dims().z() - 1);
+    for (int c = 0; c < 8; ++c) {
+      const Vec3 p =
+          T * Vec3((c & 1) ? hi.x() : lo.x(), (c & 2) ? hi.y() : lo.y(), (c & 4) ? hi.z() : lo.z());
+      zNear = std::min(zNear, float(p.z()));
+      zFar = std::max(zFar, float(p.z()));
+    }
+  }
+  float* F = farZ.data();
+  float* Wt = weight.data();
+  float* S = smooth ? smoothed.depth_m.data() : nullptr;
+  parallelFor(rect.v0, rect.v1, [&](int v) {
     for (int u = rect.u0; u < rect.u1; ++u) {
       const size_t i = size_t(v) * w + u;
       const float s = sigma_m[i];
-      weight[i] = s > 0 ? 1.f / (s * s) : 0.f;
-      if (useBand) band[i] = s > 0 ? std::clamp(k * s, bandMin, muFull) : muFull;
+      const float Dm = depth.depth_m[i];
+      Wt[i] = s > 0 ? 1.f / (s * s) : 0.f;
+      // Carve-only pixels (the robot's own surface) and pixels without a σ keep their depth, as
+      // do those more than 2μ beyond the volume (its voxels are more than μ in front of both
+      // depths: empty either way) or before it (none within reach).
+      const bool fit = s > 0 && !(carve_only && (*carve_only)[i]) && (useBand || smooth) &&
+                       Dm < zFar + 2 * muFull && Dm + muFull > zNear;
+      SmoothedSurface sm;
+      if (fit) sm = smoothedSurface(depth, K, u, v, muFull);
+      const float Dv = (fit && smooth && sm.depth > 0.f) ? sm.depth : Dm;
+      if (smooth) S[i] = Dv;
+      if (useBand) F[i] = fit ? farLimit(Dv, sm, s, k, voxelF, muFull) : Dv + muFull;
     }
-  // Pointers taken here, on this thread: inside the parallel loop `weight` and `band` would name
-  // the worker threads' own buffers.
-  const float* B = band.data();
-  const float* Wt = weight.data();
-  const DepthTiles tiles(depth, rect);
+  });
+  // The depths the voxels are updated from: the smoothed ones with VolumeOptions::smooth_depth.
+  const DepthImage& used = smooth ? smoothed : depth;
+  const DepthTiles tiles(used, rect);
   const Iso3 T_C_O = T_O_C.inverse();
   const Mat3 R = T_C_O.linear();
   const Vec3 step = R.col(0) * volume->voxelSize();  // camera-frame step along voxel x
   const Vec3i dims = volume->dims();
   const float fx = float(K.fx), fy = float(K.fy), cx = float(K.cx), cy = float(K.cy);
-  const float* D = depth.depth_m.data();
+  const float* D = used.depth_m.data();
   const uint8_t* carve = carve_only ? carve_only->data() : nullptr;
   float* sumWD = volume->sumWD();
   float* sumW = volume->sumW();
@@ -342,7 +440,7 @@ IntegrationStats integrate(const DepthImage& depth, const Iso3& T_O_C, const Cam
           // One voxel from its depth Z and its projection (fu, fv) + 0.5.
           // Captured by value: the compiler keeps them in registers (through references it reloads
           // them after every store to the volume).
-          auto voxel = [D, B, useBand, W = Wt, carve, w, h, muFull, base, sumWD, sumW, state,
+          auto voxel = [D, F, useBand, W = Wt, carve, w, h, muFull, base, sumWD, sumW, state,
                         &myVisited, &myUpdated](int x, float Z, float fu, float fv) {
             if (Z <= 0.f) return;
             // Nearest pixel. Truncation equals floor for non-negative values, and is much cheaper
@@ -354,12 +452,11 @@ IntegrationStats integrate(const DepthImage& depth, const Iso3& T_O_C, const Cam
             const float Dm = D[p];
             if (!(Dm > 0.f)) return;
             const float d = Dm - Z;
-            const float mup = useBand ? B[p] : muFull;  // predictable: the same for every voxel
-            if (d < -mup) return;
+            if (useBand ? Z > F[p] : d < -muFull) return;  // predictable: the same every voxel
             ++myVisited;
             const size_t i = base + size_t(x);
-            myUpdated += updateVoxel(d, mup, muFull, W[p], carve && carve[p], &sumWD[i], &sumW[i],
-                                     &state[i]);
+            myUpdated +=
+                updateVoxel(d, muFull, W[p], carve && carve[p], &sumWD[i], &sumW[i], &state[i]);
           };
           // Four voxels at a time: depth, its reciprocal and the projection in SSE2, each operation
           // the scalar one in the same order (IEEE single precision, no fused multiply-add), so the
@@ -426,19 +523,30 @@ IntegrationStats integrateReference(const DepthImage& depth, const Iso3& T_O_C,
         if (!(Dm > 0)) continue;
         size_t p = size_t(v) * K.width + u;
         float s = sigma_m[p];
-        // The band: k·σ within [one voxel, μ] (written out here, not shared with the fast kernel).
-        float mup = mu;
-        if (k > 0 && s > 0)
-          mup = float(std::min(double(mu),
-                               std::max(std::min(double(mu), volume->voxelSize()), k * double(s))));
-        float d = float(Dm - p_C.z());
-        if (d < -mup) continue;
+        bool carve = carve_only && (*carve_only)[p];
+        const bool object = s > 0 && !carve;
+        // The measured surface: the pixel's depth, or the plane fitted around it with
+        // smooth_depth; with band_sigmas the reach behind the fitted plane is k·σ, at least a
+        // voxel across the surface (voxel / cos θ along the ray), at most μ, and at most μ behind
+        // the depth used (written out here, not shared with the fast kernel).
+        double Dv = Dm;
+        SmoothedSurface sm;
+        if (object && (k > 0 || volume->smoothDepth())) sm = smoothedSurface(depth, K, u, v, mu);
+        if (object && volume->smoothDepth() && sm.depth > 0) Dv = sm.depth;
+        float d = float(Dv - p_C.z());
+        if (k > 0 && object) {
+          const double c = std::max(double(sm.cos_incidence), double(kMinBandCosine));
+          const double band = std::min(double(mu), std::max(k * s, volume->voxelSize() / c));
+          const double far = std::min(Dv + mu, double(sm.depth) + band);
+          if (p_C.z() > far) continue;
+        } else if (d < -mu) {
+          continue;
+        }
         ++stats.visited;
         size_t i = volume->index(x, y, z);
         float wgt = s > 0 ? 1.f / (s * s) : 0.f;
-        bool carve = carve_only && (*carve_only)[p];
-        stats.updated += updateVoxel(d, mup, mu, wgt, carve, &volume->sumWD()[i],
-                                     &volume->sumW()[i], &volume->states()[i]);
+        stats.updated += updateVoxel(d, mu, wgt, carve, &volume->sumWD()[i], &volume->sumW()[i],
+                                     &volume->states()[i]);
       }
   return stats;
 }

@@ -31,6 +31,7 @@ TsdfVolume::TsdfVolume(const Aabb& box, const VolumeOptions& options) {
   voxel_ = options.voxel_size_m;
   truncation_ = options.truncation();
   bandSigmas_ = options.band_sigmas;
+  smoothDepth_ = options.smooth_depth;
   origin_ = box.min;
   dims_ = dimsFor(box, voxel_);
   double needed = megabytesFor(dims_);

@@ -93,9 +93,15 @@ struct ScanOptions {
   TrackingOptions tracking;  // in-hand frames aligned with hand and model (arm error, §II)
   FrameChecks checks;        // in-hand frames that are not fused
   MeshOptions mesh;
-  // Memory budget, truncation and the band behind each measurement (voxel size above wins;
-  // band_sigmas 0 here, the paper's fixed band; `inhand fuse` uses 2: docs/volume.md).
-  VolumeOptions volume_budget;
+  // Memory budget, truncation, the reach behind each measurement and depth smoothing (voxel size
+  // above wins). Scans and `inhand fuse` keep thin walls: band_sigmas 2 behind each pixel's
+  // smoothed surface, voxels updated from it (docs/volume.md).
+  VolumeOptions volume_budget = [] {
+    VolumeOptions o;
+    o.band_sigmas = 2.0;
+    o.smooth_depth = true;
+    return o;
+  }();
   std::string validate() const;
 };
 

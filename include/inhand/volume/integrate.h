@@ -46,6 +46,29 @@ std::vector<float> measurementSigma(const DepthImage& depth, const CameraIntrins
                                     const PixelRect* region = nullptr,
                                     const std::vector<uint8_t>* carve_only = nullptr);
 
+// Pixel (u, v)'s surface with the noise smoothed out: a least-squares plane through the depths of
+// its (2·kSmoothingRadius + 1)² neighbourhood that lie within `max_jump` of its own (the same
+// surface), evaluated at the pixel, and the cosine between that plane's normal and the pixel's ray
+// (their mean and 1 when fewer than six or degenerate); depth 0 where the pixel has none.
+// With VolumeOptions::band_sigmas = k > 0 a measurement reaches behind this smoothed depth by
+// max(k·σ, voxel / cos θ) (a voxel across the surface, seen at incidence θ; cos θ at least
+// kMinBandCosine), at most μ, and never more than μ behind its own depth: which voxels a
+// measurement updates then hardly depends on its own noise, so the values it adds are not biased
+// outwards (a limit taken from the noisy depth drops the measurements that fell behind more often
+// than those in front).
+constexpr int kSmoothingRadius = 2;
+constexpr float kMinBandCosine = 0.2f;
+struct SmoothedSurface {
+  float depth = 0.f;
+  float cos_incidence = 1.f;
+};
+SmoothedSurface smoothedSurface(const DepthImage& depth, const CameraIntrinsics& K, int u, int v,
+                                float max_jump);
+// That reach as a camera depth: min(D + μ, Ds + min(μ, max(k·σ, voxel / cos θ))); D + μ when k or
+// σ is not positive.
+float farLimit(float D, const SmoothedSurface& surface, float sigma, float k, float voxel,
+               float mu);
+
 // Optimised kernel: both cores, rows of voxels clipped analytically to the camera frustum.
 // `sigma_m` is measurementSigma's output; `carve_only` (optional, width·height) flags pixels that
 // may only carve. Bricks of 8³ voxels that the frame cannot change are skipped from their corners

@@ -19,6 +19,9 @@ struct VolumeOptions {
   // > 0: each measurement's band is this many of its σ (at least a voxel, at most μ), so that the
   // two sides of a wall thinner than μ do not cancel; 0: μ for every measurement.
   double band_sigmas = 0.0;
+  // Update the voxels from each pixel's smoothed surface (smoothedSurface in integrate.h: the plane
+  // fitted to its 5×5 neighbourhood on the same surface) rather than its raw depth.
+  bool smooth_depth = false;
   double memory_budget_mb = 2048;  // a volume needing more memory than this is refused, MiB
 
   double truncation() const { return truncation_m > 0 ? truncation_m : 4.0 * voxel_size_m; }
@@ -44,6 +47,7 @@ class TsdfVolume {
   double voxelSize() const { return voxel_; }
   double truncation() const { return truncation_; }
   double bandSigmas() const { return bandSigmas_; }  // VolumeOptions::band_sigmas
+  bool smoothDepth() const { return smoothDepth_; }  // VolumeOptions::smooth_depth
   size_t voxelCount() const { return state_.size(); }
   size_t index(int x, int y, int z) const {
     return (size_t(z) * size_t(dims_.y()) + size_t(y)) * size_t(dims_.x()) + size_t(x);
@@ -71,6 +75,7 @@ class TsdfVolume {
   double voxel_;
   double truncation_;
   double bandSigmas_ = 0;
+  bool smoothDepth_ = false;
   std::vector<float> sumWD_, sumW_;
   std::vector<uint8_t> state_;
 };
