@@ -343,8 +343,6 @@ IntegrationStats integrate(const DepthImage& depth, const Iso3& T_O_C, const Cam
   if (smooth && (smoothed.width != depth.width || smoothed.height != depth.height ||
                  smoothed.depth_m.size() != depth.depth_m.size()))
     smoothed = depth;
-  // Pointers taken here, on this thread: inside the parallel loops the thread_local names would
-  // be the worker threads' own buffers.
   // The volume's depth range in this camera (its corners).
   float zNear = std::numeric_limits<float>::infinity(), zFar = -zNear;
   {
@@ -359,6 +357,8 @@ IntegrationStats integrate(const DepthImage& depth, const Iso3& T_O_C, const Cam
       zFar = std::max(zFar, float(p.z()));
     }
   }
+  // Pointers taken here, on this thread: inside the parallel loops the thread_local names would
+  // be the worker threads' own buffers.
   float* F = farZ.data();
   float* Wt = weight.data();
   float* S = smooth ? smoothed.depth_m.data() : nullptr;
@@ -372,7 +372,7 @@ IntegrationStats integrate(const DepthImage& depth, const Iso3& T_O_C, const Cam
       // do those more than 2μ beyond the volume (its voxels are more than μ in front of both
       // depths: empty either way) or before it (none within reach).
       const bool fit = s > 0 && !(carve_only && (*carve_only)[i]) && (useBand || smooth) &&
-                       Dm < zFar + 2 * muFull && Dm + muFull > zNear;
+                       Dm < zFar + 2 * muFull && Dm + 2 * muFull > zNear;
       SmoothedSurface sm;
       if (fit) sm = smoothedSurface(depth, K, u, v, muFull);
       const float Dv = (fit && smooth && sm.depth > 0.f) ? sm.depth : Dm;
