@@ -120,6 +120,15 @@ TEST(Cli, BadInputIsNamedAndLeavesNoOutput) {
               "frames.json");
   expectError("fuse --frames x --out m.txt", ".ply");
   expectError("render --object builtin:mug --views 3", "--out");  // CLI11 usage error
+  // A value CLI11 cannot convert is bad input too: status 1, the option named, nothing written.
+  {
+    const Result r = run(
+        "render --object builtin:mug --views 3 --range abc --out " + (dir.path() / "u").string(),
+        dir);
+    EXPECT_EQ(r.code, 1) << r.output;
+    EXPECT_NE(r.output.find("--range"), std::string::npos) << r.output;
+    EXPECT_FALSE(fs::exists(dir.path() / "u"));
+  }
   // Nothing was left behind: only the inputs (the broken frames directory, the flat mesh).
   std::vector<std::string> left;
   for (const auto& e : fs::directory_iterator(dir.path()))

@@ -212,7 +212,9 @@ int main(int argc, char** argv) {
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
-    return app.exit(e);
+    // CLI11 prints the message (or the help); a usage error is bad input: status 1, as the
+    // README's exit statuses say (CLI11's own codes are 100 and up).
+    return app.exit(e) == 0 ? 0 : 1;
   }
   try {
     if (*sc) return inhand::app::runScan(scan);
