@@ -228,7 +228,7 @@ ObjectModel extractModel(const TsdfVolume& volume, const MeshOptions& options) {
   {
     const float h = float(grid.spacing);
     const std::array<float, 4> stepLength{0.f, h, std::sqrt(2.f) * h, std::sqrt(3.f) * h};
-    std::vector<float> bound(grid.values.size(), -mu);
+    // Only unknown samples are written and only observed ones read: no sample read changes.
     parallelFor(1, grid.dims.z() - 1, [&](int z) {
       for (int y = 1; y < grid.dims.y() - 1; ++y)
         for (int x = 1; x < grid.dims.x() - 1; ++x) {
@@ -247,13 +247,11 @@ ObjectModel extractModel(const TsdfVolume& volume, const MeshOptions& options) {
                 if (dn > 0.f && dn < len) best = std::max(best, dn - len);
               }
           if (best > -mu) {
-            bound[g] = best;
+            grid.values[g] = best;
             behindMeasured[g] = 1;
           }
         }
     });
-    for (size_t g = 0; g < grid.values.size(); ++g)
-      if (behindMeasured[g]) grid.values[g] = bound[g];
   }
   ContourResult c =
       options.method == SurfaceMethod::kSurfaceNets ? surfaceNets(grid) : contour(grid);

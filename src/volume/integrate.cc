@@ -5,6 +5,7 @@
 #include <Eigen/Dense>
 
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <cmath>
 #include <limits>
@@ -14,15 +15,23 @@
 
 namespace inhand {
 
-PixelRect volumeImageRect(const TsdfVolume& volume, const Iso3& T_O_C, const CameraIntrinsics& K) {
-  const PixelRect all{0, 0, K.width, K.height};
-  const Iso3 T_C_O = T_O_C.inverse();
+namespace {
+// The volume's eight corner samples in the camera frame.
+std::array<Vec3, 8> cornersInCamera(const TsdfVolume& volume, const Iso3& T_C_O) {
   const Vec3 lo = volume.origin();
   const Vec3 hi = volume.point(volume.dims().x() - 1, volume.dims().y() - 1, volume.dims().z() - 1);
+  std::array<Vec3, 8> out;
+  for (int c = 0; c < 8; ++c)
+    out[size_t(c)] = T_C_O * Vec3((c & 1) ? hi.x() : lo.x(), (c & 2) ? hi.y() : lo.y(),
+                                  (c & 4) ? hi.z() : lo.z());
+  return out;
+}
+}  // namespace
+
+PixelRect volumeImageRect(const TsdfVolume& volume, const Iso3& T_O_C, const CameraIntrinsics& K) {
+  const PixelRect all{0, 0, K.width, K.height};
   double u0 = 1e300, v0 = 1e300, u1 = -1e300, v1 = -1e300;
-  for (int c = 0; c < 8; ++c) {
-    const Vec3 p_O((c & 1) ? hi.x() : lo.x(), (c & 2) ? hi.y() : lo.y(), (c & 4) ? hi.z() : lo.z());
-    const Vec3 p = T_C_O * p_O;
+  for (const Vec3& p : cornersInCamera(volume, T_O_C.inverse())) {
     if (!(p.z() > 1e-6)) return all;
     const Vec2 uv = K.project(p);
     u0 = std::min(u0, uv.x());
@@ -326,8 +335,9 @@ IntegrationStats integrate(const DepthImage& depth, const Iso3& T_O_C, const Cam
                            const std::vector<uint8_t>* carve_only, bool skip_unchanged_bricks) {
   checkInputs(depth, K, sigma_m, carve_only);
   const int w = K.width, h = K.height;
-  // Weight w = 1/σ² and band per pixel, so the kernel reads one or two floats per voxel; only where
-  // the volume's voxels can project (the kernel reads no other pixel).
+  // Per pixel: the weight w = 1/σ², the farthest depth the measurement reaches (band_sigmas) and
+  // the depth it updates from (smooth_depth), so the kernel reads two or three floats per voxel;
+  // only where the volume's voxels can project (the kernel reads no other pixel).
   const PixelRect rect = volumeImageRect(*volume, T_O_C, K);
   const float muFull = float(volume->truncation());
   const float k = float(volume->bandSigmas());
@@ -344,18 +354,11 @@ IntegrationStats integrate(const DepthImage& depth, const Iso3& T_O_C, const Cam
                  smoothed.depth_m.size() != depth.depth_m.size()))
     smoothed = depth;
   // The volume's depth range in this camera (its corners).
+  const Iso3 T_C_O = T_O_C.inverse();
   float zNear = std::numeric_limits<float>::infinity(), zFar = -zNear;
-  {
-    const Iso3 T = T_O_C.inverse();
-    const Vec3 lo = volume->origin();
-    const Vec3 hi =
-        volume->point(volume->dims().x() - 1, volume->dims().y() - 1, volume->dims().z() - 1);
-    for (int c = 0; c < 8; ++c) {
-      const Vec3 p =
-          T * Vec3((c & 1) ? hi.x() : lo.x(), (c & 2) ? hi.y() : lo.y(), (c & 4) ? hi.z() : lo.z());
-      zNear = std::min(zNear, float(p.z()));
-      zFar = std::max(zFar, float(p.z()));
-    }
+  for (const Vec3& p : cornersInCamera(*volume, T_C_O)) {
+    zNear = std::min(zNear, float(p.z()));
+    zFar = std::max(zFar, float(p.z()));
   }
   // Pointers taken here, on this thread: inside the parallel loops the thread_local names would
   // be the worker threads' own buffers.
@@ -383,7 +386,6 @@ IntegrationStats integrate(const DepthImage& depth, const Iso3& T_O_C, const Cam
   // The depths the voxels are updated from: the smoothed ones with VolumeOptions::smooth_depth.
   const DepthImage& used = smooth ? smoothed : depth;
   const DepthTiles tiles(used, rect);
-  const Iso3 T_C_O = T_O_C.inverse();
   const Mat3 R = T_C_O.linear();
   const Vec3 step = R.col(0) * volume->voxelSize();  // camera-frame step along voxel x
   const Vec3i dims = volume->dims();

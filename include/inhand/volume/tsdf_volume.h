@@ -16,8 +16,9 @@ enum class VoxelState : uint8_t { kUnknown = 0, kEmpty = 1, kObserved = 2 };
 struct VolumeOptions {
   double voxel_size_m = 0.002;  // edge of a voxel, m
   double truncation_m = 0.0;    // half-width μ of the signed-distance band, m; 0: 4 voxels
-  // > 0: each measurement's band is this many of its σ (at least a voxel, at most μ), so that the
-  // two sides of a wall thinner than μ do not cancel; 0: μ for every measurement.
+  // > 0: each measurement reaches this many of its σ behind its smoothed surface (at least a
+  // voxel across the surface, at most μ: farLimit in integrate.h), so that the two sides of a wall
+  // thinner than μ do not cancel; 0: μ behind every measurement's depth.
   double band_sigmas = 0.0;
   // Update the voxels from each pixel's smoothed surface (smoothedSurface in integrate.h: the plane
   // fitted to its 5×5 neighbourhood on the same surface) rather than its raw depth.
