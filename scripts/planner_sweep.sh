@@ -14,9 +14,8 @@ planners="${PLANNERS:-ig,ig-no-hand,ig-no-cost,random,area,unobserved-voxels,rea
 mkdir -p "$out/bin"
 # A copy of the binary: the sweep runs for a while, the build may change meanwhile.
 cp build/inhand "$out/bin/inhand"
-# The simulated sensor delivers every third frame (SUBSAMPLE): the setting docs/planner_eval.md
-# was measured with; SUBSAMPLE=1 runs what `inhand scan` now does by default (every frame).
-sub="${SUBSAMPLE:-3}"
+# The simulated sensor delivers every frame (what `inhand scan` does); SUBSAMPLE=n every n-th.
+sub="${SUBSAMPLE:-1}"
 echo "{\"sim\": {\"frame_subsample\": $sub}}" > "$out/default.json"
 echo "{\"initial_views\": 1, \"sim\": {\"frame_subsample\": $sub}}" > "$out/initial1.json"
 for config in ${CONFIGS:-initial1 default}; do
