@@ -410,44 +410,6 @@ TEST(Fusion, SmoothedSurfaceIsThePlaneThroughTheNeighbourhood) {
               1e-3);
 }
 
-// The many-pixel fits (row sums, the whole neighbourhood's plane from three of them) against
-// smoothedSurface pixel by pixel: a noisy image of a box in front of a tilted plane, with holes,
-// missing pixels at the outlines, NaNs and a rect that reaches the image's border.
-TEST(Fusion, SmoothedSurfacesMatchTheSinglePixelFit) {
-  RayScene scene;
-  const Vec3 normal = Vec3(0.3, -0.4, -1.0).normalized();
-  scene.addMesh(makeBox(Vec3(1.0, 1.0, 0.001)),
-                Iso3(Eigen::Translation3d(-0.9 * normal)) *
-                    Iso3(Eigen::Quaterniond::FromTwoVectors(Vec3::UnitZ(), normal)));
-  scene.addMesh(makeBox(Vec3(0.05, 0.05, 0.05)), Iso3(Eigen::Translation3d(0.1, 0.0, 0.6)));
-  scene.commit();
-  DepthCameraOptions cam;
-  NoiseModelOptions nm;
-  RenderOptions ro;
-  ro.seed = 5;
-  DepthImage d = renderDepth(scene, Iso3::Identity(), cam, nm, ro);
-  const CameraIntrinsics& K = cam.intrinsics;
-  for (int v = 100; v < 110; ++v)
-    for (int u = 300; u < 340; ++u) d.at(u, v) = 0.f;  // a hole
-  for (size_t i = 7; i < d.depth_m.size(); i += 997)
-    d.depth_m[i] = std::numeric_limits<float>::quiet_NaN();
-  for (const PixelRect& rect : {PixelRect{0, 0, K.width, K.height}, PixelRect{250, 90, 420, 300},
-                                PixelRect{0, 0, 60, K.height}}) {
-    SmoothedSurfaces fits;
-    fits.prepare(d, K, rect, 0.008f);
-    int whole = 0, compared = 0;
-    for (int v = rect.v0; v < rect.v1; ++v)
-      for (int u = rect.u0; u < rect.u1; ++u) {
-        const SmoothedSurface a = fits.at(u, v), b = smoothedSurface(d, K, u, v, 0.008f);
-        ASSERT_NEAR(a.depth, b.depth, 1e-6f * std::max(1.f, b.depth)) << u << " " << v;
-        ASSERT_NEAR(a.cos_incidence, b.cos_incidence, 1e-5f) << u << " " << v;
-        ++compared;
-        whole += a.depth > 0.f;
-      }
-    EXPECT_GT(whole, compared / 4) << rect.u0;
-  }
-}
-
 // The reach behind each measurement is taken from the smoothed surface, so which voxels a
 // measurement updates hardly depends on its own noise: a solid box fused with the reach at 2σ
 // has its surface where it is (the box's own signed distance at the observed vertices, mean

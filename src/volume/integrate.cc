@@ -117,22 +117,6 @@ void checkInputs(const DepthImage& depth, const CameraIntrinsics& K,
 
 }  // namespace
 
-namespace {
-// The surface of the plane z(u + du, v + dv) = Z + b·du + c·dv at pixel (u, v): its depth Z and
-// the cosine between its normal (from its tangents along u and v: P(u, v) = Z(u, v)·ray(u, v))
-// and the pixel's ray.
-SmoothedSurface planeSurface(const CameraIntrinsics& K, int u, int v, double Z, double b,
-                             double c) {
-  SmoothedSurface out;
-  out.depth = float(Z);
-  const Vec3 ray = K.rayZ1(u, v);
-  const Vec3 tu = b * ray + Vec3(Z / K.fx, 0, 0), tv = c * ray + Vec3(0, Z / K.fy, 0);
-  const Vec3 nrm = tu.cross(tv);
-  if (nrm.norm() > 0) out.cos_incidence = float(std::abs(nrm.normalized().dot(ray.normalized())));
-  return out;
-}
-}  // namespace
-
 SmoothedSurface smoothedSurface(const DepthImage& depth, const CameraIntrinsics& K, int u, int v,
                                 float max_jump) {
   const float D = depth.at(u, v);
@@ -177,83 +161,14 @@ SmoothedSurface smoothedSurface(const DepthImage& depth, const CameraIntrinsics&
     abc = A.ldlt().solve(Eigen::Vector3d(sz, suz, svz));
     if (!abc.allFinite()) return out;
   }
-  return planeSurface(K, u, v, double(D) + abc(0), abc(1), abc(2));
-}
-
-void SmoothedSurfaces::prepare(const DepthImage& depth, const CameraIntrinsics& K,
-                               const PixelRect& rect, float max_jump) {
-  depth_ = &depth;
-  K_ = &K;
-  rect_ = rect;
-  maxJump_ = max_jump;
-  const int r = kSmoothingRadius;
-  row0_ = std::max(0, rect.v0 - r);
-  const int row1 = std::min(depth.height, rect.v1 + r);
-  stride_ = std::max(0, rect.u1 - rect.u0);
-  const size_t n = size_t(std::max(0, row1 - row0_)) * size_t(stride_);
-  if (n == 0) return;
-  if (sum_.size() < n) {
-    sum_.resize(n);
-    sumU_.resize(n);
-    min_.resize(n);
-    max_.resize(n);
-  }
-  double* S = sum_.data();
-  double* SU = sumU_.data();
-  float* MN = min_.data();
-  float* MX = max_.data();
-  parallelFor(row0_, row1, [&](int v) {
-    const float* row = &depth.depth_m[size_t(v) * depth.width];
-    const size_t base = size_t(v - row0_) * stride_;
-    for (int u = rect.u0; u < rect.u1; ++u) {
-      const size_t i = base + size_t(u - rect.u0);
-      if (u - r < 0 || u + r >= depth.width || !(row[u] > 0.f)) {
-        MN[i] = 0.f;  // the neighbourhood leaves the image or has a hole here: never whole
-        continue;
-      }
-      double s = 0, su = 0;
-      float mn = std::numeric_limits<float>::infinity(), mx = 0.f;
-      for (int du = -r; du <= r; ++du) {
-        const float D = row[u + du];
-        const float Dv = D > 0.f ? D : 0.f;  // NaN and missing: 0, so the minimum says so
-        s += Dv;
-        su += du * double(Dv);
-        mn = std::min(mn, Dv);
-        mx = std::max(mx, Dv);
-      }
-      S[i] = s;
-      SU[i] = su;
-      MN[i] = mn;
-      MX[i] = mx;
-    }
-  });
-}
-
-SmoothedSurface SmoothedSurfaces::at(int u, int v) const {
-  const DepthImage& depth = *depth_;
-  const int r = kSmoothingRadius;
-  const float D = depth.at(u, v);
-  if (!(D > 0.f)) return {};
-  if (v - r >= 0 && v + r < depth.height) {
-    double s = 0, su = 0, sv = 0;
-    float mn = std::numeric_limits<float>::infinity(), mx = 0.f;
-    const size_t col = size_t(u - rect_.u0);
-    for (int dv = -r; dv <= r; ++dv) {
-      const size_t i = size_t(v + dv - row0_) * stride_ + col;
-      s += sum_[i];
-      su += sumU_[i];
-      sv += dv * sum_[i];
-      mn = std::min(mn, min_[i]);
-      mx = std::max(mx, max_[i]);
-    }
-    // Whole and on one surface: every |Dn − D| ≤ max_jump exactly when the extremes are.
-    if (mn > 0.f && !(std::abs(mx - D) > maxJump_) && !(std::abs(mn - D) > maxJump_)) {
-      const int full = (2 * r + 1) * (2 * r + 1);
-      const double s2 = double(full) * r * (r + 1) / 3.0;  // Σ du² over the square
-      return planeSurface(*K_, u, v, s / full, su / s2, sv / s2);
-    }
-  }
-  return smoothedSurface(depth, *K_, u, v, maxJump_);
+  const double Z = double(D) + abc(0);
+  out.depth = float(Z);
+  // The plane's normal from its tangents along u and v: P(u, v) = Z(u, v)·ray(u, v).
+  const Vec3 ray = K.rayZ1(u, v);
+  const Vec3 tu = abc(1) * ray + Vec3(Z / K.fx, 0, 0), tv = abc(2) * ray + Vec3(0, Z / K.fy, 0);
+  const Vec3 nrm = tu.cross(tv);
+  if (nrm.norm() > 0) out.cos_incidence = float(std::abs(nrm.normalized().dot(ray.normalized())));
+  return out;
 }
 
 float farLimit(float D, const SmoothedSurface& surface, float sigma, float k, float voxel,
@@ -450,9 +365,6 @@ IntegrationStats integrate(const DepthImage& depth, const Iso3& T_O_C, const Cam
   float* F = farZ.data();
   float* Wt = weight.data();
   float* S = smooth ? smoothed.depth_m.data() : nullptr;
-  thread_local SmoothedSurfaces planes;
-  SmoothedSurfaces* fits = &planes;
-  if (useBand || smooth) fits->prepare(depth, K, rect, muFull);
   parallelFor(rect.v0, rect.v1, [&](int v) {
     for (int u = rect.u0; u < rect.u1; ++u) {
       const size_t i = size_t(v) * w + u;
@@ -465,7 +377,7 @@ IntegrationStats integrate(const DepthImage& depth, const Iso3& T_O_C, const Cam
       const bool fit = s > 0 && !(carve_only && (*carve_only)[i]) && (useBand || smooth) &&
                        Dm < zFar + 2 * muFull && Dm + 2 * muFull > zNear;
       SmoothedSurface sm;
-      if (fit) sm = fits->at(u, v);
+      if (fit) sm = smoothedSurface(depth, K, u, v, muFull);
       const float Dv = (fit && smooth && sm.depth > 0.f) ? sm.depth : Dm;
       if (smooth) S[i] = Dv;
       if (useBand) F[i] = fit ? farLimit(Dv, sm, s, k, voxelF, muFull) : Dv + muFull;

@@ -64,29 +64,6 @@ struct SmoothedSurface {
 };
 SmoothedSurface smoothedSurface(const DepthImage& depth, const CameraIntrinsics& K, int u, int v,
                                 float max_jump);
-// smoothedSurface for many pixels of one image. prepare() sums each pixel's row of 5 depths (and
-// their offsets times depth, their minimum and maximum) over the rows of `rect` and two more
-// each side, once; at(u, v) for (u, v) in `rect` then adds five of those rows: where the whole
-// neighbourhood is valid and within max_jump of the pixel's depth (all but pixels near edges and
-// holes) the normal equations are diagonal and the plane follows from the three sums; any other
-// pixel gets smoothedSurface itself. Equal to smoothedSurface up to rounding (test). Reusable
-// frame after frame (buffers kept); not thread-safe during prepare(), at() is.
-class SmoothedSurfaces {
- public:
-  void prepare(const DepthImage& depth, const CameraIntrinsics& K, const PixelRect& rect,
-               float max_jump);
-  SmoothedSurface at(int u, int v) const;
-
- private:
-  const DepthImage* depth_ = nullptr;
-  const CameraIntrinsics* K_ = nullptr;
-  PixelRect rect_;
-  int row0_ = 0, stride_ = 0;  // first summed row; entries per row (the rect's width)
-  float maxJump_ = 0.f;
-  std::vector<double> sum_, sumU_;  // Σ D and Σ du·D along each pixel's row
-  std::vector<float> min_, max_;    // 0 where a depth is missing or the row leaves the image
-};
-
 // That reach as a camera depth: min(D + μ, Ds + min(μ, max(k·σ, voxel / cos θ))); D + μ when k or
 // σ is not positive.
 float farLimit(float D, const SmoothedSurface& surface, float sigma, float k, float voxel,
