@@ -164,14 +164,21 @@ int viewsUntilStopInUnits(const TriangleMesh& object, double s, StopRule rule) {
   return views;
 }
 
+// Views until each rule stops at scales 0.5, 1 and 2: (relative, absolute).
+template <typename Views>
+std::pair<std::vector<int>, std::vector<int>> viewsAtScales(const TriangleMesh& object,
+                                                            Views views) {
+  std::vector<int> relative, absolute;
+  for (double s : {0.5, 1.0, 2.0}) {
+    relative.push_back(views(object, s, StopRule::kRelative));
+    absolute.push_back(views(object, s, StopRule::kAbsolute));
+  }
+  return {relative, absolute};
+}
+
 TEST(Stopping, AnObjectScaledWithItsWorldStopsAfterTheSameViews) {
   for (const char* name : {"builtin:coffee_can", "builtin:mug", "builtin:cracker_box"}) {
-    const TriangleMesh object = loadObject(name);
-    std::vector<int> relative, absolute;
-    for (double s : {0.5, 1.0, 2.0}) {
-      relative.push_back(viewsUntilStopInUnits(object, s, StopRule::kRelative));
-      absolute.push_back(viewsUntilStopInUnits(object, s, StopRule::kAbsolute));
-    }
+    const auto [relative, absolute] = viewsAtScales(loadObject(name), viewsUntilStopInUnits);
     const std::string seen = viewsSeen(name, relative, absolute);
     std::printf("%s (object and world scaled)\n", seen.c_str());
     EXPECT_GE(*std::min_element(relative.begin(), relative.end()), 1) << seen;
@@ -184,12 +191,7 @@ TEST(Stopping, AnObjectScaledWithItsWorldStopsAfterTheSameViews) {
 // spread, and the larger object still takes more views (perspective, the slivers above).
 TEST(Stopping, ScaledObjectsStopCloserTogetherUnderTheRelativeRule) {
   for (const char* name : {"builtin:coffee_can", "builtin:mug"}) {
-    const TriangleMesh object = loadObject(name);
-    std::vector<int> relative, absolute;
-    for (double s : {0.5, 1.0, 2.0}) {
-      relative.push_back(viewsUntilStop(object, s, StopRule::kRelative));
-      absolute.push_back(viewsUntilStop(object, s, StopRule::kAbsolute));
-    }
+    const auto [relative, absolute] = viewsAtScales(loadObject(name), viewsUntilStop);
     const std::string seen = viewsSeen(name, relative, absolute);
     std::printf("%s\n", seen.c_str());
     EXPECT_GE(*std::min_element(relative.begin(), relative.end()), 1) << seen;
