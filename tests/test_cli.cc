@@ -5,6 +5,7 @@
 #include <cstdlib>
 #include <fstream>
 #include <functional>
+#include <map>
 
 #include <fcntl.h>
 #include <signal.h>
@@ -541,6 +542,12 @@ TEST(Cli, EvalScansEachRequestedRestPose) {
 // the views (direction, frames, quality), the grasps, the model's size and the figures of merit.
 // The record was written by this test with INHAND_WRITE_GOLDEN=1; rewrite it only for a change
 // that is meant to change the scan (and say so in the commit).
+//
+// The scan's decisions (views, frames, grasps, termination, how many views were evaluated) are
+// compared exactly (numbers to 1e-6). The model's fine detail is compared to a tolerance: Embree
+// and glibc's libm pick their kernels by CPU at run time, and the record was seen to move on
+// another CPU by 0.8 % in triangles and 0.5 % in a view's quality with every decision the same.
+// On one machine a scan is reproduced byte for byte (test_determinism, test_checkpoint).
 TEST(Cli, ScanOfTheCrackerBoxMatchesTheRecordedScan) {
   test::TempDir dir;
   const fs::path config = dir.path() / "fast.json";
@@ -563,32 +570,41 @@ TEST(Cli, ScanOfTheCrackerBoxMatchesTheRecordedScan) {
                             {"grasp", v["grasp"]}});
   for (const Json& g : s["grasps"]) got["grasps"].push_back(g["T_O_palm"]);
   const PlyData ply = readPly(out / "model.ply");
-  Vec3 sum = Vec3::Zero();
-  for (const Vec3f& p : ply.mesh.vertices) sum += p.cast<double>();
-  got["vertex_sum"] = {sum.x(), sum.y(), sum.z()};
+  Vec3 mean = Vec3::Zero();
+  for (const Vec3f& p : ply.mesh.vertices) mean += p.cast<double>();
+  mean /= double(std::max<size_t>(1, ply.mesh.vertices.size()));
+  got["vertex_mean"] = {mean.x(), mean.y(), mean.z()};
   const fs::path golden = fs::path(INHAND_SOURCE_DIR) / "tests/data/scan_golden.json";
   if (std::getenv("INHAND_WRITE_GOLDEN")) writeTextAtomically(golden, got.dump(1) + "\n");
   const Json want = readJsonFile(golden);
-  // Numbers agree to 1e-6 (relative, or absolute near zero); everything else exactly.
-  std::function<void(const Json&, const Json&, const std::string&)> same =
-      [&](const Json& a, const Json& b, const std::string& at) {
+  // The model's fine detail: relative tolerances, or absolute ones (metres, fractions, nats).
+  const std::map<std::string, std::pair<double, double>> loose{
+      {"vertices", {0.03, 0}},     {"triangles", {0.03, 0}},         {"quality", {0.03, 0}},
+      {"mean_entropy", {0.01, 0}}, {"observed_fraction", {0, 1e-3}}, {"coverage", {0, 5e-3}},
+      {"vertex_mean", {0, 1e-3}}};
+  std::function<void(const Json&, const Json&, const std::string&, const std::string&)> same =
+      [&](const Json& a, const Json& b, const std::string& at, const std::string& key) {
         if (a.is_number() && b.is_number()) {
           const double x = a.get<double>(), y = b.get<double>();
-          EXPECT_LE(std::abs(x - y), 1e-6 * std::max(1.0, std::abs(y))) << at;
+          const auto it = loose.find(key);
+          const double tol = it == loose.end()
+                                 ? 1e-6 * std::max(1.0, std::abs(y))
+                                 : std::max(it->second.first * std::abs(y), it->second.second);
+          EXPECT_LE(std::abs(x - y), tol) << at;
         } else if (a.is_array() && b.is_array()) {
           ASSERT_EQ(a.size(), b.size()) << at;
           for (size_t i = 0; i < a.size(); ++i)
-            same(a[i], b[i], at + "[" + std::to_string(i) + "]");
+            same(a[i], b[i], at + "[" + std::to_string(i) + "]", key);
         } else if (a.is_object() && b.is_object()) {
           for (auto it = b.begin(); it != b.end(); ++it) {
             ASSERT_TRUE(a.contains(it.key())) << at << "." << it.key();
-            same(a[it.key()], it.value(), at + "." + it.key());
+            same(a[it.key()], it.value(), at + "." + it.key(), it.key());
           }
         } else {
           EXPECT_EQ(a, b) << at;
         }
       };
-  same(got, want, "summary");
+  same(got, want, "summary", "");
 }
 
 namespace {

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 
 namespace inhand {
 
@@ -40,8 +41,10 @@ double lateralSigmaPx(const NoiseModelOptions& o, double theta_rad) {
 
 double quantizeDepth(double z_m, double f_px, double baseline_m, double step_px) {
   if (!(z_m > 0)) return z_m;
-  double disparity = f_px * baseline_m / z_m;
-  double q = std::round(disparity / step_px) * step_px;
+  const double steps = f_px * baseline_m / (z_m * step_px);  // the disparity in steps
+  // Rounded half away from zero; positive steps by truncation (no libm call per pixel).
+  const double q =
+      (steps >= 0 && steps < 0x1.0p52 ? double(int64_t(steps + 0.5)) : std::round(steps)) * step_px;
   if (q <= 0) return z_m;
   return f_px * baseline_m / q;
 }

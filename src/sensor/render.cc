@@ -38,9 +38,15 @@ double cosIncidence(const Vec3& normal, const Vec3& dir) {
   return std::min(1.0, std::abs(normal.dot(dir)) / (nn * dn));
 }
 
-// The angle itself (rad).
-double incidence(const Vec3& normal, const Vec3& dir) {
-  return std::acos(cosIncidence(normal, dir));
+// cosIncidence and the angle itself (rad) in single precision, for the noise's σ per pixel (in
+// double precision the arccosine cost as much as casting the ray).
+float cosIncidenceF(const Vec3f& normal, const Vec3f& dir) {
+  const float nn = normal.squaredNorm() * dir.squaredNorm();
+  if (!(nn > 0.f)) return 0.f;
+  return std::min(1.f, std::abs(normal.dot(dir)) / std::sqrt(nn));
+}
+float incidenceF(const Vec3f& normal, const Vec3f& dir) {
+  return std::acos(cosIncidenceF(normal, dir));
 }
 
 // The cosines of the sensor's incidence limits: an angle exceeds a limit when its cosine is
@@ -147,9 +153,9 @@ DepthImage renderDepth(const RayScene& scene, const Iso3& T_S_C, const DepthCame
         [&](int i) {
           if (!hits[i].valid()) return;
           int p = order[i];
-          double theta = incidence(hits[i].normal.cast<double>(), rays[i].dir.cast<double>());
-          double s = lateralSigmaPx(noise, theta);
-          const auto [gu, gv] = gaussianPairAt(options.seed, 3 * uint64_t(p));
+          const double theta = incidenceF(hits[i].normal, rays[i].dir);
+          const double s = lateralSigmaPx(noise, theta);
+          const auto [gu, gv] = gaussianPairAtF(options.seed, 3 * uint64_t(p));
           const double du = s * gu, dv = s * gv;
           rays[i] = pixelRay(T_S_C, K, p % w + du, p / w + dv);
         },
@@ -170,18 +176,36 @@ DepthImage renderDepth(const RayScene& scene, const Iso3& T_S_C, const DepthCame
       [&](int i) { ok[i] = acceptHit(hits[i], rays[i], projector_S, camera, limits, &shadows[i]); },
       4096);
   if (options.projector_shadows) {
-    // Compact the shadow rays so packets stay full.
+    // Compact the shadow rays so packets stay full, in pixel order: each chunk's count, their
+    // running sum, then each chunk writes its own part.
+    constexpr int kChunk = 8192;
+    const int chunks = (n + kChunk - 1) / kChunk;
+    std::vector<int> offset(size_t(chunks) + 1, 0);
+    parallelFor(0, chunks, [&](int c) {
+      int count = 0;
+      for (int i = c * kChunk; i < std::min(n, (c + 1) * kChunk); ++i) count += ok[i];
+      offset[size_t(c) + 1] = count;
+    });
+    for (int c = 0; c < chunks; ++c) offset[size_t(c) + 1] += offset[size_t(c)];
     std::vector<int>& shadowIndex = scratch.shadowIndex;
-    shadowIndex.clear();
-    for (int i = 0; i < n; ++i)
-      if (ok[i]) shadowIndex.push_back(i);
     std::vector<Ray>& compact = scratch.compact;
-    compact.resize(shadowIndex.size());
-    for (size_t k = 0; k < shadowIndex.size(); ++k) compact[k] = shadows[shadowIndex[k]];
+    const size_t total = size_t(offset.back());
+    shadowIndex.resize(total);
+    compact.resize(total);
+    parallelFor(0, chunks, [&](int c) {
+      int k = offset[size_t(c)];
+      for (int i = c * kChunk; i < std::min(n, (c + 1) * kChunk); ++i)
+        if (ok[i]) {
+          shadowIndex[size_t(k)] = i;
+          compact[size_t(k++)] = shadows[i];
+        }
+    });
     std::vector<uint8_t>& compactBlocked = scratch.compactBlocked;
-    compactBlocked.resize(shadowIndex.size());
-    scene.occluded(compact.data(), compactBlocked.data(), compact.size());
-    for (size_t k = 0; k < shadowIndex.size(); ++k) blocked[shadowIndex[k]] = compactBlocked[k];
+    compactBlocked.resize(total);
+    scene.occluded(compact.data(), compactBlocked.data(), total);
+    parallelFor(
+        0, int(total), [&](int k) { blocked[shadowIndex[size_t(k)]] = compactBlocked[size_t(k)]; },
+        16384);
   }
 
   DepthImage out(w, h);
@@ -196,9 +220,9 @@ DepthImage renderDepth(const RayScene& scene, const Iso3& T_S_C, const DepthCame
         double z = hits[i].t;
         if (options.noise) {
           // The angle matters to the axial σ only beyond grazing_start_deg.
-          const double c = cosIncidence(hits[i].normal.cast<double>(), rays[i].dir.cast<double>());
+          const double c = cosIncidenceF(hits[i].normal, rays[i].dir);
           const double theta = c < cosGrazing ? std::acos(c) : 0.0;
-          z += axialSigma(noise, z, theta) * gaussianAt(options.seed, 3 * uint64_t(p) + 2);
+          z += axialSigma(noise, z, theta) * gaussianAtF(options.seed, 3 * uint64_t(p) + 2);
           if (noise.quantize) z = quantizeDepth(z, f, camera.baseline_m(), noise.disparity_step_px);
           if (z < camera.min_range_m || z > camera.max_range_m) return;
         }
