@@ -14,6 +14,7 @@ command -v clang++ > /dev/null || { echo "fuzz: needs clang (apt-get install cla
 generator=()
 command -v ninja > /dev/null && [ ! -f build-fuzz/CMakeCache.txt ] && generator=(-G Ninja)
 CC=clang CXX=clang++ cmake -S . -B build-fuzz "${generator[@]}" -DCMAKE_BUILD_TYPE=RelWithDebInfo \
+  -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O2 -g1 -DNDEBUG" -DCMAKE_C_FLAGS_RELWITHDEBINFO="-O2 -g1 -DNDEBUG" \
   -DINHAND_FUZZ=ON -DINHAND_BUILD_TESTS=OFF -DINHAND_BUILD_BENCHMARKS=OFF -DINHAND_BUILD_PYTHON=OFF \
   > /dev/null
 cmake --build build-fuzz -j"$(nproc)" --target $(printf 'fuzz_%s ' "${targets[@]}")
