@@ -41,9 +41,12 @@ double cosIncidence(const Vec3& normal, const Vec3& dir) {
 // cosIncidence and the angle itself (rad) in single precision, for the noise's σ per pixel (in
 // double precision the arccosine cost as much as casting the ray).
 float cosIncidenceF(const Vec3f& normal, const Vec3f& dir) {
-  const float nn = normal.squaredNorm() * dir.squaredNorm();
-  if (!(nn > 0.f)) return 0.f;
-  return std::min(1.f, std::abs(normal.dot(dir)) / std::sqrt(nn));
+  // The products in double: Embree's unnormalised normal of a tiny triangle squared underflows a
+  // float.
+  const Vec3 n = normal.cast<double>(), d = dir.cast<double>();
+  const double nn = n.squaredNorm() * d.squaredNorm();
+  if (!(nn > 0)) return 0.f;
+  return float(std::min(1.0, std::abs(n.dot(d)) / std::sqrt(nn)));
 }
 float incidenceF(const Vec3f& normal, const Vec3f& dir) {
   return std::acos(cosIncidenceF(normal, dir));
