@@ -7,6 +7,7 @@
 
 #include "inhand/core/error.h"
 #include "inhand/core/random.h"
+#include "inhand/geometry/box_overlap.h"
 #include "inhand/geometry/builtin_objects.h"
 #include "inhand/geometry/contour.h"
 #include "inhand/geometry/mesh_io.h"
@@ -18,6 +19,78 @@
 #include "test_util.h"
 
 using namespace inhand;
+
+namespace {
+Mat3 randomRotation(Rng& rng) {
+  std::normal_distribution<double> N(0, 1);
+  return Eigen::Quaterniond(N(rng), N(rng), N(rng), N(rng)).normalized().toRotationMatrix();
+}
+}  // namespace
+
+// The separating-axis test against vertex-in-box, edge-through-box and box-edge-through-triangle
+// tests on random triangles near random boxes (both answers occur often).
+TEST(BoxOverlap, SeparatingAxesAgreeWithEdgeAndVertexTests) {
+  Rng rng = makeRng(11);
+  std::uniform_real_distribution<double> U(-1, 1), S(0.05, 0.6);
+  int overlaps = 0, separate = 0, vertexOutside = 0;
+  for (int i = 0; i < 20000; ++i) {
+    const Vec3 half(S(rng), S(rng), S(rng));
+    // Triangles of every size: slivers, ones larger than the box, ones far off.
+    const double scale = i % 3 == 0 ? 0.1 : (i % 3 == 1 ? 0.6 : 2.0);
+    const Vec3 centre(U(rng), U(rng), U(rng));
+    const Vec3 a = centre + scale * Vec3(U(rng), U(rng), U(rng)),
+               b = centre + scale * Vec3(U(rng), U(rng), U(rng)),
+               c = centre + scale * Vec3(U(rng), U(rng), U(rng));
+    const bool fast = triangleOverlapsBox(a, b, c, half);
+    ASSERT_EQ(fast, triangleOverlapsBoxReference(a, b, c, half))
+        << "triangle " << a.transpose() << " | " << b.transpose() << " | " << c.transpose()
+        << " box half " << half.transpose();
+    (fast ? overlaps : separate)++;
+    auto inside = [&](const Vec3& p) { return (p.cwiseAbs().array() <= half.array()).all(); };
+    if (fast && !inside(a) && !inside(b) && !inside(c)) ++vertexOutside;
+  }
+  EXPECT_GT(overlaps, 2000);
+  EXPECT_GT(separate, 3000);
+  EXPECT_GT(vertexOutside, 1000);  // overlaps found through edges and faces, not only vertices
+  // Exact cases: a large triangle through the box's middle with every vertex outside; one just
+  // beyond a face; one beyond an edge, off every face's slab only diagonally.
+  const Vec3 h(0.1, 0.2, 0.3);
+  EXPECT_TRUE(triangleOverlapsBox(Vec3(-5, -5, 0), Vec3(5, -5, 0), Vec3(0, 5, 0), h));
+  EXPECT_FALSE(triangleOverlapsBox(Vec3(-5, -5, 0.31), Vec3(5, -5, 0.31), Vec3(0, 5, 0.31), h));
+  // The plane x + y = 0.31 passes the edge (0.1, 0.2, z) at distance 0.01/sqrt(2) outside.
+  EXPECT_FALSE(triangleOverlapsBox(Vec3(0.31, 0, -5), Vec3(0.31, 0, 5), Vec3(0, 0.31, 0), h));
+  EXPECT_TRUE(triangleOverlapsBox(Vec3(0.29, 0, -5), Vec3(0.29, 0, 5), Vec3(0, 0.29, 0), h));
+}
+
+// The hierarchy answers as the brute force does, for boxes at random poses about a mesh
+// (inside it, across its surface, outside), and for a box wholly inside a closed mesh: no
+// triangle meets it.
+TEST(BoxOverlap, IndexMatchesBruteForceOnAMesh) {
+  const TriangleMesh sphere = makeSphere(0.1, 4);
+  const TriangleMesh mesh = [&] {
+    TriangleMesh m = sphere;
+    m.append(transformed(makeBox(Vec3(0.05, 0.3, 0.02)), Iso3(Eigen::Translation3d(0.12, 0, 0))));
+    return m;
+  }();
+  const TriangleBoxIndex index(mesh);
+  Rng rng = makeRng(12);
+  std::uniform_real_distribution<double> U(-0.2, 0.2), S(0.002, 0.04);
+  int hits = 0;
+  for (int i = 0; i < 4000; ++i) {
+    Iso3 T = Iso3::Identity();
+    T.linear() = randomRotation(rng);
+    T.translation() = Vec3(U(rng), U(rng), U(rng));
+    const Vec3 half(S(rng), S(rng), S(rng));
+    const bool fast = index.overlapsBox(T, half);
+    ASSERT_EQ(fast, index.overlapsBoxReference(T, half)) << "box " << i;
+    hits += fast;
+  }
+  EXPECT_GT(hits, 400);
+  EXPECT_LT(hits, 3600);
+  EXPECT_FALSE(index.overlapsBox(Iso3::Identity(), Vec3(0.05, 0.05, 0.05)));  // inside the sphere
+  EXPECT_TRUE(index.overlapsBox(Iso3(Eigen::Translation3d(0.1, 0, 0)), Vec3(0.01, 0.01, 0.01)));
+  EXPECT_FALSE(TriangleBoxIndex(TriangleMesh()).overlapsBox(Iso3::Identity(), Vec3::Ones()));
+}
 
 TEST(Primitives, ClosedWithExactVolumes) {
   TriangleMesh box = makeBox(Vec3(0.1, 0.2, 0.3));

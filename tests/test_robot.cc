@@ -388,6 +388,51 @@ TEST(Hand, FreeTravelStopsAtTheFirstContactOfAnyLink) {
   EXPECT_DOUBLE_EQ(*closer.freeTravel(open, Iso3::Identity(), -Vec3::UnitZ(), 0.3), 0.3);
 }
 
+// The box links' separating-axis test (TriangleBoxIndex) closes the fingers and approaches as
+// the FCL mesh–mesh reference does: random palm poses about a sphere and a thin plate (thousands
+// of triangles, the fingers coming from every side), every finger's stop and every approach.
+TEST(Closing, BoxLinkTestClosesAsTheMeshReferenceDoes) {
+  const RobotModel& m = wam();
+  TriangleMesh object = makeSphere(0.06, 4);
+  object.append(
+      transformed(makeBox(Vec3(0.004, 0.16, 0.12)), Iso3(Eigen::Translation3d(0.0, 0.0, 0.09))));
+  const FingerCloser fast(m, object), reference(m, object, /*reference=*/true);
+  Rng rng = makeRng(21);
+  std::normal_distribution<double> N(0, 1);
+  std::uniform_real_distribution<double> U(0, 1);
+  int contacts = 0, travels = 0, fingers = 0, same = 0;
+  double worst = 0;
+  for (int i = 0; i < 60; ++i) {
+    // The palm 0.15-0.25 m from the centre, facing it, turned about its axis at random.
+    const Vec3 dir = Vec3(N(rng), N(rng), N(rng)).normalized();
+    Iso3 T = Iso3::Identity();
+    T.linear() = Eigen::Quaterniond::FromTwoVectors(Vec3::UnitZ(), -dir).toRotationMatrix() *
+                 Eigen::AngleAxisd(2 * M_PI * U(rng), Vec3::UnitZ());
+    T.translation() = (0.15 + 0.1 * U(rng)) * dir;
+    const JointVector q = m.preshapedHand(U(rng) * M_PI, 0.0);
+    const std::optional<double> a = fast.freeTravel(q, T, -dir, 0.3, 0.01, 1e-4),
+                                b = reference.freeTravel(q, T, -dir, 0.3, 0.01, 1e-4);
+    ASSERT_EQ(a.has_value(), b.has_value()) << "pose " << i;
+    if (!a) continue;
+    EXPECT_NEAR(*a, *b, 1e-4) << "pose " << i;
+    travels += *a < 0.3;
+    T.translation() -= *a * dir;
+    const ClosingResult ca = fast.close(q, T, 0.06, 1e-4), cb = reference.close(q, T, 0.06, 1e-4);
+    for (size_t k = 0; k < ca.fingers.size(); ++k) {
+      ++fingers;
+      ASSERT_EQ(ca.fingers[k].contact, cb.fingers[k].contact) << "pose " << i << " finger " << k;
+      contacts += ca.fingers[k].contact;
+      const double d = std::abs(ca.fingers[k].value - cb.fingers[k].value);
+      worst = std::max(worst, d);
+      same += d <= 1e-4;
+    }
+  }
+  EXPECT_GT(travels, 40);
+  EXPECT_GT(contacts, 60);
+  EXPECT_GE(same, fingers - 2);  // a bisection may turn the other way at a grazing contact
+  EXPECT_LT(worst, 0.06);
+}
+
 // The BH8-280's fingertips from the manufacturer's DH table (Craig: T = RotX(α) TransX(a) RotZ(θ)
 // TransZ(d) per row), computed here without the URDF: joint 1 a = r·Aw, d = Dw, θ = r·Θ1 − j·π/2
 // (r = −1, 1, 0 and j = 1, 1, −1 for fingers 1, 2, 3); joint 2 a = A1, α = π/2, θ = Θ2; joint 3

@@ -4,9 +4,11 @@
 
 #include <limits>
 #include <map>
+#include <optional>
 #include <set>
 
 #include "inhand/core/error.h"
+#include "inhand/geometry/box_overlap.h"
 #include "inhand/geometry/primitives.h"
 
 namespace inhand {
@@ -262,12 +264,24 @@ struct FingerCloser::Geometry {
   GeomPtr object;
   std::map<std::pair<int, int>, GeomPtr>
       linkMesh;  // every hand link's, palm included, by (link, k)
+  // Box links against the object's triangles by the separating-axis test (exact for a solid
+  // box); without it (reference), every link as a mesh in FCL.
+  std::optional<TriangleBoxIndex> boxes;
+  // Whether a link's collision geometry k at T_O_link (the link's pose) meets the object.
+  bool touches(const RobotModel& model, int li, int k, const Iso3& T_O_link) const {
+    const Primitive& p = model.links()[li].collision[k];
+    if (boxes && p.type == Primitive::Type::kBox)
+      return boxes->overlapsBox(T_O_link * p.T_link_geom, 0.5 * p.size);
+    return collide(linkMesh.at({li, k}), T_O_link * p.T_link_geom, object, Iso3::Identity());
+  }
 };
 
-FingerCloser::FingerCloser(const RobotModel& model, const TriangleMesh& object_O) : model_(&model) {
+FingerCloser::FingerCloser(const RobotModel& model, const TriangleMesh& object_O, bool reference)
+    : model_(&model) {
   auto g = std::make_shared<Geometry>();
   g->object = bvhOf(object_O);
-  // Finger links as triangle meshes: mesh–mesh checks are exact triangle–triangle tests, while
+  if (!reference) g->boxes.emplace(object_O);
+  // Other links as triangle meshes: mesh–mesh checks are exact triangle–triangle tests, while
   // FCL's primitive–mesh path (GJK) can miss penetrations of a fraction of a millimetre, which
   // would let the bisection stop slightly inside the object.
   for (int li : model.handLinks())
@@ -284,10 +298,7 @@ bool FingerCloser::handTouches(const JointVector& q, const Iso3& T_O_palm) const
   const Iso3 T_O_B = T_O_palm * T[model.tipLink()].inverse();
   for (int li : model.handLinks())
     for (int k = 0; k < int(model.links()[li].collision.size()); ++k)
-      if (collide(geometry_->linkMesh.at({li, k}),
-                  T_O_B * T[li] * model.links()[li].collision[k].T_link_geom, geometry_->object,
-                  Iso3::Identity()))
-        return true;
+      if (geometry_->touches(model, li, k, T_O_B * T[li])) return true;
   return false;
 }
 
@@ -326,9 +337,7 @@ ClosingResult FingerCloser::close(const JointVector& qIn, const Iso3& T_O_palm, 
                                   double tolerance, const ClosingResult* free_from) const {
   INHAND_CHECK(step > 0 && tolerance > 0, "closing step and tolerance must be positive");
   const RobotModel& model = *model_;
-  const GeomPtr& object = geometry_->object;
-  const auto& linkMesh = geometry_->linkMesh;
-  const Iso3 I = Iso3::Identity();
+  const Geometry& geometry = *geometry_;
   ClosingResult result;
   result.q = qIn;
   INHAND_CHECK(!free_from || free_from->fingers.size() == model.fingers().size(),
@@ -346,9 +355,7 @@ ClosingResult FingerCloser::close(const JointVector& qIn, const Iso3& T_O_palm, 
       Iso3 T_O_B = T_O_palm * T[model.tipLink()].inverse();
       for (int li : f.links)
         for (int k = 0; k < int(model.links()[li].collision.size()); ++k)
-          if (collide(linkMesh.at({li, k}),
-                      T_O_B * T[li] * model.links()[li].collision[k].T_link_geom, object, I))
-            return true;
+          if (geometry.touches(model, li, k, T_O_B * T[li])) return true;
       return false;
     };
     FingerClosing fc;

@@ -86,10 +86,13 @@ ClosingResult closeFingers(const RobotModel& model, const JointVector& q, const 
                            double tolerance = 1e-4);
 
 // The same with the object's and fingers' collision structures built once, for many grasps on
-// one object; close() is const and thread-safe.
+// one object; close() is const and thread-safe. Box links meet the object's triangles by the
+// separating-axis test (TriangleBoxIndex), other links as triangle meshes in FCL; `reference`:
+// every link through FCL (what tests compare with). The two differ only where an object
+// triangle lies wholly inside a link's box, which the box test counts as touching.
 class FingerCloser {
  public:
-  FingerCloser(const RobotModel& model, const TriangleMesh& object_O);
+  FingerCloser(const RobotModel& model, const TriangleMesh& object_O, bool reference = false);
   const RobotModel& model() const { return *model_; }
   // With `free_from` (a closing of the same q, pose and step against a superset of this object,
   // e.g. the object and the table), the steps it found free are not checked again: they are free
