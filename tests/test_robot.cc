@@ -271,6 +271,13 @@ TEST(Hand, MeshIsInTheRequestedFrame) {
   EXPECT_GT(b.max.z(), 3.0 + 0.11);
   EXPECT_GT(b.max.x() - b.min.x(), 0.3);
   EXPECT_NEAR(b.center().x(), 1.0, 0.03);
+  // bounds() (each primitive's box) holds the mesh, at a turned pose and a preshape too.
+  T.linear() = Eigen::AngleAxisd(0.7, Vec3(1, 2, 3).normalized()).toRotationMatrix();
+  for (const JointVector& q : {m.home(), m.preshapedHand(1.2, 0.5)}) {
+    const Aabb mesh = HandGeometry(m, q, T).mesh().bounds(), prims = HandGeometry(m, q, T).bounds();
+    EXPECT_TRUE((prims.min.array() <= mesh.min.array() + 1e-6).all());
+    EXPECT_TRUE((prims.max.array() >= mesh.max.array() - 1e-6).all());
+  }
 }
 
 namespace {

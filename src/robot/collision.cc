@@ -178,6 +178,16 @@ HandGeometry::HandGeometry(const RobotModel& model, const JointVector& q, const 
   }
 }
 
+Aabb HandGeometry::bounds() const {
+  Aabb out;
+  for (const std::vector<Aabb>& boxes : boxes_F_)
+    for (const Aabb& b : boxes) {
+      out.extend(b.min);
+      out.extend(b.max);
+    }
+  return out;
+}
+
 TriangleMesh HandGeometry::mesh() const {
   TriangleMesh out;
   for (size_t k = 0; k < T_F_link_.size(); ++k)

@@ -69,7 +69,7 @@ HandContacts handContacts(const RobotModel& robot, const JointVector& q, const I
   const double palmTop = robot.palmFaceZ();
   const HandGeometry hand(robot, q, T_O_palm);
   const Iso3 T_palm_O = T_O_palm.inverse();
-  Aabb hb = hand.mesh().bounds();
+  const Aabb hb = hand.bounds();  // a cull only: distanceWithin decides
   std::map<std::tuple<int, int, int>, std::pair<Contact, int>> cells;
   std::vector<uint8_t> touch(robot.fingers().size(), 0);
   for (const SurfacePoint& sm : samples) {

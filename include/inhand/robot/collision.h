@@ -51,6 +51,9 @@ class HandGeometry {
   double distanceWithin(const Vec3& p_F, double limit, int* nearest = nullptr) const;
   // Link poses T_F_link of the hand links, in handLinks() order.
   const std::vector<Iso3>& linkPoses() const { return T_F_link_; }
+  // A box in F holding every link's geometry (the union of each primitive's box: the exact
+  // primitives, not their tessellation in mesh()), without building a mesh.
+  Aabb bounds() const;
 
  private:
   const RobotModel* model_;
