@@ -83,30 +83,30 @@ bool acceptHit(const Hit& hit, const Ray& ray, const Vec3& projector_S,
 
 // Rays that missed the scene hit the inside of the background sphere (when there is one): the far
 // root of |o + t·d − c|² = r², the normal pointing back in. Rays that start outside it, or whose
-// far root lies behind the ray's start, stay misses.
-void hitBackground(const RayScene& scene, const RenderOptions& o, const Ray* rays, Hit* hits,
-                   size_t count) {
-  if (!(o.background_radius_m > 0)) return;
-  const int id = scene.geometryCount();
-  const double r2 = o.background_radius_m * o.background_radius_m;
-  parallelFor(
-      0, int(count),
-      [&](int i) {
-        Hit& h = hits[i];
-        if (h.valid()) return;
-        const Vec3 d = rays[i].dir.cast<double>();
-        const Vec3 oc = rays[i].origin.cast<double>() - o.background_centre;
-        const double a = d.squaredNorm(), b = oc.dot(d), c = oc.squaredNorm() - r2;
-        const double disc = b * b - a * c;
-        if (!(a > 0) || disc < 0) return;
-        const double t = (-b + std::sqrt(disc)) / a;
-        if (!(t > rays[i].tnear) || !(t < rays[i].tfar)) return;
-        h.t = float(t);
-        h.geometry = id;
-        h.normal = (-(oc + t * d)).cast<float>();
-      },
-      4096);
-}
+// far root lies behind the ray's start, stay misses. Per ray, inside the pass that reads the hit
+// next (a pass of its own over every ray cost as much in memory traffic as its arithmetic).
+struct Background {
+  int id;
+  double r2;
+  Vec3 centre;
+  Background(const RayScene& scene, const RenderOptions& o)
+      : id(scene.geometryCount()),
+        r2(o.background_radius_m > 0 ? o.background_radius_m * o.background_radius_m : 0),
+        centre(o.background_centre) {}
+  void fill(const Ray& ray, Hit& h) const {
+    if (h.valid() || !(r2 > 0)) return;
+    const Vec3 d = ray.dir.cast<double>();
+    const Vec3 oc = ray.origin.cast<double>() - centre;
+    const double a = d.squaredNorm(), b = oc.dot(d), c = oc.squaredNorm() - r2;
+    const double disc = b * b - a * c;
+    if (!(a > 0) || disc < 0) return;
+    const double t = (-b + std::sqrt(disc)) / a;
+    if (!(t > ray.tnear) || !(t < ray.tfar)) return;
+    h.t = float(t);
+    h.geometry = id;
+    h.normal = (-(oc + t * d)).cast<float>();
+  }
+};
 
 }  // namespace
 
@@ -146,7 +146,7 @@ DepthImage renderDepth(const RayScene& scene, const Iso3& T_S_C, const DepthCame
   parallelFor(
       0, n, [&](int i) { rays[i] = pixelRay(T_S_C, K, order[i] % w, order[i] / w); }, 4096);
   scene.intersect(rays.data(), hits.data(), n);
-  hitBackground(scene, options, rays.data(), hits.data(), size_t(n));
+  const Background background(scene, options);
 
   if (options.noise) {
     // Lateral noise: the return comes from a point displaced by N(0, σ_L(θ)) pixels, so re-cast
@@ -154,6 +154,7 @@ DepthImage renderDepth(const RayScene& scene, const Iso3& T_S_C, const DepthCame
     parallelFor(
         0, n,
         [&](int i) {
+          background.fill(rays[i], hits[i]);
           if (!hits[i].valid()) return;
           int p = order[i];
           const double theta = incidenceF(hits[i].normal, rays[i].dir);
@@ -164,7 +165,6 @@ DepthImage renderDepth(const RayScene& scene, const Iso3& T_S_C, const DepthCame
         },
         4096);
     scene.intersect(rays.data(), hits.data(), n);
-    hitBackground(scene, options, rays.data(), hits.data(), size_t(n));
   }
 
   std::vector<Ray>& shadows = scratch.shadows;
@@ -176,7 +176,10 @@ DepthImage renderDepth(const RayScene& scene, const Iso3& T_S_C, const DepthCame
   blocked.assign(n, 0);
   parallelFor(
       0, n,
-      [&](int i) { ok[i] = acceptHit(hits[i], rays[i], projector_S, camera, limits, &shadows[i]); },
+      [&](int i) {
+        background.fill(rays[i], hits[i]);
+        ok[i] = acceptHit(hits[i], rays[i], projector_S, camera, limits, &shadows[i]);
+      },
       4096);
   if (options.projector_shadows) {
     // Compact the shadow rays so packets stay full, in pixel order: each chunk's count, their
