@@ -7,6 +7,7 @@
 #include <cstdlib>
 #include <cstring>
 #include <fstream>
+#include <limits>
 
 #include "inhand/core/error.h"
 #include "inhand/core/file_util.h"
@@ -90,6 +91,24 @@ struct ScanSession::State {
   bool viewOpen = false;
 
   Summary summary;
+
+  // Every change to the volume (fusion, emptying inside the robot, the non-const volume()
+  // accessor) moves `revision` on; a model extracted at one revision is kept until the next.
+  // Between two frames the scan asks for the same model several times (a view's end and its
+  // grasp's, grasp planning, each pick-up attempt's tracking), at 0.05-0.3 s an extraction.
+  uint64_t revision = 0;
+  struct CachedModel {
+    uint64_t revision = std::numeric_limits<uint64_t>::max();
+    ObjectModel model;
+  };
+  CachedModel full, planning;
+  const ObjectModel& extracted(CachedModel& cache, const MeshOptions& mesh) {
+    if (cache.revision != revision) {
+      cache.model = extractModel(volume, mesh);
+      cache.revision = revision;
+    }
+    return cache.model;
+  }
 };
 
 ScanSession::ScanSession(const RobotModel& robot, const DepthCameraOptions& camera,
@@ -127,7 +146,10 @@ const Iso3& ScanSession::graspPose() const { return s_->T_O_palm; }
 const std::vector<ViewRecord>& ScanSession::views() const { return s_->views; }
 const std::vector<int>& ScanSession::viewGrasps() const { return s_->viewGrasp; }
 const TsdfVolume& ScanSession::volume() const { return s_->volume; }
-TsdfVolume& ScanSession::volume() { return s_->volume; }
+TsdfVolume& ScanSession::volume() {
+  ++s_->revision;  // the caller may change it
+  return s_->volume;
+}
 
 namespace {
 
@@ -227,6 +249,7 @@ void ScanSession::emptyInsideRobot(const JointVector& q, const Iso3& T_O_B) {
   // (the wrist and forearm too), at each frame's joint state: nothing of the object can be there.
   const RobotModel& m = *s_->model;
   TsdfVolume& volume = s_->volume;
+  ++s_->revision;
   const std::vector<Iso3> T = m.linkPoses(q);
   for (size_t li = 0; li < m.links().size(); ++li) {
     if (m.links()[li].collision.empty()) continue;
@@ -326,6 +349,7 @@ FrameReport ScanSession::fuse(const DepthImage& depth, const JointVector& q, con
   integrate(depth, T_O_C, K,
             measurementSigma(depth, K, s.noise, &rect, carve.empty() ? nullptr : &carve), &s.volume,
             carve.empty() ? nullptr : &carve);
+  ++s.revision;
   if (inHand && s.options.hand_mode == HandMode::kCarveAndEmpty) emptyInsideRobot(q, T_O_B);
   FrameReport r;
   r.T_B_C = T_B_C;
@@ -803,13 +827,13 @@ std::optional<GraspCandidate> ScanSession::nextGrasp(const Iso3& T_B_O_rest,
   return plan.candidates.front();
 }
 
-ObjectModel ScanSession::model() const { return extractModel(s_->volume, s_->options.mesh); }
+ObjectModel ScanSession::model() const { return s_->extracted(s_->full, s_->options.mesh); }
 
 ObjectModel ScanSession::planningModel() const {
   MeshOptions planningMesh = s_->options.mesh;
   planningMesh.stride = s_->options.planning_stride;
   planningMesh.method = s_->options.planning_method;
-  return extractModel(s_->volume, planningMesh);
+  return s_->extracted(s_->planning, planningMesh);
 }
 
 void ScanSession::finish(Termination termination, const std::string& message) {
@@ -937,6 +961,7 @@ ScanSession ScanSession::load(const std::filesystem::path& path, const RobotMode
     ScanSession session(robot, camera, noise, options, multi, centre);
     State& s = *session.s_;
     TsdfVolume& v = s.volume;
+    ++s.revision;
     if (v.dims() != dims || std::abs(v.voxelSize() - vj.at("voxel_m").get<double>()) > 1e-12 ||
         (v.origin() - vecFrom(vj.at("origin"))).norm() > 1e-9)
       throw Error(path.string() + ": the checkpoint's volume (" + std::to_string(dims.x()) + "x" +

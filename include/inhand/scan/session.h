@@ -149,10 +149,14 @@ class ScanSession {
   // The best of them, or nullopt.
   std::optional<GraspCandidate> nextGrasp(const Iso3& T_B_O_rest, const JointVector& q_now);
 
-  // The model (S_obj) at full resolution, and at the planning stride (what Alg. 1 sees).
+  // The model (S_obj) at full resolution, and at the planning stride (what Alg. 1 sees). Each is
+  // extracted once per state of the volume and kept until the volume changes.
   ObjectModel model() const;
   ObjectModel planningModel() const;
   const TsdfVolume& volume() const;
+  // Writable access counts as a change of the volume: the kept models are extracted again.
+  // Writes through a reference kept across a model() call are not seen by it: call volume()
+  // again after writing.
   TsdfVolume& volume();
 
   // Ends the scan (the caller's reason; the session sets its own when it runs out of views or
