@@ -2,11 +2,13 @@
 // checkpoint resumes it exactly, and what it cannot use is refused with a reason.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <fstream>
 #include <set>
 
 #include "inhand/core/error.h"
 #include "inhand/geometry/builtin_objects.h"
+#include "inhand/mesh/extract.h"
 #include "inhand/scan/session.h"
 #include "inhand/sim/sim_world.h"
 #include "test_util.h"
@@ -100,6 +102,47 @@ TEST(Session, OwnLoopWithACheckpointGivesTheDriversScan) {
   }
   EXPECT_EQ(s.summary().frames, whole.frames);
   expectSameModel(s.model(), whole.model);
+}
+
+// The models kept between changes of the volume: the same model as a fresh extraction at each
+// step (empty, after a frame, after a second frame, after a write through volume()), never the
+// one from before the change.
+TEST(Session, KeptModelsFollowEveryChangeOfTheVolume) {
+  ScanOptions o = fastOptions();
+  o.tracking.enabled = false;
+  Sim sim;
+  ScanSession s(wam(), DepthCameraOptions{}, NoiseModelOptions{}, o, MultiGraspOptions{},
+                sim.centre());
+  MeshOptions planning = o.mesh;
+  planning.stride = o.planning_stride;
+  planning.method = o.planning_method;
+  const ScanSession& reader = s;  // the read-only accessor: no change of the volume
+  auto check = [&](const char* when) {
+    SCOPED_TRACE(when);
+    expectSameModel(s.model(), extractModel(reader.volume(), o.mesh));
+    expectSameModel(s.planningModel(), extractModel(reader.volume(), planning));
+    expectSameModel(s.model(), s.model());
+  };
+  check("empty");
+  s.beginGrasp(sim.grasp.first, sim.robot.joints());
+  sim.sensor.setPose(s.cameraPose());
+  size_t triangles = s.model().mesh.triangles.size();
+  for (const char* when : {"one view", "two views"}) {
+    const std::optional<PlannedView> v = s.nextView(sim.robot.joints());
+    ASSERT_TRUE(v);
+    sim.robot.execute(v->waypoints, [&](const JointVector& q) {
+      s.addFrame(sim.sensor.capture(), q, sim.sensor.pose());
+    });
+    check(when);
+    EXPECT_NE(s.model().mesh.triangles.size(), triangles) << when;
+    triangles = s.model().mesh.triangles.size();
+    s.finishView();
+  }
+  // A write through the writable accessor: every voxel emptied leaves no surface.
+  TsdfVolume& v = s.volume();
+  std::fill(v.states(), v.states() + v.voxelCount(), uint8_t(VoxelState::kEmpty));
+  EXPECT_TRUE(s.model().mesh.triangles.empty());
+  check("emptied");
 }
 
 TEST(Session, RefusesWhatItCannotUseAndNamesIt) {
