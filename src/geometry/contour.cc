@@ -18,6 +18,14 @@ constexpr int kTets[6][4] = {{0, 1, 3, 7}, {0, 1, 5, 7}, {0, 2, 3, 7},
 
 inline bool inside(float f) { return f < 0.f; }
 
+// Set bits of a 7-bit edge mask, by table: the baseline x86-64 has no popcount instruction, and
+// std::popcount became a library call per sample.
+constexpr std::array<uint8_t, 128> kBitCount = [] {
+  std::array<uint8_t, 128> t{};
+  for (int m = 0; m < 128; ++m) t[size_t(m)] = uint8_t(std::popcount(unsigned(m)));
+  return t;
+}();
+
 }  // namespace
 
 ContourResult contour(const ScalarGrid& grid) {
@@ -29,12 +37,22 @@ ContourResult contour(const ScalarGrid& grid) {
   const size_t sx = 1, sy = size_t(nx), sz = size_t(nx) * ny;
   const float* f = grid.values.data();
 
-  // Pass 1: which of the 7 edges leaving each sample (towards +x,+y,+z combinations) cross 0.
-  std::vector<uint8_t> mask(n, 0);
+  // Pass 1: which of the 7 edges leaving each sample (towards +x,+y,+z combinations) cross 0,
+  // and which rows (y, z) have any. The per-sample buffers are kept per thread between calls (a
+  // scan extracts its model many times; fresh pages for them cost as much as a pass).
+  // (Named through references: the workers below must see this thread's buffers, not their own.)
+  thread_local std::vector<uint8_t> maskBuffer;
+  thread_local std::vector<uint32_t> offsetBuffer;
+  std::vector<uint8_t>& mask = maskBuffer;
+  std::vector<uint32_t>& offset = offsetBuffer;
+  mask.resize(n);
+  offset.resize(n);
+  std::vector<uint8_t> rowAny(size_t(ny) * nz, 0);
   std::vector<uint32_t> sliceCount(nz, 0);
   parallelFor(0, nz, [&](int z) {
     uint32_t count = 0;
-    for (int y = 0; y < ny; ++y)
+    for (int y = 0; y < ny; ++y) {
+      uint8_t any = 0;
       for (int x = 0; x < nx; ++x) {
         size_t i = grid.index(x, y, z);
         bool in = inside(f[i]);
@@ -45,8 +63,11 @@ ContourResult contour(const ScalarGrid& grid) {
           if (inside(f[i + dx * sx + dy * sy + dz * sz]) != in) m |= uint8_t(1u << (dir - 1));
         }
         mask[i] = m;
-        count += uint32_t(std::popcount(m));
+        any |= m;
+        count += kBitCount[m];
       }
+      rowAny[size_t(z) * ny + y] = any != 0;
+    }
     sliceCount[z] = count;
   });
 
@@ -54,12 +75,13 @@ ContourResult contour(const ScalarGrid& grid) {
   std::vector<uint32_t> sliceBase(nz + 1, 0);
   for (int z = 0; z < nz; ++z) sliceBase[z + 1] = sliceBase[z] + sliceCount[z];
   const uint32_t vertexCount = sliceBase[nz];
-  std::vector<uint32_t> offset(n);
   result.mesh.vertices.resize(vertexCount);
   result.sources.resize(vertexCount);
+  // Rows without a crossing add no vertex, and their offsets are never read.
   parallelFor(0, nz, [&](int z) {
     uint32_t next = sliceBase[z];
-    for (int y = 0; y < ny; ++y)
+    for (int y = 0; y < ny; ++y) {
+      if (!rowAny[size_t(z) * ny + y]) continue;
       for (int x = 0; x < nx; ++x) {
         size_t i = grid.index(x, y, z);
         offset[i] = next;
@@ -77,20 +99,25 @@ ContourResult contour(const ScalarGrid& grid) {
           ++next;
         }
       }
+    }
   });
 
   auto edgeVertex = [&](size_t owner, int dir) {
-    return int(offset[owner] +
-               uint32_t(std::popcount(uint32_t(mask[owner]) & ((1u << (dir - 1)) - 1))));
+    return int(offset[owner] + uint32_t(kBitCount[mask[owner] & ((1u << (dir - 1)) - 1)]));
   };
 
-  // Pass 3: triangles, per slice of cubes, concatenated in slice order (deterministic).
+  // Pass 3: triangles, per slice of cubes, concatenated in slice order (deterministic). Corner 0
+  // of a cube is joined to each other corner by one of its edges (the Kuhn tetrahedra's), so a
+  // cube with corners on both sides has a crossing in its corner 0's mask: cubes and rows of
+  // cubes whose corner 0 has none are skipped.
   std::vector<std::vector<Tri>> sliceTris(nz - 1);
   parallelFor(0, nz - 1, [&](int z) {
     std::vector<Tri>& out = sliceTris[z];
-    for (int y = 0; y + 1 < ny; ++y)
+    for (int y = 0; y + 1 < ny; ++y) {
+      if (!rowAny[size_t(z) * ny + y]) continue;
       for (int x = 0; x + 1 < nx; ++x) {
         size_t base = grid.index(x, y, z);
+        if (!mask[base]) continue;
         size_t corner[8];
         uint8_t in = 0;
         for (int c = 0; c < 8; ++c) {
@@ -145,6 +172,7 @@ ContourResult contour(const ScalarGrid& grid) {
           }
         }
       }
+    }
   });
   size_t total = 0;
   for (const auto& s : sliceTris) total += s.size();

@@ -101,35 +101,36 @@ std::vector<uint8_t> unknownAttachedToObserved(const TsdfVolume& volume) {
   const Vec3i d = volume.dims();
   const size_t n = volume.voxelCount();
   std::vector<uint8_t> keep(n, 0);
-  std::vector<size_t> stack;
-  const long step[3] = {1, d.x(), long(d.x()) * d.y()};
-  auto visitNeighbours = [&](size_t i, auto&& fn) {
-    int x = int(i % size_t(d.x())), y = int((i / size_t(d.x())) % size_t(d.y())),
-        z = int(i / (size_t(d.x()) * d.y()));
-    const int c[3] = {x, y, z};
-    for (int axis = 0; axis < 3; ++axis) {
-      if (c[axis] > 0) fn(i - size_t(step[axis]));
-      if (c[axis] + 1 < d[axis]) fn(i + size_t(step[axis]));
+  // The fill's stack holds coordinates with the index: no division per visit.
+  struct Item {
+    int x, y, z;
+  };
+  std::vector<Item> stack;
+  const size_t sy = size_t(d.x()), sz = size_t(d.x()) * d.y();
+  auto push = [&](int x, int y, int z) {
+    const size_t j = size_t(z) * sz + size_t(y) * sy + size_t(x);
+    if (volume.state(j) == VoxelState::kUnknown && !keep[j]) {
+      keep[j] = 1;
+      stack.push_back({x, y, z});
     }
   };
-  for (size_t i = 0; i < n; ++i) {
-    if (volume.state(i) != VoxelState::kObserved) continue;
-    visitNeighbours(i, [&](size_t j) {
-      if (volume.state(j) == VoxelState::kUnknown && !keep[j]) {
-        keep[j] = 1;
-        stack.push_back(j);
-      }
-    });
-  }
+  auto visitNeighbours = [&](int x, int y, int z) {
+    if (x > 0) push(x - 1, y, z);
+    if (x + 1 < d.x()) push(x + 1, y, z);
+    if (y > 0) push(x, y - 1, z);
+    if (y + 1 < d.y()) push(x, y + 1, z);
+    if (z > 0) push(x, y, z - 1);
+    if (z + 1 < d.z()) push(x, y, z + 1);
+  };
+  for (int z = 0; z < d.z(); ++z)
+    for (int y = 0; y < d.y(); ++y)
+      for (int x = 0; x < d.x(); ++x)
+        if (volume.state(size_t(z) * sz + size_t(y) * sy + size_t(x)) == VoxelState::kObserved)
+          visitNeighbours(x, y, z);
   while (!stack.empty()) {
-    size_t i = stack.back();
+    const Item it = stack.back();
     stack.pop_back();
-    visitNeighbours(i, [&](size_t j) {
-      if (volume.state(j) == VoxelState::kUnknown && !keep[j]) {
-        keep[j] = 1;
-        stack.push_back(j);
-      }
-    });
+    visitNeighbours(it.x, it.y, it.z);
   }
   return keep;
 }
