@@ -38,15 +38,9 @@ ContourResult contour(const ScalarGrid& grid) {
   const float* f = grid.values.data();
 
   // Pass 1: which of the 7 edges leaving each sample (towards +x,+y,+z combinations) cross 0,
-  // and which rows (y, z) have any. The per-sample buffers are kept per thread between calls (a
-  // scan extracts its model many times; fresh pages for them cost as much as a pass).
-  // (Named through references: the workers below must see this thread's buffers, not their own.)
-  thread_local std::vector<uint8_t> maskBuffer;
-  thread_local std::vector<uint32_t> offsetBuffer;
-  std::vector<uint8_t>& mask = maskBuffer;
-  std::vector<uint32_t>& offset = offsetBuffer;
-  mask.resize(n);
-  offset.resize(n);
+  // and which rows (y, z) have any.
+  std::vector<uint8_t> mask(n);
+  std::vector<uint32_t> offset(n);
   std::vector<uint8_t> rowAny(size_t(ny) * nz, 0);
   std::vector<uint32_t> sliceCount(nz, 0);
   parallelFor(0, nz, [&](int z) {
