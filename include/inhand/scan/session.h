@@ -150,7 +150,8 @@ class ScanSession {
   std::optional<GraspCandidate> nextGrasp(const Iso3& T_B_O_rest, const JointVector& q_now);
 
   // The model (S_obj) at full resolution, and at the planning stride (what Alg. 1 sees). Each is
-  // extracted once per state of the volume and kept until the volume changes.
+  // extracted once per state of the volume and kept until the volume changes (so, though const,
+  // not to be called from two threads at once on one session).
   ObjectModel model() const;
   ObjectModel planningModel() const;
   const TsdfVolume& volume() const;
