@@ -79,6 +79,59 @@ TEST(GraspRanking, GraspCoveringTheUnknownFaceRanksLower) {
   EXPECT_GT(cands[0].reachable_views, 0);
 }
 
+// planGrasps stops without candidates when no view with no hand reaches t_q: that bound must hold
+// every candidate's quality, at the fine stride and when the planner goes coarse to fine.
+TEST(GraspRanking, NoCandidatePromisesMoreThanTheBestViewWithoutTheHand) {
+  const RobotModel& r = test::wam();
+  ObjectModel model = boxSeenExceptPlusX();
+  const Iso3 T_B_O(Eigen::Translation3d(r.camera().lookAt_B.x(), r.camera().lookAt_B.y(),
+                                        r.table().topZ() + 0.08));
+  GraspOptions go;
+  go.approaches = 24;
+  go.rolls = 2;
+  const std::vector<GraspCandidate> generated =
+      generateGrasps(r, model.mesh, T_B_O, r.home(), go).candidates;
+  ASSERT_GE(generated.size(), 10u);
+  for (int coarseToFine = 0; coarseToFine < 2; ++coarseToFine) {
+    ViewPlannerOptions o;
+    o.directions = 32;
+    o.rolls = 4;
+    o.quality.pixel_stride = 4;
+    o.prescreen_stride = coarseToFine ? 8 : 4;
+    o.refine = 8;
+    ViewPlanner planner(r, DepthCameraOptions{}, NoiseModelOptions{}, o);
+    ViewQualityScene scene = planner.qualityScene(model);
+    const double bound = planner.graspQualityBound(scene);
+    std::vector<GraspCandidate> cands = generated;
+    rankGrasps(planner, model, go, &cands);
+    double best = 0;
+    for (const GraspCandidate& c : cands) {
+      EXPECT_LE(c.quality, bound * (1 + 1e-12)) << coarseToFine;
+      best = std::max(best, c.quality);
+    }
+    // Not vacuous: the hand hides only part of the best view; with the hand ignored, the
+    // candidates' best views reach it (up to the roll each direction's cheapest view has).
+    EXPECT_GT(best, 0.3 * bound) << coarseToFine;
+    ViewPlannerOptions noHand = o;
+    noHand.hand_occlusion = false;
+    ViewPlanner blind(r, DepthCameraOptions{}, NoiseModelOptions{}, noHand);
+    cands = generated;
+    rankGrasps(blind, model, go, &cands);
+    EXPECT_LE(cands.front().quality, bound * (1 + 1e-12)) << coarseToFine;
+    EXPECT_GT(cands.front().quality, 0.97 * bound) << coarseToFine;
+    // The same model fully observed: nothing is left to gain, and the bound says so.
+    ObjectModel seen =
+        test::unweldedModel(makeBox(Vec3(0.06, 0.10, 0.16)), [](const Vec3&) { return 1e-7f; });
+    ViewQualityScene seenScene = planner.qualityScene(seen);
+    EXPECT_LT(planner.graspQualityBound(seenScene), 0.05 * bound);
+  }
+  ViewPlannerOptions random;
+  applyPlannerName("random", &random);
+  ViewPlanner randomPlanner(r, DepthCameraOptions{}, NoiseModelOptions{}, random);
+  ViewQualityScene scene = randomPlanner.qualityScene(model);
+  EXPECT_TRUE(std::isinf(randomPlanner.graspQualityBound(scene)));
+}
+
 TEST(GraspGeneration, CandidatesAreStableClearOfTheTableAndReachable) {
   const RobotModel& r = test::wam();
   ObjectModel model = boxSeenExceptPlusX();

@@ -191,6 +191,33 @@ ViewQualityScene ViewPlanner::qualityScene(const ObjectModel& S_obj) const {
   return ViewQualityScene(S_obj, camera_, noise_, options_.quality);
 }
 
+double ViewPlanner::graspQualityBound(ViewQualityScene& scene) const {
+  const ViewPlannerOptions& o = options_;
+  if (o.metric != ViewMetric::kInformationGain) return std::numeric_limits<double>::infinity();
+  const ObjectModel& S_obj = scene.model();
+  if (S_obj.mesh.empty()) return 0;
+  scene.setNearHand(nullptr);
+  const Vec3 centre = S_obj.mesh.bounds().center();
+  std::vector<double> ranges{o.range_m};
+  ranges.insert(ranges.end(), o.fallback_ranges_m.begin(), o.fallback_ranges_m.end());
+  std::vector<Iso3> poses;
+  for (const Vec3& d : fibonacciSphere(o.directions))
+    for (double range : ranges)
+      for (int r = 0; r < o.rolls; ++r)
+        poses.push_back(cameraPoseInObject(centre, d, range, 2 * M_PI * r / o.rolls));
+  // select() scores at the fine stride, and at the prescreen stride when it goes coarse to fine.
+  std::vector<int> strides{o.quality.pixel_stride};
+  if (o.refine > 0 && o.prescreen_stride > o.quality.pixel_stride)
+    strides.push_back(o.prescreen_stride);
+  std::vector<double> best(poses.size(), 0.0);
+  parallelForThreads(0, int(poses.size()), [&](int i) {
+    for (int stride : strides)
+      best[size_t(i)] =
+          std::max(best[size_t(i)], scene.quality(poses[size_t(i)], {}, nullptr, stride));
+  });
+  return *std::max_element(best.begin(), best.end());
+}
+
 ViewSelection ViewPlanner::select(const ObjectModel& S_obj, const GraspState& grasp,
                                   const std::vector<Vec3>& used,
                                   std::shared_ptr<const NearHandGrid> nearHand,

@@ -782,9 +782,28 @@ GraspPlan ScanSession::planGrasps(const Iso3& T_B_O_rest, const JointVector& q_n
   if (s.viewOpen) finishView();
   GraspPlan plan;
   const ObjectModel S_obj = planningModel();
+  // Candidates are ranked by eq. 9 (the ranking planner) whatever the view planner is, so its
+  // own t_q decides; a baseline view planner's threshold is in other units.
+  plan.model_area_m2 = S_obj.mesh.area();
+  plan.t_q = viewThreshold(s.multi.ranking, plan.model_area_m2);
+  char line[240];
+  {
+    // No grasp can promise more than the best view with no hand at all: below t_q, neither
+    // generating nor ranking candidates can change the decision.
+    ViewQualityScene scene = s.ranker.qualityScene(S_obj);
+    const double bound = s.ranker.graspQualityBound(scene);
+    if (bound < plan.t_q) {
+      std::snprintf(line, sizeof(line),
+                    "no grasp candidate promises a view above t_q: no view of the model does, "
+                    "even without the hand (best %.5f < t_q %.5f)",
+                    bound, plan.t_q);
+      log(line);
+      finish(Termination::kNoGraspAboveThreshold, line);
+      return plan;
+    }
+  }
   plan.generation = generateGrasps(*s.model, S_obj.mesh, T_B_O_rest, q_now, s.multi.grasp);
   const GraspGeneration& gen = plan.generation;
-  char line[200];
   std::snprintf(line, sizeof(line),
                 "grasp candidates: %d poses, %d touching, %d stable, %d clear of the table, %zu "
                 "reachable (%.2f s)",
@@ -803,10 +822,6 @@ GraspPlan ScanSession::planGrasps(const Iso3& T_B_O_rest, const JointVector& q_n
   std::snprintf(line, sizeof(line), "ranked %zu grasps in %.2f s: best quality %.4f, ε %.4f",
                 plan.candidates.size(), plan.ranking_s, best.quality, best.epsilon);
   log(line);
-  // Candidates are ranked by eq. 9 (the ranking planner) whatever the view planner is, so its
-  // own t_q decides; a baseline view planner's threshold is in other units.
-  plan.model_area_m2 = S_obj.mesh.area();
-  plan.t_q = viewThreshold(s.multi.ranking, plan.model_area_m2);
   const double t_q = plan.t_q;
   while (plan.above_threshold < int(plan.candidates.size()) &&
          plan.candidates[plan.above_threshold].quality >= t_q)

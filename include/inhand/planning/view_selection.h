@@ -159,6 +159,16 @@ class ViewPlanner {
   // A ViewQualityScene of S_obj for this planner.
   ViewQualityScene qualityScene(const ObjectModel& S_obj) const;
 
+  // An upper bound on the quality any grasp can promise under this planner (what rankGrasps
+  // gives a candidate: its best view's quality, used directions none): the best eq. 9 quality of
+  // S_obj over every direction, roll and range, with neither the robot nor the near-hand rule,
+  // at each pixel stride select() scores at. A grasp's views have the same camera poses in the
+  // object's frame, and per pixel the robot can only take a non-negative term away (it hides
+  // S_obj or the projector, or marks the surface near the hand). Reachability is not asked.
+  // +infinity for the metrics that are not such sums (random, the volumetric ones). Replaces
+  // the scene's near-hand grid with none.
+  double graspQualityBound(ViewQualityScene& scene) const;
+
   const ViewPlannerOptions& options() const { return options_; }
   const RobotModel& model() const { return *model_; }
 

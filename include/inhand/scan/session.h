@@ -144,7 +144,9 @@ class ScanSession {
 
   // Grasp candidates on the model so far with the object resting at T_B_O_rest and the robot at
   // q_now, ranked by the best view Alg. 1 finds with the hand there (eq. 9, the ranking planner),
-  // the first `above_threshold` of them above its t_q. Sets the termination when none is.
+  // the first `above_threshold` of them above its t_q. Sets the termination when none is; when
+  // not even a view with no hand reaches t_q (ViewPlanner::graspQualityBound) it does so without
+  // generating candidates (an empty plan).
   GraspPlan planGrasps(const Iso3& T_B_O_rest, const JointVector& q_now);
   // The best of them, or nullopt.
   std::optional<GraspCandidate> nextGrasp(const Iso3& T_B_O_rest, const JointVector& q_now);
