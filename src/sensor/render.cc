@@ -52,6 +52,25 @@ float incidenceF(const Vec3f& normal, const Vec3f& dir) {
   return std::acos(cosIncidenceF(normal, dir));
 }
 
+// Whether cosIncidence(normal, dir) < limit (limit in (0, 1)): by squares, with no square root
+// or division, where the answer is certain, and by cosIncidence itself within a relative 1e-9 of
+// the limit (both are exact to ~1e-15), so the answer is cosIncidence's, bit for bit.
+bool cosBelow(const Vec3& normal, const Vec3& dir, double limit) {
+  const double nd = normal.dot(dir);
+  const double bound = limit * limit * (normal.squaredNorm() * dir.squaredNorm());
+  if (nd * nd > bound * (1 + 1e-9)) return false;
+  if (nd * nd < bound * (1 - 1e-9)) return true;
+  return cosIncidence(normal, dir) < limit;
+}
+
+// Whether cosIncidenceF(normal, dir) ≥ c0 (c0 in (0, 1)) for certain, by squares: true only where
+// the float cosine cannot round below c0 (a relative 1e-6 of margin against its 6e-8).
+bool cosCertainlyAtLeastF(const Vec3f& normal, const Vec3f& dir, double c0) {
+  const Vec3 n = normal.cast<double>(), d = dir.cast<double>();
+  const double nn = n.squaredNorm() * d.squaredNorm(), nd = n.dot(d);
+  return nn > 0 && nd * nd >= c0 * c0 * nn * (1 + 1e-6);
+}
+
 // The cosines of the sensor's incidence limits: an angle exceeds a limit when its cosine is
 // below the limit's (acos falls as its argument rises), so no arccosine is needed per pixel.
 struct IncidenceLimits {
@@ -69,10 +88,10 @@ bool acceptHit(const Hit& hit, const Ray& ray, const Vec3& projector_S,
   double z = hit.t;
   if (z < cam.min_range_m || z > cam.max_range_m) return false;
   Vec3 n = hit.normal.cast<double>();
-  if (cosIncidence(n, ray.dir.cast<double>()) < limits.camera) return false;
+  if (cosBelow(n, ray.dir.cast<double>(), limits.camera)) return false;
   Vec3 x = (ray.origin + hit.t * ray.dir).cast<double>();
   Vec3 toProjector = projector_S - x;
-  if (cosIncidence(n, toProjector) < limits.projector) return false;
+  if (cosBelow(n, toProjector, limits.projector)) return false;
   double dist = toProjector.norm();
   shadow->origin = x.cast<float>();
   shadow->dir = (toProjector / dist).cast<float>();
@@ -143,8 +162,21 @@ DepthImage renderDepth(const RayScene& scene, const Iso3& T_S_C, const DepthCame
   std::vector<Hit>& hits = scratch.hits;
   rays.resize(n);
   hits.resize(n);
+  // The pixel centres' rays: K.rayZ1's per-column and per-row terms once, the same values.
+  std::vector<double> xs(static_cast<size_t>(w)), ys(static_cast<size_t>(h));
+  for (int u = 0; u < w; ++u) xs[size_t(u)] = K.rayZ1(u, 0).x();
+  for (int v = 0; v < h; ++v) ys[size_t(v)] = K.rayZ1(0, v).y();
+  const Vec3f origin = T_S_C.translation().cast<float>();
+  const Mat3 R = T_S_C.linear();
   parallelFor(
-      0, n, [&](int i) { rays[i] = pixelRay(T_S_C, K, order[i] % w, order[i] / w); }, 4096);
+      0, n,
+      [&](int i) {
+        const int p = order[i];
+        rays[i] = Ray{};
+        rays[i].origin = origin;
+        rays[i].dir = (R * Vec3(xs[size_t(p % w)], ys[size_t(p / w)], 1.0)).cast<float>();
+      },
+      4096);
   scene.intersect(rays.data(), hits.data(), n);
   const Background background(scene, options);
 
@@ -226,8 +258,11 @@ DepthImage renderDepth(const RayScene& scene, const Iso3& T_S_C, const DepthCame
         double z = hits[i].t;
         if (options.noise) {
           // The angle matters to the axial σ only beyond grazing_start_deg.
-          const double c = cosIncidenceF(hits[i].normal, rays[i].dir);
-          const double theta = c < cosGrazing ? std::acos(c) : 0.0;
+          double theta = 0;
+          if (!(cosGrazing > 0) || !cosCertainlyAtLeastF(hits[i].normal, rays[i].dir, cosGrazing)) {
+            const double c = cosIncidenceF(hits[i].normal, rays[i].dir);
+            theta = c < cosGrazing ? std::acos(c) : 0.0;
+          }
           z += axialSigma(noise, z, theta) * gaussianAtF(options.seed, 3 * uint64_t(p) + 2);
           if (noise.quantize) z = quantizeDepth(z, f, camera.baseline_m(), noise.disparity_step_px);
           if (z < camera.min_range_m || z > camera.max_range_m) return;
