@@ -57,6 +57,51 @@ TEST(FastMath, Log1pFourAtATimeIsBitForBitOneAtATime) {
 #endif
 }
 
+// The single-precision functions of the simulated sensor's noise against libm in double.
+TEST(FastMath, SinglePrecisionNoiseFunctionsFollowLibm) {
+  double logWorst = 0, sinCosWorst = 0, acosWorst = 0;
+  for (uint32_t k = 0; k < (1u << 24); k += 97) {  // every uniform's form: k·2^-24 (+ ½)
+    const float u1 = (float(int32_t(k)) + 0.5f) * 0x1.0p-24f, u2 = float(int32_t(k)) * 0x1.0p-24f;
+    logWorst = std::max(logWorst, std::abs(logPositiveF(u1) - std::log(double(u1))) /
+                                      std::max(1e-3, std::abs(std::log(double(u1)))));
+    float sv, cv;
+    sinCosTurnF(u2, &sv, &cv);
+    sinCosWorst = std::max({sinCosWorst, std::abs(sv - std::sin(2 * M_PI * double(u2))),
+                            std::abs(cv - std::cos(2 * M_PI * double(u2)))});
+    const float c = float(k) * 0x1.0p-24f;
+    acosWorst = std::max(acosWorst, std::abs(acosUnitF(c) - std::acos(double(c))));
+  }
+  for (float x : {1e-30f, 1e-7f, 0.70710677f, 0.7071068f, 1.f, 1.5f, 3e7f})
+    logWorst = std::max(logWorst, std::abs(logPositiveF(x) - std::log(double(x))) /
+                                      std::max(1e-3, std::abs(std::log(double(x)))));
+  EXPECT_LT(logWorst, 5e-7);
+  EXPECT_LT(sinCosWorst, 5e-7);
+  EXPECT_LT(acosWorst, 5e-7);
+  EXPECT_EQ(acosUnitF(1.f), 0.f);
+  float sv, cv;
+  sinCosTurnF(0.f, &sv, &cv);
+  EXPECT_EQ(sv, 0.f);
+  EXPECT_EQ(cv, 1.f);
+}
+
+// The batch (eight at a time with AVX2) gives gaussianPairAtF's bits, tail included.
+TEST(Random, GaussianPairBatchIsBitForBitOneAtATime) {
+  std::vector<uint64_t> index;
+  for (uint64_t i = 0; i < 20011; ++i) index.push_back(3 * i * 7919 % 1000003);
+  std::vector<float> a(index.size()), b(index.size()), c(index.size());
+  gaussianPairsF(11, index.data(), index.size(), a.data(), b.data());
+  gaussianPairsF(11, index.data(), index.size(), c.data(), nullptr);
+  int differ = 0;
+  for (size_t k = 0; k < index.size(); ++k) {
+    const auto [g0, g1] = gaussianPairAtF(11, index[k]);
+    differ += a[k] != g0 || b[k] != g1 || c[k] != g0;
+  }
+  EXPECT_EQ(differ, 0);
+#if INHAND_FAST_MATH_AVX2
+  if (!fastMathAvx2()) GTEST_SKIP() << "no AVX2 on this CPU: only the scalar path was compared";
+#endif
+}
+
 TEST(Pose, LookAtPutsTargetOnOpticalAxis) {
   Rng rng = makeRng(3);
   std::uniform_real_distribution<double> U(-1, 1);

@@ -49,7 +49,7 @@ float cosIncidenceF(const Vec3f& normal, const Vec3f& dir) {
   return float(std::min(1.0, std::abs(n.dot(d)) / std::sqrt(nn)));
 }
 float incidenceF(const Vec3f& normal, const Vec3f& dir) {
-  return std::acos(cosIncidenceF(normal, dir));
+  return acosUnitF(cosIncidenceF(normal, dir));
 }
 
 // Whether cosIncidence(normal, dir) < limit (limit in (0, 1)): by squares, with no square root
@@ -142,6 +142,7 @@ DepthImage renderDepth(const RayScene& scene, const Iso3& T_S_C, const DepthCame
     std::vector<Hit> hits;
     std::vector<uint8_t> ok, blocked, compactBlocked;
     std::vector<int> shadowIndex;
+    std::vector<float> noiseU, noiseV, noiseZ;  // the standard normal draws of each pixel
     int w = 0, h = 0;
   } scratch;
   const bool whole = options.region_u1 < 0 || options.region_v1 < 0;
@@ -180,7 +181,24 @@ DepthImage renderDepth(const RayScene& scene, const Iso3& T_S_C, const DepthCame
   scene.intersect(rays.data(), hits.data(), n);
   const Background background(scene, options);
 
+  // (The scratch through references: inside a parallel loop `scratch` is the worker's own.)
+  std::vector<float>&gu = scratch.noiseU, &gv = scratch.noiseV, &gz = scratch.noiseZ;
   if (options.noise) {
+    // Each pixel's draws, eight at a time: the lateral pair at index 3p, the axial one at 3p + 2.
+    gu.resize(size_t(n));
+    gv.resize(size_t(n));
+    gz.resize(size_t(n));
+    constexpr int kBlock = 1024;
+    parallelFor(0, (n + kBlock - 1) / kBlock, [&](int b) {
+      const int i0 = b * kBlock, m = std::min(n, i0 + kBlock) - i0;
+      uint64_t lateral[kBlock], axial[kBlock];
+      for (int k = 0; k < m; ++k) {
+        lateral[k] = 3 * uint64_t(order[size_t(i0 + k)]);
+        axial[k] = lateral[k] + 2;
+      }
+      gaussianPairsF(options.seed, lateral, size_t(m), &gu[size_t(i0)], &gv[size_t(i0)]);
+      gaussianPairsF(options.seed, axial, size_t(m), &gz[size_t(i0)], nullptr);
+    });
     // Lateral noise: the return comes from a point displaced by N(0, σ_L(θ)) pixels, so re-cast
     // through the displaced sub-pixel position (this also makes ragged, mixed depth edges).
     parallelFor(
@@ -191,8 +209,7 @@ DepthImage renderDepth(const RayScene& scene, const Iso3& T_S_C, const DepthCame
           int p = order[i];
           const double theta = incidenceF(hits[i].normal, rays[i].dir);
           const double s = lateralSigmaPx(noise, theta);
-          const auto [gu, gv] = gaussianPairAtF(options.seed, 3 * uint64_t(p));
-          const double du = s * gu, dv = s * gv;
+          const double du = s * gu[size_t(i)], dv = s * gv[size_t(i)];
           rays[i] = pixelRay(T_S_C, K, p % w + du, p / w + dv);
         },
         4096);
@@ -263,7 +280,7 @@ DepthImage renderDepth(const RayScene& scene, const Iso3& T_S_C, const DepthCame
             const double c = cosIncidenceF(hits[i].normal, rays[i].dir);
             theta = c < cosGrazing ? std::acos(c) : 0.0;
           }
-          z += axialSigma(noise, z, theta) * gaussianAtF(options.seed, 3 * uint64_t(p) + 2);
+          z += axialSigma(noise, z, theta) * gz[size_t(i)];
           if (noise.quantize) z = quantizeDepth(z, f, camera.baseline_m(), noise.disparity_step_px);
           if (z < camera.min_range_m || z > camera.max_range_m) return;
         }
