@@ -10,7 +10,9 @@
 #include "inhand/geometry/surface_distance.h"
 #include "inhand/planning/view_selection.h"
 #include "inhand/scan/multi_grasp.h"
+#include "inhand/scan/scan.h"
 #include "inhand/scan/session.h"
+#include "inhand/sensor/render.h"
 #include "inhand/sim/sim_world.h"
 #include "test_util.h"
 
@@ -171,6 +173,60 @@ TEST(Tracking, ThePickUpReportsTheGraspTheJointsImply) {
     EXPECT_GT(apart, 0.01);
     EXPECT_NEAR(apart, delta.translation().norm(), 0.01);
   }
+}
+
+// robotPixelMask against its rule pixel by pixel: a measurement is the robot's when the robot's
+// rendered surface (noise-free, every angle below 89°, no projector shadows) at a pixel within
+// radius_px lies within t_hand of it; for several radii, the whole image and a region.
+TEST(Tracking, RobotPixelMaskFollowsItsRuleAtEveryPixel) {
+  const TriangleMesh mesh = loadObject("builtin:cracker_box");
+  auto [T_O_palm, q] = defaultGrasp(wam(), mesh);
+  SimWorld world(wam(), mesh, T_O_palm, DepthCameraOptions{}, NoiseModelOptions{}, SimOptions{});
+  world.q = q;
+  world.T_B_C = ViewPlanner(wam(), DepthCameraOptions{}, NoiseModelOptions{}, ViewPlannerOptions{})
+                    .cameraPose(0.7);
+  const DepthImage d = world.render();
+  const RobotOccluders scenes(wam());
+  RayScene robotScene;
+  for (const Occluder& o : scenes.at(world.q, Iso3::Identity(), true))
+    robotScene.addInstance(*o.scene, o.T_O_scene);
+  robotScene.commit();
+  DepthCameraOptions cam;
+  cam.max_incidence_deg = 89;
+  cam.max_projector_incidence_deg = 89;
+  cam.projector_C = Vec3(1e-6, 0, 0);
+  RenderOptions exact;
+  exact.noise = false;
+  exact.projector_shadows = false;
+  const DepthImage rd = renderDepth(robotScene, world.T_B_C, cam, NoiseModelOptions{}, exact);
+  const int W = d.width, H = d.height;
+  const double t_hand = 0.01;
+  for (int R : {0, 1, 2, 3})
+    for (bool whole : {true, false}) {
+      const PixelRect region{150, 100, 500, 400};
+      const std::vector<uint8_t> mask =
+          robotPixelMask(d, world.T_B_C, world.q, scenes, DepthCameraOptions{}, NoiseModelOptions{},
+                         t_hand, R, /*with_table=*/true, whole ? nullptr : &region);
+      int robot = 0, other = 0, differ = 0;
+      for (int v = 0; v < H; ++v)
+        for (int u = 0; u < W; ++u) {
+          bool want = false;
+          const float z = d.at(u, v);
+          const bool inside =
+              whole || (u >= region.u0 && u < region.u1 && v >= region.v0 && v < region.v1);
+          for (int dv = -R; dv <= R && z > 0 && inside; ++dv)
+            for (int du = -R; du <= R; ++du) {
+              const int uu = u + du, vv = v + dv;
+              if (uu < 0 || vv < 0 || uu >= W || vv >= H || du * du + dv * dv > R * R) continue;
+              want |= rd.at(uu, vv) > 0 && std::abs(z - rd.at(uu, vv)) < t_hand;
+            }
+          differ += bool(mask[size_t(v) * W + u]) != want;
+          (want ? robot : other) += z > 0;
+        }
+      EXPECT_EQ(differ, 0) << "radius " << R << (whole ? ", whole image" : ", region");
+      EXPECT_GT(robot, 2000) << R;
+      EXPECT_GT(other, 20000) << R;
+    }
 }
 
 // The object's pose in the hand recovered from one frame of it held: the true mesh's surface as

@@ -144,11 +144,28 @@ std::vector<uint8_t> robotPixelMask(const DepthImage& depth, const Iso3& T_B_C,
   DepthImage robotDepth = renderDepth(robotScene, T_B_C, cam, noise, exact);
   // A measurement is the robot's when the robot's rendered surface lies within t_hand of it at
   // that pixel or within radius_px of it: the sensor's lateral noise moves returns across the
-  // robot's silhouette by a pixel or two.
+  // robot's silhouette by a pixel or two. Pixels with no robot surface in the (2R + 1)² square
+  // around them cannot be (a separable dilation of where the robot is, rows then columns).
+  std::vector<uint8_t> rowNear(depth.depth_m.size(), 0), near(depth.depth_m.size(), 0);
+  const int rv0 = std::max(0, r.v0 - R), rv1 = std::min(H, r.v1 + R);
+  parallelFor(rv0, rv1, [&](int v) {
+    const float* rd = &robotDepth.depth_m[size_t(v) * W];
+    uint8_t* out = &rowNear[size_t(v) * W];
+    for (int u = r.u0; u < r.u1; ++u) {
+      bool any = false;
+      for (int uu = std::max(0, u - R); uu <= std::min(W - 1, u + R) && !any; ++uu)
+        any = rd[uu] > 0;
+      out[u] = any;
+    }
+  });
+  parallelFor(r.v0, r.v1, [&](int v) {
+    for (int vv = std::max(0, v - R); vv <= std::min(H - 1, v + R); ++vv)
+      for (int u = r.u0; u < r.u1; ++u) near[size_t(v) * W + u] |= rowNear[size_t(vv) * W + u];
+  });
   parallelFor(r.v0, r.v1, [&](int v) {
     for (int u = r.u0; u < r.u1; ++u) {
       const float d = depth.depth_m[size_t(v) * W + u];
-      if (!(d > 0)) continue;
+      if (!(d > 0) || !near[size_t(v) * W + u]) continue;
       bool robot = false;
       for (int dv = -R; dv <= R && !robot; ++dv)
         for (int du = -R; du <= R && !robot; ++du) {
