@@ -7,6 +7,7 @@
 #include "inhand/geometry/primitives.h"
 #include "inhand/grasp/grasp.h"
 #include "inhand/robot/collision.h"
+#include "inhand/scan/multi_grasp.h"
 #include "test_util.h"
 
 using namespace inhand;
@@ -130,6 +131,38 @@ TEST(GraspRanking, NoCandidatePromisesMoreThanTheBestViewWithoutTheHand) {
   ViewPlanner randomPlanner(r, DepthCameraOptions{}, NoiseModelOptions{}, random);
   ViewQualityScene scene = randomPlanner.qualityScene(model);
   EXPECT_TRUE(std::isinf(randomPlanner.graspQualityBound(scene)));
+}
+
+// Ranking by views scored best bound first gives every candidate the quality and reachable views
+// that scoring every view does (the reference), on a model with an unknown face and with a
+// fallback range and the hand ignored.
+TEST(GraspRanking, BoundOrderedRankingEqualsScoringEveryView) {
+  const RobotModel& r = test::wam();
+  ObjectModel model = boxSeenExceptPlusX();
+  const Iso3 T_B_O(Eigen::Translation3d(r.camera().lookAt_B.x(), r.camera().lookAt_B.y(),
+                                        r.table().topZ() + 0.08));
+  GraspOptions go;
+  go.approaches = 24;
+  go.rolls = 2;
+  const std::vector<GraspCandidate> generated =
+      generateGrasps(r, model.mesh, T_B_O, r.home(), go).candidates;
+  ASSERT_GE(generated.size(), 10u);
+  for (int variant = 0; variant < 3; ++variant) {
+    ViewPlannerOptions o = MultiGraspOptions::defaultRankingPlanner();
+    o.directions = 32;
+    if (variant == 1) o.fallback_ranges_m = {0.9};
+    if (variant == 2) o.hand_occlusion = false;
+    ViewPlanner planner(r, DepthCameraOptions{}, NoiseModelOptions{}, o);
+    std::vector<GraspCandidate> fast = generated, all = generated;
+    rankGrasps(planner, model, go, &fast);
+    rankGrasps(planner, model, go, &all, /*reference=*/true);
+    for (size_t k = 0; k < fast.size(); ++k) {
+      EXPECT_EQ(fast[k].quality, all[k].quality) << variant << " " << k;
+      EXPECT_EQ(fast[k].reachable_views, all[k].reachable_views) << variant << " " << k;
+      EXPECT_TRUE(fast[k].T_O_palm.isApprox(all[k].T_O_palm, 0)) << variant << " " << k;
+    }
+    EXPECT_GT(fast.front().quality, 0) << variant;
+  }
 }
 
 TEST(GraspGeneration, CandidatesAreStableClearOfTheTableAndReachable) {

@@ -369,18 +369,32 @@ GraspGeneration generateGrasps(const RobotModel& robot, const TriangleMesh& mesh
 }
 
 double rankGrasps(const ViewPlanner& planner, const ObjectModel& S_obj, const GraspOptions& o,
-                  std::vector<GraspCandidate>* candidates) {
+                  std::vector<GraspCandidate>* candidates, bool reference) {
   const auto t0 = std::chrono::steady_clock::now();
   const ViewQualityOptions& qo = planner.options().quality;
   ViewQualityScene scene = planner.qualityScene(S_obj);  // S_obj's BVH once for all candidates
   const Aabb region = S_obj.mesh.bounds();  // near-hand cells only where S_obj can be hit
+  // Each view's quality with no hand bounds it with any hand: views are scored best bound first
+  // until no other can beat the best found (bestViewQuality); the reference scores every view.
+  const std::vector<double> bounds =
+      reference ? std::vector<double>() : planner.viewBoundsWithoutHand(scene);
   for (GraspCandidate& c : *candidates) {
     HandGeometry hand(planner.model(), c.q, c.T_O_palm);
     auto nearHand = std::make_shared<NearHandGrid>(hand, qo.t_hand_m, qo.near_hand_cell_m, &region);
-    ViewSelection sel = planner.select(scene, GraspState{c.T_O_palm, c.q_lift}, {}, nearHand);
-    c.reachable_views = sel.reachable;
-    c.quality = 0;
-    for (const ViewCandidate& v : sel.candidates) c.quality = std::max(c.quality, v.quality);
+    const GraspState grasp{c.T_O_palm, c.q_lift};
+    int reachable = 0;
+    const std::optional<double> best =
+        bounds.empty() ? std::nullopt
+                       : planner.bestViewQuality(scene, grasp, nearHand, bounds, &reachable);
+    if (best) {
+      c.reachable_views = reachable;
+      c.quality = *best;
+    } else {
+      ViewSelection sel = planner.select(scene, grasp, {}, nearHand);
+      c.reachable_views = sel.reachable;
+      c.quality = 0;
+      for (const ViewCandidate& v : sel.candidates) c.quality = std::max(c.quality, v.quality);
+    }
     c.score = c.quality + o.stability_weight * c.epsilon;
   }
   std::stable_sort(

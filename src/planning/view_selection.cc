@@ -191,11 +191,21 @@ ViewQualityScene ViewPlanner::qualityScene(const ObjectModel& S_obj) const {
   return ViewQualityScene(S_obj, camera_, noise_, options_.quality);
 }
 
-double ViewPlanner::graspQualityBound(ViewQualityScene& scene) const {
+namespace {
+// Whether select() may score some views at the prescreen stride (coarse to fine).
+bool mayGoCoarse(const ViewPlannerOptions& o) {
+  return o.refine > 0 && o.prescreen_stride > o.quality.pixel_stride;
+}
+bool isEq9(const ViewPlannerOptions& o) {
+  return o.metric == ViewMetric::kInformationGain &&
+         o.quality.integrand == QualityIntegrand::kInformationGain;
+}
+}  // namespace
+
+std::vector<double> ViewPlanner::viewBoundsWithoutHand(ViewQualityScene& scene) const {
   const ViewPlannerOptions& o = options_;
-  if (o.metric != ViewMetric::kInformationGain) return std::numeric_limits<double>::infinity();
   const ObjectModel& S_obj = scene.model();
-  if (S_obj.mesh.empty()) return 0;
+  if (o.metric != ViewMetric::kInformationGain || S_obj.mesh.empty()) return {};
   scene.setNearHand(nullptr);
   const Vec3 centre = S_obj.mesh.bounds().center();
   std::vector<double> ranges{o.range_m};
@@ -207,15 +217,72 @@ double ViewPlanner::graspQualityBound(ViewQualityScene& scene) const {
         poses.push_back(cameraPoseInObject(centre, d, range, 2 * M_PI * r / o.rolls));
   // select() scores at the fine stride, and at the prescreen stride when it goes coarse to fine.
   std::vector<int> strides{o.quality.pixel_stride};
-  if (o.refine > 0 && o.prescreen_stride > o.quality.pixel_stride)
-    strides.push_back(o.prescreen_stride);
-  std::vector<double> best(poses.size(), 0.0);
+  if (mayGoCoarse(o)) strides.push_back(o.prescreen_stride);
+  std::vector<double> bound(poses.size(), 0.0);
   parallelForThreads(0, int(poses.size()), [&](int i) {
     for (int stride : strides)
-      best[size_t(i)] =
-          std::max(best[size_t(i)], scene.quality(poses[size_t(i)], {}, nullptr, stride));
+      bound[size_t(i)] =
+          std::max(bound[size_t(i)], scene.quality(poses[size_t(i)], {}, nullptr, stride));
   });
-  return *std::max_element(best.begin(), best.end());
+  return bound;
+}
+
+double ViewPlanner::graspQualityBound(ViewQualityScene& scene) const {
+  if (options_.metric != ViewMetric::kInformationGain)
+    return std::numeric_limits<double>::infinity();
+  const std::vector<double> bound = viewBoundsWithoutHand(scene);
+  return bound.empty() ? 0.0 : *std::max_element(bound.begin(), bound.end());
+}
+
+std::optional<double> ViewPlanner::bestViewQuality(ViewQualityScene& scene, const GraspState& grasp,
+                                                   std::shared_ptr<const NearHandGrid> nearHand,
+                                                   const std::vector<double>& bounds,
+                                                   int* reachable) const {
+  const ViewPlannerOptions& o = options_;
+  const ObjectModel& S_obj = scene.model();
+  const std::vector<Vec3> dirs = fibonacciSphere(o.directions);
+  const size_t nRanges = 1 + o.fallback_ranges_m.size();
+  if (!isEq9(o) || mayGoCoarse(o) || S_obj.mesh.empty() ||
+      bounds.size() != dirs.size() * nRanges * size_t(o.rolls))
+    return std::nullopt;
+  const Vec3 centre = S_obj.mesh.bounds().center();
+  std::vector<std::optional<ViewCandidate>> chosen =
+      reach(dirs, centre, S_obj.mesh.bounds(), grasp);
+  scene.setNearHand(o.hand_occlusion ? std::move(nearHand) : nullptr);
+  // Each reachable direction's view with its bound: the (range, roll) reach() chose.
+  std::vector<std::pair<double, size_t>> order;
+  for (size_t k = 0; k < chosen.size(); ++k) {
+    if (!chosen[k]) continue;
+    size_t ri = nRanges;
+    if (chosen[k]->range_m == o.range_m) {
+      ri = 0;
+    } else {
+      for (size_t j = 0; j < o.fallback_ranges_m.size() && ri == nRanges; ++j)
+        if (o.fallback_ranges_m[j] == chosen[k]->range_m) ri = j + 1;
+    }
+    const long roll = std::lround(chosen[k]->roll_rad * o.rolls / (2 * M_PI));
+    INHAND_CHECK(ri < nRanges && roll >= 0 && roll < o.rolls, "view outside the bounds' table");
+    order.emplace_back(bounds[(k * nRanges + ri) * size_t(o.rolls) + size_t(roll)], k);
+  }
+  *reachable = int(order.size());
+  std::stable_sort(order.begin(), order.end(),
+                   [](const auto& a, const auto& b) { return a.first > b.first; });
+  // Best bound first, a view per thread at a time, until no view left can beat the best found.
+  const int threads = std::max(1, threadCount());
+  double best = 0;
+  std::vector<double> q(static_cast<size_t>(threads));
+  for (size_t next = 0; next < order.size() && order[next].first > best;) {
+    const int batch = int(std::min(order.size() - next, size_t(threads)));
+    parallelForThreads(0, batch, [&](int b) {
+      const ViewCandidate& c = *chosen[order[next + size_t(b)].second];
+      std::vector<Occluder> occ;
+      if (o.hand_occlusion) occ = occluders_.at(model_->withArm(grasp.q, c.arm), c.T_B_O.inverse());
+      q[size_t(b)] = scene.quality(c.T_O_C, occ, nullptr, o.quality.pixel_stride);
+    });
+    for (int b = 0; b < batch; ++b) best = std::max(best, q[size_t(b)]);
+    next += size_t(batch);
+  }
+  return best;
 }
 
 ViewSelection ViewPlanner::select(const ObjectModel& S_obj, const GraspState& grasp,

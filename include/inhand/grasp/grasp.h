@@ -116,8 +116,11 @@ GraspGeneration generateGrasps(const RobotModel& robot, const TriangleMesh& mode
 
 // Fills quality, reachable_views and score of each candidate by one Alg. 1 pass of `planner`
 // over S_obj with the hand at that grasp (usually a coarse planner: fewer directions, rolls and
-// a pixel stride), and sorts them best first. Returns the seconds spent.
+// a pixel stride), and sorts them best first. Returns the seconds spent. A candidate's quality is
+// its best reachable view's; views are scored in decreasing order of their quality with no hand
+// (an upper bound) until none left can beat the best (ViewPlanner::bestViewQuality), or, with
+// `reference`, every view through ViewPlanner::select: the same qualities.
 double rankGrasps(const ViewPlanner& planner, const ObjectModel& S_obj, const GraspOptions& options,
-                  std::vector<GraspCandidate>* candidates);
+                  std::vector<GraspCandidate>* candidates, bool reference = false);
 
 }  // namespace inhand

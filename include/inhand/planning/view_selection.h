@@ -168,6 +168,18 @@ class ViewPlanner {
   // +infinity for the metrics that are not such sums (random, the volumetric ones). Replaces
   // the scene's near-hand grid with none.
   double graspQualityBound(ViewQualityScene& scene) const;
+  // The bound of each view: eq. 9 with no hand for every (direction, range, roll) in reach()'s
+  // order (index (direction · ranges + range) · rolls + roll), the largest over the strides
+  // select() may score at. Empty for metrics other than eq. 9 or an empty model.
+  std::vector<double> viewBoundsWithoutHand(ViewQualityScene& scene) const;
+  // What rankGrasps takes from select() for a grasp, the best quality among its reachable views
+  // (used directions none), found by scoring the views in decreasing order of `bounds`
+  // (viewBoundsWithoutHand) until none left can beat the best found: the same maximum, with
+  // most views never scored. `reachable`: how many directions have a view. nullopt where
+  // select() would score otherwise (not eq. 9, coarse to fine, bounds of another shape).
+  std::optional<double> bestViewQuality(ViewQualityScene& scene, const GraspState& grasp,
+                                        std::shared_ptr<const NearHandGrid> near_hand,
+                                        const std::vector<double>& bounds, int* reachable) const;
 
   const ViewPlannerOptions& options() const { return options_; }
   const RobotModel& model() const { return *model_; }
