@@ -80,20 +80,29 @@ TEST(GraspRanking, GraspCoveringTheUnknownFaceRanksLower) {
   EXPECT_GT(cands[0].reachable_views, 0);
 }
 
+namespace {
+// The first 10 candidates generated on the box resting on the table (24 approaches, 2 rolls; the
+// options in `go`).
+std::vector<GraspCandidate> tenCandidates(const ObjectModel& model, GraspOptions* go) {
+  const RobotModel& r = test::wam();
+  const Iso3 T_B_O(Eigen::Translation3d(r.camera().lookAt_B.x(), r.camera().lookAt_B.y(),
+                                        r.table().topZ() + 0.08));
+  go->approaches = 24;
+  go->rolls = 2;
+  std::vector<GraspCandidate> c = generateGrasps(r, model.mesh, T_B_O, r.home(), *go).candidates;
+  if (c.size() > 10) c.resize(10);
+  return c;
+}
+}  // namespace
+
 // planGrasps stops without candidates when no view with no hand reaches t_q: that bound must hold
 // every candidate's quality, at the fine stride and when the planner goes coarse to fine.
 TEST(GraspRanking, NoCandidatePromisesMoreThanTheBestViewWithoutTheHand) {
   const RobotModel& r = test::wam();
-  ObjectModel model = boxSeenExceptPlusX();
-  const Iso3 T_B_O(Eigen::Translation3d(r.camera().lookAt_B.x(), r.camera().lookAt_B.y(),
-                                        r.table().topZ() + 0.08));
+  const ObjectModel model = boxSeenExceptPlusX();
   GraspOptions go;
-  go.approaches = 24;
-  go.rolls = 2;
-  std::vector<GraspCandidate> generated =
-      generateGrasps(r, model.mesh, T_B_O, r.home(), go).candidates;
-  ASSERT_GE(generated.size(), 10u);
-  generated.resize(10);
+  const std::vector<GraspCandidate> generated = tenCandidates(model, &go);
+  ASSERT_EQ(generated.size(), 10u);
   for (int coarseToFine = 0; coarseToFine < 2; ++coarseToFine) {
     ViewPlannerOptions o;
     o.directions = 32;
@@ -139,16 +148,10 @@ TEST(GraspRanking, NoCandidatePromisesMoreThanTheBestViewWithoutTheHand) {
 // fallback range and the hand ignored.
 TEST(GraspRanking, BoundOrderedRankingEqualsScoringEveryView) {
   const RobotModel& r = test::wam();
-  ObjectModel model = boxSeenExceptPlusX();
-  const Iso3 T_B_O(Eigen::Translation3d(r.camera().lookAt_B.x(), r.camera().lookAt_B.y(),
-                                        r.table().topZ() + 0.08));
+  const ObjectModel model = boxSeenExceptPlusX();
   GraspOptions go;
-  go.approaches = 24;
-  go.rolls = 2;
-  std::vector<GraspCandidate> generated =
-      generateGrasps(r, model.mesh, T_B_O, r.home(), go).candidates;
-  ASSERT_GE(generated.size(), 10u);
-  generated.resize(10);
+  const std::vector<GraspCandidate> generated = tenCandidates(model, &go);
+  ASSERT_EQ(generated.size(), 10u);
   for (int variant = 0; variant < 3; ++variant) {
     ViewPlannerOptions o = MultiGraspOptions::defaultRankingPlanner();
     o.directions = 32;
