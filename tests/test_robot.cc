@@ -10,6 +10,7 @@
 #include "inhand/core/pose.h"
 #include "inhand/core/random.h"
 #include "inhand/geometry/primitives.h"
+#include "inhand/planning/view_quality.h"
 #include "inhand/robot/collision.h"
 #include "inhand/robot/ik.h"
 #include "inhand/robot/reachability.h"
@@ -703,6 +704,57 @@ TEST(Hand, FingersStoppedByTheTableLiftTheHandUntilTheyGripAFlatObject) {
   clear.translation().z() -= 0.001;  // within the bisection tolerance of touching
   EXPECT_FALSE(closeTable.handTouches(closed.q, clear));
   EXPECT_GT(forceClosureEpsilon(hc.contacts, Vec3(0, 0, 0.2925), 0.06, 0.5, 8, 1000), 0);
+}
+
+// The grid's query holds every sample in the box (against a scan of all of them), and contacts
+// from the grid equal the reference's (every sample measured) at closed hands around a box and a
+// sphere: the same contact points and normals to the bit, fingers and palm touching.
+TEST(Hand, ContactsFromTheSampleGridEqualMeasuringEverySample) {
+  const RobotModel& m = wam();
+  std::mt19937_64 rng(5);
+  std::uniform_real_distribution<double> U(-1, 1);
+  int compared = 0, withContacts = 0;
+  for (const TriangleMesh& mesh : {makeBox(Vec3(0.06, 0.1, 0.16)), makeSphere(0.05, 3)}) {
+    const std::vector<SurfacePoint> samples = surfaceSamples(mesh, 0.005);
+    const SampleGrid grid(samples, 0.01);
+    for (int k = 0; k < 200; ++k) {
+      const Vec3 c(0.1 * U(rng), 0.1 * U(rng), 0.1 * U(rng));
+      const Aabb box{c - Vec3(0.01, 0.02, 0.03).cwiseAbs() * (1 + U(rng)),
+                     c + Vec3(0.03, 0.01, 0.02) * (1 + U(rng))};
+      std::vector<int> near;
+      grid.near(box, &near);
+      for (size_t i = 0; i < samples.size(); ++i)
+        if (box.contains(samples[i].p)) {
+          ASSERT_NE(std::find(near.begin(), near.end(), int(i)), near.end()) << k;
+        }
+    }
+    const FingerCloser closer(m, mesh);
+    for (int k = 0; k < 40; ++k) {
+      const Vec3 dir = Vec3(U(rng), U(rng), U(rng)).normalized();
+      Iso3 T = cameraPoseInObject(Vec3::Zero(), -dir, 0.0, M_PI * U(rng));
+      const JointVector q = m.preshapedHand(0.0, 0.25 * (1 + U(rng)));
+      const std::optional<double> travel = closer.freeTravel(
+          q, Iso3(Eigen::Translation3d(-0.3 * T.linear().col(2))) * T, T.linear().col(2), 0.5);
+      if (!travel) continue;
+      T.translation() = (*travel - 0.3) * T.linear().col(2);
+      const JointVector closed = closer.close(q, T, 0.02, 1e-4).q;
+      for (double contact : {0.003, 0.01}) {
+        const HandContacts a = handContacts(m, closed, T, samples, contact, 0.01);
+        const HandContacts b = handContacts(m, closed, T, grid, contact, 0.01);
+        ASSERT_EQ(a.contacts.size(), b.contacts.size()) << k;
+        for (size_t i = 0; i < a.contacts.size(); ++i) {
+          EXPECT_EQ(a.contacts[i].p_O, b.contacts[i].p_O) << k;
+          EXPECT_EQ(a.contacts[i].normal_O, b.contacts[i].normal_O) << k;
+        }
+        EXPECT_EQ(a.fingers_touching, b.fingers_touching) << k;
+        EXPECT_EQ(a.palm_touching, b.palm_touching) << k;
+        ++compared;
+        withContacts += !a.contacts.empty();
+      }
+    }
+  }
+  EXPECT_GT(compared, 100);
+  EXPECT_GT(withContacts, 50);
 }
 
 // Closing against the object alone, told which steps a closing against object and table found

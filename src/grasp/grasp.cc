@@ -178,6 +178,7 @@ class PoseCloser {
         T_B_O_(T_B_O),
         o_(o),
         samples_(samples),
+        grid_(samples, o.contact_cell_m),
         centre_(mesh.bounds().center()),
         up_(T_B_O.linear().transpose() * Vec3::UnitZ()),
         closer_(closers[0]),
@@ -237,7 +238,7 @@ class PoseCloser {
     c.pose = pose;
     // Contacts: model surface samples near the closed hand (a finger stopped by the table
     // touches nothing).
-    HandContacts hc = handContacts(robot_, c.q, Tc, samples_, o_.contact_m, o_.contact_cell_m);
+    HandContacts hc = handContacts(robot_, c.q, Tc, grid_, o_.contact_m, o_.contact_cell_m);
     c.contacts = std::move(hc.contacts);
     c.links_in_contact = hc.fingers_touching + int(hc.palm_touching);
     if (c.links_in_contact < 2) {
@@ -293,6 +294,7 @@ class PoseCloser {
   Iso3 T_B_O_;
   const GraspOptions& o_;
   std::vector<SurfacePoint> samples_;
+  SampleGrid grid_;  // the same samples, for the contacts near the closed hand
   Vec3 centre_, up_;
   double rho_ = 0, maxRise_ = -0.01;
   Aabb palm_;

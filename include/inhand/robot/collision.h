@@ -54,6 +54,9 @@ class HandGeometry {
   // A box in F holding every link's geometry (the union of each primitive's box: the exact
   // primitives, not their tessellation in mesh()), without building a mesh.
   Aabb bounds() const;
+  // Each primitive's box in F, per hand link (handLinks() order) and primitive: the boxes
+  // distanceWithin tests a point against.
+  const std::vector<std::vector<Aabb>>& primitiveBoxes() const { return boxes_F_; }
 
  private:
   const RobotModel* model_;

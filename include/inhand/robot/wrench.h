@@ -31,9 +31,34 @@ struct HandContacts {
   bool palm_touching = false;     // a sample within contact_m of the palm face
 };
 
-// Contacts of the hand at joints q, palm at T_O_palm, on the surface samples (frame O).
+// Contacts of the hand at joints q, palm at T_O_palm, on the surface samples (frame O): every
+// sample measured against the hand (the reference of the grid version below).
 HandContacts handContacts(const RobotModel& robot, const JointVector& q, const Iso3& T_O_palm,
                           const std::vector<SurfacePoint>& samples, double contact_m,
                           double contact_cell_m);
+
+// Surface samples bucketed in a uniform grid over their bounds (at most 64 cells a side), for
+// finding those near a box without visiting the others.
+class SampleGrid {
+ public:
+  SampleGrid(std::vector<SurfacePoint> samples, double cell_m);
+  const std::vector<SurfacePoint>& samples() const { return samples_; }
+  // Appends the indices of the samples in the cells `box` overlaps (every sample in `box`, and
+  // some near it), in ascending order within each cell.
+  void near(const Aabb& box, std::vector<int>* out) const;
+
+ private:
+  std::vector<SurfacePoint> samples_;
+  Vec3 origin_ = Vec3::Zero();
+  double cell_ = 1;
+  Eigen::Vector3i dims_ = Eigen::Vector3i::Ones();
+  std::vector<int> start_, index_;  // cell c's samples: index_[start_[c] .. start_[c + 1])
+};
+
+// The same contacts, measuring only the samples in the grid cells that each hand primitive's
+// box, grown by contact_m, overlaps (no other sample can be within contact_m), in the samples'
+// order: equal to the reference's, sums included.
+HandContacts handContacts(const RobotModel& robot, const JointVector& q, const Iso3& T_O_palm,
+                          const SampleGrid& samples, double contact_m, double contact_cell_m);
 
 }  // namespace inhand
