@@ -371,15 +371,17 @@ GraspGeneration generateGrasps(const RobotModel& robot, const TriangleMesh& mesh
 }
 
 double rankGrasps(const ViewPlanner& planner, const ObjectModel& S_obj, const GraspOptions& o,
-                  std::vector<GraspCandidate>* candidates, bool reference) {
+                  std::vector<GraspCandidate>* candidates, bool reference,
+                  const std::vector<double>* view_bounds) {
   const auto t0 = std::chrono::steady_clock::now();
   const ViewQualityOptions& qo = planner.options().quality;
   ViewQualityScene scene = planner.qualityScene(S_obj);  // S_obj's BVH once for all candidates
   const Aabb region = S_obj.mesh.bounds();  // near-hand cells only where S_obj can be hit
   // Each view's quality with no hand bounds it with any hand: views are scored best bound first
   // until no other can beat the best found (bestViewQuality); the reference scores every view.
-  const std::vector<double> bounds =
-      reference ? std::vector<double>() : planner.viewBoundsWithoutHand(scene);
+  const std::vector<double> bounds = reference     ? std::vector<double>()
+                                     : view_bounds ? *view_bounds
+                                                   : planner.viewBoundsWithoutHand(scene);
   for (GraspCandidate& c : *candidates) {
     HandGeometry hand(planner.model(), c.q, c.T_O_palm);
     auto nearHand = std::make_shared<NearHandGrid>(hand, qo.t_hand_m, qo.near_hand_cell_m, &region);

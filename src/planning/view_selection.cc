@@ -227,11 +227,15 @@ std::vector<double> ViewPlanner::viewBoundsWithoutHand(ViewQualityScene& scene) 
   return bound;
 }
 
-double ViewPlanner::graspQualityBound(ViewQualityScene& scene) const {
+double ViewPlanner::graspQualityBound(ViewQualityScene& scene,
+                                      std::vector<double>* view_bounds) const {
+  if (view_bounds) view_bounds->clear();
   if (options_.metric != ViewMetric::kInformationGain)
     return std::numeric_limits<double>::infinity();
-  const std::vector<double> bound = viewBoundsWithoutHand(scene);
-  return bound.empty() ? 0.0 : *std::max_element(bound.begin(), bound.end());
+  std::vector<double> bound = viewBoundsWithoutHand(scene);
+  const double best = bound.empty() ? 0.0 : *std::max_element(bound.begin(), bound.end());
+  if (view_bounds) *view_bounds = std::move(bound);
+  return best;
 }
 
 std::optional<double> ViewPlanner::bestViewQuality(ViewQualityScene& scene, const GraspState& grasp,

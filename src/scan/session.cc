@@ -805,11 +805,12 @@ GraspPlan ScanSession::planGrasps(const Iso3& T_B_O_rest, const JointVector& q_n
   plan.model_area_m2 = S_obj.mesh.area();
   plan.t_q = viewThreshold(s.multi.ranking, plan.model_area_m2);
   char line[240];
+  std::vector<double> viewBounds;  // each view's eq. 9 with no hand, for the ranking too
   {
     // No grasp can promise more than the best view with no hand at all: below t_q, neither
     // generating nor ranking candidates can change the decision.
     ViewQualityScene scene = s.ranker.qualityScene(S_obj);
-    const double bound = s.ranker.graspQualityBound(scene);
+    const double bound = s.ranker.graspQualityBound(scene, &viewBounds);
     if (bound < plan.t_q) {
       std::snprintf(line, sizeof(line),
                     "no grasp candidate promises a view above t_q: no view of the model does, "
@@ -835,7 +836,8 @@ GraspPlan ScanSession::planGrasps(const Iso3& T_B_O_rest, const JointVector& q_n
            "no grasp candidate is stable, clear of the table and reachable");
     return plan;
   }
-  plan.ranking_s = rankGrasps(s.ranker, S_obj, s.multi.grasp, &plan.candidates);
+  plan.ranking_s = rankGrasps(s.ranker, S_obj, s.multi.grasp, &plan.candidates,
+                              /*reference=*/false, &viewBounds);
   const GraspCandidate& best = plan.candidates.front();
   std::snprintf(line, sizeof(line), "ranked %zu grasps in %.2f s: best quality %.4f, ε %.4f",
                 plan.candidates.size(), plan.ranking_s, best.quality, best.epsilon);

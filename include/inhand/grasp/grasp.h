@@ -119,8 +119,10 @@ GraspGeneration generateGrasps(const RobotModel& robot, const TriangleMesh& mode
 // a pixel stride), and sorts them best first. Returns the seconds spent. A candidate's quality is
 // its best reachable view's; views are scored in decreasing order of their quality with no hand
 // (an upper bound) until none left can beat the best (ViewPlanner::bestViewQuality), or, with
-// `reference`, every view through ViewPlanner::select: the same qualities.
+// `reference`, every view through ViewPlanner::select: the same qualities. `view_bounds`: the
+// planner's viewBoundsWithoutHand of S_obj when already computed (else computed here).
 double rankGrasps(const ViewPlanner& planner, const ObjectModel& S_obj, const GraspOptions& options,
-                  std::vector<GraspCandidate>* candidates, bool reference = false);
+                  std::vector<GraspCandidate>* candidates, bool reference = false,
+                  const std::vector<double>* view_bounds = nullptr);
 
 }  // namespace inhand

@@ -166,8 +166,10 @@ class ViewPlanner {
   // object's frame, and per pixel the robot can only take a non-negative term away (it hides
   // S_obj or the projector, or marks the surface near the hand). Reachability is not asked.
   // +infinity for the metrics that are not such sums (random, the volumetric ones). Replaces
-  // the scene's near-hand grid with none.
-  double graspQualityBound(ViewQualityScene& scene) const;
+  // the scene's near-hand grid with none. `view_bounds` (optional) receives the per-view bounds
+  // it took the largest of (viewBoundsWithoutHand), for rankGrasps.
+  double graspQualityBound(ViewQualityScene& scene,
+                           std::vector<double>* view_bounds = nullptr) const;
   // The bound of each view: eq. 9 with no hand for every (direction, range, roll) in reach()'s
   // order (index (direction · ranges + range) · rolls + roll), the largest over the strides
   // select() may score at. Empty for metrics other than eq. 9 or an empty model.
