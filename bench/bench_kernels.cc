@@ -3,6 +3,8 @@
 // 2 mm voxels (151³ = 3.44 M voxels), one 640×480 frame. Run: ./build/bench/bench_kernels
 #include <benchmark/benchmark.h>
 
+#include <algorithm>
+
 #include "inhand/core/pose.h"
 #include "inhand/geometry/builtin_objects.h"
 #include "inhand/geometry/ray_scene.h"
@@ -61,12 +63,55 @@ void BM_IntegrateFrameReference(benchmark::State& state) {
 }
 BENCHMARK(BM_IntegrateFrameReference)->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(3);
 
+// What `inhand fuse` does per frame with the defaults (σ over the volume's image rect, the band
+// behind each pixel's smoothed surface, smoothed depths) in a tight cube around the box (0.23 m),
+// the same frame again and again.
+void BM_FuseFrameTight(benchmark::State& state) {
+  Scenario& s = scenario();
+  const CameraIntrinsics& K = s.camera.intrinsics;
+  VolumeOptions vo;
+  vo.band_sigmas = 2.0;
+  vo.smooth_depth = true;
+  TsdfVolume vol(Aabb{Vec3::Constant(-0.115), Vec3::Constant(0.115)}, vo);
+  for (auto _ : state) {
+    const PixelRect rect = volumeImageRect(vol, s.T_O_C, K);
+    benchmark::DoNotOptimize(
+        integrate(s.depth, s.T_O_C, K, measurementSigma(s.depth, K, s.noise, &rect), &vol));
+  }
+}
+BENCHMARK(BM_FuseFrameTight)->Unit(benchmark::kMillisecond)->UseRealTime();
+
 void BM_MeasurementSigma(benchmark::State& state) {
   Scenario& s = scenario();
   for (auto _ : state)
     benchmark::DoNotOptimize(measurementSigma(s.depth, s.camera.intrinsics, s.noise));
 }
 BENCHMARK(BM_MeasurementSigma)->Unit(benchmark::kMillisecond)->UseRealTime();
+
+// The smoothed surface (5×5 plane fit) of every pixel with a depth: smoothedSurfaces() (/1) and
+// smoothedSurface() pixel by pixel on one core (/0, the reference).
+void BM_SmoothedSurfaces(benchmark::State& state) {
+  Scenario& s = scenario();
+  const CameraIntrinsics& K = s.camera.intrinsics;
+  std::vector<uint8_t> fit(s.depth.depth_m.size());
+  for (size_t i = 0; i < fit.size(); ++i) fit[i] = s.depth.depth_m[i] > 0.f;
+  std::vector<SmoothedSurface> out(fit.size());
+  const PixelRect all{0, 0, K.width, K.height};
+  for (auto _ : state) {
+    if (state.range(0)) {
+      smoothedSurfaces(s.depth, K, all, fit.data(), 0.008f,
+                       [&](size_t i, const SmoothedSurface& sm) { out[i] = sm; });
+    } else {
+      for (int v = 0; v < K.height; ++v)
+        for (int u = 0; u < K.width; ++u)
+          if (fit[size_t(v) * K.width + u])
+            out[size_t(v) * K.width + u] = smoothedSurface(s.depth, K, u, v, 0.008f);
+    }
+    benchmark::DoNotOptimize(out.data());
+  }
+  state.counters["pixels"] = double(std::count(fit.begin(), fit.end(), 1));
+}
+BENCHMARK(BM_SmoothedSurfaces)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond)->UseRealTime();
 
 void BM_RenderFrame(benchmark::State& state) {
   Scenario& s = scenario();

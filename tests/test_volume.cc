@@ -1,7 +1,11 @@
 #include <gtest/gtest.h>
 
+#include <atomic>
 #include <cstring>
+#include <limits>
+#include <random>
 #include <string>
+#include <vector>
 
 #include "inhand/core/error.h"
 #include "inhand/core/pose.h"
@@ -408,6 +412,126 @@ TEST(Fusion, SmoothedSurfaceIsThePlaneThroughTheNeighbourhood) {
   EXPECT_NEAR(smoothedSurface(d, K, u, v, 0.008f).depth, 0.575, 1e-4);
   EXPECT_NEAR(smoothedSurface(d, K, u, v, 0.008f).cos_incidence, K.rayZ1(u, v).normalized().z(),
               1e-3);
+}
+
+namespace {
+// A noisy image of oblique faces (so that many neighbourhoods are partial) with what a loader
+// may pass on: missing returns, NaN, +inf, depths below 2·max_jump, tiny and huge values.
+DepthImage awkwardDepthImage(const DepthCameraOptions& cam) {
+  RayScene scene;
+  scene.addMesh(makeBox(Vec3(0.06, 0.158, 0.21)),
+                Iso3(Eigen::AngleAxisd(0.7, Vec3(0.3, 1, 0.2).normalized())));
+  scene.addMesh(makeBox(Vec3(0.4, 0.4, 0.002)), Iso3(Eigen::Translation3d(0, 0, -0.12)) *
+                                                    Iso3(Eigen::AngleAxisd(1.1, Vec3::UnitX())));
+  scene.commit();
+  NoiseModelOptions nm;
+  DepthImage d = renderDepth(scene, lookAt(Vec3(0.5, -0.3, 0.35).normalized() * 0.6, Vec3::Zero()),
+                             cam, nm, RenderOptions{});
+  std::mt19937 rng(7);
+  std::uniform_int_distribution<size_t> any(0, d.depth_m.size() - 1);
+  const float odd[] = {0.f,
+                       std::numeric_limits<float>::quiet_NaN(),
+                       std::numeric_limits<float>::infinity(),
+                       0.004f,
+                       1e-7f,
+                       3e30f,
+                       -0.5f};
+  for (int k = 0; k < 3000; ++k) d.depth_m[any(rng)] = odd[k % 7];
+  for (int v = 100; v < 140; ++v)  // a patch nearer than 2·max_jump, with a slope and noise
+    for (int u = 300; u < 340; ++u)
+      d.at(u, v) = 0.003f + 0.0004f * float(u - 300) + 1e-4f * float((u * 7 + v * 13) % 5);
+  return d;
+}
+}  // namespace
+
+// smoothedSurfaces (sliding sums where the whole neighbourhood is on the surface, SSE2 rows
+// elsewhere inside the image) gives what smoothedSurface gives pixel by pixel, bit for bit, once
+// per flagged pixel: noisy oblique faces, odd values, image borders, several jumps and rects.
+TEST(Fusion, SmoothedSurfacesEqualThePixelByPixelFit) {
+  DepthCameraOptions cam;
+  const CameraIntrinsics& K = cam.intrinsics;
+  const DepthImage d = awkwardDepthImage(cam);
+  std::mt19937 rng(3);
+  std::vector<uint8_t> fit(d.depth_m.size());
+  for (size_t i = 0; i < fit.size(); ++i) fit[i] = (rng() % 10) < 8;
+  int full = 0, partial = 0;
+  for (const PixelRect rect :
+       {PixelRect{0, 0, K.width, K.height}, PixelRect{-5, 3, 200, 477}, PixelRect{600, 0, 700, 30}})
+    for (float jump : {0.008f, 0.002f, 0.f}) {
+      std::vector<SmoothedSurface> got(d.depth_m.size());
+      std::vector<std::atomic<int>> seen(d.depth_m.size());
+      smoothedSurfaces(d, K, rect, fit.data(), jump, [&](size_t i, const SmoothedSurface& s) {
+        got[i] = s;
+        ++seen[i];
+      });
+      int wrong = 0, count = 0;
+      for (int v = 0; v < K.height; ++v)
+        for (int u = 0; u < K.width; ++u) {
+          const size_t i = size_t(v) * K.width + u;
+          const bool in = u >= rect.u0 && u < rect.u1 && v >= rect.v0 && v < rect.v1;
+          ASSERT_EQ(seen[i].load(), in && fit[i] ? 1 : 0) << u << " " << v;
+          if (!(in && fit[i])) continue;
+          ++count;
+          const SmoothedSurface want = smoothedSurface(d, K, u, v, jump);
+          wrong += std::memcmp(&want, &got[i], sizeof want) != 0;
+          if (jump == 0.008f && u >= 2 && v >= 2 && u + 2 < K.width && v + 2 < K.height &&
+              d.at(u, v) > 0.1f && d.at(u, v) < 2.f) {
+            bool all = true;
+            for (int dv = -2; dv <= 2; ++dv)
+              for (int du = -2; du <= 2; ++du) {
+                const float Dn = d.at(u + du, v + dv);
+                all = all && Dn > 0.f && std::abs(Dn - d.at(u, v)) <= jump;
+              }
+            ++(all ? full : partial);
+          }
+        }
+      EXPECT_EQ(wrong, 0) << "jump " << jump << " rect " << rect.u0 << "," << rect.v0;
+      EXPECT_GT(count, 500);
+    }
+  EXPECT_GT(full, 5000);  // both fast paths were taken
+  EXPECT_GT(partial, 5000);
+}
+
+// The plane smoothedSurface fits to a partial neighbourhood is the least-squares plane through
+// the neighbours within max_jump (independently: a QR solve of the design matrix), and its
+// cosine that of the plane's normal (the cross product of its tangents) with the pixel's ray.
+TEST(Fusion, SmoothedSurfaceIsTheLeastSquaresPlane) {
+  DepthCameraOptions cam;
+  const CameraIntrinsics& K = cam.intrinsics;
+  const DepthImage d = awkwardDepthImage(cam);
+  const float jump = 0.008f;
+  int checked = 0;
+  for (int v = 2; v < K.height - 2; v += 3)
+    for (int u = 2; u < K.width - 2; u += 3) {
+      const float D = d.at(u, v);
+      if (!(D > 0.1f && D < 2.f)) continue;
+      std::vector<Eigen::Vector3d> rows;
+      std::vector<double> zs;
+      for (int dv = -2; dv <= 2; ++dv)
+        for (int du = -2; du <= 2; ++du) {
+          const float Dn = d.at(u + du, v + dv);
+          if (!(Dn > 0.f) || std::abs(Dn - D) > jump) continue;
+          rows.emplace_back(1.0, du, dv);
+          zs.push_back(double(Dn) - double(D));
+        }
+      if (rows.size() < 8 || rows.size() == 25) continue;
+      Eigen::MatrixXd A(rows.size(), 3);
+      Eigen::VectorXd z(rows.size());
+      for (size_t k = 0; k < rows.size(); ++k) {
+        A.row(Eigen::Index(k)) = rows[k].transpose();
+        z(Eigen::Index(k)) = zs[k];
+      }
+      const Eigen::Vector3d abc = A.colPivHouseholderQr().solve(z);
+      const double Z = double(D) + abc(0);
+      const Vec3 ray = K.rayZ1(u, v);
+      const Vec3 tu = abc(1) * ray + Vec3(Z / K.fx, 0, 0), tv = abc(2) * ray + Vec3(0, Z / K.fy, 0);
+      const double cosine = std::abs(tu.cross(tv).normalized().dot(ray.normalized()));
+      const SmoothedSurface s = smoothedSurface(d, K, u, v, jump);
+      EXPECT_NEAR(s.depth, Z, 2e-6 * Z) << u << " " << v;
+      EXPECT_NEAR(s.cos_incidence, cosine, 1e-5) << u << " " << v;
+      ++checked;
+    }
+  EXPECT_GT(checked, 1000);
 }
 
 // The reach behind each measurement is taken from the smoothed surface, so which voxels a

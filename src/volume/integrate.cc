@@ -8,6 +8,8 @@
 #include <array>
 #include <atomic>
 #include <cmath>
+#include <cstring>
+#include <functional>
 #include <limits>
 
 #include "inhand/core/error.h"
@@ -117,12 +119,160 @@ void checkInputs(const DepthImage& depth, const CameraIntrinsics& K,
 
 }  // namespace
 
+namespace {
+
+// The smoothed surface of pixel (u, v) (depth D) from its plane z = D + a + b·du + c·dv.
+SmoothedSurface planeAt(const CameraIntrinsics& K, int u, int v, float D, double a, double b,
+                        double c) {
+  SmoothedSurface out;
+  const double Z = double(D) + a;
+  out.depth = float(Z);
+  // The plane's normal from its tangents along u and v, P(u, v) = Z(u, v)·ray(u, v) with
+  // ray = (x, y, 1): tu = b·ray + (Z / fx, 0, 0), tv = c·ray + (0, Z / fy, 0), and
+  // tu × tv = Z / (fx·fy) · m, m = (−b·fx, −c·fy, b·x·fx + c·y·fy + Z), where m · ray = Z.
+  if (!(Z != 0.0)) return out;  // no normal (and none from a NaN)
+  const double x = (double(u) - K.cx) / K.fx, y = (double(v) - K.cy) / K.fy;
+  const double mx = -b * K.fx, my = -c * K.fy, mz = b * x * K.fx + c * y * K.fy + Z;
+  const double q = (mx * mx + my * my + mz * mz) * (x * x + y * y + 1.0);
+  if (q > 0) out.cos_incidence = float(std::min(1.0, std::abs(Z) / std::sqrt(q)));
+  return out;
+}
+
+// The whole (2r + 1)² neighbourhood: symmetric offsets make the normal equations diagonal. `sz`,
+// `suz`, `svz`: the sums of z = Dn − D, du·z and dv·z.
+SmoothedSurface planeSurface(const CameraIntrinsics& K, int u, int v, float D, double sz,
+                             double suz, double svz) {
+  constexpr int r = kSmoothingRadius, full = (2 * r + 1) * (2 * r + 1);
+  const double s2 = double(full) * r * (r + 1) / 3.0;  // Σ du² over the square
+  return planeAt(K, u, v, D, sz / double(full), suz / s2, svz / s2);
+}
+
+}  // namespace
+
+namespace {
+
+// The first index in [a, b) where bytes[i] != 0, or b; eight bytes at a time.
+int firstNonZero(const uint8_t* bytes, int a, int b) {
+  int i = a;
+  for (; i + 8 <= b; i += 8) {
+    uint64_t word;
+    std::memcpy(&word, bytes + i, 8);
+    if (word) break;
+  }
+  for (; i < b; ++i)
+    if (bytes[i]) return i;
+  return b;
+}
+
+// The least-squares plane's sums over the neighbours on the pixel's surface (z = Dn − D).
+struct PlaneSums {
+  double n = 0, su = 0, sv = 0, suu = 0, suv = 0, svv = 0, sz = 0, suz = 0, svz = 0;
+};
+
+SmoothedSurface surfaceFromSums(const CameraIntrinsics& K, int u, int v, float D,
+                                const PlaneSums& s) {
+  SmoothedSurface out;
+  out.depth = float(double(D) + s.sz / s.n);  // too few neighbours for a plane: their mean, head-on
+  out.cos_incidence = 1.f;
+  if (s.n < 6) return out;
+  constexpr int r = kSmoothingRadius, full = (2 * r + 1) * (2 * r + 1);
+  if (int(s.n) == full) return planeSurface(K, u, v, D, s.sz, s.suz, s.svz);
+  // The normal equations [n su sv; su suu suv; sv suv svv]·(a, b, c) = (sz, suz, svz): their
+  // entries are small integers, so the determinant and the adjugate are exact.
+  const double c00 = s.suu * s.svv - s.suv * s.suv, c01 = s.sv * s.suv - s.su * s.svv,
+               c02 = s.su * s.suv - s.sv * s.suu, c11 = s.n * s.svv - s.sv * s.sv,
+               c12 = s.su * s.sv - s.n * s.suv, c22 = s.n * s.suu - s.su * s.su;
+  const double det = s.n * c00 + s.su * c01 + s.sv * c02;
+  if (!(std::abs(det) > 1e-6)) return out;
+  const double a = (c00 * s.sz + c01 * s.suz + c02 * s.svz) / det,
+               b = (c01 * s.sz + c11 * s.suz + c12 * s.svz) / det,
+               c = (c02 * s.sz + c12 * s.suz + c22 * s.svz) / det;
+  if (!(std::isfinite(a) && std::isfinite(b) && std::isfinite(c))) return out;
+  return planeAt(K, u, v, D, a, b, c);
+}
+
+// Per 5-bit code of which neighbours du = −2..2 of a row lie on the surface (bit du + 2): their
+// count, Σ du and Σ du².
+struct RowCode {
+  int n, su, suu;
+};
+constexpr std::array<RowCode, 32> kRowCodes = [] {
+  std::array<RowCode, 32> t{};
+  for (int code = 0; code < 32; ++code)
+    for (int k = 0; k < 5; ++k)
+      if (code >> k & 1) {
+        t[size_t(code)].n += 1;
+        t[size_t(code)].su += k - 2;
+        t[size_t(code)].suu += (k - 2) * (k - 2);
+      }
+  return t;
+}();
+
+// The sums of a pixel at least kSmoothingRadius from every image border, a row of five
+// neighbours at a time in SSE2 (the same comparisons as the reference's, in single precision).
+// Only for a finite D ≥ 2·max_jump: every neighbour on the surface then lies within
+// [D / 2, 3D / 2], so the sums of their depths (weighted by du, dv ∈ −2..2) are exact in double,
+// as are the reference's sums of z = Dn − D; the two give the same sums, bit for bit.
+PlaneSums interiorPlaneSums(const float* depth, int w, int u, int v, float D, float max_jump) {
+  static_assert(kSmoothingRadius == 2, "written for rows of five");
+  const __m128 vD = _mm_set1_ps(D), vJ = _mm_set1_ps(max_jump), zero = _mm_setzero_ps();
+  const __m128 absMask = _mm_castsi128_ps(_mm_set1_epi32(0x7fffffff));
+  const __m128d wLo = _mm_set_pd(-1.0, -2.0), wHi = _mm_set_pd(1.0, 0.0);  // du of lanes 0-3
+  __m128d sumD = _mm_setzero_pd(), sumUD = _mm_setzero_pd(), sumVD = _mm_setzero_pd();
+  double lastD = 0, lastUD = 0, lastVD = 0;  // the fifth neighbour (du = 2) of each row
+  int n = 0, su = 0, sv = 0, suu = 0, suv = 0, svv = 0;
+  for (int dv = -2; dv <= 2; ++dv) {
+    const float* row = depth + size_t(v + dv) * w + u - 2;
+    const __m128 x = _mm_loadu_ps(row);
+    const __m128 on = _mm_and_ps(_mm_cmpgt_ps(x, zero),
+                                 _mm_cmpngt_ps(_mm_and_ps(_mm_sub_ps(x, vD), absMask), vJ));
+    const __m128 xOn = _mm_and_ps(x, on);
+    const float x4 = row[4];
+    const bool on4 = x4 > 0.f && !(std::abs(x4 - D) > max_jump);
+    const RowCode& c = kRowCodes[size_t(_mm_movemask_ps(on) | (int(on4) << 4))];
+    n += c.n;
+    su += c.su;
+    suu += c.suu;
+    sv += dv * c.n;
+    suv += dv * c.su;
+    svv += dv * dv * c.n;
+    const __m128d lo = _mm_cvtps_pd(xOn), hi = _mm_cvtps_pd(_mm_movehl_ps(xOn, xOn));
+    const __m128d rowSum = _mm_add_pd(lo, hi);
+    const __m128d dvs = _mm_set1_pd(double(dv));
+    sumD = _mm_add_pd(sumD, rowSum);
+    sumUD = _mm_add_pd(sumUD, _mm_add_pd(_mm_mul_pd(lo, wLo), _mm_mul_pd(hi, wHi)));
+    sumVD = _mm_add_pd(sumVD, _mm_mul_pd(rowSum, dvs));
+    const double d4 = on4 ? double(x4) : 0.0;
+    lastD += d4;
+    lastUD += 2.0 * d4;
+    lastVD += double(dv) * d4;
+  }
+  auto total = [](__m128d a, double b) {
+    return _mm_cvtsd_f64(a) + _mm_cvtsd_f64(_mm_unpackhi_pd(a, a)) + b;
+  };
+  PlaneSums s;
+  s.n = n;
+  s.su = su;
+  s.sv = sv;
+  s.suu = suu;
+  s.suv = suv;
+  s.svv = svv;
+  // Σ z = Σ Dn − n·D and likewise weighted: every term and the results exact.
+  const double Dd = double(D);
+  s.sz = total(sumD, lastD) - s.n * Dd;
+  s.suz = total(sumUD, lastUD) - s.su * Dd;
+  s.svz = total(sumVD, lastVD) - s.sv * Dd;
+  return s;
+}
+
+}  // namespace
+
 SmoothedSurface smoothedSurface(const DepthImage& depth, const CameraIntrinsics& K, int u, int v,
                                 float max_jump) {
   const float D = depth.at(u, v);
   if (!(D > 0.f)) return {};
   // Least-squares plane z = a + b·du + c·dv through the neighbours on the same surface.
-  double n = 0, su = 0, sv = 0, suu = 0, suv = 0, svv = 0, sz = 0, suz = 0, svz = 0;
+  PlaneSums s;
   const int r = kSmoothingRadius;
   for (int dv = -r; dv <= r; ++dv) {
     const int vv = v + dv;
@@ -133,42 +283,116 @@ SmoothedSurface smoothedSurface(const DepthImage& depth, const CameraIntrinsics&
       const float Dn = depth.at(uu, vv);
       if (!(Dn > 0.f) || std::abs(Dn - D) > max_jump) continue;
       const double z = double(Dn) - double(D);  // relative to the centre: well conditioned
-      n += 1;
-      su += du;
-      sv += dv;
-      suu += du * du;
-      suv += du * dv;
-      svv += dv * dv;
-      sz += z;
-      suz += du * z;
-      svz += dv * z;
+      s.n += 1;
+      s.su += du;
+      s.sv += dv;
+      s.suu += du * du;
+      s.suv += du * dv;
+      s.svv += dv * dv;
+      s.sz += z;
+      s.suz += du * z;
+      s.svz += dv * z;
     }
   }
-  SmoothedSurface out;
-  out.depth = float(double(D) + sz / n);  // too few neighbours for a plane: their mean, head-on
-  out.cos_incidence = 1.f;
-  if (n < 6) return out;
-  Eigen::Vector3d abc;
-  const int full = (2 * r + 1) * (2 * r + 1);
-  if (int(n) == full) {
-    // The whole neighbourhood: symmetric offsets make the normal equations diagonal.
-    const double s2 = double(full) * r * (r + 1) / 3.0;  // Σ du² over the square
-    abc = Eigen::Vector3d(sz / n, suz / s2, svz / s2);
-  } else {
-    Eigen::Matrix3d A;
-    A << n, su, sv, su, suu, suv, sv, suv, svv;
-    if (!(std::abs(A.determinant()) > 1e-6)) return out;
-    abc = A.ldlt().solve(Eigen::Vector3d(sz, suz, svz));
-    if (!abc.allFinite()) return out;
-  }
-  const double Z = double(D) + abc(0);
-  out.depth = float(Z);
-  // The plane's normal from its tangents along u and v: P(u, v) = Z(u, v)·ray(u, v).
-  const Vec3 ray = K.rayZ1(u, v);
-  const Vec3 tu = abc(1) * ray + Vec3(Z / K.fx, 0, 0), tv = abc(2) * ray + Vec3(0, Z / K.fy, 0);
-  const Vec3 nrm = tu.cross(tv);
-  if (nrm.norm() > 0) out.cos_incidence = float(std::abs(nrm.normalized().dot(ray.normalized())));
-  return out;
+  return surfaceFromSums(K, u, v, D, s);
+}
+
+void smoothedSurfaces(const DepthImage& depth, const CameraIntrinsics& K, const PixelRect& rect,
+                      const uint8_t* fit, float max_jump,
+                      const std::function<void(size_t, const SmoothedSurface&)>& out) {
+  static_assert(kSmoothingRadius == 2, "the sliding sums below are written for 5 x 5");
+  const int w = depth.width, h = depth.height;
+  const PixelRect r{std::max(0, rect.u0), std::max(0, rect.v0), std::min(w, rect.u1),
+                    std::min(h, rect.v1)};
+  if (r.empty()) return;
+  constexpr int kRows = 8;  // output rows per task
+  const int blocks = (r.v1 - r.v0 + kRows - 1) / kRows;
+  parallelFor(0, blocks, [&](int b) {
+    const int v0 = r.v0 + b * kRows, v1 = std::min(r.v1, v0 + kRows);
+    int uMin = r.u1, uMax = r.u0 - 1;  // the flagged pixels' columns
+    for (int v = v0; v < v1; ++v) {
+      const uint8_t* row = fit + size_t(v) * w;
+      const int first = firstNonZero(row, r.u0, r.u1);
+      if (first == r.u1) continue;
+      uMin = std::min(uMin, first);
+      int last = r.u1 - 1;
+      while (!row[last]) --last;
+      uMax = std::max(uMax, last);
+    }
+    if (uMin > uMax) return;
+    // Per input row v0 - 2 .. v1 + 1 and column uMin .. uMax: the sum of the five depths around
+    // the column, their sum weighted by du, their minimum and maximum (invalid depths as 0; a
+    // column or row whose five do not all lie in the image gets minimum 0).
+    const int span = uMax - uMin + 1, rows = v1 - v0 + 4;
+    thread_local std::vector<double> S0, S1;
+    thread_local std::vector<float> lo, hi;
+    const size_t n = size_t(span) * rows;
+    if (S0.size() < n) {
+      S0.resize(n);
+      S1.resize(n);
+      lo.resize(n);
+      hi.resize(n);
+    }
+    double* s0 = S0.data();
+    double* s1 = S1.data();
+    float* mn = lo.data();
+    float* mx = hi.data();
+    for (int k = 0; k < rows; ++k) {
+      const int vv = v0 - 2 + k;
+      const size_t o = size_t(k) * span;
+      if (vv < 0 || vv >= h) {
+        std::fill(mn + o, mn + o + span, 0.f);
+        continue;
+      }
+      const float* row = depth.depth_m.data() + size_t(vv) * w;
+      for (int u = uMin; u <= uMax; ++u) {
+        const size_t j = o + size_t(u - uMin);
+        if (u < 2 || u + 2 >= w) {
+          mn[j] = 0.f;
+          continue;
+        }
+        float c[5];
+        for (int t = 0; t < 5; ++t) {
+          const float x = row[u - 2 + t];
+          c[t] = x > 0.f ? x : 0.f;
+        }
+        s0[j] = double(c[0]) + double(c[1]) + double(c[2]) + double(c[3]) + double(c[4]);
+        s1[j] = 2.0 * (double(c[4]) - double(c[0])) + (double(c[3]) - double(c[1]));
+        mn[j] = std::min(std::min(std::min(c[0], c[1]), std::min(c[2], c[3])), c[4]);
+        mx[j] = std::max(std::max(std::max(c[0], c[1]), std::max(c[2], c[3])), c[4]);
+      }
+    }
+    for (int v = v0; v < v1; ++v)
+      for (int u = uMin; u <= uMax; ++u) {
+        const size_t i = size_t(v) * w + u;
+        if (!fit[i]) continue;
+        const float D = depth.depth_m[i];
+        const size_t j = size_t(v - v0) * span + size_t(u - uMin);  // input row v - 2
+        const size_t st = size_t(span);
+        const float m = std::min(
+            std::min(std::min(mn[j], mn[j + st]), std::min(mn[j + 2 * st], mn[j + 3 * st])),
+            mn[j + 4 * st]);
+        const float M = std::max(
+            std::max(std::max(mx[j], mx[j + st]), std::max(mx[j + 2 * st], mx[j + 3 * st])),
+            mx[j + 4 * st]);
+        // The whole neighbourhood on the pixel's surface: every depth valid and within max_jump
+        // of D (D - Dn and Dn - D round monotonically, so the extremes decide), and their
+        // exponents close enough that the sums of (Dn - D), du (Dn - D) and dv (Dn - D) in
+        // double are exact in any order: the reference's sums, bit for bit.
+        if (D > 0.f && m > 0.f && M - D <= max_jump && D - m <= max_jump && M <= m * 0x1p20f) {
+          const double sum = s0[j] + s0[j + st] + s0[j + 2 * st] + s0[j + 3 * st] + s0[j + 4 * st];
+          const double suz = s1[j] + s1[j + st] + s1[j + 2 * st] + s1[j + 3 * st] + s1[j + 4 * st];
+          const double svz = 2.0 * (s0[j + 4 * st] - s0[j]) + (s0[j + 3 * st] - s0[j + st]);
+          out(i, planeSurface(K, u, v, D, sum - 25.0 * double(D), suz, svz));
+        } else if (D > 0.f && D >= 2.f * max_jump && D < std::numeric_limits<float>::infinity() &&
+                   u >= 2 && v >= 2 && u + 2 < w && v + 2 < h) {
+          out(i, surfaceFromSums(K, u, v, D,
+                                 interiorPlaneSums(depth.depth_m.data(), w, u, v, D, max_jump)));
+        } else {
+          out(i, smoothedSurface(depth, K, u, v, max_jump));
+        }
+      }
+  });
 }
 
 float farLimit(float D, const SmoothedSurface& surface, float sigma, float k, float voxel,
@@ -365,7 +589,12 @@ IntegrationStats integrate(const DepthImage& depth, const Iso3& T_O_C, const Cam
   float* F = farZ.data();
   float* Wt = weight.data();
   float* S = smooth ? smoothed.depth_m.data() : nullptr;
+  thread_local std::vector<uint8_t> fitFlags;
+  if (fitFlags.size() < sigma_m.size()) fitFlags.resize(sigma_m.size());
+  uint8_t* fits = fitFlags.data();
+  std::atomic<bool> anyFit{false};
   parallelFor(rect.v0, rect.v1, [&](int v) {
+    bool rowFits = false;
     for (int u = rect.u0; u < rect.u1; ++u) {
       const size_t i = size_t(v) * w + u;
       const float s = sigma_m[i];
@@ -376,13 +605,21 @@ IntegrationStats integrate(const DepthImage& depth, const Iso3& T_O_C, const Cam
       // depths: empty either way) or before it (none within reach).
       const bool fit = s > 0 && !(carve_only && (*carve_only)[i]) && (useBand || smooth) &&
                        Dm < zFar + 2 * muFull && Dm + 2 * muFull > zNear;
-      SmoothedSurface sm;
-      if (fit) sm = smoothedSurface(depth, K, u, v, muFull);
-      const float Dv = (fit && smooth && sm.depth > 0.f) ? sm.depth : Dm;
-      if (smooth) S[i] = Dv;
-      if (useBand) F[i] = fit ? farLimit(Dv, sm, s, k, voxelF, muFull) : Dv + muFull;
+      fits[i] = fit;
+      rowFits |= fit;
+      if (smooth) S[i] = Dm;
+      if (useBand) F[i] = Dm + muFull;
     }
+    if (rowFits) anyFit.store(true, std::memory_order_relaxed);
   });
+  // The fitted pixels' smoothed depth and reach.
+  if (anyFit.load())
+    smoothedSurfaces(depth, K, rect, fits, muFull, [&](size_t i, const SmoothedSurface& sm) {
+      const float Dm = depth.depth_m[i];
+      const float Dv = (smooth && sm.depth > 0.f) ? sm.depth : Dm;
+      if (smooth) S[i] = Dv;
+      if (useBand) F[i] = farLimit(Dv, sm, sigma_m[i], k, voxelF, muFull);
+    });
   // The depths the voxels are updated from: the smoothed ones with VolumeOptions::smooth_depth.
   const DepthImage& used = smooth ? smoothed : depth;
   const DepthTiles tiles(used, rect);

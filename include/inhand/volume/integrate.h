@@ -10,6 +10,7 @@
 // Pixels flagged carve-only (measurements of the robot's own hand, §IV) only mark empty space,
 // up to μ/4 in front of the measured surface (it is a known surface, not the object's).
 #include <cstdint>
+#include <functional>
 #include <vector>
 
 #include "inhand/sensor/depth_camera.h"
@@ -64,6 +65,14 @@ struct SmoothedSurface {
 };
 SmoothedSurface smoothedSurface(const DepthImage& depth, const CameraIntrinsics& K, int u, int v,
                                 float max_jump);
+// smoothedSurface() at each pixel of `rect` whose byte in `fit` (width·height, only the rect's
+// read) is non-zero, the same values bit for bit, handed to `out(index, surface)` once per pixel,
+// from both cores. Where a pixel's whole neighbourhood lies on its surface the plane comes from
+// sliding sums over rows (the sums of depths in double are exact in any order there); elsewhere
+// from smoothedSurface().
+void smoothedSurfaces(const DepthImage& depth, const CameraIntrinsics& K, const PixelRect& rect,
+                      const uint8_t* fit, float max_jump,
+                      const std::function<void(size_t, const SmoothedSurface&)>& out);
 // That reach as a camera depth: min(D + μ, Ds + min(μ, max(k·σ, voxel / cos θ))); D + μ when k or
 // σ is not positive.
 float farLimit(float D, const SmoothedSurface& surface, float sigma, float k, float voxel,
