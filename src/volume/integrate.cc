@@ -63,44 +63,60 @@ std::vector<float> measurementSigma(const DepthImage& depth, const CameraIntrins
   std::vector<double> xs(static_cast<size_t>(w)), ys(static_cast<size_t>(h));
   for (int u = 0; u < w; ++u) xs[size_t(u)] = (double(u) - K.cx) / K.fx;
   for (int v = 0; v < h; ++v) ys[size_t(v)] = (double(v) - K.cy) / K.fy;
-  auto point = [&](int u, int v) {
-    const double D = double(depth.at(u, v));
-    return Vec3(xs[size_t(u)] * D, ys[size_t(v)] * D, 1.0 * D);
-  };
   // Below the grazing angle the incidence does not enter the noise model: no acos needed there.
   const double cosGrazing = std::cos(noise.grazing_start_deg * M_PI / 180.0);
+  const double jump = noise.discontinuity_jump_m;
   parallelFor(std::max(0, r.v0), std::min(h, r.v1), [&](int v) {
-    for (int u = std::max(0, r.u0); u < std::min(w, r.u1); ++u) {
-      double D = depth.at(u, v);
+    const float* row = depth.depth_m.data() + size_t(v) * w;
+    const float* up = v > 0 ? row - w : nullptr;
+    const float* down = v + 1 < h ? row + w : nullptr;
+    const double y = ys[size_t(v)];
+    const int uEnd = std::min(w, r.u1);
+    for (int u = std::max(0, r.u0); u < uEnd; ++u) {
+      // Runs without a depth skipped four pixels at a time.
+      while (u + 4 <= uEnd &&
+             !_mm_movemask_ps(_mm_cmpgt_ps(_mm_loadu_ps(row + u), _mm_setzero_ps())))
+        u += 4;
+      if (u >= uEnd) break;
+      const double D = row[u];
       if (!(D > 0)) continue;
       if (carve_only && (*carve_only)[size_t(v) * w + u]) continue;
-      const Vec3 P = point(u, v);
+      const double x = xs[size_t(u)];
+      const Vec3 P(x * D, y * D, 1.0 * D);
       bool edge = false;
-      // Tangent along each image axis from the neighbours that lie on the same surface.
-      auto tangent = [&](int du, int dv) -> Vec3 {
-        Vec3 t = Vec3::Zero();
-        int used = 0;
-        for (int s : {-1, 1}) {
-          int uu = u + s * du, vv = v + s * dv;
-          if (uu < 0 || vv < 0 || uu >= w || vv >= h) continue;
-          double Dn = depth.at(uu, vv);
-          if (!(Dn > 0) || std::abs(Dn - D) > noise.discontinuity_jump_m) {
-            edge = true;
-            continue;
-          }
-          t += s * (point(uu, vv) - P);
-          ++used;
+      // Tangent along each image axis from the neighbours that lie on the same surface (the
+      // point of depth Dn at column uu, row yy: (x_uu·Dn, y_vv·Dn, Dn)).
+      Vec3 tu = Vec3::Zero(), tv = Vec3::Zero();
+      int usedU = 0, usedV = 0;
+      auto side = [&](double Dn, double xn, double yn, double s, Vec3* t, int* used) {
+        if (!(Dn > 0) || std::abs(Dn - D) > jump) {
+          edge = true;
+          return;
         }
-        return used ? t : Vec3(Vec3::Zero());
+        *t += s * (Vec3(xn * Dn, yn * Dn, 1.0 * Dn) - P);
+        ++*used;
       };
-      Vec3 tu = tangent(1, 0), tv = tangent(0, 1);
-      Vec3 n = tu.cross(tv);
+      if (u > 0) side(row[u - 1], xs[size_t(u - 1)], y, -1, &tu, &usedU);
+      if (u + 1 < w) side(row[u + 1], xs[size_t(u + 1)], y, 1, &tu, &usedU);
+      if (up) side(up[u], x, ys[size_t(v - 1)], -1, &tv, &usedV);
+      if (down) side(down[u], x, ys[size_t(v + 1)], 1, &tv, &usedV);
+      if (!usedU) tu.setZero();
+      if (!usedV) tv.setZero();
+      const Vec3 n = tu.cross(tv);
       double theta = 0.0;
-      if (n.norm() > 0) {
-        const double c = std::min(1.0, std::abs(n.normalized().dot(P.normalized())));
+      // |cos| of the incidence: |n · P| / (|n| |P|), one square root.
+      const double nn = n.squaredNorm();
+      if (nn > 0) {
+        const double c = std::min(1.0, std::abs(n.dot(P)) / std::sqrt(nn * P.squaredNorm()));
         theta = c > cosGrazing ? 0.0 : std::acos(c);
       }
-      double s = axialSigma(noise, D, theta);
+      double s;
+      if (theta == 0.0) {  // axialSigma head-on, inline
+        const double dz = D - noise.axial_z0_m;
+        s = noise.axial_c0_m + noise.axial_c1 * dz * dz;
+      } else {
+        s = axialSigma(noise, D, theta);
+      }
       if (edge) s *= noise.discontinuity_factor;
       sigma[size_t(v) * w + u] = float(s);
     }
