@@ -649,8 +649,10 @@ IntegrationStats integrate(const DepthImage& depth, const Iso3& T_O_C, const Cam
   float* sumW = volume->sumW();
   uint8_t* state = volume->states();
   std::atomic<int64_t> visited{0}, updated{0};
-  // The four-voxel path computes pixel indices in single precision: exact below 2^24 pixels.
-  const bool simdPixels = int64_t(w) * h < (int64_t(1) << 24);
+  // The four-voxel tests compute pixel indices in single precision: exact below 2^24 pixels.
+  // Without skipping bricks every voxel goes through voxel() one at a time (the plain path the
+  // tests compare against).
+  const bool simdPixels = skip_unchanged_bricks && int64_t(w) * h < (int64_t(1) << 24);
   // Bricks of kBrick³ voxels that this frame cannot change are skipped (BrickCull); the others are
   // processed row by row, consecutive ones as one span.
   const Vec3i bricks = (dims + Vec3i::Constant(kBrick - 1)) / kBrick;

@@ -82,8 +82,9 @@ float farLimit(float D, const SmoothedSurface& surface, float sigma, float k, fl
 // `sigma_m` is measurementSigma's output; `carve_only` (optional, width·height) flags pixels that
 // may only carve. Bricks of 8³ voxels that the frame cannot change are skipped from their corners
 // and the image's depth range under them (8×8-pixel tiles): all behind every depth by more than μ,
-// or all in front by more than μ and already empty; `skip_unchanged_bricks` = false visits every
-// voxel in the frustum (the same volume to the bit; `visited` then counts all of them).
+// or all in front by more than μ and already empty. Four voxels are tested at a time in SSE2.
+// `skip_unchanged_bricks` = false visits every voxel in the frustum one at a time (the same
+// volume to the bit; `visited` then counts all of them).
 IntegrationStats integrate(const DepthImage& depth, const Iso3& T_O_C, const CameraIntrinsics& K,
                            const std::vector<float>& sigma_m, TsdfVolume* volume,
                            const std::vector<uint8_t>* carve_only = nullptr,
