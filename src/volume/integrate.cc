@@ -266,13 +266,7 @@ PlaneSums interiorPlaneSums(const float* depth, int w, int u, int v, float D, fl
   auto total = [](__m128d a, double b) {
     return _mm_cvtsd_f64(a) + _mm_cvtsd_f64(_mm_unpackhi_pd(a, a)) + b;
   };
-  PlaneSums s;
-  s.n = n;
-  s.su = su;
-  s.sv = sv;
-  s.suu = suu;
-  s.suv = suv;
-  s.svv = svv;
+  PlaneSums s{double(n), double(su), double(sv), double(suu), double(suv), double(svv), 0, 0, 0};
   // Σ z = Σ Dn − n·D and likewise weighted: every term and the results exact.
   const double Dd = double(D);
   s.sz = total(sumD, lastD) - s.n * Dd;
