@@ -87,21 +87,17 @@ std::vector<float> measurementSigma(const DepthImage& depth, const CameraIntrins
       // Tangent along each image axis from the neighbours that lie on the same surface (the
       // point of depth Dn at column uu, row yy: (x_uu·Dn, y_vv·Dn, Dn)).
       Vec3 tu = Vec3::Zero(), tv = Vec3::Zero();
-      int usedU = 0, usedV = 0;
-      auto side = [&](double Dn, double xn, double yn, double s, Vec3* t, int* used) {
+      auto side = [&](double Dn, double xn, double yn, double s, Vec3* t) {
         if (!(Dn > 0) || std::abs(Dn - D) > jump) {
           edge = true;
           return;
         }
         *t += s * (Vec3(xn * Dn, yn * Dn, 1.0 * Dn) - P);
-        ++*used;
       };
-      if (u > 0) side(row[u - 1], xs[size_t(u - 1)], y, -1, &tu, &usedU);
-      if (u + 1 < w) side(row[u + 1], xs[size_t(u + 1)], y, 1, &tu, &usedU);
-      if (up) side(up[u], x, ys[size_t(v - 1)], -1, &tv, &usedV);
-      if (down) side(down[u], x, ys[size_t(v + 1)], 1, &tv, &usedV);
-      if (!usedU) tu.setZero();
-      if (!usedV) tv.setZero();
+      if (u > 0) side(row[u - 1], xs[size_t(u - 1)], y, -1, &tu);
+      if (u + 1 < w) side(row[u + 1], xs[size_t(u + 1)], y, 1, &tu);
+      if (up) side(up[u], x, ys[size_t(v - 1)], -1, &tv);
+      if (down) side(down[u], x, ys[size_t(v + 1)], 1, &tv);
       const Vec3 n = tu.cross(tv);
       double theta = 0.0;
       // |cos| of the incidence: |n · P| / (|n| |P|), one square root.
@@ -162,10 +158,6 @@ SmoothedSurface planeSurface(const CameraIntrinsics& K, int u, int v, float D, d
   const double s2 = double(full) * r * (r + 1) / 3.0;  // Σ du² over the square
   return planeAt(K, u, v, D, sz / double(full), suz / s2, svz / s2);
 }
-
-}  // namespace
-
-namespace {
 
 // The first index in [a, b) where bytes[i] != 0, or b; eight bytes at a time.
 int firstNonZero(const uint8_t* bytes, int a, int b) {
