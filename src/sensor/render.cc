@@ -134,160 +134,118 @@ DepthImage renderDepth(const RayScene& scene, const Iso3& T_S_C, const DepthCame
                        std::vector<int>* geometry_out) {
   const CameraIntrinsics& K = camera.intrinsics;
   const int w = K.width, h = K.height;
-  // Scratch buffers live on per thread: allocating ~40 MB afresh per frame costs more in page
-  // faults than the ray casting itself (measured: 37 ms → see README).
-  thread_local struct Scratch {
-    std::vector<int> order;
-    std::vector<Ray> rays, shadows, compact;
-    std::vector<Hit> hits;
-    std::vector<uint8_t> ok, blocked, compactBlocked;
-    std::vector<int> shadowIndex;
-    std::vector<float> noiseU, noiseV, noiseZ;  // the standard normal draws of each pixel
-    int w = 0, h = 0;
-  } scratch;
+  // The whole image's tile order is kept per thread (it is the same for every frame).
+  thread_local std::vector<int> wholeOrder;
+  thread_local int orderW = 0, orderH = 0;
   const bool whole = options.region_u1 < 0 || options.region_v1 < 0;
-  if (whole && (scratch.w != w || scratch.h != h)) {
-    scratch.order = tileOrder(w, 0, 0, w, h);
-    scratch.w = w;
-    scratch.h = h;
+  if (whole && (orderW != w || orderH != h)) {
+    wholeOrder = tileOrder(w, 0, 0, w, h);
+    orderW = w;
+    orderH = h;
   }
   std::vector<int> regionOrder;
   if (!whole)
     regionOrder =
         tileOrder(w, std::clamp(options.region_u0, 0, w), std::clamp(options.region_v0, 0, h),
                   std::clamp(options.region_u1, 0, w), std::clamp(options.region_v1, 0, h));
-  const std::vector<int>& order = whole ? scratch.order : regionOrder;
+  const std::vector<int>& order = whole ? wholeOrder : regionOrder;
   const int n = int(order.size());
   const Vec3 projector_S = T_S_C * camera.projector_C;
-  std::vector<Ray>& rays = scratch.rays;
-  std::vector<Hit>& hits = scratch.hits;
-  rays.resize(n);
-  hits.resize(n);
   // The pixel centres' rays: K.rayZ1's per-column and per-row terms once, the same values.
   std::vector<double> xs(static_cast<size_t>(w)), ys(static_cast<size_t>(h));
   for (int u = 0; u < w; ++u) xs[size_t(u)] = K.rayZ1(u, 0).x();
   for (int v = 0; v < h; ++v) ys[size_t(v)] = K.rayZ1(0, v).y();
   const Vec3f origin = T_S_C.translation().cast<float>();
   const Mat3 R = T_S_C.linear();
-  parallelFor(
-      0, n,
-      [&](int i) {
-        const int p = order[i];
-        rays[i] = Ray{};
-        rays[i].origin = origin;
-        rays[i].dir = (R * Vec3(xs[size_t(p % w)], ys[size_t(p / w)], 1.0)).cast<float>();
-      },
-      4096);
-  scene.intersect(rays.data(), hits.data(), n);
   const Background background(scene, options);
-
-  // (The scratch through references: inside a parallel loop `scratch` is the worker's own.)
-  std::vector<float>&gu = scratch.noiseU, &gv = scratch.noiseV, &gz = scratch.noiseZ;
-  if (options.noise) {
-    // Each pixel's draws, eight at a time: the lateral pair at index 3p, the axial one at 3p + 2.
-    gu.resize(size_t(n));
-    gv.resize(size_t(n));
-    gz.resize(size_t(n));
-    constexpr int kBlock = 1024;
-    parallelFor(0, (n + kBlock - 1) / kBlock, [&](int b) {
-      const int i0 = b * kBlock, m = std::min(n, i0 + kBlock) - i0;
-      uint64_t lateral[kBlock], axial[kBlock];
-      for (int k = 0; k < m; ++k) {
-        lateral[k] = 3 * uint64_t(order[size_t(i0 + k)]);
-        axial[k] = lateral[k] + 2;
-      }
-      gaussianPairsF(options.seed, lateral, size_t(m), &gu[size_t(i0)], &gv[size_t(i0)]);
-      gaussianPairsF(options.seed, axial, size_t(m), &gz[size_t(i0)], nullptr);
-    });
-    // Lateral noise: the return comes from a point displaced by N(0, σ_L(θ)) pixels, so re-cast
-    // through the displaced sub-pixel position (this also makes ragged, mixed depth edges).
-    parallelFor(
-        0, n,
-        [&](int i) {
-          background.fill(rays[i], hits[i]);
-          if (!hits[i].valid()) return;
-          int p = order[i];
-          const double theta = incidenceF(hits[i].normal, rays[i].dir);
-          const double s = lateralSigmaPx(noise, theta);
-          const double du = s * gu[size_t(i)], dv = s * gv[size_t(i)];
-          rays[i] = pixelRay(T_S_C, K, p % w + du, p / w + dv);
-        },
-        4096);
-    scene.intersect(rays.data(), hits.data(), n);
-  }
-
-  std::vector<Ray>& shadows = scratch.shadows;
-  std::vector<uint8_t>& ok = scratch.ok;
-  std::vector<uint8_t>& blocked = scratch.blocked;
   const IncidenceLimits limits(camera);
-  shadows.resize(n);
-  ok.assign(n, 0);
-  blocked.assign(n, 0);
-  parallelFor(
-      0, n,
-      [&](int i) {
-        background.fill(rays[i], hits[i]);
-        ok[i] = acceptHit(hits[i], rays[i], projector_S, camera, limits, &shadows[i]);
-      },
-      4096);
-  if (options.projector_shadows) {
-    // Compact the shadow rays so packets stay full, in pixel order: each chunk's count, their
-    // running sum, then each chunk writes its own part.
-    constexpr int kChunk = 8192;
-    const int chunks = (n + kChunk - 1) / kChunk;
-    std::vector<int> offset(size_t(chunks) + 1, 0);
-    parallelFor(0, chunks, [&](int c) {
-      int count = 0;
-      for (int i = c * kChunk; i < std::min(n, (c + 1) * kChunk); ++i) count += ok[i];
-      offset[size_t(c) + 1] = count;
-    });
-    for (int c = 0; c < chunks; ++c) offset[size_t(c) + 1] += offset[size_t(c)];
-    std::vector<int>& shadowIndex = scratch.shadowIndex;
-    std::vector<Ray>& compact = scratch.compact;
-    const size_t total = size_t(offset.back());
-    shadowIndex.resize(total);
-    compact.resize(total);
-    parallelFor(0, chunks, [&](int c) {
-      int k = offset[size_t(c)];
-      for (int i = c * kChunk; i < std::min(n, (c + 1) * kChunk); ++i)
-        if (ok[i]) {
-          shadowIndex[size_t(k)] = i;
-          compact[size_t(k++)] = shadows[i];
-        }
-    });
-    std::vector<uint8_t>& compactBlocked = scratch.compactBlocked;
-    compactBlocked.resize(total);
-    scene.occluded(compact.data(), compactBlocked.data(), total);
-    parallelFor(
-        0, int(total), [&](int k) { blocked[shadowIndex[size_t(k)]] = compactBlocked[size_t(k)]; },
-        16384);
-  }
+  const double f = K.fx;
+  const double cosGrazing = std::cos(noise.grazing_start_deg * M_PI / 180);
 
   DepthImage out(w, h);
   if (geometry_out) geometry_out->assign(size_t(w) * h, -1);
-  const double f = K.fx;
-  const double cosGrazing = std::cos(noise.grazing_start_deg * M_PI / 180);
-  parallelFor(
-      0, n,
-      [&](int i) {
-        if (!ok[i] || blocked[i]) return;
-        int p = order[i];
-        double z = hits[i].t;
-        if (options.noise) {
-          // The angle matters to the axial σ only beyond grazing_start_deg.
-          double theta = 0;
-          if (!(cosGrazing > 0) || !cosCertainlyAtLeastF(hits[i].normal, rays[i].dir, cosGrazing)) {
-            const double c = cosIncidenceF(hits[i].normal, rays[i].dir);
-            theta = c < cosGrazing ? std::acos(c) : 0.0;
-          }
-          z += axialSigma(noise, z, theta) * gz[size_t(i)];
-          if (noise.quantize) z = quantizeDepth(z, f, camera.baseline_m(), noise.disparity_step_px);
-          if (z < camera.min_range_m || z > camera.max_range_m) return;
+  // Each task takes a band of pixels through every step, rays cast in packets on its own core:
+  // the band's rays, hits and shadow rays (~100 KB) stay in the core's cache from one step to the
+  // next (passes over the whole image's ~25 MB of them cost as much in memory traffic as the
+  // ray casting). A band starts at a multiple of kBand, so the noise draws are the same ones.
+  constexpr int kBand = 1024;
+  parallelFor(0, (n + kBand - 1) / kBand, [&](int b) {
+    thread_local struct Band {
+      Ray rays[kBand], shadows[kBand];
+      Hit hits[kBand];
+      uint8_t ok[kBand], blocked[kBand], packedBlocked[kBand];
+      int shadowIndex[kBand];
+      uint64_t lateral[kBand], axial[kBand];
+      float gu[kBand], gv[kBand], gz[kBand];  // each pixel's standard normal draws
+    } band;
+    const int i0 = b * kBand, m = std::min(n, i0 + kBand) - i0;
+    const int* px = order.data() + i0;
+    Ray* rays = band.rays;
+    Hit* hits = band.hits;
+    for (int k = 0; k < m; ++k) {
+      const int p = px[k];
+      rays[k] = Ray{};
+      rays[k].origin = origin;
+      rays[k].dir = (R * Vec3(xs[size_t(p % w)], ys[size_t(p / w)], 1.0)).cast<float>();
+    }
+    scene.intersect(rays, hits, size_t(m), false);
+    if (options.noise) {
+      // Each pixel's draws: the lateral pair at index 3p, the axial one at 3p + 2.
+      for (int k = 0; k < m; ++k) {
+        band.lateral[k] = 3 * uint64_t(px[k]);
+        band.axial[k] = band.lateral[k] + 2;
+      }
+      gaussianPairsF(options.seed, band.lateral, size_t(m), band.gu, band.gv);
+      gaussianPairsF(options.seed, band.axial, size_t(m), band.gz, nullptr);
+      // Lateral noise: the return comes from a point displaced by N(0, σ_L(θ)) pixels, so
+      // re-cast through the displaced sub-pixel position (this also makes ragged, mixed depth
+      // edges).
+      for (int k = 0; k < m; ++k) {
+        background.fill(rays[k], hits[k]);
+        if (!hits[k].valid()) continue;
+        const int p = px[k];
+        const double theta = incidenceF(hits[k].normal, rays[k].dir);
+        const double s = lateralSigmaPx(noise, theta);
+        const double du = s * band.gu[k], dv = s * band.gv[k];
+        rays[k] = pixelRay(T_S_C, K, p % w + du, p / w + dv);
+      }
+      scene.intersect(rays, hits, size_t(m), false);
+    }
+    int shadowCount = 0;
+    for (int k = 0; k < m; ++k) {
+      background.fill(rays[k], hits[k]);
+      band.blocked[k] = 0;
+      band.ok[k] = acceptHit(hits[k], rays[k], projector_S, camera, limits, &band.shadows[k]);
+      // The shadow rays packed in pixel order (over the band's own), so packets stay full.
+      if (band.ok[k] && options.projector_shadows) {
+        band.shadows[shadowCount] = band.shadows[k];
+        band.shadowIndex[shadowCount++] = k;
+      }
+    }
+    if (shadowCount > 0) {
+      scene.occluded(band.shadows, band.packedBlocked, size_t(shadowCount), false);
+      for (int j = 0; j < shadowCount; ++j)
+        band.blocked[band.shadowIndex[j]] = band.packedBlocked[j];
+    }
+    for (int k = 0; k < m; ++k) {
+      if (!band.ok[k] || band.blocked[k]) continue;
+      const int p = px[k];
+      double z = hits[k].t;
+      if (options.noise) {
+        // The angle matters to the axial σ only beyond grazing_start_deg.
+        double theta = 0;
+        if (!(cosGrazing > 0) || !cosCertainlyAtLeastF(hits[k].normal, rays[k].dir, cosGrazing)) {
+          const double c = cosIncidenceF(hits[k].normal, rays[k].dir);
+          theta = c < cosGrazing ? std::acos(c) : 0.0;
         }
-        out.depth_m[p] = float(z);
-        if (geometry_out) (*geometry_out)[p] = hits[i].geometry;
-      },
-      4096);
+        z += axialSigma(noise, z, theta) * band.gz[k];
+        if (noise.quantize) z = quantizeDepth(z, f, camera.baseline_m(), noise.disparity_step_px);
+        if (z < camera.min_range_m || z > camera.max_range_m) continue;
+      }
+      out.depth_m[size_t(p)] = float(z);
+      if (geometry_out) (*geometry_out)[size_t(p)] = hits[k].geometry;
+    }
+  });
   return out;
 }
 
