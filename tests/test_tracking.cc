@@ -175,6 +175,71 @@ TEST(Tracking, ThePickUpReportsTheGraspTheJointsImply) {
   }
 }
 
+// robotDepthImage (the robot's links rasterised) against renderDepth casting a ray per pixel
+// through the same links: the same pixels covered but for a few on silhouette edges, the same
+// depth to float rounding (Embree intersects in single precision: within 1e-5 of the depth); for
+// two arm configurations holding the object up to the camera, with and without the table, the
+// whole image and a window.
+TEST(Tracking, RobotDepthImageIsTheRayCastRobot) {
+  const TriangleMesh mesh = loadObject("builtin:cracker_box");
+  auto [T_O_palm, q] = defaultGrasp(wam(), mesh);
+  const RobotOccluders scenes(wam());
+  ViewPlanner planner(wam(), DepthCameraOptions{}, NoiseModelOptions{}, ViewPlannerOptions{});
+  const Iso3 T_B_C = planner.cameraPose(0.7);
+  // The object held up to the camera from two sides: the hand and the arm in view.
+  const Vec3 centre = T_O_palm * Vec3(0, 0, wam().graspOffset());
+  Aabb box;
+  box.extend(centre - Vec3::Constant(0.1));
+  box.extend(centre + Vec3::Constant(0.1));
+  std::vector<JointVector> configs;
+  for (const Vec3& d : {Vec3(1, 0.3, -0.2), Vec3(-0.3, 1, 0.4)}) {
+    const auto c = planner.reach({d.normalized()}, centre, box, {T_O_palm, q})[0];
+    ASSERT_TRUE(c.has_value());
+    configs.push_back(wam().withArm(q, c->arm));
+  }
+  DepthCameraOptions cam;
+  cam.max_incidence_deg = 89;
+  cam.max_projector_incidence_deg = 89;
+  cam.projector_C = Vec3(1e-6, 0, 0);
+  RenderOptions exact;
+  exact.noise = false;
+  exact.projector_shadows = false;
+  int covered = 0;
+  for (const JointVector& qq : configs)
+    for (bool table : {true, false})
+      for (bool whole : {true, false}) {
+        const PixelRect window = whole ? PixelRect{0, 0, 640, 480} : PixelRect{150, 100, 500, 400};
+        RayScene robotScene;
+        for (const Occluder& o : scenes.at(qq, Iso3::Identity(), table))
+          robotScene.addInstance(*o.scene, o.T_O_scene);
+        robotScene.commit();
+        const DepthImage cast = renderDepth(robotScene, T_B_C, cam, NoiseModelOptions{}, exact);
+        const DepthImage raster =
+            robotDepthImage(scenes, qq, T_B_C, DepthCameraOptions{}, table, window);
+        int both = 0, onlyOne = 0, outside = 0;
+        for (int v = 0; v < 480; ++v)
+          for (int u = 0; u < 640; ++u) {
+            const float a = cast.at(u, v), b = raster.at(u, v);
+            if (u < window.u0 || u >= window.u1 || v < window.v0 || v >= window.v1) {
+              outside += b != 0.f;
+              continue;
+            }
+            if ((a > 0) != (b > 0)) {
+              ++onlyOne;
+              continue;
+            }
+            if (!(a > 0)) continue;
+            ++both;
+            EXPECT_NEAR(a, b, 1e-5 * a) << u << " " << v;
+          }
+        EXPECT_EQ(outside, 0);
+        EXPECT_LE(onlyOne, both / 500 + 5) << "table " << table << ", whole " << whole;
+        EXPECT_GT(both, table ? 20000 : 2000);
+        covered += both;
+      }
+  EXPECT_GT(covered, 100000);
+}
+
 // robotPixelMask against its rule pixel by pixel: a measurement is the robot's when the robot's
 // rendered surface (noise-free, every angle below 89°, no projector shadows) at a pixel within
 // radius_px lies within t_hand of it; for several radii, the whole image and a region.
@@ -205,8 +270,8 @@ TEST(Tracking, RobotPixelMaskFollowsItsRuleAtEveryPixel) {
     for (bool whole : {true, false}) {
       const PixelRect region{150, 100, 500, 400};
       const std::vector<uint8_t> mask =
-          robotPixelMask(d, world.T_B_C, world.q, scenes, DepthCameraOptions{}, NoiseModelOptions{},
-                         t_hand, R, /*with_table=*/true, whole ? nullptr : &region);
+          robotPixelMask(d, world.T_B_C, world.q, scenes, DepthCameraOptions{}, t_hand, R,
+                         /*with_table=*/true, whole ? nullptr : &region);
       int robot = 0, other = 0, differ = 0;
       for (int v = 0; v < H; ++v)
         for (int u = 0; u < W; ++u) {
@@ -250,9 +315,8 @@ TEST(Tracking, RecoversTheObjectsPoseInTheHand) {
     world.q = wam().withArm(world.q, c->arm);
     const DepthImage d = world.render();
     const RobotOccluders scenes(wam());
-    const std::vector<uint8_t> robot =
-        robotPixelMask(d, world.T_B_C, world.q, scenes, DepthCameraOptions{}, NoiseModelOptions{},
-                       0.01, 2, /*with_table=*/false);
+    const std::vector<uint8_t> robot = robotPixelMask(
+        d, world.T_B_C, world.q, scenes, DepthCameraOptions{}, 0.01, 2, /*with_table=*/false);
     const Iso3 trueT_C_O = world.T_B_C.inverse() * world.objectPose();
     // Believed: 15 mm and 10 mm across the line of sight, 8 mm in depth, 3 degrees about the
     // object's centre (its frame's origin).

@@ -105,7 +105,6 @@ struct PickOutcome {
 PickOutcome pickAndVerify(ScanSession& session, RobotInterface& robot, DepthSensor& sensor,
                           const Iso3& T_B_O_rest, const std::vector<Vec3>& points_O,
                           const std::vector<GraspCandidate>& candidates, const ScanOptions& options,
-                          const NoiseModelOptions& noise,
                           const std::function<void(const std::string&)>& log) {
   const RobotModel& m = robot.model();
   const RobotOccluders scenes(m);
@@ -162,7 +161,7 @@ PickOutcome pickAndVerify(ScanSession& session, RobotInterface& robot, DepthSens
       if (!tracked) log("tracking refused the lift's frame: " + liftTrack.reason);
       const std::vector<uint8_t> mask =
           robotPixelMask(d, tracked ? *tracked : *aim, robot.joints(), scenes, sensor.camera(),
-                         noise, options.t_hand_m, options.carve_radius_px, /*with_table=*/false);
+                         options.t_hand_m, options.carve_radius_px, /*with_table=*/false);
       if (tracked && options.tracking.enabled && options.tracking.in_hand) {
         // Where the object sits in the hand: the arm's error where it grasped moved it from
         // where the joints say. The palm's error that tracking sees in the lift's frame, as
@@ -308,8 +307,8 @@ void runGrasps(RobotInterface& robot, DepthSensor& sensor, ScanSession& session,
       if (all.model.observed[k]) known_O.push_back(all.model.mesh.vertices[k].cast<double>());
     const std::vector<GraspCandidate> usable(plan.candidates.begin(),
                                              plan.candidates.begin() + plan.above_threshold);
-    const PickOutcome pick = pickAndVerify(session, robot, sensor, T_B_O_rest, known_O, usable,
-                                           session.options(), session.noise(), log);
+    const PickOutcome pick =
+        pickAndVerify(session, robot, sensor, T_B_O_rest, known_O, usable, session.options(), log);
     if (!pick.achieved) {
       all.termination =
           progress.stopRequested() ? Termination::kInterrupted : Termination::kPickUpFailed;
@@ -420,7 +419,7 @@ MultiGraspResult scanFromTable(RobotInterface& robot, DepthSensor& sensor, const
       continue;
     }
     frames.push_back(std::move(*d));
-    robotMask.push_back(robotPixelMask(frames.back(), *aim, q, scenes, sensor.camera(), noise,
+    robotMask.push_back(robotPixelMask(frames.back(), *aim, q, scenes, sensor.camera(),
                                        options.t_hand_m, options.carve_radius_px,
                                        /*with_table=*/false));
   }
@@ -470,8 +469,8 @@ MultiGraspResult scanFromTable(RobotInterface& robot, DepthSensor& sensor, const
   }
   std::vector<Vec3> seen_O;
   for (size_t k = 0; k < object.points_O.size(); k += 5) seen_O.push_back(object.points_O[k]);
-  const PickOutcome pick = pickAndVerify(session, robot, sensor, T_B_O_rest, seen_O,
-                                         first.candidates, options, noise, log);
+  const PickOutcome pick =
+      pickAndVerify(session, robot, sensor, T_B_O_rest, seen_O, first.candidates, options, log);
   tt.attempts = pick.attempts;
   tt.attempt_poses = pick.attempt_poses;
   if (!pick.achieved) {

@@ -6,6 +6,7 @@
 #include "inhand/core/error.h"
 #include "inhand/core/parallel.h"
 #include "inhand/core/pose.h"
+#include "inhand/geometry/raster.h"
 #include "inhand/robot/collision.h"
 #include "inhand/scan/session.h"
 #include "inhand/sensor/render.h"
@@ -113,35 +114,70 @@ double secondsSince(Clock::time_point t) {
 }
 }  // namespace
 
+DepthImage robotDepthImage(const RobotOccluders& robotScenes, const JointVector& q,
+                           const Iso3& T_B_C, const DepthCameraOptions& camera, bool with_table,
+                           const PixelRect& window) {
+  const CameraIntrinsics& K = camera.intrinsics;
+  DepthImage out(K.width, K.height);
+  if (window.empty()) return out;
+  thread_local DepthRaster perThread;
+  DepthRaster& raster = perThread;  // (inside the parallel loop below, the caller's)
+  raster.reset(PinholeProjection{K.fx, K.fy, K.cx, K.cy},
+               RasterWindow{window.u0, window.u1 - 1, window.v0, window.v1 - 1, 1});
+  const Iso3 T_C_B = T_B_C.inverse();
+  std::vector<RayScene::PlacedMesh> meshes;
+  std::vector<uint8_t> solid;
+  for (const Occluder& o : robotScenes.at(q, Iso3::Identity(), with_table)) {
+    o.scene->collectMeshes(T_C_B * o.T_O_scene, &meshes);
+    solid.resize(meshes.size(), o.solid);
+  }
+  // Triangle ids run on from mesh to mesh; each triangle's normal in the camera frame.
+  std::vector<int> first(meshes.size() + 1, 0);
+  std::vector<Vec3> normal;
+  for (size_t k = 0; k < meshes.size(); ++k) {
+    const RayScene::PlacedMesh& m = meshes[k];
+    // Back faces of a closed link may go when the camera is outside its box.
+    const bool inside = m.bounds->contains(m.T.inverse().translation());
+    raster.draw(*m.mesh, m.T, first[k], solid[k] && !inside, 0, m.bounds);
+    first[k + 1] = first[k] + int(m.mesh->triangles.size());
+    for (const Tri& t : m.mesh->triangles) {
+      const Vec3 a = m.T * m.mesh->vertices[size_t(t[0])].cast<double>();
+      const Vec3 b = m.T * m.mesh->vertices[size_t(t[1])].cast<double>();
+      const Vec3 c = m.T * m.mesh->vertices[size_t(t[2])].cast<double>();
+      normal.push_back((b - a).cross(c - a));
+    }
+  }
+  const double cosLimit = std::cos(89 * M_PI / 180);
+  parallelFor(window.v0, window.v1, [&](int v) {
+    for (int u = window.u0; u < window.u1; ++u) {
+      const int s = raster.index(u, v), id = raster.id(s);
+      if (id < 0) continue;
+      const double z = 1.0 / double(raster.inverseDepth(s));
+      if (z < camera.min_range_m || z > camera.max_range_m) continue;
+      const Vec3 dir = K.rayZ1(u, v);
+      const Vec3& n = normal[size_t(id)];
+      const double nn = n.squaredNorm() * dir.squaredNorm();
+      if (!(nn > 0) || std::abs(n.dot(dir)) < cosLimit * std::sqrt(nn)) continue;
+      out.depth_m[size_t(v) * K.width + size_t(u)] = float(z);
+    }
+  });
+  return out;
+}
+
 std::vector<uint8_t> robotPixelMask(const DepthImage& depth, const Iso3& T_B_C,
                                     const JointVector& q, const RobotOccluders& robotScenes,
-                                    const DepthCameraOptions& camera,
-                                    const NoiseModelOptions& noise, double t_hand_m, int radius_px,
-                                    bool with_table, const PixelRect* region) {
-  RayScene robotScene;
-  for (const Occluder& o : robotScenes.at(q, Iso3::Identity(), with_table))
-    robotScene.addInstance(*o.scene, o.T_O_scene);
-  robotScene.commit();
+                                    const DepthCameraOptions& camera, double t_hand_m,
+                                    int radius_px, bool with_table, const PixelRect* region) {
   const int W = depth.width, H = depth.height, R = radius_px;
   const PixelRect r = region ? PixelRect{std::max(0, region->u0), std::max(0, region->v0),
                                          std::min(W, region->u1), std::min(H, region->v1)}
                              : PixelRect{0, 0, W, H};
   std::vector<uint8_t> mask(depth.depth_m.size(), 0);
   if (r.empty()) return mask;
-  RenderOptions exact;
-  exact.noise = false;
-  exact.projector_shadows = false;  // the robot's surface wherever the camera sees it
-  if (region) {
-    exact.region_u0 = r.u0 - R;
-    exact.region_v0 = r.v0 - R;
-    exact.region_u1 = r.u1 + R;
-    exact.region_v1 = r.v1 + R;
-  }
-  DepthCameraOptions cam = camera;
-  cam.max_incidence_deg = 89;
-  cam.max_projector_incidence_deg = 89;
-  cam.projector_C = Vec3(1e-6, 0, 0);
-  DepthImage robotDepth = renderDepth(robotScene, T_B_C, cam, noise, exact);
+  const DepthImage robotDepth =
+      robotDepthImage(robotScenes, q, T_B_C, camera, with_table,
+                      PixelRect{std::max(0, r.u0 - R), std::max(0, r.v0 - R), std::min(W, r.u1 + R),
+                                std::min(H, r.v1 + R)});
   // A measurement is the robot's when the robot's rendered surface lies within t_hand of it at
   // that pixel or within radius_px of it: the sensor's lateral noise moves returns across the
   // robot's silhouette by a pixel or two. Pixels with no robot surface in the (2R + 1)² square

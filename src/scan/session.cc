@@ -301,7 +301,7 @@ FrameReport ScanSession::fuse(const DepthImage& depth, const JointVector& q, con
   // The robot's own surfaces only carve (§IV); in the hand the table counts as the robot's (in
   // the air it can only be background), on the table the caller's mask says where the table is.
   if (maskRobot)
-    carve = robotPixelMask(depth, T_B_C, q, s.scenes, s.camera, s.noise, s.options.t_hand_m,
+    carve = robotPixelMask(depth, T_B_C, q, s.scenes, s.camera, s.options.t_hand_m,
                            s.options.carve_radius_px, /*with_table=*/inHand, &rect);
   if (extraCarve) {
     if (carve.empty()) carve.assign(depth.depth_m.size(), 0);
