@@ -187,11 +187,12 @@ std::vector<uint8_t> robotPixelMask(const DepthImage& depth, const Iso3& T_B_C,
   parallelFor(rv0, rv1, [&](int v) {
     const float* rd = &robotDepth.depth_m[size_t(v) * W];
     uint8_t* out = &rowNear[size_t(v) * W];
+    // The last column up to u + R where the robot is: it is within R of u when not before u − R.
+    int last = r.u0 - R - 1, next = std::max(0, r.u0 - R);
     for (int u = r.u0; u < r.u1; ++u) {
-      bool any = false;
-      for (int uu = std::max(0, u - R); uu <= std::min(W - 1, u + R) && !any; ++uu)
-        any = rd[uu] > 0;
-      out[u] = any;
+      for (const int end = std::min(W - 1, u + R); next <= end; ++next)
+        if (rd[next] > 0) last = next;
+      out[u] = last >= u - R;
     }
   });
   parallelFor(r.v0, r.v1, [&](int v) {

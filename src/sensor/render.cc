@@ -160,6 +160,10 @@ __attribute__((target("avx2"), always_inline)) inline __m256d dot(const Four& a,
   return _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(a.x, b.x), _mm256_mul_pd(a.y, b.y)),
                        _mm256_mul_pd(a.z, b.z));
 }
+// −x as the scalar's unary minus (the sign flipped, zeros included).
+__attribute__((target("avx2"), always_inline)) inline __m256d negate(__m256d x) {
+  return _mm256_xor_pd(x, _mm256_set1_pd(-0.0));
+}
 __attribute__((target("avx2"), always_inline)) inline int validLanes(const Hit* h) {
   return (h[0].geometry >= 0) | (h[1].geometry >= 0) << 1 | (h[2].geometry >= 0) << 2 |
          (h[3].geometry >= 0) << 3;
@@ -180,14 +184,13 @@ __attribute__((target("avx2"), always_inline)) inline int fillFour(const Backgro
   const __m256d a = dot(d, d), b = dot(o, d);
   const __m256d c = _mm256_set1_pd(oc.squaredNorm() - bg.r2);
   const __m256d disc = _mm256_sub_pd(_mm256_mul_pd(b, b), _mm256_mul_pd(a, c));
-  const __m256d t =
-      _mm256_div_pd(_mm256_add_pd(_mm256_sub_pd(_mm256_setzero_pd(), b), _mm256_sqrt_pd(disc)), a);
+  const __m256d t = _mm256_div_pd(_mm256_add_pd(negate(b), _mm256_sqrt_pd(disc)), a);
   double tt[4], nx[4], ny[4], nz[4];
   store4(t, tt);
   const __m256d zero = _mm256_setzero_pd();
-  store4(_mm256_sub_pd(zero, _mm256_add_pd(o.x, _mm256_mul_pd(t, d.x))), nx);
-  store4(_mm256_sub_pd(zero, _mm256_add_pd(o.y, _mm256_mul_pd(t, d.y))), ny);
-  store4(_mm256_sub_pd(zero, _mm256_add_pd(o.z, _mm256_mul_pd(t, d.z))), nz);
+  store4(negate(_mm256_add_pd(o.x, _mm256_mul_pd(t, d.x))), nx);
+  store4(negate(_mm256_add_pd(o.y, _mm256_mul_pd(t, d.y))), ny);
+  store4(negate(_mm256_add_pd(o.z, _mm256_mul_pd(t, d.z))), nz);
   const int pass = _mm256_movemask_pd(
       _mm256_and_pd(_mm256_cmp_pd(a, zero, _CMP_GT_OQ), _mm256_cmp_pd(disc, zero, _CMP_NLT_UQ)));
   int out = valid;
