@@ -1,10 +1,12 @@
 #include "inhand/geometry/ray_scene.h"
 
+#include <cstddef>
 #include <cstdio>
 #include <cstdlib>
 #include <mutex>
 
 #include "inhand/core/error.h"
+#include "inhand/core/fast_math.h"
 #include "inhand/core/parallel.h"
 
 #include <tbb/task_arena.h>
@@ -176,6 +178,49 @@ void loadPacket(const Ray* rays, size_t n, RTCRay8& r, int* valid) {
   }
 }
 
+#if INHAND_FAST_MATH_AVX2
+// loadPacket for eight rays: a Ray is eight floats (origin, direction, tnear, tfar), so the packet
+// is the 8 × 8 transpose of the rays, its rows stored to the packet's fields.
+static_assert(sizeof(Ray) == 8 * sizeof(float) && offsetof(Ray, tnear) == 6 * sizeof(float) &&
+                  offsetof(Ray, tfar) == 7 * sizeof(float),
+              "Ray: origin, dir, tnear, tfar as eight floats");
+__attribute__((target("avx2"))) void loadPacketEight(const Ray* rays, RTCRay8& r, int* valid) {
+  const float* f = reinterpret_cast<const float*>(rays);
+  __m256 row[8], t[8], u[8];
+  for (int k = 0; k < 8; ++k) row[k] = _mm256_loadu_ps(f + 8 * k);
+  for (int k = 0; k < 8; k += 2) {
+    t[k] = _mm256_unpacklo_ps(row[k], row[k + 1]);
+    t[k + 1] = _mm256_unpackhi_ps(row[k], row[k + 1]);
+  }
+  for (int k = 0; k < 8; k += 4) {
+    u[k] = _mm256_shuffle_ps(t[k], t[k + 2], 0x44);
+    u[k + 1] = _mm256_shuffle_ps(t[k], t[k + 2], 0xEE);
+    u[k + 2] = _mm256_shuffle_ps(t[k + 1], t[k + 3], 0x44);
+    u[k + 3] = _mm256_shuffle_ps(t[k + 1], t[k + 3], 0xEE);
+  }
+  // Column c of the rays: field c of each.
+  float* field[8] = {r.org_x, r.org_y, r.org_z, r.dir_x, r.dir_y, r.dir_z, r.tnear, r.tfar};
+  for (int c = 0; c < 4; ++c) {
+    _mm256_storeu_ps(field[c], _mm256_permute2f128_ps(u[c], u[c + 4], 0x20));
+    _mm256_storeu_ps(field[c + 4], _mm256_permute2f128_ps(u[c], u[c + 4], 0x31));
+  }
+  _mm256_storeu_ps(r.time, _mm256_setzero_ps());
+  _mm256_storeu_si256(reinterpret_cast<__m256i*>(r.mask), _mm256_set1_epi32(int(kAllMask)));
+  _mm256_storeu_si256(reinterpret_cast<__m256i*>(r.id), _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7));
+  _mm256_storeu_si256(reinterpret_cast<__m256i*>(r.flags), _mm256_setzero_si256());
+  _mm256_storeu_si256(reinterpret_cast<__m256i*>(valid), _mm256_set1_epi32(-1));
+}
+#endif
+
+// Rays into a packet: eight at once where the CPU has AVX2, else (and for a last packet of fewer)
+// one at a time.
+void loadRays(const Ray* rays, size_t n, RTCRay8& r, int* valid) {
+#if INHAND_FAST_MATH_AVX2
+  if (n == kPacket && fastMathAvx2()) return loadPacketEight(rays, r, valid);
+#endif
+  loadPacket(rays, n, r, valid);
+}
+
 // Calls packet(first, n) for each packet of `count` rays: on the calling thread, or spread over
 // the cores.
 template <typename F>
@@ -197,7 +242,7 @@ void RayScene::intersect(const Ray* rays, Hit* hits, size_t count, bool parallel
   forEachPacket(count, parallel, [&](size_t first, size_t n) {
     alignas(64) RTCRayHit8 rh;
     alignas(64) int valid[kPacket];
-    loadPacket(rays + first, n, rh.ray, valid);
+    loadRays(rays + first, n, rh.ray, valid);
     for (size_t k = 0; k < kPacket; ++k) {
       rh.hit.geomID[k] = RTC_INVALID_GEOMETRY_ID;
       rh.hit.instID[0][k] = RTC_INVALID_GEOMETRY_ID;
@@ -218,7 +263,7 @@ void RayScene::occluded(const Ray* rays, uint8_t* blocked, size_t count, bool pa
   forEachPacket(count, parallel, [&](size_t first, size_t n) {
     alignas(64) RTCRay8 r;
     alignas(64) int valid[kPacket];
-    loadPacket(rays + first, n, r, valid);
+    loadRays(rays + first, n, r, valid);
     RTCIntersectContext ctx;
     rtcInitIntersectContext(&ctx);
     rtcOccluded8(valid, scene_, &ctx, &r);
