@@ -175,6 +175,26 @@ TEST(Tracking, ThePickUpReportsTheGraspTheJointsImply) {
   }
 }
 
+namespace {
+// The robot's depth casting an Embree ray per pixel through its links (and with `table` its
+// table): noise-free, every angle below 89°, no projector shadows.
+DepthImage rayCastRobot(const RobotOccluders& scenes, const JointVector& q, const Iso3& T_B_C,
+                        bool table) {
+  RayScene robotScene;
+  for (const Occluder& o : scenes.at(q, Iso3::Identity(), table))
+    robotScene.addInstance(*o.scene, o.T_O_scene);
+  robotScene.commit();
+  DepthCameraOptions cam;
+  cam.max_incidence_deg = 89;
+  cam.max_projector_incidence_deg = 89;
+  cam.projector_C = Vec3(1e-6, 0, 0);
+  RenderOptions exact;
+  exact.noise = false;
+  exact.projector_shadows = false;
+  return renderDepth(robotScene, T_B_C, cam, NoiseModelOptions{}, exact);
+}
+}  // namespace
+
 // robotDepthImage (the robot's links rasterised) against renderDepth casting a ray per pixel
 // through the same links: the same pixels covered but for a few on silhouette edges, the same
 // depth to float rounding (Embree intersects in single precision: within 1e-5 of the depth); for
@@ -197,23 +217,12 @@ TEST(Tracking, RobotDepthImageIsTheRayCastRobot) {
     ASSERT_TRUE(c.has_value());
     configs.push_back(wam().withArm(q, c->arm));
   }
-  DepthCameraOptions cam;
-  cam.max_incidence_deg = 89;
-  cam.max_projector_incidence_deg = 89;
-  cam.projector_C = Vec3(1e-6, 0, 0);
-  RenderOptions exact;
-  exact.noise = false;
-  exact.projector_shadows = false;
   int covered = 0;
   for (const JointVector& qq : configs)
     for (bool table : {true, false})
       for (bool whole : {true, false}) {
         const PixelRect window = whole ? PixelRect{0, 0, 640, 480} : PixelRect{150, 100, 500, 400};
-        RayScene robotScene;
-        for (const Occluder& o : scenes.at(qq, Iso3::Identity(), table))
-          robotScene.addInstance(*o.scene, o.T_O_scene);
-        robotScene.commit();
-        const DepthImage cast = renderDepth(robotScene, T_B_C, cam, NoiseModelOptions{}, exact);
+        const DepthImage cast = rayCastRobot(scenes, qq, T_B_C, table);
         const DepthImage raster =
             robotDepthImage(scenes, qq, T_B_C, DepthCameraOptions{}, table, window);
         int both = 0, onlyOne = 0, outside = 0;
@@ -252,18 +261,7 @@ TEST(Tracking, RobotPixelMaskFollowsItsRuleAtEveryPixel) {
                     .cameraPose(0.7);
   const DepthImage d = world.render();
   const RobotOccluders scenes(wam());
-  RayScene robotScene;
-  for (const Occluder& o : scenes.at(world.q, Iso3::Identity(), true))
-    robotScene.addInstance(*o.scene, o.T_O_scene);
-  robotScene.commit();
-  DepthCameraOptions cam;
-  cam.max_incidence_deg = 89;
-  cam.max_projector_incidence_deg = 89;
-  cam.projector_C = Vec3(1e-6, 0, 0);
-  RenderOptions exact;
-  exact.noise = false;
-  exact.projector_shadows = false;
-  const DepthImage rd = renderDepth(robotScene, world.T_B_C, cam, NoiseModelOptions{}, exact);
+  const DepthImage rd = rayCastRobot(scenes, world.q, world.T_B_C, true);
   const int W = d.width, H = d.height;
   const double t_hand = 0.01;
   for (int R : {0, 1, 2, 3})
