@@ -198,8 +198,8 @@ DepthImage rayCastRobot(const RobotOccluders& scenes, const JointVector& q, cons
 // robotDepthImage (the robot's links rasterised) against renderDepth casting a ray per pixel
 // through the same links: the same pixels covered but for a few on silhouette edges, the same
 // depth to float rounding (Embree intersects in single precision: within 1e-5 of the depth); for
-// two arm configurations holding the object up to the camera, with and without the table, the
-// whole image and a window.
+// two arm configurations holding the object up to the camera, with and without the table, a
+// window past the image's edges (clipped to it) and one inside it.
 TEST(Tracking, RobotDepthImageIsTheRayCastRobot) {
   const TriangleMesh mesh = loadObject("builtin:cracker_box");
   auto [T_O_palm, q] = defaultGrasp(wam(), mesh);
@@ -221,7 +221,8 @@ TEST(Tracking, RobotDepthImageIsTheRayCastRobot) {
   for (const JointVector& qq : configs)
     for (bool table : {true, false})
       for (bool whole : {true, false}) {
-        const PixelRect window = whole ? PixelRect{0, 0, 640, 480} : PixelRect{150, 100, 500, 400};
+        const PixelRect window =
+            whole ? PixelRect{-5, -5, 700, 500} : PixelRect{150, 100, 500, 400};
         const DepthImage cast = rayCastRobot(scenes, qq, T_B_C, table);
         const DepthImage raster =
             robotDepthImage(scenes, qq, T_B_C, DepthCameraOptions{}, table, window);

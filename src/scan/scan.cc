@@ -116,9 +116,11 @@ double secondsSince(Clock::time_point t) {
 
 DepthImage robotDepthImage(const RobotOccluders& robotScenes, const JointVector& q,
                            const Iso3& T_B_C, const DepthCameraOptions& camera, bool with_table,
-                           const PixelRect& window) {
+                           const PixelRect& region) {
   const CameraIntrinsics& K = camera.intrinsics;
   DepthImage out(K.width, K.height);
+  const PixelRect window{std::max(0, region.u0), std::max(0, region.v0),
+                         std::min(K.width, region.u1), std::min(K.height, region.v1)};
   if (window.empty()) return out;
   thread_local DepthRaster perThread;
   DepthRaster& raster = perThread;  // (inside the parallel loop below, the caller's)

@@ -189,10 +189,10 @@ ScanResult scanSingleGrasp(RobotInterface& robot, DepthSensor& sensor, const Iso
                            const Aabb& object_box_O = Aabb());
 
 // The robot's depth image from T_B_C with the robot at q (and with_table its table) over the
-// pixels of `window` (0 elsewhere): its links' triangles rasterised at the pixel centres, the
-// nearest surface kept where it lies in the camera's range and faces it at under 89°. The depth
-// renderDepth gives casting a ray per pixel (noise-free, no projector shadows) but for pixels on
-// the silhouettes' edges, at a fraction of the cost.
+// pixels of `window` (clipped to the image; 0 elsewhere): its links' triangles rasterised at the
+// pixel centres, the nearest surface kept where it lies in the camera's range and faces it at under
+// 89°. The depth renderDepth gives casting a ray per pixel (noise-free, no projector shadows) but
+// for pixels on the silhouettes' edges, at a fraction of the cost.
 DepthImage robotDepthImage(const RobotOccluders& robotScenes, const JointVector& q,
                            const Iso3& T_B_C, const DepthCameraOptions& camera, bool with_table,
                            const PixelRect& window);
