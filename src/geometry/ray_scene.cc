@@ -121,23 +121,25 @@ int RayScene::addInstance(const RayScene& inner, const Iso3& T) {
   return geometryCount_++;
 }
 
-Hit RayScene::makeHit(float t, unsigned geomID, unsigned instID, unsigned primID, float u, float v,
-                      const Vec3f& Ng) const {
-  Hit h;
-  if (geomID == RTC_INVALID_GEOMETRY_ID) return h;
-  h.t = t;
-  h.triangle = int(primID);
-  h.u = u;
-  h.v = v;
-  if (instID != RTC_INVALID_GEOMETRY_ID) {
-    h.geometry = int(instID);
-    h.inner = int(geomID);
-    h.normal = instanceRotation_[instID] * Ng;  // Embree reports Ng in the instance's space
-  } else {
-    h.geometry = int(geomID);
-    h.normal = Ng;
+void RayScene::makeHit(float t, unsigned geomID, unsigned instID, unsigned primID, float u, float v,
+                       const Vec3f& Ng, Hit* h) const {
+  if (geomID == RTC_INVALID_GEOMETRY_ID) {
+    *h = Hit();
+    return;
   }
-  return h;
+  h->t = t;
+  h->triangle = int(primID);
+  h->u = u;
+  h->v = v;
+  if (instID != RTC_INVALID_GEOMETRY_ID) {
+    h->geometry = int(instID);
+    h->inner = int(geomID);
+    h->normal = instanceRotation_[instID] * Ng;  // Embree reports Ng in the instance's space
+  } else {
+    h->geometry = int(geomID);
+    h->inner = -1;
+    h->normal = Ng;
+  }
 }
 
 void RayScene::collectMeshes(const Iso3& T, std::vector<PlacedMesh>* out) const {
@@ -252,9 +254,8 @@ void RayScene::intersect(const Ray* rays, Hit* hits, size_t count, bool parallel
     ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
     rtcIntersect8(valid, scene_, &ctx, &rh);
     for (size_t k = 0; k < n; ++k)
-      hits[first + k] =
-          makeHit(rh.ray.tfar[k], rh.hit.geomID[k], rh.hit.instID[0][k], rh.hit.primID[k],
-                  rh.hit.u[k], rh.hit.v[k], Vec3f(rh.hit.Ng_x[k], rh.hit.Ng_y[k], rh.hit.Ng_z[k]));
+      makeHit(rh.ray.tfar[k], rh.hit.geomID[k], rh.hit.instID[0][k], rh.hit.primID[k], rh.hit.u[k],
+              rh.hit.v[k], Vec3f(rh.hit.Ng_x[k], rh.hit.Ng_y[k], rh.hit.Ng_z[k]), &hits[first + k]);
   });
 }
 
@@ -292,8 +293,10 @@ Hit RayScene::intersectOne(const Ray& ray) const {
   RTCIntersectContext ctx;
   rtcInitIntersectContext(&ctx);
   rtcIntersect1(scene_, &ctx, &rh);
-  return makeHit(rh.ray.tfar, rh.hit.geomID, rh.hit.instID[0], rh.hit.primID, rh.hit.u, rh.hit.v,
-                 Vec3f(rh.hit.Ng_x, rh.hit.Ng_y, rh.hit.Ng_z));
+  Hit h;
+  makeHit(rh.ray.tfar, rh.hit.geomID, rh.hit.instID[0], rh.hit.primID, rh.hit.u, rh.hit.v,
+          Vec3f(rh.hit.Ng_x, rh.hit.Ng_y, rh.hit.Ng_z), &h);
+  return h;
 }
 
 }  // namespace inhand

@@ -70,8 +70,9 @@ class RayScene {
   void collectMeshes(const Iso3& T, std::vector<PlacedMesh>* out) const;
 
  private:
-  Hit makeHit(float t, unsigned geomID, unsigned instID, unsigned primID, float u, float v,
-              const Vec3f& Ng) const;
+  // The hit an Embree ray reported, written to *h (every field).
+  void makeHit(float t, unsigned geomID, unsigned instID, unsigned primID, float u, float v,
+               const Vec3f& Ng, Hit* h) const;
   RTCScene scene_ = nullptr;
   std::vector<Eigen::Matrix3f> instanceRotation_;  // per geometry id (identity for meshes)
   // Per geometry id: the mesh as added (already placed), or the instanced scene and placement.
