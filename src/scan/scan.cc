@@ -9,7 +9,6 @@
 #include "inhand/geometry/raster.h"
 #include "inhand/robot/collision.h"
 #include "inhand/scan/session.h"
-#include "inhand/sensor/render.h"
 
 namespace inhand {
 
