@@ -132,15 +132,14 @@ DepthImage robotDepthImage(const RobotOccluders& robotScenes, const JointVector&
     o.scene->collectMeshes(T_C_B * o.T_O_scene, &meshes);
     solid.resize(meshes.size(), o.solid);
   }
-  // Triangle ids run on from mesh to mesh; each triangle's normal in the camera frame.
-  std::vector<int> first(meshes.size() + 1, 0);
+  // Triangle ids run on from mesh to mesh (the id is the index into `normal`); each triangle's
+  // normal in the camera frame.
   std::vector<Vec3> normal;
   for (size_t k = 0; k < meshes.size(); ++k) {
     const RayScene::PlacedMesh& m = meshes[k];
     // Back faces of a closed link may go when the camera is outside its box.
     const bool inside = m.bounds->contains(m.T.inverse().translation());
-    raster.draw(*m.mesh, m.T, first[k], solid[k] && !inside, 0, m.bounds);
-    first[k + 1] = first[k] + int(m.mesh->triangles.size());
+    raster.draw(*m.mesh, m.T, int(normal.size()), solid[k] && !inside, 0, m.bounds);
     for (const Tri& t : m.mesh->triangles) {
       const Vec3 a = m.T * m.mesh->vertices[size_t(t[0])].cast<double>();
       const Vec3 b = m.T * m.mesh->vertices[size_t(t[1])].cast<double>();
@@ -175,10 +174,8 @@ std::vector<uint8_t> robotPixelMask(const DepthImage& depth, const Iso3& T_B_C,
                              : PixelRect{0, 0, W, H};
   std::vector<uint8_t> mask(depth.depth_m.size(), 0);
   if (r.empty()) return mask;
-  const DepthImage robotDepth =
-      robotDepthImage(robotScenes, q, T_B_C, camera, with_table,
-                      PixelRect{std::max(0, r.u0 - R), std::max(0, r.v0 - R), std::min(W, r.u1 + R),
-                                std::min(H, r.v1 + R)});
+  const DepthImage robotDepth = robotDepthImage(robotScenes, q, T_B_C, camera, with_table,
+                                                PixelRect{r.u0 - R, r.v0 - R, r.u1 + R, r.v1 + R});
   // A measurement is the robot's when the robot's rendered surface lies within t_hand of it at
   // that pixel or within radius_px of it: the sensor's lateral noise moves returns across the
   // robot's silhouette by a pixel or two. Pixels with no robot surface in the (2R + 1)² square
