@@ -9,7 +9,7 @@ cd "$(dirname "$0")/.."
 seconds="${1:-60}"
 shift || true
 targets=("$@")
-[ ${#targets[@]} -gt 0 ] || targets=(depth_png frames_json ply mesh_import urdf robot_config scan_config)
+[ ${#targets[@]} -gt 0 ] || targets=(depth_png frames_json ply mesh_import urdf robot_config scan_config volume_data)
 command -v clang++ > /dev/null || { echo "fuzz: needs clang (apt-get install clang)" >&2; exit 2; }
 generator=()
 command -v ninja > /dev/null && [ ! -f build-fuzz/CMakeCache.txt ] && generator=(-G Ninja)

@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cstring>
 #include <fstream>
 #include <set>
 
@@ -215,6 +216,43 @@ TEST(Session, RefusesWhatItCannotUseAndNamesIt) {
                                              o, MultiGraspOptions{});
   EXPECT_EQ(back.summary().frames, 1);
   expectSameModel(back.model(), s.model());
+  // A checkpoint written before the volume's runs (its three arrays whole, no "encoding") loads
+  // to the same volume; an unknown encoding is refused by name.
+  std::ifstream g(good, std::ios::binary);
+  std::string magic;
+  size_t bytes = 0;
+  std::getline(g, magic);
+  g >> bytes;
+  g.get();
+  std::string header(bytes, '\0');
+  g.read(header.data(), std::streamsize(bytes));
+  Json h = Json::parse(header);
+  h["volume"].erase("encoding");
+  const TsdfVolume& v = s.volume();
+  const size_t n = v.voxelCount();
+  auto writeWith = [&](const fs::path& p, const Json& hj) {
+    const std::string text = hj.dump();
+    std::ofstream f(p, std::ios::binary);
+    f << magic << "\n" << text.size() << "\n" << text;
+    f.write(reinterpret_cast<const char*>(v.sumWD()), std::streamsize(n * sizeof(float)));
+    f.write(reinterpret_cast<const char*>(v.sumW()), std::streamsize(n * sizeof(float)));
+    f.write(reinterpret_cast<const char*>(v.states()), std::streamsize(n));
+  };
+  const fs::path raw = dir.path() / "raw.inhand";
+  writeWith(raw, h);
+  const ScanSession fromRaw = ScanSession::load(raw, wam(), DepthCameraOptions{},
+                                                NoiseModelOptions{}, o, MultiGraspOptions{});
+  EXPECT_EQ(std::memcmp(fromRaw.volume().sumWD(), v.sumWD(), n * sizeof(float)), 0);
+  EXPECT_EQ(std::memcmp(fromRaw.volume().sumW(), v.sumW(), n * sizeof(float)), 0);
+  EXPECT_EQ(std::memcmp(fromRaw.volume().states(), v.states(), n), 0);
+  EXPECT_EQ(std::memcmp(back.volume().sumWD(), v.sumWD(), n * sizeof(float)), 0);
+  EXPECT_EQ(std::memcmp(back.volume().states(), v.states(), n), 0);
+  // The runs' file is far smaller than the arrays.
+  EXPECT_LT(fs::file_size(good) * 4, fs::file_size(raw));
+  h["volume"]["encoding"] = "zip";
+  const fs::path zipped = dir.path() / "zip.inhand";
+  writeWith(zipped, h);
+  EXPECT_NE(loadMessage(zipped, o).find("unknown volume encoding \"zip\""), std::string::npos);
 }
 
 TEST(Session, TerminationNamesRoundTrip) {

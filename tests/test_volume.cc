@@ -4,6 +4,7 @@
 #include <cstring>
 #include <limits>
 #include <random>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -300,6 +301,87 @@ TEST(Fusion, CarveOnlyPixelsAddNoSurface) {
   integrate(d, T, cam.intrinsics, measurementSigma(d, cam.intrinsics, nm), &vol, &carve);
   EXPECT_EQ(vol.countState(VoxelState::kObserved), 0u);
   EXPECT_GT(vol.countState(VoxelState::kEmpty), 50000u);
+}
+
+// writeData / readData: a volume of runs and scattered sums (-0 and NaN bits among them) back bit
+// for bit, far smaller than the arrays; a stream cut short, a bad state or runs that do not cover
+// the volume refused with a reason.
+TEST(Volume, CompactDataComesBackBitForBit) {
+  VolumeOptions vo;
+  vo.voxel_size_m = 0.004;
+  TsdfVolume v(cube(0.1), vo);  // 51³ voxels
+  const size_t n = v.voxelCount();
+  std::mt19937 rng(7);
+  std::uniform_int_distribution<int> stateOf(0, 2);
+  std::uniform_real_distribution<float> value(-1.f, 1.f);
+  // Runs of 1 to 3,000 voxels of one state; sums on observed voxels and a few others.
+  for (size_t i = 0; i < n;) {
+    const size_t len = std::min(n - i, size_t(1 + rng() % 3000));
+    std::fill_n(v.states() + i, len, uint8_t(stateOf(rng)));
+    i += len;
+  }
+  for (size_t i = 0; i < n; ++i)
+    if (v.states()[i] == uint8_t(VoxelState::kObserved) || rng() % 1000 == 0) {
+      v.sumWD()[i] = value(rng);
+      v.sumW()[i] = rng() % 7 == 0 ? 0.f : value(rng);
+    }
+  v.sumWD()[0] = -0.f;
+  v.sumW()[n - 1] = std::numeric_limits<float>::quiet_NaN();
+  v.states()[n - 1] = uint8_t(VoxelState::kEmpty);
+  std::stringstream out;
+  v.writeData(out);
+  const std::string bytes = out.str();
+  TsdfVolume back(cube(0.1), vo);
+  std::istringstream in(bytes);
+  ASSERT_EQ(back.readData(in), "");
+  EXPECT_EQ(in.peek(), std::char_traits<char>::eof());  // every byte read
+  EXPECT_EQ(std::memcmp(back.states(), v.states(), n), 0);
+  EXPECT_EQ(std::memcmp(back.sumWD(), v.sumWD(), n * sizeof(float)), 0);
+  EXPECT_EQ(std::memcmp(back.sumW(), v.sumW(), n * sizeof(float)), 0);
+
+  // A scan-like volume (empty with a thin shell observed) is far smaller than the arrays.
+  TsdfVolume shell(cube(0.1), vo);
+  for (int z = 0; z < shell.dims().z(); ++z)
+    for (int y = 0; y < shell.dims().y(); ++y)
+      for (int x = 0; x < shell.dims().x(); ++x) {
+        const size_t i = shell.index(x, y, z);
+        const double r = (shell.point(x, y, z) - Vec3::Constant(0.0)).norm();
+        shell.states()[i] = uint8_t(r < 0.05 ? VoxelState::kUnknown : VoxelState::kEmpty);
+        if (std::abs(r - 0.05) < 0.006) {
+          shell.states()[i] = uint8_t(VoxelState::kObserved);
+          shell.sumWD()[i] = float(r - 0.05);
+          shell.sumW()[i] = 1.f;
+        }
+      }
+  std::stringstream compact;
+  shell.writeData(compact);
+  EXPECT_LT(compact.str().size(), n * TsdfVolume::kBytesPerVoxel / 4);
+  TsdfVolume shellBack(cube(0.1), vo);
+  std::istringstream shellIn(compact.str());
+  ASSERT_EQ(shellBack.readData(shellIn), "");
+  EXPECT_EQ(std::memcmp(shellBack.sumWD(), shell.sumWD(), n * sizeof(float)), 0);
+  EXPECT_EQ(std::memcmp(shellBack.states(), shell.states(), n), 0);
+
+  // Refusals.
+  auto readOf = [&](const std::string& b) {
+    TsdfVolume t(cube(0.1), vo);
+    std::istringstream s(b);
+    return t.readData(s);
+  };
+  EXPECT_NE(readOf(bytes.substr(0, bytes.size() - 1)).find("cut short"), std::string::npos);
+  EXPECT_NE(readOf(bytes.substr(0, 4)).find("cut short"), std::string::npos);
+  uint64_t runs;
+  std::memcpy(&runs, bytes.data(), sizeof runs);
+  std::string badState = bytes;
+  badState[8 + 8 * runs] = 3;  // the first run's value
+  EXPECT_NE(readOf(badState).find("invalid voxel state"), std::string::npos);
+  std::string shortRun = bytes;
+  const uint64_t one = 1;
+  std::memcpy(shortRun.data() + 8, &one, sizeof one);  // the first run's length
+  EXPECT_NE(readOf(shortRun).find("do not cover"), std::string::npos);
+  TsdfVolume other(cube(0.12), vo);  // more voxels: the runs fall short
+  std::istringstream otherIn(bytes);
+  EXPECT_NE(other.readData(otherIn).find("do not cover"), std::string::npos);
 }
 
 TEST(Volume, MemoryBudgetRefusalGivesSize) {

@@ -887,7 +887,9 @@ std::string ScanSession::Summary::brief() const {
 }
 
 // The checkpoint: "INHAND-SESSION 1\n", the JSON header's byte count and newline, the header,
-// then the volume's arrays (sumWD, sumW as float32, states as uint8), little-endian.
+// then the volume's data: with "encoding": "runs" in the header's volume, TsdfVolume::writeData's
+// (the states as runs, the non-zero sums as spans); without it (older checkpoints), the three
+// arrays whole (sumWD, sumW as float32, states as uint8), little-endian.
 namespace {
 constexpr char kMagic[] = "INHAND-SESSION 1\n";
 
@@ -901,7 +903,8 @@ void ScanSession::save(const std::filesystem::path& path, const Json& extra) con
   h["volume"] = {{"dims", {v.dims().x(), v.dims().y(), v.dims().z()}},
                  {"origin", vecJson(v.origin())},
                  {"voxel_m", v.voxelSize()},
-                 {"truncation_m", v.truncation()}};
+                 {"truncation_m", v.truncation()},
+                 {"encoding", "runs"}};
   h["centre"] = vecJson(s.centre);
   h["holding"] = s.holding;
   h["grasp"] = s.grasp;
@@ -962,10 +965,7 @@ void ScanSession::save(const std::filesystem::path& path, const Json& extra) con
   writeFileAtomically(path, [&](const fs::path& tmp) {
     std::ofstream f(tmp, std::ios::binary);
     f << kMagic << header.size() << "\n" << header;
-    const size_t n = v.voxelCount();
-    f.write(reinterpret_cast<const char*>(v.sumWD()), std::streamsize(n * sizeof(float)));
-    f.write(reinterpret_cast<const char*>(v.sumW()), std::streamsize(n * sizeof(float)));
-    f.write(reinterpret_cast<const char*>(v.states()), std::streamsize(n));
+    v.writeData(f);
     if (!f) throw Error(path.string() + ": cannot write the checkpoint");
   });
 }
@@ -1005,13 +1005,20 @@ ScanSession ScanSession::load(const std::filesystem::path& path, const RobotMode
                   " m) differs from the options' (" + std::to_string(v.dims().x()) + "x" +
                   std::to_string(v.dims().y()) + "x" + std::to_string(v.dims().z()) +
                   " voxels of " + std::to_string(v.voxelSize()) + " m)");
-    const size_t n = v.voxelCount();
-    if (!f.read(reinterpret_cast<char*>(v.sumWD()), std::streamsize(n * sizeof(float))) ||
-        !f.read(reinterpret_cast<char*>(v.sumW()), std::streamsize(n * sizeof(float))) ||
-        !f.read(reinterpret_cast<char*>(v.states()), std::streamsize(n)))
-      throw bad("voxel data cut short");
-    for (size_t i = 0; i < n; ++i)
-      if (v.states()[i] > uint8_t(VoxelState::kObserved)) throw bad("invalid voxel state");
+    const std::string encoding = vj.value("encoding", std::string("raw"));
+    if (encoding == "runs") {
+      if (std::string problem = v.readData(f); !problem.empty()) throw bad(problem);
+    } else if (encoding == "raw") {
+      const size_t n = v.voxelCount();
+      if (!f.read(reinterpret_cast<char*>(v.sumWD()), std::streamsize(n * sizeof(float))) ||
+          !f.read(reinterpret_cast<char*>(v.sumW()), std::streamsize(n * sizeof(float))) ||
+          !f.read(reinterpret_cast<char*>(v.states()), std::streamsize(n)))
+        throw bad("voxel data cut short");
+      for (size_t i = 0; i < n; ++i)
+        if (v.states()[i] > uint8_t(VoxelState::kObserved)) throw bad("invalid voxel state");
+    } else {
+      throw bad("unknown volume encoding \"" + encoding + "\"");
+    }
     s.holding = h.at("holding").get<bool>();
     s.grasp = h.at("grasp").get<int>();
     s.T_O_palm = isoFrom(h.at("T_O_palm"));

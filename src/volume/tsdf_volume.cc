@@ -1,7 +1,11 @@
 #include "inhand/volume/tsdf_volume.h"
 
+#include <algorithm>
 #include <cmath>
+#include <cstring>
+#include <istream>
 #include <limits>
+#include <ostream>
 #include <sstream>
 
 #include "inhand/core/error.h"
@@ -58,6 +62,99 @@ size_t TsdfVolume::countState(VoxelState s) const {
   size_t n = 0;
   for (uint8_t v : state_) n += v == uint8_t(s);
   return n;
+}
+
+namespace {
+
+template <class T>
+void put(std::ostream& out, const T* data, size_t count) {
+  out.write(reinterpret_cast<const char*>(data), std::streamsize(count * sizeof(T)));
+}
+
+template <class T>
+bool get(std::istream& in, T* data, size_t count) {
+  return bool(in.read(reinterpret_cast<char*>(data), std::streamsize(count * sizeof(T))));
+}
+
+// Whether a float's bits are not all zero (-0 included: the data come back bit for bit).
+bool nonZeroBits(float x) {
+  uint32_t b;
+  std::memcpy(&b, &x, sizeof b);
+  return b != 0;
+}
+
+}  // namespace
+
+void TsdfVolume::writeData(std::ostream& out) const {
+  // The states: the runs' count, their lengths, their values.
+  std::vector<uint64_t> lengths;
+  std::vector<uint8_t> values;
+  const size_t n = state_.size();
+  for (size_t i = 0; i < n;) {
+    size_t j = i + 1;
+    while (j < n && state_[j] == state_[i]) ++j;
+    lengths.push_back(j - i);
+    values.push_back(state_[i]);
+    i = j;
+  }
+  const uint64_t runs = lengths.size();
+  put(out, &runs, 1);
+  put(out, lengths.data(), lengths.size());
+  put(out, values.data(), values.size());
+  // The sums: the spans' count, their (first, count) pairs, then the spans' Σw·d and Σw.
+  std::vector<uint64_t> spans;
+  for (size_t i = 0; i < n;) {
+    if (!nonZeroBits(sumWD_[i]) && !nonZeroBits(sumW_[i])) {
+      ++i;
+      continue;
+    }
+    size_t j = i + 1;
+    while (j < n && (nonZeroBits(sumWD_[j]) || nonZeroBits(sumW_[j]))) ++j;
+    spans.push_back(i);
+    spans.push_back(j - i);
+    i = j;
+  }
+  const uint64_t count = spans.size() / 2;
+  put(out, &count, 1);
+  put(out, spans.data(), spans.size());
+  for (const std::vector<float>* a : {&sumWD_, &sumW_})
+    for (size_t k = 0; k < spans.size(); k += 2) put(out, a->data() + spans[k], spans[k + 1]);
+}
+
+std::string TsdfVolume::readData(std::istream& in) {
+  const uint64_t n = state_.size();
+  uint64_t runs = 0;
+  if (!get(in, &runs, 1)) return "voxel data cut short";
+  if (runs > n) return "more state runs than voxels";
+  std::vector<uint64_t> lengths(runs);
+  std::vector<uint8_t> values(runs);
+  if (!get(in, lengths.data(), runs) || !get(in, values.data(), runs))
+    return "voxel data cut short";
+  uint64_t at = 0;
+  for (uint64_t r = 0; r < runs; ++r) {
+    if (lengths[r] == 0 || lengths[r] > n - at) return "state runs do not cover the volume";
+    if (values[r] > uint8_t(VoxelState::kObserved)) return "invalid voxel state";
+    std::fill_n(state_.begin() + std::ptrdiff_t(at), lengths[r], values[r]);
+    at += lengths[r];
+  }
+  if (at != n) return "state runs do not cover the volume";
+  uint64_t count = 0;
+  if (!get(in, &count, 1)) return "voxel data cut short";
+  if (count > n) return "more spans than voxels";
+  std::vector<uint64_t> spans(2 * count);
+  if (!get(in, spans.data(), spans.size())) return "voxel data cut short";
+  uint64_t end = 0;
+  for (uint64_t k = 0; k < spans.size(); k += 2) {
+    if (spans[k] < end || spans[k] >= n || spans[k + 1] == 0 || spans[k + 1] > n - spans[k])
+      return "voxel spans out of order or outside the volume";
+    end = spans[k] + spans[k + 1];
+  }
+  std::fill(sumWD_.begin(), sumWD_.end(), 0.f);
+  std::fill(sumW_.begin(), sumW_.end(), 0.f);
+  for (std::vector<float>* a : {&sumWD_, &sumW_})
+    for (uint64_t k = 0; k < spans.size(); k += 2)
+      if (!get(in, a->data() + spans[k], spans[k + 1])) return "voxel data cut short";
+  return {};
 }
 
 }  // namespace inhand

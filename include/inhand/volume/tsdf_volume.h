@@ -4,6 +4,7 @@
 // measurement (so 1/Σw is the fused variance, eq. 6), and a state: unknown (never seen), empty
 // (seen through), observed (inside the truncation band of a measurement).
 #include <cstdint>
+#include <iosfwd>
 #include <string>
 #include <vector>
 
@@ -61,6 +62,14 @@ class TsdfVolume {
   // Fused variance 1/Σw (m²); infinite for voxels without measurements.
   float variance(size_t i) const;
   size_t countState(VoxelState s) const;
+
+  // The voxels' data in a compact binary form (native byte order): the states as runs, then Σw·d
+  // and Σw of the voxels where either is non-zero (bit for bit), as spans. A scan's volume is
+  // mostly unknown or empty: tens of times smaller than the three arrays. readData reads what
+  // writeData wrote into a volume of the same dims, bit for bit; it returns "" or what is wrong
+  // (the volume's contents are then unspecified).
+  void writeData(std::ostream& out) const;
+  std::string readData(std::istream& in);
 
   // Raw storage for the integration kernels.
   float* sumWD() { return sumWD_.data(); }
