@@ -543,10 +543,11 @@ std::optional<Iso3> ScanSession::trackedCameraPose(const DepthImage& depth, cons
   if (!s.options.tracking.enabled) return T_B_C;
   const auto t0 = Clock::now();
   const RobotModel& m = *s.model;
-  // The hand's surface at the fingers' joints (rebuilt when they change).
-  if (s.handPointsQ.size() != q.size() || (s.handPointsQ - q).cwiseAbs().maxCoeff() > 1e-6) {
-    JointVector atHome = q;
-    s.handPoints = evenSurfaceSamples(HandGeometry(m, q, Iso3::Identity()).mesh(),
+  // The hand's surface in the palm frame at the fingers' joints, rebuilt when they change: built
+  // with the arm at home, so that it does not depend on the arm's joints (not even in rounding).
+  const JointVector atHome = m.withArm(q, m.arm(m.home()));
+  if (s.handPointsQ.size() != q.size() || (s.handPointsQ - atHome).cwiseAbs().maxCoeff() > 1e-6) {
+    s.handPoints = evenSurfaceSamples(HandGeometry(m, atHome, Iso3::Identity()).mesh(),
                                       s.options.tracking.hand_spacing_m);
     s.handPointsQ = atHome;
   }

@@ -303,13 +303,18 @@ TrackResult alignToDepth(const DepthImage& depth, const CameraIntrinsics& K,
   // its aligned points less ten times those the camera sees through (the hand's geometry is
   // known exactly; the model's is not).
   auto score = [](const TrackResult& t) { return t.hand_inliers - 10.0 * t.hand_see_through; };
-  for (const Iso3& start : starts)
-    for (int iterations : {0, o.iterations}) {
-      const TrackResult r = alignFrom(depth, K, points, hand.size(), occluders, T_C_palm, start,
-                                      iterations, sigma, o);
-      if (first || (r.ok && !best.ok) || (r.ok == best.ok && score(r) > score(best))) best = r;
-      first = false;
-    }
+  // The alignments are independent: on both cores at once (each pairs its points on both cores
+  // too, when the other has finished), then compared in order.
+  const int runs = 2 * int(starts.size());
+  std::vector<TrackResult> results(static_cast<size_t>(runs));
+  parallelFor(0, runs, [&](int k) {
+    results[size_t(k)] = alignFrom(depth, K, points, hand.size(), occluders, T_C_palm,
+                                   starts[size_t(k / 2)], k % 2 ? o.iterations : 0, sigma, o);
+  });
+  for (const TrackResult& r : results) {
+    if (first || (r.ok && !best.ok) || (r.ok == best.ok && score(r) > score(best))) best = r;
+    first = false;
+  }
   return best;
 }
 
