@@ -1,5 +1,7 @@
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <cstring>
 #include <fstream>
 #include <functional>
 #include <map>
@@ -266,6 +268,67 @@ TEST(MeshIo, PlyRoundTripKeepsVarianceAndColour) {
   // assimp reads the same file.
   TriangleMesh viaAssimp = importMesh(dir.path() / "m.ply");
   EXPECT_EQ(viaAssimp.triangles.size(), m.triangles.size());
+}
+
+// readPly over the value types, list count types and byte orders of the format, with an element
+// it does not use between vertices and faces and a quad split in two: the same mesh and vertex
+// properties from ASCII, little- and big-endian bodies.
+TEST(MeshIo, PlyReaderTakesEveryTypeAndByteOrder) {
+  test::TempDir dir;
+  for (const std::string format : {"ascii", "binary_little_endian", "binary_big_endian"}) {
+    const bool big = format == "binary_big_endian";
+    std::string body;
+    auto put = [&](auto v) {
+      if (format == "ascii") {
+        body += std::to_string(v) + " ";
+        return;
+      }
+      char b[sizeof(v)];
+      std::memcpy(b, &v, sizeof(v));
+      if (big) std::reverse(b, b + sizeof(v));
+      body.append(b, sizeof(v));
+    };
+    for (int i = 0; i < 4; ++i) {
+      put(float(0.5f * float(i)));
+      put(double(-1.25 * i));
+      put(int16_t(-3 * i));
+      put(uint8_t(10 * i));
+      put(int32_t(-100000 * i));
+      put(uint16_t(7 * i));
+      if (format == "ascii") body += "\n";
+    }
+    put(int32_t(1));  // the edge
+    put(int8_t(-2));
+    if (format == "ascii") body += "\n";
+    put(uint16_t(4));  // the quad
+    for (uint32_t k : {0u, 1u, 2u, 3u}) put(k);
+    put(uint16_t(3));  // a triangle
+    for (uint32_t k : {3u, 2u, 1u}) put(k);
+    const std::string header = "ply\nformat " + format +
+                               " 1.0\nelement vertex 4\nproperty float x\nproperty double "
+                               "y\nproperty short z\nproperty uchar intensity\nproperty int "
+                               "q\nproperty ushort n\nelement edge 1\nproperty int a\nproperty "
+                               "char b\nelement face 2\nproperty list ushort uint "
+                               "vertex_indices\nend_header\n";
+    const std::filesystem::path f = dir.path() / (format + ".ply");
+    std::ofstream(f, std::ios::binary) << header << body;
+    const PlyData d = readPly(f);
+    ASSERT_EQ(d.mesh.vertices.size(), 4u) << format;
+    for (int i = 0; i < 4; ++i) {
+      EXPECT_EQ(d.mesh.vertices[size_t(i)], Vec3f(0.5f * float(i), float(-1.25 * i), float(-3 * i)))
+          << format;
+      EXPECT_EQ(d.vertexProperties.at("intensity")[size_t(i)], float(10 * i)) << format;
+      EXPECT_EQ(d.vertexProperties.at("q")[size_t(i)], float(-100000 * i)) << format;
+      EXPECT_EQ(d.vertexProperties.at("n")[size_t(i)], float(7 * i)) << format;
+    }
+    EXPECT_EQ(d.vertexProperties.size(), 3u) << format;
+    const std::vector<Tri> tris = {Tri(0, 1, 2), Tri(0, 2, 3), Tri(3, 2, 1)};
+    EXPECT_EQ(d.mesh.triangles, tris) << format;
+    // Cut one byte short (a binary body) or one number short (ASCII): refused.
+    const std::string cut = header + body.substr(0, body.size() - (format == "ascii" ? 2 : 1));
+    std::ofstream(f, std::ios::binary | std::ios::trunc) << cut;
+    EXPECT_THROW(readPly(f), Error) << format;
+  }
 }
 
 TEST(MeshIo, ConfidenceColourRunsGreyToRed) {

@@ -258,8 +258,22 @@ void writePly(const fs::path& path, const TriangleMesh& mesh, const std::vector<
 
 namespace {
 
+// A value's type in the body, resolved from its name once (typeOf).
+enum class PlyType : uint8_t {
+  kNone,
+  kInt8,
+  kUint8,
+  kInt16,
+  kUint16,
+  kInt32,
+  kUint32,
+  kFloat,
+  kDouble
+};
+
 struct PlyProperty {
   std::string name, type, countType;  // countType non-empty for list properties
+  PlyType kind = PlyType::kNone, countKind = PlyType::kNone;
 };
 struct PlyElement {
   std::string name;
@@ -276,7 +290,38 @@ int typeSize(const std::string& t) {
   return 0;
 }
 
-double decode(const char* p, const std::string& t, bool bigEndian) {
+PlyType typeOf(const std::string& t) {
+  if (t == "char" || t == "int8") return PlyType::kInt8;
+  if (t == "uchar" || t == "uint8") return PlyType::kUint8;
+  if (t == "short" || t == "int16") return PlyType::kInt16;
+  if (t == "ushort" || t == "uint16") return PlyType::kUint16;
+  if (t == "int" || t == "int32") return PlyType::kInt32;
+  if (t == "uint" || t == "uint32") return PlyType::kUint32;
+  if (t == "float" || t == "float32") return PlyType::kFloat;
+  if (t == "double" || t == "float64") return PlyType::kDouble;
+  return PlyType::kNone;
+}
+
+int sizeOf(PlyType t) {
+  switch (t) {
+    case PlyType::kInt8:
+    case PlyType::kUint8:
+      return 1;
+    case PlyType::kInt16:
+    case PlyType::kUint16:
+      return 2;
+    case PlyType::kInt32:
+    case PlyType::kUint32:
+    case PlyType::kFloat:
+      return 4;
+    case PlyType::kDouble:
+      return 8;
+    default:
+      return 0;
+  }
+}
+
+double decode(const char* p, PlyType t, bool bigEndian) {
   auto get = [&](auto v) {
     char bytes[sizeof(v)];
     std::memcpy(bytes, p, sizeof(v));
@@ -284,14 +329,24 @@ double decode(const char* p, const std::string& t, bool bigEndian) {
     std::memcpy(&v, bytes, sizeof(v));
     return double(v);
   };
-  if (t == "char" || t == "int8") return get(int8_t{});
-  if (t == "uchar" || t == "uint8") return get(uint8_t{});
-  if (t == "short" || t == "int16") return get(int16_t{});
-  if (t == "ushort" || t == "uint16") return get(uint16_t{});
-  if (t == "int" || t == "int32") return get(int32_t{});
-  if (t == "uint" || t == "uint32") return get(uint32_t{});
-  if (t == "float" || t == "float32") return get(float{});
-  return get(double{});
+  switch (t) {
+    case PlyType::kInt8:
+      return get(int8_t{});
+    case PlyType::kUint8:
+      return get(uint8_t{});
+    case PlyType::kInt16:
+      return get(int16_t{});
+    case PlyType::kUint16:
+      return get(uint16_t{});
+    case PlyType::kInt32:
+      return get(int32_t{});
+    case PlyType::kUint32:
+      return get(uint32_t{});
+    case PlyType::kFloat:
+      return get(float{});
+    default:
+      return get(double{});
+  }
 }
 
 }  // namespace
@@ -327,6 +382,8 @@ PlyData readPly(const fs::path& path) {
       ls >> p.name;
       if (!ls || typeSize(p.type) == 0 || (!p.countType.empty() && typeSize(p.countType) == 0))
         throw Error(where + ": unsupported PLY property line '" + line + "'");
+      p.kind = typeOf(p.type);
+      if (!p.countType.empty()) p.countKind = typeOf(p.countType);
       elements.back().props.push_back(p);
     }
   }
@@ -337,13 +394,13 @@ PlyData readPly(const fs::path& path) {
   PlyData out;
   size_t pos = bodyStart;
   std::istringstream text(ascii ? data.substr(bodyStart) : std::string());
-  auto readValue = [&](const std::string& type) -> double {
+  auto readValue = [&](PlyType type) -> double {
     if (ascii) {
       double v;
       if (!(text >> v)) throw Error(where + ": PLY body ends early or has a non-number");
       return v;
     }
-    int n = typeSize(type);
+    const int n = sizeOf(type);
     if (pos + size_t(n) > data.size()) throw Error(where + ": PLY body is truncated");
     double v = decode(data.data() + pos, type, bigEndian);
     pos += size_t(n);
@@ -359,41 +416,62 @@ PlyData readPly(const fs::path& path) {
                   " is not a non-negative integer");
     return int(value);
   };
+  std::vector<int> idx;  // one face's indices
   for (const PlyElement& e : elements) {
     const bool isVertex = e.name == "vertex", isFace = e.name == "face";
     if (e.props.empty()) continue;  // nothing to read
     if (e.count > bodyBytes)
       throw Error(where + ": PLY element '" + e.name + "' claims " + std::to_string(e.count) +
                   " entries, more than the file's " + std::to_string(bodyBytes) + " body bytes");
+    // Where each property's values go, decided once per element: a coordinate (0-2), a vertex
+    // property's values, a face's indices, or nowhere.
+    struct Target {
+      int coordinate = -1;
+      std::vector<float>* values = nullptr;
+      bool indices = false;
+    };
+    std::vector<Target> targets(e.props.size());
+    for (size_t k = 0; k < e.props.size() && e.count > 0; ++k) {
+      const PlyProperty& p = e.props[k];
+      Target& t = targets[k];
+      if (!p.countType.empty()) {
+        t.indices = isFace && (p.name == "vertex_indices" || p.name == "vertex_index");
+      } else if (isVertex) {
+        if (p.name == "x")
+          t.coordinate = 0;
+        else if (p.name == "y")
+          t.coordinate = 1;
+        else if (p.name == "z")
+          t.coordinate = 2;
+        else
+          t.values = &out.vertexProperties[p.name];
+      }
+    }
     for (size_t i = 0; i < e.count; ++i) {
       Vec3f v = Vec3f::Zero();
-      for (const PlyProperty& p : e.props) {
-        if (!p.countType.empty()) {
-          const int n = index(readValue(p.countType), "list length");
+      for (size_t k = 0; k < e.props.size(); ++k) {
+        const PlyProperty& p = e.props[k];
+        const Target& t = targets[k];
+        if (p.countKind != PlyType::kNone) {
+          const int n = index(readValue(p.countKind), "list length");
           if (size_t(n) > bodyBytes)
             throw Error(where + ": PLY list of " + std::to_string(n) +
                         " values is longer than the file");
-          const bool indices = isFace && (p.name == "vertex_indices" || p.name == "vertex_index");
-          std::vector<int> idx(size_t(n), 0);
-          for (int k = 0; k < n; ++k) {
-            const double value = readValue(p.type);
-            if (indices) idx[k] = index(value, "vertex index");
+          idx.assign(size_t(n), 0);
+          for (int j = 0; j < n; ++j) {
+            const double value = readValue(p.kind);
+            if (t.indices) idx[size_t(j)] = index(value, "vertex index");
           }
-          if (indices)
-            for (int k = 1; k + 1 < n; ++k)
-              out.mesh.triangles.emplace_back(idx[0], idx[k], idx[k + 1]);
+          if (t.indices)
+            for (int j = 1; j + 1 < n; ++j)
+              out.mesh.triangles.emplace_back(idx[0], idx[size_t(j)], idx[size_t(j) + 1]);
           continue;
         }
-        double value = readValue(p.type);
-        if (!isVertex) continue;
-        if (p.name == "x")
-          v.x() = float(value);
-        else if (p.name == "y")
-          v.y() = float(value);
-        else if (p.name == "z")
-          v.z() = float(value);
-        else
-          out.vertexProperties[p.name].push_back(float(value));
+        const double value = readValue(p.kind);
+        if (t.coordinate >= 0)
+          v[t.coordinate] = float(value);
+        else if (t.values)
+          t.values->push_back(float(value));
       }
       if (isVertex) out.mesh.vertices.push_back(v);
     }
