@@ -8,6 +8,7 @@
 #include <random>
 
 #include "inhand/core/error.h"
+#include "inhand/core/fast_math.h"
 #include "inhand/core/parallel.h"
 #include "inhand/core/pose.h"
 #include "inhand/core/random.h"
@@ -152,6 +153,72 @@ double handLowestZ(const RobotModel& robot, const JointVector& q, const Iso3& T_
   return lowest;
 }
 
+// The samples' coordinates one array per axis, for nearestInFootprint.
+struct SampleArrays {
+  std::vector<double> x, y, z;
+};
+
+// The least z of the samples p' = Rᵀ(p − origin) whose (x, y) lie in [x0, x1] × [y0, y1]
+// (+inf when none does). Each coordinate as Eigen's Rᵀ·v computes it, (R0i·dx + R1i·dy) + R2i·dz.
+double nearestInFootprint(const SampleArrays& s, const Mat3& R, const Vec3& origin, double x0,
+                          double x1, double y0, double y1) {
+  double nearest = std::numeric_limits<double>::infinity();
+  const double ox = origin.x(), oy = origin.y(), oz = origin.z();
+  for (size_t i = 0; i < s.x.size(); ++i) {
+    const double dx = s.x[i] - ox, dy = s.y[i] - oy, dz = s.z[i] - oz;
+    const double px = R(0, 0) * dx + R(1, 0) * dy + R(2, 0) * dz;
+    const double py = R(0, 1) * dx + R(1, 1) * dy + R(2, 1) * dz;
+    if (px < x0 || px > x1 || py < y0 || py > y1) continue;
+    nearest = std::min(nearest, R(0, 2) * dx + R(1, 2) * dy + R(2, 2) * dz);
+  }
+  return nearest;
+}
+
+#if INHAND_FAST_MATH_AVX2
+// nearestInFootprint four samples at a time (the same operations per sample, no FMA; the least of
+// the same values).
+__attribute__((target("avx2"))) double nearestInFootprintFour(const SampleArrays& s, const Mat3& R,
+                                                              const Vec3& origin, double x0,
+                                                              double x1, double y0, double y1) {
+  const size_t n = s.x.size(), n4 = n / 4 * 4;
+  const __m256d ox = _mm256_set1_pd(origin.x()), oy = _mm256_set1_pd(origin.y()),
+                oz = _mm256_set1_pd(origin.z());
+  __m256d r[3][3];
+  for (int a = 0; a < 3; ++a)
+    for (int b = 0; b < 3; ++b) r[a][b] = _mm256_set1_pd(R(a, b));
+  const __m256d vx0 = _mm256_set1_pd(x0), vx1 = _mm256_set1_pd(x1), vy0 = _mm256_set1_pd(y0),
+                vy1 = _mm256_set1_pd(y1),
+                inf = _mm256_set1_pd(std::numeric_limits<double>::infinity());
+  __m256d best = inf;
+  for (size_t i = 0; i < n4; i += 4) {
+    const __m256d dx = _mm256_sub_pd(_mm256_loadu_pd(s.x.data() + i), ox);
+    const __m256d dy = _mm256_sub_pd(_mm256_loadu_pd(s.y.data() + i), oy);
+    const __m256d dz = _mm256_sub_pd(_mm256_loadu_pd(s.z.data() + i), oz);
+    __m256d c[3];
+    for (int k = 0; k < 3; ++k)
+      c[k] = _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(r[0][k], dx), _mm256_mul_pd(r[1][k], dy)),
+                           _mm256_mul_pd(r[2][k], dz));
+    const __m256d px = c[0], py = c[1];
+    // Outside: px < x0 or px > x1 or ...; inside is its negation (no NaN among finite samples;
+    // a NaN compares false both ways, as in the scalar test, and is kept).
+    const __m256d outside = _mm256_or_pd(
+        _mm256_or_pd(_mm256_cmp_pd(px, vx0, _CMP_LT_OQ), _mm256_cmp_pd(px, vx1, _CMP_GT_OQ)),
+        _mm256_or_pd(_mm256_cmp_pd(py, vy0, _CMP_LT_OQ), _mm256_cmp_pd(py, vy1, _CMP_GT_OQ)));
+    if (_mm256_movemask_pd(outside) == 0xF) continue;
+    const __m256d pz = _mm256_blendv_pd(c[2], inf, outside);
+    best = _mm256_min_pd(pz, best);
+  }
+  alignas(32) double lanes[4];
+  _mm256_store_pd(lanes, best);
+  double nearest = std::min(std::min(lanes[0], lanes[1]), std::min(lanes[2], lanes[3]));
+  SampleArrays tail;
+  tail.x.assign(s.x.begin() + std::ptrdiff_t(n4), s.x.end());
+  tail.y.assign(s.y.begin() + std::ptrdiff_t(n4), s.y.end());
+  tail.z.assign(s.z.begin() + std::ptrdiff_t(n4), s.z.end());
+  return std::min(nearest, nearestInFootprint(tail, R, origin, x0, x1, y0, y1));
+}
+#endif
+
 // Brings one pose's hand to the model and closes it: what generateGrasps does per pose, with
 // what it shares across poses.
 class PoseCloser {
@@ -190,6 +257,11 @@ class PoseCloser {
       palm_.extend(b.max);
     }
     for (const SurfacePoint& sm : samples_) rho_ = std::max(rho_, (sm.p - centre_).norm());
+    for (const SurfacePoint& sm : samples_) {
+      arrays_.x.push_back(sm.p.x());
+      arrays_.y.push_back(sm.p.y());
+      arrays_.z.push_back(sm.p.z());
+    }
     // How far a palm may rise along the table normal above the centre (to keep a hand on a
     // short object clear of the table) with its axis still 1 cm below the object's top.
     for (const SurfacePoint& sm : samples_)
@@ -269,14 +341,15 @@ class PoseCloser {
     const bool firstContact = o_.approach == GraspApproach::kFirstContact;
     const Aabb box = firstContact ? openHandBox_.at({ps.spread, ps.preshape}) : palm_;
     const double margin = firstContact ? 0.005 : 0.0;
-    double nearest = std::numeric_limits<double>::infinity();
-    for (const SurfacePoint& sm : samples_) {
-      const Vec3 p = R.transpose() * (sm.p - origin);
-      if (p.x() < box.min.x() - margin || p.x() > box.max.x() + margin ||
-          p.y() < box.min.y() - margin || p.y() > box.max.y() + margin)
-        continue;
-      nearest = std::min(nearest, p.z());
-    }
+    const double x0 = box.min.x() - margin, x1 = box.max.x() + margin, y0 = box.min.y() - margin,
+                 y1 = box.max.y() + margin;
+#if INHAND_FAST_MATH_AVX2
+    const double nearest = o_.vectorised && fastMathAvx2()
+                               ? nearestInFootprintFour(arrays_, R, origin, x0, x1, y0, y1)
+                               : nearestInFootprint(arrays_, R, origin, x0, x1, y0, y1);
+#else
+    const double nearest = nearestInFootprint(arrays_, R, origin, x0, x1, y0, y1);
+#endif
     if (!std::isfinite(nearest)) return false;
     if (!firstContact) {
       T->translation() = origin + R * Vec3(0, 0, nearest - palm_.max.z() - 0.002);
@@ -294,7 +367,8 @@ class PoseCloser {
   Iso3 T_B_O_;
   const GraspOptions& o_;
   std::vector<SurfacePoint> samples_;
-  SampleGrid grid_;  // the same samples, for the contacts near the closed hand
+  SampleArrays arrays_;  // the same samples' coordinates, for the approach
+  SampleGrid grid_;      // the same samples, for the contacts near the closed hand
   Vec3 centre_, up_;
   double rho_ = 0, maxRise_ = -0.01;
   Aabb palm_;
