@@ -1,6 +1,8 @@
 // Re-grasping: stability metric, candidate generation, ranking by what Alg. 1 can still see.
 #include <gtest/gtest.h>
 
+#include <random>
+
 #include "inhand/core/pose.h"
 #include "inhand/core/random.h"
 #include "inhand/geometry/builtin_objects.h"
@@ -36,6 +38,32 @@ TEST(ForceClosure, OpposingContactsCloseAndOneSidedOnesDoNot) {
   std::vector<Contact> pair{{Vec3(0.05, 0, 0), Vec3::UnitX()}, {Vec3(-0.05, 0, 0), -Vec3::UnitX()}};
   EXPECT_LE(eps(pair, 0.5), 1e-9);
   EXPECT_LT(eps({}, 0.5), 0.0);
+}
+
+// The pruned ε (a direction's wrenches skipped once its support reaches the least so far) equals
+// the plain loop over every wrench, to the bit: random contacts on a sphere, some all round (force
+// closure), some on one side (not), several cone and direction counts.
+TEST(ForceClosure, PrunedEpsilonEqualsEveryWrenchScanned) {
+  std::mt19937_64 rng(5);
+  std::normal_distribution<double> g;
+  int closed = 0, open = 0;
+  for (int trial = 0; trial < 60; ++trial) {
+    std::vector<Contact> cs;
+    const int n = 2 + trial % 7;
+    for (int k = 0; k < n; ++k) {
+      Vec3 d(g(rng), g(rng), g(rng));
+      if (trial % 3 == 0) d.x() = std::abs(d.x()) + 0.5;  // one side only
+      d.normalize();
+      cs.push_back({0.05 * d, d});
+    }
+    const double mu = 0.3 + 0.1 * (trial % 5);
+    const int edges = 4 + trial % 9, dirs = 200 + 100 * (trial % 4);
+    const double ref = forceClosureEpsilonReference(cs, Vec3::Zero(), 0.07, mu, edges, dirs);
+    EXPECT_EQ(forceClosureEpsilon(cs, Vec3::Zero(), 0.07, mu, edges, dirs), ref) << trial;
+    (ref > 0 ? closed : open) += 1;
+  }
+  EXPECT_GT(closed, 10);
+  EXPECT_GT(open, 10);
 }
 
 namespace {

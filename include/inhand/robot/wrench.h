@@ -25,6 +25,11 @@ struct Contact {
 double forceClosureEpsilon(const std::vector<Contact>& contacts, const Vec3& centre_O, double rho,
                            double friction, int cone_edges, int directions);
 
+// forceClosureEpsilon's plain form: every wrench of every direction (the reference the pruned one
+// is tested against; the same value to the bit).
+double forceClosureEpsilonReference(const std::vector<Contact>& contacts, const Vec3& centre_O,
+                                    double rho, double friction, int cone_edges, int directions);
+
 struct HandContacts {
   std::vector<Contact> contacts;  // pooled per cell
   int fingers_touching = 0;       // fingers with a sample near one of their links
