@@ -239,7 +239,7 @@ TEST(GraspGeneration, CandidatesAreStableClearOfTheTableAndReachable) {
 
 // The approach's footprint search four samples at a time (AVX2) finds what the one-at-a-time
 // reference finds: every pose's outcome and every candidate the same, to the bit, for both
-// approaches, on a box model and the mug (a sample count that leaves a partial group of four).
+// approaches, on a box model and the mug.
 TEST(GraspGeneration, VectorisedApproachFindsTheSameCandidates) {
   const RobotModel& r = test::wam();
   const Iso3 T_B_O(Eigen::Translation3d(r.camera().lookAt_B.x(), r.camera().lookAt_B.y(),

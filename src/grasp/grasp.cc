@@ -158,13 +158,14 @@ struct SampleArrays {
   std::vector<double> x, y, z;
 };
 
-// The least z of the samples p' = Rᵀ(p − origin) whose (x, y) lie in [x0, x1] × [y0, y1]
-// (+inf when none does). Each coordinate as Eigen's Rᵀ·v computes it, (R0i·dx + R1i·dy) + R2i·dz.
+// The least z of the samples p' = Rᵀ(p − origin) (from sample `first` on) whose (x, y) lie in
+// [x0, x1] × [y0, y1] (+inf when none does). Each coordinate as Eigen's Rᵀ·v computes it,
+// (R0i·dx + R1i·dy) + R2i·dz.
 double nearestInFootprint(const SampleArrays& s, const Mat3& R, const Vec3& origin, double x0,
-                          double x1, double y0, double y1) {
+                          double x1, double y0, double y1, size_t first = 0) {
   double nearest = std::numeric_limits<double>::infinity();
   const double ox = origin.x(), oy = origin.y(), oz = origin.z();
-  for (size_t i = 0; i < s.x.size(); ++i) {
+  for (size_t i = first; i < s.x.size(); ++i) {
     const double dx = s.x[i] - ox, dy = s.y[i] - oy, dz = s.z[i] - oz;
     const double px = R(0, 0) * dx + R(1, 0) * dy + R(2, 0) * dz;
     const double py = R(0, 1) * dx + R(1, 1) * dy + R(2, 1) * dz;
@@ -199,8 +200,8 @@ __attribute__((target("avx2"))) double nearestInFootprintFour(const SampleArrays
       c[k] = _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(r[0][k], dx), _mm256_mul_pd(r[1][k], dy)),
                            _mm256_mul_pd(r[2][k], dz));
     const __m256d px = c[0], py = c[1];
-    // Outside: px < x0 or px > x1 or ...; inside is its negation (no NaN among finite samples;
-    // a NaN compares false both ways, as in the scalar test, and is kept).
+    // Outside: px < x0 or px > x1 or ... (a NaN compares false both ways and counts as inside, as
+    // in the scalar test; both minimums then pass over it).
     const __m256d outside = _mm256_or_pd(
         _mm256_or_pd(_mm256_cmp_pd(px, vx0, _CMP_LT_OQ), _mm256_cmp_pd(px, vx1, _CMP_GT_OQ)),
         _mm256_or_pd(_mm256_cmp_pd(py, vy0, _CMP_LT_OQ), _mm256_cmp_pd(py, vy1, _CMP_GT_OQ)));
@@ -210,12 +211,8 @@ __attribute__((target("avx2"))) double nearestInFootprintFour(const SampleArrays
   }
   alignas(32) double lanes[4];
   _mm256_store_pd(lanes, best);
-  double nearest = std::min(std::min(lanes[0], lanes[1]), std::min(lanes[2], lanes[3]));
-  SampleArrays tail;
-  tail.x.assign(s.x.begin() + std::ptrdiff_t(n4), s.x.end());
-  tail.y.assign(s.y.begin() + std::ptrdiff_t(n4), s.y.end());
-  tail.z.assign(s.z.begin() + std::ptrdiff_t(n4), s.z.end());
-  return std::min(nearest, nearestInFootprint(tail, R, origin, x0, x1, y0, y1));
+  const double nearest = std::min(std::min(lanes[0], lanes[1]), std::min(lanes[2], lanes[3]));
+  return std::min(nearest, nearestInFootprint(s, R, origin, x0, x1, y0, y1, n4));
 }
 #endif
 
