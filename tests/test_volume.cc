@@ -379,6 +379,10 @@ TEST(Volume, CompactDataComesBackBitForBit) {
   const uint64_t one = 1;
   std::memcpy(shortRun.data() + 8, &one, sizeof one);  // the first run's length
   EXPECT_NE(readOf(shortRun).find("do not cover"), std::string::npos);
+  // A count the rest of the data cannot hold is refused before anything is allocated for it.
+  const uint64_t claimed = n;
+  std::string manyRuns(reinterpret_cast<const char*>(&claimed), sizeof claimed);
+  EXPECT_NE(readOf(manyRuns + std::string(100, '\0')).find("cut short"), std::string::npos);
   TsdfVolume other(cube(0.12), vo);  // more voxels: the runs fall short
   std::istringstream otherIn(bytes);
   EXPECT_NE(other.readData(otherIn).find("do not cover"), std::string::npos);

@@ -76,6 +76,18 @@ bool get(std::istream& in, T* data, size_t count) {
   return bool(in.read(reinterpret_cast<char*>(data), std::streamsize(count * sizeof(T))));
 }
 
+// The bytes left to read in `in` (when it can seek; else the most a size_t holds), so that a
+// count read from a file is checked against the file before anything is allocated for it.
+uint64_t bytesLeft(std::istream& in) {
+  const std::istream::pos_type at = in.tellg();
+  if (at == std::istream::pos_type(-1)) return UINT64_MAX;
+  in.seekg(0, std::ios::end);
+  const std::istream::pos_type end = in.tellg();
+  in.seekg(at);
+  if (end == std::istream::pos_type(-1) || end < at) return UINT64_MAX;
+  return uint64_t(end - at);
+}
+
 // Whether a float's bits are not all zero (-0 included: the data come back bit for bit).
 bool nonZeroBits(float x) {
   uint32_t b;
@@ -126,6 +138,7 @@ std::string TsdfVolume::readData(std::istream& in) {
   uint64_t runs = 0;
   if (!get(in, &runs, 1)) return "voxel data cut short";
   if (runs > n) return "more state runs than voxels";
+  if (runs > bytesLeft(in) / 9) return "voxel data cut short";  // 8 + 1 bytes a run
   std::vector<uint64_t> lengths(runs);
   std::vector<uint8_t> values(runs);
   if (!get(in, lengths.data(), runs) || !get(in, values.data(), runs))
@@ -141,6 +154,7 @@ std::string TsdfVolume::readData(std::istream& in) {
   uint64_t count = 0;
   if (!get(in, &count, 1)) return "voxel data cut short";
   if (count > n) return "more spans than voxels";
+  if (count > bytesLeft(in) / 24) return "voxel data cut short";  // 16 + 2 × 4 bytes at least
   std::vector<uint64_t> spans(2 * count);
   if (!get(in, spans.data(), spans.size())) return "voxel data cut short";
   uint64_t end = 0;
