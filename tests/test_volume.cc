@@ -379,7 +379,7 @@ TEST(Volume, CompactDataComesBackBitForBit) {
   const uint64_t one = 1;
   std::memcpy(shortRun.data() + 8, &one, sizeof one);  // the first run's length
   EXPECT_NE(readOf(shortRun).find("do not cover"), std::string::npos);
-  // A count the rest of the data cannot hold is refused before anything is allocated for it.
+  // Data that end soon after a large run count: cut short.
   const uint64_t claimed = n;
   std::string manyRuns(reinterpret_cast<const char*>(&claimed), sizeof claimed);
   EXPECT_NE(readOf(manyRuns + std::string(100, '\0')).find("cut short"), std::string::npos);
