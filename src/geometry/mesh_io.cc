@@ -281,15 +281,6 @@ struct PlyElement {
   std::vector<PlyProperty> props;
 };
 
-int typeSize(const std::string& t) {
-  if (t == "char" || t == "uchar" || t == "int8" || t == "uint8") return 1;
-  if (t == "short" || t == "ushort" || t == "int16" || t == "uint16") return 2;
-  if (t == "int" || t == "uint" || t == "float" || t == "int32" || t == "uint32" || t == "float32")
-    return 4;
-  if (t == "double" || t == "float64") return 8;
-  return 0;
-}
-
 PlyType typeOf(const std::string& t) {
   if (t == "char" || t == "int8") return PlyType::kInt8;
   if (t == "uchar" || t == "uint8") return PlyType::kUint8;
@@ -380,10 +371,11 @@ PlyData readPly(const fs::path& path) {
       ls >> p.type;
       if (p.type == "list") ls >> p.countType >> p.type;
       ls >> p.name;
-      if (!ls || typeSize(p.type) == 0 || (!p.countType.empty() && typeSize(p.countType) == 0))
-        throw Error(where + ": unsupported PLY property line '" + line + "'");
       p.kind = typeOf(p.type);
       if (!p.countType.empty()) p.countKind = typeOf(p.countType);
+      if (!ls || p.kind == PlyType::kNone ||
+          (!p.countType.empty() && p.countKind == PlyType::kNone))
+        throw Error(where + ": unsupported PLY property line '" + line + "'");
       elements.back().props.push_back(p);
     }
   }
