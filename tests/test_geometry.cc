@@ -329,6 +329,20 @@ TEST(MeshIo, PlyReaderTakesEveryTypeAndByteOrder) {
     std::ofstream(f, std::ios::binary | std::ios::trunc) << cut;
     EXPECT_THROW(readPly(f), Error) << format;
   }
+  // A type the format does not have, as a value or a list's count: refused, naming the line.
+  for (const std::string prop :
+       {"property float128 x", "property list uint128 int vertex_indices"}) {
+    const std::filesystem::path f = dir.path() / "odd.ply";
+    std::ofstream(f, std::ios::binary | std::ios::trunc)
+        << "ply\nformat ascii 1.0\nelement vertex 1\n"
+        << prop << "\nend_header\n1\n";
+    try {
+      readPly(f);
+      ADD_FAILURE() << prop;
+    } catch (const Error& e) {
+      EXPECT_NE(std::string(e.what()).find(prop), std::string::npos) << e.what();
+    }
+  }
 }
 
 TEST(MeshIo, ConfidenceColourRunsGreyToRed) {
