@@ -1,5 +1,6 @@
 #include <gtest/gtest.h>
 
+#include <array>
 #include <atomic>
 #include <cstring>
 #include <limits>
@@ -407,6 +408,48 @@ TEST(Volume, MemoryBudgetRefusalGivesSize) {
 TEST(Mesh, EntropyOfGaussian) {
   EXPECT_NEAR(gaussianEntropy(1.0), 0.5 * std::log(2 * M_PI * M_E), 1e-12);
   EXPECT_NEAR(gaussianEntropy(0.05 * 0.05), 0.5 * std::log(2 * M_PI * M_E) + std::log(0.05), 1e-12);
+}
+
+TEST(Mesh, UnknownAttachedByRunsIsTheVoxelFlood) {
+  // Random volumes of every state: scattered voxels, boxes of each state (so long runs, pockets
+  // closed off by empty walls and pockets touching the volume's faces), shapes of 1 voxel wide.
+  std::mt19937 rng(7);
+  int kept = 0, dropped = 0;
+  for (int trial = 0; trial < 40; ++trial) {
+    VolumeOptions vo;
+    vo.voxel_size_m = 0.01;
+    const Vec3 size(0.01 * (1 + rng() % 30), 0.01 * (1 + rng() % 20), 0.01 * (1 + rng() % 15));
+    TsdfVolume vol(Aabb{Vec3::Zero(), size - Vec3::Constant(1e-4)}, vo);
+    const Vec3i d = vol.dims();
+    uint8_t* st = vol.states();
+    // Mostly empty space with unknown boxes in it, some touching an observed box.
+    const uint8_t background = uint8_t(trial % 4 == 0 ? rng() % 3 : 1);
+    std::fill(st, st + vol.voxelCount(), background);
+    for (int b = 0; b < 10; ++b) {
+      const Vec3i lo(int(rng() % d.x()), int(rng() % d.y()), int(rng() % d.z()));
+      const Vec3i hi = lo + Vec3i(int(rng() % (d.x() / 2 + 1)), int(rng() % (d.y() / 2 + 1)),
+                                  int(rng() % (d.z() / 2 + 1)));
+      const uint8_t value = uint8_t(std::array<int, 4>{0, 0, 1, 2}[rng() % 4]);
+      for (int z = lo.z(); z <= std::min(hi.z(), d.z() - 1); ++z)
+        for (int y = lo.y(); y <= std::min(hi.y(), d.y() - 1); ++y)
+          for (int x = lo.x(); x <= std::min(hi.x(), d.x() - 1); ++x)
+            st[vol.index(x, y, z)] = value;
+    }
+    const int scatter = int(rng() % 200);
+    for (int k = 0; k < scatter; ++k) st[rng() % vol.voxelCount()] = uint8_t(rng() % 3);
+    const std::vector<uint8_t> runs = unknownAttachedToObserved(vol),
+                               voxels = unknownAttachedToObservedReference(vol);
+    ASSERT_EQ(runs.size(), voxels.size());
+    EXPECT_TRUE(runs == voxels) << "trial " << trial << " dims " << d.transpose();
+    for (size_t i = 0; i < runs.size(); ++i) {
+      if (vol.state(i) != VoxelState::kUnknown) continue;
+      kept += voxels[i];
+      dropped += !voxels[i];
+    }
+  }
+  // Both outcomes occur often.
+  EXPECT_GT(kept, 5000) << dropped;
+  EXPECT_GT(dropped, 500) << kept;
 }
 
 namespace {

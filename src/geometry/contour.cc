@@ -28,7 +28,7 @@ constexpr std::array<uint8_t, 128> kBitCount = [] {
 
 }  // namespace
 
-ContourResult contour(const ScalarGrid& grid) {
+ContourResult contour(const ScalarGrid& grid, const ContourOptions& options) {
   const int nx = grid.dims.x(), ny = grid.dims.y(), nz = grid.dims.z();
   INHAND_CHECK(grid.values.size() == size_t(nx) * ny * nz, "grid value count mismatch");
   ContourResult result;
@@ -43,27 +43,74 @@ ContourResult contour(const ScalarGrid& grid) {
   std::vector<uint32_t> offset(n);
   std::vector<uint8_t> rowAny(size_t(ny) * nz, 0);
   std::vector<uint32_t> sliceCount(nz, 0);
-  parallelFor(0, nz, [&](int z) {
-    uint32_t count = 0;
-    for (int y = 0; y < ny; ++y) {
-      uint8_t any = 0;
-      for (int x = 0; x < nx; ++x) {
-        size_t i = grid.index(x, y, z);
-        bool in = inside(f[i]);
-        uint8_t m = 0;
-        for (int dir = 1; dir < 8; ++dir) {
-          int dx = dir & 1, dy = (dir >> 1) & 1, dz = (dir >> 2) & 1;
-          if (x + dx >= nx || y + dy >= ny || z + dz >= nz) continue;
-          if (inside(f[i + dx * sx + dy * sy + dz * sz]) != in) m |= uint8_t(1u << (dir - 1));
+  if (options.vectorised) {
+    // Each sample's side as a byte (0 or 1), then each row's masks from the four rows (y, z),
+    // (y+1, z), (y, z+1), (y+1, z+1) in straight loops the compiler vectorises: bit dir − 1 is
+    // the sample's side XOR its neighbour's along dir. A neighbour off the grid reads a row of
+    // the grid instead and its bit is cleared.
+    std::vector<uint8_t> side(n);
+    parallelFor(0, nz, [&](int z) {
+      const size_t i0 = size_t(z) * sz;
+      for (size_t i = i0; i < i0 + sz; ++i) side[i] = uint8_t(inside(f[i]));
+    });
+    parallelFor(0, nz, [&](int z) {
+      uint32_t count = 0;
+      for (int y = 0; y < ny; ++y) {
+        const bool upY = y + 1 < ny, upZ = z + 1 < nz;
+        const size_t row = grid.index(0, y, z);
+        const uint8_t* a = side.data() + row;
+        const uint8_t* b = upY ? a + sy : a;
+        const uint8_t* c = upZ ? a + sz : a;
+        const uint8_t* d = upY && upZ ? a + sy + sz : a;
+        // Bits (dir − 1) of the directions with dy (dirs 2, 3, 6, 7) and with dz (4 … 7).
+        uint8_t allowed = 0x7f;
+        if (!upY) allowed &= uint8_t(~0x66);
+        if (!upZ) allowed &= uint8_t(~0x78);
+        uint8_t* m = mask.data() + row;
+        uint8_t any = 0;
+        for (int x = 0; x + 1 < nx; ++x) {
+          const uint8_t s = a[x];
+          const uint8_t bits =
+              uint8_t((s ^ a[x + 1]) | (s ^ b[x]) << 1 | (s ^ b[x + 1]) << 2 | (s ^ c[x]) << 3 |
+                      (s ^ c[x + 1]) << 4 | (s ^ d[x]) << 5 | (s ^ d[x + 1]) << 6) &
+              allowed;
+          m[x] = bits;
+          any |= bits;
         }
-        mask[i] = m;
-        any |= m;
-        count += kBitCount[m];
+        // The last sample of the row has no +x neighbour (dirs 1, 3, 5, 7).
+        const int x = nx - 1;
+        const uint8_t s = a[x];
+        m[x] = uint8_t((s ^ b[x]) << 1 | (s ^ c[x]) << 3 | (s ^ d[x]) << 5) & allowed;
+        any |= m[x];
+        rowAny[size_t(z) * ny + y] = any != 0;
+        if (any)
+          for (int k = 0; k < nx; ++k) count += kBitCount[m[k]];
       }
-      rowAny[size_t(z) * ny + y] = any != 0;
-    }
-    sliceCount[z] = count;
-  });
+      sliceCount[z] = count;
+    });
+  } else {
+    parallelFor(0, nz, [&](int z) {
+      uint32_t count = 0;
+      for (int y = 0; y < ny; ++y) {
+        uint8_t any = 0;
+        for (int x = 0; x < nx; ++x) {
+          size_t i = grid.index(x, y, z);
+          bool in = inside(f[i]);
+          uint8_t m = 0;
+          for (int dir = 1; dir < 8; ++dir) {
+            int dx = dir & 1, dy = (dir >> 1) & 1, dz = (dir >> 2) & 1;
+            if (x + dx >= nx || y + dy >= ny || z + dz >= nz) continue;
+            if (inside(f[i + dx * sx + dy * sy + dz * sz]) != in) m |= uint8_t(1u << (dir - 1));
+          }
+          mask[i] = m;
+          any |= m;
+          count += kBitCount[m];
+        }
+        rowAny[size_t(z) * ny + y] = any != 0;
+      }
+      sliceCount[z] = count;
+    });
+  }
 
   // Pass 2: vertex id of each sample's first edge (exclusive prefix sum, slice by slice).
   std::vector<uint32_t> sliceBase(nz + 1, 0);

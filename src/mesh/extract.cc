@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstring>
 
 #include "inhand/core/parallel.h"
 #include "inhand/geometry/contour.h"
@@ -94,10 +95,7 @@ ObjectModel ObjectModel::observedSurface() const {
   return out;
 }
 
-namespace {
-
-// Marks (1) the unknown voxels 6-connected through unknown voxels to an observed voxel.
-std::vector<uint8_t> unknownAttachedToObserved(const TsdfVolume& volume) {
+std::vector<uint8_t> unknownAttachedToObservedReference(const TsdfVolume& volume) {
   const Vec3i d = volume.dims();
   const size_t n = volume.voxelCount();
   std::vector<uint8_t> keep(n, 0);
@@ -134,6 +132,104 @@ std::vector<uint8_t> unknownAttachedToObserved(const TsdfVolume& volume) {
   }
   return keep;
 }
+
+std::vector<uint8_t> unknownAttachedToObserved(const TsdfVolume& volume) {
+  const Vec3i d = volume.dims();
+  const int nx = d.x(), ny = d.y(), nz = d.z();
+  const size_t n = volume.voxelCount();
+  std::vector<uint8_t> keep(n, 0);
+  if (n == 0) return keep;
+  const uint8_t* state = volume.states();
+  const uint8_t kUnknown = uint8_t(VoxelState::kUnknown),
+                kObserved = uint8_t(VoxelState::kObserved);
+  const size_t sy = size_t(nx), sz = size_t(nx) * ny;
+  // The unknown voxels as runs along x, row by row (row = y + ny·z), found slice by slice on both
+  // cores. A run is a seed when a voxel 6-adjacent to one of its voxels is observed: its ends'
+  // x neighbours, or any voxel of the four neighbouring rows over its span (memchr).
+  struct Run {
+    int x0, x1;  // [x0, x1)
+  };
+  std::vector<std::vector<Run>> sliceRuns(static_cast<size_t>(nz));
+  std::vector<std::vector<uint8_t>> sliceSeed(static_cast<size_t>(nz));
+  std::vector<uint32_t> rowRuns(size_t(ny) * nz + 1, 0);  // runs per row, then prefix sums
+  parallelFor(0, nz, [&](int z) {
+    std::vector<Run>& runs = sliceRuns[size_t(z)];
+    std::vector<uint8_t>& seeds = sliceSeed[size_t(z)];
+    for (int y = 0; y < ny; ++y) {
+      const uint8_t* row = state + size_t(z) * sz + size_t(y) * sy;
+      const uint8_t* near[4] = {y > 0 ? row - sy : nullptr, y + 1 < ny ? row + sy : nullptr,
+                                z > 0 ? row - sz : nullptr, z + 1 < nz ? row + sz : nullptr};
+      uint32_t count = 0;
+      int x = 0;
+      while (x < nx) {
+        const void* u = std::memchr(row + x, kUnknown, size_t(nx - x));
+        if (!u) break;
+        const int x0 = int(static_cast<const uint8_t*>(u) - row);
+        int x1 = x0 + 1;
+        while (x1 < nx && row[x1] == kUnknown) ++x1;
+        bool seed = (x0 > 0 && row[x0 - 1] == kObserved) || (x1 < nx && row[x1] == kObserved);
+        for (int k = 0; k < 4 && !seed; ++k)
+          seed = near[k] && std::memchr(near[k] + x0, kObserved, size_t(x1 - x0));
+        runs.push_back({x0, x1});
+        seeds.push_back(uint8_t(seed));
+        ++count;
+        x = x1 + 1;
+      }
+      rowRuns[size_t(z) * ny + y + 1] = count;
+    }
+  });
+  for (size_t r = 0; r + 1 < rowRuns.size(); ++r) rowRuns[r + 1] += rowRuns[r];
+  std::vector<Run> runs;
+  std::vector<uint8_t> marked;
+  runs.reserve(rowRuns.back());
+  marked.reserve(rowRuns.back());
+  for (int z = 0; z < nz; ++z) {
+    runs.insert(runs.end(), sliceRuns[size_t(z)].begin(), sliceRuns[size_t(z)].end());
+    marked.insert(marked.end(), sliceSeed[size_t(z)].begin(), sliceSeed[size_t(z)].end());
+  }
+  sliceRuns = {};
+  sliceSeed = {};
+  // Flood from the seeds through runs that overlap in x in the four neighbouring rows.
+  std::vector<uint32_t> stack;
+  for (uint32_t i = 0; i < uint32_t(runs.size()); ++i)
+    if (marked[i]) stack.push_back(i);
+  std::vector<uint32_t> rowOf(runs.size());
+  for (size_t r = 0; r + 1 < rowRuns.size(); ++r)
+    std::fill(rowOf.begin() + rowRuns[r], rowOf.begin() + rowRuns[r + 1], uint32_t(r));
+  while (!stack.empty()) {
+    const uint32_t i = stack.back();
+    stack.pop_back();
+    const Run run = runs[i];
+    const int y = int(rowOf[i] % uint32_t(ny)), z = int(rowOf[i] / uint32_t(ny));
+    const int rows[4][2] = {{y - 1, z}, {y + 1, z}, {y, z - 1}, {y, z + 1}};
+    for (const auto& yz : rows) {
+      if (yz[0] < 0 || yz[0] >= ny || yz[1] < 0 || yz[1] >= nz) continue;
+      const size_t r = size_t(yz[1]) * ny + size_t(yz[0]);
+      // The row's runs are in x order: the first that ends after run.x0, on while they start
+      // before run.x1.
+      auto first = std::partition_point(runs.begin() + rowRuns[r], runs.begin() + rowRuns[r + 1],
+                                        [&](const Run& o) { return o.x1 <= run.x0; });
+      for (auto it = first; it != runs.begin() + rowRuns[r + 1] && it->x0 < run.x1; ++it) {
+        const uint32_t j = uint32_t(it - runs.begin());
+        if (!marked[j]) {
+          marked[j] = 1;
+          stack.push_back(j);
+        }
+      }
+    }
+  }
+  parallelFor(0, nz, [&](int z) {
+    for (int y = 0; y < ny; ++y) {
+      const size_t r = size_t(z) * ny + size_t(y);
+      uint8_t* row = keep.data() + size_t(z) * sz + size_t(y) * sy;
+      for (uint32_t i = rowRuns[r]; i < rowRuns[r + 1]; ++i)
+        if (marked[i]) std::memset(row + runs[i].x0, 1, size_t(runs[i].x1 - runs[i].x0));
+    }
+  });
+  return keep;
+}
+
+namespace {
 
 // Keeps the triangles of connected pieces with at least `fraction` of the largest piece's
 // triangles, and the vertices they use (with their per-vertex data).

@@ -46,8 +46,15 @@ struct ContourResult {
   std::vector<EdgeVertex> sources;
 };
 
+struct ContourOptions {
+  // contour(): the crossing edges of every sample found from a byte per sample's side in loops
+  // the compiler vectorises (false: the plain per-sample loop, kept as the reference; the same
+  // output bit for bit).
+  bool vectorised = true;
+};
+
 // Both parallel over both cores; output is deterministic (independent of scheduling).
-ContourResult contour(const ScalarGrid& grid);
+ContourResult contour(const ScalarGrid& grid, const ContourOptions& options = {});
 ContourResult surfaceNets(const ScalarGrid& grid);
 
 }  // namespace inhand

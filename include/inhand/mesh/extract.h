@@ -36,6 +36,12 @@ struct MeshOptions {
   std::string validate() const;
 };
 
+// Marks (1) the unknown voxels 6-connected through unknown voxels to an observed voxel (what
+// MeshOptions::drop_floating_unknown keeps): the unknown voxels as runs along x, flooded run by
+// run. The reference floods voxel by voxel; both give the same marks.
+std::vector<uint8_t> unknownAttachedToObserved(const TsdfVolume& volume);
+std::vector<uint8_t> unknownAttachedToObservedReference(const TsdfVolume& volume);
+
 struct ObjectModel {
   TriangleMesh mesh;              // object frame O, outward-oriented
   std::vector<float> variance;    // per vertex, m²
