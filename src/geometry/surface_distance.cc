@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include "inhand/core/error.h"
+#include "inhand/core/parallel.h"
 #include "inhand/core/random.h"
 
 namespace inhand {
@@ -97,21 +98,33 @@ TriangleDistanceIndex::TriangleDistanceIndex(const TriangleMesh& mesh,
       (*hi)[k] = std::clamp(int(std::floor((mx[k] - origin_[k]) / cell_)), 0, dims_[k] - 1);
     }
   };
+  // Each triangle's cells, then the cells counted and filled slab by slab of z on both cores:
+  // a slab's cells are its own, and take their triangles in index order as one pass would.
+  const int nt = int(tris_.size());
+  std::vector<Vec3i> lo(tris_.size()), hi(tris_.size());
+  parallelFor(
+      0, nt, [&](int i) { cellRange(tris_[size_t(i)], &lo[size_t(i)], &hi[size_t(i)]); }, 4096);
+  const int slabs = std::min(dims_.z(), 4 * threadCount());
+  auto slabZ = [&](int s) { return int(int64_t(dims_.z()) * s / slabs); };
   std::vector<uint32_t> counts(cells + 1, 0);
   for (int pass = 0; pass < 2; ++pass) {
-    for (uint32_t i = 0; i < tris_.size(); ++i) {
-      Vec3i lo, hi;
-      cellRange(tris_[i], &lo, &hi);
-      for (int z = lo.z(); z <= hi.z(); ++z)
-        for (int y = lo.y(); y <= hi.y(); ++y)
-          for (int x = lo.x(); x <= hi.x(); ++x) {
-            const size_t c = (size_t(z) * dims_.y() + y) * dims_.x() + x;
-            if (pass == 0)
-              ++counts[c + 1];
-            else
-              items_[counts[c]++] = i;
-          }
-    }
+    parallelFor(0, slabs, [&](int s) {
+      const int z0 = slabZ(s), z1 = slabZ(s + 1);
+      for (uint32_t i = 0; i < uint32_t(nt); ++i) {
+        const Vec3i& l = lo[i];
+        const Vec3i& h = hi[i];
+        if (h.z() < z0 || l.z() >= z1) continue;
+        for (int z = std::max(l.z(), z0); z <= std::min(h.z(), z1 - 1); ++z)
+          for (int y = l.y(); y <= h.y(); ++y)
+            for (int x = l.x(); x <= h.x(); ++x) {
+              const size_t c = (size_t(z) * dims_.y() + y) * dims_.x() + x;
+              if (pass == 0)
+                ++counts[c + 1];
+              else
+                items_[counts[c]++] = i;
+            }
+      }
+    });
     if (pass == 0) {
       for (size_t c = 0; c < cells; ++c) counts[c + 1] += counts[c];
       start_ = counts;
