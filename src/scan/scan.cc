@@ -193,23 +193,34 @@ std::vector<uint8_t> robotPixelMask(const DepthImage& depth, const Iso3& T_B_C,
       out[u] = last >= u - R;
     }
   });
+  // (Raw row pointers: a store through a vector's uint8_t element may alias the vector itself,
+  // which kept these loops from being vectorised.)
   parallelFor(r.v0, r.v1, [&](int v) {
-    for (int vv = std::max(0, v - R); vv <= std::min(H - 1, v + R); ++vv)
-      for (int u = r.u0; u < r.u1; ++u) near[size_t(v) * W + u] |= rowNear[size_t(vv) * W + u];
+    uint8_t* out = near.data() + size_t(v) * W;
+    for (int vv = std::max(0, v - R); vv <= std::min(H - 1, v + R); ++vv) {
+      const uint8_t* in = rowNear.data() + size_t(vv) * W;
+      for (int u = r.u0; u < r.u1; ++u) out[u] |= in[u];
+    }
   });
+  const float* robotZ = robotDepth.depth_m.data();
   parallelFor(r.v0, r.v1, [&](int v) {
+    const float* z = depth.depth_m.data() + size_t(v) * W;
+    const uint8_t* isNear = near.data() + size_t(v) * W;
+    uint8_t* out = mask.data() + size_t(v) * W;
     for (int u = r.u0; u < r.u1; ++u) {
-      const float d = depth.depth_m[size_t(v) * W + u];
-      if (!(d > 0) || !near[size_t(v) * W + u]) continue;
-      bool robot = false;
+      const float d = z[u];
+      if (!(d > 0) || !isNear[u]) continue;
+      // The pixel itself first (most pixels near the robot are on it), then the whole disk.
+      const float rd0 = robotZ[size_t(v) * W + u];
+      bool robot = rd0 > 0 && std::abs(d - rd0) < t_hand_m;
       for (int dv = -R; dv <= R && !robot; ++dv)
         for (int du = -R; du <= R && !robot; ++du) {
           const int uu = u + du, vv = v + dv;
           if (uu < 0 || vv < 0 || uu >= W || vv >= H || du * du + dv * dv > R * R) continue;
-          const float rd = robotDepth.depth_m[size_t(vv) * W + uu];
+          const float rd = robotZ[size_t(vv) * W + uu];
           robot = rd > 0 && std::abs(d - rd) < t_hand_m;
         }
-      mask[size_t(v) * W + u] = robot;
+      out[u] = robot;
     }
   });
   return mask;
