@@ -7,6 +7,7 @@
 #include <tuple>
 
 #include "inhand/core/error.h"
+#include "inhand/core/parallel.h"
 #include "inhand/core/random.h"
 
 namespace inhand {
@@ -143,11 +144,14 @@ PrincipalAxes principalAxesUpright(const std::vector<Vec3>& pts, const Vec3& upI
   std::vector<Eigen::Vector2d> q2;
   q2.reserve(pts.size());
   for (const Vec3& p : pts) q2.emplace_back((p - centroid).dot(u), (p - centroid).dot(v));
-  std::vector<double> proj(q2.size());
   const size_t cut2 = size_t(trim * double(q2.size()));
   // (The rectangle ignores the trimmed tails too: a few stray points would otherwise set it.)
-  double bestArea = std::numeric_limits<double>::infinity(), bestAngle = pca;
-  for (int k = -90; k <= 90; ++k) {
+  // Each angle's area on both cores, then the least in angle order.
+  constexpr int kSteps = 90;
+  std::vector<double> areas(2 * kSteps + 1);
+  parallelFor(-kSteps, kSteps + 1, [&](int k) {
+    thread_local std::vector<double> proj;
+    proj.resize(q2.size());
     const double a = pca + k * M_PI / 360;
     const Eigen::Vector2d d1(std::cos(a), std::sin(a)), d2(-d1.y(), d1.x());
     auto extent = [&](const Eigen::Vector2d& d) {
@@ -157,12 +161,14 @@ PrincipalAxes principalAxesUpright(const std::vector<Vec3>& pts, const Vec3& upI
       std::nth_element(proj.begin(), proj.end() - 1 - cut2, proj.end());
       return proj[proj.size() - 1 - cut2] - lo;
     };
-    const double area = extent(d1) * extent(d2);
-    if (area < bestArea - 1e-12) {
-      bestArea = area;
-      bestAngle = a;
+    areas[size_t(k + kSteps)] = extent(d1) * extent(d2);
+  });
+  double bestArea = std::numeric_limits<double>::infinity(), bestAngle = pca;
+  for (int k = -kSteps; k <= kSteps; ++k)
+    if (areas[size_t(k + kSteps)] < bestArea - 1e-12) {
+      bestArea = areas[size_t(k + kSteps)];
+      bestAngle = pca + k * M_PI / 360;
     }
-  }
   const Vec3 h1 = (std::cos(bestAngle) * u + std::sin(bestAngle) * v).normalized();
   const Vec3 h2 = up.cross(h1);
   Vec3 cand[3] = {up, h1, h2};
