@@ -275,6 +275,7 @@ void dropSmallComponents(ObjectModel* m, double fraction) {
 }  // namespace
 
 ObjectModel extractModel(const TsdfVolume& volume, const MeshOptions& options) {
+  constexpr uint8_t kEmptyState = uint8_t(VoxelState::kEmpty);
   const Vec3i d = volume.dims();
   std::vector<uint8_t> attached;
   if (options.drop_floating_unknown) attached = unknownAttachedToObserved(volume);
@@ -290,13 +291,31 @@ ObjectModel extractModel(const TsdfVolume& volume, const MeshOptions& options) {
   grid.spacing = k * volume.voxelSize();
   grid.origin = volume.origin() - Vec3::Constant(grid.spacing);
   grid.values.assign(size_t(grid.dims.prod()), mu);
-  std::vector<uint32_t> voxelOf(grid.values.size(), UINT32_MAX);  // padded sample → voxel index
+  // The voxel of padded sample (x, y, z) (UINT32_MAX on the padding), and of a sample's index.
+  auto voxelAt = [&](int x, int y, int z) {
+    if (x < 1 || y < 1 || z < 1 || x > n.x() || y > n.y() || z > n.z()) return UINT32_MAX;
+    return uint32_t(volume.index((x - 1) * k, (y - 1) * k, (z - 1) * k));
+  };
+  const size_t gx = size_t(grid.dims.x()), gxy = gx * size_t(grid.dims.y());
+  auto voxelOf = [&](size_t g) {
+    return voxelAt(int(g % gx), int(g / gx % size_t(grid.dims.y())), int(g / gxy));
+  };
+  // Samples of empty voxels keep the +μ the grid was filled with: rows of samples with none but
+  // empty voxels are passed over. Which rows have an unknown sample is noted for the next pass.
+  std::vector<uint8_t> rowUnknown(size_t(n.y()) * n.z(), 0);
+  const uint8_t* states = volume.states();
   parallelFor(0, n.z(), [&](int zs) {
-    for (int ys = 0; ys < n.y(); ++ys)
+    for (int ys = 0; ys < n.y(); ++ys) {
+      const size_t i0 = volume.index(0, ys * k, zs * k);
+      if (k == 1) {
+        bool allEmpty = true;
+        for (int xs = 0; xs < n.x(); ++xs) allEmpty &= states[i0 + size_t(xs)] == kEmptyState;
+        if (allEmpty) continue;
+      }
+      bool unknown = false;
       for (int xs = 0; xs < n.x(); ++xs) {
-        size_t i = volume.index(xs * k, ys * k, zs * k);
+        const size_t i = i0 + size_t(xs) * size_t(k);
         size_t g = grid.index(xs + 1, ys + 1, zs + 1);
-        voxelOf[g] = uint32_t(i);
         VoxelState st = volume.state(i);
         if (st == VoxelState::kUnknown && !isUnknown(uint32_t(i))) st = VoxelState::kEmpty;
         switch (st) {
@@ -310,9 +329,12 @@ ObjectModel extractModel(const TsdfVolume& volume, const MeshOptions& options) {
             break;
           case VoxelState::kUnknown:
             grid.values[g] = -mu;
+            unknown = true;
             break;
         }
       }
+      rowUnknown[size_t(zs) * n.y() + size_t(ys)] = unknown;
+    }
   });
   // An unknown sample next to an observed one that lies less than their distance in front of the
   // surface is behind that measured surface: its signed distance is at least the neighbour's less
@@ -327,20 +349,22 @@ ObjectModel extractModel(const TsdfVolume& volume, const MeshOptions& options) {
     const std::array<float, 4> stepLength{0.f, h, std::sqrt(2.f) * h, std::sqrt(3.f) * h};
     // Only unknown samples are written and only observed ones read: no sample read changes.
     parallelFor(1, grid.dims.z() - 1, [&](int z) {
-      for (int y = 1; y < grid.dims.y() - 1; ++y)
+      for (int y = 1; y < grid.dims.y() - 1; ++y) {
+        if (!rowUnknown[size_t(z - 1) * n.y() + size_t(y - 1)]) continue;
         for (int x = 1; x < grid.dims.x() - 1; ++x) {
           const size_t g = grid.index(x, y, z);
-          if (voxelOf[g] == UINT32_MAX || !isUnknown(voxelOf[g])) continue;
+          const uint32_t v = voxelAt(x, y, z);
+          if (v == UINT32_MAX || !isUnknown(v)) continue;
           float best = -mu;
           for (int dz = -1; dz <= 1; ++dz)
             for (int dy = -1; dy <= 1; ++dy)
               for (int dx = -1; dx <= 1; ++dx) {
                 const int steps = std::abs(dx) + std::abs(dy) + std::abs(dz);
                 if (steps == 0) continue;
-                const size_t nb = grid.index(x + dx, y + dy, z + dz);
-                const uint32_t vn = voxelOf[nb];
+                const uint32_t vn = voxelAt(x + dx, y + dy, z + dz);
                 if (vn == UINT32_MAX || volume.state(vn) != VoxelState::kObserved) continue;
-                const float dn = grid.values[nb], len = stepLength[size_t(steps)];
+                const float dn = grid.values[grid.index(x + dx, y + dy, z + dz)],
+                            len = stepLength[size_t(steps)];
                 if (dn > 0.f && dn < len) best = std::max(best, dn - len);
               }
           if (best > -mu) {
@@ -348,6 +372,7 @@ ObjectModel extractModel(const TsdfVolume& volume, const MeshOptions& options) {
             behindMeasured[g] = 1;
           }
         }
+      }
     });
   }
   ContourResult c =
@@ -366,7 +391,7 @@ ObjectModel extractModel(const TsdfVolume& volume, const MeshOptions& options) {
   // One crossing's variance: σ_hole² next to an unknown voxel, else 1/Σw interpolated between
   // observed voxels (or the observed end's, next to an empty voxel).
   auto crossingVariance = [&](const EdgeVertex& e) {
-    uint32_t va = voxelOf[e.a], vb = voxelOf[e.b];
+    uint32_t va = voxelOf(e.a), vb = voxelOf(e.b);
     VoxelState sa = stateOf(va), sb = stateOf(vb);
     // Behind a measured surface (above): the crossing is that measurement's.
     if (behindMeasured[e.a] && sb == VoxelState::kObserved)
