@@ -35,43 +35,62 @@ bool parseSurfaceMethod(const std::string& s, SurfaceMethod* out) {
 
 double gaussianEntropy(double variance) { return 0.5 * std::log(2.0 * M_PI * M_E * variance); }
 
+namespace {
+// Σ f(i) over i in [0, n) (f returns a fixed-size array of terms), in fixed chunks on both
+// cores, the chunks' sums added in chunk order: the same value for any thread count.
+template <size_t N, typename F>
+std::array<double, N> chunkedSums(int n, F&& f) {
+  constexpr int kChunk = 8192;
+  const int chunks = (n + kChunk - 1) / kChunk;
+  std::vector<std::array<double, N>> part(static_cast<size_t>(chunks));
+  parallelFor(0, chunks, [&](int c) {
+    std::array<double, N> sum{};
+    for (int i = c * kChunk; i < std::min(n, (c + 1) * kChunk); ++i) {
+      const std::array<double, N> term = f(i);
+      for (size_t k = 0; k < N; ++k) sum[k] += term[k];
+    }
+    part[size_t(c)] = sum;
+  });
+  std::array<double, N> total{};
+  for (const std::array<double, N>& p : part)
+    for (size_t k = 0; k < N; ++k) total[k] += p[k];
+  return total;
+}
+}  // namespace
+
 double ObjectModel::meanEntropy() const {
   if (variance.empty()) return 0.0;
-  double sum = 0;
-  for (float v : variance) sum += gaussianEntropy(v);
+  const double sum = chunkedSums<1>(int(variance.size()), [&](int i) {
+    return std::array<double, 1>{gaussianEntropy(variance[size_t(i)])};
+  })[0];
   return sum / double(variance.size());
 }
 
 double ObjectModel::observedAreaFraction() const {
-  double total = 0, seen = 0;
-  for (int t = 0; t < int(mesh.triangles.size()); ++t) {
-    double a = mesh.triangleArea(t);
-    total += a;
-    const Tri& f = mesh.triangles[t];
-    if (observed[f[0]] && observed[f[1]] && observed[f[2]]) seen += a;
-  }
+  const auto [total, seen] = chunkedSums<2>(int(mesh.triangles.size()), [&](int t) {
+    const double a = mesh.triangleArea(t);
+    const Tri& f = mesh.triangles[size_t(t)];
+    return std::array<double, 2>{a, observed[f[0]] && observed[f[1]] && observed[f[2]] ? a : 0.0};
+  });
   return total > 0 ? seen / total : 0.0;
 }
 
 double ObjectModel::unresolvedInformation(double sigma_ref_m) const {
   const double ref = sigma_ref_m * sigma_ref_m;
-  double sum = 0;
-  for (int t = 0; t < int(mesh.triangles.size()); ++t) {
-    const Tri& f = mesh.triangles[t];
+  return chunkedSums<1>(int(mesh.triangles.size()), [&](int t) {
+    const Tri& f = mesh.triangles[size_t(t)];
     double h = 0;
     for (int k = 0; k < 3; ++k) h += std::max(0.0, 0.5 * std::log(double(variance[f[k]]) / ref));
-    sum += mesh.triangleArea(t) * h / 3;
-  }
-  return sum;
+    return std::array<double, 1>{mesh.triangleArea(t) * h / 3};
+  })[0];
 }
 
 double ObjectModel::holeArea() const {
-  double hole = 0;
-  for (int t = 0; t < int(mesh.triangles.size()); ++t) {
-    const Tri& f = mesh.triangles[t];
-    if (!(observed[f[0]] && observed[f[1]] && observed[f[2]])) hole += mesh.triangleArea(t);
-  }
-  return hole;
+  return chunkedSums<1>(int(mesh.triangles.size()), [&](int t) {
+    const Tri& f = mesh.triangles[size_t(t)];
+    return std::array<double, 1>{
+        observed[f[0]] && observed[f[1]] && observed[f[2]] ? 0.0 : mesh.triangleArea(t)};
+  })[0];
 }
 
 ObjectModel ObjectModel::observedSurface() const {
