@@ -1,5 +1,7 @@
 #include "inhand/volume/tsdf_volume.h"
 
+#include <tbb/parallel_invoke.h>
+
 #include <algorithm>
 #include <cmath>
 #include <cstring>
@@ -98,34 +100,41 @@ bool nonZeroBits(float x) {
 }  // namespace
 
 void TsdfVolume::writeData(std::ostream& out) const {
-  // The states: the runs' count, their lengths, their values.
+  // The states' runs (lengths, values) and the sums' spans (first, count) where either sum is
+  // non-zero: two scans of the volume, one on each core.
   std::vector<uint64_t> lengths;
   std::vector<uint8_t> values;
+  std::vector<uint64_t> spans;
   const size_t n = state_.size();
-  for (size_t i = 0; i < n;) {
-    size_t j = i + 1;
-    while (j < n && state_[j] == state_[i]) ++j;
-    lengths.push_back(j - i);
-    values.push_back(state_[i]);
-    i = j;
-  }
+  tbb::parallel_invoke(
+      [&] {
+        for (size_t i = 0; i < n;) {
+          size_t j = i + 1;
+          while (j < n && state_[j] == state_[i]) ++j;
+          lengths.push_back(j - i);
+          values.push_back(state_[i]);
+          i = j;
+        }
+      },
+      [&] {
+        for (size_t i = 0; i < n;) {
+          if (!nonZeroBits(sumWD_[i]) && !nonZeroBits(sumW_[i])) {
+            ++i;
+            continue;
+          }
+          size_t j = i + 1;
+          while (j < n && (nonZeroBits(sumWD_[j]) || nonZeroBits(sumW_[j]))) ++j;
+          spans.push_back(i);
+          spans.push_back(j - i);
+          i = j;
+        }
+      });
+  // The states: the runs' count, their lengths, their values.
   const uint64_t runs = lengths.size();
   put(out, &runs, 1);
   put(out, lengths.data(), lengths.size());
   put(out, values.data(), values.size());
   // The sums: the spans' count, their (first, count) pairs, then the spans' Σw·d and Σw.
-  std::vector<uint64_t> spans;
-  for (size_t i = 0; i < n;) {
-    if (!nonZeroBits(sumWD_[i]) && !nonZeroBits(sumW_[i])) {
-      ++i;
-      continue;
-    }
-    size_t j = i + 1;
-    while (j < n && (nonZeroBits(sumWD_[j]) || nonZeroBits(sumW_[j]))) ++j;
-    spans.push_back(i);
-    spans.push_back(j - i);
-    i = j;
-  }
   const uint64_t count = spans.size() / 2;
   put(out, &count, 1);
   put(out, spans.data(), spans.size());
