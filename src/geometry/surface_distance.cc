@@ -72,18 +72,33 @@ std::vector<Vec3> sampleSurfaceUniform(const TriangleMesh& mesh, int count, uint
 TriangleDistanceIndex::TriangleDistanceIndex(const TriangleMesh& mesh,
                                              const std::vector<uint8_t>& use, double cell_m) {
   INHAND_CHECK(use.empty() || use.size() == mesh.triangles.size(), "one flag per triangle");
+  // The indexed triangles (in mesh order) filled on both cores; their box and summed edge
+  // lengths in that order.
+  std::vector<int> which;
+  which.reserve(mesh.triangles.size());
+  for (size_t t = 0; t < mesh.triangles.size(); ++t)
+    if (use.empty() || use[t]) which.push_back(int(t));
+  tris_.resize(which.size());
+  std::vector<double> edges(which.size());
+  parallelFor(
+      0, int(which.size()),
+      [&](int i) {
+        const Tri& f = mesh.triangles[size_t(which[size_t(i)])];
+        T& tri = tris_[size_t(i)];
+        tri = T{mesh.vertices[f[0]].cast<double>(), mesh.vertices[f[1]].cast<double>(),
+                mesh.vertices[f[2]].cast<double>()};
+        edges[size_t(i)] = (tri.b - tri.a).norm() + (tri.c - tri.b).norm() + (tri.a - tri.c).norm();
+      },
+      4096);
+  if (tris_.empty()) return;
   Aabb box;
   double edge = 0;
-  for (size_t t = 0; t < mesh.triangles.size(); ++t) {
-    if (!use.empty() && !use[t]) continue;
-    const Tri& f = mesh.triangles[t];
-    T tri{mesh.vertices[f[0]].cast<double>(), mesh.vertices[f[1]].cast<double>(),
-          mesh.vertices[f[2]].cast<double>()};
-    for (const Vec3* v : {&tri.a, &tri.b, &tri.c}) box.extend(*v);
-    edge += (tri.b - tri.a).norm() + (tri.c - tri.b).norm() + (tri.a - tri.c).norm();
-    tris_.push_back(tri);
+  for (size_t i = 0; i < tris_.size(); ++i) {
+    box.extend(tris_[i].a);
+    box.extend(tris_[i].b);
+    box.extend(tris_[i].c);
+    edge += edges[i];
   }
-  if (tris_.empty()) return;
   const Vec3 size = box.size().cwiseMax(Vec3::Constant(1e-6));
   // Cells about two mean edges wide, at most ~128 per axis.
   cell_ = cell_m > 0 ? cell_m
