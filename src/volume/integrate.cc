@@ -544,16 +544,22 @@ class DepthTiles {
     if (rect.empty()) tw_ = th_ = 0;
     lo_.assign(size_t(tw_) * th_, std::numeric_limits<float>::infinity());
     hi_.assign(size_t(tw_) * th_, -std::numeric_limits<float>::infinity());
-    for (int v = rect.v0; v < rect.v1; ++v) {
-      const size_t row = size_t((v - rect.v0) / kDepthTile) * tw_;
-      for (int u = rect.u0; u < rect.u1; ++u) {
-        const float D = depth.at(u, v);
-        if (!(D > 0.f)) continue;
-        const size_t t = row + size_t((u - rect.u0) / kDepthTile);
-        lo_[t] = std::min(lo_[t], D);
-        hi_[t] = std::max(hi_[t], D);
+    // A row of tiles per task (on both cores).
+    parallelFor(0, th_, [&](int ty) {
+      float* lo = lo_.data() + size_t(ty) * tw_;
+      float* hi = hi_.data() + size_t(ty) * tw_;
+      const int v0 = rect.v0 + ty * kDepthTile, v1 = std::min(rect.v1, v0 + kDepthTile);
+      for (int v = v0; v < v1; ++v) {
+        const float* row = depth.depth_m.data() + size_t(v) * depth.width;
+        for (int u = rect.u0; u < rect.u1; ++u) {
+          const float D = row[u];
+          if (!(D > 0.f)) continue;
+          const int t = (u - rect.u0) / kDepthTile;
+          lo[t] = std::min(lo[t], D);
+          hi[t] = std::max(hi[t], D);
+        }
       }
-    }
+    });
   }
   // The depth range over pixels [u0, u1] × [v0, v1] (inclusive, clipped to the rect); false when
   // none of them has a depth.
