@@ -1,5 +1,7 @@
 #include "inhand/scan/scan.h"
 
+#include <tbb/parallel_invoke.h>
+
 #include <chrono>
 #include <optional>
 
@@ -134,19 +136,32 @@ DepthImage robotDepthImage(const RobotOccluders& robotScenes, const JointVector&
   }
   // Triangle ids run on from mesh to mesh (the id is the index into `normal`); each triangle's
   // normal in the camera frame.
-  std::vector<Vec3> normal;
-  for (size_t k = 0; k < meshes.size(); ++k) {
-    const RayScene::PlacedMesh& m = meshes[k];
-    // Back faces of a closed link may go when the camera is outside its box.
-    const bool inside = m.bounds->contains(m.T.inverse().translation());
-    raster.draw(*m.mesh, m.T, int(normal.size()), solid[k] && !inside, 0, m.bounds);
-    for (const Tri& t : m.mesh->triangles) {
-      const Vec3 a = m.T * m.mesh->vertices[size_t(t[0])].cast<double>();
-      const Vec3 b = m.T * m.mesh->vertices[size_t(t[1])].cast<double>();
-      const Vec3 c = m.T * m.mesh->vertices[size_t(t[2])].cast<double>();
-      normal.push_back((b - a).cross(c - a));
-    }
-  }
+  std::vector<size_t> firstId(meshes.size() + 1, 0);
+  for (size_t k = 0; k < meshes.size(); ++k)
+    firstId[k + 1] = firstId[k] + meshes[k].mesh->triangles.size();
+  std::vector<Vec3> normal(firstId.back());
+  // The normals on the other core while this one rasterises.
+  tbb::parallel_invoke(
+      [&] {
+        for (size_t k = 0; k < meshes.size(); ++k) {
+          const RayScene::PlacedMesh& m = meshes[k];
+          // Back faces of a closed link may go when the camera is outside its box.
+          const bool inside = m.bounds->contains(m.T.inverse().translation());
+          raster.draw(*m.mesh, m.T, int(firstId[k]), solid[k] && !inside, 0, m.bounds);
+        }
+      },
+      [&] {
+        for (size_t k = 0; k < meshes.size(); ++k) {
+          const RayScene::PlacedMesh& m = meshes[k];
+          Vec3* out = normal.data() + firstId[k];
+          for (const Tri& t : m.mesh->triangles) {
+            const Vec3 a = m.T * m.mesh->vertices[size_t(t[0])].cast<double>();
+            const Vec3 b = m.T * m.mesh->vertices[size_t(t[1])].cast<double>();
+            const Vec3 c = m.T * m.mesh->vertices[size_t(t[2])].cast<double>();
+            *out++ = (b - a).cross(c - a);
+          }
+        }
+      });
   const double cosLimit = std::cos(89 * M_PI / 180);
   parallelFor(window.v0, window.v1, [&](int v) {
     for (int u = window.u0; u < window.u1; ++u) {
