@@ -7,6 +7,7 @@
 #include "inhand/core/error.h"
 #include "inhand/core/file_util.h"
 #include "inhand/core/json_util.h"
+#include "inhand/core/parallel.h"
 #include "inhand/geometry/mesh_io.h"
 
 namespace inhand {
@@ -26,20 +27,22 @@ std::string readText(const fs::path& p) {
 std::string base64(const void* data, size_t n) {
   static const char* k = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
   const auto* b = static_cast<const unsigned char*>(data);
-  std::string out;
-  out.reserve((n + 2) / 3 * 4);
+  std::string out((n + 2) / 3 * 4, '=');
+  char* o = out.data();
   size_t i = 0;
-  for (; i + 2 < n; i += 3) {
+  for (; i + 2 < n; i += 3, o += 4) {
     const uint32_t v = (uint32_t(b[i]) << 16) | (uint32_t(b[i + 1]) << 8) | b[i + 2];
-    for (int s = 18; s >= 0; s -= 6) out += k[(v >> s) & 63];
+    o[0] = k[(v >> 18) & 63];
+    o[1] = k[(v >> 12) & 63];
+    o[2] = k[(v >> 6) & 63];
+    o[3] = k[v & 63];
   }
-  if (i < n) {
+  if (i < n) {  // one or two bytes left: the rest of the four characters stay '='
     uint32_t v = uint32_t(b[i]) << 16;
     if (i + 1 < n) v |= uint32_t(b[i + 1]) << 8;
-    out += k[(v >> 18) & 63];
-    out += k[(v >> 12) & 63];
-    out += i + 1 < n ? k[(v >> 6) & 63] : '=';
-    out += '=';
+    o[0] = k[(v >> 18) & 63];
+    o[1] = k[(v >> 12) & 63];
+    if (i + 1 < n) o[2] = k[(v >> 6) & 63];
   }
   return out;
 }
@@ -137,24 +140,43 @@ void writeScanReport(const fs::path& dir, const fs::path& web) {
   const Json summary = readJsonFile(summaryFile);
   if (!summary.is_object() || !summary.contains("views") || !summary.contains("grasps"))
     throw Error(summaryFile.string() + ": not an inhand scan summary (no views or grasps)");
-  Json data = {{"summary", summary}};
-  data["model"] = meshJson(dir / "model.ply");
-  if (fs::exists(dir / "truth.ply")) data["truth"] = meshJson(dir / "truth.ply");
-  Json grasps = Json::array();
-  for (size_t g = 0; g < summary["grasps"].size(); ++g) {
+  // The PLYs the report shows, read and encoded on both cores.
+  const fs::path gd = dir / "grasps";
+  std::vector<fs::path> plys = {dir / "model.ply"};
+  if (fs::exists(dir / "truth.ply")) plys.push_back(dir / "truth.ply");
+  struct GraspPlys {
+    int model = -1, hand = -1;
+    std::vector<int> candidates;
+  };
+  std::vector<GraspPlys> graspPlys(summary["grasps"].size());
+  for (size_t g = 0; g < graspPlys.size(); ++g) {
     const std::string k = std::to_string(g + 1);
-    Json gj = Json::object();
-    const fs::path gd = dir / "grasps";
+    auto add = [&](const fs::path& f) {
+      plys.push_back(f);
+      return int(plys.size()) - 1;
+    };
     if (fs::exists(gd / ("grasp_" + k + "_model.ply")))
-      gj["model"] = meshJson(gd / ("grasp_" + k + "_model.ply"));
+      graspPlys[g].model = add(gd / ("grasp_" + k + "_model.ply"));
     if (fs::exists(gd / ("grasp_" + k + "_hand.ply")))
-      gj["hand"] = meshJson(gd / ("grasp_" + k + "_hand.ply"));
-    Json cands = Json::array();
+      graspPlys[g].hand = add(gd / ("grasp_" + k + "_hand.ply"));
     for (int c = 1;; ++c) {
       const fs::path f = gd / ("grasp_" + k + "_candidate_" + std::to_string(c) + ".ply");
       if (!fs::exists(f)) break;
-      cands.push_back(meshJson(f));
+      graspPlys[g].candidates.push_back(add(f));
     }
+  }
+  std::vector<Json> meshes(plys.size());
+  parallelFor(0, int(plys.size()), [&](int i) { meshes[size_t(i)] = meshJson(plys[size_t(i)]); });
+  Json data = {{"summary", summary}};
+  data["model"] = std::move(meshes[0]);
+  if (plys.size() > 1 && plys[1] == dir / "truth.ply") data["truth"] = std::move(meshes[1]);
+  Json grasps = Json::array();
+  for (const GraspPlys& g : graspPlys) {
+    Json gj = Json::object();
+    if (g.model >= 0) gj["model"] = std::move(meshes[size_t(g.model)]);
+    if (g.hand >= 0) gj["hand"] = std::move(meshes[size_t(g.hand)]);
+    Json cands = Json::array();
+    for (int c : g.candidates) cands.push_back(std::move(meshes[size_t(c)]));
     gj["candidates"] = cands;
     grasps.push_back(gj);
   }
