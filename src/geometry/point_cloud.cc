@@ -26,9 +26,10 @@ std::optional<PlaneFit> fitPlaneRansac(const std::vector<Vec3>& pts, const Plane
       candidates.push_back(i);
   if (candidates.size() < 3) return std::nullopt;
   std::uniform_int_distribution<size_t> pick(0, candidates.size() - 1);
-  std::optional<Plane> best;
-  int bestCount = 0;
-  for (int it = 0; it < o.iterations; ++it) {
+  // The hypotheses drawn in order, their inliers counted on both cores, the first with the most
+  // kept.
+  std::vector<std::optional<Plane>> hypotheses(size_t(std::max(0, o.iterations)));
+  for (std::optional<Plane>& h : hypotheses) {
     const Vec3 &a = pts[candidates[pick(rng)]], &b = pts[candidates[pick(rng)]],
                &c = pts[candidates[pick(rng)]];
     Vec3 n = (b - a).cross(c - a);
@@ -36,14 +37,23 @@ std::optional<PlaneFit> fitPlaneRansac(const std::vector<Vec3>& pts, const Plane
     n.normalize();
     if (n.dot(up) < 0) n = -n;
     if (n.dot(up) < cosTilt) continue;
-    const Plane h{n, -n.dot(a)};
-    int count = 0;
-    for (const Vec3& p : pts) count += std::abs(h.distance(p)) < o.inlier_m;
-    if (count > bestCount) {
-      bestCount = count;
-      best = h;
-    }
+    h = Plane{n, -n.dot(a)};
   }
+  std::vector<int> counts(hypotheses.size(), 0);
+  parallelFor(0, int(hypotheses.size()), [&](int it) {
+    const std::optional<Plane>& h = hypotheses[size_t(it)];
+    if (!h) return;
+    int count = 0;
+    for (const Vec3& p : pts) count += std::abs(h->distance(p)) < o.inlier_m;
+    counts[size_t(it)] = count;
+  });
+  std::optional<Plane> best;
+  int bestCount = 0;
+  for (size_t it = 0; it < hypotheses.size(); ++it)
+    if (hypotheses[it] && counts[it] > bestCount) {
+      bestCount = counts[it];
+      best = hypotheses[it];
+    }
   if (!best) return std::nullopt;
   std::vector<Vec3> in;
   for (const Vec3& p : pts)
