@@ -120,11 +120,17 @@ Silhouette silhouette(const DepthImage& depth, const std::vector<uint8_t>& hidde
 std::vector<int> visiblePoints(const CameraIntrinsics& K, const std::vector<SurfacePoint>& points,
                                const std::vector<Vec3>& occluders, const Iso3& T) {
   PointBuffer buffer(K);
-  for (const SurfacePoint& sp : points) buffer.add(T * sp.p);
+  // Each point moved once (kept for the visibility test).
+  thread_local std::vector<Vec3> moved;
+  moved.resize(points.size());
+  for (size_t k = 0; k < points.size(); ++k) {
+    moved[k] = T * points[k].p;
+    buffer.add(moved[k]);
+  }
   for (const Vec3& p : occluders) buffer.add(T * p);
   std::vector<int> visible;
   for (size_t k = 0; k < points.size(); ++k) {
-    const Vec3 x = T * points[k].p;
+    const Vec3& x = moved[k];
     if (x.z() > 0.1 && (T.linear() * points[k].n).dot(x) < 0 && buffer.visible(x))
       visible.push_back(int(k));
   }
