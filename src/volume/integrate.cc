@@ -535,35 +535,41 @@ constexpr int kBrick = 8;      // voxels per brick edge
 constexpr int kDepthTile = 8;  // pixels per depth tile edge
 
 // The nearest and farthest depth returned in each kDepthTile² tile of the image's `rect`
-// (+inf / −inf where the tile has none).
+// (+inf / −inf where the tile has none), and whether any of its depths is a measurement (not
+// carve-only).
 class DepthTiles {
  public:
-  DepthTiles(const DepthImage& depth, const PixelRect& rect) : rect_(rect) {
+  DepthTiles(const DepthImage& depth, const PixelRect& rect, const uint8_t* carve) : rect_(rect) {
     tw_ = (rect.u1 - rect.u0 + kDepthTile - 1) / kDepthTile;
     th_ = (rect.v1 - rect.v0 + kDepthTile - 1) / kDepthTile;
     if (rect.empty()) tw_ = th_ = 0;
     lo_.assign(size_t(tw_) * th_, std::numeric_limits<float>::infinity());
     hi_.assign(size_t(tw_) * th_, -std::numeric_limits<float>::infinity());
+    measured_.assign(size_t(tw_) * th_, 0);
     // A row of tiles per task (on both cores).
     parallelFor(0, th_, [&](int ty) {
       float* lo = lo_.data() + size_t(ty) * tw_;
       float* hi = hi_.data() + size_t(ty) * tw_;
+      uint8_t* measured = measured_.data() + size_t(ty) * tw_;
       const int v0 = rect.v0 + ty * kDepthTile, v1 = std::min(rect.v1, v0 + kDepthTile);
       for (int v = v0; v < v1; ++v) {
-        const float* row = depth.depth_m.data() + size_t(v) * depth.width;
+        const size_t row0 = size_t(v) * depth.width;
+        const float* row = depth.depth_m.data() + row0;
         for (int u = rect.u0; u < rect.u1; ++u) {
           const float D = row[u];
           if (!(D > 0.f)) continue;
           const int t = (u - rect.u0) / kDepthTile;
           lo[t] = std::min(lo[t], D);
           hi[t] = std::max(hi[t], D);
+          measured[t] |= !(carve && carve[row0 + size_t(u)]);
         }
       }
     });
   }
   // The depth range over pixels [u0, u1] × [v0, v1] (inclusive, clipped to the rect); false when
   // none of them has a depth.
-  bool range(int u0, int v0, int u1, int v1, float* lo, float* hi) const {
+  // *measured: whether any of those depths is a measurement (not carve-only).
+  bool range(int u0, int v0, int u1, int v1, float* lo, float* hi, bool* measured) const {
     u0 = std::max(u0, rect_.u0);
     v0 = std::max(v0, rect_.v0);
     u1 = std::min(u1, rect_.u1 - 1);
@@ -571,11 +577,13 @@ class DepthTiles {
     if (u0 > u1 || v0 > v1) return false;
     *lo = std::numeric_limits<float>::infinity();
     *hi = -std::numeric_limits<float>::infinity();
+    *measured = false;
     for (int ty = (v0 - rect_.v0) / kDepthTile; ty <= (v1 - rect_.v0) / kDepthTile; ++ty)
       for (int tx = (u0 - rect_.u0) / kDepthTile; tx <= (u1 - rect_.u0) / kDepthTile; ++tx) {
         const size_t t = size_t(ty) * tw_ + size_t(tx);
         *lo = std::min(*lo, lo_[t]);
         *hi = std::max(*hi, hi_[t]);
+        *measured = *measured || measured_[t];
       }
     return *lo <= *hi;
   }
@@ -584,13 +592,15 @@ class DepthTiles {
   PixelRect rect_;
   int tw_ = 0, th_ = 0;
   std::vector<float> lo_, hi_;
+  std::vector<uint8_t> measured_;
 };
 
 // Whether a brick of voxels is certain to be left unchanged by the frame, from its corners alone:
 // none of its voxels projects onto a pixel with a depth; or all lie more than μ behind every depth
 // their pixels can hold (d < −μ ≤ −band: no update); or all lie more than μ in front of them and
 // every voxel is already empty (d > μ changes only unknown and observed voxels, and carve-only
-// pixels only unknown ones). The margin covers the kernel's single-precision depth and pixel.
+// pixels only unknown ones); or every depth their pixels can hold is carve-only (the robot's) and
+// no voxel is unknown. The margin covers the kernel's single-precision depth and pixel.
 struct BrickCull {
   const TsdfVolume& volume;
   const Iso3& T_C_O;
@@ -619,22 +629,27 @@ struct BrickCull {
     if (uMax < -big || vMax < -big || uMin > big || vMin > big) return true;
     // A voxel reads pixel floor(u + 0.5): one more pixel each side for rounding.
     float dLo, dHi;
+    bool measured;
     if (!tiles.range(int(std::floor(uMin + 0.5)) - 1, int(std::floor(vMin + 0.5)) - 1,
-                     int(std::floor(uMax + 0.5)) + 1, int(std::floor(vMax + 0.5)) + 1, &dLo, &dHi))
+                     int(std::floor(uMax + 0.5)) + 1, int(std::floor(vMax + 0.5)) + 1, &dLo, &dHi,
+                     &measured))
       return true;
     const double margin = 1e-4 + 1e-5 * zMax;
-    if (zMin - double(dHi) > double(mu) + margin) return true;              // all behind the band
-    if (double(dLo) - zMax > double(mu) + margin) return allEmpty(lo, hi);  // all in front
+    if (zMin - double(dHi) > double(mu) + margin) return true;  // all behind the band
+    if (double(dLo) - zMax > double(mu) + margin)
+      return none(lo, hi, VoxelState::kUnknown, VoxelState::kObserved);              // all in front
+    if (!measured) return none(lo, hi, VoxelState::kUnknown, VoxelState::kUnknown);  // robot only
     return false;
   }
-  bool allEmpty(const Vec3i& lo, const Vec3i& hi) const {
+  // Whether no voxel of the brick is in state a or b.
+  bool none(const Vec3i& lo, const Vec3i& hi, VoxelState a, VoxelState b) const {
     const uint8_t* st = volume.states();
-    const uint8_t e = uint8_t(VoxelState::kEmpty);
+    const uint8_t sa = uint8_t(a), sb = uint8_t(b);
     for (int z = lo.z(); z <= hi.z(); ++z)
       for (int y = lo.y(); y <= hi.y(); ++y) {
         const uint8_t* row = st + volume.index(lo.x(), y, z);
         for (int x = 0; x <= hi.x() - lo.x(); ++x)
-          if (row[x] != e) return false;
+          if (row[x] == sa || row[x] == sb) return false;
       }
     return true;
   }
@@ -710,7 +725,7 @@ IntegrationStats integrate(const DepthImage& depth, const Iso3& T_O_C, const Cam
     });
   // The depths the voxels are updated from: the smoothed ones with VolumeOptions::smooth_depth.
   const DepthImage& used = smooth ? smoothed : depth;
-  const DepthTiles tiles(used, rect);
+  const DepthTiles tiles(used, rect, carve_only ? carve_only->data() : nullptr);
   const Mat3 R = T_C_O.linear();
   const Vec3 step = R.col(0) * volume->voxelSize();  // camera-frame step along voxel x
   const Vec3i dims = volume->dims();
