@@ -209,9 +209,10 @@ TEST(Contour, VectorisedEdgeMasksGiveTheReferenceMeshBitForBit) {
     ASSERT_EQ(fast.mesh.vertices.size(), ref.mesh.vertices.size()) << "trial " << trial;
     ASSERT_EQ(fast.mesh.triangles.size(), ref.mesh.triangles.size()) << "trial " << trial;
     ASSERT_EQ(fast.sources.size(), ref.sources.size());
-    if (!fast.mesh.vertices.empty())  // (memcmp of no bytes still wants real pointers)
+    if (!fast.mesh.vertices.empty()) {  // (memcmp of no bytes still wants real pointers)
       EXPECT_EQ(0, std::memcmp(fast.mesh.vertices.data(), ref.mesh.vertices.data(),
                                fast.mesh.vertices.size() * sizeof(Vec3f)));
+    }
     for (size_t k = 0; k < fast.sources.size(); ++k) {
       EXPECT_EQ(fast.sources[k].a, ref.sources[k].a);
       EXPECT_EQ(fast.sources[k].b, ref.sources[k].b);
