@@ -143,7 +143,8 @@ void writeScanReport(const fs::path& dir, const fs::path& web) {
   // The PLYs the report shows, read and encoded on both cores.
   const fs::path gd = dir / "grasps";
   std::vector<fs::path> plys = {dir / "model.ply"};
-  if (fs::exists(dir / "truth.ply")) plys.push_back(dir / "truth.ply");
+  const bool truth = fs::exists(dir / "truth.ply");
+  if (truth) plys.push_back(dir / "truth.ply");
   struct GraspPlys {
     int model = -1, hand = -1;
     std::vector<int> candidates;
@@ -169,7 +170,7 @@ void writeScanReport(const fs::path& dir, const fs::path& web) {
   parallelFor(0, int(plys.size()), [&](int i) { meshes[size_t(i)] = meshJson(plys[size_t(i)]); });
   Json data = {{"summary", summary}};
   data["model"] = std::move(meshes[0]);
-  if (plys.size() > 1 && plys[1] == dir / "truth.ply") data["truth"] = std::move(meshes[1]);
+  if (truth) data["truth"] = std::move(meshes[1]);
   Json grasps = Json::array();
   for (const GraspPlys& g : graspPlys) {
     Json gj = Json::object();
