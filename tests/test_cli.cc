@@ -548,7 +548,11 @@ TEST(Cli, EvalScansEachRequestedRestPose) {
 // and glibc's libm pick their kernels by CPU at run time, and the record was seen to move on
 // another CPU by 0.8 % in triangles and 0.5 % in a view's quality with every decision the same.
 // On one machine a scan is reproduced byte for byte (test_determinism, test_checkpoint).
-TEST(Cli, ScanOfTheCrackerBoxMatchesTheRecordedScan) {
+// The whole scan of the cracker box, judged by its outcome against the true mesh (what holds on
+// any CPU: a last bit that flips one argmax changes the views and grasps, not whether the scan
+// succeeds): an allowed termination, coverage and accuracy in voxels, views and grasps within
+// their bounds, the summary's counts consistent with each other, a closed model.
+TEST(Cli, ScanOfTheCrackerBoxMeetsItsOutcomeBounds) {
   test::TempDir dir;
   const fs::path config = dir.path() / "fast.json";
   writeTextAtomically(config, R"({"voxel_m": 0.003, "planner": {"directions": 80, "rolls": 4},
@@ -559,52 +563,32 @@ TEST(Cli, ScanOfTheCrackerBoxMatchesTheRecordedScan) {
                        dir);
   ASSERT_EQ(r.code, 0) << r.output;
   const Json s = readJsonFile(out / "summary.json");
-  Json got;
-  for (const char* k : {"termination", "frames", "vertices", "triangles", "observed_fraction",
-                        "mean_entropy", "coverage", "view_evaluations"})
-    got[k] = s[k];
-  for (const Json& v : s["views"])
-    got["views"].push_back({{"direction_O", v["direction_O"]},
-                            {"frames", v["frames"]},
-                            {"quality", v["quality"]},
-                            {"grasp", v["grasp"]}});
-  for (const Json& g : s["grasps"]) got["grasps"].push_back(g["T_O_palm"]);
+  const std::string t = s["termination"].get<std::string>();
+  EXPECT_TRUE(t == "no_grasp_above_threshold" || t == "max_grasps" ||
+              t == "no_view_above_threshold")
+      << t;
+  EXPECT_GE(s["coverage"].get<double>(), 0.97);
+  const double voxel = 0.003;
+  EXPECT_LE(s["accuracy_mm"]["mean"].get<double>(), 1000 * voxel / 3);
+  EXPECT_LE(s["accuracy_mm"]["p95"].get<double>(), 1000 * voxel);
+  const int grasps = int(s["grasps"].size());
+  EXPECT_GE(grasps, 1);
+  EXPECT_LE(grasps, 2);
+  // At most the initial views plus max_views per grasp; every view's frames add up.
+  const int views = int(s["views"].size());
+  EXPECT_GE(views, 1);
+  EXPECT_LE(views, grasps * 3 + s["options"]["initial_views"].get<int>());
+  int frames = 0;
+  for (const Json& v : s["views"]) {
+    frames += v["frames"].get<int>();
+    EXPECT_GE(v["grasp"].get<int>(), 1);  // 1-based
+    EXPECT_LE(v["grasp"].get<int>(), grasps);
+  }
+  EXPECT_LE(frames, s["frames"].get<int>());
   const PlyData ply = readPly(out / "model.ply");
-  Vec3 mean = Vec3::Zero();
-  for (const Vec3f& p : ply.mesh.vertices) mean += p.cast<double>();
-  mean /= double(std::max<size_t>(1, ply.mesh.vertices.size()));
-  got["vertex_mean"] = {mean.x(), mean.y(), mean.z()};
-  const fs::path golden = fs::path(INHAND_SOURCE_DIR) / "tests/data/scan_golden.json";
-  if (std::getenv("INHAND_WRITE_GOLDEN")) writeTextAtomically(golden, got.dump(1) + "\n");
-  const Json want = readJsonFile(golden);
-  // The model's fine detail: relative tolerances, or absolute ones (metres, fractions, nats).
-  const std::map<std::string, std::pair<double, double>> loose{
-      {"vertices", {0.03, 0}},     {"triangles", {0.03, 0}},         {"quality", {0.03, 0}},
-      {"mean_entropy", {0.01, 0}}, {"observed_fraction", {0, 1e-3}}, {"coverage", {0, 5e-3}},
-      {"vertex_mean", {0, 1e-3}}};
-  std::function<void(const Json&, const Json&, const std::string&, const std::string&)> same =
-      [&](const Json& a, const Json& b, const std::string& at, const std::string& key) {
-        if (a.is_number() && b.is_number()) {
-          const double x = a.get<double>(), y = b.get<double>();
-          const auto it = loose.find(key);
-          const double tol = it == loose.end()
-                                 ? 1e-6 * std::max(1.0, std::abs(y))
-                                 : std::max(it->second.first * std::abs(y), it->second.second);
-          EXPECT_LE(std::abs(x - y), tol) << at;
-        } else if (a.is_array() && b.is_array()) {
-          ASSERT_EQ(a.size(), b.size()) << at;
-          for (size_t i = 0; i < a.size(); ++i)
-            same(a[i], b[i], at + "[" + std::to_string(i) + "]", key);
-        } else if (a.is_object() && b.is_object()) {
-          for (auto it = b.begin(); it != b.end(); ++it) {
-            ASSERT_TRUE(a.contains(it.key())) << at << "." << it.key();
-            same(a[it.key()], it.value(), at + "." + it.key(), it.key());
-          }
-        } else {
-          EXPECT_EQ(a, b) << at;
-        }
-      };
-  same(got, want, "summary", "");
+  EXPECT_TRUE(ply.mesh.isWatertight());
+  EXPECT_GT(ply.mesh.vertices.size(), 1000u);
+  EXPECT_EQ(ply.mesh.vertices.size(), s["vertices"].get<size_t>());
 }
 
 namespace {

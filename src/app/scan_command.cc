@@ -474,6 +474,14 @@ int runScan(const ScanArgs& given) {
                                  {"in_known_free_space", r.frames_in_free_space}};
   summary["frames_repaired"] = r.frames_repaired;
   summary["object_drops"] = sim.drops;
+  summary["physics"] = {{"enabled", sim.physics},
+                        {"mass_kg", sim.mass_kg},
+                        {"convex_pieces", sim.pieces},
+                        {"pieces_volume_ratio", sim.pieces_volume_ratio},
+                        {"simulated_s", sim.physics_simulated_s},
+                        {"computation_s", sim.physics_s},
+                        {"slips", sim.slips},
+                        {"slip_max_mm", 1000 * sim.slip_max_m}};
   const SimFaultLog& f = sim.faults;
   summary["faults_injected"] = {{"dropped_frames", f.dropped_frames},
                                 {"corrupted_frames", f.corrupted_frames},

@@ -246,6 +246,33 @@ void visitConfig(V& v, ScanConfig& c) {
               "reported joints say");
     o.choice("pick_up", c.sim.pick_up_first_contact, kPickUps,
              "the simulated pick-up: palm backed off, or a guarded move to first contact");
+    o.object(
+        "physics",
+        "MuJoCo rigid-body physics for pick-ups, held motions and put-downs "
+        "(docs/physics.md)",
+        [&](V& p) {
+          PhysicsOptions& x = c.sim.physics;
+          p.boolean("enabled", x.enabled,
+                    "simulate every manipulation (off: the object moves rigidly with the hand)");
+          p.num("density_kg_m3", x.density_kg_m3, "the object's density, kg/m³");
+          p.num("mass_kg", x.mass_kg, "the object's mass (0: from the density), kg");
+          p.num("timestep_s", x.timestep_s, "MuJoCo's time step, s");
+          p.num("finger_force_n", x.finger_force_n, "each finger's force limit at its tip, N");
+          p.num("finger_close_time_s", x.finger_close_time_s, "fingers open to closed, s");
+          p.num("hold_force_factor", x.hold_force_factor,
+                "a closed finger resists this multiple of its drive force (worm drive)");
+          p.num("breakaway_rate", x.breakaway_rate,
+                "TorqueSwitch: coupled joints' rate after the driven joint stalls, relative to it");
+          p.num("ramp_s", x.ramp_s,
+                "each motion segment speeds up and slows down over this long, s");
+          p.num("settle_s", x.settle_s, "longest wait for the object to come to rest, s");
+          p.integer("decomposition_resolution", x.decomposition.resolution,
+                    "voxels along the object's longest side for its convex decomposition");
+          p.integer("decomposition_max_pieces", x.decomposition.max_pieces,
+                    "at most this many convex pieces");
+          p.num("decomposition_max_excess", x.decomposition.max_excess,
+                "the pieces' hulls exceed the solid by at most this fraction of its volume");
+        });
     o.object("faults", "faults injected (all off by default; docs/reliability.md)", [&](V& f) {
       SimFaults& x = c.sim.faults;
       f.num("dropped_frames", x.dropped_frames, "fraction of frames that never arrive");

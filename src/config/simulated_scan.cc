@@ -101,6 +101,16 @@ SimulatedScan runSimulatedScan(const RobotModel& model, const TriangleMesh& obje
   out.drops = world.drops;
   out.faults = world.faults;
   out.render_s = world.render_s;
+  if (const PhysicsWorld* ph = world.physics()) {
+    out.physics = true;
+    out.mass_kg = ph->mass_kg();
+    out.pieces = ph->pieces();
+    out.pieces_volume_ratio = ph->piecesVolume_m3() / massProperties(object).volume_m3;
+    out.physics_simulated_s = ph->simulated_s();
+    out.physics_s = ph->wall_s();
+    out.slips = world.slips;
+    out.slip_max_m = world.slipMax_m;
+  }
   out.renders = world.renders;
   out.frames_rejected = rejected;
   out.frames_fused_in_hand = int(palmError.size());

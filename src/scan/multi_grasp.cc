@@ -336,18 +336,7 @@ void runGrasps(RobotInterface& robot, DepthSensor& sensor, ScanSession& session,
   session.finish(all.termination);
   const ScanSession::Summary sum = session.summary();
   all.views = session.views();
-  all.view_evaluations = sum.view_evaluations;
-  all.view_refinements = sum.view_refinements;
-  all.planning_s = sum.planning_s;
-  all.fusion_s = sum.fusion_s;
-  all.tracking_s = sum.tracking_s;
-  all.frames = sum.frames;
-  all.frames_rejected = sum.frames_rejected;
-  all.frames_dropped = sum.frames_dropped;
-  all.frames_off_path = sum.frames_off_path;
-  all.frames_unsupported = sum.frames_unsupported;
-  all.frames_repaired = sum.frames_repaired;
-  all.frames_in_free_space = sum.frames_in_free_space;
+  sum.copyTo(&all);
 }
 }  // namespace
 

@@ -263,13 +263,7 @@ ScanResult scanSingleGrasp(RobotInterface& robot, DepthSensor& sensor, const Iso
   ScanResult result;
   result.termination = runGraspViews(session, robot, sensor);
   result.views = session.views();
-  const ScanSession::Summary s = session.summary();
-  result.view_evaluations = s.view_evaluations;
-  result.view_refinements = s.view_refinements;
-  result.planning_s = s.planning_s;
-  result.fusion_s = s.fusion_s;
-  result.tracking_s = s.tracking_s;
-  result.frames = s.frames;
+  session.summary().copyTo(&result);
   result.model = session.model();
   result.planning_model = session.planningModel();
   result.total_s = secondsSince(t0);

@@ -879,6 +879,21 @@ void ScanSession::finish(Termination termination, const std::string& message) {
 
 ScanSession::Summary ScanSession::summary() const { return s_->summary; }
 
+void ScanSession::Summary::copyTo(ScanResult* r) const {
+  r->view_evaluations = view_evaluations;
+  r->view_refinements = view_refinements;
+  r->planning_s = planning_s;
+  r->fusion_s = fusion_s;
+  r->tracking_s = tracking_s;
+  r->frames = frames;
+  r->frames_rejected = frames_rejected;
+  r->frames_dropped = frames_dropped;
+  r->frames_off_path = frames_off_path;
+  r->frames_unsupported = frames_unsupported;
+  r->frames_repaired = frames_repaired;
+  r->frames_in_free_space = frames_in_free_space;
+}
+
 std::string ScanSession::Summary::brief() const {
   char line[240];
   std::snprintf(line, sizeof(line),

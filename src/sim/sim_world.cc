@@ -33,6 +33,7 @@ std::string SimOptions::validate() const {
   if (!(arm_error_m >= 0 && arm_error_m <= 0.2)) return "arm_error_m must be in [0, 0.2] m";
   for (double f : {arm_error_gravity, arm_error_drift, arm_error_noise})
     if (!(f >= 0 && f <= 5)) return "arm_error_gravity, _drift and _noise must be in [0, 5]";
+  if (std::string p = physics.validate(); !p.empty()) return "physics." + p;
   if (std::string p = faults.validate(); !p.empty()) return "faults." + p;
   return {};
 }
@@ -126,6 +127,9 @@ SimWorld::SimWorld(const RobotModel& model, const TriangleMesh& object_O, const 
       }
   }
   objectMesh_ = object_O;
+  tablePose = restPose();
+  if (options.physics.enabled)
+    physics_ = std::make_unique<PhysicsWorld>(model, object_O, options.friction, options.physics);
   objectSamples_ = surfaceSamples(object_O, 0.003);
   object_.addMesh(object_O);
   object_.commit();
@@ -157,7 +161,13 @@ JointVector SimWorld::jointErrorAt(const JointVector& qr) const {
 }
 
 Iso3 SimWorld::objectPose() const {
-  return held ? model_->tipPose(trueJoints()) * T_O_palm.inverse() : restPose();
+  return held ? model_->tipPose(trueJoints()) * T_O_palm.inverse() : tablePose;
+}
+
+void SimWorld::syncFromPhysics() {
+  if (!physics_) return;
+  T_O_palm = physics_->objectPose().inverse() * physics_->palmPose() * T_tip_palm.inverse();
+  q = physics_->handJoints(q);
 }
 
 Iso3 SimWorld::restPose() const {
@@ -185,8 +195,30 @@ bool SimWorld::graspHolds() const {
 }
 
 bool SimRobot::putDown() {
-  world_->held = false;
-  world_->slipping = false;
+  SimWorld& w = *world_;
+  PhysicsWorld* ph = w.physics();
+  if (ph && w.held) {
+    // The hand carries the object (as it holds it now) to 5 mm above where it rested, from
+    // 10 cm above that, opens, backs off 10 cm along its axis; the object settles.
+    const Iso3 T_O_palmPhys = ph->objectPose().inverse() * ph->palmPose();
+    Iso3 place = w.restPose();
+    place.translation().z() += 0.005;
+    const Iso3 down = place * T_O_palmPhys;
+    Iso3 above = down;
+    above.translation().z() += 0.10;
+    const PhysicsOptions& po = w.options().physics;
+    ph->movePalm(above, 1.5);
+    ph->movePalm(down, 0.5);
+    ph->openHand();
+    Iso3 away = down;
+    away.translation() -= 0.10 * down.linear().col(2);
+    ph->movePalm(away, 0.5);
+    ph->settle(po.settle_s);
+    w.tablePose = ph->objectPose();
+    w.q = w.model().withFingersOpen(w.q);
+  }
+  w.held = false;
+  w.slipping = false;
   return true;
 }
 
@@ -198,7 +230,8 @@ std::optional<Iso3> SimRobot::pickUp(const Iso3& T_O_palm, const JointVector& q)
     return std::nullopt;
   }
   std::optional<Iso3> T = grasp(T_O_palm, q);
-  world_->slipping = T && !world_->graspHolds();
+  // With physics the lift shows whether it holds; the kinematic simulator decides here.
+  world_->slipping = T && !world_->physics() && !world_->graspHolds();
   return T;
 }
 
@@ -233,6 +266,18 @@ std::optional<Iso3> SimRobot::grasp(const Iso3& T_O_palm_planned, const JointVec
     T.translation() += *travel * in;
     // The fingers close; one that meets the table short of the object lifts the hand off it.
     auto [closed, Tc] = closeOffTheTable(closer, objectOnly, open, T, 0.005, 0.03, 0.02);
+    if (PhysicsWorld* ph = world_->physics()) {
+      // The hand there, open as it came; the fingers close on the object under their force
+      // limits (it may be pushed, or slip away); the grasp is where physics leaves it.
+      const Iso3 T_B_palm = world_->tablePose * Tc;
+      world_->q = closed.q;
+      world_->T_tip_palm = m.tipPose(world_->trueJoints()).inverse() * T_B_palm;
+      ph->reset(world_->tablePose, T_B_palm, open);
+      world_->q = ph->closeHand(closed.q);
+      world_->held = true;
+      world_->syncFromPhysics();
+      return reported(Tc);
+    }
     world_->T_O_palm = Tc;
     world_->q = closed.q;
     world_->held = true;
@@ -319,11 +364,29 @@ void SimRobot::execute(const std::vector<JointVector>& waypoints,
   // The motion's steps, and the faults that come during it.
   std::vector<std::pair<size_t, int>> steps;  // (segment, step) per sensor frame time
   std::vector<int> segmentSteps(waypoints.size(), 0);
+  // With physics each segment speeds up and slows down over `ramp` s (a trapezoidal profile at
+  // the speed limits: the segment takes `ramp` longer); the kinematic simulator moves at the
+  // limits throughout.
+  std::vector<double> segmentTime(waypoints.size(), 0), segmentRamp(waypoints.size(), 0);
+  PhysicsWorld* ph = w.physics();
   for (size_t k = 1; k < waypoints.size(); ++k) {
     const double duration = trajectoryTime(m, m.arm(waypoints[k - 1]), m.arm(waypoints[k]));
-    segmentSteps[k] = std::max(1, int(std::ceil(duration * o.frame_rate_hz)));
+    const double ramp = ph ? std::min(o.physics.ramp_s, duration) : 0.0;
+    segmentTime[k] = duration;
+    segmentRamp[k] = ramp;
+    segmentSteps[k] = std::max(1, int(std::ceil((duration + ramp) * o.frame_rate_hz)));
     for (int s = 1; s <= segmentSteps[k]; ++s) steps.emplace_back(k, s);
   }
+  // The fraction of segment k covered at its step s.
+  auto fraction = [&](size_t k, int s) {
+    if (s >= segmentSteps[k]) return 1.0;
+    const double ramp = segmentRamp[k], T = segmentTime[k];
+    if (ramp <= 0 || T <= 0) return double(s) / segmentSteps[k];
+    const double total = T + ramp, t = total * double(s) / segmentSteps[k], v = 1 / T;
+    if (t < ramp) return 0.5 * v * t * t / ramp;
+    if (t > total - ramp) return 1 - 0.5 * v * (total - t) * (total - t) / ramp;
+    return v * (t - 0.5 * ramp);
+  };
   if (steps.empty()) return;
   if (f.refused_motions > 0 && w.faultDraw(8) < f.refused_motions) {
     ++w.faults.refused_motions;
@@ -344,11 +407,31 @@ void SimRobot::execute(const std::vector<JointVector>& waypoints,
     ++w.motions;
     ++w.graspMotions;
   }
+  int untouched = 0;      // frames since the object last touched the hand (physics)
+  double motionSlip = 0;  // how far the object moved in the hand during this motion, m
+  const Iso3 grip = w.T_O_palm;
   for (size_t i = 0; i < last; ++i) {
     const auto [k, s] = steps[i];
     const JointVector& a = waypoints[k - 1];
     const JointVector& b = waypoints[k];
-    w.q = a + (b - a) * (double(s) / segmentSteps[k]);
+    w.q = a + (b - a) * fraction(k, s);
+    if (ph && w.held) {
+      // The palm follows the arm; the object moves as physics moves it. It has fallen when it
+      // has touched no part of the hand for a tenth of a second.
+      const JointVector hand = w.q;
+      ph->movePalm(m.tipPose(w.trueJoints()) * w.T_tip_palm, 1.0 / o.frame_rate_hz);
+      w.q = m.withArm(ph->handJoints(hand), m.arm(hand));
+      w.syncFromPhysics();
+      w.q = m.withArm(w.q, m.arm(hand));
+      motionSlip = std::max(motionSlip, (w.T_O_palm.translation() - grip.translation()).norm());
+      untouched = ph->objectTouchesHand() ? 0 : untouched + 1;
+      if (untouched * (1.0 / o.frame_rate_hz) >= 0.1) {
+        ph->settle(o.physics.settle_s);
+        w.tablePose = ph->objectPose();
+        w.held = false;
+        ++w.drops;
+      }
+    }
     if (w.held && w.slipping) {  // the grasp does not hold: the object falls
       w.held = false;
       w.slipping = false;
@@ -357,6 +440,7 @@ void SimRobot::execute(const std::vector<JointVector>& waypoints,
     if (i == slipAt && w.held) {  // the object slips in the hand
       const Vec3 dir = Vec3(w.faultDraw(4) - 0.5, w.faultDraw(5) - 0.5, w.faultDraw(6) - 0.5);
       w.T_O_palm.translation() += f.slip_m * dir.normalized();
+      if (ph) ph->moveObject(ph->palmPose() * w.T_tip_palm.inverse() * w.T_O_palm.inverse());
       ++w.faults.slips;
     }
     if (i == dropAt && w.held) {  // the object falls out of the hand
@@ -373,6 +457,10 @@ void SimRobot::execute(const std::vector<JointVector>& waypoints,
       }
       on_state(reported);
     }
+  }
+  if (ph && inHand && motionSlip > 0.002) {
+    ++w.slips;
+    w.slipMax_m = std::max(w.slipMax_m, motionSlip);
   }
 }
 
@@ -429,6 +517,11 @@ Json SimWorld::state() const {
           {"fault_draws", faultDraws_},
           {"motions", motions},
           {"grasp_motions", graspMotions},
+          {"table_pose", isoJson(tablePose)},
+          {"T_tip_palm", isoJson(T_tip_palm)},
+          {"slips", slips},
+          {"slip_max_m", slipMax_m},
+          {"physics", physics_ ? physics_->state() : Json()},
           {"faults",
            {faults.dropped_frames, faults.corrupted_frames, faults.pose_jumps, faults.stopped_short,
             faults.slips, faults.object_drops, faults.refused_motions, faults.failed_pickups}}};
@@ -448,6 +541,12 @@ void SimWorld::setState(const Json& j) {
     faultDraws_ = j.value("fault_draws", uint64_t(0));
     motions = j.value("motions", 0);
     graspMotions = j.value("grasp_motions", 0);
+    if (j.contains("table_pose")) tablePose = isoFrom(j.at("table_pose"));
+    if (j.contains("T_tip_palm")) T_tip_palm = isoFrom(j.at("T_tip_palm"));
+    slips = j.value("slips", 0);
+    slipMax_m = j.value("slip_max_m", 0.0);
+    if (physics_ && j.contains("physics") && !j.at("physics").is_null())
+      physics_->setState(j.at("physics"));
     if (j.contains("faults")) {
       const std::vector<int> f = j.at("faults").get<std::vector<int>>();
       if (f.size() != 8) throw Error("simulator state: faults: expected 8 counts");

@@ -20,9 +20,16 @@ struct SimulatedScan {
   double object_error_median_m = 0, object_error_p95_m = 0;
   int frames_fused_in_hand = 0, frames_rejected = 0;  // rejected: not fused, for any reason
   int drops = 0;                                      // how often the simulated object fell
-  SimFaultLog faults;         // what the simulator injected (SimOptions::faults)
-  double render_s = 0;        // rendering the simulated sensor's images (what a robot does not pay)
-  int renders = 0;            // … how many images
+  SimFaultLog faults;   // what the simulator injected (SimOptions::faults)
+  double render_s = 0;  // rendering the simulated sensor's images (what a robot does not pay)
+  int renders = 0;      // … how many images
+  // Physics (SimOptions::physics; zero when off): the object's mass, its convex pieces and their
+  // hulls' volume against the mesh's, physics time simulated and computed, motions in which the
+  // object moved in the hand by more than 2 mm and the largest such movement.
+  bool physics = false;
+  double mass_kg = 0, pieces_volume_ratio = 0, physics_simulated_s = 0, physics_s = 0;
+  int pieces = 0, slips = 0;
+  double slip_max_m = 0;
   DepthCameraOptions camera;  // the simulated sensor
 };
 

@@ -64,6 +64,9 @@ class ScanSession {
     int view_evaluations = 0, view_refinements = 0;
     double planning_s = 0, fusion_s = 0, tracking_s = 0;
     std::string brief() const;  // one line
+    // Copies every count and time of this summary into `result` (the one place that does, so
+    // that no counter is left out).
+    void copyTo(ScanResult* result) const;
   };
 
   // A model in a cube of options.volume_size_m around centre_O (object frame O), voxels of

@@ -11,6 +11,7 @@
 #include "inhand/sensor/depth_sensor.h"
 #include "inhand/sensor/noise_model.h"
 #include "inhand/sensor/render.h"
+#include "inhand/sim/physics.h"
 
 namespace inhand {
 
@@ -86,6 +87,9 @@ struct SimOptions {
   // the object sits in the hand off where the reported joints say (a real arm's case). false: the
   // hand grasps the object exactly as planned (the error shows only while it is held).
   bool grasp_error = false;
+  // Rigid-body physics (MuJoCo) for every pick-up, motion with the object in the hand and
+  // put-down; off: the kinematic simulator (check_hold decides at the pick-up).
+  PhysicsOptions physics;
   SimFaults faults;
   std::string validate() const;
 };
@@ -133,8 +137,22 @@ class SimWorld {
   // Where the object rests on the table: turned by SimOptions::R_B_O_rest, its lowest point on
   // the table top, its box's centre under the presentation point.
   Iso3 restPose() const;
-  // Whether the hand at q, T_O_palm holds the object (SimOptions::check_hold).
+  // Where the object lies when not in the hand: restPose() at the start; with physics where it
+  // settled after a put-down or a fall.
+  Iso3 tablePose;
+  // Whether the hand at q, T_O_palm holds the object (SimOptions::check_hold; the kinematic
+  // simulator's verdict).
   bool graspHolds() const;
+  // The physics (SimOptions::physics; null when off).
+  PhysicsWorld* physics() { return physics_.get(); }
+  const PhysicsWorld* physics() const { return physics_.get(); }
+  // With physics: the object's grasp (T_O_palm) and the hand's joints as physics has them.
+  void syncFromPhysics();
+  // The physics palm's pose relative to the arm's tip as the joints put it (the guarded move
+  // and the fingers' give move the hand from where the arm's joints say).
+  Iso3 T_tip_palm = Iso3::Identity();
+  int slips = 0;         // motions in which the object moved in the hand (physics), > 2 mm
+  double slipMax_m = 0;  // the largest such movement, m
   // The world's changing state (joints, arm error, camera, grasp, held, slipping, drops, the
   // frame counter that seeds the noise), for checkpoints: setState(state()) continues exactly.
   Json state() const;
@@ -147,6 +165,7 @@ class SimWorld {
   SimOptions options_;
   RayScene object_;
   RobotOccluders robot_;
+  std::unique_ptr<PhysicsWorld> physics_;
   TriangleMesh objectMesh_;
   std::vector<SurfacePoint> objectSamples_;  // for the pick-up clearance test
   uint64_t frame_ = 0;

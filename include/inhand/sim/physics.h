@@ -1,0 +1,94 @@
+#pragma once
+// Rigid-body physics for the simulator's manipulation (MuJoCo 2.2): the true object as a free
+// body with mass and inertia from its closed mesh, colliding through a convex decomposition of
+// it; the robot's hand (the tip link and every link below it in the URDF) as a free body welded
+// to a kinematic target that follows the arm, its finger joints driven by force-limited position
+// servos; the table. Only the simulator uses it (nothing in the scan reads its state).
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "inhand/core/json_util.h"
+#include "inhand/geometry/convex_decomposition.h"
+#include "inhand/robot/robot_model.h"
+
+namespace inhand {
+
+struct PhysicsOptions {
+  // true: every pick-up, motion with the object in the hand and put-down is simulated (MuJoCo);
+  // false: the kinematic simulator (the object moves rigidly with the hand; whether a grasp
+  // holds is SimOptions::check_hold's static test).
+  bool enabled = false;
+  double density_kg_m3 = 300;  // the object's density (of the solid its closed mesh encloses)
+  double mass_kg = 0;          // > 0: the object's mass, whatever its volume
+  double timestep_s = 0.002;   // MuJoCo's step
+  // The hand (BarrettHand BH8-280 figures, Barrett's support wiki): each finger pushes with at
+  // most this force at its tip (load limit 2 kg per finger); open to closed in this time
+  // (finger_close_time_s); worm-driven joints that do not backdrive: a closed finger holds its
+  // position up to hold_force_factor times the driving force.
+  double finger_force_n = 20;
+  double finger_close_time_s = 1.0;
+  double hold_force_factor = 20;
+  // TorqueSwitch: once a finger's driven (proximal) joint stalls, its coupled (distal) joints
+  // close on at this multiple of the driven joint's rate (BH8-280: 125 / 93.75 reductions).
+  double breakaway_rate = 125.0 / 93.75;
+  // The arm's motions: each trajectory segment speeds up and slows down over at most this long
+  // (a trapezoidal profile at the joints' speed limits), m/s² at the palm stay those of an arm.
+  double ramp_s = 0.3;
+  // After a put-down or a drop the object settles for at most this long (s).
+  double settle_s = 2.0;
+  ConvexDecompositionOptions decomposition;
+  std::string validate() const;
+};
+
+class PhysicsWorld {
+ public:
+  // `object_O`: the true object's closed mesh in its frame O; `friction`: μ at every contact.
+  // Throws Error when MuJoCo refuses the model (the message names the part).
+  PhysicsWorld(const RobotModel& model, const TriangleMesh& object_O, double friction,
+               const PhysicsOptions& options);
+  ~PhysicsWorld();
+  PhysicsWorld(const PhysicsWorld&) = delete;
+  PhysicsWorld& operator=(const PhysicsWorld&) = delete;
+
+  double mass_kg() const;
+  int pieces() const;              // convex pieces the object collides through
+  double piecesVolume_m3() const;  // their hulls' volume
+  const std::vector<ConvexPiece>& decomposition() const;
+
+  // Puts the object at T_B_O at rest, the hand's palm at T_B_palm with the hand joints of q (an
+  // open preshape), both at rest.
+  void reset(const Iso3& T_B_O, const Iso3& T_B_palm, const JointVector& q);
+  // Closes every finger from where it is toward its `closed` value, force-limited, with the
+  // TorqueSwitch, until each joint stalls on something or reaches its limit (at most twice
+  // finger_close_time_s), then locks them. Returns q with the hand joints as they ended.
+  JointVector closeHand(const JointVector& q);
+  // Opens the fingers to their open values over finger_close_time_s (the palm held).
+  void openHand();
+  // The palm moves to T_B_palm over `duration_s`, linearly (position and orientation), physics
+  // stepping along: the object moves only as contacts and gravity move it.
+  void movePalm(const Iso3& T_B_palm, double duration_s);
+  // Puts the object at T_B_O, at rest (an injected slip).
+  void moveObject(const Iso3& T_B_O);
+  // Steps with the palm held until the object is at rest (at most `max_s`).
+  void settle(double max_s);
+
+  Iso3 objectPose() const;     // T_B_O
+  Iso3 palmPose() const;       // T_B_palm as simulated (it trails its target by the weld's give)
+  double objectSpeed() const;  // m/s of its centre of mass
+  bool objectTouchesHand() const;
+  bool objectTouchesTable() const;
+  JointVector handJoints(const JointVector& q) const;  // q with the hand joints as simulated
+  // The whole dynamic state (positions, velocities, servo targets and limits, the solver's warm
+  // start), for checkpoints: setState(state()) continues exactly as without the break.
+  Json state() const;
+  void setState(const Json& state);  // throws Error on a state of another model
+  double simulated_s() const;        // physics time stepped so far, s
+  double wall_s() const;             // computation spent stepping, s
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace inhand

@@ -1,0 +1,210 @@
+// Physics: mass properties against analytic solids, the convex decomposition against the mesh's
+// volume, and MuJoCo grasps: a pinch the static test accepts that the hand's force limits cannot
+// carry drops, an enveloping grasp of the same object holds, an object on the table stays put.
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+
+#include "inhand/geometry/convex_decomposition.h"
+#include "inhand/geometry/primitives.h"
+#include "inhand/robot/collision.h"
+#include "inhand/sim/physics.h"
+#include "inhand/sim/sim_world.h"
+#include "test_util.h"
+
+namespace inhand {
+namespace {
+
+double boxSdf(const Vec3& p, const Vec3& centre, const Vec3& half) {
+  const Vec3 q = (p - centre).cwiseAbs() - half;
+  return q.cwiseMax(0.0).norm() + std::min(q.maxCoeff(), 0.0);
+}
+
+// A cup: 80 mm across, 95 mm tall, 4 mm wall and 5 mm bottom, as a closed solid of revolution.
+TriangleMesh cup() {
+  return makeRevolution(
+      {{0, 0}, {0.040, 0}, {0.040, 0.095}, {0.036, 0.095}, {0.036, 0.005}, {0, 0.005}}, 64);
+}
+// A ring: a torus of 40 mm radius and 9 mm tube radius.
+TriangleMesh ring() {
+  auto f = [](const Vec3& p) {
+    const double r = std::hypot(p.x(), p.y()) - 0.040;
+    return std::hypot(r, p.z()) - 0.009;
+  };
+  Aabb b;
+  b.extend(Vec3(-0.06, -0.06, -0.02));
+  b.extend(Vec3(0.06, 0.06, 0.02));
+  return meshImplicit(f, b, 0.0015);
+}
+// A C-clamp-like frame: a 120 mm spine and two 60 mm jaws, 15 mm square section.
+TriangleMesh clamp() {
+  auto f = [](const Vec3& p) {
+    const Vec3 h(0.0075, 0.0075, 0.0075);
+    const double spine = boxSdf(p, Vec3(0, 0, 0), Vec3(0.0075, 0.06, 0.0075));
+    const double jaw1 = boxSdf(p, Vec3(0.03, 0.0525, 0), Vec3(0.03, 0.0075, 0.0075));
+    const double jaw2 = boxSdf(p, Vec3(0.03, -0.0525, 0), Vec3(0.03, 0.0075, 0.0075));
+    (void)h;
+    return std::min({spine, jaw1, jaw2});
+  };
+  Aabb b;
+  b.extend(Vec3(-0.02, -0.08, -0.02));
+  b.extend(Vec3(0.08, 0.08, 0.02));
+  return meshImplicit(f, b, 0.001);
+}
+
+TEST(MassProperties, BoxAndCylinderMatchTheirFormulas) {
+  const Vec3 s(0.06, 0.1, 0.2);
+  const MassProperties box = massProperties(makeBox(s));
+  EXPECT_NEAR(box.volume_m3, s.prod(), 1e-6 * s.prod());  // float vertices
+  EXPECT_LT(box.com.norm(), 1e-9);
+  const double V = s.prod();
+  const double Ix = V * (s.y() * s.y() + s.z() * s.z()) / 12;
+  EXPECT_NEAR(box.inertia_com(0, 0), Ix, 1e-6 * Ix);
+  EXPECT_NEAR(box.inertia_com(1, 1), V * (s.x() * s.x() + s.z() * s.z()) / 12, 1e-6 * Ix);
+  EXPECT_NEAR(box.inertia_com(2, 2), V * (s.x() * s.x() + s.y() * s.y()) / 12, 1e-6 * Ix);
+  EXPECT_NEAR(box.inertia_com(0, 1), 0, 1e-6 * Ix);
+  // A 256-gon cylinder: the formulas within its polygon's deficit.
+  const double r = 0.05, h = 0.12;
+  const MassProperties c = massProperties(makeCylinder(r, h, 256));
+  const double Vc = M_PI * r * r * h;
+  EXPECT_NEAR(c.volume_m3, Vc, 1e-3 * Vc);
+  EXPECT_NEAR(c.inertia_com(2, 2), Vc * r * r / 2, 2e-3 * Vc * r * r / 2);
+  EXPECT_NEAR(c.inertia_com(0, 0), Vc * (3 * r * r + h * h) / 12,
+              2e-3 * Vc * (3 * r * r + h * h) / 12);
+  // Moved and turned: the same volume, the centre moved with it.
+  Iso3 T = Iso3::Identity();
+  T.linear() = Eigen::AngleAxisd(0.7, Vec3(1, 2, 3).normalized()).toRotationMatrix();
+  T.translation() = Vec3(0.3, -0.2, 0.5);
+  const MassProperties moved = massProperties(transformed(makeBox(s), T));
+  EXPECT_NEAR(moved.volume_m3, V, 1e-6 * V);
+  EXPECT_LT((moved.com - T.translation()).norm(), 1e-7);
+  EXPECT_NEAR(moved.inertia_com.trace(), box.inertia_com.trace(), 1e-6 * Ix);
+}
+
+TEST(ConvexDecomposition, AConvexSolidIsOnePieceOfItsVolume) {
+  const TriangleMesh b = makeBox(Vec3(0.05, 0.08, 0.12));
+  const std::vector<ConvexPiece> pieces = convexDecomposition(b);
+  ASSERT_EQ(pieces.size(), 1u);
+  EXPECT_NEAR(pieces[0].volume_m3, 0.05 * 0.08 * 0.12, 1e-6 * 0.05 * 0.08 * 0.12);
+}
+
+// The pieces' hulls (disjoint boxes of a partition) add up to within 5 % of the solid; each
+// piece convex; the hollow shapes need many pieces (a single hull is far larger).
+TEST(ConvexDecomposition, CupRingAndClampKeepTheirVolume) {
+  struct Case {
+    const char* name;
+    TriangleMesh mesh;
+  };
+  for (const Case& c : {Case{"cup", cup()}, Case{"ring", ring()}, Case{"clamp", clamp()}}) {
+    ASSERT_TRUE(c.mesh.isWatertight()) << c.name;
+    const double V = c.mesh.signedVolume();
+    ASSERT_GT(V, 0) << c.name;
+    const std::vector<ConvexPiece> pieces = convexDecomposition(c.mesh);
+    double sum = 0;
+    for (const ConvexPiece& p : pieces) sum += p.volume_m3;
+    EXPECT_LE(std::abs(sum - V), 0.05 * V)
+        << c.name << ": " << pieces.size() << " pieces, " << sum << " against " << V;
+    EXPECT_GE(pieces.size(), 4u) << c.name;
+    std::vector<Vec3> all;
+    for (const Vec3f& v : c.mesh.vertices) all.push_back(v.cast<double>());
+    EXPECT_GT(hullVolume(convexHull(all)), 1.5 * V) << c.name;
+  }
+}
+
+// An object dropped a centimetre onto the table comes to rest on it at the height of its lowest
+// point: the decomposition, the inertia and the contacts agree with the mesh.
+TEST(Physics, ABoxDroppedOnTheTableRestsOnIt) {
+  const RobotModel& m = test::wam();
+  const TriangleMesh box = makeBox(Vec3(0.06, 0.1, 0.2));
+  PhysicsOptions o;
+  o.mass_kg = 0.5;
+  PhysicsWorld w(m, box, 0.5, o);
+  EXPECT_NEAR(w.mass_kg(), 0.5, 1e-12);
+  Iso3 T = Iso3::Identity();
+  T.translation() = Vec3(0.75, 0.2, m.table().topZ() + 0.1 + 0.01);
+  Iso3 palm = Iso3::Identity();
+  palm.translation() = Vec3(0.75, -0.3, 1.0);  // well away
+  w.reset(T, palm, m.openHand(0.0));
+  w.settle(2.0);
+  const Iso3 rest = w.objectPose();
+  EXPECT_LT(w.simulated_s(), 1.0);  // it came to rest well before
+  EXPECT_NEAR(rest.translation().z(), m.table().topZ() + 0.1, 2e-3);
+  EXPECT_LT(Eigen::AngleAxisd(rest.linear()).angle(), 0.02);
+  EXPECT_TRUE(w.objectTouchesTable());
+  w.settle(0.5);  // and stays there
+  EXPECT_LT((w.objectPose().translation() - rest.translation()).norm(), 3e-4);
+}
+
+// Where the hand grasps a heavy box (4 kg) standing on the table: from the side, the palm
+// against it and the fingers around it, or from above with the fingertips only, the palm 6 cm
+// clear of its top. The static force-closure test accepts both; with the fingers' 20 N the
+// fingertips cannot carry 39 N, the enveloping grasp (the palm's contact too) can.
+struct Lifted {
+  bool staticHolds = false;
+  double rise_m = 0;  // how far the object rose with a 10 cm lift
+  bool touching = false;
+};
+Lifted liftBox(bool envelope) {
+  const RobotModel& m = test::wam();
+  const TriangleMesh box = makeBox(Vec3(0.06, 0.1, 0.2));
+  Iso3 T_B_O = Iso3::Identity();
+  T_B_O.translation() = Vec3(0.7, 0.0, m.table().topZ() + 0.1);
+  Iso3 T_O_palm = Iso3::Identity();
+  const JointVector open = m.openHand(0.0);
+  const FingerCloser closer(m, box);
+  if (envelope) {
+    // From +y, palm z along −y, fingers closing across x.
+    T_O_palm.linear().col(2) = -Vec3::UnitY();
+    T_O_palm.linear().col(0) = Vec3::UnitX();
+    T_O_palm.linear().col(1) = T_O_palm.linear().col(2).cross(Vec3::UnitX());
+    T_O_palm.translation() = Vec3(0, 0.3, 0.0);
+    const auto travel = closer.freeTravel(open, T_O_palm, -Vec3::UnitY(), 0.5);
+    T_O_palm.translation().y() -= *travel;
+  } else {
+    // From above, palm z down, fingers closing across x; the palm 6 cm above the top.
+    T_O_palm.linear().col(2) = -Vec3::UnitZ();
+    T_O_palm.linear().col(0) = Vec3::UnitX();
+    T_O_palm.linear().col(1) = T_O_palm.linear().col(2).cross(Vec3::UnitX());
+    T_O_palm.translation() = Vec3(0, 0, 0.1 + m.palmFaceZ() + 0.06);
+  }
+  Lifted out;
+  // The static test (the kinematic simulator's verdict).
+  {
+    SimOptions so;
+    so.physics.enabled = false;
+    SimWorld world(m, box, T_O_palm, DepthCameraOptions{}, NoiseModelOptions{}, so);
+    world.q = closer.close(open, T_O_palm).q;
+    out.staticHolds = world.graspHolds();
+  }
+  PhysicsOptions po;
+  po.mass_kg = 4.0;
+  PhysicsWorld w(m, box, 0.5, po);
+  const Iso3 T_B_palm = T_B_O * T_O_palm;
+  w.reset(T_B_O, T_B_palm, open);
+  w.closeHand(open);
+  Iso3 up = T_B_palm;
+  up.translation().z() += 0.10;
+  w.movePalm(up, 1.0);
+  w.settle(0.5);
+  out.rise_m = w.objectPose().translation().z() - T_B_O.translation().z();
+  out.touching = w.objectTouchesHand();
+  return out;
+}
+
+TEST(Physics, AFingertipPinchTheStaticTestAcceptsDropsAHeavyObject) {
+  const Lifted pinch = liftBox(false);
+  EXPECT_TRUE(pinch.staticHolds);
+  EXPECT_LT(pinch.rise_m, 0.05) << "the pinch carried 4 kg up " << pinch.rise_m << " m";
+}
+
+TEST(Physics, AnEnvelopingGraspOfTheSameObjectHolds) {
+  const Lifted env = liftBox(true);
+  EXPECT_TRUE(env.staticHolds);
+  EXPECT_GT(env.rise_m, 0.095);
+  EXPECT_TRUE(env.touching);
+}
+
+}  // namespace
+}  // namespace inhand
