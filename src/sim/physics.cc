@@ -233,8 +233,8 @@ PhysicsWorld::PhysicsWorld(const RobotModel& model, const TriangleMesh& object_O
     for (size_t ji = 0; ji < js.size(); ++ji) {
       const JointInfo& j = js[ji];
       if (j.parentLink != link) continue;
-      b += "<body name=\"" + named("link", j.childLink) + "\" " + posQuat(j.T_parent_joint) +
-           ">" + linkInertial(links[size_t(j.childLink)]);
+      b += "<body name=\"" + named("link", j.childLink) + "\" " + posQuat(j.T_parent_joint) + ">" +
+           linkInertial(links[size_t(j.childLink)]);
       if (j.type == JointInfo::Type::kRevolute || j.type == JointInfo::Type::kContinuous) {
         Impl::HandJoint hj;
         hj.variable = j.variable;
