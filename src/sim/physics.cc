@@ -292,14 +292,15 @@ PhysicsWorld::PhysicsWorld(const RobotModel& model, const TriangleMesh& object_O
     << "<actuator>" << hand.actuators << "</actuator></mujoco>";
   const std::string xml = x.str();
 
-  mjVFS vfs;
-  mj_defaultVFS(&vfs);
-  if (mj_makeEmptyFileVFS(&vfs, "inhand.xml", int(xml.size())) != 0)
+  // MuJoCo's virtual file system is megabytes of fixed arrays: on the heap, not the stack.
+  const auto vfs = std::make_unique<mjVFS>();
+  mj_defaultVFS(vfs.get());
+  if (mj_makeEmptyFileVFS(vfs.get(), "inhand.xml", int(xml.size())) != 0)
     throw Error("physics: MuJoCo could not take the model");
-  std::memcpy(vfs.filedata[vfs.nfile - 1], xml.data(), xml.size());
+  std::memcpy(vfs->filedata[vfs->nfile - 1], xml.data(), xml.size());
   char error[1000] = "";
-  I.m = mj_loadXML("inhand.xml", &vfs, error, sizeof error);
-  mj_deleteVFS(&vfs);
+  I.m = mj_loadXML("inhand.xml", vfs.get(), error, sizeof error);
+  mj_deleteVFS(vfs.get());
   if (!I.m) throw Error(std::string("physics: MuJoCo refused the model: ") + error);
   I.d = mj_makeData(I.m);
   I.objectBody = mj_name2id(I.m, mjOBJ_BODY, "object");
