@@ -63,6 +63,17 @@ std::string inertial(double m, const Vec3& com, const Mat3& I) {
   return "<inertial pos=\"" + vec(com) + "\" quat=\"" + quat(R) + "\" mass=\"" + num(m) +
          "\" diaginertia=\"" + vec(d) + "\"/>";
 }
+
+// A hand joint in the MuJoCo model, driven by a position servo.
+struct HandJoint {
+  int variable = -1;  // robot variable
+  int joint = -1;     // robot joint (index into RobotModel::joints())
+  int qpos = -1, dof = -1, actuator = -1;
+  double force = 0;  // driving limit, N·m
+  int finger = -1;   // index in fingers(), or -1 (spread and the like)
+  bool driver = false;
+  double mult = 1, offset = 0;  // follower: q = mult·q_driver + offset
+};
 }  // namespace
 
 struct PhysicsWorld::Impl {
@@ -72,19 +83,36 @@ struct PhysicsWorld::Impl {
   double mass = 0, piecesVolume = 0;
   mjModel* m = nullptr;
   mjData* d = nullptr;
-  int objectBody = -1, palmBody = -1, targetBody = -1, tableGeom = -1;
+  int objectBody = -1, palmBody = -1, tableGeom = -1;
   int objectQpos = -1, objectDof = -1, palmQpos = -1, palmDof = -1;
-  struct HandJoint {
-    int variable = -1;  // robot variable
-    int qpos = -1, dof = -1, actuator = -1;
-    double force = 0;  // driving limit, N·m
-    int finger = -1;   // index in fingers(), or -1 (spread and the like)
-    bool driver = false;
-    double mult = 1, offset = 0;  // follower: q = mult·q_driver + offset
-  };
   std::vector<HandJoint> joints;
   std::vector<uint8_t> handBody;  // per MuJoCo body: part of the hand
   double simulated = 0, wall = 0;
+
+  // The ids and addresses of the named parts in the compiled model.
+  void bind() {
+    objectBody = mj_name2id(m, mjOBJ_BODY, "object");
+    palmBody = mj_name2id(m, mjOBJ_BODY, "palm");
+    tableGeom = mj_name2id(m, mjOBJ_GEOM, "table");
+    const int oj = mj_name2id(m, mjOBJ_JOINT, "object"), pj = mj_name2id(m, mjOBJ_JOINT, "palm");
+    objectQpos = m->jnt_qposadr[oj];
+    objectDof = m->jnt_dofadr[oj];
+    palmQpos = m->jnt_qposadr[pj];
+    palmDof = m->jnt_dofadr[pj];
+    for (HandJoint& hj : joints) {
+      char name[32];
+      std::snprintf(name, sizeof name, "j%d", hj.joint);
+      const int id = mj_name2id(m, mjOBJ_JOINT, name);
+      hj.qpos = m->jnt_qposadr[id];
+      hj.dof = m->jnt_dofadr[id];
+      std::snprintf(name, sizeof name, "aj%d", hj.joint);
+      hj.actuator = mj_name2id(m, mjOBJ_ACTUATOR, name);
+    }
+    handBody.assign(size_t(m->nbody), 0);
+    for (int b = 0; b < m->nbody; ++b)
+      for (int a = b; a > 0; a = m->body_parentid[a])
+        if (a == palmBody) handBody[size_t(b)] = 1;
+  }
 
   ~Impl() {
     if (d) mj_deleteData(d);
@@ -168,6 +196,127 @@ void geomsXml(const LinkInfo& link, const std::string& prefix, int* meshCount, H
   }
 }
 
+// The hand as MJCF: the tip link's bodies and joints below it (URDF tree), each hinge with a
+// force-limited position servo.
+class HandXmlBuilder {
+ public:
+  HandXmlBuilder(const RobotModel& model, const PhysicsOptions& options)
+      : model_(model), options_(options), poses_(model.linkPoses(model.openHand(0.0))) {}
+  // The palm's geoms and the bodies below it; the joints go to `joints`.
+  std::string palmContents(std::vector<HandJoint>* joints) {
+    const int tip = model_.tipLink();
+    std::string palm;
+    geomsXml(model_.links()[size_t(tip)], "tip", &meshCount_, &xml_, &palm);
+    return palm + bodies(tip, joints);
+  }
+  const std::string& assets() const { return xml_.assets; }
+  const std::string& actuators() const { return xml_.actuators; }
+
+ private:
+  // The links `link` carries, itself included.
+  void below(int link, std::vector<int>* out) const {
+    out->push_back(link);
+    for (const JointInfo& j : model_.joints())
+      if (j.parentLink == link) below(j.childLink, out);
+  }
+  // The force limit's lever: the farthest collision vertex of the links the joint carries.
+  double lever(const JointInfo& j) const {
+    std::vector<int> carried;
+    below(j.childLink, &carried);
+    const Vec3 origin = (poses_[size_t(j.parentLink)] * j.T_parent_joint).translation();
+    double r = 0.02;
+    for (int l : carried)
+      for (const Primitive& p : model_.links()[size_t(l)].collision)
+        for (const Vec3f& v : p.toMesh().vertices)
+          r = std::max(r, (poses_[size_t(l)] * v.cast<double>() - origin).norm());
+    return r;
+  }
+  std::string hinge(int ji, std::vector<HandJoint>* joints) {
+    const JointInfo& j = model_.joints()[size_t(ji)];
+    HandJoint hj;
+    hj.variable = j.variable;
+    hj.joint = ji;
+    const std::string name = named("j", ji);
+    std::string b = "<joint name=\"" + name + "\" type=\"hinge\" axis=\"" + vec(j.axis) + "\"";
+    if (j.type == JointInfo::Type::kRevolute)
+      b += " limited=\"true\" range=\"" + num(j.lower) + " " + num(j.upper) + "\"";
+    hj.force = options_.finger_force_n * lever(j);
+    const double kp = hj.force / 0.02;  // the full force at 0.02 rad behind the target
+    b += " armature=\"" + num(kArmature) + "\" damping=\"" + num(2 * std::sqrt(kp * kArmature)) +
+         "\"/>";
+    xml_.actuators += "<position name=\"a" + name + "\" joint=\"" + name + "\" kp=\"" + num(kp) +
+                      "\" forcelimited=\"true\" forcerange=\"" + num(-hj.force) + " " +
+                      num(hj.force) + "\"/>";
+    for (size_t f = 0; f < model_.fingers().size(); ++f) {
+      const FingerInfo& fi = model_.fingers()[f];
+      if (fi.variable == j.variable) {
+        hj.finger = int(f);
+        hj.driver = true;
+      } else if (j.mimicOf == fi.variable) {
+        hj.finger = int(f);
+        hj.mult = j.mimicMultiplier;
+        hj.offset = j.mimicOffset;
+      }
+    }
+    joints->push_back(hj);
+    return b;
+  }
+  std::string bodies(int link, std::vector<HandJoint>* joints) {
+    std::string b;
+    const std::vector<JointInfo>& js = model_.joints();
+    for (size_t ji = 0; ji < js.size(); ++ji) {
+      const JointInfo& j = js[ji];
+      if (j.parentLink != link) continue;
+      const LinkInfo& child = model_.links()[size_t(j.childLink)];
+      const double m = child.mass > 0 ? child.mass : 0.05;
+      b += "<body name=\"" + named("link", j.childLink) + "\" " + posQuat(j.T_parent_joint) + ">" +
+           inertial(m, child.com, Mat3::Identity() * m * 1e-4);
+      if (j.type == JointInfo::Type::kRevolute || j.type == JointInfo::Type::kContinuous)
+        b += hinge(int(ji), joints);
+      else if (j.type == JointInfo::Type::kPrismatic)
+        throw Error("physics: prismatic hand joints are not supported (" + j.name + ")");
+      geomsXml(child, named("l", j.childLink), &meshCount_, &xml_, &b);
+      b += bodies(j.childLink, joints) + "</body>";
+    }
+    return b;
+  }
+
+  const RobotModel& model_;
+  const PhysicsOptions& options_;
+  std::vector<Iso3> poses_;  // link poses with the hand open
+  HandXml xml_;
+  int meshCount_ = 0;
+};
+
+// The object as MJCF: a free body with the solid's inertia, one mesh geom per convex piece.
+std::string objectXml(const std::vector<ConvexPiece>& pieces, double mass, const MassProperties& mp,
+                      std::string* assets) {
+  std::string body = "<body name=\"object\"><freejoint name=\"object\"/>" +
+                     inertial(mass, mp.com, mass / mp.volume_m3 * mp.inertia_com);
+  for (size_t i = 0; i < pieces.size(); ++i) {
+    const std::string name = named("obj", long(i));
+    *assets += "<mesh name=\"" + name + "\" vertex=\"";
+    for (const Vec3& v : pieces[i].hull.vertices) *assets += vec(v) + " ";
+    *assets += "\"/>";
+    body += "<geom type=\"mesh\" mesh=\"" + name + "\" contype=\"1\" conaffinity=\"1\"/>";
+  }
+  return body + "</body>";
+}
+
+// Compiles MJCF text (MuJoCo's virtual file system is megabytes of fixed arrays: on the heap).
+mjModel* compileXml(const std::string& xml) {
+  const auto vfs = std::make_unique<mjVFS>();
+  mj_defaultVFS(vfs.get());
+  if (mj_makeEmptyFileVFS(vfs.get(), "inhand.xml", int(xml.size())) != 0)
+    throw Error("physics: MuJoCo could not take the model");
+  std::memcpy(vfs->filedata[vfs->nfile - 1], xml.data(), xml.size());
+  char error[1000] = "";
+  mjModel* m = mj_loadXML("inhand.xml", vfs.get(), error, sizeof error);
+  mj_deleteVFS(vfs.get());
+  if (!m) throw Error(std::string("physics: MuJoCo refused the model: ") + error);
+  return m;
+}
+
 }  // namespace
 
 PhysicsWorld::PhysicsWorld(const RobotModel& model, const TriangleMesh& object_O, double friction,
@@ -182,151 +331,34 @@ PhysicsWorld::PhysicsWorld(const RobotModel& model, const TriangleMesh& object_O
   if (!(mp.volume_m3 > 0))
     throw Error("physics: the object's mesh encloses no volume (it must be closed and outward)");
   I.mass = options.mass_kg > 0 ? options.mass_kg : options.density_kg_m3 * mp.volume_m3;
-  const double density = I.mass / mp.volume_m3;
   I.pieces = convexDecomposition(object_O, options.decomposition);
   if (I.pieces.empty()) throw Error("physics: the object's convex decomposition is empty");
   for (const ConvexPiece& p : I.pieces) I.piecesVolume += p.volume_m3;
 
+  std::string assets;
+  const std::string object = objectXml(I.pieces, I.mass, mp, &assets);
+  HandXmlBuilder hand(model, options);
+  const std::string palm = hand.palmContents(&I.joints);
+  const LinkInfo& palmLink = model.links()[size_t(model.tipLink())];
+  const double palmMass = palmLink.mass > 0 ? palmLink.mass : 1.0;
+  const TableInfo& table = model.table();
   std::ostringstream x;
-  const std::string mu = num(friction) + " 0.002 0.0001";
   x << "<mujoco model=\"inhand\"><compiler angle=\"radian\"/>"
     << "<option timestep=\"" << num(options.timestep_s)
     << "\" gravity=\"0 0 -9.81\" cone=\"elliptic\" impratio=\"10\"/>"
-    << "<default><geom friction=\"" << mu << "\" condim=\"4\" solref=\"0.005 1\"/></default>";
-  std::string assets;
-  for (size_t i = 0; i < I.pieces.size(); ++i) {
-    assets += "<mesh name=\"" + named("obj", long(i)) + "\" vertex=\"";
-    for (const Vec3& v : I.pieces[i].hull.vertices) assets += vec(v) + " ";
-    assets += "\"/>";
-  }
-  // The hand: bodies along the URDF joints below the tip link.
-  HandXml hand;
-  int meshCount = 0;
-  const std::vector<LinkInfo>& links = model.links();
-  const std::vector<JointInfo>& js = model.joints();
-  // Levers for the force limits: the farthest collision vertex of the links a joint carries.
-  const JointVector q0 = model.openHand(0.0);
-  const std::vector<Iso3> poses = model.linkPoses(q0);
-  std::function<void(int, std::vector<int>*)> below = [&](int link, std::vector<int>* out) {
-    out->push_back(link);
-    for (const JointInfo& j : js)
-      if (j.parentLink == link) below(j.childLink, out);
-  };
-  auto lever = [&](const JointInfo& j) {
-    std::vector<int> carried;
-    below(j.childLink, &carried);
-    const Vec3 origin = (poses[size_t(j.parentLink)] * j.T_parent_joint).translation();
-    double r = 0.02;
-    for (int l : carried)
-      for (const Primitive& p : links[size_t(l)].collision)
-        for (const Vec3f& v : p.toMesh().vertices)
-          r = std::max(r, (poses[size_t(l)] * v.cast<double>() - origin).norm());
-    return r;
-  };
-  auto linkInertial = [&](const LinkInfo& l) {
-    const double m = l.mass > 0 ? l.mass : 0.05;
-    return inertial(m, l.com, Mat3::Identity() * m * 1e-4);
-  };
-  std::function<std::string(int)> bodyXml = [&](int link) {
-    std::string b;
-    geomsXml(links[size_t(link)], named("l", link), &meshCount, &hand, &b);
-    for (size_t ji = 0; ji < js.size(); ++ji) {
-      const JointInfo& j = js[ji];
-      if (j.parentLink != link) continue;
-      b += "<body name=\"" + named("link", j.childLink) + "\" " + posQuat(j.T_parent_joint) + ">" +
-           linkInertial(links[size_t(j.childLink)]);
-      if (j.type == JointInfo::Type::kRevolute || j.type == JointInfo::Type::kContinuous) {
-        Impl::HandJoint hj;
-        hj.variable = j.variable;
-        const std::string name = named("j", long(ji));
-        b += "<joint name=\"" + name + "\" type=\"hinge\" axis=\"" + vec(j.axis) + "\"";
-        if (j.type == JointInfo::Type::kRevolute)
-          b += " limited=\"true\" range=\"" + num(j.lower) + " " + num(j.upper) + "\"";
-        hj.force = options.finger_force_n * lever(j);
-        const double kp = hj.force / 0.02;
-        b += " armature=\"" + num(kArmature) + "\" damping=\"" +
-             num(2 * std::sqrt(kp * kArmature)) + "\"/>";
-        hand.actuators += "<position name=\"a" + name + "\" joint=\"" + name + "\" kp=\"" +
-                          num(kp) + "\" forcelimited=\"true\" forcerange=\"" + num(-hj.force) +
-                          " " + num(hj.force) + "\"/>";
-        for (size_t f = 0; f < model.fingers().size(); ++f) {
-          const FingerInfo& fi = model.fingers()[f];
-          if (fi.variable == j.variable) {
-            hj.finger = int(f);
-            hj.driver = true;
-          } else if (j.mimicOf == fi.variable) {
-            hj.finger = int(f);
-            hj.mult = j.mimicMultiplier;
-            hj.offset = j.mimicOffset;
-          }
-        }
-        I.joints.push_back(hj);
-      } else if (j.type == JointInfo::Type::kPrismatic) {
-        throw Error("physics: prismatic hand joints are not supported (" + j.name + ")");
-      }
-      b += bodyXml(j.childLink) + "</body>";
-    }
-    return b;
-  };
-  const int tip = model.tipLink();
-  const std::string handBodies = bodyXml(tip);
-  std::string palmGeoms;
-  geomsXml(links[size_t(tip)], "tip", &meshCount, &hand, &palmGeoms);
-  const LinkInfo& palmLink = links[size_t(tip)];
-  const double palmMass = palmLink.mass > 0 ? palmLink.mass : 1.0;
-
-  const TableInfo& table = model.table();
-  x << "<asset>" << assets << hand.assets << "</asset><worldbody>";
-  x << "<geom name=\"table\" type=\"box\" pos=\"" << vec(table.center_B) << "\" size=\""
-    << vec(0.5 * table.size) << "\" contype=\"1\" conaffinity=\"1\"/>";
-  x << "<body name=\"object\">"
-    << "<freejoint name=\"object\"/>" << inertial(I.mass, mp.com, density * mp.inertia_com);
-  for (size_t i = 0; i < I.pieces.size(); ++i)
-    x << "<geom type=\"mesh\" mesh=\"obj" << i << "\" contype=\"1\" conaffinity=\"1\"/>";
-  x << "</body>";
-  x << "<body name=\"target\" mocap=\"true\"/>";
-  x << "<body name=\"palm\"><freejoint name=\"palm\"/>"
-    << inertial(palmMass, palmLink.com, Mat3::Identity() * palmMass * 2e-3) << palmGeoms
-    << handBodies << "</body>";
-  x << "</worldbody><equality><weld body1=\"palm\" body2=\"target\" solref=\"0.004 1\"/></equality>"
-    << "<actuator>" << hand.actuators << "</actuator></mujoco>";
-  const std::string xml = x.str();
-
-  // MuJoCo's virtual file system is megabytes of fixed arrays: on the heap, not the stack.
-  const auto vfs = std::make_unique<mjVFS>();
-  mj_defaultVFS(vfs.get());
-  if (mj_makeEmptyFileVFS(vfs.get(), "inhand.xml", int(xml.size())) != 0)
-    throw Error("physics: MuJoCo could not take the model");
-  std::memcpy(vfs->filedata[vfs->nfile - 1], xml.data(), xml.size());
-  char error[1000] = "";
-  I.m = mj_loadXML("inhand.xml", vfs.get(), error, sizeof error);
-  mj_deleteVFS(vfs.get());
-  if (!I.m) throw Error(std::string("physics: MuJoCo refused the model: ") + error);
+    << "<default><geom friction=\"" << num(friction)
+    << " 0.002 0.0001\" condim=\"4\" solref=\"0.005 1\"/></default>"
+    << "<asset>" << assets << hand.assets() << "</asset><worldbody>"
+    << "<geom name=\"table\" type=\"box\" pos=\"" << vec(table.center_B) << "\" size=\""
+    << vec(0.5 * table.size) << "\" contype=\"1\" conaffinity=\"1\"/>" << object
+    << "<body name=\"target\" mocap=\"true\"/>"
+    << "<body name=\"palm\"><freejoint name=\"palm\"/>"
+    << inertial(palmMass, palmLink.com, Mat3::Identity() * palmMass * 2e-3) << palm << "</body>"
+    << "</worldbody><equality><weld body1=\"palm\" body2=\"target\" solref=\"0.004 1\"/>"
+    << "</equality><actuator>" << hand.actuators() << "</actuator></mujoco>";
+  I.m = compileXml(x.str());
   I.d = mj_makeData(I.m);
-  I.objectBody = mj_name2id(I.m, mjOBJ_BODY, "object");
-  I.palmBody = mj_name2id(I.m, mjOBJ_BODY, "palm");
-  I.targetBody = mj_name2id(I.m, mjOBJ_BODY, "target");
-  I.tableGeom = mj_name2id(I.m, mjOBJ_GEOM, "table");
-  const int oj = mj_name2id(I.m, mjOBJ_JOINT, "object"), pj = mj_name2id(I.m, mjOBJ_JOINT, "palm");
-  I.objectQpos = I.m->jnt_qposadr[oj];
-  I.objectDof = I.m->jnt_dofadr[oj];
-  I.palmQpos = I.m->jnt_qposadr[pj];
-  I.palmDof = I.m->jnt_dofadr[pj];
-  for (Impl::HandJoint& hj : I.joints) {
-    const JointInfo& j = model.variable(hj.variable);
-    const int ji = model.jointIndex(j.name);
-    char name[32];
-    std::snprintf(name, sizeof name, "j%d", ji);
-    const int id = mj_name2id(I.m, mjOBJ_JOINT, name);
-    hj.qpos = I.m->jnt_qposadr[id];
-    hj.dof = I.m->jnt_dofadr[id];
-    std::snprintf(name, sizeof name, "aj%d", ji);
-    hj.actuator = mj_name2id(I.m, mjOBJ_ACTUATOR, name);
-  }
-  I.handBody.assign(size_t(I.m->nbody), 0);
-  for (int b = 0; b < I.m->nbody; ++b)
-    for (int a = b; a > 0; a = I.m->body_parentid[a])
-      if (a == I.palmBody) I.handBody[size_t(b)] = 1;
+  I.bind();
 }
 
 PhysicsWorld::~PhysicsWorld() = default;
@@ -344,7 +376,7 @@ void PhysicsWorld::reset(const Iso3& T_B_O, const Iso3& T_B_palm, const JointVec
   I.setFree(I.objectQpos, I.objectDof, T_B_O);
   I.setFree(I.palmQpos, I.palmDof, T_B_palm);
   I.setMocap(T_B_palm);
-  for (const Impl::HandJoint& hj : I.joints) {
+  for (const HandJoint& hj : I.joints) {
     I.d->qpos[hj.qpos] = q[hj.variable];
     I.d->ctrl[hj.actuator] = q[hj.variable];
     // Spread and the like hold where they are, stiffly; fingers drive with their limit.
@@ -366,7 +398,7 @@ JointVector PhysicsWorld::closeHand(const JointVector& q) {
   };
   std::vector<State> st(I.joints.size());
   for (size_t k = 0; k < I.joints.size(); ++k) {
-    const Impl::HandJoint& hj = I.joints[k];
+    const HandJoint& hj = I.joints[k];
     const JointInfo& j = model.variable(hj.variable);
     if (hj.finger < 0) {
       st[k].done = true;
@@ -386,7 +418,7 @@ JointVector PhysicsWorld::closeHand(const JointVector& q) {
     for (size_t k = 0; k < I.joints.size(); ++k) {
       if (st[k].done) continue;
       all = false;
-      const Impl::HandJoint& hj = I.joints[k];
+      const HandJoint& hj = I.joints[k];
       const FingerInfo& f = model.fingers()[size_t(hj.finger)];
       const double rate = std::abs(f.closed - f.open) / I.options.finger_close_time_s;
       double& target = I.d->ctrl[hj.actuator];
@@ -416,7 +448,7 @@ JointVector PhysicsWorld::closeHand(const JointVector& q) {
   }
   // Lock: each finger joint holds where it is, pressing with the force it had reached, and
   // resists being pushed back (the worm drive) up to hold_force_factor times its drive.
-  for (const Impl::HandJoint& hj : I.joints) {
+  for (const HandJoint& hj : I.joints) {
     if (hj.finger < 0) continue;
     const int a = hj.actuator;
     const double kp = I.m->actuator_gainprm[size_t(a) * mjNGAIN];
@@ -434,7 +466,7 @@ void PhysicsWorld::openHand() {
   const RobotModel& model = *I.robot;
   std::vector<double> from(I.joints.size()), to(I.joints.size());
   for (size_t k = 0; k < I.joints.size(); ++k) {
-    const Impl::HandJoint& hj = I.joints[k];
+    const HandJoint& hj = I.joints[k];
     from[k] = I.d->qpos[hj.qpos];
     to[k] = from[k];
     if (hj.finger < 0) continue;
@@ -524,7 +556,7 @@ bool PhysicsWorld::objectTouchesTable() const {
 JointVector PhysicsWorld::handJoints(const JointVector& q) const {
   const Impl& I = *impl_;
   JointVector out = q;
-  for (const Impl::HandJoint& hj : I.joints) out[hj.variable] = I.d->qpos[hj.qpos];
+  for (const HandJoint& hj : I.joints) out[hj.variable] = I.d->qpos[hj.qpos];
   return out;
 }
 

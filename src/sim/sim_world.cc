@@ -170,6 +170,20 @@ void SimWorld::syncFromPhysics() {
   q = physics_->handJoints(q);
 }
 
+void SimWorld::stepPhysics(double dt_s, double* untouched_s) {
+  // The palm follows the arm; the object moves as physics moves it. It has fallen when it has
+  // touched no part of the hand for a tenth of a second, and then settles where it lands.
+  physics_->movePalm(model_->tipPose(trueJoints()) * T_tip_palm, dt_s);
+  syncFromPhysics();
+  *untouched_s = physics_->objectTouchesHand() ? 0.0 : *untouched_s + dt_s;
+  if (*untouched_s >= 0.1 - 1e-9) {
+    physics_->settle(options_.physics.settle_s);
+    tablePose = physics_->objectPose();
+    held = false;
+    ++drops;
+  }
+}
+
 Iso3 SimWorld::restPose() const {
   const Vec3 at = model_->camera().lookAt_B;
   Iso3 T = Iso3::Identity();
@@ -355,30 +369,30 @@ double SimWorld::faultDraw(int kind) {
   return double(h >> 11) * 0x1.0p-53;
 }
 
-void SimRobot::execute(const std::vector<JointVector>& waypoints,
-                       const std::function<void(const JointVector&)>& on_state) {
-  const RobotModel& m = world_->model();
-  const SimOptions& o = world_->options();
-  const SimFaults& f = o.faults;
-  SimWorld& w = *world_;
-  // The motion's steps, and the faults that come during it.
+namespace {
+// A motion through joint-space waypoints as the sensor's frames see it: each segment's steps at
+// the frame rate, at the joints' speed limits (trajectoryTime). With `ramp_s` > 0 each segment
+// speeds up and slows down over that long (at most its own duration), a trapezoidal profile that
+// takes the ramp longer; 0 moves at the limits throughout (the kinematic simulator).
+struct MotionSteps {
   std::vector<std::pair<size_t, int>> steps;  // (segment, step) per sensor frame time
-  std::vector<int> segmentSteps(waypoints.size(), 0);
-  // With physics each segment speeds up and slows down over `ramp` s (a trapezoidal profile at
-  // the speed limits: the segment takes `ramp` longer); the kinematic simulator moves at the
-  // limits throughout.
-  std::vector<double> segmentTime(waypoints.size(), 0), segmentRamp(waypoints.size(), 0);
-  PhysicsWorld* ph = w.physics();
-  for (size_t k = 1; k < waypoints.size(); ++k) {
-    const double duration = trajectoryTime(m, m.arm(waypoints[k - 1]), m.arm(waypoints[k]));
-    const double ramp = ph ? std::min(o.physics.ramp_s, duration) : 0.0;
-    segmentTime[k] = duration;
-    segmentRamp[k] = ramp;
-    segmentSteps[k] = std::max(1, int(std::ceil((duration + ramp) * o.frame_rate_hz)));
-    for (int s = 1; s <= segmentSteps[k]; ++s) steps.emplace_back(k, s);
+  std::vector<int> segmentSteps;
+  std::vector<double> segmentTime, segmentRamp;
+
+  MotionSteps(const RobotModel& m, const std::vector<JointVector>& waypoints, double rate_hz,
+              double ramp_s)
+      : segmentSteps(waypoints.size(), 0),
+        segmentTime(waypoints.size(), 0),
+        segmentRamp(waypoints.size(), 0) {
+    for (size_t k = 1; k < waypoints.size(); ++k) {
+      segmentTime[k] = trajectoryTime(m, m.arm(waypoints[k - 1]), m.arm(waypoints[k]));
+      segmentRamp[k] = std::min(ramp_s, segmentTime[k]);
+      segmentSteps[k] = std::max(1, int(std::ceil((segmentTime[k] + segmentRamp[k]) * rate_hz)));
+      for (int s = 1; s <= segmentSteps[k]; ++s) steps.emplace_back(k, s);
+    }
   }
   // The fraction of segment k covered at its step s.
-  auto fraction = [&](size_t k, int s) {
+  double fraction(size_t k, int s) const {
     if (s >= segmentSteps[k]) return 1.0;
     const double ramp = segmentRamp[k], T = segmentTime[k];
     if (ramp <= 0 || T <= 0) return double(s) / segmentSteps[k];
@@ -386,7 +400,20 @@ void SimRobot::execute(const std::vector<JointVector>& waypoints,
     if (t < ramp) return 0.5 * v * t * t / ramp;
     if (t > total - ramp) return 1 - 0.5 * v * (total - t) * (total - t) / ramp;
     return v * (t - 0.5 * ramp);
-  };
+  }
+};
+}  // namespace
+
+void SimRobot::execute(const std::vector<JointVector>& waypoints,
+                       const std::function<void(const JointVector&)>& on_state) {
+  const RobotModel& m = world_->model();
+  const SimOptions& o = world_->options();
+  const SimFaults& f = o.faults;
+  SimWorld& w = *world_;
+  // The motion's steps, and the faults that come during it.
+  PhysicsWorld* ph = w.physics();
+  const MotionSteps motion(m, waypoints, o.frame_rate_hz, ph ? o.physics.ramp_s : 0.0);
+  const std::vector<std::pair<size_t, int>>& steps = motion.steps;
   if (steps.empty()) return;
   if (f.refused_motions > 0 && w.faultDraw(8) < f.refused_motions) {
     ++w.faults.refused_motions;
@@ -407,30 +434,17 @@ void SimRobot::execute(const std::vector<JointVector>& waypoints,
     ++w.motions;
     ++w.graspMotions;
   }
-  int untouched = 0;      // frames since the object last touched the hand (physics)
-  double motionSlip = 0;  // how far the object moved in the hand during this motion, m
+  double untouched_s = 0;  // since the object last touched the hand (physics)
+  double motionSlip = 0;   // how far the object moved in the hand during this motion, m
   const Iso3 grip = w.T_O_palm;
   for (size_t i = 0; i < last; ++i) {
     const auto [k, s] = steps[i];
     const JointVector& a = waypoints[k - 1];
     const JointVector& b = waypoints[k];
-    w.q = a + (b - a) * fraction(k, s);
+    w.q = a + (b - a) * motion.fraction(k, s);
     if (ph && w.held) {
-      // The palm follows the arm; the object moves as physics moves it. It has fallen when it
-      // has touched no part of the hand for a tenth of a second.
-      const JointVector hand = w.q;
-      ph->movePalm(m.tipPose(w.trueJoints()) * w.T_tip_palm, 1.0 / o.frame_rate_hz);
-      w.q = m.withArm(ph->handJoints(hand), m.arm(hand));
-      w.syncFromPhysics();
-      w.q = m.withArm(w.q, m.arm(hand));
+      w.stepPhysics(1.0 / o.frame_rate_hz, &untouched_s);
       motionSlip = std::max(motionSlip, (w.T_O_palm.translation() - grip.translation()).norm());
-      untouched = ph->objectTouchesHand() ? 0 : untouched + 1;
-      if (untouched * (1.0 / o.frame_rate_hz) >= 0.1) {
-        ph->settle(o.physics.settle_s);
-        w.tablePose = ph->objectPose();
-        w.held = false;
-        ++w.drops;
-      }
     }
     if (w.held && w.slipping) {  // the grasp does not hold: the object falls
       w.held = false;

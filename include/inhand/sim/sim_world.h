@@ -148,6 +148,10 @@ class SimWorld {
   const PhysicsWorld* physics() const { return physics_.get(); }
   // With physics: the object's grasp (T_O_palm) and the hand's joints as physics has them.
   void syncFromPhysics();
+  // With physics and the object in the hand: dt_s of the palm following the arm at q;
+  // `untouched_s` counts how long the object has touched no hand link (a tenth of a second: it
+  // fell, and is left on the table where it settles).
+  void stepPhysics(double dt_s, double* untouched_s);
   // The physics palm's pose relative to the arm's tip as the joints put it (the guarded move
   // and the fingers' give move the hand from where the arm's joints say).
   Iso3 T_tip_palm = Iso3::Identity();
