@@ -113,6 +113,33 @@ TEST(ConvexDecomposition, CupRingAndClampKeepTheirVolume) {
   }
 }
 
+// The hand in MuJoCo is the robot's: every hand link where forward kinematics puts it, for
+// preshapes across the joints' ranges (the palm where it was put).
+TEST(Physics, HandLinksAreWhereForwardKinematicsPutsThem) {
+  const RobotModel& m = test::wam();
+  PhysicsWorld w(m, makeBox(Vec3(0.05, 0.05, 0.05)), 0.5, PhysicsOptions{});
+  Iso3 T_B_O = Iso3::Identity();
+  T_B_O.translation() = Vec3(0.75, 0.3, m.table().topZ() + 0.025);
+  for (double spread : {0.0, 0.8, 2.0})
+    for (double fraction : {0.0, 0.4, 0.9}) {
+      const JointVector q = m.preshapedHand(spread, fraction);
+      Iso3 T_B_palm = Iso3::Identity();
+      T_B_palm.linear() = Eigen::AngleAxisd(2.5, Vec3(0.3, 1, 0.2).normalized()).toRotationMatrix();
+      T_B_palm.translation() = Vec3(0.5, -0.3, 0.9);
+      w.reset(T_B_O, T_B_palm, q);
+      const std::vector<Iso3> fk = m.linkPoses(q);
+      const Iso3 T_B_tip = fk[size_t(m.tipLink())];
+      const std::vector<std::pair<int, Iso3>> links = w.handLinkPoses();
+      EXPECT_EQ(links.size(), m.handLinks().size());
+      for (const auto& [link, T] : links) {
+        const Iso3 want = T_B_palm * T_B_tip.inverse() * fk[size_t(link)];
+        EXPECT_LT((T.translation() - want.translation()).norm(), 1e-6) << m.links()[size_t(link)].name;
+        EXPECT_LT(Eigen::AngleAxisd(T.linear() * want.linear().transpose()).angle(), 1e-6)
+            << m.links()[size_t(link)].name;
+      }
+    }
+}
+
 // An object dropped a centimetre onto the table comes to rest on it at the height of its lowest
 // point: the decomposition, the inertia and the contacts agree with the mesh.
 TEST(Physics, ABoxDroppedOnTheTableRestsOnIt) {

@@ -258,6 +258,8 @@ void visitConfig(V& v, ScanConfig& c) {
           p.num("mass_kg", x.mass_kg, "the object's mass (0: from the density), kg");
           p.num("timestep_s", x.timestep_s, "MuJoCo's time step, s");
           p.num("finger_force_n", x.finger_force_n, "each finger's force limit at its tip, N");
+          p.num("touch_force_n", x.touch_force_n,
+                "fingers close with this force until each meets something, then squeeze, N");
           p.num("finger_close_time_s", x.finger_close_time_s, "fingers open to closed, s");
           p.num("hold_force_factor", x.hold_force_factor,
                 "a closed finger resists this multiple of its drive force (worm drive)");

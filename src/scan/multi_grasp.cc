@@ -203,6 +203,31 @@ PickOutcome pickAndVerify(ScanSession& session, RobotInterface& robot, DepthSens
       }
       if (tracked) inHand = depthSupport(d, *tracked, K, mask, held_B);
       onTable = depthSupport(d, *aim, K, mask, rest_B_points);
+      // Not where the grasp says, and not where it rested: closing the fingers may have moved
+      // it in the hand. The model registered to the frame from the grasp as planned finds it
+      // (then the grasp is where it was found).
+      if (tracked && !(inHand > 0.5) && !(onTable > 0.5)) {
+        TrackResult reg;
+        if (const std::optional<Iso3> found =
+                session.registerHeldObject(d, mask, robot.joints(), *tracked, *achieved, &reg)) {
+          const Iso3 T_B_O = m.tipPose(robot.joints()) * found->inverse();
+          for (size_t k = 0; k < points_O.size(); ++k) held_B[k] = T_B_O * points_O[k];
+          const double found_support = depthSupport(d, *tracked, K, mask, held_B);
+          char line[160];
+          std::snprintf(line, sizeof line,
+                        "the object found in the hand %.1f mm from the planned grasp (%d %% "
+                        "borne out)",
+                        1000 * (found->translation() - achieved->translation()).norm(),
+                        int(std::lround(100 * std::max(0.0, found_support))));
+          log(line);
+          if (found_support > 0.5) {
+            inHand = found_support;
+            achieved = *found;
+          }
+        } else {
+          log("the object not found in the hand: " + reg.reason);
+        }
+      }
     }
     auto percent = [](double f) {
       return f < 0 ? std::string("none in view") : std::to_string(int(std::lround(100 * f))) + " %";

@@ -8,6 +8,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <functional>
 #include <sstream>
@@ -21,6 +22,8 @@ std::string PhysicsOptions::validate() const {
   if (!(mass_kg >= 0 && mass_kg <= 100)) return "mass_kg must be in [0, 100]";
   if (!(timestep_s >= 1e-4 && timestep_s <= 0.01)) return "timestep_s must be in [1e-4, 0.01]";
   if (!(finger_force_n > 0 && finger_force_n <= 1000)) return "finger_force_n must be in (0, 1000]";
+  if (!(touch_force_n > 0 && touch_force_n <= finger_force_n))
+    return "touch_force_n must be in (0, finger_force_n]";
   if (!(finger_close_time_s > 0.05 && finger_close_time_s <= 10))
     return "finger_close_time_s must be in (0.05, 10]";
   if (!(hold_force_factor >= 1 && hold_force_factor <= 1000))
@@ -69,8 +72,9 @@ struct HandJoint {
   int variable = -1;  // robot variable
   int joint = -1;     // robot joint (index into RobotModel::joints())
   int qpos = -1, dof = -1, actuator = -1;
-  double force = 0;  // driving limit, N·m
-  int finger = -1;   // index in fingers(), or -1 (spread and the like)
+  double force = 0;       // driving limit, N·m
+  double kp = 0, kv = 0;  // servo gains: kp (target − q) + kv (commanded speed − q̇)
+  int finger = -1;        // index in fingers(), or -1 (spread and the like)
   bool driver = false;
   double mult = 1, offset = 0;  // follower: q = mult·q_driver + offset
 };
@@ -241,12 +245,15 @@ class HandXmlBuilder {
     if (j.type == JointInfo::Type::kRevolute)
       b += " limited=\"true\" range=\"" + num(j.lower) + " " + num(j.upper) + "\"";
     hj.force = options_.finger_force_n * lever(j);
-    const double kp = hj.force / 0.02;  // the full force at 0.02 rad behind the target
-    b += " armature=\"" + num(kArmature) + "\" damping=\"" + num(2 * std::sqrt(kp * kArmature)) +
-         "\"/>";
-    xml_.actuators += "<position name=\"a" + name + "\" joint=\"" + name + "\" kp=\"" + num(kp) +
-                      "\" forcelimited=\"true\" forcerange=\"" + num(-hj.force) + " " +
-                      num(hj.force) + "\"/>";
+    // The full force at 0.02 rad behind the target, critically damped; the damping is the
+    // servo's (relative to the commanded speed, within the force limit), not the joint's.
+    hj.kp = hj.force / 0.02;
+    hj.kv = 2 * std::sqrt(hj.kp * kArmature);
+    b += " armature=\"" + num(kArmature) + "\" damping=\"" + num(0.01 * hj.kv) + "\"/>";
+    xml_.actuators += "<general name=\"a" + name + "\" joint=\"" + name + "\" gainprm=\"" +
+                      num(hj.kp) + "\" biastype=\"affine\" biasprm=\"0 " + num(-hj.kp) + " " +
+                      num(-hj.kv) + "\" forcelimited=\"true\" forcerange=\"" + num(-hj.force) +
+                      " " + num(hj.force) + "\"/>";
     for (size_t f = 0; f < model_.fingers().size(); ++f) {
       const FingerInfo& fi = model_.fingers()[f];
       if (fi.variable == j.variable) {
@@ -387,77 +394,106 @@ void PhysicsWorld::reset(const Iso3& T_B_O, const Iso3& T_B_palm, const JointVec
   mj_forward(I.m, I.d);
 }
 
-JointVector PhysicsWorld::closeHand(const JointVector& q) {
-  Impl& I = *impl_;
+namespace {
+// A finger joint while the hand closes: its closing direction and end, whether it has stopped.
+struct Closing {
+  double dir = 1, limit = 0, target = 0;  // target: the commanded position
+  bool done = false, atLimit = false;
+  double stalled_s = 0;
+};
+}  // namespace
+
+// Every finger joint's servo force limited to `fraction` of its drive (spread joints untouched).
+void setFingerForce(mjModel* m, const std::vector<HandJoint>& joints, double fraction) {
+  for (const HandJoint& hj : joints) {
+    if (hj.finger < 0) continue;
+    m->actuator_forcerange[2 * hj.actuator] = -fraction * hj.force;
+    m->actuator_forcerange[2 * hj.actuator + 1] = fraction * hj.force;
+  }
+}
+
+// The fingers close at their speed until each joint stalls on something or reaches its end (at
+// most twice finger_close_time_s): driven joints from their command, coupled ones with it until
+// the driven joint stops, then on at breakaway_rate (TorqueSwitch).
+void closeUntilStalled(PhysicsWorld::Impl& I, std::vector<Closing>& st) {
   const RobotModel& model = *I.robot;
   const double dt = I.m->opt.timestep;
-  struct State {
-    double dir = 1, limit = 0;
-    bool done = false;
-    double stalled_s = 0;
-  };
-  std::vector<State> st(I.joints.size());
-  for (size_t k = 0; k < I.joints.size(); ++k) {
-    const HandJoint& hj = I.joints[k];
-    const JointInfo& j = model.variable(hj.variable);
-    if (hj.finger < 0) {
-      st[k].done = true;
-      continue;
-    }
-    const FingerInfo& f = model.fingers()[size_t(hj.finger)];
-    const double dirDriver = f.closed >= f.open ? 1.0 : -1.0;
-    st[k].dir = hj.driver ? dirDriver : dirDriver * (hj.mult >= 0 ? 1.0 : -1.0);
-    st[k].limit = hj.driver ? f.closed : (st[k].dir > 0 ? j.upper : j.lower);
-  }
   std::vector<int> driverOf(model.fingers().size(), -1);
   for (size_t k = 0; k < I.joints.size(); ++k)
     if (I.joints[k].driver) driverOf[size_t(I.joints[k].finger)] = int(k);
-  const double t_max = 2 * I.options.finger_close_time_s;
-  for (double t = 0; t < t_max; t += dt) {
+  for (double t = 0; t < 2 * I.options.finger_close_time_s; t += dt) {
     bool all = true;
     for (size_t k = 0; k < I.joints.size(); ++k) {
       if (st[k].done) continue;
       all = false;
       const HandJoint& hj = I.joints[k];
       const FingerInfo& f = model.fingers()[size_t(hj.finger)];
-      const double rate = std::abs(f.closed - f.open) / I.options.finger_close_time_s;
-      double& target = I.d->ctrl[hj.actuator];
-      const double qj = I.d->qpos[hj.qpos];
-      if (hj.driver) {
+      double rate = std::abs(f.closed - f.open) / I.options.finger_close_time_s;
+      double& target = st[k].target;
+      const int drv = driverOf[size_t(hj.finger)];
+      if (!hj.driver && drv >= 0 && !st[size_t(drv)].done) {  // coupled to the driven command
+        target = hj.mult * st[size_t(drv)].target + hj.offset;
+        rate *= std::abs(hj.mult);
+      } else {
+        if (!hj.driver) rate *= I.options.breakaway_rate;
         target = st[k].dir > 0 ? std::min(st[k].limit, target + rate * dt)
                                : std::max(st[k].limit, target - rate * dt);
-      } else {
-        const int drv = driverOf[size_t(hj.finger)];
-        if (drv >= 0 && !st[size_t(drv)].done) {  // coupled to the driven joint's command
-          target = hj.mult * I.d->ctrl[I.joints[size_t(drv)].actuator] + hj.offset;
-        } else {  // TorqueSwitch: the driven joint stopped, this one closes on
-          const double r = I.options.breakaway_rate * rate;
-          target = st[k].dir > 0 ? std::min(st[k].limit, target + r * dt)
-                                 : std::max(st[k].limit, target - r * dt);
-        }
       }
+      const bool moving = std::abs(target - st[k].limit) > 1e-9;
+      I.d->ctrl[hj.actuator] = target + (moving ? st[k].dir * rate * hj.kv / hj.kp : 0.0);
       // Stalled: held back by a contact (the servo's error grows, the joint does not move).
+      const double qj = I.d->qpos[hj.qpos];
       const double lag = st[k].dir * (target - qj);
       const double speed = std::abs(I.d->qvel[hj.dof]);
-      st[k].stalled_s = (lag > 0.05 && speed < 0.05) ? st[k].stalled_s + dt : 0;
-      const bool atLimit = std::abs(qj - st[k].limit) < 0.01;
-      if (st[k].stalled_s > 0.05 || atLimit) st[k].done = true;
+      st[k].stalled_s = (lag > 0.02 && speed < 0.05) ? st[k].stalled_s + dt : 0;
+      st[k].atLimit = std::abs(qj - st[k].limit) < 0.01;
+      if (st[k].stalled_s > 0.05 || st[k].atLimit) st[k].done = true;
     }
     if (all) break;
     I.step(1);
   }
+  for (size_t k = 0; k < I.joints.size(); ++k)
+    if (I.joints[k].finger >= 0) I.d->ctrl[I.joints[k].actuator] = st[k].target;
+}
+
+JointVector PhysicsWorld::closeHand(const JointVector& q) {
+  Impl& I = *impl_;
+  const RobotModel& model = *I.robot;
+  std::vector<Closing> st(I.joints.size());
+  for (size_t k = 0; k < I.joints.size(); ++k) {
+    const HandJoint& hj = I.joints[k];
+    if (hj.finger < 0) {
+      st[k].done = true;
+      continue;
+    }
+    const JointInfo& j = model.variable(hj.variable);
+    const FingerInfo& f = model.fingers()[size_t(hj.finger)];
+    const double dirDriver = f.closed >= f.open ? 1.0 : -1.0;
+    st[k].dir = hj.driver ? dirDriver : dirDriver * (hj.mult >= 0 ? 1.0 : -1.0);
+    st[k].limit = hj.driver ? f.closed : (st[k].dir > 0 ? j.upper : j.lower);
+    st[k].target = I.d->qpos[hj.qpos];
+  }
+  // Close with touch_force_n until every finger has met something (the first to arrive does not
+  // push the object away from the others), then squeeze with the full force.
+  setFingerForce(I.m, I.joints, I.options.touch_force_n / I.options.finger_force_n);
+  closeUntilStalled(I, st);
+  setFingerForce(I.m, I.joints, 1.0);
+  for (size_t k = 0; k < I.joints.size(); ++k) {
+    const HandJoint& hj = I.joints[k];
+    if (hj.finger < 0 || st[k].atLimit) continue;
+    I.d->ctrl[hj.actuator] = I.d->qpos[hj.qpos] + st[k].dir * 1.5 * hj.force / hj.kp;
+  }
+  I.step(std::max(1, int(std::lround(0.2 / I.m->opt.timestep))));
   // Lock: each finger joint holds where it is, pressing with the force it had reached, and
   // resists being pushed back (the worm drive) up to hold_force_factor times its drive.
   for (const HandJoint& hj : I.joints) {
     if (hj.finger < 0) continue;
     const int a = hj.actuator;
-    const double kp = I.m->actuator_gainprm[size_t(a) * mjNGAIN];
     const double qj = I.d->qpos[hj.qpos];
-    const double force = std::clamp(kp * (I.d->ctrl[a] - qj), -hj.force, hj.force);
-    I.d->ctrl[a] = qj + force / kp;
-    I.m->actuator_forcerange[2 * a] = -I.options.hold_force_factor * hj.force;
-    I.m->actuator_forcerange[2 * a + 1] = I.options.hold_force_factor * hj.force;
+    const double force = std::clamp(hj.kp * (I.d->ctrl[a] - qj), -hj.force, hj.force);
+    I.d->ctrl[a] = qj + force / hj.kp;
   }
+  setFingerForce(I.m, I.joints, I.options.hold_force_factor);
   return handJoints(q);
 }
 
@@ -551,6 +587,17 @@ bool PhysicsWorld::objectTouchesTable() const {
       return true;
   }
   return false;
+}
+
+std::vector<std::pair<int, Iso3>> PhysicsWorld::handLinkPoses() const {
+  const Impl& I = *impl_;
+  std::vector<std::pair<int, Iso3>> out{{I.robot->tipLink(), I.bodyPose(I.palmBody)}};
+  for (int b = 0; b < I.m->nbody; ++b) {
+    const char* name = mj_id2name(I.m, mjOBJ_BODY, b);
+    if (name && std::strncmp(name, "link", 4) == 0)
+      out.emplace_back(std::atoi(name + 4), I.bodyPose(b));
+  }
+  return out;
 }
 
 JointVector PhysicsWorld::handJoints(const JointVector& q) const {

@@ -27,6 +27,9 @@ struct PhysicsOptions {
   // (finger_close_time_s); worm-driven joints that do not backdrive: a closed finger holds its
   // position up to hold_force_factor times the driving force.
   double finger_force_n = 20;
+  // The fingers first close with this force until each has met something (so that the first to
+  // arrive does not push the object off the others), then squeeze with finger_force_n.
+  double touch_force_n = 2;
   double finger_close_time_s = 1.0;
   double hold_force_factor = 20;
   // TorqueSwitch: once a finger's driven (proximal) joint stalls, its coupled (distal) joints
@@ -59,9 +62,10 @@ class PhysicsWorld {
   // Puts the object at T_B_O at rest, the hand's palm at T_B_palm with the hand joints of q (an
   // open preshape), both at rest.
   void reset(const Iso3& T_B_O, const Iso3& T_B_palm, const JointVector& q);
-  // Closes every finger from where it is toward its `closed` value, force-limited, with the
-  // TorqueSwitch, until each joint stalls on something or reaches its limit (at most twice
-  // finger_close_time_s), then locks them. Returns q with the hand joints as they ended.
+  // Closes every finger from where it is toward its `closed` value with the TorqueSwitch until
+  // each joint stalls on something or reaches its limit (at most twice finger_close_time_s),
+  // pressing with touch_force_n; then squeezes with finger_force_n for 0.2 s and locks them.
+  // Returns q with the hand joints as they ended.
   JointVector closeHand(const JointVector& q);
   // Opens the fingers to their open values over finger_close_time_s (the palm held).
   void openHand();
@@ -79,6 +83,8 @@ class PhysicsWorld {
   bool objectTouchesHand() const;
   bool objectTouchesTable() const;
   JointVector handJoints(const JointVector& q) const;  // q with the hand joints as simulated
+  // Each hand link's pose as simulated (link index into RobotModel::links(), T_B_link).
+  std::vector<std::pair<int, Iso3>> handLinkPoses() const;
   // The whole dynamic state (positions, velocities, servo targets and limits, the solver's warm
   // start), for checkpoints: setState(state()) continues exactly as without the break.
   Json state() const;
@@ -86,8 +92,9 @@ class PhysicsWorld {
   double simulated_s() const;        // physics time stepped so far, s
   double wall_s() const;             // computation spent stepping, s
 
+  struct Impl;  // MuJoCo's model and data (physics.cc)
+
  private:
-  struct Impl;
   std::unique_ptr<Impl> impl_;
 };
 
