@@ -88,6 +88,35 @@ double depthSupport(const DepthImage& d, const Iso3& T_B_C, const CameraIntrinsi
   return support + against == 0 ? -1.0 : double(support) / (support + against);
 }
 
+// The object lifted but not where the grasp `T_O_palm` says: the model registered to the lift's
+// frame `d` (robot pixels `mask`, camera at T_B_C as tracked, the robot at q) from that grasp.
+// The grasp where it was found and the fraction of `points_O` the frame bears out there, when
+// more than half; else nullopt.
+std::optional<std::pair<Iso3, double>> refindInHand(
+    ScanSession& session, const DepthImage& d, const std::vector<uint8_t>& mask,
+    const JointVector& q, const Iso3& T_B_C, const Iso3& T_O_palm,
+    const std::vector<Vec3>& points_O, const CameraIntrinsics& K,
+    const std::function<void(const std::string&)>& log) {
+  TrackResult reg;
+  const std::optional<Iso3> found = session.registerHeldObject(d, mask, q, T_B_C, T_O_palm, &reg);
+  if (!found) {
+    log("the object not found in the hand: " + reg.reason);
+    return std::nullopt;
+  }
+  const Iso3 T_B_O = session.robot().tipPose(q) * found->inverse();
+  std::vector<Vec3> held_B;
+  for (const Vec3& p : points_O) held_B.push_back(T_B_O * p);
+  const double support = depthSupport(d, T_B_C, K, mask, held_B);
+  char line[160];
+  std::snprintf(line, sizeof line,
+                "the object found in the hand %.1f mm from the planned grasp (%d %% borne out)",
+                1000 * (found->translation() - T_O_palm.translation()).norm(),
+                int(std::lround(100 * std::max(0.0, support))));
+  log(line);
+  if (!(support > 0.5)) return std::nullopt;
+  return std::make_pair(*found, support);
+}
+
 // Picks the object up with the first candidate (in order) that the robot
 // closes on, lifts, and by what it then observes holds. Fingers all closed to their limit mean
 // an empty hand. After the lift the camera looks at the hand: the object's points (`points_O`,
@@ -204,30 +233,13 @@ PickOutcome pickAndVerify(ScanSession& session, RobotInterface& robot, DepthSens
       if (tracked) inHand = depthSupport(d, *tracked, K, mask, held_B);
       onTable = depthSupport(d, *aim, K, mask, rest_B_points);
       // Not where the grasp says, and not where it rested: closing the fingers may have moved
-      // it in the hand. The model registered to the frame from the grasp as planned finds it
-      // (then the grasp is where it was found).
-      if (tracked && !(inHand > 0.5) && !(onTable > 0.5)) {
-        TrackResult reg;
-        if (const std::optional<Iso3> found =
-                session.registerHeldObject(d, mask, robot.joints(), *tracked, *achieved, &reg)) {
-          const Iso3 T_B_O = m.tipPose(robot.joints()) * found->inverse();
-          for (size_t k = 0; k < points_O.size(); ++k) held_B[k] = T_B_O * points_O[k];
-          const double found_support = depthSupport(d, *tracked, K, mask, held_B);
-          char line[160];
-          std::snprintf(line, sizeof line,
-                        "the object found in the hand %.1f mm from the planned grasp (%d %% "
-                        "borne out)",
-                        1000 * (found->translation() - achieved->translation()).norm(),
-                        int(std::lround(100 * std::max(0.0, found_support))));
-          log(line);
-          if (found_support > 0.5) {
-            inHand = found_support;
-            achieved = *found;
-          }
-        } else {
-          log("the object not found in the hand: " + reg.reason);
+      // it in the hand.
+      if (tracked && !(inHand > 0.5) && !(onTable > 0.5))
+        if (const auto found = refindInHand(session, d, mask, robot.joints(), *tracked, *achieved,
+                                            points_O, K, log)) {
+          achieved = found->first;
+          inHand = found->second;
         }
-      }
     }
     auto percent = [](double f) {
       return f < 0 ? std::string("none in view") : std::to_string(int(std::lround(100 * f))) + " %";
