@@ -490,6 +490,24 @@ TEST(Cli, AGraspThatDoesNotHoldDropsTheObjectAndTheScanTriesTheNext) {
   }
 }
 
+// A pick-up budget: with every pick-up failing (the hand reaches nothing), the scan tries
+// grasp.max_failed_pick_ups candidates, no more, and ends with pick_up_failed (exit 4) and the
+// table-top model written.
+TEST(Cli, FailedPickUpsStopAtTheBudget) {
+  test::TempDir dir;
+  writeTextAtomically(dir.path() / "c.json", R"({"grasp": {"max_failed_pick_ups": 2},
+    "sim": {"faults": {"failed_pickups": 1.0}}})");
+  const fs::path out = dir.path() / "scan";
+  const Result r = run("scan --object builtin:coffee_can --config " +
+                           (dir.path() / "c.json").string() + " --out " + out.string(),
+                       dir);
+  EXPECT_EQ(r.code, 4) << r.output;
+  const Json s = readJsonFile(out / "summary.json");
+  EXPECT_EQ(s["termination"], "pick_up_failed");
+  EXPECT_EQ(s["table_top"]["pick_up_attempts"].size(), 2u);
+  EXPECT_TRUE(fs::exists(out / "model.ply"));
+}
+
 // An object the open BarrettHand cannot span (a 290 mm cube: the flat fingers reach 302 mm tip
 // to tip) ends cleanly: no force-closure grasp, object_too_large_for_hand, exit 4, with the
 // table-top model written.

@@ -31,12 +31,13 @@ struct ScanRun {
   JointVector q;
 };
 
-ScanRun scanCan(const ScanOptions& o, uint64_t seed = 1) {
+ScanRun scanCan(const ScanOptions& o, uint64_t seed = 1, const SimFaults& faults = {}) {
   TriangleMesh can = loadObject("builtin:coffee_can");
   auto [T_O_palm, q] = defaultGrasp(wam(), can);
   SimOptions so;
   so.seed = seed;
   so.frame_subsample = 4;
+  so.faults = faults;
   SimWorld world(wam(), can, T_O_palm, DepthCameraOptions{}, NoiseModelOptions{}, so);
   world.q = q;
   SimRobot robot(&world);
@@ -149,4 +150,20 @@ TEST(Scan, DropsSeenInTheDepthFramesAreTheSimulatorsDrops) {
     EXPECT_EQ(r.scan.termination, Termination::kPickUpFailed);
     EXPECT_FALSE(world.held);
   }
+}
+
+// A one-grasp scan reports every frame it did not fuse: a quarter of the frames dropped by the
+// sensor reach ScanResult (scanSingleGrasp once left these counts at 0), and the counts add up.
+TEST(Scan, SingleGraspScanReportsTheFramesItRejected) {
+  ScanOptions o = testOptions();
+  o.max_views = 1;
+  SimFaults f;
+  f.dropped_frames = 0.25;
+  const ScanRun run = scanCan(o, 1, f);
+  const ScanResult& r = run.result;
+  EXPECT_GT(r.frames_dropped, 0);
+  EXPECT_GT(r.frames, 0);
+  int inViews = 0;
+  for (const ViewRecord& v : r.views) inViews += v.frames;
+  EXPECT_LE(inViews, r.frames);
 }

@@ -192,6 +192,8 @@ void visitConfig(V& v, ScanConfig& c) {
              "how the open hand comes in: palm slides to contact, or the whole hand to first "
              "contact");
     g.integer("approaches", o.approaches, "approach directions over the sphere");
+    g.integer("max_failed_pick_ups", o.max_failed_pick_ups,
+              "failed pick-ups per grasp before the scan gives up on it");
     g.integer("rolls", o.rolls, "palm rolls about each approach (over 180°)");
     g.numbers("spreads", o.spreads, "spread joint values tried");
     g.numbers("preshapes", o.preshapes,

@@ -36,6 +36,8 @@ bool parseGraspApproach(const std::string& name, GraspApproach* a) {
 std::string GraspOptions::validate() const {
   if (approaches < 1) return "approaches must be >= 1";
   if (rolls < 1) return "rolls must be >= 1";
+  if (max_failed_pick_ups < 1 || max_failed_pick_ups > 1000)
+    return "max_failed_pick_ups must be in 1..1000";
   if (spreads.empty()) return "spreads must not be empty";
   if (preshapes.empty()) return "preshapes must not be empty";
   for (double f : preshapes)

@@ -138,8 +138,14 @@ PickOutcome pickAndVerify(ScanSession& session, RobotInterface& robot, DepthSens
   const RobotModel& m = robot.model();
   const RobotOccluders scenes(m);
   PickOutcome out;
+  const int budget = session.multiOptions().grasp.max_failed_pick_ups;
   for (const GraspCandidate& c : candidates) {
     if (session.progress().stopRequested()) break;
+    if (int(out.attempts.size()) >= budget) {
+      log("no pick-up held after " + std::to_string(budget) +
+          " attempts (grasp.max_failed_pick_ups); giving up on this grasp");
+      break;
+    }
     out.attempt_poses.push_back(c.pose);
     std::optional<Iso3> achieved = robot.pickUp(c.T_O_palm, c.q_open);
     if (!achieved) {
@@ -348,7 +354,7 @@ void runGrasps(RobotInterface& robot, DepthSensor& sensor, ScanSession& session,
         pickAndVerify(session, robot, sensor, T_B_O_rest, known_O, usable, session.options(), log);
     if (!pick.achieved) {
       all.termination =
-          progress.stopRequested() ? Termination::kInterrupted : Termination::kPickUpFailed;
+          progress.stopRequested() ? Termination::kInterrupted : Termination::kRegraspFailed;
       out.unused_generation_s += plan.generation.seconds;
       out.unused_ranking_s += plan.ranking_s;
       break;

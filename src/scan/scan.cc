@@ -46,6 +46,7 @@ constexpr std::pair<Termination, const char*> kTerminationNames[] = {
     {Termination::kNoReachableGrasp, "no_reachable_grasp"},
     {Termination::kNoGraspAboveThreshold, "no_grasp_above_threshold"},
     {Termination::kPickUpFailed, "pick_up_failed"},
+    {Termination::kRegraspFailed, "regrasp_failed"},
     {Termination::kObjectOutOfView, "object_out_of_view"},
     {Termination::kObjectNotFound, "object_not_found"},
     {Termination::kObjectTooLargeForHand, "object_too_large_for_hand"},

@@ -66,8 +66,11 @@ struct GraspOptions {
   double contact_cell_m = 0.01;   // contact pooling cell, m
   double min_epsilon = 1e-4;      // ε below this: not a stable grasp
   double stability_weight = 0.0;  // score = quality + weight·ε
-  int max_candidates = 50;        // ranked at most (the most stable first)
-  double lift_m = 0.15;           // the object is lifted this far after the pick
+  // Failed pick-ups per grasp before the scan gives up on that grasp (first grasp:
+  // pick_up_failed; a re-grasp: regrasp_failed, with the model of the grasps so far).
+  int max_failed_pick_ups = 8;
+  int max_candidates = 50;  // ranked at most (the most stable first)
+  double lift_m = 0.15;     // the object is lifted this far after the pick
   // The approach's search for the nearest model sample in the hand's footprint four samples at a
   // time in AVX2 where the CPU has it (false: one at a time). The same candidates either way.
   bool vectorised = true;

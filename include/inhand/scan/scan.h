@@ -39,7 +39,7 @@ enum class Termination {
   kRegraspUnsupported,       // the robot cannot put the object down
   kNoReachableGrasp,         // no grasp candidate is stable, clear of the table and reachable
   kNoGraspAboveThreshold,    // no candidate promises a view above t_q
-  kPickUpFailed,             // no candidate picked the object up and held it
+  kPickUpFailed,             // no candidate picked the object up and held it (first grasp)
   kObjectOutOfView,          // the camera cannot aim at the rest pose
   kObjectNotFound,           // too few points above the table near the rest pose
   kObjectTooLargeForHand,    // the open hand spans none of its extents
@@ -47,6 +47,7 @@ enum class Termination {
   kNoStableGrasp,            // no first-grasp pose is force closure
   kInterrupted,              // the caller stopped it (ScanProgress::interrupted, e.g. SIGINT)
   kObjectLost,               // in-hand frames stopped showing the object where the hand held it
+  kRegraspFailed,            // a re-grasp's pick-ups failed (grasp.max_failed_pick_ups)
 };
 // snake_case names as summary.json writes them (no_view_above_threshold, …; running).
 std::string terminationName(Termination t);
