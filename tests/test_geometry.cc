@@ -12,6 +12,7 @@
 #include "inhand/geometry/box_overlap.h"
 #include "inhand/geometry/builtin_objects.h"
 #include "inhand/geometry/contour.h"
+#include "inhand/geometry/convex_decomposition.h"
 #include "inhand/geometry/mesh_io.h"
 #include "inhand/geometry/primitives.h"
 #include "inhand/geometry/projector_shadows.h"
@@ -1183,6 +1184,31 @@ TEST(StablePoses, ConvexHullOfACubeWithInteriorAndFacePoints) {
 
 // A box a × b × c rests on each face pair with the solid angle the face subtends at the centre,
 // Ω = 4 asin(ab / √((a² + 4d²)(b² + 4d²))) at distance d, over 4π.
+// Many cocircular and coplanar points (a revolved mug of 10^5 vertices): the hull is closed
+// (V − E + F = 2), every point lies inside every face's plane, and it comes out in bounded memory
+// and time (an earlier incremental hull grew without bound on this input).
+TEST(StablePoses, ConvexHullOfAMugIsClosedAndHoldsEveryPoint) {
+  const TriangleMesh mug = loadObject("builtin:mug");
+  std::vector<Vec3> pts;
+  for (const Vec3f& v : mug.vertices) pts.push_back(v.cast<double>());
+  const ConvexHull h = convexHull(pts);
+  ASSERT_GE(h.vertices.size(), 4u);
+  EXPECT_EQ(2 * long(h.vertices.size()) - 4, long(h.triangles.size()));
+  double worst = 0;
+  for (const auto& t : h.triangles) {
+    const Vec3 a = h.vertices[size_t(t[0])], b = h.vertices[size_t(t[1])],
+               c = h.vertices[size_t(t[2])];
+    const Vec3 n = (b - a).cross(c - a);
+    if (n.norm() < 1e-14) continue;
+    for (size_t k = 0; k < pts.size(); k += 7)
+      worst = std::max(worst, n.normalized().dot(pts[k] - a));
+  }
+  EXPECT_LT(worst, 1e-9);
+  const Aabb box = mug.bounds();
+  EXPECT_GT(hullVolume(h), 0.5 * box.size().prod());
+  EXPECT_LT(hullVolume(h), box.size().prod());
+}
+
 TEST(StablePoses, BoxProbabilitiesAreTheFacesSolidAngles) {
   const Vec3 s(0.06, 0.158, 0.21);  // the cracker box
   auto face = [](double a, double b, double d) {

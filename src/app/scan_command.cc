@@ -481,7 +481,8 @@ int runScan(const ScanArgs& given) {
                         {"simulated_s", sim.physics_simulated_s},
                         {"computation_s", sim.physics_s},
                         {"slips", sim.slips},
-                        {"slip_max_mm", 1000 * sim.slip_max_m}};
+                        {"slip_max_mm", 1000 * sim.slip_max_m},
+                        {"unstable_steps_undone", sim.unstable_steps}};
   const SimFaultLog& f = sim.faults;
   summary["faults_injected"] = {{"dropped_frames", f.dropped_frames},
                                 {"corrupted_frames", f.corrupted_frames},

@@ -209,6 +209,19 @@ void visitConfig(V& v, ScanConfig& c) {
     g.num("stability_weight", o.stability_weight, "ranking score = quality + weight · ε");
     g.integer("max_candidates", o.max_candidates, "ranked at most (the most stable first)");
     g.num("lift_m", o.lift_m, "the object is lifted this far after the pick, m");
+    g.object("hold", "the hold test: candidates closed, lifted and turned on the model in physics",
+             [&](V& h) {
+               HoldTestOptions& x = o.hold;
+               h.boolean("enabled", x.enabled, "test the candidates; those that hold go first");
+               h.integer("max_candidates", x.max_candidates, "the first this many are tested");
+               h.num("density_kg_m3", x.density_kg_m3,
+                     "assumed: the model's mass is its volume times this, kg/m³");
+               h.num("lift_m", x.lift_m, "lifted this far straight up, m");
+               h.num("lift_s", x.lift_s, "… over this long, s");
+               h.num("turn_rad", x.turn_rad, "then turned this far about a horizontal axis, rad");
+               h.num("turn_s", x.turn_s, "… over this long, s");
+               h.num("max_slip_m", x.max_slip_m, "moved farther in the hand: it did not hold, m");
+             });
     g.object("ranking", "Alg. 1 as used to rank grasp candidates",
              [&](V& p) { visitPlanner(p, m.ranking); });
   });

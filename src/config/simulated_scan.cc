@@ -108,6 +108,7 @@ SimulatedScan runSimulatedScan(const RobotModel& model, const TriangleMesh& obje
     out.pieces_volume_ratio = ph->piecesVolume_m3() / massProperties(object).volume_m3;
     out.physics_simulated_s = ph->simulated_s();
     out.physics_s = ph->wall_s();
+    out.unstable_steps = ph->unstableSteps();
     out.slips = world.slips;
     out.slip_max_m = world.slipMax_m;
   }

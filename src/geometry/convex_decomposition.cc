@@ -278,12 +278,15 @@ std::vector<ConvexPiece> convexDecomposition(const TriangleMesh& mesh,
   pieces[0].hi = g.n;
   buildPiece(mesh, triBox, g, all, &pieces[0]);
   std::vector<uint8_t> final(1, 0);  // a piece that no cut improves
+  // Excesses that differ by round-off (the hull of a symmetric part, built in another order) are
+  // equal: the first in order wins, whatever the last bit says.
+  const double tie = 1e-9 * solid;
   while (int(pieces.size()) < options.max_pieces) {
     double total = 0;
     int worst = -1;
     for (size_t i = 0; i < pieces.size(); ++i) {
       total += pieces[i].excess();
-      if (!final[i] && (worst < 0 || pieces[i].excess() > pieces[size_t(worst)].excess()))
+      if (!final[i] && (worst < 0 || pieces[i].excess() > pieces[size_t(worst)].excess() + tie))
         worst = int(i);
     }
     if (worst < 0 || total <= options.max_excess * solid) break;
@@ -318,7 +321,7 @@ std::vector<ConvexPiece> convexDecomposition(const TriangleMesh& mesh,
     size_t best = 0;
     for (size_t c = 1; c < cuts.size(); ++c)
       if (children[c][0].excess() + children[c][1].excess() <
-          children[best][0].excess() + children[best][1].excess())
+          children[best][0].excess() + children[best][1].excess() - tie)
         best = c;
     pieces[size_t(worst)] = std::move(children[best][0]);
     final[size_t(worst)] = 0;
@@ -328,6 +331,27 @@ std::vector<ConvexPiece> convexDecomposition(const TriangleMesh& mesh,
   std::vector<ConvexPiece> out;
   for (Piece& p : pieces)
     if (p.hull_m3 > 0) out.push_back({std::move(p.hull), p.hull_m3});
+  return out;
+}
+
+std::optional<ConvexPiece> clipPiece(const ConvexPiece& piece, const Vec3& n, double d) {
+  const std::vector<Vec3>& v = piece.hull.vertices;
+  std::vector<Vec3> kept;
+  for (const Vec3& p : v)
+    if (n.dot(p) >= d) kept.push_back(p);
+  if (kept.size() == v.size()) return piece;
+  for (const auto& t : piece.hull.triangles)
+    for (int k = 0; k < 3; ++k) {
+      const Vec3& a = v[size_t(t[size_t(k)])];
+      const Vec3& b = v[size_t(t[size_t((k + 1) % 3)])];
+      const double sa = n.dot(a) - d, sb = n.dot(b) - d;
+      if ((sa < 0) != (sb < 0)) kept.push_back(a + (sa / (sa - sb)) * (b - a));
+    }
+  if (kept.size() < 4) return std::nullopt;
+  ConvexPiece out;
+  out.hull = convexHull(kept);
+  out.volume_m3 = hullVolume(out.hull);
+  if (!(out.volume_m3 >= 1e-9)) return std::nullopt;
   return out;
 }
 

@@ -2,9 +2,11 @@
 
 #include <algorithm>
 #include <cmath>
+#include <functional>
 #include <map>
 #include <numeric>
 #include <random>
+#include <unordered_map>
 
 #include "inhand/core/error.h"
 
@@ -43,64 +45,129 @@ ConvexHull convexHull(const std::vector<Vec3>& input) {
   Aabb box;
   for (const Vec3& p : pts) box.extend(p);
   const double eps = 1e-9 * std::max(1e-6, box.size().maxCoeff());
-  // An initial tetrahedron of four non-coplanar points.
-  int i0 = 0, i1 = -1, i2 = -1, i3 = -1;
-  for (size_t i = 1; i < pts.size() && i1 < 0; ++i)
-    if ((pts[i] - pts[i0]).norm() > 1e3 * eps) i1 = int(i);
-  if (i1 < 0) return hull;
-  for (size_t i = 1; i < pts.size() && i2 < 0; ++i)
-    if ((pts[i1] - pts[i0]).cross(pts[i] - pts[i0]).norm() > 1e3 * eps * box.size().maxCoeff())
-      i2 = int(i);
-  if (i2 < 0) return hull;
+  // The initial tetrahedron spans as much as the points do (a flat one would make the inside
+  // point's side of its faces a matter of round-off): the lowest x, the farthest from it, the
+  // farthest from their line, the farthest from their plane.
+  auto farthest = [&](const std::function<double(const Vec3&)>& distance) {
+    int best = 0;
+    double d = -1;
+    for (size_t i = 0; i < pts.size(); ++i)
+      if (const double di = distance(pts[i]); di > d) {
+        d = di;
+        best = int(i);
+      }
+    return std::make_pair(best, d);
+  };
+  const int i0 = farthest([](const Vec3& p) { return -p.x(); }).first;
+  const auto [i1, d1] = farthest([&](const Vec3& p) { return (p - pts[i0]).norm(); });
+  if (!(d1 > 1e3 * eps)) return hull;
+  const Vec3 u = (pts[i1] - pts[i0]) / d1;
+  const auto [i2, d2] = farthest([&](const Vec3& p) { return u.cross(p - pts[i0]).norm(); });
+  if (!(d2 > 1e3 * eps)) return hull;
   const Vec3 n012 = (pts[i1] - pts[i0]).cross(pts[i2] - pts[i0]).normalized();
-  for (size_t i = 1; i < pts.size() && i3 < 0; ++i)
-    if (std::abs(n012.dot(pts[i] - pts[i0])) > 1e3 * eps) i3 = int(i);
-  if (i3 < 0) return hull;
+  const auto [i3, d3] = farthest([&](const Vec3& p) { return std::abs(n012.dot(p - pts[i0])); });
+  if (!(d3 > 1e3 * eps)) return hull;
+  // Quickhull: each face keeps the points outside it; the farthest of them is added next (so a
+  // point barely outside, where round-off decides visibility, comes last and is usually inside
+  // by then). Each directed edge (a, b) maps to the live face it bounds.
   std::vector<Tri3> faces;
   std::vector<Vec3> normal;
   std::vector<double> offset;
   std::vector<uint8_t> alive;
+  std::vector<std::vector<int>> outside;
+  std::unordered_map<uint64_t, int> edgeFace;
+  auto key = [](int a, int b) { return (uint64_t(uint32_t(a)) << 32) | uint32_t(b); };
+  auto dist = [&](int f, const Vec3& p) { return normal[size_t(f)].dot(p) - offset[size_t(f)]; };
   const Vec3 inside = 0.25 * (pts[i0] + pts[i1] + pts[i2] + pts[i3]);
-  auto addFace = [&](int a, int b, int c) {
-    Vec3 n = (pts[b] - pts[a]).cross(pts[c] - pts[a]);
-    if (n.dot(pts[a] - inside) < 0) {
+  auto addFace = [&](int a, int b, int c, bool orient) {
+    Vec3 n = (pts[size_t(b)] - pts[size_t(a)]).cross(pts[size_t(c)] - pts[size_t(a)]);
+    if (orient && n.dot(pts[size_t(a)] - inside) < 0) {
       std::swap(b, c);
       n = -n;
     }
-    n.normalize();
+    const double len = n.norm();
+    n = len > 0 ? Vec3(n / len) : Vec3::Zero();
+    const int f = int(faces.size());
     faces.push_back({a, b, c});
     normal.push_back(n);
-    offset.push_back(n.dot(pts[a]));
+    offset.push_back(n.dot(pts[size_t(a)]));
     alive.push_back(1);
+    outside.emplace_back();
+    edgeFace[key(a, b)] = f;
+    edgeFace[key(b, c)] = f;
+    edgeFace[key(c, a)] = f;
+    return f;
   };
-  addFace(i0, i1, i2);
-  addFace(i0, i1, i3);
-  addFace(i0, i2, i3);
-  addFace(i1, i2, i3);
-  for (size_t pi = 0; pi < pts.size(); ++pi) {
-    if (int(pi) == i0 || int(pi) == i1 || int(pi) == i2 || int(pi) == i3) continue;
-    const Vec3& p = pts[pi];
-    std::vector<int> visible;
-    for (size_t f = 0; f < faces.size(); ++f)
-      if (alive[f] && normal[f].dot(p) - offset[f] > eps) visible.push_back(int(f));
-    if (visible.empty()) continue;
-    // Horizon: directed edges of visible faces whose reverse is not on a visible face.
-    std::map<std::pair<int, int>, int> edges;
-    for (int f : visible)
-      for (int k = 0; k < 3; ++k) edges[{faces[f][k], faces[f][(k + 1) % 3]}]++;
-    for (int f : visible) alive[f] = 0;
-    for (const auto& [e, count] : edges)
-      if (!edges.count({e.second, e.first})) {
-        // Keep the orientation: the new face (a, b, p) continues the visible face's winding.
-        const int a = e.first, b = e.second;
-        Vec3 n = (pts[b] - pts[a]).cross(p - pts[a]);
-        if (n.norm() < 1e-30) continue;
-        n.normalize();
-        faces.push_back({a, b, int(pi)});
-        normal.push_back(n);
-        offset.push_back(n.dot(pts[a]));
-        alive.push_back(1);
+  // Each point to the face (among `candidates`) it lies farthest outside of, if any.
+  auto assign = [&](int q, const std::vector<int>& candidates) {
+    int best = -1;
+    double far = eps;
+    for (int f : candidates)
+      if (const double d = dist(f, pts[size_t(q)]); d > far) {
+        far = d;
+        best = f;
       }
+    if (best >= 0) outside[size_t(best)].push_back(q);
+  };
+  const std::vector<int> first{addFace(i0, i1, i2, true), addFace(i0, i1, i3, true),
+                               addFace(i0, i2, i3, true), addFace(i1, i2, i3, true)};
+  for (size_t q = 0; q < pts.size(); ++q)
+    if (int(q) != i0 && int(q) != i1 && int(q) != i2 && int(q) != i3) assign(int(q), first);
+  std::vector<int> visible, stack, orphans, added;
+  std::vector<uint8_t> isVisible;
+  for (size_t f0 = 0; f0 < faces.size(); ++f0) {
+    while (alive[f0] && !outside[f0].empty()) {
+      // The farthest point outside this face, and every face it sees connected to this one.
+      const std::vector<int>& out = outside[f0];
+      const int pi = *std::max_element(out.begin(), out.end(), [&](int a, int b) {
+        return dist(int(f0), pts[size_t(a)]) < dist(int(f0), pts[size_t(b)]);
+      });
+      const Vec3& p = pts[size_t(pi)];
+      isVisible.resize(faces.size(), 0);
+      visible.clear();
+      stack.assign(1, int(f0));
+      isVisible[f0] = 1;
+      while (!stack.empty()) {
+        const int f = stack.back();
+        stack.pop_back();
+        visible.push_back(f);
+        for (int k = 0; k < 3; ++k) {
+          const Tri3& t = faces[size_t(f)];
+          const auto it = edgeFace.find(key(t[size_t((k + 1) % 3)], t[size_t(k)]));
+          if (it == edgeFace.end() || isVisible[size_t(it->second)]) continue;
+          if (dist(it->second, p) > eps) {
+            isVisible[size_t(it->second)] = 1;
+            stack.push_back(it->second);
+          }
+        }
+      }
+      // The rim: edges of visible faces whose other face is not visible; the new faces continue
+      // the visible faces' winding.
+      std::vector<std::pair<int, int>> rim;
+      orphans.clear();
+      for (int f : visible) {
+        const Tri3& t = faces[size_t(f)];
+        for (int k = 0; k < 3; ++k) {
+          const int a = t[size_t(k)], b = t[size_t((k + 1) % 3)];
+          const auto it = edgeFace.find(key(b, a));
+          if (it == edgeFace.end() || !isVisible[size_t(it->second)]) rim.emplace_back(a, b);
+        }
+        for (int q : outside[size_t(f)])
+          if (q != pi) orphans.push_back(q);
+        outside[size_t(f)].clear();
+      }
+      for (int f : visible) {
+        alive[size_t(f)] = 0;
+        const Tri3& t = faces[size_t(f)];
+        for (int k = 0; k < 3; ++k) {
+          const auto it = edgeFace.find(key(t[size_t(k)], t[size_t((k + 1) % 3)]));
+          if (it != edgeFace.end() && it->second == f) edgeFace.erase(it);
+        }
+      }
+      added.clear();
+      for (const auto& [a, b] : rim) added.push_back(addFace(a, b, pi, false));
+      for (int q : orphans) assign(q, added);
+    }
   }
   std::map<int, int> index;
   for (size_t f = 0; f < faces.size(); ++f) {

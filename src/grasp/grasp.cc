@@ -54,6 +54,7 @@ std::string GraspOptions::validate() const {
   if (!(lift_m >= 0 && lift_m < 1)) return "lift_m must be in [0, 1) m";
   if (!(stability_weight >= 0)) return "stability_weight must be >= 0";
   if (max_candidates < 1) return "max_candidates must be >= 1";
+  if (std::string p = hold.validate(); !p.empty()) return "hold." + p;
   return {};
 }
 

@@ -238,11 +238,12 @@ PickOutcome pickAndVerify(ScanSession& session, RobotInterface& robot, DepthSens
       }
       if (tracked) inHand = depthSupport(d, *tracked, K, mask, held_B);
       onTable = depthSupport(d, *aim, K, mask, rest_B_points);
-      // Not where the grasp says, and not where it rested: closing the fingers may have moved
-      // it in the hand.
-      if (tracked && !(inHand > 0.5) && !(onTable > 0.5))
+      // Not all where the grasp says, and not where it rested: closing the fingers may have
+      // moved it in the hand. Registered from the grasp, kept where the frame bears out more.
+      if (tracked && !(inHand > 0.9) && !(onTable > 0.5))
         if (const auto found = refindInHand(session, d, mask, robot.joints(), *tracked, *achieved,
-                                            points_O, K, log)) {
+                                            points_O, K, log);
+            found && found->second > inHand) {
           achieved = found->first;
           inHand = found->second;
         }

@@ -852,7 +852,15 @@ GraspPlan ScanSession::planGrasps(const Iso3& T_B_O_rest, const JointVector& q_n
                   "no grasp candidate promises a view above t_q (best %.5f < t_q %.5f)",
                   best.quality, t_q);
     finish(Termination::kNoGraspAboveThreshold, line);
+    return plan;
   }
+  // Among those above t_q, the ones that hold the model in physics first (grasp/hold_test.h).
+  std::vector<GraspCandidate> usable(plan.candidates.begin(),
+                                     plan.candidates.begin() + plan.above_threshold);
+  plan.hold_s = rankByHold(*s.model, S_obj.mesh, T_B_O_rest, nullptr, s.multi.grasp.friction,
+                           s.multi.grasp.hold, &usable);
+  std::move(usable.begin(), usable.end(), plan.candidates.begin());
+  log(holdLine(plan.candidates, plan.hold_s));
   return plan;
 }
 

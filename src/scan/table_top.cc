@@ -174,6 +174,11 @@ GraspGeneration firstGrasps(const ScanSession& session, const TableTopObject& ob
                      const double eb = std::floor(std::log(std::max(b.epsilon, 1e-9)) / 0.1);
                      return ea != eb ? ea > eb : a.score < b.score;
                    });
+  // Those that hold the model in physics first (grasp/hold_test.h).
+  const double holdS =
+      rankByHold(m, seen.mesh, T_B_O_rest, &object.box_O, session.multiOptions().grasp.friction,
+                 session.multiOptions().grasp.hold, &first.candidates);
+  session.log(holdLine(first.candidates, holdS));
   return first;
 }
 

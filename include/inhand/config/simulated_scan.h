@@ -28,7 +28,7 @@ struct SimulatedScan {
   // object moved in the hand by more than 2 mm and the largest such movement.
   bool physics = false;
   double mass_kg = 0, pieces_volume_ratio = 0, physics_simulated_s = 0, physics_s = 0;
-  int pieces = 0, slips = 0;
+  int pieces = 0, slips = 0, unstable_steps = 0;
   double slip_max_m = 0;
   DepthCameraOptions camera;  // the simulated sensor
 };

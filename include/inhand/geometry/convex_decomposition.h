@@ -1,6 +1,7 @@
 #pragma once
 // Mass properties of a closed mesh, and its decomposition into convex pieces for a physics
 // engine that collides convex shapes only (MuJoCo collides every mesh geom by its hull).
+#include <optional>
 #include <vector>
 
 #include "inhand/geometry/stable_poses.h"
@@ -44,5 +45,9 @@ struct ConvexPiece {
 // walls as a closed solid); an empty result for an empty mesh.
 std::vector<ConvexPiece> convexDecomposition(const TriangleMesh& closed,
                                              const ConvexDecompositionOptions& options = {});
+
+// The part of a convex piece where n·x ≥ d (n a unit vector): the hull of its vertices on that
+// side and of its edges' crossings of the plane. nullopt when less than 1e-9 m³ is left.
+std::optional<ConvexPiece> clipPiece(const ConvexPiece& piece, const Vec3& n, double d);
 
 }  // namespace inhand

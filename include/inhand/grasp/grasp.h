@@ -25,6 +25,7 @@
 #include <vector>
 
 #include "inhand/geometry/point_cloud.h"
+#include "inhand/grasp/hold_test.h"
 #include "inhand/mesh/extract.h"
 #include "inhand/planning/view_selection.h"
 #include "inhand/robot/wrench.h"
@@ -70,6 +71,7 @@ struct GraspOptions {
   // pick_up_failed; a re-grasp: regrasp_failed, with the model of the grasps so far).
   int max_failed_pick_ups = 8;
   int max_candidates = 50;  // ranked at most (the most stable first)
+  HoldTestOptions hold;     // the candidates tried in physics on the model (grasp/hold_test.h)
   double lift_m = 0.15;     // the object is lifted this far after the pick
   // The approach's search for the nearest model sample in the hand's footprint four samples at a
   // time in AVX2 where the CPU has it (false: one at a time). The same candidates either way.
@@ -85,10 +87,12 @@ struct GraspCandidate {
   JointVector q_lift;        // the same grasp with the object lifted `lift_m` off the table
   int links_in_contact = 0;  // fingers touching, plus one when the palm touches
   std::vector<Contact> contacts;
-  double epsilon = 0;       // stability
-  double quality = 0;       // best view quality Alg. 1 finds with the hand there
-  double score = 0;         // quality + stability_weight·ε
-  int reachable_views = 0;  // views Alg. 1 could reach with this grasp
+  double epsilon = 0;        // stability
+  double quality = 0;        // best view quality Alg. 1 finds with the hand there
+  double score = 0;          // quality + stability_weight·ε
+  int reachable_views = 0;   // views Alg. 1 could reach with this grasp
+  int hold = -1;             // the hold test: 1 held, 0 did not, -1 not tested
+  std::string hold_failure;  // why it did not (HoldTrial::failure)
 };
 
 // What became of one candidate pose.

@@ -48,6 +48,7 @@ struct GraspPlan {
   double model_area_m2 = 0;                // of the planning model the candidates were ranked on
   GraspGeneration generation;              // every pose tried (candidates moved out)
   double ranking_s = 0;
+  double hold_s = 0;  // the hold test (grasp/hold_test.h)
 };
 
 class ScanSession {

@@ -11,7 +11,7 @@
 #include "inhand/sensor/depth_sensor.h"
 #include "inhand/sensor/noise_model.h"
 #include "inhand/sensor/render.h"
-#include "inhand/sim/physics.h"
+#include "inhand/physics/physics.h"
 
 namespace inhand {
 

@@ -1,10 +1,11 @@
-#include "inhand/sim/physics.h"
+#include "inhand/physics/physics.h"
 
 #include <mujoco/mujoco.h>
 
 #include <Eigen/Eigenvalues>
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -123,9 +124,35 @@ struct PhysicsWorld::Impl {
     if (m) mj_deleteModel(m);
   }
 
+  int unstable = 0;  // steps MuJoCo found unstable (bad accelerations), undone
+  std::vector<mjtNum> saved;
+  // Steps n times. A step MuJoCo finds unstable resets its whole state (the object at the
+  // world's origin, the servos' commands and the palm's target zeroed): it is undone, the
+  // positions, commands and target as before it, at rest.
   void step(int n) {
     const auto t0 = std::chrono::steady_clock::now();
-    for (int i = 0; i < n; ++i) mj_step(m, d);
+    const size_t nq = size_t(m->nq), nu = size_t(m->nu), nm = size_t(m->nmocap);
+    saved.resize(nq + nu + 7 * nm);
+    for (int i = 0; i < n; ++i) {
+      std::copy(d->qpos, d->qpos + nq, saved.begin());
+      std::copy(d->ctrl, d->ctrl + nu, saved.begin() + long(nq));
+      std::copy(d->mocap_pos, d->mocap_pos + 3 * nm, saved.begin() + long(nq + nu));
+      std::copy(d->mocap_quat, d->mocap_quat + 4 * nm, saved.begin() + long(nq + nu + 3 * nm));
+      const int bad = d->warning[mjWARN_BADQACC].number;
+      const double time = d->time;
+      mj_step(m, d);
+      if (d->warning[mjWARN_BADQACC].number == bad && d->time > time) continue;
+      std::copy(saved.begin(), saved.begin() + long(nq), d->qpos);
+      std::copy(saved.begin() + long(nq), saved.begin() + long(nq + nu), d->ctrl);
+      std::copy(saved.begin() + long(nq + nu), saved.begin() + long(nq + nu + 3 * nm),
+                d->mocap_pos);
+      std::copy(saved.begin() + long(nq + nu + 3 * nm), saved.end(), d->mocap_quat);
+      std::fill(d->qvel, d->qvel + m->nv, 0.0);
+      std::fill(d->qacc_warmstart, d->qacc_warmstart + m->nv, 0.0);
+      d->time = time + m->opt.timestep;
+      mj_forward(m, d);
+      ++unstable;
+    }
     simulated += n * m->opt.timestep;
     wall += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   }
@@ -330,16 +357,57 @@ PhysicsWorld::PhysicsWorld(const RobotModel& model, const TriangleMesh& object_O
                            const PhysicsOptions& options)
     : impl_(std::make_unique<Impl>()) {
   if (std::string p = options.validate(); !p.empty()) throw Error("physics options: " + p);
-  Impl& I = *impl_;
-  I.robot = &model;
-  I.options = options;
   // The object: mass and inertia of the solid its mesh encloses, collision through its pieces.
   const MassProperties mp = massProperties(object_O);
   if (!(mp.volume_m3 > 0))
     throw Error("physics: the object's mesh encloses no volume (it must be closed and outward)");
+  std::vector<ConvexPiece> pieces = convexDecomposition(object_O, options.decomposition);
+  if (pieces.empty()) throw Error("physics: the object's convex decomposition is empty");
+  build(model, std::move(pieces), mp, friction, options);
+}
+
+PhysicsWorld::PhysicsWorld(const RobotModel& model, std::vector<ConvexPiece> pieces,
+                           double friction, const PhysicsOptions& options)
+    : impl_(std::make_unique<Impl>()) {
+  if (std::string p = options.validate(); !p.empty()) throw Error("physics options: " + p);
+  if (pieces.empty()) throw Error("physics: the object has no convex pieces");
+  // The solid as the union of the pieces (they do not overlap): volumes, centres and inertias
+  // added about the common centre of mass (parallel axis theorem).
+  MassProperties mp;
+  std::vector<MassProperties> each;
+  for (const ConvexPiece& p : pieces) {
+    TriangleMesh hull;
+    for (const Vec3& v : p.hull.vertices) hull.vertices.push_back(v.cast<float>());
+    for (const auto& t : p.hull.triangles) hull.triangles.push_back(Tri(t[0], t[1], t[2]));
+    each.push_back(massProperties(hull));
+    mp.volume_m3 += each.back().volume_m3;
+    mp.com += each.back().volume_m3 * each.back().com;
+  }
+  if (!(mp.volume_m3 > 0)) throw Error("physics: the object's pieces enclose no volume");
+  mp.com /= mp.volume_m3;
+  for (const MassProperties& e : each) {
+    const Vec3 d = e.com - mp.com;
+    mp.inertia_com +=
+        e.inertia_com + e.volume_m3 * (d.squaredNorm() * Mat3::Identity() - d * d.transpose());
+  }
+  build(model, std::move(pieces), mp, friction, options);
+}
+
+namespace {
+// MuJoCo's warnings (a full contact buffer, an unstable step) are counted, not written to a log
+// file in the working folder: the stepping undoes unstable steps and counts them itself.
+std::atomic<long> mujocoWarnings{0};
+void countWarning(const char*) { ++mujocoWarnings; }
+}  // namespace
+
+void PhysicsWorld::build(const RobotModel& model, std::vector<ConvexPiece> pieces,
+                         const MassProperties& mp, double friction, const PhysicsOptions& options) {
+  mju_user_warning = countWarning;
+  Impl& I = *impl_;
+  I.robot = &model;
+  I.options = options;
   I.mass = options.mass_kg > 0 ? options.mass_kg : options.density_kg_m3 * mp.volume_m3;
-  I.pieces = convexDecomposition(object_O, options.decomposition);
-  if (I.pieces.empty()) throw Error("physics: the object's convex decomposition is empty");
+  I.pieces = std::move(pieces);
   for (const ConvexPiece& p : I.pieces) I.piecesVolume += p.volume_m3;
 
   std::string assets;
@@ -350,15 +418,22 @@ PhysicsWorld::PhysicsWorld(const RobotModel& model, const TriangleMesh& object_O
   const double palmMass = palmLink.mass > 0 ? palmLink.mass : 1.0;
   const TableInfo& table = model.table();
   std::ostringstream x;
-  x << "<mujoco model=\"inhand\"><compiler angle=\"radian\"/>"
+  // Contacts: every convex piece may touch the table plane at a few points (MuJoCo 2.2's default
+  // buffer of 100 fills with a many-piece object on it).
+  x << "<mujoco model=\"inhand\"><compiler angle=\"radian\"/><size nconmax=\"2000\" "
+    << "njmax=\"6000\"/>"
     << "<option timestep=\"" << num(options.timestep_s)
     << "\" gravity=\"0 0 -9.81\" cone=\"elliptic\" impratio=\"10\"/>"
     << "<default><geom friction=\"" << num(friction)
     << " 0.002 0.0001\" condim=\"4\" solref=\"0.005 1\"/></default>"
-    << "<asset>" << assets << hand.assets() << "</asset><worldbody>"
-    << "<geom name=\"table\" type=\"box\" pos=\"" << vec(table.center_B) << "\" size=\""
-    << vec(0.5 * table.size) << "\" contype=\"1\" conaffinity=\"1\"/>" << object
-    << "<body name=\"target\" mocap=\"true\"/>"
+    << "<asset>" << assets << hand.assets()
+    << "</asset><worldbody>"
+    // The table top as a plane (MuJoCo 2.2 gives a convex mesh one contact against a box, several
+    // against a plane: an object rests on a plane without rocking).
+    << "<geom name=\"table\" type=\"plane\" pos=\""
+    << vec(Vec3(table.center_B.x(), table.center_B.y(), table.topZ())) << "\" size=\""
+    << vec(Vec3(0.5 * table.size.x(), 0.5 * table.size.y(), 0.01))
+    << "\" contype=\"1\" conaffinity=\"1\"/>" << object << "<body name=\"target\" mocap=\"true\"/>"
     << "<body name=\"palm\"><freejoint name=\"palm\"/>"
     << inertial(palmMass, palmLink.com, Mat3::Identity() * palmMass * 2e-3) << palm << "</body>"
     << "</worldbody><equality><weld body1=\"palm\" body2=\"target\" solref=\"0.004 1\"/>"
@@ -375,6 +450,7 @@ int PhysicsWorld::pieces() const { return int(impl_->pieces.size()); }
 double PhysicsWorld::piecesVolume_m3() const { return impl_->piecesVolume; }
 const std::vector<ConvexPiece>& PhysicsWorld::decomposition() const { return impl_->pieces; }
 double PhysicsWorld::simulated_s() const { return impl_->simulated; }
+int PhysicsWorld::unstableSteps() const { return impl_->unstable; }
 double PhysicsWorld::wall_s() const { return impl_->wall; }
 
 void PhysicsWorld::reset(const Iso3& T_B_O, const Iso3& T_B_palm, const JointVector& q) {

@@ -50,6 +50,10 @@ class PhysicsWorld {
   // Throws Error when MuJoCo refuses the model (the message names the part).
   PhysicsWorld(const RobotModel& model, const TriangleMesh& object_O, double friction,
                const PhysicsOptions& options);
+  // The object as convex pieces already made (frame O; they must not overlap): its solid is their
+  // union, its mass and inertia theirs.
+  PhysicsWorld(const RobotModel& model, std::vector<ConvexPiece> pieces, double friction,
+               const PhysicsOptions& options);
   ~PhysicsWorld();
   PhysicsWorld(const PhysicsWorld&) = delete;
   PhysicsWorld& operator=(const PhysicsWorld&) = delete;
@@ -90,11 +94,15 @@ class PhysicsWorld {
   Json state() const;
   void setState(const Json& state);  // throws Error on a state of another model
   double simulated_s() const;        // physics time stepped so far, s
-  double wall_s() const;             // computation spent stepping, s
+  // Steps MuJoCo found unstable (bad accelerations): each undone (the state before it, at rest).
+  int unstableSteps() const;
+  double wall_s() const;  // computation spent stepping, s
 
   struct Impl;  // MuJoCo's model and data (physics.cc)
 
  private:
+  void build(const RobotModel& model, std::vector<ConvexPiece> pieces, const MassProperties& mp,
+             double friction, const PhysicsOptions& options);
   std::unique_ptr<Impl> impl_;
 };
 

@@ -1,0 +1,71 @@
+#pragma once
+// Grasps chosen to hold. Force closure (ε) says a grasp could resist some wrench; whether the
+// hand holds this object depends on what ε leaves out: the object's weight against the fingers'
+// force limits, the arm's accelerations, the fingers pushing the object as they close one after
+// another, and the turns that present the object to the camera. The hold test closes each
+// candidate on the planner's model of the object in physics (physics/physics.h: the hand's force
+// limits and TorqueSwitch, the model's convex pieces above the table top, its weight at an assumed
+// density), lifts it as the arm lifts, turns it, and sees whether the model stays in the hand.
+// The model is what the scan knows (the observed surface, closed over what it hides), never the
+// true object.
+#include <string>
+#include <vector>
+
+#include "inhand/geometry/convex_decomposition.h"
+#include "inhand/physics/physics.h"
+#include "inhand/robot/robot_model.h"
+
+namespace inhand {
+
+struct GraspCandidate;
+
+struct HoldTestOptions {
+  bool enabled = true;
+  int max_candidates = 12;  // the first this many candidates (in their order) are tested
+  // Assumed: the model's mass is its volume times this (the simulator's default density too).
+  double density_kg_m3 = 300;
+  double lift_m = 0.10;  // the lift, straight up over lift_s
+  double lift_s = 1.0;
+  // Then the palm turns by turn_rad about a horizontal axis over turn_s (the views turn the
+  // object: gravity pulls at the grasp from another side) and holds still for 0.3 s.
+  double turn_rad = M_PI / 2;
+  double turn_s = 1.0;
+  double max_slip_m = 0.01;  // the model moved farther than this in the hand: it did not hold
+  // The model's pieces: coarser than the simulator's (the model is a guess where unobserved).
+  ConvexDecompositionOptions decomposition{32, 24, 0.05};
+  std::string validate() const;
+};
+
+struct HoldTrial {
+  bool held = false;    // still in the hand, moved at most max_slip_m
+  double slip_m = 0;    // how far the model moved in the hand (its centre, from the close)
+  double lift_kg = 0;   // the model's mass
+  std::string failure;  // "", "dropped_in_lift", "dropped_in_turn", "slipped", "not_touching"
+};
+
+// The closed model (frame O) resting at T_B_O, as convex pieces of its part above the robot's
+// table top (the unobserved space below the top is not the object) and, when `keep_O` is given,
+// inside that box (where the object may lie).
+std::vector<ConvexPiece> modelPiecesAboveTable(const TriangleMesh& model_O, const Iso3& T_B_O,
+                                               const RobotModel& robot, const Aabb* keep_O,
+                                               const ConvexDecompositionOptions& options);
+
+// One candidate on the model `world` holds (its object put at T_B_O, the palm at the candidate's
+// pose, the fingers open as they come in): closed, lifted, turned.
+HoldTrial tryHold(PhysicsWorld& world, const Iso3& T_B_O, const Iso3& T_O_palm,
+                  const JointVector& q_open, const JointVector& q_closed,
+                  const HoldTestOptions& options);
+
+// Tests the first max_candidates candidates on the model (in parallel), records each one's
+// outcome (keep_O: as for modelPiecesAboveTable; GraspCandidate::hold: 1 held, 0 not, -1 not
+// tested) and moves those that held ahead of those that did not among the tested (each group in its
+// order). `friction`: μ the planner assumes. Returns the seconds it took. Nothing happens with
+// options.enabled false.
+double rankByHold(const RobotModel& robot, const TriangleMesh& model_O, const Iso3& T_B_O,
+                  const Aabb* keep_O, double friction, const HoldTestOptions& options,
+                  std::vector<GraspCandidate>* candidates);
+
+// "hold test: H of N candidates held the model (S s)" (N: those tested), or "" when none was.
+std::string holdLine(const std::vector<GraspCandidate>& candidates, double seconds);
+
+}  // namespace inhand

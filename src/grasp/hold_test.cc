@@ -1,0 +1,164 @@
+#include "inhand/grasp/hold_test.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <optional>
+
+#include "inhand/core/error.h"
+#include "inhand/core/parallel.h"
+#include "inhand/grasp/grasp.h"
+
+namespace inhand {
+
+std::string HoldTestOptions::validate() const {
+  if (max_candidates < 1) return "max_candidates must be >= 1";
+  if (!(density_kg_m3 > 0 && density_kg_m3 < 30000)) return "density_kg_m3 must be in (0, 30000)";
+  if (!(lift_m >= 0 && lift_m < 1)) return "lift_m must be in [0, 1) m";
+  if (!(lift_s > 0 && lift_s <= 10)) return "lift_s must be in (0, 10] s";
+  if (!(std::abs(turn_rad) <= M_PI)) return "turn_rad must be in [-pi, pi]";
+  if (!(turn_s > 0 && turn_s <= 10)) return "turn_s must be in (0, 10] s";
+  if (!(max_slip_m > 0 && max_slip_m < 0.2)) return "max_slip_m must be in (0, 0.2) m";
+  if (std::string p = decomposition.validate(); !p.empty()) return "decomposition." + p;
+  return {};
+}
+
+std::vector<ConvexPiece> modelPiecesAboveTable(const TriangleMesh& model_O, const Iso3& T_B_O,
+                                               const RobotModel& robot, const Aabb* keep_O,
+                                               const ConvexDecompositionOptions& options) {
+  // The table top in frame O: n·x ≥ d above it (a millimetre up: the model's surface where it
+  // meets the top is a voxel's width of guess).
+  const Vec3 n = T_B_O.linear().transpose() * Vec3::UnitZ();
+  const double d = robot.table().topZ() + 0.001 - T_B_O.translation().z();
+  std::vector<ConvexPiece> out;
+  for (const ConvexPiece& p : convexDecomposition(model_O, options)) {
+    std::optional<ConvexPiece> c = clipPiece(p, n, d);
+    for (int k = 0; k < 3 && keep_O && c; ++k) {
+      c = clipPiece(*c, Vec3::Unit(k), keep_O->min[k]);
+      if (c) c = clipPiece(*c, -Vec3::Unit(k), -keep_O->max[k]);
+    }
+    if (c) out.push_back(std::move(*c));
+  }
+  return out;
+}
+
+namespace {
+// The palm's pose s ∈ [0, 1] of the way along a motion with a trapezoidal speed profile (a
+// quarter of the time speeding up, a quarter slowing down).
+double trapezoid(double s) {
+  const double r = 0.25, v = 1 / (1 - r);
+  if (s < r) return 0.5 * v * s * s / r;
+  if (s > 1 - r) return 1 - 0.5 * v * (1 - s) * (1 - s) / r;
+  return v * (s - 0.5 * r);
+}
+
+// Moves the palm from `from` toward `to` over `seconds` (trapezoidal, 20 ms segments), rotating
+// about the point `pivot_B`; false as soon as the object has touched no part of the hand for
+// 0.1 s.
+bool movePalmHolding(PhysicsWorld& w, const Iso3& from, const Vec3& lift,
+                     const Eigen::AngleAxisd& turn, const Vec3& pivot_B, double seconds) {
+  const int n = std::max(1, int(std::lround(seconds / 0.02)));
+  double untouched = 0;
+  for (int k = 1; k <= n; ++k) {
+    const double f = trapezoid(double(k) / n);
+    const Mat3 R = Eigen::AngleAxisd(f * turn.angle(), turn.axis()).toRotationMatrix();
+    Iso3 T = Iso3::Identity();
+    T.linear() = R * from.linear();
+    T.translation() = pivot_B + R * (from.translation() - pivot_B) + f * lift;
+    w.movePalm(T, seconds / n);
+    untouched = w.objectTouchesHand() ? 0.0 : untouched + seconds / n;
+    if (untouched >= 0.1 - 1e-9) return false;
+  }
+  return true;
+}
+}  // namespace
+
+HoldTrial tryHold(PhysicsWorld& world, const Iso3& T_B_O, const Iso3& T_O_palm,
+                  const JointVector& q_open, const JointVector& q_closed,
+                  const HoldTestOptions& o) {
+  HoldTrial t;
+  t.lift_kg = world.mass_kg();
+  const Iso3 T_B_palm = T_B_O * T_O_palm;
+  world.reset(T_B_O, T_B_palm, q_open);
+  world.closeHand(q_closed);
+  if (!world.objectTouchesHand()) {
+    t.failure = "not_touching";
+    return t;
+  }
+  const Iso3 grip = world.palmPose().inverse() * world.objectPose();
+  auto slip = [&] {
+    const Iso3 now = world.palmPose().inverse() * world.objectPose();
+    return (now.translation() - grip.translation()).norm();
+  };
+  const Iso3 start = world.palmPose();
+  if (!movePalmHolding(world, start, Vec3(0, 0, o.lift_m), Eigen::AngleAxisd(0, Vec3::UnitX()),
+                       start.translation(), o.lift_s)) {
+    t.failure = "dropped_in_lift";
+    t.slip_m = slip();
+    return t;
+  }
+  // The turn: about the horizontal axis across the palm's approach (gravity then pulls along the
+  // approach or across it), through the object's centre.
+  Vec3 axis = Vec3::UnitZ().cross(world.palmPose().linear().col(2));
+  if (axis.norm() < 1e-6) axis = world.palmPose().linear().col(0);
+  const Iso3 lifted = world.palmPose();
+  if (!movePalmHolding(world, lifted, Vec3::Zero(),
+                       Eigen::AngleAxisd(o.turn_rad, axis.normalized()),
+                       world.objectPose().translation(), o.turn_s)) {
+    t.failure = "dropped_in_turn";
+    t.slip_m = slip();
+    return t;
+  }
+  world.movePalm(world.palmPose(), 0.3);
+  t.slip_m = slip();
+  t.held = world.objectTouchesHand() && t.slip_m <= o.max_slip_m;
+  if (!t.held) t.failure = world.objectTouchesHand() ? "slipped" : "dropped_in_turn";
+  return t;
+}
+
+double rankByHold(const RobotModel& robot, const TriangleMesh& model_O, const Iso3& T_B_O,
+                  const Aabb* keep_O, double friction, const HoldTestOptions& o,
+                  std::vector<GraspCandidate>* candidates) {
+  const auto t0 = std::chrono::steady_clock::now();
+  if (!o.enabled || candidates->empty() || model_O.empty()) return 0;
+  if (std::string p = o.validate(); !p.empty()) throw Error("hold test options: " + p);
+  const std::vector<ConvexPiece> pieces =
+      modelPiecesAboveTable(model_O, T_B_O, robot, keep_O, o.decomposition);
+  if (pieces.empty()) return 0;
+  PhysicsOptions po;
+  po.density_kg_m3 = o.density_kg_m3;
+  const int n = std::min(o.max_candidates, int(candidates->size()));
+  // One world per core, each trying every other candidate from a fresh reset.
+  const int workers = std::max(1, std::min(threadCount(), n));
+  std::vector<HoldTrial> trials(size_t(n), HoldTrial{});
+  parallelFor(0, workers, [&](int w) {
+    PhysicsWorld world(robot, pieces, friction, po);
+    for (int i = w; i < n; i += workers) {
+      const GraspCandidate& c = (*candidates)[size_t(i)];
+      trials[size_t(i)] = tryHold(world, T_B_O, c.T_O_palm, c.q_open, c.q, o);
+    }
+  });
+  for (int i = 0; i < n; ++i) {
+    (*candidates)[size_t(i)].hold = trials[size_t(i)].held ? 1 : 0;
+    (*candidates)[size_t(i)].hold_failure = trials[size_t(i)].failure;
+  }
+  std::stable_partition(candidates->begin(), candidates->begin() + n,
+                        [](const GraspCandidate& c) { return c.hold == 1; });
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+std::string holdLine(const std::vector<GraspCandidate>& candidates, double seconds) {
+  int tested = 0, held = 0;
+  for (const GraspCandidate& c : candidates) {
+    tested += c.hold >= 0;
+    held += c.hold == 1;
+  }
+  if (tested == 0) return "hold test: no candidate tested";
+  char line[120];
+  std::snprintf(line, sizeof line, "hold test: %d of %d candidates held the model (%.2f s)", held,
+                tested, seconds);
+  return line;
+}
+
+}  // namespace inhand
