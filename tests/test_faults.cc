@@ -128,12 +128,13 @@ TEST(Faults, RefusedMotionsAreReplannedAndFailedPickUpsTryTheNextCandidate) {
     for (const std::string& a : s.result.table_top->attempts) noContact += a == "no_contact";
   for (const GraspRecord& g : s.result.grasps)
     for (const std::string& a : g.attempts) noContact += a == "no_contact";
-  // A re-grasp whose pick-ups all failed records no grasp: at least those of the grasps made.
-  EXPECT_GE(noContact, 1);
+  for (const std::string& a : s.result.failed_regrasp_attempts) noContact += a == "no_contact";
+  EXPECT_GE(noContact, s.faults.failed_pickups);
   EXPECT_NE(s.result.scan.termination, Termination::kRunning);
-  // Ending with regrasp_failed keeps the first grasp's model; else as good as the clean scan.
+  // Ending with regrasp_failed keeps the first grasp's model (the can seen from one grasp: about
+  // half of it); else as good as the clean scan.
   if (s.result.scan.termination == Termination::kRegraspFailed)
-    EXPECT_GE(s.metrics.coverage, 0.6);
+    EXPECT_GE(s.metrics.coverage, 0.4);
   else
     EXPECT_GE(s.metrics.coverage, clean().metrics.coverage - 0.05);
 }

@@ -9,8 +9,10 @@
 
 #include "inhand/core/error.h"
 #include "inhand/geometry/builtin_objects.h"
+#include "inhand/geometry/stable_poses.h"
 #include "inhand/mesh/extract.h"
 #include "inhand/scan/session.h"
+#include "inhand/scan/table_top.h"
 #include "inhand/sim/sim_world.h"
 #include "test_util.h"
 
@@ -269,4 +271,103 @@ TEST(Session, TerminationNamesRoundTrip) {
   EXPECT_EQ(names.size(), size_t(int(Termination::kNoStableGrasp) + 1));
   Termination t;
   EXPECT_FALSE(parseTermination("done", &t));
+}
+
+// After a put-down the object may tip: the session finds it on the table again from one frame.
+// The cracker box's model is fused from frames of it resting on two of its faces at four headings
+// each (as the views of a grasp see most of it); it is then put on a third face, 35° turned and
+// 4 cm off. The model registered from its resting orientations over the object (restingStarts)
+// and from where it was believed to be: the registration with the most inliers puts the box's
+// surface within 3 mm of the truth (mean) and is turned by less than 2° (up to the box's
+// symmetries).
+TEST(Session, AnObjectThatTippedIsFoundAgainOnTheTable) {
+  const TriangleMesh box = loadObject("builtin:cracker_box");
+  SimOptions so;
+  SimWorld world(wam(), box, Iso3::Identity(), DepthCameraOptions{}, NoiseModelOptions{}, so);
+  world.held = false;
+  world.q = wam().home();
+  SimSensor sensor(&world, DepthCameraOptions{});
+  const std::vector<StablePose> rests = stablePoses(box);
+  ASSERT_GE(rests.size(), 3u);
+  // Resting on the table over (x, y), heading yaw, on its pose-th face.
+  auto resting = [&](int pose, double yaw, double x, double y) {
+    Iso3 T = Iso3::Identity();
+    T.linear() =
+        Eigen::AngleAxisd(yaw, Vec3::UnitZ()).toRotationMatrix() * rests[size_t(pose)].R_B_O;
+    Aabb b;
+    for (const Vec3f& v : box.vertices) b.extend(T.linear() * v.cast<double>());
+    T.translation() =
+        Vec3(x - b.center().x(), y - b.center().y(), wam().table().topZ() - b.min.z());
+    return T;
+  };
+  const Vec3 at = wam().camera().lookAt_B;
+  ScanSession session(wam(), sensor.camera(), NoiseModelOptions{}, fastOptions(),
+                      MultiGraspOptions{}, box.bounds().center());
+  for (int k = 0; k < 8; ++k) {
+    world.tablePose = resting(k / 4, k * M_PI / 2, at.x(), at.y());
+    const std::optional<Iso3> aim = wam().camera().aimAt(world.tablePose.translation());
+    ASSERT_TRUE(aim);
+    sensor.setPose(*aim);
+    session.addFrameOfObjectAt(world.render(), world.q, *aim, world.tablePose);
+  }
+  const Iso3 believed = resting(0, 0, at.x(), at.y());
+  const Iso3 truth = resting(2, 35 * M_PI / 180, at.x() + 0.04, at.y() - 0.01);
+  world.tablePose = truth;
+  const std::optional<Iso3> aim = wam().camera().aimAt(truth.translation());
+  ASSERT_TRUE(aim);
+  sensor.setPose(*aim);
+  const DepthImage d = world.render();
+  // The table's pixels pair with nothing; the centroid of the points above it near the object.
+  std::vector<uint8_t> hidden(d.depth_m.size(), 0);
+  Vec3 centre = Vec3::Zero();
+  int above = 0;
+  const CameraIntrinsics& K = sensor.camera().intrinsics;
+  for (int v = 0; v < d.height; ++v)
+    for (int u = 0; u < d.width; ++u) {
+      const size_t i = size_t(v) * size_t(d.width) + size_t(u);
+      if (!(d.depth_m[i] > 0)) continue;
+      const Vec3 p = *aim * (double(d.depth_m[i]) * K.rayZ1(u, v));
+      if (p.z() < wam().table().topZ() + 0.005) {
+        hidden[i] = 1;
+      } else if ((p - truth.translation()).head<2>().norm() < 0.25) {
+        centre += p;
+        ++above;
+      }
+    }
+  ASSERT_GT(above, 500);
+  centre /= above;
+  std::vector<Iso3> starts{believed};
+  for (const Iso3& T : restingStarts(session.planningModel().mesh, centre, aim->translation(),
+                                     wam().table().topZ()))
+    starts.push_back(T);
+  ASSERT_GT(starts.size(), 12u);
+  const auto results = session.registerObjectAt(d, hidden, *aim, starts);
+  ASSERT_EQ(results.size(), starts.size());
+  int best = -1;
+  for (size_t k = 0; k < results.size(); ++k)
+    if (results[k].first &&
+        (best < 0 || results[k].second.inliers > results[size_t(best)].second.inliers))
+      best = int(k);
+  ASSERT_GE(best, 0);
+  const Iso3 found = *results[size_t(best)].first;
+  // The box is symmetric (a half turn about any of its axes gives it back): the found pose is
+  // compared by where it puts the box's surface, against the true box (its distance field), and
+  // by its turn up to those half turns. Measured: 2.1 mm mean, 7.3 mm at worst, 0.3°.
+  const Vec3 half = 0.5 * box.bounds().size(), mid = box.bounds().center();
+  double worst = 0, sum = 0;
+  const std::vector<SurfacePoint> samples = surfaceSamples(box, 0.01);
+  for (const SurfacePoint& sp : samples) {
+    const Vec3 q = (truth.inverse() * (found * sp.p) - mid).cwiseAbs() - half;
+    const double dist = std::abs(q.cwiseMax(0.0).norm() + std::min(q.maxCoeff(), 0.0));
+    worst = std::max(worst, dist);
+    sum += dist;
+  }
+  EXPECT_LT(sum / double(samples.size()), 0.003);
+  EXPECT_LT(worst, 0.01);
+  const Mat3 R = truth.linear().transpose() * found.linear();
+  double turned = Eigen::AngleAxisd(R).angle();
+  for (int a = 0; a < 3; ++a)
+    turned =
+        std::min(turned, Eigen::AngleAxisd(Eigen::AngleAxisd(M_PI, Vec3::Unit(a)) * R).angle());
+  EXPECT_LT(turned, 2 * M_PI / 180);
 }

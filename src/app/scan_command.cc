@@ -443,6 +443,7 @@ int runScan(const ScanArgs& given) {
   summary["trajectory_s"] = views.empty() ? 0.0 : views.back()["trajectory_s"].get<double>();
   summary["views"] = views;
   summary["grasps"] = graspsJson(mr);
+  summary["failed_regrasp_attempts"] = mr.failed_regrasp_attempts;
   summary["start"] = o.start;
   summary["rest_pose"] = restJson;
   if (mr.table_top) summary["table_top"] = tableTopJson(*mr.table_top);
@@ -474,6 +475,16 @@ int runScan(const ScanArgs& given) {
                                  {"in_known_free_space", r.frames_in_free_space}};
   summary["frames_repaired"] = r.frames_repaired;
   summary["object_drops"] = sim.drops;
+  {
+    std::vector<double> mm;  // the model registered where the object rests, per put-down
+    for (double r : sim.result.refind_residuals_m) mm.push_back(1000 * r);
+    summary["refound_on_table_residual_mm"] = mm;
+  }
+  {
+    std::vector<double> mm;
+    for (double r : mr.refind_residuals_m) mm.push_back(1000 * r);
+    summary["refound_on_table_residual_mm"] = mm;
+  }
   summary["physics"] = {{"enabled", sim.physics},
                         {"mass_kg", sim.mass_kg},
                         {"convex_pieces", sim.pieces},

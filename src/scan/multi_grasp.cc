@@ -8,6 +8,7 @@
 #include <limits>
 
 #include "inhand/core/error.h"
+#include "inhand/geometry/stable_poses.h"
 #include "inhand/robot/collision.h"
 #include "inhand/scan/checkpoint.h"
 #include "inhand/scan/session.h"
@@ -117,6 +118,120 @@ std::optional<std::pair<Iso3, double>> refindInHand(
   return std::make_pair(*found, support);
 }
 
+// The object found on the table again after it was put down or fell: a frame aimed where it is
+// believed to lie (T_B_O_guess), the largest cluster above the table near there
+// (findObjectOnTable), and the model so far registered to the frame from the believed pose and
+// from each of the model's 6 most probable resting orientations at 12 headings over the
+// cluster; the registration whose pose the frame bears out most, if more than 60 %.
+struct Refound {
+  std::optional<Iso3> T_B_O;
+  double support = -1, rms_m = 0;
+  std::string reason;  // why not found
+};
+Refound refindOnTable(ScanSession& session, RobotInterface& robot, DepthSensor& sensor,
+                      const Iso3& T_B_O_guess, const ScanOptions& options,
+                      const std::function<void(const std::string&)>& log) {
+  const RobotModel& m = robot.model();
+  const CameraIntrinsics& K = sensor.camera().intrinsics;
+  Refound out;
+  // The arm out of the camera's way first: home, the hand as it is.
+  const JointVector home = m.withArm(robot.joints(), m.arm(m.home()));
+  if (!robot.joints().isApprox(home, 1e-9))
+    robot.execute({robot.joints(), home}, [](const JointVector&) {});
+  const TableTopOptions& to = session.multiOptions().table_top;
+  const std::optional<Iso3> aim =
+      m.camera().aimAt(T_B_O_guess.translation() + Vec3(0, 0, to.aim_height_m));
+  std::optional<DepthImage> frame;
+  if (aim) {
+    sensor.setPose(*aim);
+    frame = captureUsable(sensor, options.checks);
+  }
+  if (!frame) {
+    out.reason = "no usable frame of the table";
+    return out;
+  }
+  const DepthImage& d = *frame;
+  const RobotOccluders scenes(m);
+  const std::vector<uint8_t> mask =
+      robotPixelMask(d, *aim, robot.joints(), scenes, sensor.camera(), options.t_hand_m,
+                     options.carve_radius_px, /*with_table=*/false);
+  const TableTopObject object =
+      findObjectOnTable({d}, {mask}, *aim, K, T_B_O_guess, m, options, to, nullptr, {});
+  if (object.problem == Termination::kObjectNotFound) {
+    out.reason = "no object on the table near where it was";
+    return out;
+  }
+  Vec3 centre_B = Vec3::Zero();
+  for (const Vec3& p : object.points_O) centre_B += T_B_O_guess * p;
+  centre_B /= double(std::max<size_t>(1, object.points_O.size()));
+  // The robot's pixels and the table's (at most 5 mm above its top) pair with nothing.
+  std::vector<uint8_t> hidden = mask;
+  const double top = m.table().topZ() + 0.005;
+  for (int v = 0; v < d.height; ++v)
+    for (int u = 0; u < d.width; ++u) {
+      const size_t i = size_t(v) * size_t(d.width) + size_t(u);
+      const float z = d.depth_m[i];
+      if (z > 0 && (*aim * (double(z) * K.rayZ1(u, v))).z() < top) hidden[i] = 1;
+    }
+  // Starts: where it is believed to lie; resting on the table over the cluster.
+  const ObjectModel model = session.planningModel();
+  std::vector<Iso3> starts{T_B_O_guess};
+  for (const Iso3& T : restingStarts(model.mesh, centre_B, aim->translation(), m.table().topZ()))
+    starts.push_back(T);
+  std::vector<Vec3> known_O;  // the observed surface, every 7th vertex
+  for (size_t k = 0; k < model.mesh.vertices.size(); k += 7)
+    if (model.observed[k]) known_O.push_back(model.mesh.vertices[k].cast<double>());
+  // The best: among the poses the frame bears out within 2 % of the most borne out, the one
+  // nearest where it was believed to lie (a symmetric object fits turned poses as well: the
+  // belief decides between them).
+  struct Fit {
+    Iso3 T;
+    double support, rms;
+  };
+  std::vector<Fit> fits;
+  double most = -1;
+  for (const auto& [T, r] : session.registerObjectAt(d, hidden, *aim, starts)) {
+    if (!T) continue;
+    std::vector<Vec3> at_B;
+    for (const Vec3& p : known_O) at_B.push_back(*T * p);
+    fits.push_back({*T, depthSupport(d, *aim, K, hidden, at_B), r.rms_m});
+    most = std::max(most, fits.back().support);
+  }
+  auto away = [&](const Iso3& T) {
+    return (T.translation() - T_B_O_guess.translation()).norm() +
+           0.1 * Eigen::AngleAxisd(T.linear() * T_B_O_guess.linear().transpose()).angle();
+  };
+  const Fit* best = nullptr;
+  for (const Fit& f : fits)
+    if (f.support >= most - 0.02 && (!best || away(f.T) < away(best->T))) best = &f;
+  if (best) {
+    out.support = best->support;
+    out.rms_m = best->rms;
+    // The frame bears out the belief itself as well (within 2 %): the object did not move (a
+    // registration also slides along what the frame cannot tell apart, such as a can's turn
+    // about its axis), and the belief, which the fused model was built in, stays.
+    std::vector<Vec3> believed_B;
+    for (const Vec3& p : known_O) believed_B.push_back(T_B_O_guess * p);
+    const bool same = depthSupport(d, *aim, K, hidden, believed_B) >= most - 0.02;
+    if (best->support > 0.6) out.T_B_O = same ? T_B_O_guess : best->T;
+  }
+  if (!out.T_B_O) {
+    out.reason = "the model does not fit what the camera sees there";
+    return out;
+  }
+  char line[200];
+  std::snprintf(
+      line, sizeof line,
+      "the object found on the table %.1f mm and %.1f° from where it was believed to "
+      "lie (%d %% borne out, residual %.2f mm)",
+      1000 * (out.T_B_O->translation() - T_B_O_guess.translation()).norm(),
+      180 / M_PI *
+          Eigen::AngleAxisd(out.T_B_O->linear() * T_B_O_guess.linear().transpose()).angle(),
+      int(std::lround(100 * out.support)), 1000 * out.rms_m);
+  log(line);
+  return out;
+}
+
 // Picks the object up with the first candidate (in order) that the robot
 // closes on, lifts, and by what it then observes holds. Fingers all closed to their limit mean
 // an empty hand. After the lift the camera looks at the hand: the object's points (`points_O`,
@@ -130,18 +245,37 @@ struct PickOutcome {
   // index (GraspCandidate::pose).
   std::vector<std::string> attempts;
   std::vector<int> attempt_poses;
+  // After a failed attempt the object was found elsewhere on the table (the candidates, planned
+  // where it was, no longer apply), or not found at all.
+  std::optional<Iso3> moved_to;
+  bool lost = false;
 };
 PickOutcome pickAndVerify(ScanSession& session, RobotInterface& robot, DepthSensor& sensor,
                           const Iso3& T_B_O_rest, const std::vector<Vec3>& points_O,
                           const std::vector<GraspCandidate>& candidates, const ScanOptions& options,
-                          const std::function<void(const std::string&)>& log) {
+                          const std::function<void(const std::string&)>& log, int used = 0) {
   const RobotModel& m = robot.model();
   const RobotOccluders scenes(m);
   PickOutcome out;
   const int budget = session.multiOptions().grasp.max_failed_pick_ups;
+  // After a failed attempt that touched the object: is it still where it rested?
+  auto stillThere = [&] {
+    const Refound f = refindOnTable(session, robot, sensor, T_B_O_rest, options, log);
+    if (!f.T_B_O) {
+      log("the object not found on the table: " + f.reason);
+      out.lost = true;
+      return false;
+    }
+    const double moved = (f.T_B_O->translation() - T_B_O_rest.translation()).norm();
+    const double turned =
+        Eigen::AngleAxisd(f.T_B_O->linear() * T_B_O_rest.linear().transpose()).angle();
+    if (moved < 0.005 && turned < 0.05) return true;
+    out.moved_to = f.T_B_O;
+    return false;
+  };
   for (const GraspCandidate& c : candidates) {
     if (session.progress().stopRequested()) break;
-    if (int(out.attempts.size()) >= budget) {
+    if (used + int(out.attempts.size()) >= budget) {
       log("no pick-up held after " + std::to_string(budget) +
           " attempts (grasp.max_failed_pick_ups); giving up on this grasp");
       break;
@@ -161,6 +295,7 @@ PickOutcome pickAndVerify(ScanSession& session, RobotInterface& robot, DepthSens
       robot.putDown();
       out.attempts.push_back("empty_hand");
       log("the fingers closed on nothing; trying the next candidate");
+      if (!stillThere()) break;
       continue;
     }
     robot.execute({robot.joints(), m.withArm(robot.joints(), m.arm(c.q_lift))},
@@ -257,6 +392,7 @@ PickOutcome pickAndVerify(ScanSession& session, RobotInterface& robot, DepthSens
       robot.putDown();
       out.attempts.push_back("dropped");
       log("the grasp did not hold; trying the next candidate");
+      if (!(onTable > 0.5) && !stillThere()) break;  // not seen where it rested: where is it?
       continue;
     }
     out.attempts.push_back("picked");
@@ -272,8 +408,10 @@ PickOutcome pickAndVerify(ScanSession& session, RobotInterface& robot, DepthSens
 // first grasp's initial trajectory (empty: unknown). `resumed`: the grasp has begun already (a
 // checkpoint), its views go on.
 void runGrasps(RobotInterface& robot, DepthSensor& sensor, ScanSession& session,
-               const Iso3& T_O_palm0, const Iso3& T_B_O_rest, GraspRecord next,
+               const Iso3& T_O_palm0, const Iso3& T_B_O_start, GraspRecord next,
                MultiGraspResult& out, const Aabb& box_O, int first = 0, bool resumed = false) {
+  Iso3 T_B_O_rest =
+      T_B_O_start;  // where the object rests on the table (re-found after each put-down)
   const MultiGraspOptions& multi = session.multiOptions();
   const ScanProgress& progress = session.progress();
   auto log = [&](const std::string& s) { session.log(s); };
@@ -337,25 +475,47 @@ void runGrasps(RobotInterface& robot, DepthSensor& sensor, ScanSession& session,
       break;
     }
     session.endGrasp();
-    GraspPlan plan = session.planGrasps(T_B_O_rest, robot.joints());
+    // Where the object came to rest (it may have tipped, or fallen during the views): the model
+    // registered to a frame of the table, before any re-grasp is planned.
+    const Refound found = refindOnTable(session, robot, sensor, T_B_O_rest, session.options(), log);
+    if (!found.T_B_O) {
+      log("the object not found on the table: " + found.reason);
+      all.termination = Termination::kObjectLost;
+      break;
+    }
+    T_B_O_rest = *found.T_B_O;
+    out.refind_residuals_m.push_back(found.rms_m);
+    // The best candidate the robot manages to pick up and hold (a real hand may fail where the
+    // model said it would not; the next one above t_q is tried). Lifted, not fused. Found
+    // elsewhere after a failed attempt: planned again where it lies.
+    std::vector<Vec3> known_O;  // the observed surface so far, every 7th vertex
+    for (size_t k = 0; k < all.model.mesh.vertices.size(); k += 7)
+      if (all.model.observed[k]) known_O.push_back(all.model.mesh.vertices[k].cast<double>());
+    GraspPlan plan;
+    PickOutcome pick;
+    std::vector<std::string> attempts;
+    for (;;) {
+      plan = session.planGrasps(T_B_O_rest, robot.joints());
+      if (plan.above_threshold == 0) break;
+      const std::vector<GraspCandidate> usable(plan.candidates.begin(),
+                                               plan.candidates.begin() + plan.above_threshold);
+      pick = pickAndVerify(session, robot, sensor, T_B_O_rest, known_O, usable, session.options(),
+                           log, int(attempts.size()));
+      attempts.insert(attempts.end(), pick.attempts.begin(), pick.attempts.end());
+      if (pick.achieved || !pick.moved_to || progress.stopRequested()) break;
+      T_B_O_rest = *pick.moved_to;
+    }
     if (plan.above_threshold == 0) {
       all.termination = session.summary().termination;
       out.unused_generation_s += plan.generation.seconds;
       out.unused_ranking_s += plan.ranking_s;
       break;
     }
-    // The best candidate the robot manages to pick up and hold (a real hand may fail where the
-    // model said it would not; the next one above t_q is tried). Lifted, not fused.
-    std::vector<Vec3> known_O;  // the observed surface so far, every 7th vertex
-    for (size_t k = 0; k < all.model.mesh.vertices.size(); k += 7)
-      if (all.model.observed[k]) known_O.push_back(all.model.mesh.vertices[k].cast<double>());
-    const std::vector<GraspCandidate> usable(plan.candidates.begin(),
-                                             plan.candidates.begin() + plan.above_threshold);
-    const PickOutcome pick =
-        pickAndVerify(session, robot, sensor, T_B_O_rest, known_O, usable, session.options(), log);
     if (!pick.achieved) {
-      all.termination =
-          progress.stopRequested() ? Termination::kInterrupted : Termination::kRegraspFailed;
+      out.failed_regrasp_attempts = attempts;
+      all.termination = progress.stopRequested() ? Termination::kInterrupted
+                        : pick.lost              ? Termination::kObjectLost
+                                                 : Termination::kRegraspFailed;
       out.unused_generation_s += plan.generation.seconds;
       out.unused_ranking_s += plan.ranking_s;
       break;
@@ -371,7 +531,7 @@ void runGrasps(RobotInterface& robot, DepthSensor& sensor, ScanSession& session,
     next.epsilon = pick.picked->epsilon;
     next.generation_s = plan.generation.seconds;
     next.ranking_s = plan.ranking_s;
-    next.attempts = pick.attempts;
+    next.attempts = attempts;
     for (const GraspCandidate& c : plan.candidates) {
       if (int(next.ranked.size()) >= multi.keep_ranked) break;
       next.ranked.push_back({c.T_O_palm, c.q, c.quality, c.epsilon});
@@ -502,10 +662,29 @@ MultiGraspResult scanFromTable(RobotInterface& robot, DepthSensor& sensor, const
   }
   std::vector<Vec3> seen_O;
   for (size_t k = 0; k < object.points_O.size(); k += 5) seen_O.push_back(object.points_O[k]);
-  const PickOutcome pick =
-      pickAndVerify(session, robot, sensor, T_B_O_rest, seen_O, first.candidates, options, log);
+  Iso3 T_B_O_now = T_B_O_rest;
+  PickOutcome pick =
+      pickAndVerify(session, robot, sensor, T_B_O_now, seen_O, first.candidates, options, log);
   tt.attempts = pick.attempts;
   tt.attempt_poses = pick.attempt_poses;
+  // Found elsewhere after a failed attempt: candidates planned where it lies now (the table
+  // plane in its frame moved with it), the attempts left tried on them.
+  TableTopObject there = object;
+  while (!pick.achieved && pick.moved_to && !progress.stopRequested()) {
+    const Vec3 n_B = T_B_O_now.linear() * there.table_O.n;
+    const Vec3 on_B = T_B_O_now * (-there.table_O.d * there.table_O.n);
+    T_B_O_now = *pick.moved_to;
+    there.table_O.n = T_B_O_now.linear().transpose() * n_B;
+    there.table_O.d = -there.table_O.n.dot(T_B_O_now.inverse() * on_B);
+    const GraspGeneration again = firstGrasps(session, there, T_B_O_now, robot.joints());
+    log("grasp candidates where it lies now: " + std::to_string(again.candidates.size()));
+    if (again.candidates.empty()) break;
+    pick = pickAndVerify(session, robot, sensor, T_B_O_now, seen_O, again.candidates, options, log,
+                         int(tt.attempts.size()));
+    tt.attempts.insert(tt.attempts.end(), pick.attempts.begin(), pick.attempts.end());
+    tt.attempt_poses.insert(tt.attempt_poses.end(), pick.attempt_poses.begin(),
+                            pick.attempt_poses.end());
+  }
   if (!pick.achieved) {
     all.model = session.model();
     return finish(progress.stopRequested() ? Termination::kInterrupted
@@ -517,7 +696,7 @@ MultiGraspResult scanFromTable(RobotInterface& robot, DepthSensor& sensor, const
   rec.candidates = tt.reachable;
   rec.tried = tt.tried;
   rec.generation_s = tt.seconds;
-  runGrasps(robot, sensor, session, *pick.achieved, T_B_O_rest, rec, out, object.box_O);
+  runGrasps(robot, sensor, session, *pick.achieved, T_B_O_now, rec, out, object.box_O);
   all.total_s = std::chrono::duration<double>(Clock::now() - t0).count();
   return out;
 }

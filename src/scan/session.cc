@@ -1,4 +1,6 @@
 #include "inhand/scan/session.h"
+
+#include <Eigen/Geometry>
 #include "inhand/sensor/depth_image.h"
 
 #include <algorithm>
@@ -8,6 +10,7 @@
 #include <cstring>
 #include <fstream>
 #include <limits>
+#include <unordered_map>
 
 #include "inhand/core/error.h"
 #include "inhand/core/file_util.h"
@@ -625,6 +628,133 @@ std::optional<Iso3> ScanSession::registerHeldObject(const DepthImage& depth,
   if (result) *result = r;
   if (!r.ok) return std::nullopt;
   return (r.correction * T_C_O).inverse() * T_C_palm;
+}
+
+namespace {
+// A coarse alignment of model points (frame O) with a frame's points (frame B) from T_B_O:
+// point-to-point ICP, each frame point paired with the nearest model point within a gate that
+// shrinks from 4 cm to 1 cm (a 1 cm grid of the model points), the rigid motion of the pairs by
+// Umeyama's method (Eigen), 20 rounds. It brings a start within the reach of the fine alignment
+// (alignBodyToDepth pairs along rays within centimetres).
+Iso3 coarseAlign(const std::vector<Vec3>& frame_B, const std::vector<Vec3>& model_O, Iso3 T) {
+  // The nearest model point of every 5 mm cell within 4 cm of the model (a breadth-first sweep
+  // out from the cells the points lie in; near enough to the nearest for pairing).
+  const double cell = 0.005;
+  Aabb bounds;
+  for (const Vec3& p : model_O) bounds.extend(p);
+  bounds.min.array() -= 0.045;
+  bounds.max.array() += 0.045;
+  const Eigen::Vector3i n = ((bounds.max - bounds.min) / cell).array().ceil().cast<int>().max(1);
+  std::vector<int> nearest(size_t(n.prod()), -1);
+  auto index = [&](const Eigen::Vector3i& c) {
+    return (size_t(c.z()) * size_t(n.y()) + size_t(c.y())) * size_t(n.x()) + size_t(c.x());
+  };
+  auto cellOf = [&](const Vec3& p) -> std::optional<Eigen::Vector3i> {
+    const Eigen::Vector3i c = ((p - bounds.min) / cell).array().floor().cast<int>();
+    if ((c.array() < 0).any() || (c.array() >= n.array()).any()) return std::nullopt;
+    return c;
+  };
+  std::vector<Eigen::Vector3i> front, next;
+  for (size_t i = 0; i < model_O.size(); ++i)
+    if (const auto c = cellOf(model_O[i]); c && nearest[index(*c)] < 0) {
+      nearest[index(*c)] = int(i);
+      front.push_back(*c);
+    }
+  for (int ring = 0; ring < 9 && !front.empty(); ++ring, front.swap(next)) {
+    next.clear();
+    for (const Eigen::Vector3i& c : front)
+      for (int a = 0; a < 3; ++a)
+        for (int step : {-1, 1}) {
+          Eigen::Vector3i d = c;
+          d[a] += step;
+          if (d[a] < 0 || d[a] >= n[a] || nearest[index(d)] >= 0) continue;
+          nearest[index(d)] = nearest[index(c)];
+          next.push_back(d);
+        }
+  }
+  for (int round = 0; round < 20; ++round) {
+    const double gate = std::max(0.01, 0.04 - 0.003 * round);
+    const Iso3 T_O_B = T.inverse();
+    Eigen::Matrix3Xd src(3, 0), dst(3, 0);
+    std::vector<Vec3> a, b;
+    for (const Vec3& p_B : frame_B) {
+      const Vec3 p = T_O_B * p_B;
+      const auto c = cellOf(p);
+      if (!c) continue;
+      // The nearest of the neighbouring cells' nearest points.
+      int found = -1;
+      double best = gate * gate;
+      for (int dz = -1; dz <= 1; ++dz)
+        for (int dy = -1; dy <= 1; ++dy)
+          for (int dx = -1; dx <= 1; ++dx) {
+            const Eigen::Vector3i d = *c + Eigen::Vector3i(dx, dy, dz);
+            if ((d.array() < 0).any() || (d.array() >= n.array()).any()) continue;
+            const int k = nearest[index(d)];
+            if (k < 0) continue;
+            if (const double e = (model_O[size_t(k)] - p).squaredNorm(); e < best) {
+              best = e;
+              found = k;
+            }
+          }
+      if (found < 0) continue;
+      a.push_back(T * model_O[size_t(found)]);
+      b.push_back(p_B);
+    }
+    if (a.size() < 20) break;
+    src.resize(3, long(a.size()));
+    dst.resize(3, long(b.size()));
+    for (size_t i = 0; i < a.size(); ++i) {
+      src.col(long(i)) = a[i];
+      dst.col(long(i)) = b[i];
+    }
+    const Eigen::Matrix4d U = Eigen::umeyama(src, dst, false);
+    Iso3 D = Iso3::Identity();
+    D.linear() = U.block<3, 3>(0, 0);
+    D.translation() = U.block<3, 1>(0, 3);
+    T = D * T;
+    if (D.translation().norm() < 1e-5 && Eigen::AngleAxisd(D.linear()).angle() < 1e-4) break;
+  }
+  return T;
+}
+}  // namespace
+
+std::vector<std::pair<std::optional<Iso3>, TrackResult>> ScanSession::registerObjectAt(
+    const DepthImage& depth, const std::vector<uint8_t>& hidden, const Iso3& T_B_C,
+    const std::vector<Iso3>& starts) {
+  State& s = *s_;
+  if (hidden.size() != depth.depth_m.size())
+    throw Error("registerObjectAt: the hidden mask does not match the image");
+  const auto t0 = Clock::now();
+  const ObjectModel m = planningModel();
+  const std::vector<SurfacePoint> points =
+      observedSurface(m, std::max(2000, s.options.tracking.max_object_points), Iso3::Identity());
+  const std::vector<Vec3> occluders = modelOccluders(m, Iso3::Identity());
+  // The frame's points near the starts (every other pixel each way, not hidden), for the coarse
+  // alignment; the model's observed points.
+  Vec3 near = Vec3::Zero();
+  for (const Iso3& T : starts) near += T.translation();
+  near /= double(std::max<size_t>(1, starts.size()));
+  std::vector<Vec3> frame_B, model_O;
+  const CameraIntrinsics& K = s.camera.intrinsics;
+  for (int v = 0; v < depth.height; v += 2)
+    for (int u = 0; u < depth.width; u += 2) {
+      const size_t i = size_t(v) * size_t(depth.width) + size_t(u);
+      if (hidden[i] || !(depth.depth_m[i] > 0)) continue;
+      const Vec3 p = T_B_C * (double(depth.depth_m[i]) * K.rayZ1(u, v));
+      if ((p - near).norm() < 0.3) frame_B.push_back(p);
+    }
+  for (const SurfacePoint& sp : points) model_O.push_back(sp.p);
+  std::vector<std::pair<std::optional<Iso3>, TrackResult>> out(starts.size());
+  parallelFor(0, int(starts.size()), [&](int k) {
+    const Iso3 T_C_O = T_B_C.inverse() * coarseAlign(frame_B, model_O, starts[size_t(k)]);
+    TrackResult r =
+        alignBodyToDepth(depth, hidden, s.camera.intrinsics, points, occluders, T_C_O,
+                         axialSigma(s.noise, T_C_O.translation().z(), 0), s.options.tracking);
+    if (r.ok) out[size_t(k)].first = T_B_C * r.correction * T_C_O;
+    out[size_t(k)].second = std::move(r);
+  });
+  s.summary.tracking_s += secondsSince(t0);
+  return out;
 }
 
 void ScanSession::filterCorrection(const JointVector& q, const Iso3& T_C_palm, TrackResult* r) {

@@ -5,6 +5,8 @@
 #include <cstdio>
 #include <limits>
 
+#include "inhand/core/error.h"
+#include "inhand/geometry/stable_poses.h"
 #include "inhand/robot/collision.h"
 
 namespace inhand {
@@ -180,6 +182,48 @@ GraspGeneration firstGrasps(const ScanSession& session, const TableTopObject& ob
                  session.multiOptions().grasp.hold, &first.candidates);
   session.log(holdLine(first.candidates, holdS));
   return first;
+}
+
+std::vector<Iso3> restingStarts(const TriangleMesh& model_O, const Vec3& seen_B,
+                                const Vec3& camera_B, double table_top_z, int orientations,
+                                int headings) {
+  std::vector<StablePose> rests;
+  try {
+    rests = stablePoses(model_O);
+  } catch (const Error&) {
+    return {};
+  }
+  if (int(rests.size()) > orientations) rests.resize(size_t(std::max(0, orientations)));
+  std::vector<Iso3> starts;
+  for (const StablePose& rest : rests)
+    for (int k = 0; k < headings; ++k) {
+      Iso3 T = Iso3::Identity();
+      T.linear() =
+          Eigen::AngleAxisd(2 * M_PI * k / headings, Vec3::UnitZ()).toRotationMatrix() * rest.R_B_O;
+      double low = std::numeric_limits<double>::infinity();
+      for (const Vec3f& v : model_O.vertices)
+        low = std::min(low, (T.linear() * v.cast<double>()).z());
+      T.translation() = Vec3(0, 0, table_top_z - low);
+      // The centroid (by area) of the triangles facing the camera with the model there.
+      Vec3 near = Vec3::Zero();
+      double area = 0;
+      for (const Tri& t : model_O.triangles) {
+        const Vec3 a = T * model_O.vertices[size_t(t[0])].cast<double>();
+        const Vec3 b = T * model_O.vertices[size_t(t[1])].cast<double>();
+        const Vec3 c = T * model_O.vertices[size_t(t[2])].cast<double>();
+        const Vec3 n = (b - a).cross(c - a);
+        const Vec3 mid = (a + b + c) / 3;
+        if (n.dot(camera_B - mid) <= 0 || mid.z() < table_top_z + 0.005) continue;
+        near += 0.5 * n.norm() * mid;
+        area += 0.5 * n.norm();
+      }
+      if (!(area > 0)) continue;
+      near /= area;
+      T.translation().x() += seen_B.x() - near.x();
+      T.translation().y() += seen_B.y() - near.y();
+      starts.push_back(T);
+    }
+  return starts;
 }
 
 }  // namespace inhand

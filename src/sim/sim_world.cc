@@ -258,7 +258,12 @@ std::optional<Iso3> SimRobot::grasp(const Iso3& T_O_palm_planned, const JointVec
   const JointVector error = world_->jointErrorAt(q);
   const Iso3 delta = m.tipPose(q).inverse() * m.tipPose(q + error);
   const bool exact = !world_->options().grasp_error || error.isZero(0);
-  const Iso3 T_O_palm = exact ? T_O_palm_planned : T_O_palm_planned * delta;
+  // With physics the hand goes where the arm's joints put it, and the object is where physics
+  // left it: a scan that believes it elsewhere misses it. (Without, the grasp is taken relative
+  // to the object.)
+  const Iso3 T_O_palm = world_->physics() ? Iso3(world_->tablePose.inverse() * m.tipPose(q + error))
+                        : exact           ? T_O_palm_planned
+                                          : T_O_palm_planned * delta;
   auto reported = [&](const Iso3& T_true) -> Iso3 {
     if (exact) return T_true;
     return T_O_palm_planned * (T_O_palm.inverse() * T_true);

@@ -86,6 +86,11 @@ struct MultiGraspResult {
   // The grasp planning that led to no further grasp (no candidate above t_q, none reachable or
   // none picked up): its time is in no GraspRecord.
   double unused_generation_s = 0, unused_ranking_s = 0;
+  // The attempts of a re-grasp that never held (regrasp_failed, object_lost): no GraspRecord
+  // carries them.
+  std::vector<std::string> failed_regrasp_attempts;
+  // After each put-down, the residual (RMS, m) of the model registered where the object rests.
+  std::vector<double> refind_residuals_m;
   std::optional<TableTopRecord> table_top;  // when the scan began with the object on the table
 };
 

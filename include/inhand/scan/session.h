@@ -126,6 +126,13 @@ class ScanSession {
                                          const std::vector<uint8_t>& robot_mask,
                                          const JointVector& q, const Iso3& T_B_C,
                                          const Iso3& T_O_palm, TrackResult* result = nullptr);
+  // The object resting on the table, from a frame of it (camera at T_B_C; `hidden`: pixels that
+  // pair with nothing, the robot's and the table's): the model so far (its observed surface)
+  // aligned with the frame from each of `starts` (T_B_O), on both cores. Each start's aligned
+  // pose T_B_O (nullopt where the alignment failed its checks) and result, in order.
+  std::vector<std::pair<std::optional<Iso3>, TrackResult>> registerObjectAt(
+      const DepthImage& depth, const std::vector<uint8_t>& hidden, const Iso3& T_B_C,
+      const std::vector<Iso3>& starts);
 
   // A depth frame of the object lying at T_B_O (not in the hand, e.g. on the table): the robot's
   // pixels and those set in `carve` (same size as the image; may be null) only carve. With

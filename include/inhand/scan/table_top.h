@@ -55,4 +55,14 @@ std::vector<uint8_t> tablePixels(const DepthImage& depth, const Iso3& T_O_C,
 GraspGeneration firstGrasps(const ScanSession& session, const TableTopObject& object,
                             const Iso3& T_B_O_rest, const JointVector& q_now);
 
+// Poses from which to register a model (frame O) to an object resting on the table, seen by a
+// camera at camera_B whose points above the table have their centroid at seen_B: each of the
+// model's `orientations` most probable resting orientations (stablePoses of its mesh) at
+// `headings` headings about the vertical, its lowest point on the table top, placed so that the
+// centroid of its surface facing the camera lies over seen_B (the camera sees the near side: the
+// object's centre lies beyond the centroid of what it sees). Empty when the mesh spans no volume.
+std::vector<Iso3> restingStarts(const TriangleMesh& model_O, const Vec3& seen_B,
+                                const Vec3& camera_B, double table_top_z, int orientations = 6,
+                                int headings = 12);
+
 }  // namespace inhand
