@@ -44,9 +44,7 @@ int main(int argc, char** argv) {
     std::printf("hold test on the true mesh: %.2f s\n", predS);
     const Json start = world.state();
     std::printf("mass_kg %.3f candidates %zu\n", world.physics()->mass_kg(), gen.candidates.size());
-    std::printf(
-        "rank,predicted,why,epsilon,links,palm,approach_up,outcome,rise_mm,slip_mm,close_moved_"
-        "mm\n");
+    std::printf("rank,predicted,why,epsilon,links,palm,approach_up,outcome,rise_mm,slip_mm\n");
     int held = 0, tried = 0, predHeld[2] = {0, 0}, predN[2] = {0, 0};
     for (int k = 0; k < n && k < int(gen.candidates.size()); ++k) {
       const GraspCandidate& c = gen.candidates[size_t(k)];
@@ -54,11 +52,10 @@ int main(int argc, char** argv) {
       const Iso3 before = world.physics()->objectPose();
       const std::optional<Iso3> got = robot.pickUp(c.T_O_palm, c.q_open);
       std::string outcome = "no_contact";
-      double rise = 0, slip = 0, moved = 0;
+      double rise = 0, slip = 0;
       const HandContacts hc = handContacts(m, c.q, c.T_O_palm, world.objectSamples(), 0.003, 0.01);
       const bool palm = hc.palm_touching;
       if (got) {
-        moved = 1000 * (world.physics()->objectPose().translation() - before.translation()).norm();
         const Iso3 grip = world.T_O_palm;
         robot.execute({robot.joints(), m.withArm(robot.joints(), m.arm(c.q_lift))},
                       [](const JointVector&) {});
@@ -72,9 +69,8 @@ int main(int argc, char** argv) {
       predHeld[c.hold == 1] += outcome == "held" || outcome == "slipped";
       predN[c.hold == 1] += 1;
       const double up = -(T_B_O.linear() * c.T_O_palm.linear().col(2)).z();
-      std::printf("%d,%d,%s,%.4f,%d,%d,%.2f,%s,%.0f,%.1f,%.1f\n", k + 1, c.hold,
-                  c.hold_failure.c_str(), c.epsilon, c.links_in_contact, int(palm), up,
-                  outcome.c_str(), rise, slip, moved);
+      std::printf("%d,%d,%s,%.4f,%d,%d,%.2f,%s,%.0f,%.1f\n", k + 1, c.hold, c.hold_failure.c_str(),
+                  c.epsilon, c.links_in_contact, int(palm), up, outcome.c_str(), rise, slip);
     }
     std::printf("held %d of %d; predicted to hold: %d of %d held; predicted not: %d of %d held\n",
                 held, tried, predHeld[1], predN[1], predHeld[0], predN[0]);

@@ -10,7 +10,6 @@
 #include <cstring>
 #include <fstream>
 #include <limits>
-#include <unordered_map>
 
 #include "inhand/core/error.h"
 #include "inhand/core/file_util.h"
@@ -631,47 +630,62 @@ std::optional<Iso3> ScanSession::registerHeldObject(const DepthImage& depth,
 }
 
 namespace {
-// A coarse alignment of model points (frame O) with a frame's points (frame B) from T_B_O:
-// point-to-point ICP, each frame point paired with the nearest model point within a gate that
-// shrinks from 4 cm to 1 cm (a 1 cm grid of the model points), the rigid motion of the pairs by
-// Umeyama's method (Eigen), 20 rounds. It brings a start within the reach of the fine alignment
-// (alignBodyToDepth pairs along rays within centimetres).
-Iso3 coarseAlign(const std::vector<Vec3>& frame_B, const std::vector<Vec3>& model_O, Iso3 T) {
-  // The nearest model point of every 5 mm cell within 4 cm of the model (a breadth-first sweep
-  // out from the cells the points lie in; near enough to the nearest for pairing).
-  const double cell = 0.005;
+// The nearest model point (frame O) of every 5 mm cell within 4.5 cm of the model: a
+// breadth-first sweep out from the cells the points lie in (near enough to the nearest for
+// pairing). Built once per model, shared by every start.
+struct NearestGrid {
+  const std::vector<Vec3>& model_O;
+  double cell = 0.005;
   Aabb bounds;
-  for (const Vec3& p : model_O) bounds.extend(p);
-  bounds.min.array() -= 0.045;
-  bounds.max.array() += 0.045;
-  const Eigen::Vector3i n = ((bounds.max - bounds.min) / cell).array().ceil().cast<int>().max(1);
-  std::vector<int> nearest(size_t(n.prod()), -1);
-  auto index = [&](const Eigen::Vector3i& c) {
+  Eigen::Vector3i n;
+  std::vector<int> nearest;
+
+  explicit NearestGrid(const std::vector<Vec3>& model) : model_O(model) {
+    for (const Vec3& p : model_O) bounds.extend(p);
+    bounds.min.array() -= 0.045;
+    bounds.max.array() += 0.045;
+    n = ((bounds.max - bounds.min) / cell).array().ceil().cast<int>().max(1);
+    nearest.assign(size_t(n.prod()), -1);
+    std::vector<Eigen::Vector3i> front, next;
+    for (size_t i = 0; i < model_O.size(); ++i)
+      if (const auto c = cellOf(model_O[i]); c && nearest[index(*c)] < 0) {
+        nearest[index(*c)] = int(i);
+        front.push_back(*c);
+      }
+    for (int ring = 0; ring < 9 && !front.empty(); ++ring, front.swap(next)) {
+      next.clear();
+      for (const Eigen::Vector3i& c : front)
+        for (int a = 0; a < 3; ++a)
+          for (int step : {-1, 1}) {
+            Eigen::Vector3i d = c;
+            d[a] += step;
+            if (d[a] < 0 || d[a] >= n[a] || nearest[index(d)] >= 0) continue;
+            nearest[index(d)] = nearest[index(c)];
+            next.push_back(d);
+          }
+    }
+  }
+  size_t index(const Eigen::Vector3i& c) const {
     return (size_t(c.z()) * size_t(n.y()) + size_t(c.y())) * size_t(n.x()) + size_t(c.x());
-  };
-  auto cellOf = [&](const Vec3& p) -> std::optional<Eigen::Vector3i> {
+  }
+  std::optional<Eigen::Vector3i> cellOf(const Vec3& p) const {
     const Eigen::Vector3i c = ((p - bounds.min) / cell).array().floor().cast<int>();
     if ((c.array() < 0).any() || (c.array() >= n.array()).any()) return std::nullopt;
     return c;
-  };
-  std::vector<Eigen::Vector3i> front, next;
-  for (size_t i = 0; i < model_O.size(); ++i)
-    if (const auto c = cellOf(model_O[i]); c && nearest[index(*c)] < 0) {
-      nearest[index(*c)] = int(i);
-      front.push_back(*c);
-    }
-  for (int ring = 0; ring < 9 && !front.empty(); ++ring, front.swap(next)) {
-    next.clear();
-    for (const Eigen::Vector3i& c : front)
-      for (int a = 0; a < 3; ++a)
-        for (int step : {-1, 1}) {
-          Eigen::Vector3i d = c;
-          d[a] += step;
-          if (d[a] < 0 || d[a] >= n[a] || nearest[index(d)] >= 0) continue;
-          nearest[index(d)] = nearest[index(c)];
-          next.push_back(d);
-        }
   }
+};
+
+// A coarse alignment of the model points (frame O) with a frame's points (frame B) from T_B_O:
+// point-to-point ICP, each frame point paired with the nearest model point (of the grid's
+// neighbouring cells) within a gate that shrinks from 4 cm to 1 cm, the rigid motion of the pairs
+// by Umeyama's method (Eigen), 20 rounds. It brings a start within the reach of the fine
+// alignment (alignBodyToDepth pairs along rays within centimetres).
+Iso3 coarseAlign(const std::vector<Vec3>& frame_B, const NearestGrid& grid, Iso3 T) {
+  const std::vector<Vec3>& model_O = grid.model_O;
+  const Eigen::Vector3i& n = grid.n;
+  auto index = [&](const Eigen::Vector3i& c) { return grid.index(c); };
+  auto cellOf = [&](const Vec3& p) { return grid.cellOf(p); };
+  const std::vector<int>& nearest = grid.nearest;
   for (int round = 0; round < 20; ++round) {
     const double gate = std::max(0.01, 0.04 - 0.003 * round);
     const Iso3 T_O_B = T.inverse();
@@ -745,8 +759,9 @@ std::vector<std::pair<std::optional<Iso3>, TrackResult>> ScanSession::registerOb
     }
   for (const SurfacePoint& sp : points) model_O.push_back(sp.p);
   std::vector<std::pair<std::optional<Iso3>, TrackResult>> out(starts.size());
+  const NearestGrid grid(model_O);
   parallelFor(0, int(starts.size()), [&](int k) {
-    const Iso3 T_C_O = T_B_C.inverse() * coarseAlign(frame_B, model_O, starts[size_t(k)]);
+    const Iso3 T_C_O = T_B_C.inverse() * coarseAlign(frame_B, grid, starts[size_t(k)]);
     TrackResult r =
         alignBodyToDepth(depth, hidden, s.camera.intrinsics, points, occluders, T_C_O,
                          axialSigma(s.noise, T_C_O.translation().z(), 0), s.options.tracking);
