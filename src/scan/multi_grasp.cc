@@ -240,7 +240,7 @@ Refound refindOnTable(ScanSession& session, RobotInterface& robot, DepthSensor& 
 // and tries the next. Records every attempt.
 struct PickOutcome {
   std::optional<Iso3> achieved;
-  const GraspCandidate* picked = nullptr;
+  std::optional<GraspCandidate> picked;  // a copy: the candidates it came from may be gone
   // Per candidate tried: picked, no_contact, empty_hand or dropped, and the candidate's pose
   // index (GraspCandidate::pose).
   std::vector<std::string> attempts;
@@ -397,7 +397,7 @@ PickOutcome pickAndVerify(ScanSession& session, RobotInterface& robot, DepthSens
     }
     out.attempts.push_back("picked");
     out.achieved = achieved;
-    out.picked = &c;
+    out.picked = c;
     break;
   }
   return out;
