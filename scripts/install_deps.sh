@@ -7,7 +7,7 @@ packages=(
   nlohmann-json3-dev libcli11-dev
   liburdfdom-dev liborocos-kdl-dev libfcl-dev libmujoco-dev
   libgtest-dev libbenchmark-dev
-  clang libclang-rt-14-dev
+  clang libclang-rt-14-dev clang-format
   python3-dev pybind11-dev python3-numpy python3-pytest
   nodejs npm chromium
 )

@@ -6,6 +6,7 @@
 #include <fstream>
 #include <functional>
 #include <map>
+#include <optional>
 
 #include <fcntl.h>
 #include <signal.h>
@@ -18,6 +19,8 @@
 #include "inhand/geometry/builtin_objects.h"
 #include "inhand/geometry/mesh_io.h"
 #include "inhand/geometry/primitives.h"
+#include "inhand/geometry/surface_distance.h"
+#include "inhand/sensor/depth_image.h"
 #include "test_util.h"
 
 using namespace inhand;
@@ -866,4 +869,97 @@ TEST(Cli, CompareScoresAModelAgainstTheTrueSurface) {
   r = run("compare " + (dir.path() / "nothing.ply").string() + " --truth builtin:mug", dir);
   EXPECT_EQ(r.code, 1);
   EXPECT_NE(r.output.find("nothing.ply"), std::string::npos) << r.output;
+}
+
+namespace {
+// Sets an environment variable for the lifetime of the object (unset when `value` is null) and
+// puts back what was there.
+class ScopedEnv {
+ public:
+  ScopedEnv(const char* name, const char* value) : name_(name) {
+    const char* old = std::getenv(name);
+    if (old) old_ = old;
+    if (value)
+      setenv(name, value, 1);
+    else
+      unsetenv(name);
+  }
+  ~ScopedEnv() {
+    if (old_)
+      setenv(name_.c_str(), old_->c_str(), 1);
+    else
+      unsetenv(name_.c_str());
+  }
+
+ private:
+  std::string name_;
+  std::optional<std::string> old_;
+};
+
+// Runs `inhand args` with the run-time AVX2 paths on (as this CPU allows) or off (inhand's own,
+// Embree's and glibc's AVX2 and FMA kernels), whatever the test's own environment says.
+Result runWithAvx2(bool on, const std::string& args, const test::TempDir& dir) {
+  ScopedEnv avx2("INHAND_NO_AVX2", on ? "0" : "1");
+  ScopedEnv glibc("GLIBC_TUNABLES", on ? nullptr : "glibc.cpu.hwcaps=-AVX2,-FMA,-AVX512F");
+  return run(args, dir);
+}
+
+// Mean and largest distance from the vertices of `a` to the surface of `b`.
+std::pair<double, double> vertexToSurface(const TriangleMesh& a, const TriangleMesh& b) {
+  const TriangleDistanceIndex index(b);
+  double sum = 0, most = 0;
+  for (const auto& v : a.vertices) {
+    const double d = index.distance(v.cast<double>());
+    sum += d;
+    most = std::max(most, d);
+  }
+  return {sum / double(std::max<size_t>(1, a.vertices.size())), most};
+}
+}  // namespace
+
+// A CPU without AVX2 and FMA (INHAND_NO_AVX2, as CI's second run): the same views rendered both
+// ways agree to the millimetre the PNG keeps, and the same frames fused both ways, or the frames
+// of each way fused its own way, give models within half a voxel of each other.
+TEST(Cli, RenderAndFuseAgreeWithTheAvx2PathsOff) {
+  test::TempDir dir;
+  const fs::path on = dir.path() / "on", off = dir.path() / "off";
+  const std::string render = "render --object builtin:pill_bottle --views 10 --out ";
+  ASSERT_EQ(runWithAvx2(true, render + on.string(), dir).code, 0);
+  ASSERT_EQ(runWithAvx2(false, render + off.string(), dir).code, 0);
+  int64_t valid = 0, validDiffers = 0, apart = 0;
+  for (int k = 0; k < 10; ++k) {
+    char name[32];
+    std::snprintf(name, sizeof name, "depth_%04d.png", k);
+    const DepthImage a = readDepthPng(on / name), b = readDepthPng(off / name);
+    ASSERT_EQ(a.depth_m.size(), b.depth_m.size());
+    for (size_t i = 0; i < a.depth_m.size(); ++i) {
+      const bool va = a.depth_m[i] > 0, vb = b.depth_m[i] > 0;
+      valid += va || vb;
+      validDiffers += va != vb;
+      if (va && vb && std::abs(a.depth_m[i] - b.depth_m[i]) > 0.0015f) ++apart;
+    }
+  }
+  ASSERT_GT(valid, 10000);
+  EXPECT_LE(double(validDiffers) / double(valid), 0.005) << validDiffers << " of " << valid;
+  EXPECT_LE(double(apart) / double(valid), 0.005) << apart << " of " << valid;
+  const double voxel = 0.003;
+  auto fuse = [&](bool avx2, const fs::path& frames, const std::string& name) {
+    const fs::path model = dir.path() / (name + ".ply");
+    const Result r = runWithAvx2(avx2,
+                                 "fuse --voxel " + std::to_string(voxel) + " --frames " +
+                                     frames.string() + " --out " + model.string(),
+                                 dir);
+    EXPECT_EQ(r.code, 0) << r.output;
+    return readPly(model).mesh;
+  };
+  const TriangleMesh onOn = fuse(true, on, "on_on"), onOff = fuse(false, on, "on_off"),
+                     offOff = fuse(false, off, "off_off");
+  ASSERT_GT(onOn.vertices.size(), 1000u);
+  for (const TriangleMesh* other : {&onOff, &offOff}) {
+    const auto [mean, most] = vertexToSurface(*other, onOn);
+    EXPECT_LE(mean, voxel / 2);
+    EXPECT_LE(most, 2 * voxel);
+  }
+  // The fusion alone sees the same frames: its two paths differ by round-off.
+  EXPECT_LE(vertexToSurface(onOff, onOn).first, voxel / 20);
 }

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #if INHAND_RASTER_AVX2
+#include "inhand/core/fast_math.h"
 #include "raster_avx2.h"
 #elif defined(__SSE2__)
 #include <emmintrin.h>
@@ -231,7 +232,7 @@ void DepthRaster::drawMesh(const TriangleMesh& mesh, const Iso3& T_C_mesh, int i
 
 bool DepthRaster::avx2Available() {
 #if INHAND_RASTER_AVX2
-  static const bool has = __builtin_cpu_supports("avx2");
+  static const bool has = __builtin_cpu_supports("avx2") && !avx2TurnedOff();
   return has;
 #else
   return false;

@@ -22,7 +22,11 @@ void onEmbreeError(void*, RTCError code, const char* str) {
 // One Embree device for the process (it owns the thread pool and ISA dispatch).
 RTCDevice device() {
   static RTCDevice dev = [] {
-    RTCDevice d = rtcNewDevice(std::getenv("INHAND_EMBREE_CONFIG"));
+    // INHAND_EMBREE_CONFIG is Embree's own configuration string; without it, INHAND_NO_AVX2
+    // keeps Embree to its SSE4.2 kernels.
+    const char* config = std::getenv("INHAND_EMBREE_CONFIG");
+    if (!config && avx2TurnedOff()) config = "max_isa=sse4.2";
+    RTCDevice d = rtcNewDevice(config);
     INHAND_CHECK(d != nullptr, "cannot create an Embree device");
     rtcSetDeviceErrorFunction(d, onEmbreeError, nullptr);
     return d;

@@ -3,6 +3,7 @@
 // arithmetic around it. Each is checked against libm in tests/test_core.cc.
 #include <cmath>
 #include <cstdint>
+#include <cstdlib>
 #include <cstring>
 #if defined(__x86_64__) && defined(__GNUC__)
 #include <immintrin.h>
@@ -113,10 +114,21 @@ inline float acosUnitF(float x) {
   return std::sqrt(1.f - x) * p;
 }
 
+// INHAND_NO_AVX2 set to anything but "" or "0": every run-time AVX2 path of inhand is off, as
+// on a CPU without AVX2 (with it, scripts/test.sh also turns off AVX2 and FMA in glibc's libm and
+// in Embree; CI runs the suite both ways).
+inline bool avx2TurnedOff() {
+  static const bool off = [] {
+    const char* v = std::getenv("INHAND_NO_AVX2");
+    return v && *v && std::strcmp(v, "0") != 0;
+  }();
+  return off;
+}
+
 #if INHAND_FAST_MATH_AVX2
-// Whether this CPU runs the AVX2 functions below.
+// Whether this CPU runs the AVX2 functions below (and INHAND_NO_AVX2 does not turn them off).
 inline bool fastMathAvx2() {
-  static const bool yes = __builtin_cpu_supports("avx2");
+  static const bool yes = __builtin_cpu_supports("avx2") && !avx2TurnedOff();
   return yes;
 }
 

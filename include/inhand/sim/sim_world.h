@@ -6,12 +6,12 @@
 
 #include "inhand/core/json_util.h"
 #include "inhand/geometry/ray_scene.h"
+#include "inhand/physics/physics.h"
 #include "inhand/planning/view_quality.h"
 #include "inhand/robot/robot_interface.h"
 #include "inhand/sensor/depth_sensor.h"
 #include "inhand/sensor/noise_model.h"
 #include "inhand/sensor/render.h"
-#include "inhand/physics/physics.h"
 
 namespace inhand {
 
