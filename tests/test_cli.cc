@@ -963,3 +963,67 @@ TEST(Cli, RenderAndFuseAgreeWithTheAvx2PathsOff) {
   // The fusion alone sees the same frames: its two paths differ by round-off.
   EXPECT_LE(vertexToSurface(onOff, onOn).first, voxel / 20);
 }
+
+namespace {
+// Distances from the vertices of `a` to the surface of `b`, sorted.
+std::vector<double> sortedVertexDistances(const TriangleMesh& a, const TriangleMesh& b) {
+  const TriangleDistanceIndex index(b);
+  std::vector<double> d;
+  d.reserve(a.vertices.size());
+  for (const auto& v : a.vertices) d.push_back(index.distance(v.cast<double>()));
+  std::sort(d.begin(), d.end());
+  return d;
+}
+
+// Whether two models are the same surface up to round-off: every vertex of each within half a
+// voxel of the other, mean within a hundredth of a voxel, 95th percentile within a fortieth.
+::testing::AssertionResult sameSurface(const TriangleMesh& a, const TriangleMesh& b, double voxel) {
+  for (const auto& [x, y] : {std::pair{&a, &b}, std::pair{&b, &a}}) {
+    const std::vector<double> d = sortedVertexDistances(*x, *y);
+    if (d.empty()) return ::testing::AssertionFailure() << "a model without vertices";
+    double sum = 0;
+    for (double v : d) sum += v;
+    const double mean = sum / double(d.size()), p95 = d[d.size() * 95 / 100], most = d.back();
+    if (mean > voxel / 100 || p95 > voxel / 40 || most > voxel / 2)
+      return ::testing::AssertionFailure()
+             << "surfaces apart: mean " << 1000 * mean << " mm, p95 " << 1000 * p95 << " mm, max "
+             << 1000 * most << " mm (voxel " << 1000 * voxel << " mm)";
+  }
+  return ::testing::AssertionSuccess();
+}
+}  // namespace
+
+// A replay against a record written on another machine (tests/record_replay.sh): ten in-hand
+// frames of a coffee-can scan, with the joints, camera poses and grasp the robot reported, fused
+// by `fuse --robot` (the ScanSession a scan fuses with: the robot's pixels carve only, the voxels
+// inside it emptied), tracking off so that the poses are the recorded ones. The model is the
+// recorded one up to round-off on any CPU; one frame fused 2 mm off is told apart.
+TEST(Cli, RecordedFramesReplayToTheRecordedModel) {
+  test::TempDir dir;
+  const fs::path record = fs::path(INHAND_SOURCE_DIR) / "tests" / "data" / "replay";
+  const std::string robot = std::string(INHAND_SOURCE_DIR) + "/data/robots/wam_barretthand.json";
+  const double voxel = 0.004;
+  auto replay = [&](const fs::path& frames, const std::string& name) {
+    const fs::path model = dir.path() / (name + ".ply");
+    const Result r =
+        run("fuse --frames " + frames.string() + " --robot " + robot + " --tracking off --voxel " +
+                std::to_string(voxel) + " --out " + model.string(),
+            dir);
+    EXPECT_EQ(r.code, 0) << r.output;
+    return readPly(model).mesh;
+  };
+  const TriangleMesh recorded = readPly(record / "model.ply").mesh;
+  ASSERT_GT(recorded.vertices.size(), 10000u);
+  EXPECT_TRUE(sameSurface(replay(record, "replayed"), recorded, voxel));
+  // The same frames with frame 0's camera 2 mm off along its x axis.
+  const fs::path shifted = dir.path() / "shifted";
+  fs::create_directories(shifted);
+  for (const auto& e : fs::directory_iterator(record))
+    if (e.path().extension() == ".png") fs::copy_file(e.path(), shifted / e.path().filename());
+  Json fj = readJsonFile(record / "frames.json");
+  Json& T = fj["frames"][0]["T_B_C"];
+  for (int r = 0; r < 3; ++r)
+    T[4 * r + 3] = T[4 * r + 3].get<double>() + 0.002 * T[4 * r].get<double>();
+  writeTextAtomically(shifted / "frames.json", fj.dump());
+  EXPECT_FALSE(sameSurface(replay(shifted, "shifted"), recorded, voxel));
+}
