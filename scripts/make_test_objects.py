@@ -83,6 +83,17 @@ def main(out):
     # A mug-like open cup without a handle: radius 40 mm, 95 mm high, 4 mm wall.
     prof = [(0.0, 0.0), (0.04, 0.0), (0.04, 0.095), (0.036, 0.095), (0.036, 0.005), (0.0, 0.005)]
     write_obj(os.path.join(out, "cup.obj"), *revolve(prof, 48))
+    # Thin objects that lie flat: a marker (19 mm across, 130 mm) and a pen (12 mm, 140 mm), each
+    # a capped cylinder along x; a remote-control-like box 180 x 50 x 20 mm; a small flat hammer
+    # (a 180 x 18 x 12 mm handle, a 22 x 80 x 22 mm head across its end).
+    for name, r, length in (("marker", 0.0095, 0.13), ("pen", 0.006, 0.14)):
+        prof = [(0.0, -length / 2), (r, -length / 2), (r, length / 2), (0.0, length / 2)]
+        v, f = revolve(prof, 32)
+        write_obj(os.path.join(out, name + ".obj"), [(z, x, y) for x, y, z in v], f)
+    write_obj(os.path.join(out, "remote.obj"), *box(0.18, 0.05, 0.02))
+    v1, f1 = box(0.18, 0.018, 0.012, -0.01, 0.0, 0.0)
+    v2, f2 = box(0.022, 0.08, 0.022, 0.091, 0.0, 0.0, base=8)
+    write_obj(os.path.join(out, "flat_hammer.obj"), v1 + v2, f1 + f2)
 
 
 if __name__ == "__main__":

@@ -140,6 +140,30 @@ TEST(GroundTruth, ShiftedModelHasThatAccuracy) {
   EXPECT_LT(r.fscore[0], 0.05);       // at 2 mm almost nothing matches
 }
 
+// A 10 cm cube with two 1 cm cubes beside it: one 3 cm off its face (no vertex within 5 mm of the
+// truth: detached, 6 cm²), one whose near face lies 2 mm beyond the cube's (attached). Pieces are
+// counted by shared vertices.
+TEST(GroundTruth, PiecesAwayFromTheTruthAreDetached) {
+  const TriangleMesh box = makeBox(Vec3(0.1, 0.1, 0.1));
+  TriangleMesh model = box;
+  const TriangleMesh small = makeBox(Vec3(0.01, 0.01, 0.01));
+  model.append(transformed(small, Iso3(Eigen::Translation3d(0.085, 0, 0))));
+  model.append(transformed(small, Iso3(Eigen::Translation3d(0, 0.057, 0))));
+  int pieces = 0;
+  const std::vector<int> piece = meshPieces(model, &pieces);
+  EXPECT_EQ(pieces, 3);
+  EXPECT_EQ(piece.front(), 0);
+  EXPECT_EQ(piece.back(), 2);
+  const SurfaceMetrics r = GroundTruth(box).evaluate(observedModel(model));
+  EXPECT_EQ(r.detached_pieces, 1);
+  EXPECT_NEAR(r.detached_area_m2, 6e-4, 1e-8);
+  EXPECT_EQ(GroundTruth(box).evaluate(observedModel(box)).detached_area_m2, 0.0);
+  // Nearer than detached_m counts as attached: at 4 cm the far cube is attached too.
+  EvalOptions o;
+  o.detached_m = 0.04;
+  EXPECT_EQ(GroundTruth(box, o).evaluate(observedModel(model)).detached_pieces, 0);
+}
+
 // ---- baselines -----------------------------------------------------------------------------
 
 TEST(Baselines, UnknownAreaIsTheVisibleHoleFilledArea) {

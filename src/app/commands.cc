@@ -535,15 +535,18 @@ int runCompare(const std::string& modelPath, const std::string& truthSpec, doubl
                                 {"rms", m.accuracy_rms_mm},
                                 {"p95", m.accuracy_p95_mm}}},
                               {"fscore", fsj},
-                              {"observed_area_m2", m.observed_area_m2}})
+                              {"observed_area_m2", m.observed_area_m2},
+                              {"detached_area_m2", m.detached_area_m2},
+                              {"detached_pieces", m.detached_pieces}})
                             .dump(2)
                             .c_str());
   } else {
     std::printf(
         "compare: %s against %s: coverage %.1f%% (%.0f mm), accuracy %.2f mm mean, %.2f "
-        "mm p95, F-score %.3f at %.0f mm\n",
+        "mm p95, F-score %.3f at %.0f mm, %d detached pieces (%.1f cm²)\n",
         modelPath.c_str(), truthSpec.c_str(), 100 * m.coverage, 1000 * eo.tau_m, m.accuracy_mean_mm,
-        m.accuracy_p95_mm, m.fscore.empty() ? 0.0 : m.fscore[0], 1000 * eo.fscore_m[0]);
+        m.accuracy_p95_mm, m.fscore.empty() ? 0.0 : m.fscore[0], 1000 * eo.fscore_m[0],
+        m.detached_pieces, 1e4 * m.detached_area_m2);
   }
   return 0;
 }

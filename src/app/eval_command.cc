@@ -108,7 +108,7 @@ void tabulate(const fs::path& dir, const std::vector<EvalRun>& runs,
          "accuracy_rms_mm,accuracy_p95_mm,fscore_2mm,fscore_5mm,fscore_10mm,mean_entropy,"
          "observed_fraction,trajectory_s,planning_s,grasp_ranking_s,total_s,views_to_90,"
          "views_to_95,views_to_99,trajectory_s_to_90,trajectory_s_to_95,trajectory_s_to_99,"
-         "view_evaluations\n";
+         "view_evaluations,detached_area_m2\n";
   std::ostringstream curves;
   curves << "object,planner,seed,view,grasp,initial,coverage,mean_entropy,trajectory_s,quality,"
             "cost_s\n";
@@ -116,7 +116,7 @@ void tabulate(const fs::path& dir, const std::vector<EvalRun>& runs,
   for (const EvalRun& r : runs) {
     csv << csvField(r.name) << "," << r.planner << "," << r.seed << "," << r.status << ",";
     if (!r.summary.is_object()) {
-      csv << (r.exited ? "error" : "missing") << std::string(22, ',') << "\n";
+      csv << (r.exited ? "error" : "missing") << std::string(23, ',') << "\n";
       continue;
     }
     const Json& s = r.summary;
@@ -135,7 +135,8 @@ void tabulate(const fs::path& dir, const std::vector<EvalRun>& runs,
         << num(t.value("total", NAN));
     for (double l : levels) csv << "," << num(firstReaching(views, l).first);
     for (double l : levels) csv << "," << num(firstReaching(views, l).second);
-    csv << "," << s.value("view_evaluations", 0) << "\n";
+    csv << "," << s.value("view_evaluations", 0) << "," << num(s.value("detached_area_m2", NAN))
+        << "\n";
     Json c = {{"object", r.name},
               {"planner", r.planner},
               {"seed", r.seed},

@@ -440,6 +440,8 @@ int runScan(const ScanArgs& given) {
     fs[key] = {{"f", sm.fscore[k]}, {"precision", sm.precision[k]}, {"recall", sm.recall[k]}};
   }
   summary["fscore"] = fs;
+  summary["detached_area_m2"] = sm.detached_area_m2;
+  summary["detached_pieces"] = sm.detached_pieces;
   summary["trajectory_s"] = views.empty() ? 0.0 : views.back()["trajectory_s"].get<double>();
   summary["views"] = views;
   summary["grasps"] = graspsJson(mr);

@@ -236,6 +236,9 @@ void visitConfig(V& v, ScanConfig& c) {
     o.integer("samples", c.eval.samples, "points drawn on each surface");
     o.num("tau_m", c.eval.tau_m, "coverage radius τ, m");
     o.numbers("fscore_m", c.eval.fscore_m, "F-score thresholds, m");
+    o.num("detached_m", c.eval.detached_m,
+          "a model piece none of whose vertices lies this near the true surface is detached "
+          "(summary detached_area_m2), m");
   });
   v.object("sim", "the simulator", [&](V& o) {
     o.num("frame_rate_hz", c.sim.frame_rate_hz, "sensor frame rate along trajectories, Hz");

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <tuple>
 
 #include "inhand/core/error.h"
 #include "inhand/core/parallel.h"
@@ -13,6 +14,7 @@ std::string EvalOptions::validate() const {
   if (!(tau_m > 0 && tau_m < 1)) return "tau_m must be in (0, 1) m";
   for (double d : fscore_m)
     if (!(d > 0 && d < 1)) return "fscore_m values must be in (0, 1) m";
+  if (!(detached_m > 0 && detached_m < 1)) return "detached_m must be in (0, 1) m";
   return {};
 }
 
@@ -65,8 +67,68 @@ double GroundTruth::coverage(const ObjectModel& model) const {
   return double(n) / double(truthSamples_.size());
 }
 
+std::vector<int> meshPieces(const TriangleMesh& mesh, int* pieces) {
+  // Union-find over vertices, joined along every triangle's edges.
+  std::vector<int> parent(mesh.vertices.size());
+  for (size_t i = 0; i < parent.size(); ++i) parent[i] = int(i);
+  auto root = [&](int i) {
+    while (parent[size_t(i)] != i) i = parent[size_t(i)] = parent[size_t(parent[size_t(i)])];
+    return i;
+  };
+  for (const auto& t : mesh.triangles)
+    for (int k = 1; k < 3; ++k) {
+      const int a = root(int(t[0])), b = root(int(t[k]));
+      if (a != b) parent[size_t(std::max(a, b))] = std::min(a, b);
+    }
+  std::vector<int> id(mesh.vertices.size(), -1), piece(mesh.triangles.size());
+  int n = 0;
+  for (size_t t = 0; t < mesh.triangles.size(); ++t) {
+    int& p = id[size_t(root(int(mesh.triangles[t][0])))];
+    if (p < 0) p = n++;
+    piece[t] = p;
+  }
+  if (pieces) *pieces = n;
+  return piece;
+}
+
+namespace {
+// The area of the pieces of `mesh` none of whose vertices lies within `near_m` of the indexed
+// truth, and their number.
+std::pair<double, int> detachedArea(const TriangleMesh& mesh, const TriangleDistanceIndex& truth,
+                                    double near_m) {
+  int n = 0;
+  const std::vector<int> piece = meshPieces(mesh, &n);
+  std::vector<std::vector<int>> vertices(static_cast<size_t>(n));
+  std::vector<int> seen(mesh.vertices.size(), -1);
+  for (size_t t = 0; t < piece.size(); ++t)
+    for (int k = 0; k < 3; ++k) {
+      const int v = int(mesh.triangles[t][k]);
+      if (seen[size_t(v)] < 0) {
+        seen[size_t(v)] = piece[t];
+        vertices[size_t(piece[t])].push_back(v);
+      }
+    }
+  std::vector<uint8_t> attached(size_t(n), 0);
+  parallelFor(0, n, [&](int p) {
+    for (int v : vertices[size_t(p)])
+      if (truth.within(mesh.vertices[size_t(v)].cast<double>(), near_m)) {
+        attached[size_t(p)] = 1;
+        return;
+      }
+  });
+  double area = 0;
+  int count = 0;
+  for (int p = 0; p < n; ++p) count += !attached[size_t(p)];
+  for (size_t t = 0; t < piece.size(); ++t)
+    if (!attached[size_t(piece[t])]) area += mesh.triangleArea(int(t));
+  return {area, count};
+}
+}  // namespace
+
 SurfaceMetrics GroundTruth::evaluate(const ObjectModel& model) const {
   SurfaceMetrics m;
+  std::tie(m.detached_area_m2, m.detached_pieces) =
+      detachedArea(model.mesh, truthIndex_, options_.detached_m);
   const std::vector<uint8_t> use = observedTriangles(model);
   for (size_t t = 0; t < use.size(); ++t)
     if (use[t]) m.observed_area_m2 += model.mesh.triangleArea(int(t));

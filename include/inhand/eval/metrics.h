@@ -8,7 +8,10 @@
 //               (mean, RMS, 95th percentile);
 //   F-score   — at each threshold d: 2PR/(P+R) with precision P the fraction of observed-model
 //               samples within d of the truth and recall R the fraction of truth samples within d
-//               of the observed model.
+//               of the observed model;
+//   detached  — the area of the model's connected pieces (triangles sharing vertices, observed or
+//               hole-filled) none of whose vertices lies within EvalOptions::detached_m of the true
+//               surface: debris that is not the object.
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -23,6 +26,7 @@ struct EvalOptions {
   uint64_t seed = 1;     // of those draws
   double tau_m = 0.003;  // coverage radius τ
   std::vector<double> fscore_m{0.002, 0.005, 0.010};
+  double detached_m = 0.005;  // a model piece with no vertex this near the truth is detached
   std::string validate() const;
 };
 
@@ -31,6 +35,8 @@ struct SurfaceMetrics {
   double accuracy_mean_mm = 0, accuracy_rms_mm = 0, accuracy_p95_mm = 0;
   std::vector<double> fscore, precision, recall;  // one per EvalOptions::fscore_m
   double observed_area_m2 = 0;                    // area of the observed model surface
+  double detached_area_m2 = 0;  // area of the model pieces detached from the true surface
+  int detached_pieces = 0;      // how many such pieces
 };
 
 // The true surface sampled once, ready to score many models (thread-safe after construction).
@@ -47,6 +53,10 @@ class GroundTruth {
   TriangleDistanceIndex truthIndex_;
   std::vector<Vec3> truthSamples_;
 };
+
+// The connected pieces of a mesh: per triangle, the index of its piece (triangles sharing a vertex
+// are in one piece); `pieces` receives their number.
+std::vector<int> meshPieces(const TriangleMesh& mesh, int* pieces);
 
 // Per-triangle flag: all three vertices observed.
 std::vector<uint8_t> observedTriangles(const ObjectModel& model);
