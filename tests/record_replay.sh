@@ -2,13 +2,20 @@
 # Writes the record that Cli.RecordedFramesReplayToTheRecordedModel replays (tests/data/replay):
 # the in-hand frames of a one-grasp coffee-can scan (every third of them: 10 frames, with the
 # joints, camera poses and grasp the robot reported) and the model `inhand fuse --robot
-# --tracking off` makes of them. Usage: bash tests/record_replay.sh [BUILD_DIR]
+# --tracking off` makes of them. Usage: bash tests/record_replay.sh [--model-only] [BUILD_DIR]
+# --model-only keeps the recorded frames and fuses them again (after a change to fusion).
 set -euo pipefail
 cd "$(dirname "$0")/.."
+model_only=0
+if [ "${1:-}" = --model-only ]; then
+  model_only=1
+  shift
+fi
 inhand="${1:-build}/inhand"
 out=tests/data/replay
 tmp=$(mktemp -d)
 trap 'rm -rf "$tmp"' EXIT
+if [ "$model_only" = 0 ]; then
 cat > "$tmp/quick.json" <<'JSON'
 {"voxel_m": 0.004, "initial_views": 2,
  "planner": {"directions": 40, "rolls": 4, "fallback_ranges_m": []},
@@ -29,6 +36,7 @@ for f in j["frames"]:
     shutil.copy(os.path.join(src, f["file"]), dst)
 json.dump(j, open(os.path.join(dst, "frames.json"), "w"), indent=1)
 PY
+fi
 "$inhand" fuse --frames "$out" --robot data/robots/wam_barretthand.json --tracking off \
   --voxel 0.004 --out "$tmp/model.ply" > /dev/null 2>&1
 cp "$tmp/model.ply" "$out/model.ply"

@@ -61,6 +61,9 @@ struct ScanSession::State {
   JointVector qGrasp;  // the robot's joints when the grasp began (the hand as it holds)
   Aabb objectBox;
   std::shared_ptr<NearHandGrid> nearHand;
+  // Within ScanOptions::t_hand_m of the hand as it holds (fusion's §IV rule; nearHand itself when
+  // the planner's t_hand is the same).
+  std::shared_ptr<NearHandGrid> fuseNearHand;
   // Tracking: the hand's surface at the grasp's finger joints, the model's observed surface (both
   // palm frame), the last frame's correction.
   std::vector<SurfacePoint> handPoints, objectPoints;
@@ -110,6 +113,17 @@ struct ScanSession::State {
       cache.revision = revision;
     }
     return cache.model;
+  }
+  // The grasp's near-hand grids: the planner's (eq. 9 skips hits within its t_hand) and fusion's
+  // (measurements within ScanOptions::t_hand_m only carve), one grid when the two agree.
+  void buildNearHand(const RobotModel& robot, const JointVector& q, const Iso3& T_O_palm_) {
+    const HandGeometry hand(robot, q, T_O_palm_);
+    const ViewQualityOptions& vq = options.planner.quality;
+    nearHand = std::make_shared<NearHandGrid>(hand, vq.t_hand_m, vq.near_hand_cell_m);
+    fuseNearHand =
+        options.t_hand_m == vq.t_hand_m
+            ? nearHand
+            : std::make_shared<NearHandGrid>(hand, options.t_hand_m, vq.near_hand_cell_m);
   }
 };
 
@@ -225,9 +239,7 @@ void ScanSession::beginGrasp(const Iso3& T_O_palm, const JointVector& q, const A
     s.objectBox.extend(s.centre - Vec3::Constant(0.05));
     s.objectBox.extend(s.centre + Vec3::Constant(0.05));
   }
-  const HandGeometry hand(*s.model, q, T_O_palm);
-  s.nearHand = std::make_shared<NearHandGrid>(hand, s.options.planner.quality.t_hand_m,
-                                              s.options.planner.quality.near_hand_cell_m);
+  s.buildNearHand(*s.model, q, T_O_palm);
   s.used.clear();
   s.alg1Views = 0;
   s.correction = Iso3::Identity();
@@ -305,6 +317,21 @@ FrameReport ScanSession::fuse(const DepthImage& depth, const JointVector& q, con
   if (maskRobot)
     carve = robotPixelMask(depth, T_B_C, q, s.scenes, s.camera, s.options.t_hand_m,
                            s.options.carve_radius_px, /*with_table=*/inHand, &rect);
+  // §IV in the object frame: in the hand, a measurement within t_hand of the hand only carves
+  // wherever the image puts it. The rendered robot depth holds the nearest robot surface per
+  // pixel: a return from the palm seen past a finger's edge (the sensor's lateral noise moves
+  // returns across silhouettes) is behind the finger there and escapes robotPixelMask.
+  if (inHand && maskRobot && s.fuseNearHand) {
+    if (carve.empty()) carve.assign(depth.depth_m.size(), 0);
+    const NearHandGrid& near = *s.fuseNearHand;
+    parallelFor(rect.v0, rect.v1, [&](int v) {
+      for (int u = rect.u0; u < rect.u1; ++u) {
+        const size_t i = size_t(v) * depth.width + u;
+        const float z = depth.depth_m[i];
+        if (z > 0 && !carve[i] && near.near(T_O_C * (double(z) * K.rayZ1(u, v)))) carve[i] = 1;
+      }
+    });
+  }
   if (extraCarve) {
     if (carve.empty()) carve.assign(depth.depth_m.size(), 0);
     for (size_t i = 0; i < carve.size(); ++i) carve[i] |= (*extraCarve)[i];
@@ -1259,9 +1286,7 @@ ScanSession ScanSession::load(const std::filesystem::path& path, const RobotMode
     s.qGrasp = JointVector::Zero(Eigen::Index(qj.size()));
     for (size_t i = 0; i < qj.size(); ++i) s.qGrasp[Eigen::Index(i)] = qj[i].get<double>();
     if (s.holding) {  // the grasp's near-hand grid, rebuilt from the hand as it holds
-      const HandGeometry hand(robot, s.qGrasp, s.T_O_palm);
-      s.nearHand = std::make_shared<NearHandGrid>(hand, options.planner.quality.t_hand_m,
-                                                  options.planner.quality.near_hand_cell_m);
+      s.buildNearHand(robot, s.qGrasp, s.T_O_palm);
     }
     // Tracking's object points as they were (from the model after the last view, or the
     // planning model when the grasp began).
