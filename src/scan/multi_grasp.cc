@@ -507,6 +507,10 @@ void runGrasps(RobotInterface& robot, DepthSensor& sensor, ScanSession& session,
     }
     if (plan.above_threshold == 0) {
       all.termination = session.summary().termination;
+      // No re-grasp can be made (none stable, clear of the table and reachable): the model of
+      // the grasps so far stands, as when every re-grasp's pick-up failed.
+      if (all.termination == Termination::kNoReachableGrasp)
+        all.termination = Termination::kRegraspFailed;
       out.unused_generation_s += plan.generation.seconds;
       out.unused_ranking_s += plan.ranking_s;
       break;

@@ -94,6 +94,7 @@ std::string ScanOptions::validate() const {
   if (max_views < 0) return "max_views must be >= 0";
   if (planning_stride < 1 || planning_stride > 4) return "planning_stride must be in 1..4";
   if (carve_radius_px < 0 || carve_radius_px > 10) return "carve_radius_px must be in 0..10";
+  if (!(edge_jump_m >= 0 && edge_jump_m < 1)) return "edge_jump_m must be in [0, 1) m";
   if (!(volume_budget.truncation_m >= 0 && volume_budget.truncation_m < 0.1))
     return "truncation_m must be in [0, 0.1) m (0: 4 voxels)";
   if (volume_budget.truncation_m > 0 && volume_budget.truncation_m < voxel_m)

@@ -125,6 +125,42 @@ struct ScanSession::State {
             ? nearHand
             : std::make_shared<NearHandGrid>(hand, options.t_hand_m, vq.near_hand_cell_m);
   }
+  // The pixels of an in-hand frame (taken from T_O_C) that fusion does not use at all, among
+  // those robotPixelMask left to fuse (`carve` 0):
+  //  - §IV in the object frame: the measurement lies within t_hand of the hand. The rendered
+  //    robot depth that robotPixelMask compares with holds the nearest robot surface per pixel,
+  //    so a return from the palm seen past a finger's edge (lateral noise moves returns across
+  //    silhouettes) escaped it and was fused as surface. Not carving either: the object's own
+  //    surface within t_hand stays unknown (the planner counts it unobservable in this grasp),
+  //    and carving a pixel's noisy depth would erode it.
+  //  - A silhouette: a pixel next to one with no return or farther by more than edge_jump_m.
+  //    Its return may come from across the edge (the sensor's lateral noise), and fused it grows
+  //    flakes of surface beyond the object's edges that no later view carves away where the hand
+  //    hides them.
+  std::vector<uint8_t> unusedInHand(const DepthImage& depth, const std::vector<uint8_t>& carve,
+                                    const Iso3& T_O_C, const PixelRect& rect) const {
+    const CameraIntrinsics& K = camera.intrinsics;
+    const int W = depth.width, H = depth.height;
+    const float jump = float(options.edge_jump_m);
+    std::vector<uint8_t> unused(depth.depth_m.size(), 0);
+    parallelFor(rect.v0, rect.v1, [&](int v) {
+      for (int u = rect.u0; u < rect.u1; ++u) {
+        const size_t i = size_t(v) * W + u;
+        const float z = depth.depth_m[i];
+        if (!(z > 0) || (!carve.empty() && carve[i])) continue;
+        bool edge = false;
+        for (int dv = -1; dv <= 1 && jump > 0 && !edge; ++dv)
+          for (int du = -1; du <= 1 && !edge; ++du) {
+            const int uu = u + du, vv = v + dv;
+            if (uu < 0 || vv < 0 || uu >= W || vv >= H) continue;
+            const float zn = depth.depth_m[size_t(vv) * W + uu];
+            edge = !(zn > 0) || zn - z > jump;
+          }
+        unused[i] = edge || fuseNearHand->near(T_O_C * (double(z) * K.rayZ1(u, v)));
+      }
+    });
+    return unused;
+  }
 };
 
 ScanSession::ScanSession(const RobotModel& robot, const DepthCameraOptions& camera,
@@ -298,16 +334,16 @@ void ScanSession::emptyInsideRobot(const JointVector& q, const Iso3& T_O_B) {
   }
 }
 
-FrameReport ScanSession::fuse(const DepthImage& depth, const JointVector& q, const Iso3& T_B_C,
+FrameReport ScanSession::fuse(const DepthImage& input, const JointVector& q, const Iso3& T_B_C,
                               const Iso3& T_O_B, const std::vector<uint8_t>* extraCarve,
                               bool inHand, bool maskRobot) {
   const auto t0 = Clock::now();
   State& s = *s_;
   const CameraIntrinsics& K = s.camera.intrinsics;
-  checkFrameSize(depth, K);
-  if (extraCarve && extraCarve->size() != depth.depth_m.size())
+  checkFrameSize(input, K);
+  if (extraCarve && extraCarve->size() != input.depth_m.size())
     throw Error("carve mask: " + std::to_string(extraCarve->size()) + " values for " +
-                std::to_string(depth.depth_m.size()) + " pixels");
+                std::to_string(input.depth_m.size()) + " pixels");
   const Iso3 T_O_C = T_O_B * T_B_C;
   std::vector<uint8_t> carve;
   // The pixels the volume's voxels project to: the only ones fusion reads.
@@ -315,23 +351,19 @@ FrameReport ScanSession::fuse(const DepthImage& depth, const JointVector& q, con
   // The robot's own surfaces only carve (§IV); in the hand the table counts as the robot's (in
   // the air it can only be background), on the table the caller's mask says where the table is.
   if (maskRobot)
-    carve = robotPixelMask(depth, T_B_C, q, s.scenes, s.camera, s.options.t_hand_m,
+    carve = robotPixelMask(input, T_B_C, q, s.scenes, s.camera, s.options.t_hand_m,
                            s.options.carve_radius_px, /*with_table=*/inHand, &rect);
-  // §IV in the object frame: in the hand, a measurement within t_hand of the hand only carves
-  // wherever the image puts it. The rendered robot depth holds the nearest robot surface per
-  // pixel: a return from the palm seen past a finger's edge (the sensor's lateral noise moves
-  // returns across silhouettes) is behind the finger there and escapes robotPixelMask.
+  // In the hand, pixels that are not used at all (neither fused nor carving): see unusedInHand.
+  DepthImage trimmed;
   if (inHand && maskRobot && s.fuseNearHand) {
-    if (carve.empty()) carve.assign(depth.depth_m.size(), 0);
-    const NearHandGrid& near = *s.fuseNearHand;
-    parallelFor(rect.v0, rect.v1, [&](int v) {
-      for (int u = rect.u0; u < rect.u1; ++u) {
-        const size_t i = size_t(v) * depth.width + u;
-        const float z = depth.depth_m[i];
-        if (z > 0 && !carve[i] && near.near(T_O_C * (double(z) * K.rayZ1(u, v)))) carve[i] = 1;
-      }
-    });
+    const std::vector<uint8_t> unused = s.unusedInHand(input, carve, T_O_C, rect);
+    if (std::find(unused.begin(), unused.end(), 1) != unused.end()) {
+      trimmed = input;
+      for (size_t i = 0; i < unused.size(); ++i)
+        if (unused[i]) trimmed.depth_m[i] = 0;
+    }
   }
+  const DepthImage& depth = trimmed.width > 0 ? trimmed : input;
   if (extraCarve) {
     if (carve.empty()) carve.assign(depth.depth_m.size(), 0);
     for (size_t i = 0; i < carve.size(); ++i) carve[i] |= (*extraCarve)[i];
