@@ -121,8 +121,8 @@ void visitConfig(V& v, ScanConfig& c) {
   v.num("t_hand_m", s.t_hand_m, "measurements this close to the robot only carve (§IV), m");
   v.integer("carve_radius_px", s.carve_radius_px, "… or this close to it in the image, pixels");
   v.num("edge_jump_m", s.edge_jump_m,
-        "in the hand, a pixel next to one with no return or farther by more than this is not "
-        "fused (a silhouette); 0: off, m");
+        "in the hand, a pixel next to one farther by more than this is not fused (a "
+        "silhouette); 0: off, m");
   v.choice("hand_mode", s.hand_mode, kHandModes, "the robot's own measurements (Fig. 3 a, b, c)");
   v.integer("initial_views", s.initial_views, "directions of the initial trajectory");
   v.integer("max_views", s.max_views, "Alg. 1 views per grasp at most");

@@ -133,10 +133,11 @@ struct ScanSession::State {
   //    silhouettes) escaped it and was fused as surface. Not carving either: the object's own
   //    surface within t_hand stays unknown (the planner counts it unobservable in this grasp),
   //    and carving a pixel's noisy depth would erode it.
-  //  - A silhouette: a pixel next to one with no return or farther by more than edge_jump_m.
-  //    Its return may come from across the edge (the sensor's lateral noise), and fused it grows
-  //    flakes of surface beyond the object's edges that no later view carves away where the hand
-  //    hides them.
+  //  - A silhouette: a pixel next to one farther by more than edge_jump_m. Its return may come
+  //    from across the edge (the sensor's lateral noise), and fused it grows flakes of surface
+  //    beyond the object's edges that no later view carves away where the hand hides them. (A
+  //    neighbour with no return does not count: a projector shadow beside a finger lies on the
+  //    object's face, and dropping the face's pixels along it left slits at the contacts.)
   std::vector<uint8_t> unusedInHand(const DepthImage& depth, const std::vector<uint8_t>& carve,
                                     const Iso3& T_O_C, const PixelRect& rect) const {
     const CameraIntrinsics& K = camera.intrinsics;
@@ -154,7 +155,7 @@ struct ScanSession::State {
             const int uu = u + du, vv = v + dv;
             if (uu < 0 || vv < 0 || uu >= W || vv >= H) continue;
             const float zn = depth.depth_m[size_t(vv) * W + uu];
-            edge = !(zn > 0) || zn - z > jump;
+            edge = zn - z > jump;
           }
         unused[i] = edge || fuseNearHand->near(T_O_C * (double(z) * K.rayZ1(u, v)));
       }

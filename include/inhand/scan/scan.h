@@ -84,8 +84,8 @@ struct ScanOptions {
   bool fit_volume = true;
   double t_hand_m = 0.01;   // measurements this close to the robot only carve (§IV), m
   int carve_radius_px = 2;  // … this close to it in the image, too (lateral noise), pixels
-  // In the hand, a pixel next to one with no return or farther by more than this is not fused
-  // (a silhouette: its return may come from across the edge); 0: off. m
+  // In the hand, a pixel next to one farther by more than this is not fused (a silhouette: its
+  // return may come from across the edge); 0: off. m
   double edge_jump_m = 0.02;
   HandMode hand_mode = HandMode::kCarveAndEmpty;
   int initial_views = 4;    // the simple initial trajectory: this many directions
