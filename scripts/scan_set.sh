@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # The grasping test set: every mesh in ../shared/objects in its most probable resting poses
 # (REST_POSES, default "0 1") and the procedural objects of scripts/make_test_objects.py (flat
-# box, long thin ellipsoid, bowl, bottle, ring, L-bracket, cup) in their most probable pose,
+# box, long thin ellipsoid, bowl, bottle, ring, L-bracket, cup, marker, pen, remote-like box,
+# small flat hammer) in their most probable pose,
 # each scanned from the table with default options. Writes OUT/results.md and OUT/results.csv
 # (first grasp made, grasps, views, coverage, accuracy, seconds, termination) as runs finish.
 # Usage: scripts/scan_set.sh [OUT]   (default out/scan_set; the build must exist)

@@ -1027,3 +1027,33 @@ TEST(Cli, RecordedFramesReplayToTheRecordedModel) {
   writeTextAtomically(shifted / "frames.json", fj.dump());
   EXPECT_FALSE(sameSurface(replay(shifted, "shifted"), recorded, voxel));
 }
+
+// A one-grasp scan with dropped, corrupted and jumping frames: every frame it did not fuse is in
+// summary.json's frames_not_fused under its reason (their sum is the number of "frame not fused"
+// lines in the log), and repaired frames are counted (a ScanResult once copied the session's
+// counters by hand and left six of them at 0).
+TEST(Cli, OneGraspScanReportsEveryFrameItDidNotFuse) {
+  test::TempDir dir;
+  Json config = Json::parse(kQuickConfig);
+  config["sim"]["frame_subsample"] = 3;
+  config["sim"]["faults"] = {
+      {"dropped_frames", 0.15}, {"corrupted_frames", 0.15}, {"pose_jumps", 0.2}};
+  writeTextAtomically(dir.path() / "faults.json", config.dump());
+  const fs::path out = dir.path() / "scan";
+  const Result r = run("scan --object builtin:coffee_can --max-grasps 1 --max-views 1 --config " +
+                           (dir.path() / "faults.json").string() + " --out " + out.string(),
+                       dir);
+  ASSERT_EQ(r.code, 0) << r.output;
+  const Json s = readJsonFile(out / "summary.json");
+  const Json& nf = s.at("frames_not_fused");
+  int sum = 0;
+  for (const auto& [k, v] : nf.items()) sum += v.get<int>();
+  int lines = 0;
+  for (size_t at = r.output.find("frame not fused"); at != std::string::npos;
+       at = r.output.find("frame not fused", at + 1))
+    ++lines;
+  EXPECT_EQ(sum, lines) << nf;
+  EXPECT_GT(nf.at("dropped_or_empty").get<int>(), 0) << nf;
+  EXPECT_GT(nf.at("off_path").get<int>(), 0) << nf;
+  EXPECT_GT(s.at("frames_repaired").get<int>(), 0) << s.at("frames_repaired");
+}
