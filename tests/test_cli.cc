@@ -2,6 +2,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdlib>
 #include <fstream>
 #include <functional>
@@ -904,16 +905,20 @@ Result runWithAvx2(bool on, const std::string& args, const test::TempDir& dir) {
   return run(args, dir);
 }
 
-// Mean and largest distance from the vertices of `a` to the surface of `b`.
-std::pair<double, double> vertexToSurface(const TriangleMesh& a, const TriangleMesh& b) {
+// The distances from the vertices of `a` to the surface of `b`: mean, 95th percentile, largest
+// (all +inf when `a` has no vertex).
+struct Apart {
+  double mean, p95, max;
+};
+Apart vertexToSurface(const TriangleMesh& a, const TriangleMesh& b) {
   const TriangleDistanceIndex index(b);
-  double sum = 0, most = 0;
-  for (const auto& v : a.vertices) {
-    const double d = index.distance(v.cast<double>());
-    sum += d;
-    most = std::max(most, d);
-  }
-  return {sum / double(std::max<size_t>(1, a.vertices.size())), most};
+  std::vector<double> d;
+  for (const auto& v : a.vertices) d.push_back(index.distance(v.cast<double>()));
+  if (d.empty()) return {INFINITY, INFINITY, INFINITY};
+  std::sort(d.begin(), d.end());
+  double sum = 0;
+  for (double x : d) sum += x;
+  return {sum / double(d.size()), d[d.size() * 95 / 100], d.back()};
 }
 }  // namespace
 
@@ -956,38 +961,24 @@ TEST(Cli, RenderAndFuseAgreeWithTheAvx2PathsOff) {
                      offOff = fuse(false, off, "off_off");
   ASSERT_GT(onOn.vertices.size(), 1000u);
   for (const TriangleMesh* other : {&onOff, &offOff}) {
-    const auto [mean, most] = vertexToSurface(*other, onOn);
-    EXPECT_LE(mean, voxel / 2);
-    EXPECT_LE(most, 2 * voxel);
+    const Apart d = vertexToSurface(*other, onOn);
+    EXPECT_LE(d.mean, voxel / 2);
+    EXPECT_LE(d.max, 2 * voxel);
   }
   // The fusion alone sees the same frames: its two paths differ by round-off.
-  EXPECT_LE(vertexToSurface(onOff, onOn).first, voxel / 20);
+  EXPECT_LE(vertexToSurface(onOff, onOn).mean, voxel / 20);
 }
 
 namespace {
-// Distances from the vertices of `a` to the surface of `b`, sorted.
-std::vector<double> sortedVertexDistances(const TriangleMesh& a, const TriangleMesh& b) {
-  const TriangleDistanceIndex index(b);
-  std::vector<double> d;
-  d.reserve(a.vertices.size());
-  for (const auto& v : a.vertices) d.push_back(index.distance(v.cast<double>()));
-  std::sort(d.begin(), d.end());
-  return d;
-}
-
 // Whether two models are the same surface up to round-off: every vertex of each within half a
 // voxel of the other, mean within a hundredth of a voxel, 95th percentile within a fortieth.
 ::testing::AssertionResult sameSurface(const TriangleMesh& a, const TriangleMesh& b, double voxel) {
   for (const auto& [x, y] : {std::pair{&a, &b}, std::pair{&b, &a}}) {
-    const std::vector<double> d = sortedVertexDistances(*x, *y);
-    if (d.empty()) return ::testing::AssertionFailure() << "a model without vertices";
-    double sum = 0;
-    for (double v : d) sum += v;
-    const double mean = sum / double(d.size()), p95 = d[d.size() * 95 / 100], most = d.back();
-    if (mean > voxel / 100 || p95 > voxel / 40 || most > voxel / 2)
+    const Apart d = vertexToSurface(*x, *y);
+    if (!(d.mean <= voxel / 100 && d.p95 <= voxel / 40 && d.max <= voxel / 2))
       return ::testing::AssertionFailure()
-             << "surfaces apart: mean " << 1000 * mean << " mm, p95 " << 1000 * p95 << " mm, max "
-             << 1000 * most << " mm (voxel " << 1000 * voxel << " mm)";
+             << "surfaces apart: mean " << 1000 * d.mean << " mm, p95 " << 1000 * d.p95
+             << " mm, max " << 1000 * d.max << " mm (voxel " << 1000 * voxel << " mm)";
   }
   return ::testing::AssertionSuccess();
 }

@@ -479,11 +479,6 @@ int runScan(const ScanArgs& given) {
   summary["object_drops"] = sim.drops;
   {
     std::vector<double> mm;  // the model registered where the object rests, per put-down
-    for (double r : sim.result.refind_residuals_m) mm.push_back(1000 * r);
-    summary["refound_on_table_residual_mm"] = mm;
-  }
-  {
-    std::vector<double> mm;
     for (double r : mr.refind_residuals_m) mm.push_back(1000 * r);
     summary["refound_on_table_residual_mm"] = mm;
   }

@@ -1,5 +1,6 @@
 #include "inhand/core/pose.h"
 
+#include <Eigen/Geometry>
 #include <Eigen/SVD>
 #include <cmath>
 #include <sstream>
@@ -50,6 +51,10 @@ std::optional<Iso3> poseFromRowMajor(const std::array<double, 16>& m, std::strin
   T.linear() = R;
   T.translation() = M.topRightCorner<3, 1>();
   return orthonormalized(T);
+}
+
+double rotationBetween(const Iso3& a, const Iso3& b) {
+  return Eigen::AngleAxisd(b.linear() * a.linear().transpose()).angle();
 }
 
 std::array<double, 16> poseToRowMajor(const Iso3& T) {

@@ -15,6 +15,7 @@
 #include <sstream>
 
 #include "inhand/core/error.h"
+#include "inhand/core/pose.h"
 
 namespace inhand {
 
@@ -625,7 +626,7 @@ void PhysicsWorld::settle(double max_s) {
     if (s % window) continue;
     const Iso3 now = objectPose();
     const bool still = (now.translation() - start.translation()).norm() < 3e-4 &&
-                       Eigen::AngleAxisd(now.linear() * start.linear().transpose()).angle() < 0.005;
+                       rotationBetween(start, now) < 0.005;
     if (still) break;
     start = now;
   }

@@ -8,6 +8,7 @@
 #include <limits>
 
 #include "inhand/core/error.h"
+#include "inhand/core/pose.h"
 #include "inhand/geometry/stable_poses.h"
 #include "inhand/robot/collision.h"
 #include "inhand/scan/checkpoint.h"
@@ -118,6 +119,14 @@ std::optional<std::pair<Iso3, double>> refindInHand(
   return std::make_pair(*found, support);
 }
 
+// The model's observed vertices, every 7th (enough for depthSupport to tell where it lies).
+std::vector<Vec3> observedVertices(const ObjectModel& model) {
+  std::vector<Vec3> out;
+  for (size_t k = 0; k < model.mesh.vertices.size(); k += 7)
+    if (model.observed[k]) out.push_back(model.mesh.vertices[k].cast<double>());
+  return out;
+}
+
 // The object found on the table again after it was put down or fell: a frame aimed where it is
 // believed to lie (T_B_O_guess), the largest cluster above the table near there
 // (findObjectOnTable), and the model so far registered to the frame from the believed pose and
@@ -178,9 +187,7 @@ Refound refindOnTable(ScanSession& session, RobotInterface& robot, DepthSensor& 
   std::vector<Iso3> starts{T_B_O_guess};
   for (const Iso3& T : restingStarts(model.mesh, centre_B, aim->translation(), m.table().topZ()))
     starts.push_back(T);
-  std::vector<Vec3> known_O;  // the observed surface, every 7th vertex
-  for (size_t k = 0; k < model.mesh.vertices.size(); k += 7)
-    if (model.observed[k]) known_O.push_back(model.mesh.vertices[k].cast<double>());
+  const std::vector<Vec3> known_O = observedVertices(model);
   // The best: among the poses the frame bears out within 2 % of the most borne out, the one
   // nearest where it was believed to lie (a symmetric object fits turned poses as well: the
   // belief decides between them).
@@ -199,7 +206,7 @@ Refound refindOnTable(ScanSession& session, RobotInterface& robot, DepthSensor& 
   }
   auto away = [&](const Iso3& T) {
     return (T.translation() - T_B_O_guess.translation()).norm() +
-           0.1 * Eigen::AngleAxisd(T.linear() * T_B_O_guess.linear().transpose()).angle();
+           0.1 * rotationBetween(T_B_O_guess, T);
   };
   const Fit* best = nullptr;
   for (const Fit& f : fits)
@@ -220,14 +227,12 @@ Refound refindOnTable(ScanSession& session, RobotInterface& robot, DepthSensor& 
     return out;
   }
   char line[200];
-  std::snprintf(
-      line, sizeof line,
-      "the object found on the table %.1f mm and %.1f° from where it was believed to "
-      "lie (%d %% borne out, residual %.2f mm)",
-      1000 * (out.T_B_O->translation() - T_B_O_guess.translation()).norm(),
-      180 / M_PI *
-          Eigen::AngleAxisd(out.T_B_O->linear() * T_B_O_guess.linear().transpose()).angle(),
-      int(std::lround(100 * out.support)), 1000 * out.rms_m);
+  std::snprintf(line, sizeof line,
+                "the object found on the table %.1f mm and %.1f° from where it was believed to "
+                "lie (%d %% borne out, residual %.2f mm)",
+                1000 * (out.T_B_O->translation() - T_B_O_guess.translation()).norm(),
+                180 / M_PI * rotationBetween(T_B_O_guess, *out.T_B_O),
+                int(std::lround(100 * out.support)), 1000 * out.rms_m);
   log(line);
   return out;
 }
@@ -267,8 +272,7 @@ PickOutcome pickAndVerify(ScanSession& session, RobotInterface& robot, DepthSens
       return false;
     }
     const double moved = (f.T_B_O->translation() - T_B_O_rest.translation()).norm();
-    const double turned =
-        Eigen::AngleAxisd(f.T_B_O->linear() * T_B_O_rest.linear().transpose()).angle();
+    const double turned = rotationBetween(T_B_O_rest, *f.T_B_O);
     if (moved < 0.005 && turned < 0.05) return true;
     out.moved_to = f.T_B_O;
     return false;
@@ -488,9 +492,7 @@ void runGrasps(RobotInterface& robot, DepthSensor& sensor, ScanSession& session,
     // The best candidate the robot manages to pick up and hold (a real hand may fail where the
     // model said it would not; the next one above t_q is tried). Lifted, not fused. Found
     // elsewhere after a failed attempt: planned again where it lies.
-    std::vector<Vec3> known_O;  // the observed surface so far, every 7th vertex
-    for (size_t k = 0; k < all.model.mesh.vertices.size(); k += 7)
-      if (all.model.observed[k]) known_O.push_back(all.model.mesh.vertices[k].cast<double>());
+    const std::vector<Vec3> known_O = observedVertices(all.model);
     GraspPlan plan;
     PickOutcome pick;
     std::vector<std::string> attempts;

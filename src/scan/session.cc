@@ -125,6 +125,54 @@ struct ScanSession::State {
             ? nearHand
             : std::make_shared<NearHandGrid>(hand, options.t_hand_m, vq.near_hand_cell_m);
   }
+  // Why an in-hand frame (taken from T_O_C) lands where the model knows space is empty, or ""
+  // when it does not: more than checks.max_free_space_fraction of its sampled points not in
+  // `carve` (every second pixel of every second row, in the volume) lie in empty voxel cells.
+  std::string inKnownFreeSpace(const DepthImage& depth, const std::vector<uint8_t>& carve,
+                               const Iso3& T_O_C) const {
+    const CameraIntrinsics& K = camera.intrinsics;
+    const TsdfVolume& vol = volume;
+    const Vec3i& dims = vol.dims();
+    // Counted per row (on both cores) then summed.
+    const int rows = (depth.height + 1) / 2;
+    std::vector<int> rowInside(size_t(rows), 0), rowEmpty(size_t(rows), 0);
+    parallelFor(0, rows, [&](int row) {
+      const int v = 2 * row;
+      int& inside = rowInside[size_t(row)];
+      int& inEmpty = rowEmpty[size_t(row)];
+      for (int u = 0; u < depth.width; u += 2) {
+        const size_t i = size_t(v) * depth.width + u;
+        const float z = depth.depth_m[i];
+        if (!(z > 0) || (!carve.empty() && carve[i])) continue;
+        const Vec3 g = (T_O_C * (double(z) * K.rayZ1(u, v)) - vol.origin()) / vol.voxelSize();
+        const int x = int(std::floor(g.x())), y = int(std::floor(g.y())),
+                  w = int(std::floor(g.z()));
+        if (x < 0 || y < 0 || w < 0 || x + 1 >= dims.x() || y + 1 >= dims.y() || w + 1 >= dims.z())
+          continue;
+        ++inside;
+        // In known-empty space only when the whole voxel cell around the point is: a surface
+        // point's cell always has a corner in the surface's band or behind it, while rays that
+        // grazed the surface may have emptied the voxel nearest to it.
+        bool allEmpty = true;
+        for (int c = 0; c < 8 && allEmpty; ++c)
+          allEmpty = vol.state(vol.index(x + (c & 1), y + ((c >> 1) & 1), w + ((c >> 2) & 1))) ==
+                     VoxelState::kEmpty;
+        inEmpty += allEmpty;
+      }
+    });
+    int inside = 0, inEmpty = 0;
+    for (int row = 0; row < rows; ++row) {
+      inside += rowInside[size_t(row)];
+      inEmpty += rowEmpty[size_t(row)];
+    }
+    if (std::getenv("INHAND_DEBUG_FREE_SPACE"))
+      std::fprintf(stderr, "free space: %d of %d\n", inEmpty, inside);
+    if (inside < options.checks.min_points ||
+        inEmpty <= options.checks.max_free_space_fraction * inside)
+      return {};
+    return "depth where the model knows space is empty (" + std::to_string(inEmpty) + " of " +
+           std::to_string(inside) + " sampled pixels in the volume)";
+  }
   // The pixels of an in-hand frame (taken from T_O_C) that fusion does not use at all, among
   // those robotPixelMask left to fuse (`carve` 0):
   //  - §IV in the object frame: the measurement lies within t_hand of the hand. The rendered
@@ -373,48 +421,10 @@ FrameReport ScanSession::fuse(const DepthImage& input, const JointVector& q, con
   // before) are not the object (a stripe of wrong depth, a reflection): a frame with many of
   // them is not fused.
   if (inHand && s.options.checks.max_free_space_fraction < 1) {
-    const TsdfVolume& vol = s.volume;
-    const Vec3i& dims = vol.dims();
-    // Every second pixel of every second row, counted per row (on both cores) then summed.
-    const int rows = (depth.height + 1) / 2;
-    std::vector<int> rowInside(size_t(rows), 0), rowEmpty(size_t(rows), 0);
-    parallelFor(0, rows, [&](int row) {
-      const int v = 2 * row;
-      int& inside = rowInside[size_t(row)];
-      int& inEmpty = rowEmpty[size_t(row)];
-      for (int u = 0; u < depth.width; u += 2) {
-        const size_t i = size_t(v) * depth.width + u;
-        const float z = depth.depth_m[i];
-        if (!(z > 0) || (!carve.empty() && carve[i])) continue;
-        const Vec3 g = (T_O_C * (double(z) * K.rayZ1(u, v)) - vol.origin()) / vol.voxelSize();
-        const int x = int(std::floor(g.x())), y = int(std::floor(g.y())),
-                  w = int(std::floor(g.z()));
-        if (x < 0 || y < 0 || w < 0 || x + 1 >= dims.x() || y + 1 >= dims.y() || w + 1 >= dims.z())
-          continue;
-        ++inside;
-        // In known-empty space only when the whole voxel cell around the point is: a surface
-        // point's cell always has a corner in the surface's band or behind it, while rays that
-        // grazed the surface may have emptied the voxel nearest to it.
-        bool allEmpty = true;
-        for (int c = 0; c < 8 && allEmpty; ++c)
-          allEmpty = vol.state(vol.index(x + (c & 1), y + ((c >> 1) & 1), w + ((c >> 2) & 1))) ==
-                     VoxelState::kEmpty;
-        inEmpty += allEmpty;
-      }
-    });
-    int inside = 0, inEmpty = 0;
-    for (int row = 0; row < rows; ++row) {
-      inside += rowInside[size_t(row)];
-      inEmpty += rowEmpty[size_t(row)];
-    }
-    if (std::getenv("INHAND_DEBUG_FREE_SPACE"))
-      std::fprintf(stderr, "free space: %d of %d\n", inEmpty, inside);
-    if (inside >= s.options.checks.min_points &&
-        inEmpty > s.options.checks.max_free_space_fraction * inside) {
+    if (std::string why = s.inKnownFreeSpace(depth, carve, T_O_C); !why.empty()) {
       FrameReport r;
       r.fused = false;
-      r.rejected = "depth where the model knows space is empty (" + std::to_string(inEmpty) +
-                   " of " + std::to_string(inside) + " sampled pixels in the volume)";
+      r.rejected = why;
       return r;
     }
   }
@@ -663,6 +673,16 @@ std::optional<Iso3> ScanSession::trackedCameraPose(const DepthImage& depth, cons
   return T_B_C * r.correction.inverse();
 }
 
+namespace {
+// A model as registration aligns it, in the object frame: its observed surface (about
+// max(2000, max_object_points) points) and the whole model as occluders.
+std::pair<std::vector<SurfacePoint>, std::vector<Vec3>> registrationModel(
+    const ObjectModel& m, const TrackingOptions& o) {
+  return {observedSurface(m, std::max(2000, o.max_object_points), Iso3::Identity()),
+          modelOccluders(m, Iso3::Identity())};
+}
+}  // namespace
+
 std::optional<Iso3> ScanSession::registerHeldObject(const DepthImage& depth,
                                                     const std::vector<uint8_t>& robot_mask,
                                                     const JointVector& q, const Iso3& T_B_C,
@@ -672,12 +692,7 @@ std::optional<Iso3> ScanSession::registerHeldObject(const DepthImage& depth,
   if (robot_mask.size() != depth.depth_m.size())
     throw Error("registerHeldObject: the robot mask does not match the image");
   const auto t0 = Clock::now();
-  const ObjectModel m = planningModel();
-  // The observed surface (about max(2000, max_object_points) points) and the whole model as
-  // occluders, in the object frame.
-  const std::vector<SurfacePoint> points =
-      observedSurface(m, std::max(2000, s.options.tracking.max_object_points), Iso3::Identity());
-  const std::vector<Vec3> occluders = modelOccluders(m, Iso3::Identity());
+  const auto [points, occluders] = registrationModel(planningModel(), s.options.tracking);
   const Iso3 T_C_palm = T_B_C.inverse() * s.model->tipPose(q);
   const Iso3 T_C_O = T_C_palm * T_O_palm.inverse();
   const TrackResult r =
@@ -743,9 +758,6 @@ struct NearestGrid {
 Iso3 coarseAlign(const std::vector<Vec3>& frame_B, const NearestGrid& grid, Iso3 T) {
   const std::vector<Vec3>& model_O = grid.model_O;
   const Eigen::Vector3i& n = grid.n;
-  auto index = [&](const Eigen::Vector3i& c) { return grid.index(c); };
-  auto cellOf = [&](const Vec3& p) { return grid.cellOf(p); };
-  const std::vector<int>& nearest = grid.nearest;
   for (int round = 0; round < 20; ++round) {
     const double gate = std::max(0.01, 0.04 - 0.003 * round);
     const Iso3 T_O_B = T.inverse();
@@ -753,7 +765,7 @@ Iso3 coarseAlign(const std::vector<Vec3>& frame_B, const NearestGrid& grid, Iso3
     std::vector<Vec3> a, b;
     for (const Vec3& p_B : frame_B) {
       const Vec3 p = T_O_B * p_B;
-      const auto c = cellOf(p);
+      const auto c = grid.cellOf(p);
       if (!c) continue;
       // The nearest of the neighbouring cells' nearest points.
       int found = -1;
@@ -763,7 +775,7 @@ Iso3 coarseAlign(const std::vector<Vec3>& frame_B, const NearestGrid& grid, Iso3
           for (int dx = -1; dx <= 1; ++dx) {
             const Eigen::Vector3i d = *c + Eigen::Vector3i(dx, dy, dz);
             if ((d.array() < 0).any() || (d.array() >= n.array()).any()) continue;
-            const int k = nearest[index(d)];
+            const int k = grid.nearest[grid.index(d)];
             if (k < 0) continue;
             if (const double e = (model_O[size_t(k)] - p).squaredNorm(); e < best) {
               best = e;
@@ -799,10 +811,7 @@ std::vector<std::pair<std::optional<Iso3>, TrackResult>> ScanSession::registerOb
   if (hidden.size() != depth.depth_m.size())
     throw Error("registerObjectAt: the hidden mask does not match the image");
   const auto t0 = Clock::now();
-  const ObjectModel m = planningModel();
-  const std::vector<SurfacePoint> points =
-      observedSurface(m, std::max(2000, s.options.tracking.max_object_points), Iso3::Identity());
-  const std::vector<Vec3> occluders = modelOccluders(m, Iso3::Identity());
+  const auto [points, occluders] = registrationModel(planningModel(), s.options.tracking);
   // The frame's points near the starts (every other pixel each way, not hidden), for the coarse
   // alignment; the model's observed points.
   Vec3 near = Vec3::Zero();

@@ -24,6 +24,9 @@ std::array<double, 16> poseToRowMajor(const Iso3& T);
 // Re-orthonormalises the rotation part (nearest rotation, via SVD).
 Iso3 orthonormalized(const Iso3& T);
 
+// The angle of the rotation between the orientations of a and b, rad (0..π).
+double rotationBetween(const Iso3& a, const Iso3& b);
+
 // Unit vectors spread evenly on the sphere (Fibonacci lattice); deterministic.
 std::vector<Vec3> fibonacciSphere(int count);
 
