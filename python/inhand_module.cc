@@ -381,6 +381,10 @@ void bindSession(py::module_& m) {
       .def_readonly("planning_s", &ScanSession::Summary::planning_s)
       .def_readonly("fusion_s", &ScanSession::Summary::fusion_s)
       .def_readonly("frames_rejected", &ScanSession::Summary::frames_rejected)
+      .def_readonly("frames_moving", &ScanSession::Summary::frames_moving)
+      .def_property_readonly(
+          "slips", [](const ScanSession::Summary& s) { return slipsJson(s.slips).dump(); },
+          "the slips found in the hand, as summary.json's slips_found (a JSON string)")
       .def_readonly("tracking_s", &ScanSession::Summary::tracking_s)
       .def("__repr__", &ScanSession::Summary::brief);
 

@@ -264,7 +264,9 @@ int fuseWithRobot(const FuseArgs& args, const fs::path& dir, const FrameSet& set
   summary["frames_not_fused"] = {{"tracking", sum.frames_rejected},
                                  {"dropped_or_empty", sum.frames_dropped},
                                  {"object_not_in_hand", sum.frames_unsupported},
-                                 {"in_known_free_space", sum.frames_in_free_space}};
+                                 {"in_known_free_space", sum.frames_in_free_space},
+                                 {"object_moving_in_hand", sum.frames_moving}};
+  summary["slips_found"] = slipsJson(sum.slips);
   summary["frames_tracked"] = "frames_tracked.json";
   addModelFigures(result, args.surface, &summary);
   summary["timing_s"] = {{"fusion", sum.fusion_s},

@@ -474,8 +474,10 @@ int runScan(const ScanArgs& given) {
                                  {"dropped_or_empty", r.frames_dropped},
                                  {"off_path", r.frames_off_path},
                                  {"object_not_in_hand", r.frames_unsupported},
-                                 {"in_known_free_space", r.frames_in_free_space}};
+                                 {"in_known_free_space", r.frames_in_free_space},
+                                 {"object_moving_in_hand", r.frames_moving}};
   summary["frames_repaired"] = r.frames_repaired;
+  summary["slips_found"] = slipsJson(r.slips);
   summary["object_drops"] = sim.drops;
   {
     std::vector<double> mm;  // the model registered where the object rests, per put-down

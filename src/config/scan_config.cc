@@ -158,6 +158,15 @@ void visitConfig(V& v, ScanConfig& c) {
         t.num("in_hand_significance", o.in_hand_significance,
               "a pick-up's palm error is carried to the grasp only when its squared "
               "Mahalanobis distance exceeds this (χ²(6) at 99 %)");
+        t.boolean("slip_check", o.slip_check,
+                  "each in-hand frame, the model alone aligned with it: the object's slip in the "
+                  "hand found, the grasp corrected, frames not fused while it moves");
+        t.num("slip_m", o.slip_m,
+              "a significant correction moving the model's surface farther (RMS along its normals) "
+              "is a slip, m");
+        t.integer("slip_points", o.slip_points,
+                  "the model's observed surface, subsampled to this many points for it");
+        t.num("slip_gate_m", o.slip_gate_m, "its first iteration's depth gate, m");
       });
   v.object("checks", "in-hand frames that are not fused (docs/reliability.md)", [&](V& k) {
     FrameChecks& o = s.checks;

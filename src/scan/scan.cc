@@ -57,6 +57,34 @@ constexpr std::pair<Termination, const char*> kTerminationNames[] = {
 };
 }  // namespace
 
+Json slipsJson(const std::vector<SlipRecord>& slips) {
+  Json out = Json::array();
+  for (const SlipRecord& e : slips)
+    out.push_back({{"grasp", e.grasp},
+                   {"view", e.view},
+                   {"moved_mm", 1000 * e.moved_m},
+                   {"turned_deg", e.turned_rad * 180 / M_PI},
+                   {"frames_not_fused", e.frames},
+                   {"settled", e.settled}});
+  return out;
+}
+
+std::vector<SlipRecord> slipsFrom(const Json& j) {
+  if (!j.is_array()) throw Error("slips: not a list");
+  std::vector<SlipRecord> out;
+  for (const Json& e : j) {
+    SlipRecord r;
+    r.grasp = e.at("grasp").get<int>();
+    r.view = e.at("view").get<int>();
+    r.moved_m = e.at("moved_mm").get<double>() / 1000;
+    r.turned_rad = e.at("turned_deg").get<double>() * M_PI / 180;
+    r.frames = e.at("frames_not_fused").get<int>();
+    r.settled = e.at("settled").get<bool>();
+    out.push_back(r);
+  }
+  return out;
+}
+
 std::string terminationName(Termination t) {
   for (const auto& [value, name] : kTerminationNames)
     if (value == t) return name;

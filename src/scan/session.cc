@@ -67,10 +67,18 @@ struct ScanSession::State {
   // Tracking: the hand's surface at the grasp's finger joints, the model's observed surface (both
   // palm frame), the last frame's correction.
   std::vector<SurfacePoint> handPoints, objectPoints;
-  std::vector<Vec3> objectOccluders;           // the whole model (observed or not), palm frame
-  std::vector<Vec3> supportPoints;             // measured model surface, palm frame (FrameChecks)
-  std::vector<JointVector> viewPath;           // the open view's waypoints (FrameChecks)
-  int unsupportedStreak = 0;                   // frames in a row not showing the object in the hand
+  std::vector<Vec3> objectOccluders;  // the whole model (observed or not), palm frame
+  std::vector<Vec3> supportPoints;    // measured model surface, palm frame (FrameChecks)
+  std::vector<JointVector> viewPath;  // the open view's waypoints (FrameChecks)
+  int unsupportedStreak = 0;          // frames in a row not showing the object in the hand
+  // TrackingOptions::slip_check: the object is moving in the hand (since the grasp was at
+  // slipFrom), the event's record so far.
+  bool slipping = false;
+  Iso3 slipFrom = Iso3::Identity();
+  std::optional<Iso3> slipPending;       // the last frame's unconfirmed slip (palm frame)
+  std::vector<SurfacePoint> slipPoints;  // the model's observed surface for it (palm frame)
+  int slipRefinements = 0;               // frames that refined the grasp after it moved
+  SlipRecord slip;
   std::vector<std::vector<Vec3>> linkSamples;  // the arm's links' surfaces (link frames)
   JointVector handPointsQ;
   // The last aligned frame's error in the palm frame: true palm = reported palm · correction.
@@ -317,6 +325,7 @@ void ScanSession::beginGrasp(const Iso3& T_O_palm, const JointVector& q, const A
   s.summary.grasps = s.grasp + 1;
   s.summary.termination = Termination::kRunning;
   s.summary.message.clear();
+  closeSlip();
   s.T_O_palm = T_O_palm;
   s.qGrasp = q;
   s.objectBox = object_box_O;
@@ -338,9 +347,40 @@ void ScanSession::beginGrasp(const Iso3& T_O_palm, const JointVector& q, const A
     s.initialDirs = fibonacciSphere(s.options.initial_views);
 }
 
+namespace {
+// How far a surface moves under `T` as a depth frame can tell: the RMS of its points' motion
+// along their normals (a cylinder turned about its axis, or a plane slid in itself, does not
+// move).
+double surfaceMotion(const std::vector<SurfacePoint>& points, const Iso3& T) {
+  double sum = 0;
+  for (const SurfacePoint& p : points) sum += std::pow(p.n.dot(T * p.p - p.p), 2);
+  return points.empty() ? 0.0 : std::sqrt(sum / double(points.size()));
+}
+// How far the centroid of `points` moves under `T`.
+double centroidMotion(const std::vector<SurfacePoint>& points, const Iso3& T) {
+  Vec3 c = Vec3::Zero();
+  for (const SurfacePoint& p : points) c += p.p;
+  c /= double(std::max<size_t>(1, points.size()));
+  return (T * c - c).norm();
+}
+}  // namespace
+
 void ScanSession::endGrasp() {
   if (s_->viewOpen) finishView();
   s_->holding = false;
+  closeSlip();
+}
+
+void ScanSession::closeSlip() {
+  State& s = *s_;
+  s.slipPending.reset();
+  if (!s.slipping) return;  // a slip still under way when the grasp's views ended
+  s.slipping = false;
+  // An event no second frame bore out (an alignment gone wrong, not a slip) leaves no record.
+  if (s.slipFrom.isApprox(s.T_O_palm, 1e-12)) return;
+  s.slip.moved_m = centroidMotion(s.slipPoints, s.T_O_palm.inverse() * s.slipFrom);
+  s.slip.turned_rad = rotationBetween(s.slipFrom, s.T_O_palm);
+  s.summary.slips.push_back(s.slip);
 }
 
 void ScanSession::emptyInsideRobot(const JointVector& q, const Iso3& T_O_B) {
@@ -511,6 +551,11 @@ FrameReport ScanSession::addFrame(const DepthImage& input, const JointVector& q,
   TrackResult track;
   if (s.options.tracking.enabled) {
     const std::optional<Iso3> tracked = trackedCameraPose(depth, q, T_B_C, s.T_O_palm, &track);
+    // The object may have moved in the hand (the palm as tracked, or as the last frame had it).
+    const Iso3 T_C_held = tracked ? Iso3(tracked->inverse() * s.model->tipPose(q))
+                                  : Iso3(T_B_C.inverse() * s.model->tipPose(q) * s.correction);
+    if (std::string why = followSlip(depth, q, T_B_C, T_C_held); !why.empty())
+      return refuse(why, &s.summary.frames_moving);
     if (!tracked) {
       ++s.summary.frames_rejected;
       FrameReport r;
@@ -583,6 +628,134 @@ FrameReport ScanSession::addFrame(const DepthImage& input, const JointVector& q,
   return r;
 }
 
+std::string ScanSession::followSlip(const DepthImage& depth, const JointVector& q,
+                                    const Iso3& T_B_C, const Iso3& T_C_palm) {
+  State& s = *s_;
+  const TrackingOptions& o = s.options.tracking;
+  if (!o.enabled || !o.slip_check || s.slipPoints.size() < size_t(o.min_inliers)) return {};
+  const auto t0 = Clock::now();
+  const RobotModel& m = *s.model;
+  const CameraIntrinsics& K = s.camera.intrinsics;
+  // The robot as the frame shows it (as fusion masks it) hides the model where it is in front.
+  const JointVector qSeen = q + armOffsetsFromPalmError(m, q, s.correction);
+  const Iso3 T_O_C = s.T_O_palm * m.tipPose(qSeen).inverse() * T_B_C;
+  const PixelRect rect = volumeImageRect(s.volume, T_O_C, K);
+  const std::vector<uint8_t> hidden =
+      robotPixelMask(depth, T_B_C, qSeen, s.scenes, s.camera, s.options.t_hand_m,
+                     s.options.carve_radius_px, /*with_table=*/true, &rect);
+  // The model in the palm frame is a body at the palm's pose: its correction is the slip.
+  // A slip is looked for within slip_gate_m: farther, the object has fallen or the alignment
+  // gone wrong.
+  TrackingOptions near = o;
+  near.gate_m = std::max(o.final_gate_m, std::min(o.gate_m, o.slip_gate_m));
+  const TrackResult r =
+      alignBodyToDepth(depth, hidden, K, s.slipPoints, s.objectOccluders, T_C_palm,
+                       axialSigma(s.noise, T_C_palm.translation().z(), 0), near);
+  s.summary.tracking_s += secondsSince(t0);
+  const bool graspMoved = s.slipping && !s.slipFrom.isApprox(s.T_O_palm, 1e-12);
+  if (!r.ok) {
+    // Not aligned: while a slip that moved the grasp goes on, the frame cannot show where the
+    // object is; otherwise the frame checks decide.
+    if (graspMoved) return "the object moving in the hand (" + r.reason + ")";
+    s.slipping = false;
+    s.slipPending.reset();
+    return {};
+  }
+  // The correction in the palm frame: the model's points move by it.
+  Iso3 moved = T_C_palm.inverse() * r.correction * T_C_palm;
+  const double rms = surfaceMotion(s.slipPoints, moved);
+  // A slip moves the model farther than slip_m, significantly for the alignment's own
+  // uncertainty, and the frame bears the moved model out clearly better than the held one (a
+  // residual a half larger there, a quarter fewer points aligned, or more seen through): an
+  // alignment that slid along what the frame leaves free fits no better than where it began.
+  const bool significant =
+      correctionSignificance(r, T_C_palm, o.pair_information) > o.in_hand_significance;
+  bool moving = rms > o.slip_m && significant;
+  if (moving) {
+    TrackingOptions at = near;
+    at.iterations = 0;  // the frame against the model where the hand holds it
+    const TrackResult held =
+        alignBodyToDepth(depth, hidden, K, s.slipPoints, s.objectOccluders, T_C_palm,
+                         axialSigma(s.noise, T_C_palm.translation().z(), 0), at);
+    moving = held.rms_m > 1.5 * r.rms_m || held.inliers < 0.75 * r.inliers ||
+             held.see_through > 2 * r.see_through + r.inliers / 20;
+  }
+  // The grasp follows the object: points in the palm frame move with it, T_O_palm the other way.
+  auto follow = [&] {
+    // The palm as tracked leaned towards the moved object (its model is part of the alignment):
+    // the palm again from the hand alone (the model where it now lies hides the hand's points),
+    // and the object's pose relative to that.
+    TrackResult handOnly;
+    if (const std::optional<Iso3> T_B_C_hand =
+            trackedCameraPose(depth, q, T_B_C, s.T_O_palm * moved.inverse(), &handOnly)) {
+      const Iso3 T_C_palm_hand = T_B_C_hand->inverse() * m.tipPose(q);
+      moved = T_C_palm_hand.inverse() * r.correction * T_C_palm;
+      s.correction = (T_B_C.inverse() * m.tipPose(q)).inverse() * T_C_palm_hand;
+    }
+    s.T_O_palm = s.T_O_palm * moved.inverse();
+    for (std::vector<SurfacePoint>* set : {&s.objectPoints, &s.slipPoints})
+      for (SurfacePoint& p : *set) {
+        p.p = moved * p.p;
+        p.n = moved.linear() * p.n;
+      }
+    for (Vec3& p : s.objectOccluders) p = moved * p;
+    for (Vec3& p : s.supportPoints) p = moved * p;
+    s.buildNearHand(m, s.qGrasp, s.T_O_palm);
+  };
+  char why[160];
+  // Once a slip has moved the grasp, the frames after it refine where the object came to rest
+  // (the first correction came from a model aligned with one frame): a significant correction
+  // is followed, its frame not fused, for a few frames.
+  if (!moving && graspMoved && significant && rms > 0.25 * o.slip_m && s.slipRefinements < 4) {
+    ++s.slipRefinements;
+    ++s.slip.frames;
+    follow();
+    std::snprintf(why, sizeof why, "the object settling in the hand (its surface %.1f mm)",
+                  1000 * rms);
+    return why;
+  }
+  if (!moving) {
+    // At rest where the hand holds it: the event (if any) ends; this frame is fused.
+    s.slip.settled = true;
+    closeSlip();
+    if (graspMoved) {
+      const SlipRecord& e = s.summary.slips.back();
+      char line[160];
+      std::snprintf(line, sizeof line,
+                    "the object at rest in the hand again: it moved %.1f mm and %.1f deg (%d "
+                    "frames not fused)",
+                    1000 * e.moved_m, e.turned_rad * 180 / M_PI, e.frames);
+      log(line);
+    }
+    return {};
+  }
+  if (!s.slipping) {
+    s.slipping = true;
+    s.slipFrom = s.T_O_palm;
+    s.slip = SlipRecord{};
+    s.slip.grasp = s.grasp;
+    s.slip.view = std::max(0, int(s.views.size()) - 1);
+  }
+  // One frame alone may be a wrong alignment: the grasp moves when the next frame bears the same
+  // correction out (the object now rests there in the hand, or goes on moving).
+  const bool confirmed =
+      s.slipPending && surfaceMotion(s.slipPoints, moved * s.slipPending->inverse()) < o.slip_m;
+  s.slipPending = moved;
+  ++s.slip.frames;
+  if (!confirmed) {
+    std::snprintf(why, sizeof why, "the object may have moved in the hand (its surface %.1f mm)",
+                  1000 * rms);
+    return why;
+  }
+  s.slipPending.reset();
+  s.slipRefinements = 0;
+  follow();
+  std::snprintf(why, sizeof why,
+                "the object moved in the hand (its surface %.1f mm; the grasp corrected)",
+                1000 * rms);
+  return why;
+}
+
 bool ScanSession::modelPointsNeeded(const ScanOptions& o) {
   return o.tracking.enabled || o.checks.min_support > 0;
 }
@@ -606,6 +779,9 @@ void ScanSession::refreshTrackingModel(const ObjectModel* current) {
       s.supportPoints.push_back(T_palm_O * m.mesh.vertices[k].cast<double>());
   if (s.options.tracking.enabled)
     s.objectPoints = observedSurface(m, o.max_object_points, T_palm_O);
+  s.slipPoints.clear();
+  if (o.enabled && o.slip_check)
+    s.slipPoints = observedSurface(m, std::max(o.slip_points, o.max_object_points), T_palm_O);
 }
 
 std::optional<Iso3> ScanSession::trackedCameraPose(const DepthImage& depth, const JointVector& q,
@@ -811,7 +987,11 @@ std::vector<std::pair<std::optional<Iso3>, TrackResult>> ScanSession::registerOb
   if (hidden.size() != depth.depth_m.size())
     throw Error("registerObjectAt: the hidden mask does not match the image");
   const auto t0 = Clock::now();
-  const auto [points, occluders] = registrationModel(planningModel(), s.options.tracking);
+  // Named pair members, not a structured binding: the lambda below captures them, which clang
+  // before 16 refuses for bindings.
+  const auto registration = registrationModel(planningModel(), s.options.tracking);
+  const std::vector<SurfacePoint>& points = registration.first;
+  const std::vector<Vec3>& occluders = registration.second;
   // The frame's points near the starts (every other pixel each way, not hidden), for the coarse
   // alignment; the model's observed points.
   Vec3 near = Vec3::Zero();
@@ -1114,6 +1294,8 @@ void ScanSession::Summary::copyTo(ScanResult* r) const {
   r->frames_unsupported = frames_unsupported;
   r->frames_repaired = frames_repaired;
   r->frames_in_free_space = frames_in_free_space;
+  r->frames_moving = frames_moving;
+  r->slips = slips;
 }
 
 std::string ScanSession::Summary::brief() const {
@@ -1192,6 +1374,8 @@ void ScanSession::save(const std::filesystem::path& path, const Json& extra) con
                   {"frames_off_path", m.frames_off_path},
                   {"frames_unsupported", m.frames_unsupported},
                   {"frames_in_free_space", m.frames_in_free_space},
+                  {"frames_moving", m.frames_moving},
+                  {"slips", slipsJson(m.slips)},
                   {"frames_repaired", m.frames_repaired},
                   {"tracking_s", m.tracking_s},
                   {"view_evaluations", m.view_evaluations},
@@ -1299,6 +1483,8 @@ ScanSession ScanSession::load(const std::filesystem::path& path, const RobotMode
     s.summary.frames_off_path = m.value("frames_off_path", 0);
     s.summary.frames_unsupported = m.value("frames_unsupported", 0);
     s.summary.frames_in_free_space = m.value("frames_in_free_space", 0);
+    s.summary.frames_moving = m.value("frames_moving", 0);
+    if (m.contains("slips")) s.summary.slips = slipsFrom(m.at("slips"));
     s.summary.frames_repaired = m.value("frames_repaired", 0);
     s.summary.tracking_s = m.value("tracking_s", 0.0);
     if (h.contains("tracking_correction")) s.correction = isoFrom(h.at("tracking_correction"));

@@ -10,6 +10,9 @@ namespace inhand {
 
 std::string TrackingOptions::validate() const {
   if (!(in_hand_significance >= 0)) return "in_hand_significance must be >= 0";
+  if (!(slip_m > 0 && slip_m < 0.1)) return "slip_m must be in (0, 0.1) m";
+  if (slip_points < 0) return "slip_points must be >= 0";
+  if (!(slip_gate_m > 0 && slip_gate_m < 1)) return "slip_gate_m must be in (0, 1) m";
   if (iterations < 1 || iterations > 200) return "iterations must be in 1..200";
   if (!(final_gate_m > 0 && final_gate_m <= gate_m && gate_m < 1))
     return "gates must satisfy 0 < final_gate_m <= gate_m < 1 m";

@@ -8,6 +8,7 @@
 #include <string>
 #include <vector>
 
+#include "inhand/core/json_util.h"
 #include "inhand/mesh/extract.h"
 #include "inhand/planning/view_selection.h"
 #include "inhand/robot/robot_interface.h"
@@ -130,6 +131,22 @@ struct ViewRecord {
   double planning_s = 0;
 };
 
+// The object moved in the hand during a grasp's views (TrackingOptions::slip_check): found in
+// the frames, the grasp corrected from then on.
+struct SlipRecord {
+  int grasp = 0, view = 0;  // 0-based; the view counted over every grasp
+  // The motion of the model in the hand from the last frame that showed it at rest to the first
+  // that showed it at rest again: RMS over its observed points, and the turn.
+  double moved_m = 0, turned_rad = 0;
+  int frames = 0;        // frames not fused while it moved
+  bool settled = false;  // a frame showed it at rest again (false: the views ended first)
+};
+
+// Slip records in summary.json and checkpoints (moved_mm, turned_deg); slipsFrom throws Error on
+// a malformed list.
+Json slipsJson(const std::vector<SlipRecord>& slips);
+std::vector<SlipRecord> slipsFrom(const Json& j);
+
 // What one added frame did.
 struct FrameReport {
   bool fused = true;  // false: tracking could not align it (not fused; `rejected` says why)
@@ -181,6 +198,8 @@ struct ScanResult {
   // empty; joints off the planned path; the object not in the hand. And frames repaired.
   int frames_rejected = 0, frames_dropped = 0, frames_off_path = 0, frames_unsupported = 0,
       frames_repaired = 0, frames_in_free_space = 0;
+  int frames_moving = 0;  // not fused: the object moved in the hand (TrackingOptions::slip_check)
+  std::vector<SlipRecord> slips;
 };
 
 // Scans with the object held at T_O_palm (palm pose in the object frame); the robot must be

@@ -62,6 +62,8 @@ class ScanSession {
     // the object not where the hand holds it; and frames whose non-finite depths were dropped.
     int frames_dropped = 0, frames_off_path = 0, frames_unsupported = 0, frames_repaired = 0;
     int frames_in_free_space = 0;  // depth where the model knows space is empty
+    int frames_moving = 0;         // the object moving in the hand (TrackingOptions::slip_check)
+    std::vector<SlipRecord> slips;
     int view_evaluations = 0, view_refinements = 0;
     double planning_s = 0, fusion_s = 0, tracking_s = 0;
     std::string brief() const;  // one line
@@ -197,6 +199,13 @@ class ScanSession {
   void emptyInsideRobot(const JointVector& q, const Iso3& T_O_B);
   // Tracking's object points from `current` (or a fresh planning model).
   void refreshTrackingModel(const ObjectModel* current = nullptr);
+  void closeSlip();  // a slip under way ends (its record kept when it moved the grasp)
+  // TrackingOptions::slip_check on an in-hand frame (the robot at q, the camera reported at T_B_C,
+  // the palm at T_C_palm in the camera frame): why it must not be fused because the object moved
+  // in the hand, or "". A slip that two frames bear out moves the grasp (T_O_palm and everything
+  // kept in the palm frame).
+  std::string followSlip(const DepthImage& depth, const JointVector& q, const Iso3& T_B_C,
+                         const Iso3& T_C_palm);
   // TrackingOptions::filter: the frame's alignment `r` (taken with the robot at q, the palm
   // predicted at T_C_palm) through the Kalman filter; r->correction becomes the filtered one.
   void filterCorrection(const JointVector& q, const Iso3& T_C_palm, TrackResult* r);

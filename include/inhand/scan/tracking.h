@@ -51,6 +51,17 @@ struct TrackingOptions {
   // frame's noise alone gives once in a hundred (an exact arm's lift frame would otherwise move
   // the object in the hand by a millimetre or two for the rest of the grasp).
   double in_hand_significance = 16.81;
+  // Slip (ScanSession::addFrame): every in-hand frame, the model alone is aligned with the frame
+  // from where the grasp holds it (the robot's pixels hidden). A correction that moves the model's
+  // surface by more than slip_m (RMS along its normals: what a depth frame can tell), is
+  // significant (in_hand_significance), and that the frame bears out clearly better than the
+  // held pose, in two frames in a row, means the object moved in the hand: the grasp is
+  // corrected, and no frame is fused until one shows the object at rest in the hand again.
+  // false: the grasp stays as it began.
+  bool slip_check = true;
+  double slip_m = 0.002;
+  int slip_points = 1500;     // the model's observed surface, subsampled to this for it
+  double slip_gate_m = 0.03;  // its first iteration's depth gate, m
   std::string validate() const;
 };
 
