@@ -8,6 +8,7 @@ import sys
 out = sys.argv[1]
 runs = os.path.join(out, "runs")
 rows = []
+all_attempts = []
 for name in sorted(os.listdir(runs)):
     if not name.endswith(".status"):
         continue
@@ -20,11 +21,20 @@ for name in sorted(os.listdir(runs)):
         s = json.load(open(path))
     grasps = len(s.get("grasps", []))
     attempts = s.get("table_top", {}).get("pick_up_attempts", [])
+    # Every pick-up of the scan, one list per grasp (the first grasp's are the table top's).
+    per_grasp = [attempts] + [g.get("pick_up_attempts", []) for g in s.get("grasps", [])[1:]]
+    per_grasp.append(s.get("failed_regrasp_attempts", []))
+    for lst in per_grasp:
+        all_attempts.extend(a for a in lst if isinstance(a, dict))
+    failed_max = max([sum(isinstance(a, dict) and a["outcome"] != "picked" for a in lst)
+                      for lst in per_grasp] or [0])
     rows.append({
         "object": run,
         "exit": status,
         "first_grasp": "yes" if grasps > 0 else "no",
         "pick_attempts": len(attempts),
+        "failed_picks_max": failed_max,
+        "slips": len(s.get("slips_found", [])),
         "grasps": grasps,
         "views": len(s.get("views", [])),
         "coverage_pct": "%.1f" % (100 * s["coverage"]) if "coverage" in s else "",
@@ -34,7 +44,8 @@ for name in sorted(os.listdir(runs)):
         "seconds": "%.0f" % float(seconds or 0),
         "termination": s.get("termination", "(no summary)"),
     })
-keys = ["object", "exit", "first_grasp", "pick_attempts", "grasps", "views", "coverage_pct", "accuracy_mm",
+keys = ["object", "exit", "first_grasp", "pick_attempts", "failed_picks_max", "slips", "grasps", "views",
+        "coverage_pct", "accuracy_mm",
         "p95_mm", "detached_cm2", "seconds", "termination"]
 with open(os.path.join(out, "results.csv.tmp"), "w", newline="") as f:
     w = csv.DictWriter(f, keys)
@@ -59,4 +70,22 @@ with open(os.path.join(out, "results.md.tmp"), "w") as f:
             "mean accuracy <= 1 mm on %d, p95 <= 3 mm on %d, a detached piece on %d.\n"
             % (n, first, 100.0 * first / max(n, 1), cov97, 100.0 * cov97 / max(n, 1), le3, picks,
                firstHeld, acc1, p95, detached))
+
+
+def rate(sel):
+    held = sum(a["outcome"] == "picked" for a in sel)
+    return "%d of %d" % (held, len(sel))
+
+
+with open(os.path.join(out, "results.md.tmp"), "a") as f:
+    ranks = ", ".join("rank %d: %s" % (k, rate([a for a in all_attempts if a["rank"] == k]))
+                      for k in range(3))
+    f.write("\nPick-ups that held, over every attempt of every grasp (%s): %s, rank 3 and later: %s; "
+            "enveloping %s, fingertips %s; the hold test said it holds %s, said not %s, untested %s.\n"
+            % (rate(all_attempts), ranks, rate([a for a in all_attempts if a["rank"] >= 3]),
+               rate([a for a in all_attempts if a["kind"] == "enveloping"]),
+               rate([a for a in all_attempts if a["kind"] == "fingertips"]),
+               rate([a for a in all_attempts if a["hold_test"] is True]),
+               rate([a for a in all_attempts if a["hold_test"] is False]),
+               rate([a for a in all_attempts if a["hold_test"] is None])))
 os.replace(os.path.join(out, "results.md.tmp"), os.path.join(out, "results.md"))

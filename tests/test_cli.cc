@@ -390,7 +390,7 @@ TEST(Cli, ShortObjectIsPickedFromTheTableAndScannedAlmostWhole) {
   const Json s = readJsonFile(out / "summary.json");
   EXPECT_EQ(s["start"], "table");
   ASSERT_GE(s["grasps"].size(), 1u) << s["termination"];
-  EXPECT_EQ(s["table_top"]["pick_up_attempts"].back(), "picked");
+  EXPECT_EQ(s["table_top"]["pick_up_attempts"].back()["outcome"], "picked");
   double previous = 1.0;
   for (const Json& g : s["grasps"]) {
     const double a = g["unknown_area_m2"].get<double>();
@@ -413,7 +413,7 @@ TEST(Cli, CrackerBoxIsScannedWholeFromTheTable) {
   ASSERT_GE(s["grasps"].size(), 1u) << s["termination"];
   EXPECT_LE(s["grasps"].size(), 3u);
   EXPECT_GT(s["coverage"].get<double>(), 0.99);
-  EXPECT_EQ(s["table_top"]["pick_up_attempts"].back(), "picked");
+  EXPECT_EQ(s["table_top"]["pick_up_attempts"].back()["outcome"], "picked");
   EXPECT_EQ(s["options"]["grasp"]["approach"], "first_contact");
   EXPECT_EQ(s["options"]["sim"]["pick_up"], "first_contact");
   const Aabb b = loadObject("builtin:cracker_box").bounds();
@@ -482,10 +482,11 @@ TEST(Cli, AGraspThatDoesNotHoldDropsTheObjectAndTheScanTriesTheNext) {
                      (dir.path() / "c.json").string() + " --out " + out.string(),
                  dir);
   const Json s = readJsonFile(out / "summary.json");
-  const auto attempts = s["table_top"]["pick_up_attempts"].get<std::vector<std::string>>();
+  const Json& attempts = s["table_top"]["pick_up_attempts"];
   ASSERT_FALSE(attempts.empty());
-  EXPECT_EQ(attempts.front(), "dropped") << r.output;
-  if (attempts.back() == "picked") {
+  EXPECT_EQ(attempts.front()["outcome"], "dropped") << r.output;
+  EXPECT_EQ(attempts.front()["rank"], 0);
+  if (attempts.back()["outcome"] == "picked") {
     EXPECT_EQ(r.code, 0) << r.output;
     EXPECT_GT(s["coverage"].get<double>(), 0.9);
   } else {

@@ -139,12 +139,12 @@ TEST(Scan, DropsSeenInTheDepthFramesAreTheSimulatorsDrops) {
   const MultiGraspResult r =
       scanFromTable(robot, sensor, world.restPose(), o, multi, NoiseModelOptions{});
   ASSERT_TRUE(r.table_top);
-  const std::vector<std::string>& attempts = r.table_top->attempts;
+  const std::vector<PickAttempt>& attempts = r.table_top->attempts;
   ASSERT_FALSE(attempts.empty());
-  const int dropped = int(std::count(attempts.begin(), attempts.end(), "dropped"));
+  const int dropped = countOutcome(attempts, "dropped");
   EXPECT_GT(dropped, 0) << "with μ = 0.1 some grasp should fail";
   EXPECT_EQ(dropped, world.drops);
-  if (attempts.back() == "picked") {
+  if (attempts.back().outcome == "picked") {
     EXPECT_TRUE(world.held);
     EXPECT_EQ(r.grasps.size(), 1u);
   } else {

@@ -184,7 +184,7 @@ Json graspsJson(const MultiGraspResult& mr) {
                       {"unknown_area_m2", g.hole_area_m2},
                       {"mean_entropy", g.mean_entropy},
                       {"generation_s", g.generation_s},
-                      {"pick_up_attempts", g.attempts},
+                      {"pick_up_attempts", attemptsJson(g.attempts)},
                       {"ranking_s", g.ranking_s}});
   }
   return grasps;
@@ -213,8 +213,7 @@ Json tableTopJson(const TableTopRecord& t) {
             {"not_force_closure", t.touching - t.stable},
             {"hand_in_table", t.stable - t.table_free},
             {"unreachable", t.table_free - t.reachable}}},
-          {"pick_up_attempts", t.attempts},
-          {"pick_up_poses", t.attempt_poses},
+          {"pick_up_attempts", attemptsJson(t.attempts)},
           {"grasp_poses", posesJson(t.poses)},
           {"volume", {{"size_m", t.volume_size_m}, {"voxel_m", t.voxel_m}}},
           {"seconds", t.seconds}};
@@ -445,7 +444,7 @@ int runScan(const ScanArgs& given) {
   summary["trajectory_s"] = views.empty() ? 0.0 : views.back()["trajectory_s"].get<double>();
   summary["views"] = views;
   summary["grasps"] = graspsJson(mr);
-  summary["failed_regrasp_attempts"] = mr.failed_regrasp_attempts;
+  summary["failed_regrasp_attempts"] = attemptsJson(mr.failed_regrasp_attempts);
   summary["start"] = o.start;
   summary["rest_pose"] = restJson;
   if (mr.table_top) summary["table_top"] = tableTopJson(*mr.table_top);

@@ -313,6 +313,7 @@ class PoseCloser {
     HandContacts hc = handContacts(robot_, c.q, Tc, grid_, o_.contact_m, o_.contact_cell_m);
     c.contacts = std::move(hc.contacts);
     c.links_in_contact = hc.fingers_touching + int(hc.palm_touching);
+    c.palm_contact = hc.palm_touching;
     if (c.links_in_contact < 2) {
       rec.result = "fewer_than_two_links";
       return std::nullopt;

@@ -80,7 +80,7 @@ Json graspJson(const GraspRecord& g) {
           {"generation_s", g.generation_s},
           {"ranking_s", g.ranking_s},
           {"ranked", ranked},
-          {"attempts", g.attempts},
+          {"attempts", attemptsJson(g.attempts)},
           {"model", modelJson(g.model)}};
 }
 GraspRecord graspFrom(const Json& j) {
@@ -104,7 +104,7 @@ GraspRecord graspFrom(const Json& j) {
   for (const Json& r : j.at("ranked"))
     g.ranked.push_back({isoFrom(r.at("T_O_palm")), jointsFrom(r.at("q")),
                         r.at("quality").get<double>(), r.at("epsilon").get<double>()});
-  g.attempts = j.at("attempts").get<std::vector<std::string>>();
+  g.attempts = attemptsFrom(j.at("attempts"));
   g.model = modelFrom(j.at("model"));
   return g;
 }
@@ -140,8 +140,7 @@ Json tableTopJson(const TableTopRecord& t) {
           {"poses", poses},
           {"volume_size_m", t.volume_size_m},
           {"voxel_m", t.voxel_m},
-          {"attempts", t.attempts},
-          {"attempt_poses", t.attempt_poses},
+          {"attempts", attemptsJson(t.attempts)},
           {"seconds", t.seconds}};
 }
 TableTopRecord tableTopFrom(const Json& j) {
@@ -175,8 +174,7 @@ TableTopRecord tableTopFrom(const Json& j) {
   }
   t.volume_size_m = j.at("volume_size_m").get<double>();
   t.voxel_m = j.at("voxel_m").get<double>();
-  t.attempts = j.at("attempts").get<std::vector<std::string>>();
-  t.attempt_poses = j.at("attempt_poses").get<std::vector<int>>();
+  t.attempts = attemptsFrom(j.at("attempts"));
   t.seconds = j.at("seconds").get<double>();
   return t;
 }

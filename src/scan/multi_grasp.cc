@@ -246,10 +246,7 @@ Refound refindOnTable(ScanSession& session, RobotInterface& robot, DepthSensor& 
 struct PickOutcome {
   std::optional<Iso3> achieved;
   std::optional<GraspCandidate> picked;  // a copy: the candidates it came from may be gone
-  // Per candidate tried: picked, no_contact, empty_hand or dropped, and the candidate's pose
-  // index (GraspCandidate::pose).
-  std::vector<std::string> attempts;
-  std::vector<int> attempt_poses;
+  std::vector<PickAttempt> attempts;     // per candidate tried
   // After a failed attempt the object was found elsewhere on the table (the candidates, planned
   // where it was, no longer apply), or not found at all.
   std::optional<Iso3> moved_to;
@@ -277,17 +274,27 @@ PickOutcome pickAndVerify(ScanSession& session, RobotInterface& robot, DepthSens
     out.moved_to = f.T_B_O;
     return false;
   };
-  for (const GraspCandidate& c : candidates) {
+  for (size_t rank = 0; rank < candidates.size(); ++rank) {
+    const GraspCandidate& c = candidates[rank];
     if (session.progress().stopRequested()) break;
     if (used + int(out.attempts.size()) >= budget) {
       log("no pick-up held after " + std::to_string(budget) +
           " attempts (grasp.max_failed_pick_ups); giving up on this grasp");
       break;
     }
-    out.attempt_poses.push_back(c.pose);
+    PickAttempt attempt;
+    attempt.rank = int(rank);
+    attempt.pose = c.pose;
+    attempt.hold_test = c.hold;
+    attempt.palm_contact = c.palm_contact;
+    attempt.epsilon = c.epsilon;
+    auto record = [&](const char* outcome) {
+      attempt.outcome = outcome;
+      out.attempts.push_back(attempt);
+    };
     std::optional<Iso3> achieved = robot.pickUp(c.T_O_palm, c.q_open);
     if (!achieved) {
-      out.attempts.push_back("no_contact");
+      record("no_contact");
       log("pick-up failed (the hand met nothing there); trying the next candidate");
       continue;
     }
@@ -297,7 +304,7 @@ PickOutcome pickAndVerify(ScanSession& session, RobotInterface& robot, DepthSens
       if (std::abs(q[f.variable] - f.closed) > 1e-3) empty = false;
     if (empty) {
       robot.putDown();
-      out.attempts.push_back("empty_hand");
+      record("empty_hand");
       log("the fingers closed on nothing; trying the next candidate");
       if (!stillThere()) break;
       continue;
@@ -392,14 +399,15 @@ PickOutcome pickAndVerify(ScanSession& session, RobotInterface& robot, DepthSens
     };
     log("after the lift: the object's points borne out in the hand " + percent(inHand) +
         ", where it rested " + percent(onTable));
+    if (inHand > 0.5) attempt.shift_m = (achieved->translation() - c.T_O_palm.translation()).norm();
     if (!(inHand > 0.5) || onTable > 0.5) {
       robot.putDown();
-      out.attempts.push_back("dropped");
+      record("dropped");
       log("the grasp did not hold; trying the next candidate");
       if (!(onTable > 0.5) && !stillThere()) break;  // not seen where it rested: where is it?
       continue;
     }
-    out.attempts.push_back("picked");
+    record("picked");
     out.achieved = achieved;
     out.picked = c;
     break;
@@ -495,7 +503,7 @@ void runGrasps(RobotInterface& robot, DepthSensor& sensor, ScanSession& session,
     const std::vector<Vec3> known_O = observedVertices(all.model);
     GraspPlan plan;
     PickOutcome pick;
-    std::vector<std::string> attempts;
+    std::vector<PickAttempt> attempts;
     for (;;) {
       plan = session.planGrasps(T_B_O_rest, robot.joints());
       if (plan.above_threshold == 0) break;
@@ -549,6 +557,46 @@ void runGrasps(RobotInterface& robot, DepthSensor& sensor, ScanSession& session,
   sum.copyTo(&all);
 }
 }  // namespace
+
+Json attemptsJson(const std::vector<PickAttempt>& attempts) {
+  Json out = Json::array();
+  for (const PickAttempt& a : attempts)
+    out.push_back({{"outcome", a.outcome},
+                   {"rank", a.rank},
+                   {"pose", a.pose},
+                   {"hold_test", a.hold_test < 0 ? Json() : Json(a.hold_test == 1)},
+                   {"kind", a.palm_contact ? "enveloping" : "fingertips"},
+                   {"epsilon", a.epsilon},
+                   {"shift_in_hand_mm", a.shift_m < 0 ? Json() : Json(1000 * a.shift_m)}});
+  return out;
+}
+
+std::vector<PickAttempt> attemptsFrom(const Json& j) {
+  if (!j.is_array()) throw Error("pick-up attempts: not a list");
+  std::vector<PickAttempt> out;
+  for (const Json& e : j) {
+    PickAttempt a;
+    if (e.is_string()) {
+      a.outcome = e.get<std::string>();
+    } else {
+      a.outcome = e.at("outcome").get<std::string>();
+      a.rank = e.at("rank").get<int>();
+      a.pose = e.at("pose").get<int>();
+      a.hold_test = e.at("hold_test").is_null() ? -1 : int(e.at("hold_test").get<bool>());
+      a.palm_contact = e.at("kind").get<std::string>() == "enveloping";
+      a.epsilon = e.at("epsilon").get<double>();
+      a.shift_m =
+          e.at("shift_in_hand_mm").is_null() ? -1.0 : e.at("shift_in_hand_mm").get<double>() / 1000;
+    }
+    out.push_back(a);
+  }
+  return out;
+}
+
+int countOutcome(const std::vector<PickAttempt>& attempts, const std::string& outcome) {
+  return int(std::count_if(attempts.begin(), attempts.end(),
+                           [&](const PickAttempt& a) { return a.outcome == outcome; }));
+}
 
 std::string TableTopOptions::validate() const {
   if (frames < 1 || frames > 30) return "frames must be in 1..30";
@@ -672,7 +720,6 @@ MultiGraspResult scanFromTable(RobotInterface& robot, DepthSensor& sensor, const
   PickOutcome pick =
       pickAndVerify(session, robot, sensor, T_B_O_now, seen_O, first.candidates, options, log);
   tt.attempts = pick.attempts;
-  tt.attempt_poses = pick.attempt_poses;
   // Found elsewhere after a failed attempt: candidates planned where it lies now (the table
   // plane in its frame moved with it), the attempts left tried on them.
   TableTopObject there = object;
@@ -688,8 +735,6 @@ MultiGraspResult scanFromTable(RobotInterface& robot, DepthSensor& sensor, const
     pick = pickAndVerify(session, robot, sensor, T_B_O_now, seen_O, again.candidates, options, log,
                          int(tt.attempts.size()));
     tt.attempts.insert(tt.attempts.end(), pick.attempts.begin(), pick.attempts.end());
-    tt.attempt_poses.insert(tt.attempt_poses.end(), pick.attempt_poses.begin(),
-                            pick.attempt_poses.end());
   }
   if (!pick.achieved) {
     all.model = session.model();
@@ -698,7 +743,7 @@ MultiGraspResult scanFromTable(RobotInterface& robot, DepthSensor& sensor, const
   }
   GraspRecord rec;
   rec.epsilon = pick.picked->epsilon;
-  rec.attempts = pick.attempts;
+  rec.attempts = tt.attempts;
   rec.candidates = tt.reachable;
   rec.tried = tt.tried;
   rec.generation_s = tt.seconds;

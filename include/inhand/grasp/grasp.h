@@ -81,11 +81,12 @@ struct GraspOptions {
 
 struct GraspCandidate {
   Iso3 T_O_palm = Iso3::Identity();
-  JointVector q;             // hand joints closed to contact (arm part: the pick IK solution)
-  JointVector q_open;        // the hand as it comes in (preshape; arm part as q)
-  int pose = -1;             // its index in GraspGeneration::poses
-  JointVector q_lift;        // the same grasp with the object lifted `lift_m` off the table
-  int links_in_contact = 0;  // fingers touching, plus one when the palm touches
+  JointVector q;              // hand joints closed to contact (arm part: the pick IK solution)
+  JointVector q_open;         // the hand as it comes in (preshape; arm part as q)
+  int pose = -1;              // its index in GraspGeneration::poses
+  JointVector q_lift;         // the same grasp with the object lifted `lift_m` off the table
+  int links_in_contact = 0;   // fingers touching, plus one when the palm touches
+  bool palm_contact = false;  // the palm touches (an enveloping grasp; else fingertips only)
   std::vector<Contact> contacts;
   double epsilon = 0;        // stability
   double quality = 0;        // best view quality Alg. 1 finds with the hand there

@@ -23,6 +23,24 @@ struct TableTopOptions {
   std::string validate() const;
 };
 
+// One pick-up attempt: the candidate tried and what became of it.
+struct PickAttempt {
+  // picked (it held after the lift), no_contact (the hand met nothing), empty_hand (the fingers
+  // closed on nothing), dropped (the lift's frame did not show it in the hand)
+  std::string outcome;
+  int rank = 0;        // the candidate's place in the ranking it was tried from (0: the first)
+  int pose = -1;       // its index among the poses generated (GraspCandidate::pose)
+  int hold_test = -1;  // the hold test's verdict on the model: 1 held, 0 not, -1 untested
+  bool palm_contact = false;  // enveloping (the palm touches) or fingertips only
+  double epsilon = 0;         // its force-closure ε
+  // After the lift: how far the object sat in the hand from the planned grasp (−1: not seen).
+  double shift_m = -1;
+};
+Json attemptsJson(const std::vector<PickAttempt>& attempts);
+// Throws Error on a malformed list; a list of outcome strings (older checkpoints) is read too.
+std::vector<PickAttempt> attemptsFrom(const Json& j);
+int countOutcome(const std::vector<PickAttempt>& attempts, const std::string& outcome);
+
 // What the table-top stage saw and chose.
 struct TableTopRecord {
   int frames = 0;
@@ -37,8 +55,7 @@ struct TableTopRecord {
   int tried = 0, touching = 0, stable = 0, table_free = 0, reachable = 0;
   std::vector<GraspPoseRecord> poses;     // every pose tried and what became of it
   double volume_size_m = 0, voxel_m = 0;  // the volume as fitted to the object
-  std::vector<std::string> attempts;
-  std::vector<int> attempt_poses;  // the pose (index into `poses`) of each attempt
+  std::vector<PickAttempt> attempts;
   double seconds = 0;
 };
 
@@ -76,7 +93,7 @@ struct GraspRecord {
   double mean_entropy = 0;  // of the model after its views
   double generation_s = 0, ranking_s = 0;
   std::vector<RankedGrasp> ranked;    // the best candidates it was chosen from, best first
-  std::vector<std::string> attempts;  // pick-up attempts before it held (see TableTopRecord)
+  std::vector<PickAttempt> attempts;  // pick-up attempts, the last the one that held
   ObjectModel model;                  // the model after its views (at the planning stride)
 };
 
@@ -88,7 +105,7 @@ struct MultiGraspResult {
   double unused_generation_s = 0, unused_ranking_s = 0;
   // The attempts of a re-grasp that never held (regrasp_failed, object_lost): no GraspRecord
   // carries them.
-  std::vector<std::string> failed_regrasp_attempts;
+  std::vector<PickAttempt> failed_regrasp_attempts;
   // After each put-down, the residual (RMS, m) of the model registered where the object rests.
   std::vector<double> refind_residuals_m;
   std::optional<TableTopRecord> table_top;  // when the scan began with the object on the table
