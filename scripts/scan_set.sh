@@ -6,11 +6,15 @@
 # each scanned from the table with default options. Writes OUT/results.md and OUT/results.csv
 # (first grasp made, grasps, views, coverage, accuracy, seconds, termination) as runs finish.
 # Usage: scripts/scan_set.sh [OUT]   (default out/scan_set; the build must exist)
+# SCAN_CONFIG=FILE adds `--config FILE` to every scan (e.g. physics on: docs/physics.md).
 set -uo pipefail
 cd "$(dirname "$0")/.."
 out="${1:-out/scan_set}"
 poses="${REST_POSES:-0 1}"
-mkdir -p "$out/runs"
+mkdir -p "$out/runs" "$out/bin"
+cp build/inhand "$out/bin/inhand"  # the build may change while this runs
+config=()
+[ -n "${SCAN_CONFIG:-}" ] && config=(--config "$SCAN_CONFIG")
 /usr/bin/python3 scripts/make_test_objects.py "$out/objects"
 objects=()
 for f in "$out"/objects/*.obj; do objects+=("$f:0"); done
@@ -29,7 +33,8 @@ for entry in "${objects[@]}"; do
   if [ -f "$dir/summary.json" ]; then continue; fi
   rm -rf "$dir"
   start=$(date +%s)
-  ./build/inhand scan --object "$mesh" --rest-pose "$pose" --out "$dir" > "$out/runs/$name.log" 2>&1
+  "$out/bin/inhand" scan --object "$mesh" --rest-pose "$pose" "${config[@]}" --out "$dir" \
+    > "$out/runs/$name.log" 2>&1
   echo "$?" > "$out/runs/$name.status"
   end=$(date +%s)
   echo "$((end - start))" > "$out/runs/$name.seconds"
