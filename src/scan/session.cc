@@ -28,6 +28,32 @@ double secondsSince(Clock::time_point t) {
 }
 }  // namespace
 
+namespace {
+// How far a surface moves under `T` as a depth frame can tell: the RMS of its points' motion
+// along their normals (a cylinder turned about its axis, or a plane slid in itself, does not
+// move).
+double surfaceMotion(const std::vector<SurfacePoint>& points, const Iso3& T) {
+  double sum = 0;
+  for (const SurfacePoint& p : points) sum += std::pow(p.n.dot(T * p.p - p.p), 2);
+  return points.empty() ? 0.0 : std::sqrt(sum / double(points.size()));
+}
+// How far the centroid of `points` moves under `T`.
+double centroidMotion(const std::vector<SurfacePoint>& points, const Iso3& T) {
+  Vec3 c = Vec3::Zero();
+  for (const SurfacePoint& p : points) c += p.p;
+  c /= double(std::max<size_t>(1, points.size()));
+  return (T * c - c).norm();
+}
+// What measureSlip found.
+struct SlipMeasure {
+  TrackResult r;                  // the model aligned with the frame
+  Iso3 moved = Iso3::Identity();  // its correction in the palm frame
+  double surface_m = 0;           // surfaceMotion of the correction
+  bool significant = false;       // beyond the alignment's own uncertainty
+  bool moving = false;            // a slip: farther than slip_m, significant, better borne out
+};
+}  // namespace
+
 struct ScanSession::State {
   State(const RobotModel& robot, const DepthCameraOptions& camera, const NoiseModelOptions& noise,
         const ScanOptions& options, const MultiGraspOptions& multi, const Vec3& centre_O)
@@ -132,6 +158,45 @@ struct ScanSession::State {
         options.t_hand_m == vq.t_hand_m
             ? nearHand
             : std::make_shared<NearHandGrid>(hand, options.t_hand_m, vq.near_hand_cell_m);
+  }
+  // The model alone aligned with an in-hand frame from where the grasp holds it (the palm at
+  // T_C_palm; TrackingOptions::slip_check). A slip moves the model farther than slip_m,
+  // significantly for the alignment's own uncertainty, and the frame bears the moved model out
+  // clearly better than the held one (a residual a half larger there, a quarter fewer points
+  // aligned, or more seen through): an alignment that slid along what the frame leaves free
+  // fits no better than where it began.
+  SlipMeasure measureSlip(const DepthImage& depth, const JointVector& q, const Iso3& T_B_C,
+                          const Iso3& T_C_palm) const {
+    const TrackingOptions& o = options.tracking;
+    const CameraIntrinsics& K = camera.intrinsics;
+    // The robot as the frame shows it (as fusion masks it) hides the model where it is in front.
+    const JointVector qSeen = q + armOffsetsFromPalmError(*model, q, correction);
+    const Iso3 T_O_C = T_O_palm * model->tipPose(qSeen).inverse() * T_B_C;
+    const PixelRect rect = volumeImageRect(volume, T_O_C, K);
+    const std::vector<uint8_t> hidden =
+        robotPixelMask(depth, T_B_C, qSeen, scenes, camera, options.t_hand_m,
+                       options.carve_radius_px, /*with_table=*/true, &rect);
+    // The model in the palm frame is a body at the palm's pose: its correction is the slip,
+    // looked for within slip_gate_m (farther, the object has fallen or the alignment gone wrong).
+    TrackingOptions near = o;
+    near.gate_m = std::max(o.final_gate_m, std::min(o.gate_m, o.slip_gate_m));
+    const double sigma = axialSigma(noise, T_C_palm.translation().z(), 0);
+    SlipMeasure out;
+    out.r = alignBodyToDepth(depth, hidden, K, slipPoints, objectOccluders, T_C_palm, sigma, near);
+    if (!out.r.ok) return out;
+    out.moved = T_C_palm.inverse() * out.r.correction * T_C_palm;  // palm frame
+    out.surface_m = surfaceMotion(slipPoints, out.moved);
+    out.significant =
+        correctionSignificance(out.r, T_C_palm, o.pair_information) > o.in_hand_significance;
+    if (!(out.surface_m > o.slip_m && out.significant)) return out;
+    TrackingOptions at = near;
+    at.iterations = 0;  // the frame against the model where the hand holds it
+    const TrackResult held =
+        alignBodyToDepth(depth, hidden, K, slipPoints, objectOccluders, T_C_palm, sigma, at);
+    const TrackResult& r = out.r;
+    out.moving = held.rms_m > 1.5 * r.rms_m || held.inliers < 0.75 * r.inliers ||
+                 held.see_through > 2 * r.see_through + r.inliers / 20;
+    return out;
   }
   // Why an in-hand frame (taken from T_O_C) lands where the model knows space is empty, or ""
   // when it does not: more than checks.max_free_space_fraction of its sampled points not in
@@ -346,24 +411,6 @@ void ScanSession::beginGrasp(const Iso3& T_O_palm, const JointVector& q, const A
   if (s.grasp == 0 && s.options.initial_views > 0)
     s.initialDirs = fibonacciSphere(s.options.initial_views);
 }
-
-namespace {
-// How far a surface moves under `T` as a depth frame can tell: the RMS of its points' motion
-// along their normals (a cylinder turned about its axis, or a plane slid in itself, does not
-// move).
-double surfaceMotion(const std::vector<SurfacePoint>& points, const Iso3& T) {
-  double sum = 0;
-  for (const SurfacePoint& p : points) sum += std::pow(p.n.dot(T * p.p - p.p), 2);
-  return points.empty() ? 0.0 : std::sqrt(sum / double(points.size()));
-}
-// How far the centroid of `points` moves under `T`.
-double centroidMotion(const std::vector<SurfacePoint>& points, const Iso3& T) {
-  Vec3 c = Vec3::Zero();
-  for (const SurfacePoint& p : points) c += p.p;
-  c /= double(std::max<size_t>(1, points.size()));
-  return (T * c - c).norm();
-}
-}  // namespace
 
 void ScanSession::endGrasp() {
   if (s_->viewOpen) finishView();
@@ -628,104 +675,73 @@ FrameReport ScanSession::addFrame(const DepthImage& input, const JointVector& q,
   return r;
 }
 
+void ScanSession::moveGrasp(const DepthImage& depth, const JointVector& q, const Iso3& T_B_C,
+                            const Iso3& T_C_palm, const TrackResult& r, Iso3 moved) {
+  State& s = *s_;
+  const RobotModel& m = *s.model;
+  // The palm as tracked leaned towards the moved object (its model is part of the alignment):
+  // the palm again from the hand alone (the model where it now lies hides the hand's points),
+  // and the object's pose relative to that.
+  TrackResult handOnly;
+  if (const std::optional<Iso3> T_B_C_hand =
+          trackedCameraPose(depth, q, T_B_C, s.T_O_palm * moved.inverse(), &handOnly)) {
+    const Iso3 T_C_palm_hand = T_B_C_hand->inverse() * m.tipPose(q);
+    moved = T_C_palm_hand.inverse() * r.correction * T_C_palm;
+    s.correction = (T_B_C.inverse() * m.tipPose(q)).inverse() * T_C_palm_hand;
+  }
+  // Points in the palm frame move with the object, T_O_palm the other way.
+  s.T_O_palm = s.T_O_palm * moved.inverse();
+  for (std::vector<SurfacePoint>* set : {&s.objectPoints, &s.slipPoints})
+    for (SurfacePoint& p : *set) {
+      p.p = moved * p.p;
+      p.n = moved.linear() * p.n;
+    }
+  for (Vec3& p : s.objectOccluders) p = moved * p;
+  for (Vec3& p : s.supportPoints) p = moved * p;
+  s.buildNearHand(m, s.qGrasp, s.T_O_palm);
+}
+
 std::string ScanSession::followSlip(const DepthImage& depth, const JointVector& q,
                                     const Iso3& T_B_C, const Iso3& T_C_palm) {
   State& s = *s_;
   const TrackingOptions& o = s.options.tracking;
   if (!o.enabled || !o.slip_check || s.slipPoints.size() < size_t(o.min_inliers)) return {};
   const auto t0 = Clock::now();
-  const RobotModel& m = *s.model;
-  const CameraIntrinsics& K = s.camera.intrinsics;
-  // The robot as the frame shows it (as fusion masks it) hides the model where it is in front.
-  const JointVector qSeen = q + armOffsetsFromPalmError(m, q, s.correction);
-  const Iso3 T_O_C = s.T_O_palm * m.tipPose(qSeen).inverse() * T_B_C;
-  const PixelRect rect = volumeImageRect(s.volume, T_O_C, K);
-  const std::vector<uint8_t> hidden =
-      robotPixelMask(depth, T_B_C, qSeen, s.scenes, s.camera, s.options.t_hand_m,
-                     s.options.carve_radius_px, /*with_table=*/true, &rect);
-  // The model in the palm frame is a body at the palm's pose: its correction is the slip.
-  // A slip is looked for within slip_gate_m: farther, the object has fallen or the alignment
-  // gone wrong.
-  TrackingOptions near = o;
-  near.gate_m = std::max(o.final_gate_m, std::min(o.gate_m, o.slip_gate_m));
-  const TrackResult r =
-      alignBodyToDepth(depth, hidden, K, s.slipPoints, s.objectOccluders, T_C_palm,
-                       axialSigma(s.noise, T_C_palm.translation().z(), 0), near);
+  const SlipMeasure slip = s.measureSlip(depth, q, T_B_C, T_C_palm);
   s.summary.tracking_s += secondsSince(t0);
   const bool graspMoved = s.slipping && !s.slipFrom.isApprox(s.T_O_palm, 1e-12);
-  if (!r.ok) {
+  if (!slip.r.ok) {
     // Not aligned: while a slip that moved the grasp goes on, the frame cannot show where the
     // object is; otherwise the frame checks decide.
-    if (graspMoved) return "the object moving in the hand (" + r.reason + ")";
+    if (graspMoved) return "the object moving in the hand (" + slip.r.reason + ")";
     s.slipping = false;
     s.slipPending.reset();
     return {};
   }
-  // The correction in the palm frame: the model's points move by it.
-  Iso3 moved = T_C_palm.inverse() * r.correction * T_C_palm;
-  const double rms = surfaceMotion(s.slipPoints, moved);
-  // A slip moves the model farther than slip_m, significantly for the alignment's own
-  // uncertainty, and the frame bears the moved model out clearly better than the held one (a
-  // residual a half larger there, a quarter fewer points aligned, or more seen through): an
-  // alignment that slid along what the frame leaves free fits no better than where it began.
-  const bool significant =
-      correctionSignificance(r, T_C_palm, o.pair_information) > o.in_hand_significance;
-  bool moving = rms > o.slip_m && significant;
-  if (moving) {
-    TrackingOptions at = near;
-    at.iterations = 0;  // the frame against the model where the hand holds it
-    const TrackResult held =
-        alignBodyToDepth(depth, hidden, K, s.slipPoints, s.objectOccluders, T_C_palm,
-                         axialSigma(s.noise, T_C_palm.translation().z(), 0), at);
-    moving = held.rms_m > 1.5 * r.rms_m || held.inliers < 0.75 * r.inliers ||
-             held.see_through > 2 * r.see_through + r.inliers / 20;
-  }
-  // The grasp follows the object: points in the palm frame move with it, T_O_palm the other way.
-  auto follow = [&] {
-    // The palm as tracked leaned towards the moved object (its model is part of the alignment):
-    // the palm again from the hand alone (the model where it now lies hides the hand's points),
-    // and the object's pose relative to that.
-    TrackResult handOnly;
-    if (const std::optional<Iso3> T_B_C_hand =
-            trackedCameraPose(depth, q, T_B_C, s.T_O_palm * moved.inverse(), &handOnly)) {
-      const Iso3 T_C_palm_hand = T_B_C_hand->inverse() * m.tipPose(q);
-      moved = T_C_palm_hand.inverse() * r.correction * T_C_palm;
-      s.correction = (T_B_C.inverse() * m.tipPose(q)).inverse() * T_C_palm_hand;
-    }
-    s.T_O_palm = s.T_O_palm * moved.inverse();
-    for (std::vector<SurfacePoint>* set : {&s.objectPoints, &s.slipPoints})
-      for (SurfacePoint& p : *set) {
-        p.p = moved * p.p;
-        p.n = moved.linear() * p.n;
-      }
-    for (Vec3& p : s.objectOccluders) p = moved * p;
-    for (Vec3& p : s.supportPoints) p = moved * p;
-    s.buildNearHand(m, s.qGrasp, s.T_O_palm);
-  };
   char why[160];
   // Once a slip has moved the grasp, the frames after it refine where the object came to rest
   // (the first correction came from a model aligned with one frame): a significant correction
   // is followed, its frame not fused, for a few frames.
-  if (!moving && graspMoved && significant && rms > 0.25 * o.slip_m && s.slipRefinements < 4) {
+  if (!slip.moving && graspMoved && slip.significant && slip.surface_m > 0.25 * o.slip_m &&
+      s.slipRefinements < 4) {
     ++s.slipRefinements;
     ++s.slip.frames;
-    follow();
+    moveGrasp(depth, q, T_B_C, T_C_palm, slip.r, slip.moved);
     std::snprintf(why, sizeof why, "the object settling in the hand (its surface %.1f mm)",
-                  1000 * rms);
+                  1000 * slip.surface_m);
     return why;
   }
-  if (!moving) {
+  if (!slip.moving) {
     // At rest where the hand holds it: the event (if any) ends; this frame is fused.
     s.slip.settled = true;
     closeSlip();
     if (graspMoved) {
       const SlipRecord& e = s.summary.slips.back();
-      char line[160];
-      std::snprintf(line, sizeof line,
+      std::snprintf(why, sizeof why,
                     "the object at rest in the hand again: it moved %.1f mm and %.1f deg (%d "
                     "frames not fused)",
                     1000 * e.moved_m, e.turned_rad * 180 / M_PI, e.frames);
-      log(line);
+      log(why);
     }
     return {};
   }
@@ -739,20 +755,21 @@ std::string ScanSession::followSlip(const DepthImage& depth, const JointVector& 
   // One frame alone may be a wrong alignment: the grasp moves when the next frame bears the same
   // correction out (the object now rests there in the hand, or goes on moving).
   const bool confirmed =
-      s.slipPending && surfaceMotion(s.slipPoints, moved * s.slipPending->inverse()) < o.slip_m;
-  s.slipPending = moved;
+      s.slipPending &&
+      surfaceMotion(s.slipPoints, slip.moved * s.slipPending->inverse()) < o.slip_m;
+  s.slipPending = slip.moved;
   ++s.slip.frames;
   if (!confirmed) {
     std::snprintf(why, sizeof why, "the object may have moved in the hand (its surface %.1f mm)",
-                  1000 * rms);
+                  1000 * slip.surface_m);
     return why;
   }
   s.slipPending.reset();
   s.slipRefinements = 0;
-  follow();
+  moveGrasp(depth, q, T_B_C, T_C_palm, slip.r, slip.moved);
   std::snprintf(why, sizeof why,
                 "the object moved in the hand (its surface %.1f mm; the grasp corrected)",
-                1000 * rms);
+                1000 * slip.surface_m);
   return why;
 }
 

@@ -199,6 +199,10 @@ class ScanSession {
   void emptyInsideRobot(const JointVector& q, const Iso3& T_O_B);
   // Tracking's object points from `current` (or a fresh planning model).
   void refreshTrackingModel(const ObjectModel* current = nullptr);
+  // The grasp corrected by a slip `moved` (palm frame) that alignment `r` found from the palm at
+  // T_C_palm: the palm again from the hand alone, then T_O_palm and the palm-frame points.
+  void moveGrasp(const DepthImage& depth, const JointVector& q, const Iso3& T_B_C,
+                 const Iso3& T_C_palm, const TrackResult& r, Iso3 moved);
   void closeSlip();  // a slip under way ends (its record kept when it moved the grasp)
   // TrackingOptions::slip_check on an in-hand frame (the robot at q, the camera reported at T_B_C,
   // the palm at T_C_palm in the camera frame): why it must not be fused because the object moved
