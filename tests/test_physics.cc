@@ -142,6 +142,19 @@ TEST(Physics, HandLinksAreWhereForwardKinematicsPutsThem) {
     }
 }
 
+// A mesh whose triangles all face inwards is the same solid: the same mass at the same density.
+TEST(Physics, AnInsideOutMeshHasTheMassOfItsSolid) {
+  const TriangleMesh box = makeBox(Vec3(0.06, 0.1, 0.2));
+  TriangleMesh inward = box;
+  for (Tri& t : inward.triangles) std::swap(t[1], t[2]);
+  ASSERT_LT(massProperties(inward).volume_m3, 0);
+  PhysicsOptions o;
+  o.density_kg_m3 = 500;
+  const PhysicsWorld a(test::wam(), box, 0.5, o), b(test::wam(), inward, 0.5, o);
+  EXPECT_NEAR(a.mass_kg(), 500 * 0.06 * 0.1 * 0.2, 1e-6);  // float vertices
+  EXPECT_NEAR(b.mass_kg(), a.mass_kg(), 1e-9);
+}
+
 // An object dropped a centimetre onto the table comes to rest on it at the height of its lowest
 // point: the decomposition, the inertia and the contacts agree with the mesh.
 TEST(Physics, ABoxDroppedOnTheTableRestsOnIt) {

@@ -359,9 +359,15 @@ PhysicsWorld::PhysicsWorld(const RobotModel& model, const TriangleMesh& object_O
     : impl_(std::make_unique<Impl>()) {
   if (std::string p = options.validate(); !p.empty()) throw Error("physics options: " + p);
   // The object: mass and inertia of the solid its mesh encloses, collision through its pieces.
-  const MassProperties mp = massProperties(object_O);
+  // A mesh whose triangles all face inwards (a negative enclosed volume) is the same solid.
+  MassProperties mp = massProperties(object_O);
+  if (mp.volume_m3 < 0) {
+    TriangleMesh outward = object_O;
+    for (Tri& t : outward.triangles) std::swap(t[1], t[2]);
+    mp = massProperties(outward);
+  }
   if (!(mp.volume_m3 > 0))
-    throw Error("physics: the object's mesh encloses no volume (it must be closed and outward)");
+    throw Error("physics: the object's mesh encloses no volume (it must be a closed surface)");
   std::vector<ConvexPiece> pieces = convexDecomposition(object_O, options.decomposition);
   if (pieces.empty()) throw Error("physics: the object's convex decomposition is empty");
   build(model, std::move(pieces), mp, friction, options);
