@@ -294,6 +294,37 @@ TEST(HoldTest, PutsTheEnvelopingGraspOfABoxAheadOfThePinch) {
   EXPECT_NEAR(v, box.signedVolume(), 0.02 * box.signedVolume());
 }
 
+// When no candidate of the first batch holds, the next batch is tested (grasp.hold.max_tested):
+// three pinches, then the enveloping grasp, in batches of two; not tested beyond max_tested.
+TEST(HoldTest, TestsTheNextBatchWhenNoneOfTheFirstHolds) {
+  const RobotModel& m = test::wam();
+  const TriangleMesh box = makeBox(Vec3(0.06, 0.1, 0.2));
+  const JointVector open = m.openHand(0.0);
+  const FingerCloser closer(m, box);
+  std::vector<GraspCandidate> candidates(4);
+  for (int k = 0; k < 4; ++k) {
+    candidates[size_t(k)].T_O_palm = boxGrasp(m, box, /*envelope=*/k == 3);
+    candidates[size_t(k)].q_open = open;
+    candidates[size_t(k)].q = closer.close(open, candidates[size_t(k)].T_O_palm).q;
+    candidates[size_t(k)].pose = k;
+  }
+  HoldTestOptions o;
+  o.density_kg_m3 = 2.0 / box.signedVolume();
+  o.max_candidates = 2;
+  o.max_tested = 4;
+  std::vector<GraspCandidate> all = candidates;
+  rankByHold(m, box, boxOnTable(m), nullptr, 0.5, o, &all);
+  EXPECT_EQ(all[0].pose, 3);
+  EXPECT_EQ(all[0].hold, 1) << all[0].hold_failure;
+  for (size_t k = 1; k < 4; ++k) EXPECT_EQ(all[k].hold, 0) << k;
+  o.max_tested = 2;  // the first batch only: nothing moves, the rest untested
+  std::vector<GraspCandidate> first = candidates;
+  rankByHold(m, box, boxOnTable(m), nullptr, 0.5, o, &first);
+  for (size_t k = 0; k < 4; ++k) EXPECT_EQ(first[k].pose, int(k));
+  EXPECT_EQ(first[2].hold, -1);
+  EXPECT_EQ(first[3].hold, -1);
+}
+
 // A piece clipped by a plane keeps exactly the part on its side: a unit cube's hull cut through
 // its centre at an angle keeps half its volume.
 TEST(ConvexDecomposition, AClippedPieceKeepsItsPartOfTheVolume) {

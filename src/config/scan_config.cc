@@ -226,6 +226,8 @@ void visitConfig(V& v, ScanConfig& c) {
                HoldTestOptions& x = o.hold;
                h.boolean("enabled", x.enabled, "test the candidates; those that hold go first");
                h.integer("max_candidates", x.max_candidates, "the first this many are tested");
+               h.integer("max_tested", x.max_tested,
+                         "… and when none holds the model, the next as many, up to this many");
                h.num("density_kg_m3", x.density_kg_m3,
                      "assumed: the model's mass is its volume times this, kg/m³");
                h.num("lift_m", x.lift_m, "lifted this far straight up, m");

@@ -14,6 +14,7 @@ namespace inhand {
 
 std::string HoldTestOptions::validate() const {
   if (max_candidates < 1) return "max_candidates must be >= 1";
+  if (max_tested < max_candidates) return "max_tested must be >= max_candidates";
   if (!(density_kg_m3 > 0 && density_kg_m3 < 30000)) return "density_kg_m3 must be in (0, 30000)";
   if (!(lift_m >= 0 && lift_m < 1)) return "lift_m must be in [0, 1) m";
   if (!(lift_s > 0 && lift_s <= 10)) return "lift_s must be in (0, 10] s";
@@ -128,20 +129,29 @@ double rankByHold(const RobotModel& robot, const TriangleMesh& model_O, const Is
   if (pieces.empty()) return 0;
   PhysicsOptions po;
   po.density_kg_m3 = o.density_kg_m3;
-  const int n = std::min(o.max_candidates, int(candidates->size()));
-  // One world per core, each trying every other candidate from a fresh reset.
-  const int workers = std::max(1, std::min(threadCount(), n));
-  std::vector<HoldTrial> trials(size_t(n), HoldTrial{});
-  parallelFor(0, workers, [&](int w) {
-    PhysicsWorld world(robot, pieces, friction, po);
-    for (int i = w; i < n; i += workers) {
-      const GraspCandidate& c = (*candidates)[size_t(i)];
-      trials[size_t(i)] = tryHold(world, T_B_O, c.T_O_palm, c.q_open, c.q, o);
+  // Batches of max_candidates in their order until one holds (or max_tested are tried). One
+  // world per core, each trying every other candidate of the batch from a fresh reset.
+  const int total = std::min(o.max_tested, int(candidates->size()));
+  int n = 0;  // tested so far
+  bool anyHeld = false;
+  while (n < total && !anyHeld) {
+    const int begin = n, end = std::min(total, n + o.max_candidates);
+    const int workers = std::max(1, std::min(threadCount(), end - begin));
+    std::vector<HoldTrial> trials(size_t(end - begin), HoldTrial{});
+    parallelFor(0, workers, [&](int w) {
+      PhysicsWorld world(robot, pieces, friction, po);
+      for (int i = begin + w; i < end; i += workers) {
+        const GraspCandidate& c = (*candidates)[size_t(i)];
+        trials[size_t(i - begin)] = tryHold(world, T_B_O, c.T_O_palm, c.q_open, c.q, o);
+      }
+    });
+    for (int i = begin; i < end; ++i) {
+      GraspCandidate& c = (*candidates)[size_t(i)];
+      c.hold = trials[size_t(i - begin)].held ? 1 : 0;
+      c.hold_failure = trials[size_t(i - begin)].failure;
+      anyHeld = anyHeld || c.hold == 1;
     }
-  });
-  for (int i = 0; i < n; ++i) {
-    (*candidates)[size_t(i)].hold = trials[size_t(i)].held ? 1 : 0;
-    (*candidates)[size_t(i)].hold_failure = trials[size_t(i)].failure;
+    n = end;
   }
   std::stable_partition(candidates->begin(), candidates->begin() + n,
                         [](const GraspCandidate& c) { return c.hold == 1; });

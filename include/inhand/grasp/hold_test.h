@@ -22,6 +22,8 @@ struct GraspCandidate;
 struct HoldTestOptions {
   bool enabled = true;
   int max_candidates = 12;  // the first this many candidates (in their order) are tested
+  // … and when none of them holds the model, the next as many, up to this many in all.
+  int max_tested = 24;
   // Assumed: the model's mass is its volume times this (the simulator's default density too).
   double density_kg_m3 = 300;
   double lift_m = 0.10;  // the lift, straight up over lift_s
