@@ -243,6 +243,114 @@ Refound refindOnTable(ScanSession& session, RobotInterface& robot, DepthSensor& 
 // what the scan knows of its surface) carried by the hand as gripped must be borne out by the
 // depth frame (depthSupport > 1/2), and where it rested they must not be. Each failure lets go
 // and tries the next. Records every attempt.
+// tracking.in_hand: the grasp the lift's frame `d` shows (camera at *aim as aimed, at `tracked`
+// as tracked by `liftTrack`; the robot's pixels `mask`), from the planned candidate `c` and the
+// grasp as the hand closed on it (`achieved`).
+Iso3 graspInHand(ScanSession& session, const RobotModel& m, const JointVector& q,
+                 const DepthImage& d, const std::vector<uint8_t>& mask, const Iso3& aim,
+                 const Iso3& tracked, const TrackResult& liftTrack, const GraspCandidate& c,
+                 const Iso3& achieved, const TrackingOptions& options,
+                 const std::function<void(const std::string&)>& log) {
+  // Where the object sits in the hand: the arm's error where it grasped moved it from
+  // where the joints say. The palm's error that tracking sees in the lift's frame, as
+  // joint offsets (armOffsetsFromPalmError), gives the palm's error at the pick (the palm
+  // was that far off when it met the object, which has not moved since); then the model
+  // is registered with the frame from there.
+  const Iso3 T_C_reported = aim.inverse() * m.tipPose(q);
+  // Only an error the frame shows beyond its own noise is carried (an exact arm's lift
+  // frame alone would move the object a millimetre or two for the rest of the grasp).
+  const double palmSignificance =
+      correctionSignificance(liftTrack, T_C_reported, options.pair_information);
+  const Iso3 palmError = palmSignificance > options.in_hand_significance
+                             ? Iso3(T_C_reported.inverse() * (tracked.inverse() * m.tipPose(q)))
+                             : Iso3::Identity();
+  // The joint offsets that explain it, then the palm's error they give at the pick.
+  const JointVector e = armOffsetsFromPalmError(m, q, palmError);
+  const Iso3 pickError = m.tipPose(c.q_open).inverse() * m.tipPose(c.q_open + e);
+  // achieved = planned · motion (the guarded move, in the palm frame): the error enters
+  // before it.
+  const Iso3 carried = c.T_O_palm * pickError * (c.T_O_palm.inverse() * achieved);
+  Iso3 grasp = carried;
+  TrackResult reg;
+  if (const std::optional<Iso3> T = session.registerHeldObject(d, mask, q, tracked, carried, &reg))
+    grasp = *T;
+  char line[240];
+  std::snprintf(line, sizeof line,
+                "the object in the hand: %.1f mm from where the joints put it by the arm's "
+                "error (significance %.0f), %.1f mm more by the model ",
+                1000 * (carried.translation() - achieved.translation()).norm(), palmSignificance,
+                1000 * (grasp.translation() - carried.translation()).norm());
+  log(line + (reg.ok ? std::string("(registered)") : "(not registered: " + reg.reason + ")"));
+  return grasp;
+}
+
+// After the lift: how much of the object's points `points_O` the lift's frame bears out where the
+// grasp holds it (`*achieved`, moved to where the frame shows it in the hand) and where it rested
+// (T_B_O_rest); -1 where none is in view.
+struct LiftCheck {
+  double inHand = -1, onTable = -1;
+};
+LiftCheck checkAfterLift(ScanSession& session, RobotInterface& robot, DepthSensor& sensor,
+                         const GraspCandidate& c, const Iso3& T_B_O_rest,
+                         const std::vector<Vec3>& points_O, const ScanOptions& options,
+                         const RobotOccluders& scenes,
+                         const std::function<void(const std::string&)>& log,
+                         std::optional<Iso3>* achieved) {
+  const RobotModel& m = robot.model();
+  // Where the hand holds the object now, and where it rested: which does the camera see?
+  const Iso3 T_B_O_held = m.tipPose(robot.joints()) * (*achieved)->inverse();
+  std::vector<Vec3> held_B, rest_B_points;
+  // Where it rested, only points well above the table tell (the table itself is near the
+  // others' depth).
+  const double tableTop = m.table().topZ();
+  for (const Vec3& p : points_O) {
+    held_B.push_back(T_B_O_held * p);
+    const Vec3 r = T_B_O_rest * p;
+    if (r.z() > tableTop + 0.015) rest_B_points.push_back(r);
+  }
+  LiftCheck out;
+  Aabb heldBox;
+  for (const Vec3& p : held_B) heldBox.extend(p);
+  const std::optional<Iso3> aim = m.camera().aimAt(heldBox.center());
+  std::optional<DepthImage> frame;
+  if (aim) {
+    sensor.setPose(*aim);
+    frame = captureUsable(sensor, options.checks);
+  }
+  if (aim && frame) {
+    const DepthImage& d = *frame;
+    const CameraIntrinsics& K = sensor.camera().intrinsics;
+    // The camera pose relative to where the hand really is (options.tracking; the pose as
+    // reported without it): the held points and the robot's pixels are seen from there.
+    TrackResult liftTrack;
+    const std::optional<Iso3> tracked =
+        session.trackedCameraPose(d, robot.joints(), *aim, **achieved, &liftTrack);
+    if (!tracked) log("tracking refused the lift's frame: " + liftTrack.reason);
+    const std::vector<uint8_t> mask =
+        robotPixelMask(d, tracked ? *tracked : *aim, robot.joints(), scenes, sensor.camera(),
+                       options.t_hand_m, options.carve_radius_px, /*with_table=*/false);
+    if (tracked && options.tracking.enabled && options.tracking.in_hand) {
+      const JointVector q = robot.joints();
+      *achieved = graspInHand(session, m, q, d, mask, *aim, *tracked, liftTrack, c, **achieved,
+                              options.tracking, log);
+      const Iso3 T_B_O = m.tipPose(q) * (*achieved)->inverse();
+      for (size_t k = 0; k < points_O.size(); ++k) held_B[k] = T_B_O * points_O[k];
+    }
+    if (tracked) out.inHand = depthSupport(d, *tracked, K, mask, held_B);
+    out.onTable = depthSupport(d, *aim, K, mask, rest_B_points);
+    // Not all where the grasp says, and not where it rested: closing the fingers may have
+    // moved it in the hand. Registered from the grasp, kept where the frame bears out more.
+    if (tracked && !(out.inHand > 0.9) && !(out.onTable > 0.5))
+      if (const auto found = refindInHand(session, d, mask, robot.joints(), *tracked, **achieved,
+                                          points_O, K, log);
+          found && found->second > out.inHand) {
+        *achieved = found->first;
+        out.inHand = found->second;
+      }
+  }
+  return out;
+}
+
 struct PickOutcome {
   std::optional<Iso3> achieved;
   std::optional<GraspCandidate> picked;  // a copy: the candidates it came from may be gone
@@ -311,89 +419,9 @@ PickOutcome pickAndVerify(ScanSession& session, RobotInterface& robot, DepthSens
     }
     robot.execute({robot.joints(), m.withArm(robot.joints(), m.arm(c.q_lift))},
                   [](const JointVector&) {});
-    // Where the hand holds the object now, and where it rested: which does the camera see?
-    const Iso3 T_B_O_held = m.tipPose(robot.joints()) * achieved->inverse();
-    std::vector<Vec3> held_B, rest_B_points;
-    // Where it rested, only points well above the table tell (the table itself is near the
-    // others' depth).
-    const double tableTop = m.table().topZ();
-    for (const Vec3& p : points_O) {
-      held_B.push_back(T_B_O_held * p);
-      const Vec3 r = T_B_O_rest * p;
-      if (r.z() > tableTop + 0.015) rest_B_points.push_back(r);
-    }
-    double inHand = -1, onTable = -1;
-    Aabb heldBox;
-    for (const Vec3& p : held_B) heldBox.extend(p);
-    const std::optional<Iso3> aim = m.camera().aimAt(heldBox.center());
-    std::optional<DepthImage> frame;
-    if (aim) {
-      sensor.setPose(*aim);
-      frame = captureUsable(sensor, options.checks);
-    }
-    if (aim && frame) {
-      const DepthImage& d = *frame;
-      const CameraIntrinsics& K = sensor.camera().intrinsics;
-      // The camera pose relative to where the hand really is (options.tracking; the pose as
-      // reported without it): the held points and the robot's pixels are seen from there.
-      TrackResult liftTrack;
-      const std::optional<Iso3> tracked =
-          session.trackedCameraPose(d, robot.joints(), *aim, *achieved, &liftTrack);
-      if (!tracked) log("tracking refused the lift's frame: " + liftTrack.reason);
-      const std::vector<uint8_t> mask =
-          robotPixelMask(d, tracked ? *tracked : *aim, robot.joints(), scenes, sensor.camera(),
-                         options.t_hand_m, options.carve_radius_px, /*with_table=*/false);
-      if (tracked && options.tracking.enabled && options.tracking.in_hand) {
-        // Where the object sits in the hand: the arm's error where it grasped moved it from
-        // where the joints say. The palm's error that tracking sees in the lift's frame, as
-        // joint offsets (armOffsetsFromPalmError), gives the palm's error at the pick (the palm
-        // was that far off when it met the object, which has not moved since); then the model
-        // is registered with the frame from there.
-        const JointVector q = robot.joints();
-        const Iso3 T_C_reported = aim->inverse() * m.tipPose(q);
-        // Only an error the frame shows beyond its own noise is carried (an exact arm's lift
-        // frame alone would move the object a millimetre or two for the rest of the grasp).
-        const double palmSignificance =
-            correctionSignificance(liftTrack, T_C_reported, options.tracking.pair_information);
-        const Iso3 palmError =
-            palmSignificance > options.tracking.in_hand_significance
-                ? Iso3(T_C_reported.inverse() * (tracked->inverse() * m.tipPose(q)))
-                : Iso3::Identity();
-        // The joint offsets that explain it, then the palm's error they give at the pick.
-        const JointVector e = armOffsetsFromPalmError(m, q, palmError);
-        const Iso3 pickError = m.tipPose(c.q_open).inverse() * m.tipPose(c.q_open + e);
-        // achieved = planned · motion (the guarded move, in the palm frame): the error enters
-        // before it.
-        const Iso3 carried = c.T_O_palm * pickError * (c.T_O_palm.inverse() * *achieved);
-        Iso3 grasp = carried;
-        TrackResult reg;
-        if (const std::optional<Iso3> T =
-                session.registerHeldObject(d, mask, q, *tracked, carried, &reg))
-          grasp = *T;
-        char line[240];
-        std::snprintf(line, sizeof line,
-                      "the object in the hand: %.1f mm from where the joints put it by the arm's "
-                      "error (significance %.0f), %.1f mm more by the model ",
-                      1000 * (carried.translation() - achieved->translation()).norm(),
-                      palmSignificance,
-                      1000 * (grasp.translation() - carried.translation()).norm());
-        log(line + (reg.ok ? std::string("(registered)") : "(not registered: " + reg.reason + ")"));
-        achieved = grasp;
-        const Iso3 T_B_O = m.tipPose(q) * achieved->inverse();
-        for (size_t k = 0; k < points_O.size(); ++k) held_B[k] = T_B_O * points_O[k];
-      }
-      if (tracked) inHand = depthSupport(d, *tracked, K, mask, held_B);
-      onTable = depthSupport(d, *aim, K, mask, rest_B_points);
-      // Not all where the grasp says, and not where it rested: closing the fingers may have
-      // moved it in the hand. Registered from the grasp, kept where the frame bears out more.
-      if (tracked && !(inHand > 0.9) && !(onTable > 0.5))
-        if (const auto found = refindInHand(session, d, mask, robot.joints(), *tracked, *achieved,
-                                            points_O, K, log);
-            found && found->second > inHand) {
-          achieved = found->first;
-          inHand = found->second;
-        }
-    }
+    const LiftCheck lift = checkAfterLift(session, robot, sensor, c, T_B_O_rest, points_O, options,
+                                          scenes, log, &achieved);
+    const double inHand = lift.inHand, onTable = lift.onTable;
     auto percent = [](double f) {
       return f < 0 ? std::string("none in view") : std::to_string(int(std::lround(100 * f))) + " %";
     };
