@@ -265,18 +265,25 @@ TEST(Physics, AnEnvelopingGraspOfTheSameObjectHolds) {
 // The planner's hold test (grasp/hold_test.h) tells the two apart on its own: the same box as
 // its model, 2 kg at the density it assumes, the pinch first in the candidates' order; the test
 // (lift, then a quarter turn) moves the enveloping grasp ahead and marks the pinch as not holding.
+// `n` candidates on `box`: fingertip pinches, the last one the enveloping grasp (pose = index).
+std::vector<GraspCandidate> boxCandidates(const RobotModel& m, const TriangleMesh& box, int n) {
+  const JointVector open = m.openHand(0.0);
+  const FingerCloser closer(m, box);
+  std::vector<GraspCandidate> out(static_cast<size_t>(n), GraspCandidate{});
+  for (int k = 0; k < n; ++k) {
+    GraspCandidate& c = out[size_t(k)];
+    c.T_O_palm = boxGrasp(m, box, /*envelope=*/k == n - 1);
+    c.q_open = open;
+    c.q = closer.close(open, c.T_O_palm).q;
+    c.pose = k;
+  }
+  return out;
+}
+
 TEST(HoldTest, PutsTheEnvelopingGraspOfABoxAheadOfThePinch) {
   const RobotModel& m = test::wam();
   const TriangleMesh box = makeBox(Vec3(0.06, 0.1, 0.2));
-  const JointVector open = m.openHand(0.0);
-  const FingerCloser closer(m, box);
-  std::vector<GraspCandidate> candidates(2);
-  for (int k = 0; k < 2; ++k) {
-    candidates[size_t(k)].T_O_palm = boxGrasp(m, box, /*envelope=*/k == 1);
-    candidates[size_t(k)].q_open = open;
-    candidates[size_t(k)].q = closer.close(open, candidates[size_t(k)].T_O_palm).q;
-    candidates[size_t(k)].pose = k;
-  }
+  std::vector<GraspCandidate> candidates = boxCandidates(m, box, 2);
   HoldTestOptions o;
   o.density_kg_m3 = 2.0 / box.signedVolume();
   const double s = rankByHold(m, box, boxOnTable(m), nullptr, 0.5, o, &candidates);
@@ -299,15 +306,7 @@ TEST(HoldTest, PutsTheEnvelopingGraspOfABoxAheadOfThePinch) {
 TEST(HoldTest, TestsTheNextBatchWhenNoneOfTheFirstHolds) {
   const RobotModel& m = test::wam();
   const TriangleMesh box = makeBox(Vec3(0.06, 0.1, 0.2));
-  const JointVector open = m.openHand(0.0);
-  const FingerCloser closer(m, box);
-  std::vector<GraspCandidate> candidates(4);
-  for (int k = 0; k < 4; ++k) {
-    candidates[size_t(k)].T_O_palm = boxGrasp(m, box, /*envelope=*/k == 3);
-    candidates[size_t(k)].q_open = open;
-    candidates[size_t(k)].q = closer.close(open, candidates[size_t(k)].T_O_palm).q;
-    candidates[size_t(k)].pose = k;
-  }
+  const std::vector<GraspCandidate> candidates = boxCandidates(m, box, 4);
   HoldTestOptions o;
   o.density_kg_m3 = 2.0 / box.signedVolume();
   o.max_candidates = 2;

@@ -418,13 +418,14 @@ void ScanSession::endGrasp() {
   closeSlip();
 }
 
-void ScanSession::closeSlip() {
+void ScanSession::closeSlip(bool settled) {
   State& s = *s_;
   s.slipPending.reset();
-  if (!s.slipping) return;  // a slip still under way when the grasp's views ended
+  if (!s.slipping) return;
   s.slipping = false;
   // An event no second frame bore out (an alignment gone wrong, not a slip) leaves no record.
   if (s.slipFrom.isApprox(s.T_O_palm, 1e-12)) return;
+  s.slip.settled = settled;
   s.slip.moved_m = centroidMotion(s.slipPoints, s.T_O_palm.inverse() * s.slipFrom);
   s.slip.turned_rad = rotationBetween(s.slipFrom, s.T_O_palm);
   s.summary.slips.push_back(s.slip);
@@ -712,10 +713,9 @@ std::string ScanSession::followSlip(const DepthImage& depth, const JointVector& 
   const bool graspMoved = s.slipping && !s.slipFrom.isApprox(s.T_O_palm, 1e-12);
   if (!slip.r.ok) {
     // Not aligned: while a slip that moved the grasp goes on, the frame cannot show where the
-    // object is; otherwise the frame checks decide.
+    // object is; otherwise the frame checks decide (an unconfirmed slip is dropped).
     if (graspMoved) return "the object moving in the hand (" + slip.r.reason + ")";
-    s.slipping = false;
-    s.slipPending.reset();
+    closeSlip();
     return {};
   }
   char why[160];
@@ -733,8 +733,7 @@ std::string ScanSession::followSlip(const DepthImage& depth, const JointVector& 
   }
   if (!slip.moving) {
     // At rest where the hand holds it: the event (if any) ends; this frame is fused.
-    s.slip.settled = true;
-    closeSlip();
+    closeSlip(/*settled=*/true);
     if (graspMoved) {
       const SlipRecord& e = s.summary.slips.back();
       std::snprintf(why, sizeof why,

@@ -203,7 +203,9 @@ class ScanSession {
   // T_C_palm: the palm again from the hand alone, then T_O_palm and the palm-frame points.
   void moveGrasp(const DepthImage& depth, const JointVector& q, const Iso3& T_B_C,
                  const Iso3& T_C_palm, const TrackResult& r, Iso3 moved);
-  void closeSlip();  // a slip under way ends (its record kept when it moved the grasp)
+  // A slip under way ends, at rest in the hand (`settled`) or with the grasp's views; its record
+  // is kept when it moved the grasp.
+  void closeSlip(bool settled = false);
   // TrackingOptions::slip_check on an in-hand frame (the robot at q, the camera reported at T_B_C,
   // the palm at T_C_palm in the camera frame): why it must not be fused because the object moved
   // in the hand, or "". A slip that two frames bear out moves the grasp (T_O_palm and everything
