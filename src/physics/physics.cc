@@ -475,6 +475,26 @@ void PhysicsWorld::reset(const Iso3& T_B_O, const Iso3& T_B_palm, const JointVec
     I.m->actuator_forcerange[2 * hj.actuator + 1] = limit;
   }
   mj_forward(I.m, I.d);
+  // The hand was put where it touches the object's mesh; the object's pieces are hulls that may
+  // stand a little proud of it (a coarse decomposition, a mesh not quite convex in a piece): the
+  // palm backs off along its approach until the hand does not start inside a piece.
+  const Vec3 back = -T_B_palm.linear().col(2);
+  Iso3 T = T_B_palm;
+  for (int k = 0; k < 8; ++k) {
+    double depth = 0;
+    for (int c = 0; c < I.d->ncon; ++c) {
+      const int b1 = I.m->geom_bodyid[I.d->contact[c].geom1];
+      const int b2 = I.m->geom_bodyid[I.d->contact[c].geom2];
+      if ((b1 == I.objectBody && I.handBody[size_t(b2)]) ||
+          (b2 == I.objectBody && I.handBody[size_t(b1)]))
+        depth = std::max(depth, -I.d->contact[c].dist);
+    }
+    if (depth < 2e-4) break;
+    T.translation() += (depth + 2e-4) * back;
+    I.setFree(I.palmQpos, I.palmDof, T);
+    I.setMocap(T);
+    mj_forward(I.m, I.d);
+  }
 }
 
 namespace {
@@ -483,6 +503,7 @@ struct Closing {
   double dir = 1, limit = 0, target = 0;  // target: the commanded position
   bool done = false, atLimit = false;
   double stalled_s = 0;
+  double reached = -1e9;  // the farthest closed so far (along dir)
 };
 }  // namespace
 
@@ -495,10 +516,25 @@ void setFingerForce(mjModel* m, const std::vector<HandJoint>& joints, double fra
   }
 }
 
+// The worm drive does not backdrive: a finger joint pushed back (opened) from the farthest it
+// has closed is held there with the gear's strength (hold_force_factor times the drive), else it
+// drives with `fraction` of its force toward its command.
+void holdBack(PhysicsWorld::Impl& I, const HandJoint& hj, double fraction, Closing* c) {
+  const double q = I.d->qpos[hj.qpos];
+  c->reached = std::max(c->reached, c->dir * q);
+  double limit = fraction * hj.force;
+  if (c->dir * q < c->reached - 0.002) {
+    I.d->ctrl[hj.actuator] = c->dir * c->reached;
+    limit = I.options.hold_force_factor * hj.force;
+  }
+  I.m->actuator_forcerange[2 * hj.actuator] = -limit;
+  I.m->actuator_forcerange[2 * hj.actuator + 1] = limit;
+}
+
 // The fingers close at their speed until each joint stalls on something or reaches its end (at
 // most twice finger_close_time_s): driven joints from their command, coupled ones with it until
 // the driven joint stops, then on at breakaway_rate (TorqueSwitch).
-void closeUntilStalled(PhysicsWorld::Impl& I, std::vector<Closing>& st) {
+void closeUntilStalled(PhysicsWorld::Impl& I, std::vector<Closing>& st, double fraction) {
   const RobotModel& model = *I.robot;
   const double dt = I.m->opt.timestep;
   std::vector<int> driverOf(model.fingers().size(), -1);
@@ -507,7 +543,10 @@ void closeUntilStalled(PhysicsWorld::Impl& I, std::vector<Closing>& st) {
   for (double t = 0; t < 2 * I.options.finger_close_time_s; t += dt) {
     bool all = true;
     for (size_t k = 0; k < I.joints.size(); ++k) {
-      if (st[k].done) continue;
+      if (st[k].done) {
+        if (I.joints[k].finger >= 0) holdBack(I, I.joints[k], fraction, &st[k]);
+        continue;
+      }
       all = false;
       const HandJoint& hj = I.joints[k];
       const FingerInfo& f = model.fingers()[size_t(hj.finger)];
@@ -524,6 +563,7 @@ void closeUntilStalled(PhysicsWorld::Impl& I, std::vector<Closing>& st) {
       }
       const bool moving = std::abs(target - st[k].limit) > 1e-9;
       I.d->ctrl[hj.actuator] = target + (moving ? st[k].dir * rate * hj.kv / hj.kp : 0.0);
+      holdBack(I, hj, fraction, &st[k]);
       // Stalled: held back by a contact (the servo's error grows, the joint does not move).
       const double qj = I.d->qpos[hj.qpos];
       const double lag = st[k].dir * (target - qj);
@@ -559,7 +599,7 @@ JointVector PhysicsWorld::closeHand(const JointVector& q) {
   // Close with touch_force_n until every finger has met something (the first to arrive does not
   // push the object away from the others), then squeeze with the full force.
   setFingerForce(I.m, I.joints, I.options.touch_force_n / I.options.finger_force_n);
-  closeUntilStalled(I, st);
+  closeUntilStalled(I, st, I.options.touch_force_n / I.options.finger_force_n);
   setFingerForce(I.m, I.joints, 1.0);
   for (size_t k = 0; k < I.joints.size(); ++k) {
     const HandJoint& hj = I.joints[k];
