@@ -207,10 +207,13 @@ TEST(Cli, ScanWritesModelAndSummaryAndRejectsBadConfig) {
   ASSERT_EQ(s["grasps"].size(), 2u) << s.dump(2);
   EXPECT_EQ(s["termination"], "max_grasps");
   const Json& g2 = s["grasps"][1];
-  for (const char* key : {"candidates", "quality", "stability_epsilon", "views", "termination"})
+  for (const char* key :
+       {"candidates", "quality", "t_q", "stability_epsilon", "views", "termination"})
     EXPECT_TRUE(g2.contains(key)) << key;
   EXPECT_GT(g2["candidates"].get<int>(), 0);
-  EXPECT_GE(g2["quality"].get<double>(), 0.005);
+  // Its best view's quality clears the threshold the scan stops at (t_q, relative to the area).
+  EXPECT_GT(g2["t_q"].get<double>(), 0.0);
+  EXPECT_GE(g2["quality"].get<double>(), g2["t_q"].get<double>());
   EXPECT_GT(g2["stability_epsilon"].get<double>(), 0.0);
   // The scan began on the table: the fitted table plane is the true one (the box stands upright
   // with frame O's z up; its bottom at z = −h/2 lies on the table), the first grasp was made on
@@ -510,6 +513,24 @@ TEST(Cli, FailedPickUpsStopAtTheBudget) {
   const Json s = readJsonFile(out / "summary.json");
   EXPECT_EQ(s["termination"], "pick_up_failed");
   EXPECT_EQ(s["table_top"]["pick_up_attempts"].size(), 2u);
+  EXPECT_TRUE(fs::exists(out / "model.ply"));
+}
+
+// A scan that made its first grasp exits 0 whatever ended it: the object dropped during a view
+// with no re-grasp left ends object_lost, with the model so far written.
+TEST(Cli, AnObjectLostAfterTheFirstGraspExitsZeroWithTheModel) {
+  test::TempDir dir;
+  writeTextAtomically(dir.path() / "c.json",
+                      R"({"voxel_m": 0.003, "planner": {"directions": 40, "rolls": 4},
+    "sim": {"faults": {"drop_in_motion": 2}}})");
+  const fs::path out = dir.path() / "scan";
+  const Result r = run("scan --object builtin:coffee_can --max-grasps 1 --config " +
+                           (dir.path() / "c.json").string() + " --out " + out.string(),
+                       dir);
+  EXPECT_EQ(r.code, 0) << r.output;
+  const Json s = readJsonFile(out / "summary.json");
+  EXPECT_EQ(s["termination"], "object_lost");
+  EXPECT_EQ(s["grasps"].size(), 1u);
   EXPECT_TRUE(fs::exists(out / "model.ply"));
 }
 

@@ -219,15 +219,13 @@ Json tableTopJson(const TableTopRecord& t) {
           {"seconds", t.seconds}};
 }
 
-// Exit status: 3 no view reachable, 4 no grasp, 6 no object to scan, 7 object lost from the
-// hand (with no re-grasp left), 130 interrupted
-// (docs/commands.md).
+// Exit status: 3 no view reachable, 4 no grasp, 6 no object to scan, 130 interrupted; 0 for a
+// scan that made its first grasp and wrote its model, whatever ended it (object_lost,
+// regrasp_failed: the termination says why) (docs/scanning.md).
 int exitStatus(Termination t) {
   switch (t) {
     case Termination::kInterrupted:
       return 130;
-    case Termination::kObjectLost:
-      return 7;
     case Termination::kNoReachableView:
       return 3;
     case Termination::kNoReachableGrasp:
