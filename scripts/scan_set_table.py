@@ -81,11 +81,13 @@ with open(os.path.join(out, "results.md.tmp"), "a") as f:
     ranks = ", ".join("rank %d: %s" % (k, rate([a for a in all_attempts if a["rank"] == k]))
                       for k in range(3))
     f.write("\nPick-ups that held, over every attempt of every grasp (%s): %s, rank 3 and later: %s; "
-            "enveloping %s, fingertips %s; the hold test said it holds %s, said not %s, untested %s.\n"
+            "enveloping %s, fingertips %s; the hold test said it holds %s (with its margin %s), "
+            "said not %s, untested %s.\n"
             % (rate(all_attempts), ranks, rate([a for a in all_attempts if a["rank"] >= 3]),
                rate([a for a in all_attempts if a["kind"] == "enveloping"]),
                rate([a for a in all_attempts if a["kind"] == "fingertips"]),
                rate([a for a in all_attempts if a["hold_test"] is True]),
+               rate([a for a in all_attempts if a.get("hold_margin") is True]),
                rate([a for a in all_attempts if a["hold_test"] is False]),
                rate([a for a in all_attempts if a["hold_test"] is None])))
 os.replace(os.path.join(out, "results.md.tmp"), os.path.join(out, "results.md"))

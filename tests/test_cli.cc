@@ -517,12 +517,13 @@ TEST(Cli, FailedPickUpsStopAtTheBudget) {
 }
 
 // A scan that made its first grasp exits 0 whatever ended it: the object dropped during a view
-// with no re-grasp left ends object_lost, with the model so far written.
+// with no re-grasp left ends object_lost, with the model so far written (the scan starts with the
+// object in the hand: the drop comes in its third motion whatever the pick-ups do).
 TEST(Cli, AnObjectLostAfterTheFirstGraspExitsZeroWithTheModel) {
   test::TempDir dir;
   writeTextAtomically(dir.path() / "c.json",
                       R"({"voxel_m": 0.003, "planner": {"directions": 40, "rolls": 4},
-    "sim": {"faults": {"drop_in_motion": 2}}})");
+    "start": "held", "sim": {"faults": {"drop_in_motion": 2}}})");
   const fs::path out = dir.path() / "scan";
   const Result r = run("scan --object builtin:coffee_can --max-grasps 1 --config " +
                            (dir.path() / "c.json").string() + " --out " + out.string(),

@@ -366,6 +366,31 @@ TEST(HoldTest, TestsTheNextBatchWhenNoneOfTheFirstHolds) {
   EXPECT_EQ(first[3].hold, -1);
 }
 
+// The margin (HoldTestOptions::margin_mass, margin_friction): a pinch and an enveloping grasp
+// that both hold the box at its assumed mass (0.25 kg), the pinch first in the candidates' order;
+// tried again twice as heavy with 70 % of the friction, only the enveloping grasp holds, and it
+// goes first. With no margin the order stays.
+TEST(HoldTest, PutsTheGraspThatHoldsWithAMarginFirst) {
+  const RobotModel& m = test::wam();
+  const TriangleMesh box = makeBox(Vec3(0.06, 0.1, 0.2));
+  HoldTestOptions o;
+  o.density_kg_m3 = 0.25 / box.signedVolume();  // 0.25 kg (0.1 kg: the pinch holds 0.2 kg too)
+  std::vector<GraspCandidate> c = boxCandidates(m, box, 2);
+  rankByHold(m, box, boxOnTable(m), nullptr, 0.5, o, &c);
+  ASSERT_EQ(c[0].hold, 1) << c[0].hold_failure;
+  ASSERT_EQ(c[1].hold, 1) << c[1].hold_failure;
+  EXPECT_EQ(c[0].pose, 1);
+  EXPECT_EQ(c[0].hold_margin, 1);
+  EXPECT_EQ(c[1].pose, 0);
+  EXPECT_EQ(c[1].hold_margin, 0);
+  o.margin_mass = 1;
+  o.margin_friction = 1;
+  c = boxCandidates(m, box, 2);
+  rankByHold(m, box, boxOnTable(m), nullptr, 0.5, o, &c);
+  EXPECT_EQ(c[0].pose, 0);
+  EXPECT_EQ(c[0].hold_margin, -1);
+}
+
 // A piece clipped by a plane keeps exactly the part on its side: a unit cube's hull cut through
 // its centre at an angle keeps half its volume.
 TEST(ConvexDecomposition, AClippedPieceKeepsItsPartOfTheVolume) {

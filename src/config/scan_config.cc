@@ -235,6 +235,9 @@ void visitConfig(V& v, ScanConfig& c) {
                h.num("turn_rad", x.turn_rad, "then turned this far about a horizontal axis, rad");
                h.num("turn_s", x.turn_s, "… over this long, s");
                h.num("max_slip_m", x.max_slip_m, "moved farther in the hand: it did not hold, m");
+               h.num("margin_mass", x.margin_mass,
+                     "those that held, tried this many times as heavy: those that hold go first");
+               h.num("margin_friction", x.margin_friction, "… with this fraction of the friction");
              });
     g.object("ranking", "Alg. 1 as used to rank grasp candidates",
              [&](V& p) { visitPlanner(p, m.ranking); });

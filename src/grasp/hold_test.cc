@@ -21,6 +21,8 @@ std::string HoldTestOptions::validate() const {
   if (!(std::abs(turn_rad) <= M_PI)) return "turn_rad must be in [-pi, pi]";
   if (!(turn_s > 0 && turn_s <= 10)) return "turn_s must be in (0, 10] s";
   if (!(max_slip_m > 0 && max_slip_m < 0.2)) return "max_slip_m must be in (0, 0.2) m";
+  if (!(margin_mass >= 1 && margin_mass <= 20)) return "margin_mass must be in [1, 20]";
+  if (!(margin_friction > 0 && margin_friction <= 1)) return "margin_friction must be in (0, 1]";
   if (std::string p = decomposition.validate(); !p.empty()) return "decomposition." + p;
   return {};
 }
@@ -153,8 +155,28 @@ double rankByHold(const RobotModel& robot, const TriangleMesh& model_O, const Is
     }
     n = end;
   }
-  std::stable_partition(candidates->begin(), candidates->begin() + n,
-                        [](const GraspCandidate& c) { return c.hold == 1; });
+  const auto held = std::stable_partition(candidates->begin(), candidates->begin() + n,
+                                          [](const GraspCandidate& c) { return c.hold == 1; });
+  // The margin: those that held tried again on a model margin_mass times as heavy with
+  // margin_friction of the friction (the object's true weight and friction are not known); those
+  // that hold that too go first.
+  const int h = int(held - candidates->begin());
+  if (h > 0 && (o.margin_mass != 1 || o.margin_friction != 1)) {
+    PhysicsOptions heavy = po;
+    heavy.density_kg_m3 *= o.margin_mass;
+    std::vector<uint8_t> margin(size_t(h), 0);
+    const int workers = std::max(1, std::min(threadCount(), h));
+    parallelFor(0, workers, [&](int w) {
+      PhysicsWorld world(robot, pieces, friction * o.margin_friction, heavy);
+      for (int i = w; i < h; i += workers) {
+        const GraspCandidate& c = (*candidates)[size_t(i)];
+        margin[size_t(i)] = tryHold(world, T_B_O, c.T_O_palm, c.q_open, c.q, o).held;
+      }
+    });
+    for (int i = 0; i < h; ++i) (*candidates)[size_t(i)].hold_margin = margin[size_t(i)];
+    std::stable_partition(candidates->begin(), held,
+                          [](const GraspCandidate& c) { return c.hold_margin == 1; });
+  }
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 }
 

@@ -394,6 +394,7 @@ PickOutcome pickAndVerify(ScanSession& session, RobotInterface& robot, DepthSens
     attempt.rank = int(rank);
     attempt.pose = c.pose;
     attempt.hold_test = c.hold;
+    attempt.hold_margin = c.hold_margin;
     attempt.palm_contact = c.palm_contact;
     attempt.epsilon = c.epsilon;
     auto record = [&](const char* outcome) {
@@ -593,6 +594,7 @@ Json attemptsJson(const std::vector<PickAttempt>& attempts) {
                    {"rank", a.rank},
                    {"pose", a.pose},
                    {"hold_test", a.hold_test < 0 ? Json() : Json(a.hold_test == 1)},
+                   {"hold_margin", a.hold_margin < 0 ? Json() : Json(a.hold_margin == 1)},
                    {"kind", a.palm_contact ? "enveloping" : "fingertips"},
                    {"epsilon", a.epsilon},
                    {"shift_in_hand_mm", a.shift_m < 0 ? Json() : Json(1000 * a.shift_m)}});
@@ -611,6 +613,8 @@ std::vector<PickAttempt> attemptsFrom(const Json& j) {
       a.rank = e.at("rank").get<int>();
       a.pose = e.at("pose").get<int>();
       a.hold_test = e.at("hold_test").is_null() ? -1 : int(e.at("hold_test").get<bool>());
+      const Json margin = e.value("hold_margin", Json());  // absent before the margin
+      a.hold_margin = margin.is_null() ? -1 : int(margin.get<bool>());
       a.palm_contact = e.at("kind").get<std::string>() == "enveloping";
       a.epsilon = e.at("epsilon").get<double>();
       a.shift_m =

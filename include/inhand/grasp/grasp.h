@@ -94,6 +94,7 @@ struct GraspCandidate {
   int reachable_views = 0;   // views Alg. 1 could reach with this grasp
   int hold = -1;             // the hold test: 1 held, 0 did not, -1 not tested
   std::string hold_failure;  // why it did not (HoldTrial::failure)
+  int hold_margin = -1;      // held also with the test's margin (1), not (0), not tried (-1)
 };
 
 // What became of one candidate pose.

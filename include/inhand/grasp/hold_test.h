@@ -23,7 +23,7 @@ struct HoldTestOptions {
   bool enabled = true;
   int max_candidates = 12;  // the first this many candidates (in their order) are tested
   // … and when none of them holds the model, the next as many, up to this many in all.
-  int max_tested = 24;
+  int max_tested = 48;
   // Assumed: the model's mass is its volume times this (the simulator's default density too).
   double density_kg_m3 = 300;
   double lift_m = 0.10;  // the lift, straight up over lift_s
@@ -33,6 +33,10 @@ struct HoldTestOptions {
   double turn_rad = M_PI / 2;
   double turn_s = 1.0;
   double max_slip_m = 0.01;  // the model moved farther than this in the hand: it did not hold
+  // The margin: the candidates that held are tried again on the model this many times as heavy,
+  // with this fraction of the friction; those that hold then too go first (1 and 1: no margin).
+  double margin_mass = 2.0;
+  double margin_friction = 0.7;
   // The model's pieces: coarser than the simulator's (the model is a guess where unobserved).
   ConvexDecompositionOptions decomposition{32, 24, 0.05};
   std::string validate() const;
@@ -58,11 +62,12 @@ HoldTrial tryHold(PhysicsWorld& world, const Iso3& T_B_O, const Iso3& T_O_palm,
                   const JointVector& q_open, const JointVector& q_closed,
                   const HoldTestOptions& options);
 
-// Tests the first max_candidates candidates on the model (in parallel), records each one's
-// outcome (keep_O: as for modelPiecesAboveTable; GraspCandidate::hold: 1 held, 0 not, -1 not
-// tested) and moves those that held ahead of those that did not among the tested (each group in its
-// order). `friction`: μ the planner assumes. Returns the seconds it took. Nothing happens with
-// options.enabled false.
+// Tests the first max_candidates candidates on the model (in parallel; the next as many while
+// none holds, up to max_tested), records each one's outcome (keep_O: as for
+// modelPiecesAboveTable; GraspCandidate::hold: 1 held, 0 not, -1 not tested) and moves those
+// that held ahead of those that did not among the tested, those that held with the margin first
+// (GraspCandidate::hold_margin; each group in its order). `friction`: μ the planner assumes.
+// Returns the seconds it took. Nothing happens with options.enabled false.
 double rankByHold(const RobotModel& robot, const TriangleMesh& model_O, const Iso3& T_B_O,
                   const Aabb* keep_O, double friction, const HoldTestOptions& options,
                   std::vector<GraspCandidate>* candidates);

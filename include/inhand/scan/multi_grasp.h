@@ -28,9 +28,10 @@ struct PickAttempt {
   // picked (it held after the lift), no_contact (the hand met nothing), empty_hand (the fingers
   // closed on nothing), dropped (the lift's frame did not show it in the hand)
   std::string outcome;
-  int rank = 0;        // the candidate's place in the ranking it was tried from (0: the first)
-  int pose = -1;       // its index among the poses generated (GraspCandidate::pose)
-  int hold_test = -1;  // the hold test's verdict on the model: 1 held, 0 not, -1 untested
+  int rank = 0;          // the candidate's place in the ranking it was tried from (0: the first)
+  int pose = -1;         // its index among the poses generated (GraspCandidate::pose)
+  int hold_test = -1;    // the hold test's verdict on the model: 1 held, 0 not, -1 untested
+  int hold_margin = -1;  // … and with its margin (GraspCandidate::hold_margin)
   bool palm_contact = false;  // enveloping (the palm touches) or fingertips only
   double epsilon = 0;         // its force-closure ε
   // After the lift: how far the object sat in the hand from the planned grasp (−1: not seen).

@@ -1,0 +1,136 @@
+// Which first-grasp candidates hold the true object: the scan's own table-top stage (frames,
+// the model they give, candidates, the planner's hold test on that model) in the simulator with
+// physics, an object resting in its N-th most probable stable pose; each candidate the scan would
+// try, in its order, picked up from the same start in MuJoCo, lifted 10 cm and turned a quarter
+// turn (as the views turn it), then the world put back as it was. Prints one row per candidate
+// (rank, the hold test's verdict, ε, outcome, how far it moved in the hand) and the hold rates
+// by verdict.
+// Usage: first_grasp_eval OBJECT [REST_POSE] [CANDIDATES] [CONFIG.json]
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+
+#include "inhand/config/scan_config.h"
+#include "inhand/core/error.h"
+#include "inhand/geometry/builtin_objects.h"
+#include "inhand/geometry/stable_poses.h"
+#include "inhand/physics/physics.h"
+#include "inhand/scan/multi_grasp.h"
+#include "inhand/sim/sim_world.h"
+
+using namespace inhand;
+
+namespace {
+// Tries each pick-up on the simulated world and puts the world back: the scan sees every
+// candidate fail to reach the object (no_contact) and goes on to the next.
+class ProbeRobot : public RobotInterface {
+ public:
+  explicit ProbeRobot(SimWorld* w) : world_(w), robot_(w) {}
+  const RobotModel& model() const override { return robot_.model(); }
+  JointVector joints() const override { return robot_.joints(); }
+  void execute(const std::vector<JointVector>& w,
+               const std::function<void(const JointVector&)>& f) override {
+    robot_.execute(w, f);
+  }
+  bool putDown() override { return robot_.putDown(); }
+  std::optional<Iso3> pickUp(const Iso3& T_O_palm, const JointVector& q) override {
+    const Json start = world_->state();
+    outcomes.push_back(tryOne(T_O_palm, q));
+    world_->setState(start);
+    return std::nullopt;
+  }
+  struct Outcome {
+    std::string what;  // held, dropped_in_lift, dropped_in_turn, slipped, no_contact
+    double moved_mm = 0;
+  };
+  std::vector<Outcome> outcomes;
+
+ private:
+  Outcome tryOne(const Iso3& T_O_palm, const JointVector& q) {
+    Outcome o;
+    if (!robot_.pickUp(T_O_palm, q)) {
+      o.what = "no_contact";
+      return o;
+    }
+    PhysicsWorld& ph = *world_->physics();
+    const Iso3 grip = ph.palmPose().inverse() * ph.objectPose();
+    auto moved = [&] {
+      return 1000 * ((ph.palmPose().inverse() * ph.objectPose()).translation() - grip.translation())
+                        .norm();
+    };
+    Iso3 up = ph.palmPose();
+    up.translation().z() += 0.10;
+    ph.movePalm(up, 1.0);
+    if (!ph.objectTouchesHand()) {
+      o.what = "dropped_in_lift";
+      o.moved_mm = moved();
+      return o;
+    }
+    Vec3 axis = Vec3::UnitZ().cross(up.linear().col(2));
+    if (axis.norm() < 1e-6) axis = up.linear().col(0);
+    axis.normalize();
+    const Vec3 pivot = ph.objectPose().translation();
+    for (int k = 1; k <= 50; ++k) {
+      const Mat3 R = Eigen::AngleAxisd(k / 50.0 * M_PI / 2, axis).toRotationMatrix();
+      Iso3 T = up;
+      T.linear() = R * up.linear();
+      T.translation() = pivot + R * (up.translation() - pivot);
+      ph.movePalm(T, 0.02);
+    }
+    ph.movePalm(ph.palmPose(), 0.3);
+    o.moved_mm = moved();
+    o.what = !ph.objectTouchesHand() ? "dropped_in_turn" : o.moved_mm > 10 ? "slipped" : "held";
+    return o;
+  }
+  SimWorld* world_;
+  SimRobot robot_;
+};
+}  // namespace
+
+int main(int argc, char** argv) {
+  if (argc < 2) {
+    std::fprintf(stderr, "usage: first_grasp_eval OBJECT [REST_POSE] [CANDIDATES] [CONFIG]\n");
+    return 2;
+  }
+  try {
+    const RobotModel m = RobotModel::load(std::filesystem::path(INHAND_SOURCE_DIR) /
+                                          "data/robots/wam_barretthand.json");
+    const TriangleMesh object = loadObject(argv[1]);
+    const int pose = argc > 2 ? std::atoi(argv[2]) : 0;
+    const int n = argc > 3 ? std::atoi(argv[3]) : 24;
+    ScanConfig c;
+    if (argc > 4) readScanConfigFile(argv[4], &c);
+    c.sim.physics.enabled = true;
+    c.sim.R_B_O_rest = stablePoses(object).at(size_t(pose)).R_B_O;
+    c.multi.grasp.max_failed_pick_ups = n;
+    c.multi.max_grasps = 1;
+    const DepthCameraOptions camera;
+    const NoiseModelOptions noise;
+    auto [T_O_palm, q] = defaultGrasp(m, object);
+    SimWorld world(m, object, T_O_palm, camera, noise, c.sim);
+    world.held = false;
+    world.q = m.home();
+    ProbeRobot robot(&world);
+    SimSensor sensor(&world, camera);
+    const MultiGraspResult r =
+        scanFromTable(robot, sensor, world.restPose(), c.scan, c.multi, noise, ScanProgress{});
+    if (!r.table_top) throw Error("no table-top stage");
+    const std::vector<PickAttempt>& a = r.table_top->attempts;
+    std::printf("rank,hold_test,epsilon,kind,outcome,moved_mm\n");
+    int held[2] = {0, 0}, tested[2] = {0, 0};
+    for (size_t k = 0; k < a.size() && k < robot.outcomes.size(); ++k) {
+      const auto& o = robot.outcomes[k];
+      std::printf("%d,%d,%.3f,%s,%s,%.1f\n", a[k].rank, a[k].hold_test, a[k].epsilon,
+                  a[k].palm_contact ? "enveloping" : "fingertips", o.what.c_str(), o.moved_mm);
+      const int v = a[k].hold_test == 1;
+      held[v] += o.what == "held";
+      ++tested[v];
+    }
+    std::printf("%s pose %d: first %s; hold test yes: %d of %d held; no: %d of %d held\n", argv[1],
+                pose, robot.outcomes.empty() ? "none" : robot.outcomes[0].what.c_str(), held[1],
+                tested[1], held[0], tested[0]);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "first_grasp_eval: %s\n", e.what());
+    return 1;
+  }
+}
