@@ -181,6 +181,11 @@ struct PhysicsWorld::Impl {
             .toRotationMatrix();
     return T;
   }
+  // Contact c is between the object and a hand link.
+  bool handObjectContact(int c) const {
+    const int b1 = m->geom_bodyid[d->contact[c].geom1], b2 = m->geom_bodyid[d->contact[c].geom2];
+    return (b1 == objectBody && handBody[size_t(b2)]) || (b2 == objectBody && handBody[size_t(b1)]);
+  }
   void setFree(int qpos, int dof, const Iso3& T) {
     for (int k = 0; k < 3; ++k) d->qpos[qpos + k] = T.translation()[k];
     const Eigen::Quaterniond q(T.linear());
@@ -482,13 +487,8 @@ void PhysicsWorld::reset(const Iso3& T_B_O, const Iso3& T_B_palm, const JointVec
   Iso3 T = T_B_palm;
   for (int k = 0; k < 8; ++k) {
     double depth = 0;
-    for (int c = 0; c < I.d->ncon; ++c) {
-      const int b1 = I.m->geom_bodyid[I.d->contact[c].geom1];
-      const int b2 = I.m->geom_bodyid[I.d->contact[c].geom2];
-      if ((b1 == I.objectBody && I.handBody[size_t(b2)]) ||
-          (b2 == I.objectBody && I.handBody[size_t(b1)]))
-        depth = std::max(depth, -I.d->contact[c].dist);
-    }
+    for (int c = 0; c < I.d->ncon; ++c)
+      if (I.handObjectContact(c)) depth = std::max(depth, -I.d->contact[c].dist);
     if (depth < 2e-4) break;
     T.translation() += (depth + 2e-4) * back;
     I.setFree(I.palmQpos, I.palmDof, T);
@@ -598,8 +598,9 @@ JointVector PhysicsWorld::closeHand(const JointVector& q) {
   }
   // Close with touch_force_n until every finger has met something (the first to arrive does not
   // push the object away from the others), then squeeze with the full force.
-  setFingerForce(I.m, I.joints, I.options.touch_force_n / I.options.finger_force_n);
-  closeUntilStalled(I, st, I.options.touch_force_n / I.options.finger_force_n);
+  const double touch = I.options.touch_force_n / I.options.finger_force_n;
+  setFingerForce(I.m, I.joints, touch);
+  closeUntilStalled(I, st, touch);
   setFingerForce(I.m, I.joints, 1.0);
   for (size_t k = 0; k < I.joints.size(); ++k) {
     const HandJoint& hj = I.joints[k];
@@ -690,13 +691,8 @@ double PhysicsWorld::objectSpeed() const {
 
 bool PhysicsWorld::objectTouchesHand() const {
   const Impl& I = *impl_;
-  for (int c = 0; c < I.d->ncon; ++c) {
-    const int b1 = I.m->geom_bodyid[I.d->contact[c].geom1];
-    const int b2 = I.m->geom_bodyid[I.d->contact[c].geom2];
-    if ((b1 == I.objectBody && I.handBody[size_t(b2)]) ||
-        (b2 == I.objectBody && I.handBody[size_t(b1)]))
-      return true;
-  }
+  for (int c = 0; c < I.d->ncon; ++c)
+    if (I.handObjectContact(c)) return true;
   return false;
 }
 

@@ -351,6 +351,18 @@ LiftCheck checkAfterLift(ScanSession& session, RobotInterface& robot, DepthSenso
   return out;
 }
 
+// The record of trying candidate c, the rank-th of its ranking (its outcome still to come).
+PickAttempt attemptOf(const GraspCandidate& c, int rank) {
+  PickAttempt a;
+  a.rank = rank;
+  a.pose = c.pose;
+  a.hold_test = c.hold;
+  a.hold_margin = c.hold_margin;
+  a.palm_contact = c.palm_contact;
+  a.epsilon = c.epsilon;
+  return a;
+}
+
 struct PickOutcome {
   std::optional<Iso3> achieved;
   std::optional<GraspCandidate> picked;  // a copy: the candidates it came from may be gone
@@ -390,13 +402,7 @@ PickOutcome pickAndVerify(ScanSession& session, RobotInterface& robot, DepthSens
           " attempts (grasp.max_failed_pick_ups); giving up on this grasp");
       break;
     }
-    PickAttempt attempt;
-    attempt.rank = int(rank);
-    attempt.pose = c.pose;
-    attempt.hold_test = c.hold;
-    attempt.hold_margin = c.hold_margin;
-    attempt.palm_contact = c.palm_contact;
-    attempt.epsilon = c.epsilon;
+    PickAttempt attempt = attemptOf(c, int(rank));
     auto record = [&](const char* outcome) {
       attempt.outcome = outcome;
       out.attempts.push_back(attempt);
