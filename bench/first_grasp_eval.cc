@@ -3,8 +3,8 @@
 // physics, an object resting in its N-th most probable stable pose; each candidate the scan would
 // try, in its order, picked up from the same start in MuJoCo, lifted 10 cm and turned a quarter
 // turn (as the views turn it), then the world put back as it was. Prints one row per candidate
-// (rank, the hold test's verdict, ε, outcome, how far it moved in the hand) and the hold rates
-// by verdict.
+// (rank, the hold test's verdict, ε, outcome, how far it moved in the hand, where it failed the
+// hold test, whether a pinch pose) and the hold rates by verdict.
 // Usage: first_grasp_eval OBJECT [REST_POSE] [CANDIDATES] [CONFIG.json]
 #include <cstdio>
 #include <cstdlib>
@@ -116,12 +116,14 @@ int main(int argc, char** argv) {
         scanFromTable(robot, sensor, world.restPose(), c.scan, c.multi, noise, ScanProgress{});
     if (!r.table_top) throw Error("no table-top stage");
     const std::vector<PickAttempt>& a = r.table_top->attempts;
-    std::printf("rank,hold_test,epsilon,kind,outcome,moved_mm\n");
+    std::printf("rank,hold_test,epsilon,kind,outcome,moved_mm,hold_failure,pinch\n");
     int held[2] = {0, 0}, tested[2] = {0, 0};
     for (size_t k = 0; k < a.size() && k < robot.outcomes.size(); ++k) {
       const auto& o = robot.outcomes[k];
-      std::printf("%d,%d,%.3f,%s,%s,%.1f\n", a[k].rank, a[k].hold_test, a[k].epsilon,
-                  a[k].palm_contact ? "enveloping" : "fingertips", o.what.c_str(), o.moved_mm);
+      const bool pinch = a[k].pose >= 0 && r.table_top->poses[size_t(a[k].pose)].pinch;
+      std::printf("%d,%d,%.3f,%s,%s,%.1f,%s,%d\n", a[k].rank, a[k].hold_test, a[k].epsilon,
+                  a[k].palm_contact ? "enveloping" : "fingertips", o.what.c_str(), o.moved_mm,
+                  a[k].hold_failure.c_str(), int(pinch));
       const int v = a[k].hold_test == 1;
       held[v] += o.what == "held";
       ++tested[v];

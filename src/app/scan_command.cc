@@ -42,6 +42,7 @@ static Json posesJson(const std::vector<GraspPoseRecord>& poses) {
                    {"spread", round4(p.spread)},
                    {"preshape", p.preshape},
                    {"edge", p.edge},
+                   {"pinch", p.pinch},
                    {"epsilon", round4(p.epsilon)},
                    {"result", p.result}});
   return out;

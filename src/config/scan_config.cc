@@ -212,6 +212,8 @@ void visitConfig(V& v, ScanConfig& c) {
               "fingers this fraction of the way closed as the hand comes in");
     g.numbers("edge_spreads", o.edge_spreads, "edge poses at each of these spreads");
     g.num("edge_inset_m", o.edge_inset_m, "edge poses: the model ends this far beyond the palm, m");
+    g.boolean("pinch_poses", o.pinch_poses,
+              "pinch poses: straight down, fingertips straddling the model's footprint");
     g.num("friction", o.friction, "μ at each contact (stability)");
     g.integer("cone_edges", o.cone_edges, "friction-cone linearisation");
     g.integer("wrench_directions", o.wrench_directions, "directions sampled for ε");
@@ -321,6 +323,8 @@ void visitConfig(V& v, ScanConfig& c) {
             "fraction of motions the arm refuses (it stays where it is)");
       f.num("failed_pickups", x.failed_pickups, "fraction of pick-ups that reach nothing");
       f.num("slip_m", x.slip_m, "the object slips this far in the hand once per grasp, m");
+      f.integer("slip_in_motion", x.slip_in_motion,
+                "… halfway through this motion with it in the hand of each grasp (0-based)");
       f.integer("drop_in_motion", x.drop_in_motion,
                 "the object falls out of the hand during this motion (0-based; -1: never)");
     });

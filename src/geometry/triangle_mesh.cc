@@ -128,6 +128,25 @@ TriangleMesh welded(const TriangleMesh& mesh, double tolerance_m) {
   return out;
 }
 
+TriangleMesh withoutUnusedVertices(const TriangleMesh& mesh) {
+  std::vector<int> remap(mesh.vertices.size(), -1);
+  TriangleMesh out;
+  out.triangles.reserve(mesh.triangles.size());
+  for (const Tri& f : mesh.triangles) {
+    Tri g;
+    for (int k = 0; k < 3; ++k) {
+      int& r = remap[size_t(f[k])];
+      if (r < 0) {
+        r = int(out.vertices.size());
+        out.vertices.push_back(mesh.vertices[size_t(f[k])]);
+      }
+      g[k] = r;
+    }
+    out.triangles.push_back(g);
+  }
+  return out;
+}
+
 std::string validateMesh(const TriangleMesh& mesh) {
   if (mesh.triangles.empty()) return "has no triangles";
   for (const Vec3f& v : mesh.vertices) {

@@ -95,19 +95,90 @@ std::vector<std::optional<PickLift>> pickAndLift(const RobotModel& robot,
 namespace {
 
 // A candidate pose: the palm's orientation in O (palm z into the object), the spread, whether it
-// is an edge pose, and the preshape (fraction of the fingers' closing range at the approach).
+// is an edge pose, the preshape (fraction of the fingers' closing range at the approach), and
+// where its palm axis passes (the model's centre plus `offset`).
 struct Pose {
   Mat3 R;
   double spread;
   bool edge;
   double preshape = 0;
+  bool pinch = false;
+  Vec3 offset = Vec3::Zero();
 };
+
+// How far apart the open hand's lowest points (those within 5 mm of the farthest along palm z:
+// the fingertips of a preshaped hand) lie along palm x, at `spread` and preshape `f`.
+double tipGap(const RobotModel& robot, double spread, double f) {
+  const TriangleMesh hand =
+      HandGeometry(robot, robot.preshapedHand(spread, f), Iso3::Identity()).mesh();
+  double zmax = -std::numeric_limits<double>::infinity();
+  for (const Vec3f& v : hand.vertices) zmax = std::max(zmax, double(v.z()));
+  double x0 = std::numeric_limits<double>::infinity(), x1 = -x0;
+  for (const Vec3f& v : hand.vertices)
+    if (v.z() > zmax - 0.005) {
+      x0 = std::min(x0, double(v.x()));
+      x1 = std::max(x1, double(v.x()));
+    }
+  return x1 - x0;
+}
+
+// Pinch poses: the hand straight down the table normal onto the model's footprint (the axis
+// through the centre of its least-area rectangle on the table), palm x across each of the
+// rectangle's sides either way, at each spread, with the preshape whose fingertips straddle the
+// model's width across palm x by 8 mm and by 20 mm on each side. The fingertips then come down
+// beside the model to the table (or onto it, on a tall model) and close on it low: the grasp of
+// a pen, a remote or a box lying flat, which the approaches spread over the sphere catch only
+// when one happens to line up with the model.
+void addPinchPoses(const RobotModel& robot, const std::vector<SurfacePoint>& samples,
+                   const Vec3& centre, const Vec3& up, const GraspOptions& o,
+                   std::vector<Pose>* poses) {
+  std::vector<Vec3> points;
+  for (const SurfacePoint& sm : samples) points.push_back(sm.p);
+  const PrincipalAxes A = principalAxesUpright(points, up, 0.0);
+  Vec3 mid = centre;
+  std::vector<std::pair<Vec3, double>> sides;  // (horizontal axis, the model's width along it)
+  for (int k = 0; k < 3; ++k) {
+    const Vec3 a = A.axes.col(k);
+    if (std::abs(a.dot(up)) > 0.5) continue;
+    mid += (0.5 * (A.min[k] + A.max[k]) + (A.centroid - centre).dot(a)) * a;
+    sides.push_back({a, A.max[k] - A.min[k]});
+  }
+  for (double s : o.spreads) {
+    // The fingertips' gap along palm x as the preshape closes, while it narrows (further on,
+    // other parts of the curled fingers are the lowest).
+    std::vector<std::pair<double, double>> gaps;
+    for (double f = 0.2; f <= 0.9 + 1e-9; f += 0.025) {
+      const double gap = tipGap(robot, s, f);
+      if (!gaps.empty() && gap > gaps.back().second) break;
+      gaps.push_back({f, gap});
+    }
+    for (const auto& [a, width] : sides)
+      for (double margin : {0.008, 0.020}) {
+        // The most closed preshape whose gap still clears the width with the margin.
+        double best = -1;
+        for (const auto& [f, gap] : gaps)
+          if (gap >= width + 2 * margin) best = f;
+        if (best < 0) continue;
+        for (double sx : {1.0, -1.0}) {
+          Mat3 R;
+          R.col(2) = -up;
+          R.col(0) = sx * a;
+          R.col(1) = R.col(2).cross(R.col(0));
+          Pose ps{R, s, false, best};
+          ps.pinch = true;
+          ps.offset = mid - centre;
+          poses->push_back(ps);
+        }
+      }
+  }
+}
 
 // Every (approach, roll, spread, preshape) pose with the palm axis through the centre; then the
 // edge poses, aligned with the model's principal axes (palm z along ± one axis, palm y along
-// another, palm x either way along the third: the hand is not symmetric there).
+// another, palm x either way along the third: the hand is not symmetric there); then the pinch
+// poses (addPinchPoses; `up`: the table normal in O).
 std::vector<Pose> candidatePoses(const RobotModel& robot, const std::vector<SurfacePoint>& samples,
-                                 const Vec3& centre, const GraspOptions& o) {
+                                 const Vec3& centre, const Vec3& up, const GraspOptions& o) {
   std::vector<Pose> poses;
   for (const Vec3& d : fibonacciSphere(o.approaches))
     for (int r = 0; r < o.rolls; ++r) {
@@ -133,6 +204,7 @@ std::vector<Pose> candidatePoses(const RobotModel& robot, const std::vector<Surf
           }
         }
   }
+  if (o.pinch_poses) addPinchPoses(robot, samples, centre, up, o, &poses);
   return poses;
 }
 
@@ -144,6 +216,7 @@ GraspPoseRecord poseRecord(const Pose& ps) {
   rec.spread = ps.spread;
   rec.preshape = ps.preshape;
   rec.edge = ps.edge;
+  rec.pinch = ps.pinch;
   rec.result = "no_contact";
   return rec;
 }
@@ -262,10 +335,6 @@ class PoseCloser {
       arrays_.y.push_back(sm.p.y());
       arrays_.z.push_back(sm.p.z());
     }
-    // How far a palm may rise along the table normal above the centre (to keep a hand on a
-    // short object clear of the table) with its axis still 1 cm below the object's top.
-    for (const SurfacePoint& sm : samples_)
-      maxRise_ = std::max(maxRise_, (sm.p - centre_).dot(up_) - 0.01);
     // The preshaped hand's bounding box in the palm frame, per (spread, preshape).
     for (const Pose& ps : poses)
       if (!openHandBox_.count({ps.spread, ps.preshape}))
@@ -284,22 +353,28 @@ class PoseCloser {
     // Edge poses: the palm axis moves along palm x until the model's extent along it ends
     // `edge_inset_m` beyond the axis, so that fingers 1 and 2 (across palm y at a 90° spread)
     // straddle the object near its edge and finger 3 closes over that edge.
-    Vec3 origin = centre_;
-    if (ps.edge) {
-      double extent = -std::numeric_limits<double>::infinity();
-      for (const SurfacePoint& sm : samples_)
-        extent = std::max(extent, (sm.p - centre_).dot(ps.R.col(0)));
-      origin += (extent - o_.edge_inset_m) * ps.R.col(0);
-    }
-    if (!approach(ps, q, origin, &T)) return std::nullopt;
-    // On a short object the open hand reaches below the table top: the palm axis rises along
-    // the table normal until the hand clears it (as for the first grasp), within maxRise.
+    Vec3 origin = centre_ + ps.offset;
+    if (ps.edge) origin += (extent(ps.R.col(0)) - o_.edge_inset_m) * ps.R.col(0);
+    // The hand first comes to the model alone: where it then reaches below the table top, the
+    // palm rises along the table normal until it clears it (by 3 mm) and comes in again, now
+    // stopping at the model or the table. Rising moves the palm axis off the model's centre by
+    // its part across the approach: allowed while the axis stays 1 cm inside the model's extent
+    // that way. A hand coming straight down keeps its axis: its fingertips stop at the table and
+    // close from there (the table-level pinch of a short object).
+    if (!approach(ps, q, origin, modelCloser_, &T)) return std::nullopt;
     const double rise = robot_.table().topZ() + 0.003 - handLowestZ(robot_, q, T_B_O_ * T);
-    if (rise > 0 && rise > maxRise_) {
+    if (rise > 0) {
+      const Vec3 across = rise * (up_ - up_.dot(ps.R.col(2)) * ps.R.col(2));
+      if (across.norm() > 1e-9 && across.norm() > extent(across.normalized()) - 0.01) {
+        rec.result = "table";
+        return std::nullopt;
+      }
+      origin += rise * up_;
+    }
+    if (!approach(ps, q, origin, closer_, &T)) {
       rec.result = "table";
       return std::nullopt;
     }
-    if (rise > 0 && !approach(ps, q, origin + rise * up_, &T)) return std::nullopt;
     // 0.06 rad steps: the fingertip moves 9 mm per step, less than a link is thick (20 mm).
     // A finger stopped by the table short of the model lifts the hand off it (5 mm steps).
     auto [closed, Tc] = closeOffTheTable(closer_, modelCloser_, q, T, 0.005, 0.03, 0.06);
@@ -325,6 +400,13 @@ class PoseCloser {
   }
 
  private:
+  // How far the model reaches from its centre along the unit direction d.
+  double extent(const Vec3& d) const {
+    double e = -std::numeric_limits<double>::infinity();
+    for (const SurfacePoint& sm : samples_) e = std::max(e, (sm.p - centre_).dot(d));
+    return e;
+  }
+
   static TriangleMesh withTable(const TriangleMesh& mesh, const RobotModel& robot,
                                 const Iso3& T_B_O) {
     TriangleMesh obstacles = mesh;
@@ -333,11 +415,12 @@ class PoseCloser {
   }
 
   // Brings the preshaped hand (palm orientation ps.R, its axis through `origin`) to the model
-  // along palm z: kFirstContact, from outside until any link touches the model or the table
-  // (the travel starts where the open hand's box first reaches a sample inside its footprint:
-  // nothing can touch earlier); kPalm, until the palm face touches the nearest sample in its
-  // footprint. False when nothing is met.
-  bool approach(const Pose& ps, const JointVector& q, const Vec3& origin, Iso3* T) const {
+  // along palm z: kFirstContact, from outside until any link touches what `closer` holds (the
+  // model, or the model and the table; the travel starts where the open hand's box first reaches a
+  // sample inside its footprint: nothing can touch earlier); kPalm, until the palm face touches the
+  // nearest sample in its footprint. False when nothing is met or the hand starts in contact.
+  bool approach(const Pose& ps, const JointVector& q, const Vec3& origin,
+                const FingerCloser& closer, Iso3* T) const {
     const Mat3& R = ps.R;
     const bool firstContact = o_.approach == GraspApproach::kFirstContact;
     const Aabb box = firstContact ? openHandBox_.at({ps.spread, ps.preshape}) : palm_;
@@ -358,7 +441,7 @@ class PoseCloser {
     }
     const double start = box.max.z() - nearest + 0.01, travelMax = 2 * rho_ + 0.02;
     T->translation() = origin - start * R.col(2);
-    const std::optional<double> travel = closer_.freeTravel(q, *T, R.col(2), travelMax);
+    const std::optional<double> travel = closer.freeTravel(q, *T, R.col(2), travelMax);
     if (!travel || *travel >= travelMax) return false;
     T->translation() += *travel * R.col(2);
     return true;
@@ -371,7 +454,7 @@ class PoseCloser {
   SampleArrays arrays_;  // the same samples' coordinates, for the approach
   SampleGrid grid_;      // the same samples, for the contacts near the closed hand
   Vec3 centre_, up_;
-  double rho_ = 0, maxRise_ = -0.01;
+  double rho_ = 0;
   Aabb palm_;
   FingerCloser closer_, modelCloser_;
   std::map<std::pair<double, double>, Aabb> openHandBox_;
@@ -379,17 +462,33 @@ class PoseCloser {
 
 }  // namespace
 
-GraspGeneration generateGrasps(const RobotModel& robot, const TriangleMesh& mesh, const Iso3& T_B_O,
-                               const JointVector& q_now, const GraspOptions& o) {
+namespace {
+// Two closed grasps the same to within 1 mm and 1° of palm pose and 0.01 rad at every finger.
+bool sameGrasp(const RobotModel& robot, const GraspCandidate& a, const GraspCandidate& b) {
+  if ((a.T_O_palm.translation() - b.T_O_palm.translation()).norm() > 0.001) return false;
+  if (rotationBetween(a.T_O_palm, b.T_O_palm) > M_PI / 180) return false;
+  for (const FingerInfo& f : robot.fingers())
+    if (std::abs(a.q[f.variable] - b.q[f.variable]) > 0.01) return false;
+  const int s = robot.spreadVariable();
+  return s < 0 || std::abs(a.q[s] - b.q[s]) <= 0.01;
+}
+}  // namespace
+
+GraspGeneration generateGrasps(const RobotModel& robot, const TriangleMesh& model,
+                               const Iso3& T_B_O, const JointVector& q_now, const GraspOptions& o) {
   const auto t0 = std::chrono::steady_clock::now();
   std::string problem = o.validate();
   if (!problem.empty()) throw Error("grasp options: " + problem);
   INHAND_CHECK(!robot.fingers().empty(), "the hand has no fingers to grasp with");
   GraspGeneration out;
+  // Vertices no triangle uses (a model cut out of a bigger one keeps them) would be samples,
+  // contacts and bounds of surface that is not there.
+  const TriangleMesh mesh = withoutUnusedVertices(model);
   if (mesh.empty()) return out;
   // Surface samples with outward normals (vertices, plus a lattice on large triangles).
   const std::vector<SurfacePoint> samples = surfaceSamples(mesh, 0.5 * o.contact_cell_m);
-  const std::vector<Pose> poses = candidatePoses(robot, samples, mesh.bounds().center(), o);
+  const std::vector<Pose> poses = candidatePoses(robot, samples, mesh.bounds().center(),
+                                                 T_B_O.linear().transpose() * Vec3::UnitZ(), o);
   out.tried = int(poses.size());
   for (const Pose& ps : poses) out.poses.push_back(poseRecord(ps));
   // The hand stops at the model and at the table: approaching, and closing its fingers. Each
@@ -414,6 +513,14 @@ GraspGeneration generateGrasps(const RobotModel& robot, const TriangleMesh& mesh
       continue;
     }
     ++out.table_free;
+    // Preshapes that close to the same grasp (the same palm pose, the same finger joints) are
+    // one candidate: the first.
+    const bool same = std::any_of(kept.begin(), kept.end(),
+                                  [&](const GraspCandidate& k) { return sameGrasp(robot, k, *f); });
+    if (same) {
+      out.poses[i].result = "duplicate";
+      continue;
+    }
     kept.push_back(std::move(*f));
   }
   // Reachable at the table (IK to the palm pose, arm and hand free of table and base).

@@ -46,6 +46,14 @@ std::vector<ConvexPiece> modelPiecesAboveTable(const TriangleMesh& model_O, cons
   return out;
 }
 
+int holdStage(const std::string& failure) {
+  if (failure.empty()) return 4;
+  if (failure == "slipped") return 3;
+  if (failure == "dropped_in_turn") return 2;
+  if (failure == "dropped_in_lift") return 1;
+  return 0;  // not_touching
+}
+
 namespace {
 // The palm's pose s ∈ [0, 1] of the way along a motion with a trapezoidal speed profile (a
 // quarter of the time speeding up, a quarter slowing down).
@@ -157,6 +165,12 @@ double rankByHold(const RobotModel& robot, const TriangleMesh& model_O, const Is
   }
   const auto held = std::stable_partition(candidates->begin(), candidates->begin() + n,
                                           [](const GraspCandidate& c) { return c.hold == 1; });
+  // Those that did not hold, by how far they got: still in the hand but moved, dropped in the
+  // turn, dropped in the lift, not touching after the close.
+  std::stable_sort(held, candidates->begin() + n,
+                   [](const GraspCandidate& a, const GraspCandidate& b) {
+                     return holdStage(a.hold_failure) > holdStage(b.hold_failure);
+                   });
   // The margin: those that held tried again on a model margin_mass times as heavy with
   // margin_friction of the friction (the object's true weight and friction are not known); those
   // that hold that too go first.

@@ -117,6 +117,7 @@ Json tableTopJson(const TableTopRecord& t) {
                      {"spread", p.spread},
                      {"preshape", p.preshape},
                      {"edge", p.edge},
+                     {"pinch", p.pinch},
                      {"epsilon", p.epsilon},
                      {"result", p.result}});
   Json axes = Json::array();
@@ -168,6 +169,7 @@ TableTopRecord tableTopFrom(const Json& j) {
     r.spread = p.at("spread").get<double>();
     r.preshape = p.at("preshape").get<double>();
     r.edge = p.at("edge").get<bool>();
+    r.pinch = p.value("pinch", false);  // (checkpoints written before pinch poses)
     r.epsilon = p.at("epsilon").get<double>();
     r.result = p.at("result").get<std::string>();
     t.poses.push_back(r);

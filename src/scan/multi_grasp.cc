@@ -358,6 +358,7 @@ PickAttempt attemptOf(const GraspCandidate& c, int rank) {
   a.pose = c.pose;
   a.hold_test = c.hold;
   a.hold_margin = c.hold_margin;
+  a.hold_failure = c.hold_failure;
   a.palm_contact = c.palm_contact;
   a.epsilon = c.epsilon;
   return a;
@@ -601,6 +602,7 @@ Json attemptsJson(const std::vector<PickAttempt>& attempts) {
                    {"pose", a.pose},
                    {"hold_test", a.hold_test < 0 ? Json() : Json(a.hold_test == 1)},
                    {"hold_margin", a.hold_margin < 0 ? Json() : Json(a.hold_margin == 1)},
+                   {"hold_failure", a.hold_test == 0 ? Json(a.hold_failure) : Json()},
                    {"kind", a.palm_contact ? "enveloping" : "fingertips"},
                    {"epsilon", a.epsilon},
                    {"shift_in_hand_mm", a.shift_m < 0 ? Json() : Json(1000 * a.shift_m)}});
@@ -621,6 +623,8 @@ std::vector<PickAttempt> attemptsFrom(const Json& j) {
       a.hold_test = e.at("hold_test").is_null() ? -1 : int(e.at("hold_test").get<bool>());
       const Json margin = e.value("hold_margin", Json());  // absent before the margin
       a.hold_margin = margin.is_null() ? -1 : int(margin.get<bool>());
+      const Json failure = e.value("hold_failure", Json());  // absent before it was recorded
+      if (failure.is_string()) a.hold_failure = failure.get<std::string>();
       a.palm_contact = e.at("kind").get<std::string>() == "enveloping";
       a.epsilon = e.at("epsilon").get<double>();
       a.shift_m =

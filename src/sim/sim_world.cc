@@ -19,6 +19,7 @@ std::string SimFaults::validate() const {
     if (!(f >= 0 && f <= 1)) return "fault rates must be in [0, 1]";
   if (!(slip_m >= 0 && slip_m <= 0.05)) return "slip_m must be in [0, 0.05] m";
   if (drop_in_motion < -1) return "drop_in_motion must be >= -1";
+  if (slip_in_motion < 0) return "slip_in_motion must be >= 0";
   return {};
 }
 
@@ -434,7 +435,7 @@ void SimRobot::execute(const std::vector<JointVector>& waypoints,
   const bool inHand = w.held;
   size_t slipAt = steps.size(), dropAt = steps.size();
   if (inHand) {
-    if (f.slip_m > 0 && w.graspMotions == 1) slipAt = steps.size() / 2;
+    if (f.slip_m > 0 && w.graspMotions == f.slip_in_motion) slipAt = steps.size() / 2;
     if (f.drop_in_motion >= 0 && w.motions == f.drop_in_motion) dropAt = steps.size() / 2;
     ++w.motions;
     ++w.graspMotions;

@@ -61,6 +61,10 @@ TriangleMesh transformed(const TriangleMesh& mesh, const Iso3& T);
 // that become degenerate. STL files come unwelded; this makes them indexed.
 TriangleMesh welded(const TriangleMesh& mesh, double tolerance_m = 1e-7);
 
+// The mesh without the vertices no triangle uses (the triangles renumbered, in order): what a
+// mesh cut out of a bigger one keeps, so that its bounds and samples are its triangles'.
+TriangleMesh withoutUnusedVertices(const TriangleMesh& mesh);
+
 // Points on the surface with outward normals: every vertex (area-weighted face normals), plus a
 // lattice of about `spacing_m` on triangles larger than that (so coarse meshes are covered too).
 struct SurfacePoint {

@@ -7,12 +7,15 @@
 // Candidates (BarrettHand-style hands: a palm and closing fingers, optional spread):
 //   - approach directions spread over the sphere, palm rolls about each, spread settings and
 //     preshapes (how far the fingers are already closed as the hand comes in), the palm axis
-//     through the model's centre; then the edge poses (below);
+//     through the model's centre; then the edge poses and the pinch poses (below);
 //   - the preshaped hand comes along the approach until any link first touches the model or the
 //     table (GraspApproach::kFirstContact, the default), or the palm face is slid until it
-//     touches the nearest surface sample inside its footprint (kPalm; samples: the vertices,
-//     plus a lattice of half a contact cell on larger triangles); where the hand would reach
-//     below the table top, the palm axis first rises along the table normal;
+//     touches the nearest surface sample inside its footprint (kPalm; samples: the vertices
+//     of the model's triangles, plus a lattice of half a contact cell on larger triangles);
+//     the hand first comes to the model alone, and where it would then reach below the table
+//     top, the palm rises along the table normal (while its axis stays on the model) and comes
+//     in again stopping at model or table: a hand coming straight down stops with its
+//     fingertips on the table;
 //   - fingers closed from the preshape until contact with the model or the table
 //     (robot::FingerCloser); a finger stopped by the table touches nothing;
 //   - kept when at least two links touch the model, the grasp is force closure (below), the
@@ -60,6 +63,10 @@ struct GraspOptions {
   // finger 3 closes over the edge.
   std::vector<double> edge_spreads{M_PI / 2};
   double edge_inset_m = 0.005;
+  // Pinch poses: the hand straight down onto the model's footprint, palm x across each side of
+  // its least-area rectangle on the table, fingertips preshaped to straddle the model just wider
+  // than it (8 and 20 mm each side), coming down beside it to the table and closing on it low.
+  bool pinch_poses = true;
   double friction = 0.5;          // μ at each contact
   int cone_edges = 8;             // friction-cone linearisation
   int wrench_directions = 1000;   // directions sampled for ε
@@ -103,10 +110,12 @@ struct GraspPoseRecord {
   double roll_rad = 0;             // palm x about it, from the approach's reference direction
   double spread = 0, preshape = 0;
   bool edge = false;
+  bool pinch = false;  // a pinch pose (GraspOptions::pinch_poses)
   double epsilon = 0;  // when the closed hand touched with two links or more
   // kept, no_contact (the hand met nothing or started in contact), table (the hand cannot clear
   // the table), fewer_than_two_links, not_force_closure, hand_in_table, unreachable, or
-  // beyond_max_candidates
+  // beyond_max_candidates; duplicate: its closed hand is an earlier pose's (the same palm pose
+  // and finger joints from another preshape)
   std::string result;
 };
 

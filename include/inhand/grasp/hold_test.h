@@ -49,6 +49,10 @@ struct HoldTrial {
   std::string failure;  // "", "dropped_in_lift", "dropped_in_turn", "slipped", "not_touching"
 };
 
+// How far a trial got: 4 held, 3 slipped (in the hand, moved too far), 2 dropped in the turn,
+// 1 dropped in the lift, 0 not touching after the close.
+int holdStage(const std::string& failure);
+
 // The closed model (frame O) resting at T_B_O, as convex pieces of its part above the robot's
 // table top (the unobserved space below the top is not the object) and, when `keep_O` is given,
 // inside that box (where the object may lie).
@@ -66,7 +70,8 @@ HoldTrial tryHold(PhysicsWorld& world, const Iso3& T_B_O, const Iso3& T_O_palm,
 // none holds, up to max_tested), records each one's outcome (keep_O: as for
 // modelPiecesAboveTable; GraspCandidate::hold: 1 held, 0 not, -1 not tested) and moves those
 // that held ahead of those that did not among the tested, those that held with the margin first
-// (GraspCandidate::hold_margin; each group in its order). `friction`: μ the planner assumes.
+// (GraspCandidate::hold_margin), those that did not by how far they got (holdStage); each group
+// in its order. `friction`: μ the planner assumes.
 // Returns the seconds it took. Nothing happens with options.enabled false.
 double rankByHold(const RobotModel& robot, const TriangleMesh& model_O, const Iso3& T_B_O,
                   const Aabb* keep_O, double friction, const HoldTestOptions& options,

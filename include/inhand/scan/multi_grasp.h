@@ -32,6 +32,9 @@ struct PickAttempt {
   int pose = -1;         // its index among the poses generated (GraspCandidate::pose)
   int hold_test = -1;    // the hold test's verdict on the model: 1 held, 0 not, -1 untested
   int hold_margin = -1;  // … and with its margin (GraspCandidate::hold_margin)
+  // Where it failed the hold test (HoldTrial::failure: dropped_in_lift, dropped_in_turn,
+  // slipped, not_touching; empty when it held or was not tested).
+  std::string hold_failure;
   bool palm_contact = false;  // enveloping (the palm touches) or fingertips only
   double epsilon = 0;         // its force-closure ε
   // After the lift: how far the object sat in the hand from the planned grasp (−1: not seen).

@@ -28,9 +28,11 @@ struct SimFaults {
   // side: it stays where it is), and of pick-ups that fail (the hand reaches nothing).
   double refused_motions = 0;
   double failed_pickups = 0;
-  // The object slips in the hand this far (m, a random direction), once, halfway through the
-  // second motion with it in the hand of every grasp (0: never).
+  // The object slips in the hand this far (m, a random direction), once, halfway through motion
+  // `slip_in_motion` with it in the hand of every grasp (0-based; 1, the default: the second;
+  // slip_m 0: never).
   double slip_m = 0;
+  int slip_in_motion = 1;
   // The object falls out of the hand halfway through this motion with it in the hand (0-based,
   // counting every motion of the scan; -1: never). It lands where it rested.
   int drop_in_motion = -1;
