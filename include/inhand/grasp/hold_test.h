@@ -37,8 +37,9 @@ struct HoldTestOptions {
   // with this fraction of the friction; those that hold then too go first (1 and 1: no margin).
   double margin_mass = 2.0;
   double margin_friction = 0.7;
-  // The model's pieces: coarser than the simulator's (the model is a guess where unobserved).
-  ConvexDecompositionOptions decomposition{32, 24, 0.05};
+  // The model's pieces (at most 64; coarser hulls bulge beside thin and flat models, where a pinch
+  // then starts inside them and closes over the model).
+  ConvexDecompositionOptions decomposition{64, 64, 0.02};
   std::string validate() const;
 };
 
