@@ -108,6 +108,40 @@ TEST(Primitives, ClosedWithExactVolumes) {
   EXPECT_NEAR(sphere.signedVolume(), 4.0 / 3.0 * M_PI * 1e-3, 1e-5);
 }
 
+// Holes closed: a box without its top and a cylinder without its caps become the closed solids
+// they were (the fans face outwards: the same volume), a closed mesh stays as it is.
+TEST(Primitives, HolesClosedGiveTheSolidBack) {
+  auto without = [](const TriangleMesh& m, const Vec3& n) {
+    TriangleMesh out = m;
+    out.triangles.clear();
+    for (int t = 0; t < int(m.triangles.size()); ++t)
+      if (std::abs(m.faceNormal(t).dot(n)) < 0.99) out.triangles.push_back(m.triangles[t]);
+    return out;
+  };
+  const TriangleMesh box = makeBox(Vec3(0.1, 0.2, 0.3));
+  TriangleMesh open = box;
+  open.triangles.clear();
+  for (int t = 0; t < int(box.triangles.size()); ++t)
+    if (box.faceNormal(t).z() < 0.99) open.triangles.push_back(box.triangles[t]);
+  ASSERT_EQ(open.boundaryEdgeCount(), 4);
+  int loops = -1;
+  const TriangleMesh boxClosed = withHolesClosed(open, &loops);
+  EXPECT_EQ(loops, 1);
+  EXPECT_TRUE(boxClosed.isClosed());
+  EXPECT_NEAR(boxClosed.signedVolume(), 0.006, 1e-8);
+  const TriangleMesh cyl = makeCylinder(0.05, 0.1, 64);
+  const TriangleMesh tube = without(cyl, Vec3::UnitZ());
+  ASSERT_EQ(tube.boundaryEdgeCount(), 128);
+  const TriangleMesh cylClosed = withHolesClosed(tube, &loops);
+  EXPECT_EQ(loops, 2);
+  EXPECT_TRUE(cylClosed.isClosed());
+  EXPECT_NEAR(cylClosed.signedVolume(), cyl.signedVolume(), 1e-9);
+  const TriangleMesh same = withHolesClosed(cyl, &loops);
+  EXPECT_EQ(loops, 0);
+  EXPECT_EQ(same.vertices.size(), cyl.vertices.size());
+  EXPECT_EQ(same.triangles.size(), cyl.triangles.size());
+}
+
 TEST(Contour, ImplicitSphereIsWatertightAndAccurate) {
   Aabb box;
   box.extend(Vec3::Constant(-0.06));

@@ -58,7 +58,8 @@ int runRender(const RenderArgs& args) {
     throw Error("--range must be within the sensor's range [" + std::to_string(camera.min_range_m) +
                 ", " + std::to_string(camera.max_range_m) + "] m");
   auto t0 = Clock::now();
-  TriangleMesh object = loadObject(args.object);
+  // A solid, as every simulated object (runSimulatedScan): the camera does not look into holes.
+  TriangleMesh object = withHolesClosed(loadObject(args.object));
   Aabb box = object.bounds();
   if (box.size().maxCoeff() > 1.0)
     throw Error(args.object + ": the object is " + std::to_string(box.size().maxCoeff()) +

@@ -368,7 +368,12 @@ int runScan(const ScanArgs& given) {
   RobotModel model = RobotModel::load(o.robot);
   if (!(std::isfinite(args.scale) && args.scale > 0))
     throw Error("--scale: must be a positive number, not " + std::to_string(args.scale));
-  TriangleMesh object = loadObject(objectToLoad);
+  // A solid, as the simulator takes it (runSimulatedScan): truth.ply is what was scanned.
+  int holes = 0;
+  TriangleMesh object = withHolesClosed(loadObject(objectToLoad), &holes);
+  if (holes > 0)
+    std::fprintf(stderr, "scan: %s: the mesh is open: %d holes closed (a solid is simulated)\n",
+                 args.object.c_str(), holes);
   if (args.scale != 1.0)
     for (auto& v : object.vertices) v *= float(args.scale);
   const Json restJson = applyRestPose(args, object, &o);

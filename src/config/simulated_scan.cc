@@ -7,10 +7,17 @@
 
 namespace inhand {
 
-SimulatedScan runSimulatedScan(const RobotModel& model, const TriangleMesh& object,
+SimulatedScan runSimulatedScan(const RobotModel& model, const TriangleMesh& mesh,
                                const ScanConfig& o, ScanProgress progress,
                                const SimulatedScanCheckpoints& checkpoints) {
   if (std::string p = o.validate(); !p.empty()) throw Error(p);
+  // The simulated object is a solid: a mesh open where its scanner did not see is closed, so
+  // that the camera cannot look into it (nor the scan fuse its inside as surface).
+  int holes = 0;
+  const TriangleMesh object = withHolesClosed(mesh, &holes);
+  if (holes > 0 && progress.log)
+    progress.log("the object's mesh is open: " + std::to_string(holes) +
+                 " holes closed for the simulation");
   if (o.start != "table" && o.start != "held") throw Error("start: must be table or held");
   // From the table the scan finds out itself (object_too_large_for_volume); held, it cannot.
   if (o.start == "held" && object.bounds().size().maxCoeff() > o.scan.volume_size_m - 0.02)

@@ -147,6 +147,51 @@ TriangleMesh withoutUnusedVertices(const TriangleMesh& mesh) {
   return out;
 }
 
+TriangleMesh withHolesClosed(const TriangleMesh& mesh, int* loops_closed) {
+  // Boundary half-edges: a directed edge whose undirected edge only one triangle uses.
+  std::unordered_map<uint64_t, int> undirected;
+  for (const Tri& f : mesh.triangles)
+    for (int k = 0; k < 3; ++k) {
+      const int a = f[k], b = f[(k + 1) % 3];
+      ++undirected[edgeKey(std::min(a, b), std::max(a, b))];
+    }
+  std::unordered_multimap<int, int> from;  // start vertex → end vertex of each boundary half-edge
+  for (const Tri& f : mesh.triangles)
+    for (int k = 0; k < 3; ++k) {
+      const int a = f[k], b = f[(k + 1) % 3];
+      if (undirected[edgeKey(std::min(a, b), std::max(a, b))] == 1) from.emplace(a, b);
+    }
+  TriangleMesh out = mesh;
+  int closed = 0;
+  // Walk each loop along the triangles' own direction; a vertex where loops touch has several
+  // ways on (any unused one closes a loop). A chain that ends (inconsistently oriented
+  // triangles) is left open.
+  while (!from.empty()) {
+    std::vector<int> loop{from.begin()->first};
+    int at = from.begin()->second;
+    from.erase(from.begin());
+    while (at != loop.front()) {
+      loop.push_back(at);
+      const auto next = from.find(at);
+      if (next == from.end()) break;
+      at = next->second;
+      from.erase(next);
+    }
+    if (at != loop.front() || loop.size() < 3) continue;
+    // A fan about the loop's centroid, turned against the loop (the triangles beside each
+    // boundary edge run along it): the filled surface faces the same way as the rest.
+    Vec3 c = Vec3::Zero();
+    for (int v : loop) c += out.vertices[size_t(v)].cast<double>();
+    const int centre = int(out.vertices.size());
+    out.vertices.push_back((c / double(loop.size())).cast<float>());
+    for (size_t i = 0; i < loop.size(); ++i)
+      out.triangles.push_back(Tri(loop[(i + 1) % loop.size()], loop[i], centre));
+    ++closed;
+  }
+  if (loops_closed) *loops_closed = closed;
+  return out;
+}
+
 std::string validateMesh(const TriangleMesh& mesh) {
   if (mesh.triangles.empty()) return "has no triangles";
   for (const Vec3f& v : mesh.vertices) {

@@ -42,7 +42,8 @@ struct SimulatedScanCheckpoints {
   Json extra;
 };
 
-// `object`: the true mesh (frame O, the model's frame); the seed is config.sim.seed (noise) and
+// `object`: the true mesh (frame O, the model's frame; an open mesh with its holes closed:
+// withHolesClosed); the seed is config.sim.seed (noise) and
 // config.scan.planner.seed (IK). `progress.coverage` is set to the truth's coverage when empty.
 // With checkpoints.resume the scan goes on from the file and ends as the scan that wrote it
 // would have. Throws Error for invalid options, an object larger than the volume when held, or

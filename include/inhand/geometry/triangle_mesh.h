@@ -65,6 +65,13 @@ TriangleMesh welded(const TriangleMesh& mesh, double tolerance_m = 1e-7);
 // mesh cut out of a bigger one keeps, so that its bounds and samples are its triangles'.
 TriangleMesh withoutUnusedVertices(const TriangleMesh& mesh);
 
+// The mesh with each hole (a loop of edges only one triangle uses) closed by a fan of triangles
+// about the loop's centroid, facing the same way as the triangles around it: a scanned mesh open
+// where its scanner could not see (the Stanford bunny's base) as the solid object it stands for,
+// so that a simulated camera cannot look into it. `loops_closed` receives how many holes were
+// closed. A closed mesh comes back unchanged.
+TriangleMesh withHolesClosed(const TriangleMesh& mesh, int* loops_closed = nullptr);
+
 // Points on the surface with outward normals: every vertex (area-weighted face normals), plus a
 // lattice of about `spacing_m` on triangles larger than that (so coarse meshes are covered too).
 struct SurfacePoint {
