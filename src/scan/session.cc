@@ -166,7 +166,7 @@ struct ScanSession::State {
   // aligned, or more seen through): an alignment that slid along what the frame leaves free
   // fits no better than where it began.
   SlipMeasure measureSlip(const DepthImage& depth, const JointVector& q, const Iso3& T_B_C,
-                          const Iso3& T_C_palm) const {
+                          const Iso3& T_C_palm, double gate_m) const {
     const TrackingOptions& o = options.tracking;
     const CameraIntrinsics& K = camera.intrinsics;
     // The robot as the frame shows it (as fusion masks it) hides the model where it is in front.
@@ -177,9 +177,9 @@ struct ScanSession::State {
         robotPixelMask(depth, T_B_C, qSeen, scenes, camera, options.t_hand_m,
                        options.carve_radius_px, /*with_table=*/true, &rect);
     // The model in the palm frame is a body at the palm's pose: its correction is the slip,
-    // looked for within slip_gate_m (farther, the object has fallen or the alignment gone wrong).
+    // looked for within gate_m.
     TrackingOptions near = o;
-    near.gate_m = std::max(o.final_gate_m, std::min(o.gate_m, o.slip_gate_m));
+    near.gate_m = std::max(o.final_gate_m, gate_m);
     const double sigma = axialSigma(noise, T_C_palm.translation().z(), 0);
     SlipMeasure out;
     out.r = alignBodyToDepth(depth, hidden, K, slipPoints, objectOccluders, T_C_palm, sigma, near);
@@ -708,13 +708,23 @@ std::string ScanSession::followSlip(const DepthImage& depth, const JointVector& 
   const TrackingOptions& o = s.options.tracking;
   if (!o.enabled || !o.slip_check || s.slipPoints.size() < size_t(o.min_inliers)) return {};
   const auto t0 = Clock::now();
-  const SlipMeasure slip = s.measureSlip(depth, q, T_B_C, T_C_palm);
+  // A slip is looked for within slip_gate_m (farther, the object has fallen or the alignment
+  // gone wrong); while one goes on, within the tracking's own gate: an object sliding on in
+  // the hand may have gone farther since the last frame that showed it.
+  const double gate = std::min(o.gate_m, o.slip_gate_m);
+  SlipMeasure slip = s.measureSlip(depth, q, T_B_C, T_C_palm, gate);
+  if (!slip.r.ok && s.slipping && o.gate_m > gate)
+    slip = s.measureSlip(depth, q, T_B_C, T_C_palm, o.gate_m);
   s.summary.tracking_s += secondsSince(t0);
   const bool graspMoved = s.slipping && !s.slipFrom.isApprox(s.T_O_palm, 1e-12);
   if (!slip.r.ok) {
     // Not aligned: while a slip that moved the grasp goes on, the frame cannot show where the
-    // object is; otherwise the frame checks decide (an unconfirmed slip is dropped).
-    if (graspMoved) return "the object moving in the hand (" + slip.r.reason + ")";
+    // object is. While one is suspected (a frame before showed the object moving), a frame whose
+    // points contradict every pose tried (seen through, a residual too large) does not show it
+    // back where the hand holds it; one with too few points to align shows nothing either way.
+    // Not fused; otherwise the frame checks decide.
+    if (graspMoved || (s.slipping && slip.r.inliers >= o.min_inliers))
+      return "the object moving in the hand (" + slip.r.reason + ")";
     closeSlip();
     return {};
   }
