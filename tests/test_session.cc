@@ -11,6 +11,8 @@
 #include "inhand/geometry/builtin_objects.h"
 #include "inhand/geometry/stable_poses.h"
 #include "inhand/mesh/extract.h"
+#include "inhand/scan/multi_grasp.h"
+#include "inhand/scan/scan.h"
 #include "inhand/scan/session.h"
 #include "inhand/scan/table_top.h"
 #include "inhand/sim/sim_world.h"

@@ -2,6 +2,7 @@
 // inhand: every public header of the library (link inhand::inhand).
 #include "inhand/config/scan_config.h"
 #include "inhand/config/simulated_scan.h"
+#include "inhand/core/clock.h"
 #include "inhand/core/error.h"
 #include "inhand/core/fast_math.h"
 #include "inhand/core/file_util.h"
@@ -34,6 +35,7 @@
 #include "inhand/robot/reachability.h"
 #include "inhand/robot/robot_interface.h"
 #include "inhand/robot/robot_model.h"
+#include "inhand/robot/robot_scenes.h"
 #include "inhand/robot/wrench.h"
 #include "inhand/scan/checkpoint.h"
 #include "inhand/scan/multi_grasp.h"
@@ -41,6 +43,7 @@
 #include "inhand/scan/session.h"
 #include "inhand/scan/table_top.h"
 #include "inhand/scan/tracking.h"
+#include "inhand/scan/types.h"
 #include "inhand/sensor/depth_camera.h"
 #include "inhand/sensor/depth_image.h"
 #include "inhand/sensor/depth_sensor.h"

@@ -8,6 +8,7 @@
 #include <unistd.h>
 
 #include "inhand/config/scan_config.h"
+#include "inhand/core/clock.h"
 #include "inhand/core/error.h"
 #include "inhand/core/file_util.h"
 #include "inhand/core/json_util.h"
@@ -32,11 +33,6 @@ namespace inhand::app {
 namespace fs = std::filesystem;
 
 namespace {
-
-using Clock = std::chrono::steady_clock;
-double secondsSince(Clock::time_point t0) {
-  return std::chrono::duration<double>(Clock::now() - t0).count();
-}
 
 // Progress on the terminal: rewritten in place on a TTY, every 10th step otherwise.
 void progress(const char* what, size_t done, size_t total) {

@@ -1,5 +1,5 @@
 // The `inhand` command line. CLI11 is included in this translation unit only (it is slow to
-// compile); the commands live in commands.cc.
+// compile); the commands live in commands.cc. One function per subcommand declares its options.
 #include <CLI/CLI.hpp>
 #include <cstdio>
 #include <new>
@@ -7,11 +7,11 @@
 #include "commands.h"
 #include "inhand/core/error.h"
 
-int main(int argc, char** argv) {
-  CLI::App app{"inhand: autonomous in-hand 3D modelling of unknown objects (Krainin et al. 2011)"};
-  app.require_subcommand(1);
+namespace {
 
-  inhand::app::RenderArgs render;
+using namespace inhand::app;
+
+CLI::App* addRender(CLI::App& app, RenderArgs& render) {
   auto* r = app.add_subcommand("render", "render noisy depth images of an object from all around");
   r->add_option("--object", render.object, "builtin:NAME or a mesh file (OBJ, PLY, STL, ...)")
       ->required();
@@ -26,9 +26,10 @@ int main(int argc, char** argv) {
                 "(0: none)")
       ->capture_default_str();
   r->add_flag("!--no-noise", render.noise, "render exact depths (no sensor noise)");
+  return r;
+}
 
-  inhand::app::FuseArgs fuse;
-  std::vector<double> bounds;
+CLI::App* addFuse(CLI::App& app, FuseArgs& fuse, std::vector<double>& bounds) {
   auto* f = app.add_subcommand("fuse", "fuse a directory of depth frames into a model");
   f->add_option("--frames", fuse.frames, "directory with frames.json and depth PNGs")->required();
   f->add_option("--out", fuse.out, "output model, .ply")->required();
@@ -69,29 +70,38 @@ int main(int argc, char** argv) {
                 "closed: the model closed over what was never seen (hole-filled, red); observed: "
                 "the measured surface alone (an open mesh)")
       ->capture_default_str();
+  return f;
+}
 
-  inhand::app::SnapshotArgs snap;
+CLI::App* addSnapshot(CLI::App& app, SnapshotArgs& snap) {
   auto* s =
       app.add_subcommand("snapshot", "render a model (PLY with colours or variance) to a PNG");
   s->add_option("model", snap.model, "model .ply, mesh file or builtin:NAME")->required();
   s->add_option("--out", snap.out, "output PNG")->required();
   s->add_option("--size", snap.size_px, "pixels per view")->capture_default_str();
+  return s;
+}
 
-  std::string compareModel, compareTruth;
-  double compareVariance = 1e-4;
-  bool compareJson = false;
+struct CompareArgs {
+  std::string model, truth;
+  double variance = 1e-4;
+  bool json = false;
+};
+
+CLI::App* addCompare(CLI::App& app, CompareArgs& a) {
   auto* cmp = app.add_subcommand(
       "compare", "score a model against the true surface: coverage, accuracy, F-scores");
-  cmp->add_option("model", compareModel, "the model: PLY (with per-vertex variance) or a mesh")
+  cmp->add_option("model", a.model, "the model: PLY (with per-vertex variance) or a mesh")
       ->required();
-  cmp->add_option("--truth", compareTruth, "the true surface: builtin:NAME or a mesh file")
-      ->required();
-  cmp->add_option("--observed-variance", compareVariance,
+  cmp->add_option("--truth", a.truth, "the true surface: builtin:NAME or a mesh file")->required();
+  cmp->add_option("--observed-variance", a.variance,
                   "vertices with a variance at or above this (m²) are hole-filled, not observed")
       ->capture_default_str();
-  cmp->add_flag("--json", compareJson, "print JSON");
+  cmp->add_flag("--json", a.json, "print JSON");
+  return cmp;
+}
 
-  inhand::app::RobotArgs robot;
+CLI::App* addRobot(CLI::App& app, RobotArgs& robot) {
   auto* rb = app.add_subcommand("robot", "check a robot: chain, limits, speeds, reachability map");
   rb->add_option("--config", robot.config, "robot config JSON (names the URDF)")->required();
   rb->add_option("--urdf", robot.urdf, "URDF file (default: the one the config names)");
@@ -100,8 +110,10 @@ int main(int argc, char** argv) {
   rb->add_option("--rolls", robot.rolls, "rolls tried per direction")->capture_default_str();
   rb->add_option("--grid", robot.grid, "grid x grid object positions")->capture_default_str();
   rb->add_option("--range", robot.range_m, "camera-to-object distance, m")->capture_default_str();
+  return rb;
+}
 
-  inhand::app::ScanArgs scan;
+CLI::App* addScan(CLI::App& app, ScanArgs& scan) {
   auto* sc = app.add_subcommand("scan", "simulated autonomous scan of an object held by the robot");
   std::vector<CLI::Option*> scanOptions;
   scanOptions.push_back(sc->add_option("--object", scan.object, "builtin:NAME or a mesh file"));
@@ -151,8 +163,10 @@ int main(int argc, char** argv) {
                      "DIR: go on with the interrupted scan in DIR (its checkpoint.inhand), "
                      "with the options it was started with");
   for (CLI::Option* o : scanOptions) resume->excludes(o);
+  return sc;
+}
 
-  inhand::app::EvalArgs eval;
+CLI::App* addEval(CLI::App& app, EvalArgs& eval, CLI::Option** backendOpt) {
   auto* ev = app.add_subcommand(
       "eval", "scan objects with several view planners and seeds; tabulate against ground truth");
   std::vector<CLI::Option*> evalPlan;
@@ -176,11 +190,11 @@ int main(int argc, char** argv) {
                  "runs at a time (local: 0 = one per core; slurm: array tasks at once, 0 = no "
                  "limit)")
       ->capture_default_str();
-  auto* backendOpt = ev->add_option("--backend", eval.backend,
-                                    "local: runs on this machine; slurm: one Slurm job array "
-                                    "(the output directory must be on a file system the nodes "
-                                    "share)")
-                         ->capture_default_str();
+  *backendOpt = ev->add_option("--backend", eval.backend,
+                               "local: runs on this machine; slurm: one Slurm job array "
+                               "(the output directory must be on a file system the nodes "
+                               "share)")
+                    ->capture_default_str();
   ev->add_option("--slurm-args", eval.slurm_args,
                  "extra sbatch options, e.g. \"--partition=cpu --time=01:00:00 --mem=4G "
                  "--cpus-per-task=2\"");
@@ -190,6 +204,30 @@ int main(int argc, char** argv) {
                                     "DIR: run again what did not finish in the eval DIR "
                                     "(interrupted scans go on from their checkpoints)");
   for (CLI::Option* o : evalPlan) evalResume->excludes(o);
+  return ev;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"inhand: autonomous in-hand 3D modelling of unknown objects (Krainin et al. 2011)"};
+  app.require_subcommand(1);
+  RenderArgs render;
+  FuseArgs fuse;
+  std::vector<double> bounds;
+  SnapshotArgs snap;
+  CompareArgs compare;
+  RobotArgs robot;
+  ScanArgs scan;
+  EvalArgs eval;
+  CLI::Option* backendOpt = nullptr;
+  auto* r = addRender(app, render);
+  auto* f = addFuse(app, fuse, bounds);
+  auto* s = addSnapshot(app, snap);
+  auto* cmp = addCompare(app, compare);
+  auto* rb = addRobot(app, robot);
+  auto* sc = addScan(app, scan);
+  auto* ev = addEval(app, eval, &backendOpt);
 
   std::string taskDir, taskList;
   auto* et = app.add_subcommand("eval-task", "one run of an eval, as a Slurm array task");
@@ -227,7 +265,7 @@ int main(int argc, char** argv) {
     if (*cf) return inhand::app::runConfig(configFile, configReference);
     if (*rb) return inhand::app::runRobot(robot);
     if (*cmp)
-      return inhand::app::runCompare(compareModel, compareTruth, compareVariance, compareJson);
+      return inhand::app::runCompare(compare.model, compare.truth, compare.variance, compare.json);
     if (*s) return inhand::app::runSnapshot(snap);
     if (*r) return inhand::app::runRender(render);
     if (*f) {

@@ -231,38 +231,6 @@ bool NearHandGrid::anyNear(const Aabb& box) const {
   return false;
 }
 
-// ---- robot occluders ----------------------------------------------------------------------------
-
-RobotOccluders::RobotOccluders(const RobotModel& model) : model_(&model) {
-  for (int li = 0; li < int(model.links().size()); ++li) {
-    const auto& col = model.links()[li].collision;
-    if (col.empty()) continue;
-    TriangleMesh m;
-    for (const Primitive& p : col) m.append(p.toMesh());
-    auto scene = std::make_unique<RayScene>();
-    scene->addMesh(m);
-    scene->commit();
-    solid_.push_back(m.isWatertight() && m.signedVolume() > 0);
-    links_.push_back(li);
-    scenes_.push_back(std::move(scene));
-  }
-  table_ = std::make_unique<RayScene>();
-  table_->addMesh(makeBox(model.table().size));
-  table_->commit();
-}
-
-std::vector<Occluder> RobotOccluders::at(const JointVector& q, const Iso3& T_O_B,
-                                         bool with_table) const {
-  std::vector<Iso3> T = model_->linkPoses(q);
-  std::vector<Occluder> out;
-  for (size_t k = 0; k < links_.size(); ++k)
-    out.push_back({scenes_[k].get(), T_O_B * T[links_[k]], solid_[k] != 0});
-  if (with_table)
-    out.push_back(
-        {table_.get(), T_O_B * Iso3(Eigen::Translation3d(model_->table().center_B)), true});
-  return out;
-}
-
 // ---- quality ------------------------------------------------------------------------------------
 
 ViewQualityScene::ViewQualityScene(const ObjectModel& model, const DepthCameraOptions& camera,

@@ -11,6 +11,7 @@
 #include <fstream>
 #include <limits>
 
+#include "inhand/core/clock.h"
 #include "inhand/core/error.h"
 #include "inhand/core/file_util.h"
 #include "inhand/core/json_util.h"
@@ -20,13 +21,6 @@
 #include "inhand/sensor/render.h"
 
 namespace inhand {
-
-namespace {
-using Clock = std::chrono::steady_clock;
-double secondsSince(Clock::time_point t) {
-  return std::chrono::duration<double>(Clock::now() - t).count();
-}
-}  // namespace
 
 namespace {
 // How far a surface moves under `T` as a depth frame can tell: the RMS of its points' motion

@@ -16,6 +16,7 @@
 #include "inhand/geometry/ray_scene.h"
 #include "inhand/mesh/extract.h"
 #include "inhand/robot/collision.h"
+#include "inhand/robot/robot_scenes.h"
 #include "inhand/sensor/depth_camera.h"
 #include "inhand/sensor/noise_model.h"
 
@@ -88,30 +89,6 @@ class NearHandGrid {
   Vec3i dims_ = Vec3i::Zero();
   bool flag(int x, int y, int z) const;  // cell (x, y, z) is near
   std::vector<uint64_t> bits_;           // a bit per cell, x fastest, then y, then z
-};
-
-// A committed scene placed in the object frame: something that can block the view of S_obj.
-struct Occluder {
-  const RayScene* scene;
-  Iso3 T_O_scene;
-  // Every mesh of the scene is watertight and outward-facing: the rasteriser may skip its back
-  // faces when the camera is outside it.
-  bool solid = false;
-};
-
-// One robot's links as Embree scenes in their link frames, built once and instanced per view.
-class RobotOccluders {
- public:
-  explicit RobotOccluders(const RobotModel& model);
-  // Every link with geometry at q, and the table, placed in frame O by T_O_B.
-  std::vector<Occluder> at(const JointVector& q, const Iso3& T_O_B, bool with_table = true) const;
-
- private:
-  const RobotModel* model_;
-  std::vector<int> links_;
-  std::vector<std::unique_ptr<RayScene>> scenes_;
-  std::vector<uint8_t> solid_;  // per link scene: watertight with positive volume
-  std::unique_ptr<RayScene> table_;
 };
 
 // S_obj (mesh + variances) ready for many evaluations. Thread-safe after construction.

@@ -23,7 +23,7 @@
 
 #include "inhand/core/json_util.h"
 #include "inhand/robot/robot_interface.h"
-#include "inhand/scan/multi_grasp.h"
+#include "inhand/scan/types.h"
 #include "inhand/sensor/depth_sensor.h"
 
 namespace inhand {

@@ -9,6 +9,12 @@
 
 namespace inhand {
 
+// Pixels [u0, u1) × [v0, v1) of an image.
+struct PixelRect {
+  int u0 = 0, v0 = 0, u1 = 0, v1 = 0;
+  bool empty() const { return u0 >= u1 || v0 >= v1; }
+};
+
 struct DepthImage {
   int width = 0;
   int height = 0;

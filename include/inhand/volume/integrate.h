@@ -25,12 +25,6 @@ struct IntegrationStats {
   int64_t updated = 0;  // voxels whose state or sums changed
 };
 
-// Pixels [u0, u1) × [v0, v1) of an image.
-struct PixelRect {
-  int u0 = 0, v0 = 0, u1 = 0, v1 = 0;
-  bool empty() const { return u0 >= u1 || v0 >= v1; }
-};
-
 // The pixels a volume's voxels can project to from camera pose T_O_C (the image rectangle of
 // its eight corners, a pixel wider each side, clipped to the image); the whole image when a
 // corner lies behind the camera. integrate() reads no pixel outside it.

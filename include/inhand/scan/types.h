@@ -1,0 +1,315 @@
+#pragma once
+// The scan's own types: its options (ScanOptions, MultiGraspOptions, TableTopOptions), the
+// records it keeps (views, slips, pick-up attempts, grasps, the table-top stage), how it ends
+// (Termination) and what it hands back (ScanResult, MultiGraspResult). The session
+// (scan/session.h) and the drivers over it (scan/scan.h, scan/multi_grasp.h) share them.
+#include <functional>
+#include <limits>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "inhand/core/json_util.h"
+#include "inhand/grasp/grasp.h"
+#include "inhand/mesh/extract.h"
+#include "inhand/planning/view_selection.h"
+#include "inhand/robot/robot_interface.h"
+#include "inhand/robot/robot_scenes.h"
+#include "inhand/scan/tracking.h"
+#include "inhand/sensor/depth_sensor.h"
+#include "inhand/volume/integrate.h"
+
+namespace inhand {
+
+// How measurements near the robot's own hand are used (paper Fig. 3).
+enum class HandMode {
+  kNaive,          // (a) all measurements add surface
+  kCarveOnly,      // (b) measurements within t_hand of the robot only carve free space
+  kCarveAndEmpty,  // (c) as (b), and voxels inside the hand are marked empty
+};
+std::string handModeName(HandMode m);
+bool parseHandMode(const std::string& s, HandMode* out);
+
+struct ScanCheckpoint;
+class ScanSession;
+
+// Why a scan (or one grasp's views) ended.
+enum class Termination {
+  kRunning,                  // not ended
+  kNoViewAboveThreshold,     // no reachable view reaches t_q (Alg. 1)
+  kMaxViews,                 // the grasp's view limit
+  kNoReachableView,          // the arm reaches no view with this grasp
+  kMaxGrasps,                // the grasp limit
+  kRegraspUnsupported,       // the robot cannot put the object down
+  kNoReachableGrasp,         // no grasp candidate is stable, clear of the table and reachable
+  kNoGraspAboveThreshold,    // no candidate promises a view above t_q
+  kPickUpFailed,             // no candidate picked the object up and held it (first grasp)
+  kObjectOutOfView,          // the camera cannot aim at the rest pose
+  kObjectNotFound,           // too few points above the table near the rest pose
+  kObjectTooLargeForHand,    // the open hand spans none of its extents
+  kObjectTooLargeForVolume,  // larger than options.volume_size_m
+  kNoStableGrasp,            // no first-grasp pose is force closure
+  kInterrupted,              // the caller stopped it (ScanProgress::interrupted, e.g. SIGINT)
+  kObjectLost,               // in-hand frames stopped showing the object where the hand held it
+  kRegraspFailed,            // a re-grasp's pick-ups failed (grasp.max_failed_pick_ups)
+};
+// snake_case names as summary.json writes them (no_view_above_threshold, …; running).
+std::string terminationName(Termination t);
+bool parseTermination(const std::string& s, Termination* out);
+
+// What ScanSession::addFrame refuses to fuse, as real sensors and arms deliver it now and then.
+// A refused frame is counted (Summary) and reported (FrameReport::rejected); the scan goes on.
+struct FrameChecks {
+  // An empty image (0 x 0) is a dropped frame; non-finite or negative depths are no return.
+  double min_valid_fraction = 0.002;  // fewer valid pixels than this: an empty frame
+  // Reported joints farther than this (rad, any arm joint) from the view's planned path: a
+  // jump in the joint states, not a pose to fuse with (0: no check).
+  double max_path_deviation_rad = 0.05;
+  // The object must be where the hand holds it: of the model's measured surface points in view
+  // (at least min_points of them), the fraction the frame bears out (within 2 cm; against: seen
+  // more than 3 cm behind) must reach min_support, or the frame is not fused; lost_after such
+  // frames in a row end the grasp's views with object_lost (0: no check).
+  double min_support = 0.2;
+  int min_points = 100;
+  int lost_after = 3;
+  // Of the frame's depth pixels (every 2nd row and column, not the robot's) that land in the
+  // volume, at most this fraction may land where the model knows space is empty (seen through
+  // before), or the frame is not fused (1: no check).
+  double max_free_space_fraction = 0.2;
+  std::string validate() const;
+};
+
+struct ScanOptions {
+  double voxel_m = 0.002;       // volume voxel size, m
+  double volume_size_m = 0.34;  // edge of the cubic volume around the grasped object, m
+  // From the table (scanFromTable): fit the volume to the object seen there, a cube of 1.5 times
+  // its largest extent + 4 cm (at most volume_size_m) with as many voxels across as
+  // volume_size_m / voxel_m (the same cost; finer voxels for smaller objects).
+  bool fit_volume = true;
+  double t_hand_m = 0.01;   // measurements this close to the robot only carve (§IV), m
+  int carve_radius_px = 2;  // … this close to it in the image, too (lateral noise), pixels
+  // In the hand, a pixel next to one farther by more than this is not fused (a silhouette: its
+  // return may come from across the edge); 0: off. m
+  double edge_jump_m = 0.02;
+  HandMode hand_mode = HandMode::kCarveAndEmpty;
+  int initial_views = 4;    // the simple initial trajectory: this many directions
+  int max_views = 20;       // Alg. 1 views per grasp at most (after the initial ones)
+  int planning_stride = 2;  // S_obj for planning from every n-th voxel (output: full res)
+  // S_obj for planning by surface nets (a fifth of the triangles to ray cast; output: tetrahedra)
+  SurfaceMethod planning_method = SurfaceMethod::kSurfaceNets;
+  ViewPlannerOptions planner;
+  TrackingOptions tracking;  // in-hand frames aligned with hand and model (arm error, §II)
+  FrameChecks checks;        // in-hand frames that are not fused
+  MeshOptions mesh;
+  // Memory budget, truncation, the reach behind each measurement and depth smoothing (voxel size
+  // above wins). Scans and `inhand fuse` keep thin walls: band_sigmas 2 behind each pixel's
+  // smoothed surface, voxels updated from it (docs/volume.md).
+  VolumeOptions volume_budget = [] {
+    VolumeOptions o;
+    o.band_sigmas = 2.0;
+    o.smooth_depth = true;
+    return o;
+  }();
+  std::string validate() const;
+};
+
+struct ViewRecord {
+  bool initial = false;  // part of the initial trajectory (not chosen by Alg. 1)
+  Vec3 dir_O = Vec3::Zero();
+  Iso3 T_O_C = Iso3::Identity();  // the chosen camera pose in the object frame
+  double quality = 0, cost_s = 0, score = 0;
+  // eq. 9 gain the planner predicted for the view (nats·m²; for a baseline, computed under the
+  // relative rule) and the threshold in force; NaN when unknown (initial views).
+  double gain = std::numeric_limits<double>::quiet_NaN();
+  double t_q = std::numeric_limits<double>::quiet_NaN();
+  // Information the model leaves unresolved after the view (ObjectModel::unresolvedInformation at
+  // the sensor's σ at the view range), nats·m²: the drop from the view before is the realised
+  // gain, in eq. 9's units.
+  double unresolved = 0;
+  double mean_entropy = 0;  // of the model after the view's frames
+  double observed_fraction = 0;
+  double coverage = -1;  // of the true surface after the view (ScanProgress::coverage), −1: unknown
+  int frames = 0;        // depth frames fused along the way
+  int candidates = 0;    // quality evaluations in the Alg. 1 pass that chose it
+  double planning_s = 0;
+};
+
+// The object moved in the hand during a grasp's views (TrackingOptions::slip_check): found in
+// the frames, the grasp corrected from then on.
+struct SlipRecord {
+  int grasp = 0, view = 0;  // 0-based; the view counted over every grasp
+  // The motion of the model in the hand from the last frame that showed it at rest to the first
+  // that showed it at rest again: RMS over its observed points, and the turn.
+  double moved_m = 0, turned_rad = 0;
+  int frames = 0;        // frames not fused while it moved
+  bool settled = false;  // a frame showed it at rest again (false: the views ended first)
+};
+
+// Slip records in summary.json and checkpoints (moved_mm, turned_deg); slipsFrom throws Error on
+// a malformed list.
+Json slipsJson(const std::vector<SlipRecord>& slips);
+std::vector<SlipRecord> slipsFrom(const Json& j);
+
+// What one added frame did.
+struct FrameReport {
+  bool fused = true;  // false: tracking could not align it (not fused; `rejected` says why)
+  std::string rejected;
+  int pixels = 0;        // valid depth pixels
+  int carve_pixels = 0;  // of those, only carving (the robot's own where the volume is in view,
+                         // or the caller's mask)
+  Iso3 T_B_C = Iso3::Identity();  // the camera pose it was fused with (tracked, or as given)
+  int tracking_inliers = 0;       // points aligned with the frame (tracking)
+  int tracking_hand_inliers = 0, tracking_hand_see_through = 0;  // of the hand's
+  double tracking_rms_m = 0;
+  double seconds = 0;
+};
+
+struct ScanProgress {
+  std::function<void(const std::string&)> log;  // one line per event (may be empty)
+  // Ground-truth coverage of a model (set when the object's true mesh is known): recorded in
+  // each view's record after its frames.
+  std::function<double(const ObjectModel&)> coverage;
+  // Each in-hand frame as ScanSession::addFrame handled it, with the joints and the camera pose
+  // it was given (may be empty).
+  std::function<void(const FrameReport&, const JointVector& q, const Iso3& T_B_C)> frame;
+  // Each in-hand frame as given to ScanSession::addFrame, before any check: what a robot
+  // delivers, for recording it (`inhand scan --save-frames`). May be empty.
+  std::function<void(const ScanSession&, const DepthImage&, const JointVector& q,
+                     const Iso3& T_B_C)>
+      frame_input;
+  // Asked before each step and at every frame: true ends the scan at the next frame with
+  // Termination::kInterrupted and the model so far (frames after it are not fused). For a
+  // SIGINT handler's flag; may be empty.
+  std::function<bool()> interrupted;
+  // Called at every point a scan can resume from (scan/checkpoint.h): when a grasp's views begin
+  // and after each view. May be empty.
+  std::function<void(const ScanCheckpoint&)> checkpoint;
+  bool stopRequested() const { return interrupted && interrupted(); }
+};
+
+struct ScanResult {
+  ObjectModel model;           // final S_obj, object frame
+  ObjectModel planning_model;  // the same at the planning stride (what Alg. 1 would see next)
+  std::vector<ViewRecord> views;
+  Termination termination = Termination::kRunning;
+  int view_evaluations = 0;  // candidates scored by Alg. 1 (coarse pre-screen or full)
+  int view_refinements = 0;  // of those, scored at full resolution
+  double planning_s = 0, fusion_s = 0, total_s = 0;
+  double tracking_s = 0;  // aligning in-hand frames (ScanOptions::tracking), apart from fusion_s
+  int frames = 0;
+  // In-hand frames not fused (ScanSession::Summary): tracking could not align them; dropped or
+  // empty; joints off the planned path; the object not in the hand. And frames repaired.
+  int frames_rejected = 0, frames_dropped = 0, frames_off_path = 0, frames_unsupported = 0,
+      frames_repaired = 0, frames_in_free_space = 0;
+  int frames_moving = 0;  // not fused: the object moved in the hand (TrackingOptions::slip_check)
+  std::vector<SlipRecord> slips;
+};
+
+// The volume a scan centred at centre_O uses.
+TsdfVolume makeScanVolume(const Vec3& centre_O, const ScanOptions& options);
+
+// The table-top stage (paper §V): the object starts on the table, unknown.
+struct TableTopOptions {
+  int frames = 3;              // depth frames taken of it there (fused; the table hides the bottom)
+  double aim_height_m = 0.05;  // the camera aims this far above the rest pose's origin, m
+  double search_radius_m = 0.25;  // object points lie within this of the rest pose (horizontal), m
+  double above_table_m = 0.008;   // … and at least this far above the fitted table plane, m
+  double cluster_cell_m = 0.01;   // the object is the largest cluster at this linking cell, m
+  int min_points = 200;           // fewer object points than this: object_not_found
+  PlaneFitOptions plane;          // RANSAC of the table plane
+  std::string validate() const;
+};
+
+// One pick-up attempt: the candidate tried and what became of it.
+struct PickAttempt {
+  // picked (it held after the lift), no_contact (the hand met nothing), empty_hand (the fingers
+  // closed on nothing), dropped (the lift's frame did not show it in the hand)
+  std::string outcome;
+  int rank = 0;          // the candidate's place in the ranking it was tried from (0: the first)
+  int pose = -1;         // its index among the poses generated (GraspCandidate::pose)
+  int hold_test = -1;    // the hold test's verdict on the model: 1 held, 0 not, -1 untested
+  int hold_margin = -1;  // … and with its margin (GraspCandidate::hold_margin)
+  // Where it failed the hold test (HoldTrial::failure: dropped_in_lift, dropped_in_turn,
+  // slipped, not_touching; empty when it held or was not tested).
+  std::string hold_failure;
+  bool palm_contact = false;  // enveloping (the palm touches) or fingertips only
+  double epsilon = 0;         // its force-closure ε
+  // After the lift: how far the object sat in the hand from the planned grasp (−1: not seen).
+  double shift_m = -1;
+};
+Json attemptsJson(const std::vector<PickAttempt>& attempts);
+// Throws Error on a malformed list; a list of outcome strings (older checkpoints) is read too.
+std::vector<PickAttempt> attemptsFrom(const Json& j);
+int countOutcome(const std::vector<PickAttempt>& attempts, const std::string& outcome);
+
+// What the table-top stage saw and chose.
+struct TableTopRecord {
+  int frames = 0;
+  int points = 0;         // measured points near the rest pose
+  int table_inliers = 0;  // of those, on the fitted plane
+  int object_points = 0;  // above it
+  Plane table_O;          // the fitted table plane, frame O
+  PrincipalAxes axes;     // of the object points, frame O
+  // First-grasp candidates (generateGrasps on the table-top model): poses tried, those whose
+  // closed hand touches with two links or more, of those force closure, clear of the table, and
+  // reachable; then the pick-up attempts in order (picked, no_contact, empty_hand, dropped).
+  int tried = 0, touching = 0, stable = 0, table_free = 0, reachable = 0;
+  std::vector<GraspPoseRecord> poses;     // every pose tried and what became of it
+  double volume_size_m = 0, voxel_m = 0;  // the volume as fitted to the object
+  std::vector<PickAttempt> attempts;
+  double seconds = 0;
+};
+
+struct MultiGraspOptions {
+  int max_grasps = 3;  // grasps in all (1: the single-grasp scan)
+  TableTopOptions table_top;
+  GraspOptions grasp;
+  // Alg. 1 as used to rank grasp candidates: coarser than the view planner's (fewer directions
+  // and rolls, every 4th pixel), since it runs once per candidate.
+  ViewPlannerOptions ranking = defaultRankingPlanner();
+  int keep_ranked = 12;  // candidates kept per grasp in its record (for the report)
+  static ViewPlannerOptions defaultRankingPlanner();
+  std::string validate() const;
+};
+
+// A ranked candidate as the report shows it.
+struct RankedGrasp {
+  Iso3 T_O_palm = Iso3::Identity();
+  JointVector q;  // hand closed to contact
+  double quality = 0, epsilon = 0;
+};
+
+struct GraspRecord {
+  Iso3 T_O_palm = Iso3::Identity();
+  JointVector q;  // the robot's joints when the grasp's views began (hand as it holds the object)
+  int candidates = 0;  // ranked candidates this grasp was chosen from (0: the first grasp)
+  int tried = 0;       // candidate poses tried
+  double quality = 0;  // its best view quality when ranked
+  double t_q = 0;      // the threshold that quality passed (relative rule: scaled by the area)
+  double model_area_m2 = 0;                         // of the planning model it was ranked on
+  double epsilon = 0;                               // its stability (Ferrari–Canny ε)
+  int views = 0;                                    // views taken with it
+  Termination termination = Termination::kRunning;  // why its views ended
+  double hole_area_m2 = 0;  // σ = 5 cm (unknown) area of the model after its views
+  double mean_entropy = 0;  // of the model after its views
+  double generation_s = 0, ranking_s = 0;
+  std::vector<RankedGrasp> ranked;    // the best candidates it was chosen from, best first
+  std::vector<PickAttempt> attempts;  // pick-up attempts, the last the one that held
+  ObjectModel model;                  // the model after its views (at the planning stride)
+};
+
+struct MultiGraspResult {
+  ScanResult scan;  // views of all grasps, model, timings; termination of the whole scan
+  std::vector<GraspRecord> grasps;
+  // The grasp planning that led to no further grasp (no candidate above t_q, none reachable or
+  // none picked up): its time is in no GraspRecord.
+  double unused_generation_s = 0, unused_ranking_s = 0;
+  // The attempts of a re-grasp that never held (regrasp_failed, object_lost): no GraspRecord
+  // carries them.
+  std::vector<PickAttempt> failed_regrasp_attempts;
+  // After each put-down, the residual (RMS, m) of the model registered where the object rests.
+  std::vector<double> refind_residuals_m;
+  std::optional<TableTopRecord> table_top;  // when the scan began with the object on the table
+};
+
+}  // namespace inhand
