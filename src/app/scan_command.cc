@@ -116,7 +116,8 @@ Json applyRestPose(const ScanArgs& args, const TriangleMesh& object, ScanConfig*
 void writeModels(const fs::path& dir, const RobotModel& model, const TriangleMesh& object,
                  const MultiGraspResult& mr) {
   const ScanResult& r = mr.scan;
-  writePly(dir / "model.ply", r.model.mesh, &r.model.variance);
+  writePly(dir / "model.ply", r.model.mesh, &r.model.variance,
+           r.model.rgba.empty() ? nullptr : &r.model.rgba);
   writePly(dir / "truth.ply", object);  // the simulated object, frame O
   // Per grasp: the model after its views, the hand as it held the object, the best candidates.
   fs::create_directories(dir / "grasps");
@@ -370,7 +371,19 @@ int runScan(const ScanArgs& given) {
     throw Error("--scale: must be a positive number, not " + std::to_string(args.scale));
   // A solid, as the simulator takes it (runSimulatedScan): truth.ply is what was scanned.
   int holes = 0;
-  TriangleMesh object = withHolesClosed(loadObject(objectToLoad), &holes);
+  // With the colour camera: the object's colours from its file (OBJ + MTL + PNG, PLY colours),
+  // a built-in object's checkerboard, or flat grey.
+  SurfaceColours colours;
+  TriangleMesh loaded;
+  if (o.sim.colour.enabled && !isBuiltinSpec(objectToLoad)) {
+    TexturedMesh t = importTexturedMesh(objectToLoad);
+    loaded = std::move(t.mesh);
+    colours = std::move(t.colours);
+  } else {
+    loaded = loadObject(objectToLoad);
+    if (o.sim.colour.enabled) colours = checkerColours(loaded, kBuiltinCheckerSquare_m);
+  }
+  TriangleMesh object = withHolesClosed(loaded, &holes);
   if (holes > 0)
     std::fprintf(stderr, "scan: %s: the mesh is open: %d holes closed (a solid is simulated)\n",
                  args.object.c_str(), holes);
@@ -417,7 +430,7 @@ int runScan(const ScanArgs& given) {
     progress.frame_input = [&](const ScanSession& s, const DepthImage& d, const JointVector& q,
                                const Iso3& T_B_C) { recorder->add(s, d, q, T_B_C); };
   }
-  const SimulatedScan sim = runSimulatedScan(model, object, o, progress, checkpoints);
+  const SimulatedScan sim = runSimulatedScan(model, object, o, progress, checkpoints, colours);
   if (recorder && !recorder->finish())
     std::fprintf(stderr, "scan: --save-frames: no in-hand frame to save\n");
   const bool interrupted = sim.result.scan.termination == Termination::kInterrupted;
@@ -445,6 +458,14 @@ int runScan(const ScanArgs& given) {
   summary["fscore"] = fs;
   summary["detached_area_m2"] = sm.detached_area_m2;
   summary["detached_pieces"] = sm.detached_pieces;
+  if (sim.camera.colour.enabled)
+    summary["colour"] = {
+        {"vertices_compared", sim.colour.vertices},
+        {"delta_e76_mean", sim.colour.delta_e_mean},
+        {"delta_e76_p95", sim.colour.delta_e_p95},
+        {"pixels_fused", r.colour_pixels},
+        {"fusion_s", r.colour_s},
+        {"fusion_ms_per_frame", r.frames > 0 ? 1000 * r.colour_s / r.frames : 0.0}};
   summary["trajectory_s"] = views.empty() ? 0.0 : views.back()["trajectory_s"].get<double>();
   summary["views"] = views;
   summary["grasps"] = graspsJson(mr);

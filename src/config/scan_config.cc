@@ -264,6 +264,16 @@ void visitConfig(V& v, ScanConfig& c) {
     o.integer("frame_subsample", c.sim.frame_subsample,
               "deliver every n-th sensor frame to the scan (1: all)");
     o.boolean("noise", c.sim.noise, "sensor noise");
+    o.object("colour", "a colour camera beside the depth camera (Kinect-class, 640x480)",
+             [&](V& k) {
+               SimColourOptions& x = c.sim.colour;
+               k.boolean("enabled", x.enabled, "render colour images and fuse their colours");
+               k.num("ambient", x.ambient,
+                     "lit fraction where the lamp at the camera grazes a surface (Lambertian)");
+               k.num("noise_sigma", x.noise_sigma, "per-pixel Gaussian noise, 8-bit levels");
+               k.num("exposure_sigma", x.exposure_sigma,
+                     "per-frame exposure change, relative (Gaussian σ)");
+             });
     o.num("room_radius_m", c.sim.room_radius_m, "a room around the camera (0: none), m");
     o.boolean("check_hold", c.sim.check_hold, "grasps must be force closure on the true object");
     o.num("friction", c.sim.friction, "μ of the true contacts");

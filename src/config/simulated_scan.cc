@@ -9,7 +9,8 @@ namespace inhand {
 
 SimulatedScan runSimulatedScan(const RobotModel& model, const TriangleMesh& mesh,
                                const ScanConfig& o, ScanProgress progress,
-                               const SimulatedScanCheckpoints& checkpoints) {
+                               const SimulatedScanCheckpoints& checkpoints,
+                               const SurfaceColours& colours) {
   if (std::string p = o.validate(); !p.empty()) throw Error(p);
   // The simulated object is a solid: a mesh open where its scanner did not see is closed, so
   // that the camera cannot look into it (nor the scan fuse its inside as surface).
@@ -25,12 +26,14 @@ SimulatedScan runSimulatedScan(const RobotModel& model, const TriangleMesh& mesh
                 " m across) does not fit the scan volume (volume_size_m = " +
                 std::to_string(o.scan.volume_size_m) + " m)");
   SimulatedScan out;
+  out.camera.colour.enabled = o.sim.colour.enabled;
   const DepthCameraOptions& camera = out.camera;
   NoiseModelOptions noise;
   // start "table": the object rests on the table, the arm at home (the whole scan, §V);
   // "held": the robot already holds it at the simulator's default side grasp.
   auto [T_O_palm, qGrasp] = defaultGrasp(model, object);
   SimWorld world(model, object, T_O_palm, camera, noise, o.sim);
+  world.setObjectColours(colours);  // its triangles first, then those closing its holes
   if (o.start == "held") {
     world.q = qGrasp;
   } else {
@@ -105,6 +108,7 @@ SimulatedScan runSimulatedScan(const RobotModel& model, const TriangleMesh& mesh
             : scanFromTable(robot, sensor, out.T_B_O_rest, o.scan, o.multi, noise, progress);
   }
   out.metrics = truth.evaluate(out.result.scan.model);
+  if (camera.colour.enabled) out.colour = colourAccuracy(out.result.scan.model, object, colours);
   out.drops = world.drops;
   out.faults = world.faults;
   out.render_s = world.render_s;

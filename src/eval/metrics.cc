@@ -170,4 +170,48 @@ SurfaceMetrics GroundTruth::evaluate(const ObjectModel& model) const {
   return m;
 }
 
+ColourMetrics colourAccuracy(const ObjectModel& model, const TriangleMesh& truth,
+                             const SurfaceColours& truth_colours) {
+  ColourMetrics out;
+  if (model.rgba.size() != model.mesh.vertices.size() || truth.empty()) return out;
+  const TriangleDistanceIndex index(truth);
+  std::vector<size_t> which;
+  for (size_t i = 0; i < model.rgba.size(); ++i)
+    if (model.rgba[i][3] == 255 && (model.observed.empty() || model.observed[i]))
+      which.push_back(i);
+  std::vector<double> de(which.size());
+  parallelFor(0, int(which.size()), [&](int k) {
+    const size_t i = which[size_t(k)];
+    int tri = -1;
+    Vec3 q;
+    index.nearest(model.mesh.vertices[i].cast<double>(), &tri, &q);
+    // q's barycentrics in its triangle.
+    const Tri& f = truth.triangles[size_t(tri)];
+    const Vec3 a = truth.vertices[size_t(f[0])].cast<double>();
+    const Vec3 e1 = truth.vertices[size_t(f[1])].cast<double>() - a;
+    const Vec3 e2 = truth.vertices[size_t(f[2])].cast<double>() - a;
+    const Vec3 d = q - a;
+    const double d11 = e1.dot(e1), d12 = e1.dot(e2), d22 = e2.dot(e2);
+    const double det = d11 * d22 - d12 * d12;
+    double b1 = 0, b2 = 0;
+    if (det > 0) {
+      b1 = (d22 * e1.dot(d) - d12 * e2.dot(d)) / det;
+      b2 = (d11 * e2.dot(d) - d12 * e1.dot(d)) / det;
+    }
+    const Vec3f want = truth_colours.at(truth, tri, float(b1), float(b2));
+    const auto& c = model.rgba[i];
+    de[size_t(k)] = deltaE76(Vec3f(c[0], c[1], c[2]), want);
+  });
+  out.vertices = int(de.size());
+  if (de.empty()) return out;
+  double sum = 0;
+  for (double x : de) sum += x;
+  out.delta_e_mean = sum / double(de.size());
+  std::vector<double> sorted = de;
+  const size_t k95 = std::min(sorted.size() - 1, size_t(std::floor(0.95 * double(sorted.size()))));
+  std::nth_element(sorted.begin(), sorted.begin() + long(k95), sorted.end());
+  out.delta_e_p95 = sorted[k95];
+  return out;
+}
+
 }  // namespace inhand

@@ -39,10 +39,32 @@ bool parseNumber(const char*& p, const char* end, double* out) {
   return true;
 }
 
+// What an OBJ says about its surface's colour: texture coordinates, each triangle's corners'
+// coordinates (-1: none) and material (-1: none), and the material libraries named.
+struct ObjColours {
+  std::vector<Vec2f> vt;
+  std::vector<int> corner_vt;  // 3 per triangle
+  std::vector<std::string> material_names;
+  std::vector<int> triangle_material;
+  std::vector<std::string> mtllibs;
+};
+
+// The rest of the line after a keyword, trimmed.
+std::string restOfLine(const char* q, const char* eol) {
+  while (q < eol && (*q == ' ' || *q == '\t')) ++q;
+  while (eol > q && std::isspace(static_cast<unsigned char>(eol[-1]))) --eol;
+  return std::string(q, eol);
+}
+
+bool keyword(const char* q, const char* eol, const char* word) {
+  const size_t n = std::strlen(word);
+  return size_t(eol - q) > n && std::strncmp(q, word, n) == 0 && (q[n] == ' ' || q[n] == '\t');
+}
+
 // Wavefront OBJ: `v x y z [w]` and `f` with `i`, `i/t`, `i//n` or `i/t/n` corners (negative:
-// relative to the end), polygons fan-triangulated; every other statement ignored. Errors name
-// the line.
-TriangleMesh readObj(const fs::path& path) {
+// relative to the end), polygons fan-triangulated; with `colours`, also `vt`, `usemtl` and
+// `mtllib`; every other statement ignored. Errors name the line.
+TriangleMesh readObj(const fs::path& path, ObjColours* colours = nullptr) {
   const std::string data = readTextFile(path);
   TriangleMesh mesh;
   const char* p = data.data();
@@ -51,7 +73,8 @@ TriangleMesh readObj(const fs::path& path) {
   auto fail = [&](const std::string& what) {
     return Error(path.string() + ": line " + std::to_string(lineNo) + ": " + what);
   };
-  std::vector<int> corners;
+  std::vector<int> corners, cornerVt;
+  int material = -1;
   while (p < end) {
     ++lineNo;
     const char* eol = static_cast<const char*>(std::memchr(p, '\n', size_t(end - p)));
@@ -64,9 +87,23 @@ TriangleMesh readObj(const fs::path& path) {
       for (double& x : c)
         if (!parseNumber(q, eol, &x)) throw fail("a vertex needs three numbers (v x y z)");
       mesh.vertices.emplace_back(float(c[0]), float(c[1]), float(c[2]));
+    } else if (colours && keyword(q, eol, "vt")) {
+      q += 3;
+      double c[2];
+      for (double& x : c)
+        if (!parseNumber(q, eol, &x)) throw fail("a texture coordinate needs two numbers (vt u v)");
+      colours->vt.emplace_back(float(c[0]), float(c[1]));
+    } else if (colours && keyword(q, eol, "usemtl")) {
+      const std::string name = restOfLine(q + 6, eol);
+      auto it = std::find(colours->material_names.begin(), colours->material_names.end(), name);
+      material = int(it - colours->material_names.begin());
+      if (it == colours->material_names.end()) colours->material_names.push_back(name);
+    } else if (colours && keyword(q, eol, "mtllib")) {
+      colours->mtllibs.push_back(restOfLine(q + 6, eol));
     } else if (eol - q >= 2 && q[0] == 'f' && (q[1] == ' ' || q[1] == '\t')) {
       q += 2;
       corners.clear();
+      cornerVt.clear();
       while (true) {
         while (q < eol && (*q == ' ' || *q == '\t' || *q == '\r')) ++q;
         if (q >= eol) break;
@@ -80,11 +117,27 @@ TriangleMesh readObj(const fs::path& path) {
                      std::to_string(n) + " vertices so far");
         corners.push_back(int(index));
         q = stop;
+        int vt = -1;
+        if (colours && q < eol && *q == '/' && q + 1 < eol && q[1] != '/') {
+          const long t = std::strtol(q + 1, &stop, 10);
+          const long nt = long(colours->vt.size());
+          const long ti = t > 0 ? t - 1 : nt + t;
+          if (stop == q + 1 || t == 0 || ti < 0 || ti >= nt)
+            throw fail("face texture index is not one of the " + std::to_string(nt) +
+                       " texture coordinates so far");
+          vt = int(ti);
+        }
+        cornerVt.push_back(vt);
         while (q < eol && !std::isspace(static_cast<unsigned char>(*q))) ++q;  // /t/n
       }
       if (corners.size() < 3) throw fail("a face needs three corners or more");
-      for (size_t k = 1; k + 1 < corners.size(); ++k)
+      for (size_t k = 1; k + 1 < corners.size(); ++k) {
         mesh.triangles.emplace_back(corners[0], corners[k], corners[k + 1]);
+        if (colours) {
+          for (size_t c : {size_t(0), k, k + 1}) colours->corner_vt.push_back(cornerVt[c]);
+          colours->triangle_material.push_back(material);
+        }
+      }
     }
     p = eol + (eol < end ? 1 : 0);
   }
@@ -214,9 +267,12 @@ std::array<uint8_t, 3> confidenceColor(float variance_m2) {
   return c;
 }
 
-void writePly(const fs::path& path, const TriangleMesh& mesh, const std::vector<float>* variance) {
+void writePly(const fs::path& path, const TriangleMesh& mesh, const std::vector<float>* variance,
+              const std::vector<std::array<uint8_t, 4>>* rgba) {
   if (variance && variance->size() != mesh.vertices.size())
     throw Error(path.string() + ": variance count does not match vertex count");
+  if (rgba && rgba->size() != mesh.vertices.size())
+    throw Error(path.string() + ": colour count does not match vertex count");
   writeFileAtomically(path, [&](const fs::path& tmp) {
     std::ofstream out(tmp, std::ios::binary);
     if (!out) throw Error(path.string() + ": cannot open for writing");
@@ -227,20 +283,30 @@ void writePly(const fs::path& path, const TriangleMesh& mesh, const std::vector<
       out << "comment variance: per-vertex surface variance in m^2 (sigma = 5 cm: never "
              "observed)\n";
       out << "property float variance\n";
-      out << "property uchar red\nproperty uchar green\nproperty uchar blue\n";
     }
+    if (rgba)
+      out << "comment red, green, blue: the scanned colour (sRGB); alpha 0 where no colour was "
+             "observed\n";
+    if (variance || rgba) out << "property uchar red\nproperty uchar green\nproperty uchar blue\n";
+    if (rgba) out << "property uchar alpha\n";
     out << "element face " << mesh.triangles.size() << "\n";
     out << "property list uchar int vertex_indices\nend_header\n";
-    const size_t stride = 12 + (variance ? 7 : 0);
+    const size_t stride = 12 + (variance ? 4 : 0) + (rgba ? 4 : variance ? 3 : 0);
     std::vector<char> buf(mesh.vertices.size() * stride);
     for (size_t i = 0; i < mesh.vertices.size(); ++i) {
       char* p = buf.data() + i * stride;
       std::memcpy(p, mesh.vertices[i].data(), 12);
+      p += 12;
       if (variance) {
         float v = (*variance)[i];
-        std::memcpy(p + 12, &v, 4);
-        auto c = confidenceColor(v);
-        std::memcpy(p + 16, c.data(), 3);
+        std::memcpy(p, &v, 4);
+        p += 4;
+      }
+      if (rgba) {
+        std::memcpy(p, (*rgba)[i].data(), 4);
+      } else if (variance) {
+        auto c = confidenceColor((*variance)[i]);
+        std::memcpy(p, c.data(), 3);
       }
     }
     out.write(buf.data(), std::streamsize(buf.size()));
@@ -470,6 +536,113 @@ PlyData readPly(const fs::path& path) {
   }
   std::string problem = validateMesh(out.mesh);
   if (!problem.empty()) throw Error(where + ": mesh " + problem);
+  return out;
+}
+
+}  // namespace inhand
+
+namespace inhand {
+
+namespace {
+// The materials of an MTL file: `newmtl`, `Kd r g b` (0–1) and `map_Kd FILE` (PNG, relative to
+// the MTL's folder; options before the file name are not read). Errors name the file and line.
+std::vector<Material> readMtl(const fs::path& path) {
+  const std::string data = readTextFile(path);
+  std::vector<Material> out;
+  std::istringstream in(data);
+  std::string line;
+  int lineNo = 0;
+  while (std::getline(in, line)) {
+    ++lineNo;
+    if (!line.empty() && line.back() == '\r') line.pop_back();
+    std::istringstream ls(line);
+    std::string key;
+    if (!(ls >> key)) continue;
+    auto fail = [&](const std::string& what) {
+      return Error(path.string() + ": line " + std::to_string(lineNo) + ": " + what);
+    };
+    if (key == "newmtl") {
+      Material m;
+      std::getline(ls >> std::ws, m.name);
+      out.push_back(std::move(m));
+    } else if (key == "Kd" || key == "map_Kd") {
+      if (out.empty()) throw fail(key + " before any newmtl");
+      if (key == "Kd") {
+        double c[3];
+        for (double& x : c)
+          if (!(ls >> x) || !(x >= 0 && x <= 1)) throw fail("Kd needs three numbers in [0, 1]");
+        for (int k = 0; k < 3; ++k)
+          out.back().diffuse[size_t(k)] = uint8_t(std::lround(255 * c[k]));
+      } else {
+        std::string file;
+        std::getline(ls >> std::ws, file);
+        const fs::path tex = path.parent_path() / file;
+        std::string ext = tex.extension().string();
+        std::transform(ext.begin(), ext.end(), ext.begin(),
+                       [](unsigned char c) { return std::tolower(c); });
+        if (ext != ".png")
+          throw fail("texture " + file + " is not a PNG (only PNG textures are read)");
+        out.back().texture = readRgbPng(tex);
+      }
+    }
+  }
+  return out;
+}
+}  // namespace
+
+TexturedMesh importTexturedMesh(const fs::path& path) {
+  std::string ext = path.extension().string();
+  std::transform(ext.begin(), ext.end(), ext.begin(),
+                 [](unsigned char c) { return std::tolower(c); });
+  TexturedMesh out;
+  std::error_code ec;
+  if (ext == ".obj" && fs::is_regular_file(path, ec)) {
+    ObjColours oc;
+    TriangleMesh mesh = readObj(path, &oc);
+    if (std::string problem = validateMesh(mesh); !problem.empty())
+      throw Error(path.string() + ": mesh " + problem);
+    std::vector<Material> library;
+    for (const std::string& lib : oc.mtllibs)
+      for (Material& m : readMtl(path.parent_path() / lib)) library.push_back(std::move(m));
+    SurfaceColours& c = out.colours;
+    for (const std::string& name : oc.material_names) {
+      auto it = std::find_if(library.begin(), library.end(),
+                             [&](const Material& m) { return m.name == name; });
+      if (it == library.end())
+        throw Error(path.string() + ": material " + name + " is in no mtllib it names");
+      c.materials.push_back(*it);
+    }
+    c.triangle_material = oc.triangle_material;
+    bool anyUv = false;
+    for (int t : oc.corner_vt) anyUv |= t >= 0;
+    if (anyUv)
+      for (int t : oc.corner_vt) c.corner_uv.push_back(t >= 0 ? oc.vt[size_t(t)] : Vec2f(0, 0));
+    std::vector<int> kept;
+    out.mesh = welded(mesh, 1e-7, &kept);
+    out.colours = c.withTriangles(kept);
+    return out;
+  }
+  if (ext == ".ply" && fs::is_regular_file(path, ec)) {
+    PlyData ply = readPly(path);
+    std::vector<int> kept, remap;
+    out.mesh = welded(ply.mesh, 1e-7, &kept, &remap);
+    const auto& p = ply.vertexProperties;
+    if (p.count("red") && p.count("green") && p.count("blue")) {
+      const std::vector<float>* ch[3] = {&p.at("red"), &p.at("green"), &p.at("blue")};
+      out.colours.vertex_rgb.assign(out.mesh.vertices.size(), {0, 0, 0});
+      // The first of the vertices welded into one gives its colour.
+      std::vector<uint8_t> set(out.mesh.vertices.size(), 0);
+      for (size_t i = 0; i < remap.size() && i < ch[0]->size(); ++i) {
+        const size_t j = size_t(remap[i]);
+        if (set[j]++) continue;
+        for (int k = 0; k < 3; ++k)
+          out.colours.vertex_rgb[j][size_t(k)] =
+              uint8_t(std::clamp(std::lround((*ch[k])[i]), 0L, 255L));
+      }
+    }
+    return out;
+  }
+  out.mesh = importMesh(path);
   return out;
 }
 

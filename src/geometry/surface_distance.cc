@@ -90,6 +90,7 @@ TriangleDistanceIndex::TriangleDistanceIndex(const TriangleMesh& mesh,
         edges[size_t(i)] = (tri.b - tri.a).norm() + (tri.c - tri.b).norm() + (tri.a - tri.c).norm();
       },
       4096);
+  ids_ = std::move(which);
   if (tris_.empty()) return;
   Aabb box;
   double edge = 0;
@@ -183,7 +184,13 @@ bool TriangleDistanceIndex::within(const Vec3& p, double r) const {
 }
 
 double TriangleDistanceIndex::distance(const Vec3& p, double max_m) const {
+  return nearest(p, nullptr, nullptr, max_m);
+}
+
+double TriangleDistanceIndex::nearest(const Vec3& p, int* triangle, Vec3* point,
+                                      double max_m) const {
   double best2 = std::numeric_limits<double>::infinity();
+  if (triangle) *triangle = -1;
   if (tris_.empty()) return best2;
   Vec3i c0;
   for (int k = 0; k < 3; ++k)
@@ -192,7 +199,13 @@ double TriangleDistanceIndex::distance(const Vec3& p, double max_m) const {
     const size_t c = (size_t(z) * dims_.y() + y) * dims_.x() + x;
     for (uint32_t j = start_[c]; j < start_[c + 1]; ++j) {
       const T& t = tris_[items_[j]];
-      best2 = std::min(best2, (closestPointOnTriangle(p, t.a, t.b, t.c) - p).squaredNorm());
+      const Vec3 q = closestPointOnTriangle(p, t.a, t.b, t.c);
+      const double d2 = (q - p).squaredNorm();
+      if (d2 < best2) {
+        best2 = d2;
+        if (triangle) *triangle = ids_[items_[j]];
+        if (point) *point = q;
+      }
     }
   };
   const int rMax = dims_.maxCoeff();

@@ -102,7 +102,8 @@ TriangleMesh transformed(const TriangleMesh& mesh, const Iso3& T) {
   return out;
 }
 
-TriangleMesh welded(const TriangleMesh& mesh, double tolerance_m) {
+TriangleMesh welded(const TriangleMesh& mesh, double tolerance_m, std::vector<int>* kept_triangles,
+                    std::vector<int>* vertex_remap) {
   struct KeyHash {
     size_t operator()(const std::array<int64_t, 3>& k) const {
       return size_t(uint64_t(k[0]) * 73856093u ^ uint64_t(k[1]) * 19349663u ^
@@ -121,10 +122,16 @@ TriangleMesh welded(const TriangleMesh& mesh, double tolerance_m) {
     if (inserted) out.vertices.push_back(v);
     remap[i] = it->second;
   }
-  for (const Tri& f : mesh.triangles) {
+  if (kept_triangles) kept_triangles->clear();
+  for (size_t t = 0; t < mesh.triangles.size(); ++t) {
+    const Tri& f = mesh.triangles[t];
     Tri g(remap[f[0]], remap[f[1]], remap[f[2]]);
-    if (g[0] != g[1] && g[1] != g[2] && g[0] != g[2]) out.triangles.push_back(g);
+    if (g[0] != g[1] && g[1] != g[2] && g[0] != g[2]) {
+      out.triangles.push_back(g);
+      if (kept_triangles) kept_triangles->push_back(int(t));
+    }
   }
+  if (vertex_remap) *vertex_remap = std::move(remap);
   return out;
 }
 

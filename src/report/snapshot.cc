@@ -72,29 +72,4 @@ RgbImage renderSnapshot(const TriangleMesh& mesh, const std::vector<std::array<u
   return img;
 }
 
-void writeRgbPng(const std::filesystem::path& path, const RgbImage& image) {
-  writeFileAtomically(path, [&](const std::filesystem::path& tmp) {
-    FILE* fp = std::fopen(tmp.c_str(), "wb");
-    if (!fp) throw Error(path.string() + ": cannot open for writing");
-    png_structp png = png_create_write_struct(PNG_LIBPNG_VER_STRING, nullptr, nullptr, nullptr);
-    png_infop info = png ? png_create_info_struct(png) : nullptr;
-    bool ok = png && info;
-    if (ok && setjmp(png_jmpbuf(png)))
-      ok = false;
-    else if (ok) {
-      png_init_io(png, fp);
-      png_set_IHDR(png, info, png_uint_32(image.width), png_uint_32(image.height), 8,
-                   PNG_COLOR_TYPE_RGB, PNG_INTERLACE_NONE, PNG_COMPRESSION_TYPE_DEFAULT,
-                   PNG_FILTER_TYPE_DEFAULT);
-      png_write_info(png, info);
-      for (int v = 0; v < image.height; ++v)
-        png_write_row(png, &image.rgb[size_t(v) * image.width * 3]);
-      png_write_end(png, nullptr);
-    }
-    png_destroy_write_struct(&png, &info);
-    bool closed = std::fclose(fp) == 0;
-    if (!ok || !closed) throw Error(path.string() + ": PNG write failed");
-  });
-}
-
 }  // namespace inhand

@@ -701,6 +701,7 @@ MultiGraspResult scanFromTable(RobotInterface& robot, DepthSensor& sensor, const
   const JointVector q = robot.joints();
   std::vector<DepthImage> frames;
   std::vector<std::vector<uint8_t>> robotMask;
+  std::vector<RgbImage> colours;
   for (int f = 0; f < to.frames; ++f) {
     std::optional<DepthImage> d = captureUsable(sensor, options.checks);
     if (!d) {
@@ -708,6 +709,7 @@ MultiGraspResult scanFromTable(RobotInterface& robot, DepthSensor& sensor, const
       continue;
     }
     frames.push_back(std::move(*d));
+    colours.push_back(sensor.camera().colour.enabled ? sensor.captureColour() : RgbImage());
     robotMask.push_back(robotPixelMask(frames.back(), *aim, q, scenes, sensor.camera(),
                                        options.t_hand_m, options.carve_radius_px,
                                        /*with_table=*/false));
@@ -728,6 +730,7 @@ MultiGraspResult scanFromTable(RobotInterface& robot, DepthSensor& sensor, const
   for (size_t f = 0; f < frames.size(); ++f) {
     std::vector<uint8_t> carve = tablePixels(frames[f], T_O_C, K, object.table_O, to.above_table_m);
     for (size_t i = 0; i < carve.size(); ++i) carve[i] |= robotMask[f][i];
+    session.setColourOfNextFrame(std::move(colours[f]));
     session.addFrameOfObjectAt(frames[f], q, *aim, T_B_O_rest, &carve,
                                /*carve_includes_robot=*/true);
   }

@@ -182,6 +182,7 @@ Termination runGraspViews(ScanSession& session, RobotInterface& robot, DepthSens
       // halted by its own controller); nor once the object is no longer in the hand.
       if (stopped || (stopped = progress.stopRequested()) || lost()) return;
       const DepthImage depth = sensor.capture();
+      if (sensor.camera().colour.enabled) session.setColourOfNextFrame(sensor.captureColour());
       session.addFrame(depth, q, sensor.pose());
     });
     session.finishView();

@@ -1,5 +1,7 @@
 #include "inhand/scan/session.h"
 
+#include "inhand/volume/colour_volume.h"
+
 #include <Eigen/Geometry>
 #include "inhand/sensor/depth_image.h"
 
@@ -69,6 +71,9 @@ struct ScanSession::State {
   MultiGraspOptions multi;
   Vec3 centre;
   TsdfVolume volume;
+  // Colour (camera.colour): the grid's colours once a frame had them; the next frame's image.
+  std::unique_ptr<ColourVolume> colour;
+  RgbImage nextColour;
   ViewPlanner planner, ranker;
   RobotOccluders scenes;
   std::vector<Aabb> linkBox;  // each link's collision primitives' box, link frame
@@ -138,6 +143,7 @@ struct ScanSession::State {
   const ObjectModel& extracted(CachedModel& cache, const MeshOptions& mesh) {
     if (cache.revision != revision) {
       cache.model = extractModel(volume, mesh);
+      if (colour && &cache == &full) cache.model.rgba = vertexColours(*colour, cache.model.mesh);
       cache.revision = revision;
     }
     return cache.model;
@@ -467,7 +473,7 @@ void ScanSession::emptyInsideRobot(const JointVector& q, const Iso3& T_O_B) {
 
 FrameReport ScanSession::fuse(const DepthImage& input, const JointVector& q, const Iso3& T_B_C,
                               const Iso3& T_O_B, const std::vector<uint8_t>* extraCarve,
-                              bool inHand, bool maskRobot) {
+                              bool inHand, bool maskRobot, const RgbImage& colour) {
   const auto t0 = Clock::now();
   State& s = *s_;
   const CameraIntrinsics& K = s.camera.intrinsics;
@@ -511,9 +517,17 @@ FrameReport ScanSession::fuse(const DepthImage& input, const JointVector& q, con
     }
   }
   // σ only where voxels can project, and not for pixels that only carve (integrate reads neither).
-  integrate(depth, T_O_C, K,
-            measurementSigma(depth, K, s.noise, &rect, carve.empty() ? nullptr : &carve), &s.volume,
-            carve.empty() ? nullptr : &carve);
+  const std::vector<float> sigma =
+      measurementSigma(depth, K, s.noise, &rect, carve.empty() ? nullptr : &carve);
+  integrate(depth, T_O_C, K, sigma, &s.volume, carve.empty() ? nullptr : &carve);
+  if (s.camera.colour.enabled && !colour.empty()) {
+    const auto tc = Clock::now();
+    if (!s.colour) s.colour = std::make_unique<ColourVolume>(s.volume);
+    const ColourIntegrationStats cs = integrateColour(
+        depth, colour, T_O_C, s.camera, sigma, s.colour.get(), carve.empty() ? nullptr : &carve);
+    s.summary.colour_pixels += cs.pixels;
+    s.summary.colour_s += secondsSince(tc);
+  }
   ++s.revision;
   if (inHand && s.options.hand_mode == HandMode::kCarveAndEmpty) emptyInsideRobot(q, T_O_B);
   FrameReport r;
@@ -542,6 +556,7 @@ FrameReport ScanSession::addFrame(const DepthImage& input, const JointVector& q,
   if (!s_->holding) throw Error("addFrame: no grasp (beginGrasp first)");
   checkJoints(*s_->model, q, "addFrame");
   State& s = *s_;
+  const RgbImage colour = std::exchange(s.nextColour, RgbImage());
   if (s.progress.frame_input) s.progress.frame_input(*this, input, q, T_B_C);
   const FrameChecks& fc = s.options.checks;
   auto refuse = [&](const std::string& why, int* counter) {
@@ -658,8 +673,8 @@ FrameReport ScanSession::addFrame(const DepthImage& input, const JointVector& q,
     T_B_C_seen = T_B_C;
   }
   const Iso3 T_O_B = s.T_O_palm * s.model->tipPose(qSeen).inverse();
-  FrameReport r =
-      fuse(depth, qSeen, T_B_C_seen, T_O_B, nullptr, true, s.options.hand_mode != HandMode::kNaive);
+  FrameReport r = fuse(depth, qSeen, T_B_C_seen, T_O_B, nullptr, true,
+                       s.options.hand_mode != HandMode::kNaive, colour);
   if (!r.fused) return refuse(r.rejected, &s.summary.frames_in_free_space);
   r.T_B_C = T_B_C_used;  // the camera relative to the palm at the reported joints
   r.tracking_inliers = track.inliers;
@@ -1091,7 +1106,18 @@ FrameReport ScanSession::addFrameOfObjectAt(const DepthImage& depth, const Joint
                                             const std::vector<uint8_t>* carve,
                                             bool carve_includes_robot) {
   checkJoints(*s_->model, q, "addFrameOfObjectAt");
-  return fuse(depth, q, T_B_C, T_B_O.inverse(), carve, false, !(carve && carve_includes_robot));
+  const RgbImage colour = std::exchange(s_->nextColour, RgbImage());
+  return fuse(depth, q, T_B_C, T_B_O.inverse(), carve, false, !(carve && carve_includes_robot),
+              colour);
+}
+
+void ScanSession::setColourOfNextFrame(RgbImage colour) {
+  const CameraIntrinsics& K = s_->camera.colour.intrinsics;
+  if (!colour.empty() && (colour.width != K.width || colour.height != K.height))
+    throw Error("colour image is " + std::to_string(colour.width) + "x" +
+                std::to_string(colour.height) + ", the colour camera's intrinsics say " +
+                std::to_string(K.width) + "x" + std::to_string(K.height));
+  s_->nextColour = std::move(colour);
 }
 
 std::optional<PlannedView> ScanSession::nextView(const JointVector& q_now) {
@@ -1307,6 +1333,8 @@ void ScanSession::Summary::copyTo(ScanResult* r) const {
   r->planning_s = planning_s;
   r->fusion_s = fusion_s;
   r->tracking_s = tracking_s;
+  r->colour_pixels = colour_pixels;
+  r->colour_s = colour_s;
   r->frames = frames;
   r->frames_rejected = frames_rejected;
   r->frames_dropped = frames_dropped;

@@ -5,6 +5,7 @@
 #include <cmath>
 
 #include "inhand/core/error.h"
+#include "inhand/core/parallel.h"
 #include "inhand/core/pose.h"
 #include "inhand/core/random.h"
 #include "inhand/robot/collision.h"
@@ -23,8 +24,16 @@ std::string SimFaults::validate() const {
   return {};
 }
 
+std::string SimColourOptions::validate() const {
+  if (!(ambient >= 0 && ambient <= 1)) return "ambient must be in [0, 1]";
+  if (!(noise_sigma >= 0 && noise_sigma <= 100)) return "noise_sigma must be in [0, 100]";
+  if (!(exposure_sigma >= 0 && exposure_sigma <= 0.5)) return "exposure_sigma must be in [0, 0.5]";
+  return {};
+}
+
 std::string SimOptions::validate() const {
   if (!(frame_rate_hz > 0)) return "frame_rate_hz must be > 0";
+  if (std::string p = colour.validate(); !p.empty()) return "colour." + p;
   if (frame_subsample < 1) return "frame_subsample must be >= 1";
   if (!(room_radius_m >= 0)) return "room_radius_m must be >= 0";
   if (!(friction > 0 && friction <= 2)) return "friction must be in (0, 2]";
@@ -368,6 +377,68 @@ DepthImage SimWorld::render() {
     }
   }
   return d;
+}
+
+RgbImage SimWorld::renderColour() {
+  const ColourCameraOptions& cc = camera_.colour;
+  if (!cc.enabled) return {};
+  const auto t0 = std::chrono::steady_clock::now();
+  // The scene render() saw (its frame counter has moved on by one).
+  const uint64_t frame = frame_ - 1;
+  RayScene scene;
+  scene.addInstance(object_, objectPose());
+  const std::vector<Occluder> robot = robot_.at(trueJoints(), Iso3::Identity());
+  for (const Occluder& o : robot) scene.addInstance(*o.scene, o.T_O_scene);
+  scene.commit();
+  const CameraIntrinsics& K = cc.intrinsics;
+  const Iso3 T_B_RGB = T_B_C * cc.T_D_RGB();
+  const Vec3f eye = T_B_RGB.translation().cast<float>();
+  const Eigen::Matrix3f R = T_B_RGB.linear().cast<float>();
+  const size_t n = size_t(K.width) * size_t(K.height);
+  std::vector<Ray> rays(n);
+  for (int v = 0; v < K.height; ++v)
+    for (int u = 0; u < K.width; ++u) {
+      Ray& r = rays[size_t(v) * size_t(K.width) + size_t(u)];
+      r.origin = eye;
+      r.dir = R * K.rayZ1(u, v).cast<float>();
+      r.tfar = float(options_.room_radius_m > 0 ? 2 * options_.room_radius_m : 100.0);
+    }
+  std::vector<Hit> hits(n);
+  scene.intersect(rays.data(), hits.data(), n);
+  const SimColourOptions& o = options_.colour;
+  const uint64_t seed = mixSeed(options_.seed ^ 0xC0104Full, frame);
+  const float exposure = float(1 + o.exposure_sigma * gaussianAt(seed, 0));
+  const int tableScene = int(robot.size());  // the table is the last occluder (geometry id)
+  RgbImage out(K.width, K.height);
+  parallelFor(0, K.height, [&](int v) {
+    for (int u = 0; u < K.width; ++u) {
+      const size_t i = size_t(v) * size_t(K.width) + size_t(u);
+      const Hit& h = hits[i];
+      Vec3f albedo;
+      float shade = 1;
+      if (!h.valid()) {
+        albedo = Vec3f(o.room[0], o.room[1], o.room[2]);
+      } else {
+        if (h.geometry == 0)
+          albedo = colours_.at(objectMesh_, h.triangle, h.u, h.v);
+        else if (h.geometry == tableScene)
+          albedo = Vec3f(o.table[0], o.table[1], o.table[2]);
+        else
+          albedo = Vec3f(o.robot[0], o.robot[1], o.robot[2]);
+        // Lambertian: ambient plus the lamp at the camera.
+        const Vec3f nrm = h.normal.normalized();
+        const float cosine = std::abs(nrm.dot(rays[i].dir.normalized()));
+        shade = float(o.ambient) + float(1 - o.ambient) * cosine;
+      }
+      uint8_t* px = out.at(u, v);
+      for (int c = 0; c < 3; ++c) {
+        const float noise = float(o.noise_sigma) * gaussianAtF(seed, 3 * i + size_t(c) + 1);
+        px[c] = uint8_t(std::clamp(std::lround(albedo[c] * shade * exposure + noise), 0L, 255L));
+      }
+    }
+  });
+  render_s += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  return out;
 }
 
 double SimWorld::faultDraw(int kind) {

@@ -31,6 +31,7 @@ struct SimulatedScan {
   int pieces = 0, slips = 0, unstable_steps = 0;
   double slip_max_m = 0;
   DepthCameraOptions camera;  // the simulated sensor
+  ColourMetrics colour;       // the model's colour against the truth's (sim.colour.enabled)
 };
 
 // Checkpoints of a simulated scan (scan/checkpoint.h): the scan's state, the simulator's and
@@ -48,8 +49,11 @@ struct SimulatedScanCheckpoints {
 // With checkpoints.resume the scan goes on from the file and ends as the scan that wrote it
 // would have. Throws Error for invalid options, an object larger than the volume when held, or
 // a checkpoint that cannot be read.
+// `colours`: the object's surface colours for the simulated colour camera (sim.colour.enabled;
+// flat grey when empty), addressing `object`'s triangles.
 SimulatedScan runSimulatedScan(const RobotModel& robot, const TriangleMesh& object,
                                const ScanConfig& config, ScanProgress progress = {},
-                               const SimulatedScanCheckpoints& checkpoints = {});
+                               const SimulatedScanCheckpoints& checkpoints = {},
+                               const SurfaceColours& colours = {});
 
 }  // namespace inhand

@@ -9,6 +9,7 @@
 namespace inhand {
 
 using Vec2 = Eigen::Vector2d;
+using Vec2f = Eigen::Vector2f;
 using Vec3 = Eigen::Vector3d;
 using Vec4 = Eigen::Vector4d;
 using Vec3f = Eigen::Vector3f;

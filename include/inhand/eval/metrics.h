@@ -16,6 +16,7 @@
 #include <string>
 #include <vector>
 
+#include "inhand/geometry/appearance.h"
 #include "inhand/geometry/surface_distance.h"
 #include "inhand/mesh/extract.h"
 
@@ -38,6 +39,16 @@ struct SurfaceMetrics {
   double detached_area_m2 = 0;  // area of the model pieces detached from the true surface
   int detached_pieces = 0;      // how many such pieces
 };
+
+// The model's colour against the true surface's (issue: colour accuracy): every vertex observed
+// (measured, not hole-filled) with colour (alpha 255) against the albedo at the nearest point of
+// the true surface, as CIELAB ΔE76.
+struct ColourMetrics {
+  int vertices = 0;  // vertices compared
+  double delta_e_mean = 0, delta_e_p95 = 0;
+};
+ColourMetrics colourAccuracy(const ObjectModel& model, const TriangleMesh& truth,
+                             const SurfaceColours& truth_colours);
 
 // The true surface sampled once, ready to score many models (thread-safe after construction).
 class GroundTruth {

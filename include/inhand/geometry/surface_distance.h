@@ -29,6 +29,10 @@ class TriangleDistanceIndex {
   // Distance from p to the nearest indexed triangle; +inf when the index is empty. With
   // `max_m` finite, any value ≥ max_m may be returned as soon as none nearer can exist.
   double distance(const Vec3& p, double max_m = std::numeric_limits<double>::infinity()) const;
+  // The same, with the nearest triangle (its index in the mesh; -1 when none) and the nearest
+  // point on it (when found before max_m allowed stopping).
+  double nearest(const Vec3& p, int* triangle, Vec3* point,
+                 double max_m = std::numeric_limits<double>::infinity()) const;
   // Whether some indexed triangle lies within r of p (distance(p) ≤ r), stopping at the first.
   bool within(const Vec3& p, double r) const;
   // Brute-force reference: every indexed triangle.
@@ -39,6 +43,7 @@ class TriangleDistanceIndex {
     Vec3 a, b, c;
   };
   std::vector<T> tris_;
+  std::vector<int> ids_;  // each indexed triangle's index in the mesh
   Vec3 origin_ = Vec3::Zero();
   double cell_ = 1;
   Vec3i dims_ = Vec3i::Ones();

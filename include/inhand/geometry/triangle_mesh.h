@@ -58,8 +58,11 @@ struct TriangleMesh {
 TriangleMesh transformed(const TriangleMesh& mesh, const Iso3& T);
 
 // Merges vertices with identical coordinates (after rounding to `tolerance_m`), drops triangles
-// that become degenerate. STL files come unwelded; this makes them indexed.
-TriangleMesh welded(const TriangleMesh& mesh, double tolerance_m = 1e-7);
+// that become degenerate. STL files come unwelded; this makes them indexed. `kept_triangles`
+// receives the old index of each triangle kept, `vertex_remap` each old vertex's new index.
+TriangleMesh welded(const TriangleMesh& mesh, double tolerance_m = 1e-7,
+                    std::vector<int>* kept_triangles = nullptr,
+                    std::vector<int>* vertex_remap = nullptr);
 
 // The mesh without the vertices no triangle uses (the triangles renumbered, in order): what a
 // mesh cut out of a bigger one keeps, so that its bounds and samples are its triangles'.

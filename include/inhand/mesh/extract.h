@@ -1,4 +1,5 @@
 #pragma once
+#include <array>
 // S_obj of Alg. 1: one closed surface from the TsdfVolume (paper §III-B). The scalar field is the
 // fused signed distance on observed voxels, +μ on empty voxels and −μ on unknown voxels (and +μ
 // on a one-voxel border around the grid, so the surface closes at the volume's edge). Its zero
@@ -46,6 +47,8 @@ struct ObjectModel {
   TriangleMesh mesh;              // object frame O, outward-oriented
   std::vector<float> variance;    // per vertex, m²
   std::vector<uint8_t> observed;  // per vertex: 1 from measurements, 0 hole-filled
+  // Per vertex, when the scan had colour: sRGB and alpha (255: colour seen there, 0: none).
+  std::vector<std::array<uint8_t, 4>> rgba;
 
   // Paper Fig. 5: mean over vertices of ½ ln(2πe σ²), nats.
   double meanEntropy() const;

@@ -5,14 +5,10 @@
 #include <filesystem>
 #include <vector>
 
+#include "inhand/geometry/appearance.h"
 #include "inhand/geometry/triangle_mesh.h"
 
 namespace inhand {
-
-struct RgbImage {
-  int width = 0, height = 0;
-  std::vector<uint8_t> rgb;  // row-major, 3 bytes per pixel
-};
 
 struct SnapshotOptions {
   int tile_px = 400;          // size of each view, pixels
@@ -24,8 +20,5 @@ struct SnapshotOptions {
 // Renders `mesh` (colours per vertex, or uniform grey when empty) from several directions.
 RgbImage renderSnapshot(const TriangleMesh& mesh, const std::vector<std::array<uint8_t, 3>>& colors,
                         const SnapshotOptions& options = {});
-
-// Writes an 8-bit RGB PNG atomically; throws Error naming the path.
-void writeRgbPng(const std::filesystem::path& path, const RgbImage& image);
 
 }  // namespace inhand

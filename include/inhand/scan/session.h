@@ -66,6 +66,9 @@ class ScanSession {
     std::vector<SlipRecord> slips;
     int view_evaluations = 0, view_refinements = 0;
     double planning_s = 0, fusion_s = 0, tracking_s = 0;
+    // Colour (camera.colour): pixels whose colour was fused, and the time it took (in fusion_s).
+    long colour_pixels = 0;
+    double colour_s = 0;
     std::string brief() const;  // one line
     // Copies every count and time of this summary into `result` (the one place that does, so
     // that no counter is left out).
@@ -112,6 +115,11 @@ class ScanSession {
   // emptied (Fig. 3 c). Counts toward the current view. Throws when no grasp is active or the
   // image does not match the camera.
   FrameReport addFrame(const DepthImage& depth, const JointVector& q, const Iso3& T_B_C);
+  // The colour image taken with the next frame added (addFrame, addFrameOfObjectAt), by the
+  // colour camera of the session's DepthCameraOptions (camera.colour): where that frame is
+  // fused, its colours are too (integrateColour), and model() carries per-vertex colour. An
+  // empty image, or a camera without colour, adds none.
+  void setColourOfNextFrame(RgbImage colour);
   // The camera pose (base frame) that aligns a frame taken from T_B_C, the robot at q, with the
   // hand at q and the object held at T_O_palm (its model so far): options.tracking; T_B_C itself
   // when tracking is off, nullopt when the frame cannot be aligned. addFrame uses it.
@@ -195,7 +203,7 @@ class ScanSession {
   std::unique_ptr<State> s_;
   FrameReport fuse(const DepthImage& depth, const JointVector& q, const Iso3& T_B_C,
                    const Iso3& T_O_B, const std::vector<uint8_t>* carve, bool inHand,
-                   bool maskRobot);
+                   bool maskRobot, const RgbImage& colour);
   void emptyInsideRobot(const JointVector& q, const Iso3& T_O_B);
   // Tracking's object points from `current` (or a fresh planning model).
   void refreshTrackingModel(const ObjectModel* current = nullptr);

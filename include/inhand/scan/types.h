@@ -195,7 +195,9 @@ struct ScanResult {
   int view_evaluations = 0;  // candidates scored by Alg. 1 (coarse pre-screen or full)
   int view_refinements = 0;  // of those, scored at full resolution
   double planning_s = 0, fusion_s = 0, total_s = 0;
-  double tracking_s = 0;  // aligning in-hand frames (ScanOptions::tracking), apart from fusion_s
+  double tracking_s = 0;   // aligning in-hand frames (ScanOptions::tracking), apart from fusion_s
+  long colour_pixels = 0;  // pixels whose colour was fused (camera.colour)
+  double colour_s = 0;     // … the time that took (part of fusion_s)
   int frames = 0;
   // In-hand frames not fused (ScanSession::Summary): tracking could not align them; dropped or
   // empty; joints off the planned path; the object not in the hand. And frames repaired.

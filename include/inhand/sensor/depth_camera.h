@@ -25,8 +25,23 @@ struct CameraIntrinsics {
   std::string validate() const;
 };
 
+// A colour camera registered to the depth camera, as on a Kinect-class sensor: its own
+// intrinsics; its optical frame parallel to the depth camera's, its centre at offset_D in the
+// depth camera's frame (the Kinect v1's colour camera sits 2.5 cm beside its infrared camera).
+struct ColourCameraOptions {
+  bool enabled = false;
+  CameraIntrinsics intrinsics{640, 480, 530.0, 530.0, 318.5, 242.5};
+  Vec3 offset_D{0.025, 0.0, 0.0};
+  Iso3 T_D_RGB() const {
+    Iso3 T = Iso3::Identity();
+    T.translation() = offset_D;
+    return T;
+  }
+};
+
 struct DepthCameraOptions {
   CameraIntrinsics intrinsics;
+  ColourCameraOptions colour;         // none unless enabled
   Vec3 projector_C{0.075, 0.0, 0.0};  // projector centre in the camera frame, m (7.5 cm baseline)
   double min_range_m = 0.5;           // no return nearer than this depth z, m
   double max_range_m = 5.0;           // no return farther than this depth z, m

@@ -1,5 +1,6 @@
 #pragma once
 // What the scan needs from a depth camera on a pan-tilt unit, real or simulated.
+#include "inhand/geometry/appearance.h"
 #include "inhand/sensor/depth_camera.h"
 #include "inhand/sensor/depth_image.h"
 
@@ -15,6 +16,9 @@ class DepthSensor {
   virtual Iso3 pose() const = 0;
   // The latest depth image.
   virtual DepthImage capture() = 0;
+  // The colour image taken with the latest depth image (camera().colour); empty when the sensor
+  // has no colour camera.
+  virtual RgbImage captureColour() { return {}; }
 };
 
 }  // namespace inhand

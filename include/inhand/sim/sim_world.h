@@ -1,4 +1,5 @@
 #pragma once
+#include <array>
 // The simulator: a table, an object held rigidly in the robot's hand, the robot, a depth camera on
 // its pan-tilt unit and a room around them. SimRobot and SimSensor implement the interfaces the
 // scan uses; only they see the true object.
@@ -45,12 +46,28 @@ struct SimFaultLog {
       object_drops = 0, refused_motions = 0, failed_pickups = 0;
 };
 
+// The simulated colour camera (DepthCameraOptions::colour): what it sees is the surfaces'
+// albedo (the object's SurfaceColours; the robot and the table in colours of their own) lit by
+// ambient light plus a lamp at the camera (Lambertian), times an exposure that changes a little
+// from frame to frame, plus per-pixel Gaussian noise, in 8-bit sRGB.
+struct SimColourOptions {
+  bool enabled = false;          // a colour camera beside the depth camera
+  double ambient = 0.4;          // the lit fraction where the lamp's light grazes the surface
+  double noise_sigma = 2.0;      // per-pixel noise, 8-bit levels
+  double exposure_sigma = 0.02;  // per-frame exposure change, relative
+  std::array<uint8_t, 3> robot{40, 60, 190};    // the arm and hand
+  std::array<uint8_t, 3> table{205, 185, 150};  // the table top
+  std::array<uint8_t, 3> room{128, 128, 128};   // the background
+  std::string validate() const;
+};
+
 struct SimOptions {
   double frame_rate_hz = 30.0;  // sensor frame rate along trajectories
-  int frame_subsample = 1;      // deliver every n-th frame to the scan (1: every frame, 30 Hz)
-  bool noise = true;            // sensor noise
-  uint64_t seed = 1;            // noise seed
-  double room_radius_m = 2.5;   // background: a room around the camera (0: none)
+  SimColourOptions colour;
+  int frame_subsample = 1;     // deliver every n-th frame to the scan (1: every frame, 30 Hz)
+  bool noise = true;           // sensor noise
+  uint64_t seed = 1;           // noise seed
+  double room_radius_m = 2.5;  // background: a room around the camera (0: none)
   // Pick-up: false backs the palm off until it is clear of the true object (the fingers may end
   // inside it); true stops the open hand at the first contact of any link (physically valid).
   bool pick_up_first_contact = true;
@@ -123,6 +140,11 @@ class SimWorld {
   // Depth image at the current state, seeded by the frame counter (with SimOptions::faults: at
   // times empty or corrupted).
   DepthImage render();
+  // The colour camera's image (DepthCameraOptions::colour) of the state the last render() saw,
+  // seeded by its frame; empty when the camera has none.
+  RgbImage renderColour();
+  // The true object's colours (flat grey until set; its triangles as objectMesh()'s).
+  void setObjectColours(SurfaceColours colours) { colours_ = std::move(colours); }
   // A uniform number in [0, 1) for fault `kind`, from the seed and a counter (part of state()).
   double faultDraw(int kind);
   int motions = 0;          // arm motions with the object in the hand so far
@@ -173,6 +195,7 @@ class SimWorld {
   RobotOccluders robot_;
   std::unique_ptr<PhysicsWorld> physics_;
   TriangleMesh objectMesh_;
+  SurfaceColours colours_;
   std::vector<SurfacePoint> objectSamples_;  // for the pick-up clearance test
   uint64_t frame_ = 0;
   uint64_t faultDraws_ = 0;
@@ -213,6 +236,7 @@ class SimRobot : public RobotInterface {
 class SimSensor : public DepthSensor {
  public:
   SimSensor(SimWorld* world, const DepthCameraOptions& camera) : world_(world), camera_(camera) {}
+  RgbImage captureColour() override { return world_->renderColour(); }
   const DepthCameraOptions& camera() const override { return camera_; }
   void setPose(const Iso3& T_B_C) override { world_->T_B_C = T_B_C; }
   Iso3 pose() const override { return world_->T_B_C; }

@@ -1,0 +1,166 @@
+#include "inhand/geometry/appearance.h"
+
+#include <png.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+
+#include "inhand/core/error.h"
+#include "inhand/core/file_util.h"
+
+namespace inhand {
+
+Vec3f RgbImage::bilinear(double x, double y) const {
+  x = std::clamp(x, 0.0, double(width - 1));
+  y = std::clamp(y, 0.0, double(height - 1));
+  const int u0 = std::min(int(x), width - 1), v0 = std::min(int(y), height - 1);
+  const int u1 = std::min(u0 + 1, width - 1), v1 = std::min(v0 + 1, height - 1);
+  const float fx = float(x - u0), fy = float(y - v0);
+  Vec3f out;
+  for (int c = 0; c < 3; ++c) {
+    const float top = (1 - fx) * at(u0, v0)[c] + fx * at(u1, v0)[c];
+    const float bottom = (1 - fx) * at(u0, v1)[c] + fx * at(u1, v1)[c];
+    out[c] = (1 - fy) * top + fy * bottom;
+  }
+  return out;
+}
+
+RgbImage readRgbPng(const std::filesystem::path& path) {
+  std::error_code ec;
+  if (!std::filesystem::exists(path, ec)) throw Error(path.string() + ": no such image");
+  png_image image;
+  std::memset(&image, 0, sizeof image);
+  image.version = PNG_IMAGE_VERSION;
+  if (!png_image_begin_read_from_file(&image, path.c_str()))
+    throw Error(path.string() + ": not a readable PNG (" + image.message + ")");
+  image.format = PNG_FORMAT_RGB;
+  if (image.width == 0 || image.height == 0 || image.width > 32768 || image.height > 32768) {
+    png_image_free(&image);
+    throw Error(path.string() + ": PNG of " + std::to_string(image.width) + "x" +
+                std::to_string(image.height) + " pixels (at most 32768 on a side)");
+  }
+  RgbImage out(int(image.width), int(image.height));
+  if (!png_image_finish_read(&image, nullptr, out.rgb.data(), 0, nullptr)) {
+    const std::string why = image.message;
+    png_image_free(&image);
+    throw Error(path.string() + ": corrupt or truncated PNG (" + why + ")");
+  }
+  return out;
+}
+
+void writeRgbPng(const std::filesystem::path& path, const RgbImage& image) {
+  writeFileAtomically(path, [&](const std::filesystem::path& tmp) {
+    FILE* fp = std::fopen(tmp.c_str(), "wb");
+    if (!fp) throw Error(path.string() + ": cannot open for writing");
+    png_structp png = png_create_write_struct(PNG_LIBPNG_VER_STRING, nullptr, nullptr, nullptr);
+    png_infop info = png ? png_create_info_struct(png) : nullptr;
+    bool ok = png && info;
+    if (ok && setjmp(png_jmpbuf(png)))
+      ok = false;
+    else if (ok) {
+      png_init_io(png, fp);
+      png_set_IHDR(png, info, png_uint_32(image.width), png_uint_32(image.height), 8,
+                   PNG_COLOR_TYPE_RGB, PNG_INTERLACE_NONE, PNG_COMPRESSION_TYPE_DEFAULT,
+                   PNG_FILTER_TYPE_DEFAULT);
+      png_write_info(png, info);
+      for (int v = 0; v < image.height; ++v)
+        png_write_row(png, &image.rgb[size_t(v) * image.width * 3]);
+      png_write_end(png, nullptr);
+    }
+    png_destroy_write_struct(&png, &info);
+    bool closed = std::fclose(fp) == 0;
+    if (!ok || !closed) throw Error(path.string() + ": PNG write failed");
+  });
+}
+
+Vec3f SurfaceColours::at(const TriangleMesh& mesh, int tri, float b1, float b2) const {
+  const float b0 = 1 - b1 - b2;
+  const size_t t = size_t(tri);
+  const Tri& f = mesh.triangles[t];
+  if (!vertex_rgb.empty() && size_t(f.maxCoeff()) < vertex_rgb.size()) {
+    Vec3f c = Vec3f::Zero();
+    const float b[3] = {b0, b1, b2};
+    for (int k = 0; k < 3; ++k)
+      for (int ch = 0; ch < 3; ++ch) c[ch] += b[k] * vertex_rgb[size_t(f[k])][size_t(ch)];
+    return c;
+  }
+  const int mi = t < triangle_material.size() ? triangle_material[t] : -1;
+  if (mi < 0 || size_t(mi) >= materials.size()) return Vec3f(fallback[0], fallback[1], fallback[2]);
+  const Material& m = materials[size_t(mi)];
+  if (m.texture.empty() || corner_uv.size() < 3 * (t + 1))
+    return Vec3f(m.diffuse[0], m.diffuse[1], m.diffuse[2]);
+  const Vec2f uv = b0 * corner_uv[3 * t] + b1 * corner_uv[3 * t + 1] + b2 * corner_uv[3 * t + 2];
+  const double u = uv.x() - std::floor(uv.x()), v = uv.y() - std::floor(uv.y());
+  // Texture v runs up from the image's bottom row; pixel centres sit at half-integers of uv·size.
+  return m.texture.bilinear(u * m.texture.width - 0.5, (1 - v) * m.texture.height - 0.5);
+}
+
+SurfaceColours SurfaceColours::withTriangles(const std::vector<int>& kept) const {
+  SurfaceColours out = *this;
+  out.triangle_material.clear();
+  out.corner_uv.clear();
+  for (int old : kept) {
+    const size_t o = size_t(old);
+    if (o < triangle_material.size()) out.triangle_material.push_back(triangle_material[o]);
+    if (3 * o + 2 < corner_uv.size())
+      for (int k = 0; k < 3; ++k) out.corner_uv.push_back(corner_uv[3 * o + size_t(k)]);
+  }
+  return out;
+}
+
+SurfaceColours checkerColours(const TriangleMesh& mesh, double square_m, std::array<uint8_t, 3> a,
+                              std::array<uint8_t, 3> b) {
+  SurfaceColours out;
+  Material m;
+  m.name = "checker";
+  // One period (2 × 2 squares) in 64 × 64 texels: bilinear sampling blurs an edge over 1/64 of it.
+  constexpr int kTexels = 64;
+  m.texture = RgbImage(kTexels, kTexels);
+  for (int v = 0; v < kTexels; ++v)
+    for (int u = 0; u < kTexels; ++u) {
+      const auto& c = ((u < kTexels / 2) != (v < kTexels / 2)) ? a : b;
+      std::copy(c.begin(), c.end(), m.texture.at(u, v));
+    }
+  out.materials.push_back(std::move(m));
+  out.triangle_material.assign(mesh.triangles.size(), 0);
+  out.corner_uv.reserve(3 * mesh.triangles.size());
+  const double period = 2 * square_m;
+  for (size_t t = 0; t < mesh.triangles.size(); ++t) {
+    const Vec3 n = mesh.faceNormal(int(t)).cwiseAbs();
+    int axis = 0;
+    n.maxCoeff(&axis);
+    const int i = (axis + 1) % 3, j = (axis + 2) % 3;
+    for (int k = 0; k < 3; ++k) {
+      const Vec3f& p = mesh.vertices[size_t(mesh.triangles[t][k])];
+      out.corner_uv.emplace_back(float(p[i] / period), float(p[j] / period));
+    }
+  }
+  return out;
+}
+
+namespace {
+double srgbToLinear(double c) {
+  c /= 255.0;
+  return c <= 0.04045 ? c / 12.92 : std::pow((c + 0.055) / 1.055, 2.4);
+}
+double labF(double t) {
+  constexpr double d = 6.0 / 29.0;
+  return t > d * d * d ? std::cbrt(t) : t / (3 * d * d) + 4.0 / 29.0;
+}
+}  // namespace
+
+Vec3 srgbToLab(const Vec3f& rgb) {
+  const double r = srgbToLinear(rgb[0]), g = srgbToLinear(rgb[1]), b = srgbToLinear(rgb[2]);
+  // sRGB (D65) to XYZ, normalised by the D65 white.
+  const double X = (0.4124564 * r + 0.3575761 * g + 0.1804375 * b) / 0.95047;
+  const double Y = 0.2126729 * r + 0.7151522 * g + 0.0721750 * b;
+  const double Z = (0.0193339 * r + 0.1191920 * g + 0.9503041 * b) / 1.08883;
+  const double fx = labF(X), fy = labF(Y), fz = labF(Z);
+  return Vec3(116 * fy - 16, 500 * (fx - fy), 200 * (fy - fz));
+}
+
+double deltaE76(const Vec3f& a, const Vec3f& b) { return (srgbToLab(a) - srgbToLab(b)).norm(); }
+
+}  // namespace inhand
