@@ -3,7 +3,7 @@
 set -euo pipefail
 packages=(
   build-essential cmake ninja-build pkg-config
-  libeigen3-dev libembree-dev libtbb-dev libassimp-dev libpng-dev
+  libeigen3-dev libembree-dev libtbb-dev libassimp-dev libpng-dev libjpeg-dev
   nlohmann-json3-dev libcli11-dev
   liburdfdom-dev liborocos-kdl-dev libfcl-dev libmujoco-dev
   libgtest-dev libbenchmark-dev

@@ -10,6 +10,7 @@
 #include "inhand/geometry/builtin_objects.h"
 #include "inhand/geometry/mesh_io.h"
 #include "inhand/geometry/primitives.h"
+#include "inhand/sensor/frame_set.h"
 #include "inhand/volume/colour_volume.h"
 #include "test_util.h"
 
@@ -88,8 +89,8 @@ TEST(Colour, TexturedObjReadsItsMaterialsAndTexture) {
   // A texture that is missing, or not a PNG, is named.
   std::ofstream(dir.path() / "quad.mtl") << "newmtl painted\nmap_Kd gone.png\nnewmtl plain\n";
   expectErrorNaming([&] { importTexturedMesh(dir.path() / "quad.obj"); }, "gone.png");
-  std::ofstream(dir.path() / "quad.mtl") << "newmtl painted\nmap_Kd photo.jpg\nnewmtl plain\n";
-  expectErrorNaming([&] { importTexturedMesh(dir.path() / "quad.obj"); }, "photo.jpg");
+  std::ofstream(dir.path() / "quad.mtl") << "newmtl painted\nmap_Kd photo.bmp\nnewmtl plain\n";
+  expectErrorNaming([&] { importTexturedMesh(dir.path() / "quad.obj"); }, "photo.bmp");
 }
 
 TEST(Colour, PlyColoursRoundTripWithAlpha) {
@@ -174,7 +175,7 @@ TEST(ColourVolume, APlaneTakesTheColourTheColourCameraSeesItIn) {
   int red = 0, blue = 0;
   for (double x = -0.15; x <= 0.15; x += 0.0037) {
     const Vec3 p(x, 0.01, 0.8);
-    const Vec3 q = cam.colour.T_D_RGB().inverse() * p;
+    const Vec3 q = cam.colour.T_D_RGB.inverse() * p;
     const double u = cam.colour.intrinsics.project(q).x();
     if (std::abs(u - 319.5) < 8) continue;  // the edge, blurred over a voxel
     Vec3f c;
@@ -212,4 +213,77 @@ TEST(Colour, AScanGetsTheCheckerBoxsColours) {
   const SurfaceColours other =
       checkerColours(box, kBuiltinCheckerSquare_m, {20, 120, 20}, {30, 30, 30});
   EXPECT_GT(colourAccuracy(m, box, other).delta_e_mean, 40.0);
+}
+
+// Real Kinect frames (../shared/data/sevenscenes: 50 frames of a 7-Scenes sequence, colour not
+// registered to depth): 40 fused with their colours by `inhand fuse`; the model's colours
+// checked against the 10 frames held out, where each of those sees a model vertex (its depth
+// there within 2 cm of the vertex's). The same check against each held-out frame's colours at
+// pixels shifted half an image away is far off: the check can fail.
+TEST(Colour, RealKinectFramesFuseWithTheirColours) {
+  const fs::path data = fs::path(INHAND_SOURCE_DIR) / ".." / "shared" / "data" / "sevenscenes";
+  if (!fs::is_directory(data)) GTEST_SKIP() << data << " not found";
+  test::TempDir dir;
+  FrameSet all;
+  all.intrinsics = CameraIntrinsics{640, 480, 585, 585, 320, 240};
+  all.colour.enabled = true;
+  all.colour.intrinsics = all.intrinsics;
+  all.colour.T_D_RGB = Iso3::Identity();
+  std::vector<FrameRecord> held;
+  for (int f = 0; f < 1000; f += 20) {
+    char stem[32];
+    std::snprintf(stem, sizeof stem, "frame-%06d", f);
+    std::ifstream in(data / (std::string(stem) + ".pose.txt"));
+    Eigen::Matrix4d M;
+    for (int k = 0; k < 16; ++k) in >> M(k / 4, k % 4);
+    ASSERT_TRUE(in) << stem;
+    Iso3 T = Iso3::Identity();
+    // Rotations orthonormal to ~1e-4 only: the nearest rotation (as readFrameSet would use).
+    Eigen::JacobiSVD<Mat3> svd(M.topLeftCorner<3, 3>(), Eigen::ComputeFullU | Eigen::ComputeFullV);
+    T.linear() = svd.matrixU() * svd.matrixV().transpose();
+    T.translation() = M.topRightCorner<3, 1>();
+    FrameRecord r((data / (std::string(stem) + ".depth.png")).string(), T);
+    r.colour_file = (data / (std::string(stem) + ".color.jpg")).string();
+    ((f / 20) % 5 == 4 ? held : all.frames).push_back(r);
+  }
+  writeFrameSet(dir.path(), all);
+  const fs::path model = dir.path() / "scene.ply";
+  const test::CommandResult r =
+      test::runInhand("fuse --frames " + dir.path().string() + " --out " + model.string() +
+                          " --voxel 0.02 --surface observed",
+                      dir);
+  ASSERT_EQ(r.code, 0) << r.output;
+  const PlyData ply = readPly(model);
+  const auto& P = ply.vertexProperties;
+  ASSERT_TRUE(P.count("red") && P.count("alpha"));
+  size_t coloured = 0;
+  for (float a : P.at("alpha")) coloured += a == 255;
+  EXPECT_GT(double(coloured), 0.9 * double(ply.mesh.vertices.size()));  // 96.2 % measured
+  std::vector<double> de, shifted;
+  for (const FrameRecord& h : held) {
+    const DepthImage depth = readDepthPng(h.file, 0.001, 640, 480);
+    const RgbImage img = readRgbImage(h.colour_file);
+    const Iso3 T_C_O = h.T_O_C.inverse();
+    for (size_t i = 0; i < ply.mesh.vertices.size(); i += 7) {
+      if (P.at("alpha")[i] != 255) continue;
+      const Vec3 p = T_C_O * ply.mesh.vertices[i].cast<double>();
+      if (p.z() < 0.3) continue;
+      const Vec2 uv = all.intrinsics.project(p);
+      const int u = int(std::lround(uv.x())), v = int(std::lround(uv.y()));
+      if (u < 0 || v < 0 || u >= 640 || v >= 480) continue;
+      if (!(std::abs(depth.at(u, v) - p.z()) < 0.02)) continue;
+      const Vec3f c(P.at("red")[i], P.at("green")[i], P.at("blue")[i]);
+      de.push_back(deltaE76(c, img.bilinear(uv.x(), uv.y())));
+      shifted.push_back(deltaE76(c, img.bilinear((u + 320) % 640, (v + 240) % 480)));
+    }
+  }
+  ASSERT_GT(de.size(), 1000u);
+  auto median = [](std::vector<double> v) {
+    std::nth_element(v.begin(), v.begin() + long(v.size() / 2), v.end());
+    return v[v.size() / 2];
+  };
+  std::printf("held-out frames: %zu vertex views, median dE76 %.1f (shifted %.1f)\n", de.size(),
+              median(de), median(shifted));
+  EXPECT_LT(median(de), 13.0);  // 10.3 measured
+  EXPECT_GT(median(shifted), 2 * median(de));
 }

@@ -26,6 +26,7 @@
 #include "inhand/scan/session.h"
 #include "inhand/sensor/frame_set.h"
 #include "inhand/sensor/render.h"
+#include "inhand/volume/colour_volume.h"
 #include "inhand/volume/integrate.h"
 
 namespace inhand::app {
@@ -144,7 +145,7 @@ void addModelFigures(const ObjectModel& model, const std::string& surface, Json*
 // Writes the model and its summary; neither stays when the other cannot be written.
 void writeFusedModel(const fs::path& outPath, const fs::path& summaryPath, const ObjectModel& model,
                      const Json& summary) {
-  writePly(outPath, model.mesh, &model.variance);
+  writePly(outPath, model.mesh, &model.variance, model.rgba.empty() ? nullptr : &model.rgba);
   try {
     writeTextAtomically(summaryPath, summary.dump(2) + "\n");
   } catch (...) {
@@ -213,6 +214,7 @@ int fuseWithRobot(const FuseArgs& args, const fs::path& dir, const FrameSet& set
   }
   DepthCameraOptions camera;
   camera.intrinsics = set.intrinsics;
+  camera.colour = set.colour;
   NoiseModelOptions noise;
   ScanSession session(model, camera, noise, o, config.multi, box.center());
   std::fprintf(stderr, "fuse: %zu frames with %s, tracking %s, voxels of %.1f mm\n",
@@ -227,6 +229,7 @@ int fuseWithRobot(const FuseArgs& args, const fs::path& dir, const FrameSet& set
       ++grasps;
     }
     const DepthImage depth = loadFrameDepth(dir, set, i);
+    session.setColourOfNextFrame(loadFrameColour(dir, set, i));
     const FrameReport r = session.addFrame(depth, qs[i], *set.frames[i].T_B_C);
     fused += r.fused;
     Json t = {{"file", set.frames[i].file}, {"fused", r.fused}};
@@ -355,22 +358,35 @@ int runFuse(const FuseArgs& args) {
                TsdfVolume::megabytesFor(volume.dims()));
   NoiseModelOptions noise;
   auto tIntegrate = Clock::now();
-  double integrateS = 0;
-  int64_t updated = 0;
+  double integrateS = 0, colourS = 0;
+  int64_t updated = 0, colourPixels = 0;
+  // Colour (frames with a colour image): the camera as frames.json gives it.
+  DepthCameraOptions camera;
+  camera.intrinsics = set.intrinsics;
+  camera.colour = set.colour;
+  ColourVolume colour(volume);
   for (size_t i = 0; i < set.frames.size(); ++i) {
     DepthImage depth = loadFrameDepth(dir, set, i);
+    const RgbImage rgb = loadFrameColour(dir, set, i);
     auto ti = Clock::now();
     // σ only where the volume's voxels can project (integrate reads no other pixel).
     const PixelRect rect = volumeImageRect(volume, set.frames[i].T_O_C, set.intrinsics);
     std::vector<float> sigma = measurementSigma(depth, set.intrinsics, noise, &rect);
     updated += integrate(depth, set.frames[i].T_O_C, set.intrinsics, sigma, &volume).updated;
     integrateS += secondsSince(ti);
+    if (!rgb.empty()) {
+      auto tc = Clock::now();
+      colourPixels +=
+          integrateColour(depth, rgb, set.frames[i].T_O_C, camera, sigma, &colour).pixels;
+      colourS += secondsSince(tc);
+    }
     progress("fuse: frames", i + 1, set.frames.size());
   }
   double loadAndIntegrateS = secondsSince(tIntegrate);
   auto tMesh = Clock::now();
   ObjectModel model = extractModel(volume, mo);
   if (args.surface == "observed") model = model.observedSurface();
+  if (set.colour.enabled) model.rgba = vertexColours(colour, model.mesh);
   double meshS = secondsSince(tMesh);
   if (model.mesh.empty())
     throw Error(dir.string() +
@@ -390,7 +406,16 @@ int runFuse(const FuseArgs& args) {
       {"voxels_empty", volume.countState(VoxelState::kEmpty)},
       {"voxels_unknown", volume.countState(VoxelState::kUnknown)},
       {"voxel_updates", updated}};
+  if (set.colour.enabled) {
+    size_t coloured = 0;
+    for (const auto& c : model.rgba) coloured += c[3] == 255;
+    summary["colour"] = {{"pixels_fused", colourPixels},
+                         {"voxels", colour.voxels()},
+                         {"memory_mb", double(colour.bytes()) / (1 << 20)},
+                         {"vertices_with_colour", coloured}};
+  }
   summary["timing_s"] = {{"integrate", integrateS},
+                         {"colour", colourS},
                          {"load_and_integrate", loadAndIntegrateS},
                          {"mesh", meshS},
                          {"total", secondsSince(t0)}};

@@ -1,6 +1,8 @@
 #include "inhand/geometry/appearance.h"
 
+#include <jpeglib.h>
 #include <png.h>
+#include <setjmp.h>
 
 #include <algorithm>
 #include <cmath>
@@ -48,6 +50,67 @@ RgbImage readRgbPng(const std::filesystem::path& path) {
     throw Error(path.string() + ": corrupt or truncated PNG (" + why + ")");
   }
   return out;
+}
+
+namespace {
+// libjpeg reports errors through error_exit, which must not return: back to the reader's setjmp
+// with the message kept.
+struct JpegError {
+  jpeg_error_mgr mgr;
+  jmp_buf jump;
+  char message[JMSG_LENGTH_MAX];
+};
+void jpegErrorExit(j_common_ptr cinfo) {
+  JpegError* e = reinterpret_cast<JpegError*>(cinfo->err);
+  (*cinfo->err->format_message)(cinfo, e->message);
+  longjmp(e->jump, 1);
+}
+void jpegSilence(j_common_ptr, int) {}
+}  // namespace
+
+RgbImage readRgbJpeg(const std::filesystem::path& path) {
+  std::error_code ec;
+  if (!std::filesystem::exists(path, ec)) throw Error(path.string() + ": no such image");
+  FILE* fp = std::fopen(path.c_str(), "rb");
+  if (!fp) throw Error(path.string() + ": cannot open for reading");
+  jpeg_decompress_struct cinfo;
+  JpegError err;
+  cinfo.err = jpeg_std_error(&err.mgr);
+  err.mgr.error_exit = jpegErrorExit;
+  err.mgr.emit_message = jpegSilence;
+  RgbImage out;
+  if (setjmp(err.jump)) {
+    jpeg_destroy_decompress(&cinfo);
+    std::fclose(fp);
+    throw Error(path.string() + ": not a readable JPEG (" + err.message + ")");
+  }
+  jpeg_create_decompress(&cinfo);
+  jpeg_stdio_src(&cinfo, fp);
+  jpeg_read_header(&cinfo, TRUE);
+  cinfo.out_color_space = JCS_RGB;
+  jpeg_start_decompress(&cinfo);
+  if (cinfo.output_components != 3 || cinfo.output_width > 32768 || cinfo.output_height > 32768) {
+    jpeg_destroy_decompress(&cinfo);
+    std::fclose(fp);
+    throw Error(path.string() + ": JPEG of an unsupported size or colour layout");
+  }
+  out = RgbImage(int(cinfo.output_width), int(cinfo.output_height));
+  while (cinfo.output_scanline < cinfo.output_height) {
+    JSAMPROW row = out.at(0, int(cinfo.output_scanline));
+    jpeg_read_scanlines(&cinfo, &row, 1);
+  }
+  jpeg_finish_decompress(&cinfo);
+  jpeg_destroy_decompress(&cinfo);
+  std::fclose(fp);
+  return out;
+}
+
+RgbImage readRgbImage(const std::filesystem::path& path) {
+  std::string ext = path.extension().string();
+  for (char& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
+  if (ext == ".png") return readRgbPng(path);
+  if (ext == ".jpg" || ext == ".jpeg") return readRgbJpeg(path);
+  throw Error(path.string() + ": not a PNG or JPEG image (by its extension)");
 }
 
 void writeRgbPng(const std::filesystem::path& path, const RgbImage& image) {

@@ -544,8 +544,9 @@ PlyData readPly(const fs::path& path) {
 namespace inhand {
 
 namespace {
-// The materials of an MTL file: `newmtl`, `Kd r g b` (0–1) and `map_Kd FILE` (PNG, relative to
-// the MTL's folder; options before the file name are not read). Errors name the file and line.
+// The materials of an MTL file: `newmtl`, `Kd r g b` (0–1) and `map_Kd FILE` (PNG or JPEG,
+// relative to the MTL's folder; options before the file name are not read). Errors name the file
+// and line.
 std::vector<Material> readMtl(const fs::path& path) {
   const std::string data = readTextFile(path);
   std::vector<Material> out;
@@ -576,13 +577,7 @@ std::vector<Material> readMtl(const fs::path& path) {
       } else {
         std::string file;
         std::getline(ls >> std::ws, file);
-        const fs::path tex = path.parent_path() / file;
-        std::string ext = tex.extension().string();
-        std::transform(ext.begin(), ext.end(), ext.begin(),
-                       [](unsigned char c) { return std::tolower(c); });
-        if (ext != ".png")
-          throw fail("texture " + file + " is not a PNG (only PNG textures are read)");
-        out.back().texture = readRgbPng(tex);
+        out.back().texture = readRgbImage(path.parent_path() / file);
       }
     }
   }

@@ -106,6 +106,7 @@ ObjectModel ObjectModel::observedSurface() const {
         out.mesh.vertices.push_back(mesh.vertices[f[k]]);
         out.variance.push_back(variance[f[k]]);
         out.observed.push_back(1);
+        if (rgba.size() == mesh.vertices.size()) out.rgba.push_back(rgba[f[k]]);
       }
       g[k] = i;
     }

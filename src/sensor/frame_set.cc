@@ -75,6 +75,21 @@ FrameSet readFrameSet(const fs::path& dir) {
     set.bounds_O = box;
   }
   if (j.contains("T_O_palm")) set.T_O_palm = readPose(j["T_O_palm"], name + ": T_O_palm", &set);
+  set.colour.intrinsics = set.intrinsics;
+  set.colour.T_D_RGB = Iso3::Identity();
+  if (j.contains("colour_intrinsics")) {
+    const Json& C = j["colour_intrinsics"];
+    const std::string cw = name + ": colour_intrinsics";
+    CameraIntrinsics& c = set.colour.intrinsics;
+    c.width = requireInt(C, "width", cw);
+    c.height = requireInt(C, "height", cw);
+    c.fx = requireNumber(C, "fx", cw);
+    c.fy = requireNumber(C, "fy", cw);
+    c.cx = requireNumber(C, "cx", cw);
+    c.cy = requireNumber(C, "cy", cw);
+    if (std::string p = c.validate(); !p.empty()) throw Error(cw + "." + p);
+  }
+  if (j.contains("T_D_RGB")) set.colour.T_D_RGB = readPose(j["T_D_RGB"], name + ": T_D_RGB", &set);
   const Json& frames = requireField(j, "frames", name);
   if (!frames.is_array()) throw Error(name + ": frames: expected an array");
   if (frames.empty()) throw Error(name + ": frames: the array is empty");
@@ -99,6 +114,12 @@ FrameSet readFrameSet(const fs::path& dir) {
       rec.T_B_C = readPose(frames[i]["T_B_C"], where + ".T_B_C", &set);
     if (frames[i].contains("T_O_palm"))
       rec.T_O_palm = readPose(frames[i]["T_O_palm"], where + ".T_O_palm", &set);
+    if (frames[i].contains("colour")) {
+      rec.colour_file = requireString(frames[i], "colour", where);
+      if (!fs::is_regular_file(dir / rec.colour_file, ec))
+        throw Error(where + ".colour: " + (dir / rec.colour_file).string() + " does not exist");
+      set.colour.enabled = true;
+    }
     if (frames[i].contains("T_O_C")) {
       rec.T_O_C = readPose(frames[i]["T_O_C"], where + ".T_O_C", &set);
     } else if (!rec.q.empty() && rec.T_B_C) {
@@ -114,6 +135,18 @@ FrameSet readFrameSet(const fs::path& dir) {
 DepthImage loadFrameDepth(const fs::path& dir, const FrameSet& set, size_t i) {
   return readDepthPng(dir / set.frames.at(i).file, set.depth_scale_m, set.intrinsics.width,
                       set.intrinsics.height);
+}
+
+RgbImage loadFrameColour(const fs::path& dir, const FrameSet& set, size_t i) {
+  const FrameRecord& f = set.frames.at(i);
+  if (f.colour_file.empty()) return {};
+  RgbImage img = readRgbImage(dir / f.colour_file);
+  const CameraIntrinsics& K = set.colour.intrinsics;
+  if (img.width != K.width || img.height != K.height)
+    throw Error((dir / f.colour_file).string() + ": colour image is " + std::to_string(img.width) +
+                "x" + std::to_string(img.height) + ", expected " + std::to_string(K.width) + "x" +
+                std::to_string(K.height) + " (from the colour intrinsics)");
+  return img;
 }
 
 void writeFrameSet(const fs::path& dir, const FrameSet& set) {
@@ -133,10 +166,17 @@ void writeFrameSet(const fs::path& dir, const FrameSet& set) {
     }
     if (f.T_B_C) r["T_B_C"] = poseToRowMajor(*f.T_B_C);
     if (f.T_O_palm) r["T_O_palm"] = poseToRowMajor(*f.T_O_palm);
+    if (!f.colour_file.empty()) r["colour"] = f.colour_file;
     frames.push_back(r);
   }
   j["frames"] = frames;
   if (set.T_O_palm) j["T_O_palm"] = poseToRowMajor(*set.T_O_palm);
+  if (set.colour.enabled) {
+    const CameraIntrinsics& c = set.colour.intrinsics;
+    j["colour_intrinsics"] = {{"width", c.width}, {"height", c.height}, {"fx", c.fx},
+                              {"fy", c.fy},       {"cx", c.cx},         {"cy", c.cy}};
+    j["T_D_RGB"] = poseToRowMajor(set.colour.T_D_RGB);
+  }
   if (set.bounds_O)
     j["bounds_O"] = {
         {"min", {set.bounds_O->min.x(), set.bounds_O->min.y(), set.bounds_O->min.z()}},

@@ -391,7 +391,7 @@ RgbImage SimWorld::renderColour() {
   for (const Occluder& o : robot) scene.addInstance(*o.scene, o.T_O_scene);
   scene.commit();
   const CameraIntrinsics& K = cc.intrinsics;
-  const Iso3 T_B_RGB = T_B_C * cc.T_D_RGB();
+  const Iso3 T_B_RGB = T_B_C * cc.T_D_RGB;
   const Vec3f eye = T_B_RGB.translation().cast<float>();
   const Eigen::Matrix3f R = T_B_RGB.linear().cast<float>();
   const size_t n = size_t(K.width) * size_t(K.height);

@@ -4,6 +4,8 @@
 #include <cmath>
 #include <limits>
 
+#include "inhand/core/parallel.h"
+
 namespace inhand {
 
 ColourVolume::ColourVolume(const TsdfVolume& volume)
@@ -68,7 +70,25 @@ bool ColourVolume::at(const Vec3& p, Vec3f* rgb, float* weight) const {
     b += t * s.b;
     tw += t;
   }
-  if (!(w > 0)) return false;
+  if (!(w > 0)) {
+    // None of the cell's corners has colour (a surface point falls into the nearest voxel only):
+    // the coloured voxels of the 4 × 4 × 4 block around the cell, by their own weights.
+    for (int z = c.z() - 1; z <= c.z() + 2; ++z)
+      for (int y = c.y() - 1; y <= c.y() + 2; ++y)
+        for (int x = c.x() - 1; x <= c.x() + 2; ++x) {
+          if (x < 0 || y < 0 || z < 0 || x >= dims_.x() || y >= dims_.y() || z >= dims_.z())
+            continue;
+          auto it = sums_.find((size_t(z) * size_t(dims_.y()) + size_t(y)) * size_t(dims_.x()) +
+                               size_t(x));
+          if (it == sums_.end()) continue;
+          w += it->second.w;
+          r += it->second.r;
+          g += it->second.g;
+          b += it->second.b;
+        }
+    tw = 64;
+    if (!(w > 0)) return false;
+  }
   *rgb = Vec3f(float(r / w), float(g / w), float(b / w));
   if (weight) *weight = float(w / std::max(tw, 1e-12));
   return true;
@@ -90,7 +110,7 @@ ColourIntegrationStats integrateColour(const DepthImage& depth, const RgbImage& 
     const float d = depth.at(u, v);
     return d > 0 && std::isfinite(d);
   };
-  const Iso3 T_RGB_D = camera.colour.T_D_RGB().inverse();
+  const Iso3 T_RGB_D = camera.colour.T_D_RGB.inverse();
   // The colour camera's z-buffer of every measured point (the robot's included).
   std::vector<float> zbuf(size_t(Kc.width) * size_t(Kc.height),
                           std::numeric_limits<float>::infinity());
@@ -110,7 +130,18 @@ ColourIntegrationStats integrateColour(const DepthImage& depth, const RgbImage& 
   };
   constexpr float kJump = 0.01f;
   constexpr int kEdge = 2;
-  for (int v = 1; v + 1 < H; ++v)
+  // Each row's colours on both cores, then added to the volume in row order (deterministic).
+  struct Seen {
+    Vec3 p_O;
+    Vec3f rgb;
+    float w;
+  };
+  const size_t rowCount = size_t(H);
+  std::vector<std::vector<Seen>> rows(rowCount);
+  std::vector<ColourIntegrationStats> rowStats(rowCount);
+  parallelFor(1, H - 1, [&](int v) {
+    ColourIntegrationStats& st = rowStats[size_t(v)];
+    rows[size_t(v)].reserve(size_t(W));
     for (int u = 1; u + 1 < W; ++u) {
       const size_t i = size_t(v) * size_t(W) + size_t(u);
       if (!valid(u, v) || carve(u, v) || !(sigma_m[i] > 0)) continue;
@@ -145,9 +176,16 @@ ColourIntegrationStats integrateColour(const DepthImage& depth, const RgbImage& 
         w *= 0.1f;
         ++st.edge_weighted;
       }
-      volume->add(T_O_C * p, colour.bilinear(px.x(), px.y()), w);
+      rows[size_t(v)].push_back({T_O_C * p, colour.bilinear(px.x(), px.y()), w});
       ++st.pixels;
     }
+  });
+  for (int v = 0; v < H; ++v) {
+    for (const Seen& s : rows[size_t(v)]) volume->add(s.p_O, s.rgb, s.w);
+    st.pixels += rowStats[size_t(v)].pixels;
+    st.occluded += rowStats[size_t(v)].occluded;
+    st.edge_weighted += rowStats[size_t(v)].edge_weighted;
+  }
   return st;
 }
 

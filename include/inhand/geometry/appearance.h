@@ -30,6 +30,11 @@ struct RgbImage {
 // Reads an 8- or 16-bit PNG (grey, grey + alpha, RGB, RGBA or palette) as 8-bit RGB (alpha
 // dropped). Throws Error naming the file when it is missing, not a PNG or corrupt.
 RgbImage readRgbPng(const std::filesystem::path& path);
+// Reads a baseline or progressive JPEG (grey or colour) as 8-bit RGB; throws Error naming the file.
+RgbImage readRgbJpeg(const std::filesystem::path& path);
+// PNG or JPEG by the file's extension (.png, .jpg, .jpeg; any case); other extensions are an
+// Error naming the file.
+RgbImage readRgbImage(const std::filesystem::path& path);
 // Writes an 8-bit RGB PNG atomically; throws Error naming the path.
 void writeRgbPng(const std::filesystem::path& path, const RgbImage& image);
 

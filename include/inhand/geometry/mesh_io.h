@@ -16,11 +16,11 @@ namespace inhand {
 // vertices are welded. Coordinates are taken as metres. Throws Error naming the file on failure.
 TriangleMesh importMesh(const std::filesystem::path& path);
 
-// Imports a mesh with its colours: OBJ with its MTL (`Kd`, `map_Kd` PNG textures, `vt`
+// Imports a mesh with its colours: OBJ with its MTL (`Kd`, `map_Kd` PNG or JPEG textures, `vt`
 // coordinates), PLY with per-vertex `red`/`green`/`blue`, anything else as importMesh reads it
 // (flat grey). Vertices are welded as importMesh welds them. Throws Error naming the file (the
-// MTL or the texture as well) when something cannot be read; a texture that is not PNG is an
-// error, not a silent grey.
+// MTL or the texture as well) when something cannot be read; a texture that is not PNG or JPEG
+// is an error, not a silent grey.
 TexturedMesh importTexturedMesh(const std::filesystem::path& path);
 
 // Per-vertex colour from variance (m²), the paper's convention: grey where confident, through

@@ -26,17 +26,12 @@ struct CameraIntrinsics {
 };
 
 // A colour camera registered to the depth camera, as on a Kinect-class sensor: its own
-// intrinsics; its optical frame parallel to the depth camera's, its centre at offset_D in the
-// depth camera's frame (the Kinect v1's colour camera sits 2.5 cm beside its infrared camera).
+// intrinsics, and its optical frame's pose in the depth camera's frame (by default parallel to
+// it, 2.5 cm aside, as the Kinect v1's colour camera sits beside its infrared camera).
 struct ColourCameraOptions {
   bool enabled = false;
   CameraIntrinsics intrinsics{640, 480, 530.0, 530.0, 318.5, 242.5};
-  Vec3 offset_D{0.025, 0.0, 0.0};
-  Iso3 T_D_RGB() const {
-    Iso3 T = Iso3::Identity();
-    T.translation() = offset_D;
-    return T;
-  }
+  Iso3 T_D_RGB = Iso3(Eigen::Translation3d(0.025, 0.0, 0.0));
 };
 
 struct DepthCameraOptions {

@@ -13,12 +13,17 @@
 //     "T_O_palm": [16 numbers],                                       (top level, optional)
 //     "frames": [ { "file": ..., "q": { "joint_name": value, … }, "T_B_C": [16 numbers],
 //                   "T_O_palm": [16 numbers] (optional), "T_O_C": (optional with q and T_B_C) } ]
+// Frames may carry a colour image ("colour": a PNG or JPEG file, per frame), taken by a colour
+// camera with its own intrinsics ("colour_intrinsics", top level; default: the depth camera's)
+// and pose in the depth camera's frame ("T_D_RGB", 16 numbers; default: the identity, an image
+// registered to the depth image).
 #include <filesystem>
 #include <optional>
 #include <string>
 #include <utility>
 #include <vector>
 
+#include "inhand/geometry/appearance.h"
 #include "inhand/geometry/triangle_mesh.h"
 #include "inhand/sensor/depth_camera.h"
 #include "inhand/sensor/depth_image.h"
@@ -35,6 +40,7 @@ struct FrameRecord {
   // camera in the robot's base frame, the palm in the object frame (else FrameSet::T_O_palm).
   std::vector<std::pair<std::string, double>> q;
   std::optional<Iso3> T_B_C, T_O_palm;
+  std::string colour_file;  // the colour image taken with it (relative path), or empty
 };
 
 struct FrameSet {
@@ -45,6 +51,8 @@ struct FrameSet {
   // uses it for the volume unless --bounds is given.
   std::optional<Aabb> bounds_O;
   std::optional<Iso3> T_O_palm;  // the palm in the object frame, for frames that give none
+  // The colour camera: enabled when a frame has a colour image.
+  ColourCameraOptions colour;
   // Poses whose rotation was not orthonormal to 1e-9 (max |RᵀR − I| up to 1e-2, as pose files
   // with 7–8 significant digits give) were replaced by the nearest rotation: how many, and the
   // largest deviation.
@@ -58,6 +66,9 @@ struct FrameSet {
 FrameSet readFrameSet(const std::filesystem::path& dir);
 // Loads frame i's depth image, checking its size against the intrinsics.
 DepthImage loadFrameDepth(const std::filesystem::path& dir, const FrameSet& set, size_t i);
+// Loads frame i's colour image (empty when it has none), checking its size against the colour
+// intrinsics.
+RgbImage loadFrameColour(const std::filesystem::path& dir, const FrameSet& set, size_t i);
 // Writes DIR/frames.json atomically.
 void writeFrameSet(const std::filesystem::path& dir, const FrameSet& set);
 

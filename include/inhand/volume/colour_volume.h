@@ -22,8 +22,8 @@ class ColourVolume {
 
   // Adds colour `rgb` (0–255) seen at p_O with weight w to the voxel nearest p_O.
   void add(const Vec3& p_O, const Vec3f& rgb, float w);
-  // The weighted mean colour at p_O, trilinear over the 8 voxels around it; false where none of
-  // them has colour. `weight` (optional) receives the interpolated weight.
+  // The weighted mean colour at p_O, trilinear over the 8 voxels around it; where none of them
+  // has colour, the coloured voxels of the 4 × 4 × 4 block around them; false where none has. `weight` (optional) receives the interpolated weight.
   bool at(const Vec3& p_O, Vec3f* rgb, float* weight = nullptr) const;
 
   size_t voxels() const { return sums_.size(); }  // voxels with colour
