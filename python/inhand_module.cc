@@ -190,6 +190,15 @@ void bindCameraAndModel(py::module_& m) {
             return py::array_t<uint8_t>({py::ssize_t(o.observed.size())}, o.observed.data(), self);
           },
           "N uint8: 1 measured, 0 hole-filled")
+      .def_property_readonly(
+          "rgba",
+          [](py::object self) {
+            auto& o = self.cast<ObjectModel&>();
+            return py::array_t<uint8_t>({py::ssize_t(o.rgba.size()), py::ssize_t(4)},
+                                        reinterpret_cast<const uint8_t*>(o.rgba.data()), self);
+          },
+          "N×4 uint8 scanned colour (sRGB) and alpha (255: colour seen, 0: none); N×4 empty "
+          "(0 rows) without a colour camera")
       .def("mean_entropy", &ObjectModel::meanEntropy, "paper Fig. 5: mean ½ ln(2πe σ²), nats")
       .def("observed_fraction", &ObjectModel::observedAreaFraction)
       .def("hole_area_m2", &ObjectModel::holeArea)
@@ -198,9 +207,11 @@ void bindCameraAndModel(py::module_& m) {
       .def(
           "save_ply",
           [](const ObjectModel& o, const std::filesystem::path& path) {
-            writePly(path, o.mesh, &o.variance);
+            writePly(path, o.mesh, &o.variance, o.rgba.empty() ? nullptr : &o.rgba);
           },
-          py::arg("path"), "binary PLY with per-vertex variance and confidence colours")
+          py::arg("path"),
+          "binary PLY with per-vertex variance and the scanned colours (confidence colours "
+          "without a colour camera)")
       .def("__repr__", [](const ObjectModel& o) {
         return "Model(" + std::to_string(o.mesh.vertices.size()) + " vertices, " +
                std::to_string(o.mesh.triangles.size()) + " faces)";
@@ -597,14 +608,14 @@ void bindScan(py::module_& m) {
         if (!robot)
           robot = std::make_shared<RobotModel>(
               RobotModel::load(std::filesystem::path(dataDir()) / "robots/wam_barretthand.json"));
-        const TriangleMesh mesh = loadObject(object);
+        const TexturedMesh mesh = loadSimulatedObject(object, c.sim.colour.enabled);
         ScanProgress progress;
         if (log)
           progress.log = [](const std::string& s) {
             std::fprintf(stderr, "scan: %s\n", s.c_str());
           };
         py::gil_scoped_release release;
-        return runSimulatedScan(*robot, mesh, c, progress);
+        return runSimulatedScan(*robot, mesh.mesh, c, progress, {}, mesh.colours);
       },
       py::arg("object"), py::arg("robot") = nullptr, py::arg("options") = py::none(),
       py::arg("seed") = 1, py::arg("max_grasps") = py::none(), py::arg("log") = false,

@@ -287,3 +287,24 @@ TEST(Colour, RealKinectFramesFuseWithTheirColours) {
   EXPECT_LT(median(de), 13.0);  // 10.3 measured
   EXPECT_GT(median(shifted), 2 * median(de));
 }
+
+// PSNR: a model with the truth's own colours renders as the truth does; a grey one does not.
+TEST(Colour, PsnrOfTheTruthsOwnColoursIsPerfectAndOfGreyIsLow) {
+  const TriangleMesh sphere = makeSphere(0.05, 3);
+  SurfaceColours truth;
+  ObjectModel m;
+  m.mesh = sphere;
+  for (const Vec3f& v : sphere.vertices) {
+    const auto c = std::array<uint8_t, 3>{uint8_t(128 + 1200 * v.x()), uint8_t(128 + 1200 * v.y()),
+                                          uint8_t(128 + 1200 * v.z())};
+    truth.vertex_rgb.push_back(c);
+    m.rgba.push_back({c[0], c[1], c[2], 255});
+  }
+  std::vector<RgbImage> images;
+  EXPECT_GT(colourPsnr(m, sphere, truth, 8, &images), 60.0);
+  EXPECT_EQ(images.size(), 16u);
+  for (auto& c : m.rgba) c = {128, 128, 128, 255};
+  const double grey = colourPsnr(m, sphere, truth, 8);
+  EXPECT_GT(grey, 5.0);
+  EXPECT_LT(grey, 30.0);
+}

@@ -32,6 +32,10 @@ function geometryOf(m) {
   g.setAttribute('position', new THREE.BufferAttribute(decode(m.positions, Float32Array), 3));
   g.setIndex(new THREE.BufferAttribute(decode(m.indices, Uint32Array), 1));
   if (m.colors) g.setAttribute('color', new THREE.BufferAttribute(decode(m.colors, Uint8Array), 3, true));
+  if (m.confidence_colors) {  // scanned with colour: both colourings, the report's switch picks
+    g.userData.scanColour = g.getAttribute('color');
+    g.userData.confidenceColour = new THREE.BufferAttribute(decode(m.confidence_colors, Uint8Array), 3, true);
+  }
   g.computeVertexNormals();
   return g;
 }
@@ -157,9 +161,18 @@ select.value = models.length - 1;
 const truthBox = el('input', { type: 'checkbox', onchange: () => { if (truth) truth.visible = truthBox.checked; render(); } });
 const viewsBox = el('input', { type: 'checkbox', checked: '', onchange: () => { frusta.visible = viewsBox.checked; render(); } });
 const handBox = el('input', { type: 'checkbox', checked: '', onchange: () => show(current) });
+// Scanned colour or confidence, on every model that has both.
+const colourBox = el('input', { type: 'checkbox', checked: '', onchange: () => {
+  for (const m of models) {
+    const u = m.mesh.geometry.userData;
+    if (u.scanColour) m.mesh.geometry.setAttribute('color', colourBox.checked ? u.scanColour : u.confidenceColour);
+  }
+  render();
+} });
 controlsDiv.append(el('label', {}, 'Show: ', select),
   el('label', {}, truthBox, ' true mesh' + (truth ? '' : ' (not known)')),
   el('label', {}, viewsBox, ' camera views'), el('label', {}, handBox, ' hand'));
+if (D.model.confidence_colors) controlsDiv.append(el('label', {}, colourBox, ' scanned colour (off: confidence)'));
 if (!truth) truthBox.disabled = true; else truth.visible = false;
 
 camera.position.copy(centre.clone().add(new THREE.Vector3(1.2, -1.6, 1.0).normalize().multiplyScalar(radius * 5.5)));

@@ -180,3 +180,21 @@ def test_session_driven_from_python_equals_the_cpp_scan(tmp_path):
         if not v["initial"]:
             assert v["predicted_gain"] >= v["t_q"] > 0
     assert cpp.views[-1]["unresolved"] < cpp.views[0]["unresolved"]
+
+
+def test_colours_reach_numpy_without_copies():
+    """A scan with the colour camera: the model's N x 4 colours are a view of its memory, most
+    of the observed vertices have colour, and they are the checkerboard's red and cream, not
+    grey."""
+    options = dict(FAST, start="held", sim=dict(FAST["sim"], colour={"enabled": True}))
+    result = inhand.scan("builtin:coffee_can", options=options, max_grasps=1)
+    model = result.model
+    rgba = model.rgba
+    assert rgba.shape == (len(model.vertices), 4) and rgba.dtype == np.uint8
+    assert not rgba.flags.owndata  # a view of the model's memory
+    seen = rgba[:, 3] == 255
+    assert seen[model.observed == 1].mean() > 0.8
+    red = rgba[seen, 0].astype(int) - rgba[seen, 1].astype(int)
+    assert (red > 60).mean() > 0.2  # the red squares (200, 40, 40 before shading)
+    without = inhand.scan("builtin:coffee_can", options=dict(FAST, start="held"), max_grasps=1)
+    assert without.model.rgba.shape == (0, 4)

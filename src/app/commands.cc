@@ -499,8 +499,41 @@ int runRobot(const RobotArgs& args) {
   return 0;
 }
 
+// `snapshot --view-from DIR:N`: frame N's colour image (black without one) and the model rendered
+// unlit from that frame's colour camera, side by side.
+RgbImage viewFromFrame(const TriangleMesh& mesh, const std::vector<std::array<uint8_t, 3>>& colors,
+                       const std::string& spec) {
+  const size_t colon = spec.rfind(':');
+  if (colon == std::string::npos || colon == 0 || colon + 1 == spec.size())
+    throw Error("--view-from: expected DIR:N, not " + spec);
+  const fs::path dir = spec.substr(0, colon);
+  char* end = nullptr;
+  const long n = std::strtol(spec.c_str() + colon + 1, &end, 10);
+  const FrameSet set = readFrameSet(dir);
+  if (*end != '\0' || n < 0 || size_t(n) >= set.frames.size())
+    throw Error("--view-from: frame " + spec.substr(colon + 1) + " is not one of the " +
+                std::to_string(set.frames.size()) + " in " + (dir / "frames.json").string());
+  const FrameRecord& f = set.frames[size_t(n)];
+  if (!f.has_T_O_C) throw Error("--view-from: frame " + std::to_string(n) + " has no T_O_C");
+  std::vector<std::array<uint8_t, 4>> rgba(mesh.vertices.size(), {128, 128, 128, 0});
+  for (size_t i = 0; i < colors.size() && i < rgba.size(); ++i)
+    rgba[i] = {colors[i][0], colors[i][1], colors[i][2], 255};
+  const CameraIntrinsics& K = set.colour.intrinsics;
+  const RgbImage model = renderVertexColours(mesh, rgba, f.T_O_C * set.colour.T_D_RGB, K);
+  const RgbImage photo = loadFrameColour(dir, set, size_t(n));
+  RgbImage out(2 * K.width, K.height);
+  for (int v = 0; v < K.height; ++v)
+    for (int u = 0; u < K.width; ++u) {
+      if (!photo.empty()) std::copy(photo.at(u, v), photo.at(u, v) + 3, out.at(u, v));
+      std::copy(model.at(u, v), model.at(u, v) + 3, out.at(K.width + u, v));
+    }
+  return out;
+}
+
 int runSnapshot(const SnapshotArgs& args) {
   if (args.size_px < 16 || args.size_px > 4096) throw Error("--size must be in 16..4096");
+  if (args.colour != "auto" && args.colour != "scan" && args.colour != "confidence")
+    throw Error("--colour must be auto, scan or confidence, not " + args.colour);
   fs::path in(args.model);
   TriangleMesh mesh;
   std::vector<std::array<uint8_t, 3>> colors;
@@ -508,7 +541,13 @@ int runSnapshot(const SnapshotArgs& args) {
     PlyData ply = readPly(in);
     mesh = std::move(ply.mesh);
     auto& p = ply.vertexProperties;
-    if (p.count("red") && p.count("green") && p.count("blue")) {
+    if (args.colour == "scan" && !p.count("alpha"))
+      throw Error(args.model + ": no scanned colours (no alpha property: scanned without colour)");
+    if (args.colour == "confidence" && !p.count("variance"))
+      throw Error(args.model + ": no variance property for the confidence colours");
+    if (args.colour == "confidence") {
+      for (float v : p["variance"]) colors.push_back(confidenceColor(v));
+    } else if (p.count("red") && p.count("green") && p.count("blue")) {
       for (size_t i = 0; i < mesh.vertices.size(); ++i)
         colors.push_back({uint8_t(p["red"][i]), uint8_t(p["green"][i]), uint8_t(p["blue"][i])});
     } else if (p.count("variance")) {
@@ -516,6 +555,12 @@ int runSnapshot(const SnapshotArgs& args) {
     }
   } else {
     mesh = loadObject(args.model);
+  }
+  if (!args.view_from.empty()) {
+    writeRgbPng(args.out, viewFromFrame(mesh, colors, args.view_from));
+    std::printf("snapshot: %s from %s -> %s\n", args.model.c_str(), args.view_from.c_str(),
+                args.out.c_str());
+    return 0;
   }
   SnapshotOptions so;
   so.tile_px = args.size_px;

@@ -40,6 +40,12 @@ struct SnapshotArgs {
   std::string model;  // PLY (colours per vertex used when present) or any mesh file
   std::string out;    // PNG
   int size_px = 400;  // per view
+  // auto: the PLY's red, green, blue; scan: the scanned colours (a PLY with alpha: inhand's
+  // colour models); confidence: from the per-vertex variance.
+  std::string colour = "auto";
+  // DIR:N: instead of six views, the model from frame N's colour camera (DIR/frames.json) beside
+  // that frame's colour image.
+  std::string view_from;
 };
 
 struct RobotArgs {

@@ -79,6 +79,13 @@ CLI::App* addSnapshot(CLI::App& app, SnapshotArgs& snap) {
   s->add_option("model", snap.model, "model .ply, mesh file or builtin:NAME")->required();
   s->add_option("--out", snap.out, "output PNG")->required();
   s->add_option("--size", snap.size_px, "pixels per view")->capture_default_str();
+  s->add_option("--colour", snap.colour,
+                "auto: the PLY's colours; scan: the scanned colours (grey where none was seen); "
+                "confidence: grey to red by the variance")
+      ->capture_default_str();
+  s->add_option("--view-from", snap.view_from,
+                "DIR:N: the model from frame N's colour camera (DIR/frames.json), beside that "
+                "frame's colour image");
   return s;
 }
 

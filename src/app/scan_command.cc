@@ -373,17 +373,9 @@ int runScan(const ScanArgs& given) {
   int holes = 0;
   // With the colour camera: the object's colours from its file (OBJ + MTL + PNG, PLY colours),
   // a built-in object's checkerboard, or flat grey.
-  SurfaceColours colours;
-  TriangleMesh loaded;
-  if (o.sim.colour.enabled && !isBuiltinSpec(objectToLoad)) {
-    TexturedMesh t = importTexturedMesh(objectToLoad);
-    loaded = std::move(t.mesh);
-    colours = std::move(t.colours);
-  } else {
-    loaded = loadObject(objectToLoad);
-    if (o.sim.colour.enabled) colours = checkerColours(loaded, kBuiltinCheckerSquare_m);
-  }
-  TriangleMesh object = withHolesClosed(loaded, &holes);
+  TexturedMesh loaded = loadSimulatedObject(objectToLoad, o.sim.colour.enabled);
+  const SurfaceColours& colours = loaded.colours;
+  TriangleMesh object = withHolesClosed(loaded.mesh, &holes);
   if (holes > 0)
     std::fprintf(stderr, "scan: %s: the mesh is open: %d holes closed (a solid is simulated)\n",
                  args.object.c_str(), holes);
@@ -463,6 +455,7 @@ int runScan(const ScanArgs& given) {
         {"vertices_compared", sim.colour.vertices},
         {"delta_e76_mean", sim.colour.delta_e_mean},
         {"delta_e76_p95", sim.colour.delta_e_p95},
+        {"psnr_db_8_views", sim.colour.psnr_db},
         {"pixels_fused", r.colour_pixels},
         {"fusion_s", r.colour_s},
         {"fusion_ms_per_frame", r.frames > 0 ? 1000 * r.colour_s / r.frames : 0.0}};

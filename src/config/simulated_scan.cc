@@ -3,9 +3,19 @@
 #include <algorithm>
 
 #include "inhand/core/error.h"
+#include "inhand/geometry/builtin_objects.h"
+#include "inhand/geometry/mesh_io.h"
 #include "inhand/scan/checkpoint.h"
 
 namespace inhand {
+
+TexturedMesh loadSimulatedObject(const std::string& spec, bool colour) {
+  if (colour && !isBuiltinSpec(spec)) return importTexturedMesh(spec);
+  TexturedMesh out;
+  out.mesh = loadObject(spec);
+  if (colour) out.colours = checkerColours(out.mesh, kBuiltinCheckerSquare_m);
+  return out;
+}
 
 SimulatedScan runSimulatedScan(const RobotModel& model, const TriangleMesh& mesh,
                                const ScanConfig& o, ScanProgress progress,
@@ -108,7 +118,10 @@ SimulatedScan runSimulatedScan(const RobotModel& model, const TriangleMesh& mesh
             : scanFromTable(robot, sensor, out.T_B_O_rest, o.scan, o.multi, noise, progress);
   }
   out.metrics = truth.evaluate(out.result.scan.model);
-  if (camera.colour.enabled) out.colour = colourAccuracy(out.result.scan.model, object, colours);
+  if (camera.colour.enabled) {
+    out.colour = colourAccuracy(out.result.scan.model, object, colours);
+    out.colour.psnr_db = colourPsnr(out.result.scan.model, object, colours);
+  }
   out.drops = world.drops;
   out.faults = world.faults;
   out.render_s = world.render_s;

@@ -6,6 +6,9 @@
 
 #include "inhand/core/error.h"
 #include "inhand/core/parallel.h"
+#include "inhand/core/pose.h"
+#include "inhand/geometry/ray_scene.h"
+#include "inhand/sensor/depth_camera.h"
 
 namespace inhand {
 
@@ -212,6 +215,117 @@ ColourMetrics colourAccuracy(const ObjectModel& model, const TriangleMesh& truth
   std::nth_element(sorted.begin(), sorted.begin() + long(k95), sorted.end());
   out.delta_e_p95 = sorted[k95];
   return out;
+}
+
+namespace {
+// The mesh rendered unlit from T_O_C (pinhole K): each pixel's colour from `colourAt(triangle,
+// b1, b2)`, black where the ray meets nothing; `hit` marks the pixels that meet the mesh.
+template <class ColourAt>
+RgbImage renderUnlit(const RayScene& scene, const Iso3& T_O_C, const CameraIntrinsics& K,
+                     const ColourAt& colourAt, std::vector<uint8_t>* hit) {
+  const size_t n = size_t(K.width) * size_t(K.height);
+  std::vector<Ray> rays(n);
+  for (int v = 0; v < K.height; ++v)
+    for (int u = 0; u < K.width; ++u) {
+      Ray& r = rays[size_t(v) * size_t(K.width) + size_t(u)];
+      r.origin = T_O_C.translation().cast<float>();
+      r.dir = (T_O_C.linear() * K.rayZ1(u, v)).cast<float>();
+    }
+  std::vector<Hit> hits(n);
+  scene.intersect(rays.data(), hits.data(), n);
+  RgbImage img(K.width, K.height);
+  hit->assign(n, 0);
+  for (size_t i = 0; i < n; ++i) {
+    if (!hits[i].valid()) continue;
+    (*hit)[i] = 1;
+    const Vec3f c = colourAt(hits[i].triangle, hits[i].u, hits[i].v);
+    for (int k = 0; k < 3; ++k)
+      img.rgb[3 * i + size_t(k)] = uint8_t(std::clamp(std::lround(c[k]), 0L, 255L));
+  }
+  return img;
+}
+// The per-vertex colour interpolated at barycentric (b1, b2) of triangle t (alpha 0: mid grey).
+Vec3f vertexColourAt(const TriangleMesh& mesh, const std::vector<std::array<uint8_t, 4>>& rgba,
+                     int t, float b1, float b2) {
+  const Tri& f = mesh.triangles[size_t(t)];
+  const float b[3] = {1 - b1 - b2, b1, b2};
+  Vec3f c = Vec3f::Zero();
+  for (int k = 0; k < 3; ++k) {
+    const auto& q = rgba[size_t(f[k])];
+    c += b[k] * (q[3] ? Vec3f(q[0], q[1], q[2]) : Vec3f(128, 128, 128));
+  }
+  return c;
+}
+}  // namespace
+
+RgbImage renderVertexColours(const TriangleMesh& mesh,
+                             const std::vector<std::array<uint8_t, 4>>& rgba, const Iso3& T_O_C,
+                             const CameraIntrinsics& K) {
+  if (rgba.size() != mesh.vertices.size())
+    throw Error("renderVertexColours: " + std::to_string(rgba.size()) + " colours for " +
+                std::to_string(mesh.vertices.size()) + " vertices");
+  RayScene scene;
+  scene.addMesh(mesh);
+  scene.commit();
+  std::vector<uint8_t> hit;
+  return renderUnlit(
+      scene, T_O_C, K,
+      [&](int t, float b1, float b2) { return vertexColourAt(mesh, rgba, t, b1, b2); }, &hit);
+}
+
+double colourPsnr(const ObjectModel& model, const TriangleMesh& truth,
+                  const SurfaceColours& truth_colours, int views, std::vector<RgbImage>* images) {
+  if (model.mesh.empty() || truth.empty() || model.rgba.size() != model.mesh.vertices.size())
+    return 0;
+  RayScene truthScene, modelScene;
+  truthScene.addMesh(truth);
+  truthScene.commit();
+  modelScene.addMesh(model.mesh);
+  modelScene.commit();
+  const Aabb box = truth.bounds();
+  const Vec3 centre = box.center();
+  const double range = 3 * box.size().norm();
+  CameraIntrinsics K;
+  K.width = 320;
+  K.height = 240;
+  K.fx = K.fy = 0.5 * K.width / std::tan(M_PI / 6);
+  K.cx = 0.5 * (K.width - 1);
+  K.cy = 0.5 * (K.height - 1);
+  auto truthAt = [&](int t, float b1, float b2) { return truth_colours.at(truth, t, b1, b2); };
+  auto modelAt = [&](int t, float b1, float b2) {
+    return vertexColourAt(model.mesh, model.rgba, t, b1, b2);
+  };
+  double sse = 0;
+  size_t count = 0;
+  for (const Vec3& d : fibonacciSphere(views)) {
+    // The camera on direction d from the centre, looking at it (z forward, y down).
+    const Vec3 z = -d;
+    Vec3 x = z.cross(std::abs(z.z()) < 0.9 ? Vec3::UnitZ() : Vec3::UnitX()).normalized();
+    const Vec3 y = z.cross(x);
+    Iso3 T_O_C = Iso3::Identity();
+    T_O_C.linear().col(0) = x;
+    T_O_C.linear().col(1) = y;
+    T_O_C.linear().col(2) = z;
+    T_O_C.translation() = centre + range * d;
+    std::vector<uint8_t> hitTruth, hitModel;
+    const RgbImage a = renderUnlit(truthScene, T_O_C, K, truthAt, &hitTruth);
+    const RgbImage b = renderUnlit(modelScene, T_O_C, K, modelAt, &hitModel);
+    for (size_t i = 0; i < hitTruth.size(); ++i) {
+      if (!hitTruth[i] && !hitModel[i]) continue;
+      for (int k = 0; k < 3; ++k) {
+        const double e = double(a.rgb[3 * i + size_t(k)]) - double(b.rgb[3 * i + size_t(k)]);
+        sse += e * e;
+      }
+      count += 3;
+    }
+    if (images) {
+      images->push_back(a);
+      images->push_back(b);
+    }
+  }
+  if (count == 0) return 0;
+  const double mse = sse / double(count);
+  return mse > 0 ? 10 * std::log10(255.0 * 255.0 / mse) : 99.0;
 }
 
 }  // namespace inhand

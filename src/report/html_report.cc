@@ -48,7 +48,7 @@ std::string base64(const void* data, size_t n) {
 }
 
 // A mesh as base64 little-endian arrays: float32 positions, uint32 indices, and uint8 RGB
-// colours when the PLY has them.
+// colours when the PLY has them (and the confidence colours of a model scanned with colour).
 Json meshJson(const fs::path& ply) {
   const PlyData d = readPly(ply);
   std::vector<float> pos;
@@ -73,6 +73,16 @@ Json meshJson(const fs::path& ply) {
       rgb[3 * i + 2] = uint8_t(b->second[i]);
     }
     j["colors"] = base64(rgb.data(), rgb.size());
+  }
+  // A model scanned with colour (alpha): its confidence colours too, for the report's switch.
+  auto a = d.vertexProperties.find("alpha"), var = d.vertexProperties.find("variance");
+  if (a != d.vertexProperties.end() && var != d.vertexProperties.end()) {
+    std::vector<uint8_t> rgb(d.mesh.vertices.size() * 3);
+    for (size_t i = 0; i < d.mesh.vertices.size(); ++i) {
+      const auto c = confidenceColor(var->second[i]);
+      std::copy(c.begin(), c.end(), &rgb[3 * i]);
+    }
+    j["confidence_colors"] = base64(rgb.data(), rgb.size());
   }
   return j;
 }

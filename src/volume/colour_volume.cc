@@ -157,9 +157,17 @@ ColourIntegrationStats integrateColour(const DepthImage& depth, const RgbImage& 
       if (q.z() <= 0) continue;
       const Vec2 px = Kc.project(q);
       if (px.x() < 0 || px.y() < 0 || px.x() > Kc.width - 1 || px.y() > Kc.height - 1) continue;
-      const size_t zi =
-          size_t(std::lround(px.y())) * size_t(Kc.width) + size_t(std::lround(px.x()));
-      if (q.z() > zbuf[zi] + kJump) {
+      // Occluded: something nearer at the colour pixel or beside it (the bilinear sample reads
+      // its neighbours: a finger's silhouette would tint the object).
+      const int cu = int(std::lround(px.x())), cv = int(std::lround(px.y()));
+      bool hidden = false;
+      for (int dv = -1; dv <= 1 && !hidden; ++dv)
+        for (int du = -1; du <= 1 && !hidden; ++du) {
+          const int uu = cu + du, vv = cv + dv;
+          if (uu < 0 || vv < 0 || uu >= Kc.width || vv >= Kc.height) continue;
+          hidden = q.z() > zbuf[size_t(vv) * size_t(Kc.width) + size_t(uu)] + kJump;
+        }
+      if (hidden) {
         ++st.occluded;
         continue;
       }

@@ -43,6 +43,12 @@ struct SimulatedScanCheckpoints {
   Json extra;
 };
 
+// The object a simulated scan takes ("builtin:NAME" or a mesh file): with `colour` (the colour
+// camera on) its colours from its file (OBJ + MTL + texture, PLY colours; flat grey when it has
+// none), or a built-in object's checkerboard (kBuiltinCheckerSquare_m). Throws Error naming the
+// object or file.
+TexturedMesh loadSimulatedObject(const std::string& spec, bool colour);
+
 // `object`: the true mesh (frame O, the model's frame; an open mesh with its holes closed:
 // withHolesClosed); the seed is config.sim.seed (noise) and
 // config.scan.planner.seed (IK). `progress.coverage` is set to the truth's coverage when empty.

@@ -19,6 +19,7 @@
 #include "inhand/geometry/appearance.h"
 #include "inhand/geometry/surface_distance.h"
 #include "inhand/mesh/extract.h"
+#include "inhand/sensor/depth_camera.h"
 
 namespace inhand {
 
@@ -46,9 +47,26 @@ struct SurfaceMetrics {
 struct ColourMetrics {
   int vertices = 0;  // vertices compared
   double delta_e_mean = 0, delta_e_p95 = 0;
+  double psnr_db = 0;  // colourPsnr over 8 views
 };
 ColourMetrics colourAccuracy(const ObjectModel& model, const TriangleMesh& truth,
                              const SurfaceColours& truth_colours);
+
+// `mesh` with per-vertex colours (`rgba`: alpha 0 drawn mid grey) rendered unlit from the camera
+// at T_O_C (pinhole K) by ray casting: black where the rays meet nothing.
+RgbImage renderVertexColours(const TriangleMesh& mesh,
+                             const std::vector<std::array<uint8_t, 4>>& rgba, const Iso3& T_O_C,
+                             const CameraIntrinsics& K);
+
+// The model with its per-vertex colours (rgba; vertices without colour in mid grey) and the true
+// mesh with its colours, each rendered unlit (albedo only) by ray casting from `views` cameras
+// around the true mesh's box centre (directions spread over the sphere, 3 box diagonals away,
+// 320 × 240, 60° across), none of them the scan's: the PSNR (dB) of the model's images against
+// the truth's over every pixel where either shows its surface (a pixel only one shows counts
+// against the black of the other). `images` (optional) receives the pairs, truth then model.
+double colourPsnr(const ObjectModel& model, const TriangleMesh& truth,
+                  const SurfaceColours& truth_colours, int views = 8,
+                  std::vector<RgbImage>* images = nullptr);
 
 // The true surface sampled once, ready to score many models (thread-safe after construction).
 class GroundTruth {

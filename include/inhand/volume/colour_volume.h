@@ -23,7 +23,8 @@ class ColourVolume {
   // Adds colour `rgb` (0–255) seen at p_O with weight w to the voxel nearest p_O.
   void add(const Vec3& p_O, const Vec3f& rgb, float w);
   // The weighted mean colour at p_O, trilinear over the 8 voxels around it; where none of them
-  // has colour, the coloured voxels of the 4 × 4 × 4 block around them; false where none has. `weight` (optional) receives the interpolated weight.
+  // has colour, the coloured voxels of the 4 × 4 × 4 block around them; false where none has.
+  // `weight` (optional) receives the interpolated weight.
   bool at(const Vec3& p_O, Vec3f* rgb, float* weight = nullptr) const;
 
   size_t voxels() const { return sums_.size(); }  // voxels with colour
@@ -55,8 +56,9 @@ struct ColourIntegrationStats {
 // pixel's surface point, weighted by (1 mm / σ)² · cos²(viewing angle) (σ: measurementSigma);
 // pixels within 2 of one with no depth, a depth jump over 1 cm or a carve-only pixel (edges,
 // where colour and depth disagree most, and next to the fingers) weigh a tenth. A pixel whose
-// point the colour camera sees behind something nearer (another pixel's point 1 cm or more in
-// front along its ray, as the fingers hide the object from a camera 2.5 cm aside) adds nothing.
+// point the colour camera sees behind something nearer, at its colour pixel or one beside it
+// (another pixel's point 1 cm or more in front, as the fingers hide the object from a camera
+// 2.5 cm aside), adds nothing.
 ColourIntegrationStats integrateColour(const DepthImage& depth, const RgbImage& colour,
                                        const Iso3& T_O_C, const DepthCameraOptions& camera,
                                        const std::vector<float>& sigma_m, ColourVolume* volume,
