@@ -308,3 +308,31 @@ TEST(Colour, PsnrOfTheTruthsOwnColoursIsPerfectAndOfGreyIsLow) {
   EXPECT_GT(grey, 5.0);
   EXPECT_LT(grey, 30.0);
 }
+
+// A colour scan stopped midway and resumed from its checkpoint ends with the colours of the scan
+// that was not stopped, vertex for vertex (same machine).
+TEST(Colour, AResumedScanKeepsItsColours) {
+  test::TempDir dir;
+  ScanConfig config = test::quickScanConfig(2);
+  config.sim.colour.enabled = true;
+  const TexturedMesh can = loadSimulatedObject("builtin:coffee_can", true);
+  const SimulatedScan whole = runSimulatedScan(test::wam(), can.mesh, config, {}, {}, can.colours);
+  bool stop = false;
+  int frames = 0;
+  ScanProgress p;
+  p.frame = [&](const FrameReport&, const JointVector&, const Iso3&) { stop = ++frames >= 12; };
+  p.interrupted = [&] { return stop; };
+  SimulatedScanCheckpoints cp;
+  cp.file = dir.path() / "scan.inhand";
+  runSimulatedScan(test::wam(), can.mesh, config, p, cp, can.colours);
+  ASSERT_TRUE(fs::exists(cp.file));
+  cp.resume = true;
+  const SimulatedScan resumed =
+      runSimulatedScan(test::wam(), can.mesh, config, {}, cp, can.colours);
+  const ObjectModel &a = whole.result.scan.model, &b = resumed.result.scan.model;
+  ASSERT_EQ(a.mesh.vertices.size(), b.mesh.vertices.size());
+  ASSERT_EQ(a.rgba.size(), a.mesh.vertices.size());
+  ASSERT_EQ(b.rgba.size(), b.mesh.vertices.size());
+  for (size_t i = 0; i < a.rgba.size(); ++i) ASSERT_EQ(a.rgba[i], b.rgba[i]) << i;
+  EXPECT_EQ(whole.result.scan.colour_pixels, resumed.result.scan.colour_pixels);
+}

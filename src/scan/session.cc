@@ -1429,13 +1429,28 @@ void ScanSession::save(const std::filesystem::path& path, const Json& extra) con
                   {"view_evaluations", m.view_evaluations},
                   {"view_refinements", m.view_refinements},
                   {"planning_s", m.planning_s},
-                  {"fusion_s", m.fusion_s}};
+                  {"fusion_s", m.fusion_s},
+                  {"colour_pixels", m.colour_pixels},
+                  {"colour_s", m.colour_s}};
   if (!extra.is_null()) h["extra"] = extra;
+  // The colours (camera.colour): after the voxels, one record per coloured voxel in index order
+  // (its index, then Σw, Σw·r, Σw·g, Σw·b as floats).
+  std::vector<std::pair<size_t, ColourVolume::Sum>> colours;
+  if (s.colour) colours.assign(s.colour->sums().begin(), s.colour->sums().end());
+  std::sort(colours.begin(), colours.end(),
+            [](const auto& a, const auto& b) { return a.first < b.first; });
+  if (s.colour) h["colour_voxels"] = colours.size();
   const std::string header = h.dump();
   writeFileAtomically(path, [&](const fs::path& tmp) {
     std::ofstream f(tmp, std::ios::binary);
     f << kMagic << header.size() << "\n" << header;
     v.writeData(f);
+    for (const auto& [i, c] : colours) {
+      const uint64_t index = i;
+      const float sums[4] = {c.w, c.r, c.g, c.b};
+      f.write(reinterpret_cast<const char*>(&index), sizeof index);
+      f.write(reinterpret_cast<const char*>(sums), sizeof sums);
+    }
     if (!f) throw Error(path.string() + ": cannot write the checkpoint");
   });
 }
@@ -1488,6 +1503,19 @@ ScanSession ScanSession::load(const std::filesystem::path& path, const RobotMode
         if (v.states()[i] > uint8_t(VoxelState::kObserved)) throw bad("invalid voxel state");
     } else {
       throw bad("unknown volume encoding \"" + encoding + "\"");
+    }
+    if (h.contains("colour_voxels")) {
+      const size_t n = h.at("colour_voxels").get<size_t>();
+      s.colour = std::make_unique<ColourVolume>(v);
+      for (size_t k = 0; k < n; ++k) {
+        uint64_t index = 0;
+        float sums[4];
+        if (!f.read(reinterpret_cast<char*>(&index), sizeof index) ||
+            !f.read(reinterpret_cast<char*>(sums), sizeof sums))
+          throw bad("colour data cut short");
+        if (index >= v.voxelCount()) throw bad("colour voxel index out of the volume");
+        s.colour->sums()[size_t(index)] = {sums[0], sums[1], sums[2], sums[3]};
+      }
     }
     s.holding = h.at("holding").get<bool>();
     s.grasp = h.at("grasp").get<int>();
@@ -1554,6 +1582,8 @@ ScanSession ScanSession::load(const std::filesystem::path& path, const RobotMode
     s.summary.view_refinements = m.at("view_refinements").get<int>();
     s.summary.planning_s = m.at("planning_s").get<double>();
     s.summary.fusion_s = m.at("fusion_s").get<double>();
+    s.summary.colour_pixels = m.value("colour_pixels", 0L);
+    s.summary.colour_s = m.value("colour_s", 0.0);
     const Json& qj = h.at("q_grasp");
     if (s.grasp >= 0 && qj.size() != size_t(robot.variableCount()))
       throw Error(path.string() + ": the checkpoint's joint state has " +
