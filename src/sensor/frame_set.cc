@@ -14,6 +14,24 @@ namespace fs = std::filesystem;
 namespace {
 
 // A rigid transform from 16 row-major numbers; counts re-orthonormalised ones in `set`.
+Json intrinsicsJson(const CameraIntrinsics& c) {
+  return {{"width", c.width}, {"height", c.height}, {"fx", c.fx},
+          {"fy", c.fy},       {"cx", c.cx},         {"cy", c.cy}};
+}
+
+// A pinhole camera's intrinsics (width, height, fx, fy, cx, cy), checked; errors name `where`.
+CameraIntrinsics readIntrinsics(const Json& K, const std::string& where) {
+  CameraIntrinsics c;
+  c.width = requireInt(K, "width", where);
+  c.height = requireInt(K, "height", where);
+  c.fx = requireNumber(K, "fx", where);
+  c.fy = requireNumber(K, "fy", where);
+  c.cx = requireNumber(K, "cx", where);
+  c.cy = requireNumber(K, "cy", where);
+  if (std::string problem = c.validate(); !problem.empty()) throw Error(where + "." + problem);
+  return c;
+}
+
 Iso3 readPose(const Json& T, const std::string& where, FrameSet* set) {
   if (!T.is_array() || T.size() != 16)
     throw Error(where + ": expected an array of 16 numbers (row-major 4x4)");
@@ -47,16 +65,7 @@ FrameSet readFrameSet(const fs::path& dir) {
     set.depth_scale_m = requireNumber(j, "depth_scale_m", name);
     if (!(set.depth_scale_m > 0)) throw Error(name + ": depth_scale_m must be > 0");
   }
-  const Json& K = requireField(j, "intrinsics", name);
-  const std::string kw = name + ": intrinsics";
-  set.intrinsics.width = requireInt(K, "width", kw);
-  set.intrinsics.height = requireInt(K, "height", kw);
-  set.intrinsics.fx = requireNumber(K, "fx", kw);
-  set.intrinsics.fy = requireNumber(K, "fy", kw);
-  set.intrinsics.cx = requireNumber(K, "cx", kw);
-  set.intrinsics.cy = requireNumber(K, "cy", kw);
-  std::string problem = set.intrinsics.validate();
-  if (!problem.empty()) throw Error(name + ": intrinsics." + problem);
+  set.intrinsics = readIntrinsics(requireField(j, "intrinsics", name), name + ": intrinsics");
   if (j.contains("bounds_O")) {
     const Json& b = j["bounds_O"];
     const std::string bw = name + ": bounds_O";
@@ -77,18 +86,8 @@ FrameSet readFrameSet(const fs::path& dir) {
   if (j.contains("T_O_palm")) set.T_O_palm = readPose(j["T_O_palm"], name + ": T_O_palm", &set);
   set.colour.intrinsics = set.intrinsics;
   set.colour.T_D_RGB = Iso3::Identity();
-  if (j.contains("colour_intrinsics")) {
-    const Json& C = j["colour_intrinsics"];
-    const std::string cw = name + ": colour_intrinsics";
-    CameraIntrinsics& c = set.colour.intrinsics;
-    c.width = requireInt(C, "width", cw);
-    c.height = requireInt(C, "height", cw);
-    c.fx = requireNumber(C, "fx", cw);
-    c.fy = requireNumber(C, "fy", cw);
-    c.cx = requireNumber(C, "cx", cw);
-    c.cy = requireNumber(C, "cy", cw);
-    if (std::string p = c.validate(); !p.empty()) throw Error(cw + "." + p);
-  }
+  if (j.contains("colour_intrinsics"))
+    set.colour.intrinsics = readIntrinsics(j["colour_intrinsics"], name + ": colour_intrinsics");
   if (j.contains("T_D_RGB")) set.colour.T_D_RGB = readPose(j["T_D_RGB"], name + ": T_D_RGB", &set);
   const Json& frames = requireField(j, "frames", name);
   if (!frames.is_array()) throw Error(name + ": frames: expected an array");
@@ -152,9 +151,7 @@ RgbImage loadFrameColour(const fs::path& dir, const FrameSet& set, size_t i) {
 void writeFrameSet(const fs::path& dir, const FrameSet& set) {
   Json j;
   j["depth_scale_m"] = set.depth_scale_m;
-  j["intrinsics"] = {{"width", set.intrinsics.width}, {"height", set.intrinsics.height},
-                     {"fx", set.intrinsics.fx},       {"fy", set.intrinsics.fy},
-                     {"cx", set.intrinsics.cx},       {"cy", set.intrinsics.cy}};
+  j["intrinsics"] = intrinsicsJson(set.intrinsics);
   Json frames = Json::array();
   for (const FrameRecord& f : set.frames) {
     Json r = {{"file", f.file}};
@@ -172,9 +169,7 @@ void writeFrameSet(const fs::path& dir, const FrameSet& set) {
   j["frames"] = frames;
   if (set.T_O_palm) j["T_O_palm"] = poseToRowMajor(*set.T_O_palm);
   if (set.colour.enabled) {
-    const CameraIntrinsics& c = set.colour.intrinsics;
-    j["colour_intrinsics"] = {{"width", c.width}, {"height", c.height}, {"fx", c.fx},
-                              {"fy", c.fy},       {"cx", c.cx},         {"cy", c.cy}};
+    j["colour_intrinsics"] = intrinsicsJson(set.colour.intrinsics);
     j["T_D_RGB"] = poseToRowMajor(set.colour.T_D_RGB);
   }
   if (set.bounds_O)
