@@ -94,6 +94,48 @@ bool ColourVolume::at(const Vec3& p, Vec3f* rgb, float* weight) const {
   return true;
 }
 
+namespace {
+constexpr float kJump = 0.01f;  // a depth step this large (m) is an edge, or an occluder in front
+constexpr int kEdge = 2;        // pixels this close to an edge weigh a tenth
+
+bool validDepth(const DepthImage& depth, int u, int v) {
+  const float d = depth.at(u, v);
+  return d > 0 && std::isfinite(d);
+}
+
+// The colour camera's z-buffer of every measured point of the frame (the robot's included).
+std::vector<float> colourCameraDepths(const DepthImage& depth, const CameraIntrinsics& K,
+                                      const CameraIntrinsics& Kc, const Iso3& T_RGB_D) {
+  std::vector<float> zbuf(size_t(Kc.width) * size_t(Kc.height),
+                          std::numeric_limits<float>::infinity());
+  for (int v = 0; v < depth.height; ++v)
+    for (int u = 0; u < depth.width; ++u) {
+      if (!validDepth(depth, u, v)) continue;
+      const Vec3 p = T_RGB_D * (K.rayZ1(u, v) * double(depth.at(u, v)));
+      if (p.z() <= 0) continue;
+      const Vec2 px = Kc.project(p);
+      const long cu = std::lround(px.x()), cv = std::lround(px.y());
+      if (cu < 0 || cv < 0 || cu >= Kc.width || cv >= Kc.height) continue;
+      float& z = zbuf[size_t(cv) * size_t(Kc.width) + size_t(cu)];
+      z = std::min(z, float(p.z()));
+    }
+  return zbuf;
+}
+
+// Something nearer than z (by kJump) at colour pixel (cu, cv) or beside it: the bilinear sample
+// reads its neighbours, and a finger's silhouette would tint the object.
+bool hiddenInColour(const std::vector<float>& zbuf, const CameraIntrinsics& Kc, int cu, int cv,
+                    double z) {
+  for (int dv = -1; dv <= 1; ++dv)
+    for (int du = -1; du <= 1; ++du) {
+      const int uu = cu + du, vv = cv + dv;
+      if (uu < 0 || vv < 0 || uu >= Kc.width || vv >= Kc.height) continue;
+      if (z > zbuf[size_t(vv) * size_t(Kc.width) + size_t(uu)] + kJump) return true;
+    }
+  return false;
+}
+}  // namespace
+
 ColourIntegrationStats integrateColour(const DepthImage& depth, const RgbImage& colour,
                                        const Iso3& T_O_C, const DepthCameraOptions& camera,
                                        const std::vector<float>& sigma_m, ColourVolume* volume,
@@ -106,30 +148,12 @@ ColourIntegrationStats integrateColour(const DepthImage& depth, const RgbImage& 
     return st;
   const int W = depth.width, H = depth.height;
   auto point = [&](int u, int v) -> Vec3 { return K.rayZ1(u, v) * double(depth.at(u, v)); };
-  auto valid = [&](int u, int v) {
-    const float d = depth.at(u, v);
-    return d > 0 && std::isfinite(d);
-  };
+  auto valid = [&](int u, int v) { return validDepth(depth, u, v); };
   const Iso3 T_RGB_D = camera.colour.T_D_RGB.inverse();
-  // The colour camera's z-buffer of every measured point (the robot's included).
-  std::vector<float> zbuf(size_t(Kc.width) * size_t(Kc.height),
-                          std::numeric_limits<float>::infinity());
-  for (int v = 0; v < H; ++v)
-    for (int u = 0; u < W; ++u) {
-      if (!valid(u, v)) continue;
-      const Vec3 p = T_RGB_D * point(u, v);
-      if (p.z() <= 0) continue;
-      const Vec2 px = Kc.project(p);
-      const long cu = std::lround(px.x()), cv = std::lround(px.y());
-      if (cu < 0 || cv < 0 || cu >= Kc.width || cv >= Kc.height) continue;
-      float& z = zbuf[size_t(cv) * size_t(Kc.width) + size_t(cu)];
-      z = std::min(z, float(p.z()));
-    }
+  const std::vector<float> zbuf = colourCameraDepths(depth, K, Kc, T_RGB_D);
   auto carve = [&](int u, int v) {
     return carve_only && (*carve_only)[size_t(v) * size_t(W) + size_t(u)] != 0;
   };
-  constexpr float kJump = 0.01f;
-  constexpr int kEdge = 2;
   // Each row's colours on both cores, then added to the volume in row order (deterministic).
   struct Seen {
     Vec3 p_O;
@@ -157,17 +181,7 @@ ColourIntegrationStats integrateColour(const DepthImage& depth, const RgbImage& 
       if (q.z() <= 0) continue;
       const Vec2 px = Kc.project(q);
       if (px.x() < 0 || px.y() < 0 || px.x() > Kc.width - 1 || px.y() > Kc.height - 1) continue;
-      // Occluded: something nearer at the colour pixel or beside it (the bilinear sample reads
-      // its neighbours: a finger's silhouette would tint the object).
-      const int cu = int(std::lround(px.x())), cv = int(std::lround(px.y()));
-      bool hidden = false;
-      for (int dv = -1; dv <= 1 && !hidden; ++dv)
-        for (int du = -1; du <= 1 && !hidden; ++du) {
-          const int uu = cu + du, vv = cv + dv;
-          if (uu < 0 || vv < 0 || uu >= Kc.width || vv >= Kc.height) continue;
-          hidden = q.z() > zbuf[size_t(vv) * size_t(Kc.width) + size_t(uu)] + kJump;
-        }
-      if (hidden) {
+      if (hiddenInColour(zbuf, Kc, int(std::lround(px.x())), int(std::lround(px.y())), q.z())) {
         ++st.occluded;
         continue;
       }
