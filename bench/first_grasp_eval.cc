@@ -116,14 +116,15 @@ int main(int argc, char** argv) {
         scanFromTable(robot, sensor, world.restPose(), c.scan, c.multi, noise, ScanProgress{});
     if (!r.table_top) throw Error("no table-top stage");
     const std::vector<PickAttempt>& a = r.table_top->attempts;
-    std::printf("rank,hold_test,epsilon,kind,outcome,moved_mm,hold_failure,pinch\n");
+    std::printf("rank,hold_test,epsilon,kind,outcome,moved_mm,hold_failure,pinch,two_finger\n");
     int held[2] = {0, 0}, tested[2] = {0, 0};
     for (size_t k = 0; k < a.size() && k < robot.outcomes.size(); ++k) {
       const auto& o = robot.outcomes[k];
       const bool pinch = a[k].pose >= 0 && r.table_top->poses[size_t(a[k].pose)].pinch;
-      std::printf("%d,%d,%.3f,%s,%s,%.1f,%s,%d\n", a[k].rank, a[k].hold_test, a[k].epsilon,
+      const bool two = a[k].pose >= 0 && r.table_top->poses[size_t(a[k].pose)].two_finger;
+      std::printf("%d,%d,%.3f,%s,%s,%.1f,%s,%d,%d\n", a[k].rank, a[k].hold_test, a[k].epsilon,
                   a[k].palm_contact ? "enveloping" : "fingertips", o.what.c_str(), o.moved_mm,
-                  a[k].hold_failure.c_str(), int(pinch));
+                  a[k].hold_failure.c_str(), int(pinch), int(two));
       const int v = a[k].hold_test == 1;
       held[v] += o.what == "held";
       ++tested[v];

@@ -286,6 +286,51 @@ TEST(Physics, AClosingFingerIsNotPushedOpenByTheOthers) {
   EXPECT_LT((w.objectPose().translation() - T_B_O.translation()).norm(), 0.015);
 }
 
+// A two-finger pinch preshape (the third finger open) with its fingertips 1 mm above the table,
+// 16 mm clear of a 19 mm cylinder lying between them: as the fingers curl, the palm is lowered
+// so that the hand's lowest point stays where it started (PhysicsOptions::table_sweep_m) and the
+// fingertips meet the cylinder at its middle or below; without the sweep they rise with the
+// curling fingers and pass over it (or meet it above its middle).
+TEST(Physics, AHandClosingAtTheTableKeepsItsFingertipsThere) {
+  const RobotModel& m = test::wam();
+  JointVector open = m.preshapedHand(M_PI / 2, 0.66);
+  open[m.fingers()[2].variable] = m.fingers()[2].open;
+  m.applyCouplings(&open);
+  Iso3 T_B_palm = Iso3::Identity();
+  T_B_palm.linear() = Eigen::AngleAxisd(M_PI, Vec3::UnitX()).toRotationMatrix();  // palm z down
+  T_B_palm.translation() = Vec3(0.6, 0.0, 0.5);
+  const double top = m.table().topZ();
+  T_B_palm.translation().z() -= HandGeometry(m, open, T_B_palm).bounds().min.z() - (top + 0.001);
+  // The cylinder along base x (palm x), across the fingers' closing direction (palm y).
+  Iso3 T_B_O = Iso3::Identity();
+  T_B_O.linear() = Eigen::AngleAxisd(M_PI / 2, Vec3::UnitY()).toRotationMatrix();
+  T_B_O.translation() = Vec3(0.6, 0.0, top + 0.0095);
+  const TriangleMesh marker = makeCylinder(0.0095, 0.13);
+  for (double sweep : {0.005, 0.0}) {
+    PhysicsOptions po;
+    po.table_sweep_m = sweep;
+    PhysicsWorld w(m, marker, 0.5, po);
+    w.reset(T_B_O, T_B_palm, open);
+    const JointVector q = w.closeHand(open);
+    const double lowest = HandGeometry(m, q, w.palmPose()).bounds().min.z() - top;
+    const double descent = T_B_palm.translation().z() - w.palmPose().translation().z();
+    EXPECT_NEAR(q[m.fingers()[2].variable], open[m.fingers()[2].variable], 0.01);  // stayed open
+    double highest = -1;  // the highest fingertip contact above the cylinder's axis
+    for (const PhysicsWorld::Contact& c : w.objectContacts())
+      if (c.link >= 0) highest = std::max(highest, c.p_B.z() - w.objectPose().translation().z());
+    if (sweep > 0) {
+      EXPECT_NEAR(lowest, 0.001, 0.002);
+      EXPECT_GT(descent, 0.003);
+      EXPECT_GT(highest, -1) << "the fingers did not touch the cylinder";
+      EXPECT_LT(highest, 0.001);
+    } else {  // passing over it, or meeting it above its middle
+      EXPECT_GT(lowest, 0.004);
+      EXPECT_NEAR(descent, 0.0, 0.001);
+      EXPECT_TRUE(highest == -1 || highest > 0.002) << highest;
+    }
+  }
+}
+
 // The hand put 3 mm inside the object (its pieces are hulls that may stand proud of the mesh the
 // grasp touched) starts clear of it: the palm backs off along its approach, nothing is flung.
 TEST(Physics, AHandPutInsideTheObjectBacksOffAlongItsApproach) {

@@ -561,6 +561,26 @@ TEST(Hand, ParallelJawStopsAtContact) {
   EXPECT_NEAR(r.fingers[0].value, 0.02, 1e-5);  // jaws stop at the box's 40 mm width
 }
 
+// A preshape with the first two fingers partly closed and the third at its open value (a
+// two-finger pinch): the third stays open as the others close; every finger closes from a
+// preshape with all of them open, or all partly closed.
+TEST(Hand, AFingerLeftOpenInAPinchPreshapeStaysOpen) {
+  const RobotModel& m = wam();
+  JointVector q = m.preshapedHand(M_PI / 2, 0.5);
+  const FingerInfo& third = m.fingers()[2];
+  q[third.variable] = third.open;
+  m.applyCouplings(&q);
+  EXPECT_EQ(m.closingFingers(q), (std::vector<bool>{true, true, false}));
+  EXPECT_EQ(m.closingFingers(m.preshapedHand(0.0, 0.0)), (std::vector<bool>{true, true, true}));
+  EXPECT_EQ(m.closingFingers(m.preshapedHand(0.0, 0.4)), (std::vector<bool>{true, true, true}));
+  const TriangleMesh far =
+      transformed(makeBox(Vec3(0.01, 0.01, 0.01)), Iso3(Eigen::Translation3d(Vec3(5, 5, 5))));
+  const ClosingResult r = closeFingers(m, q, Iso3::Identity(), far);
+  EXPECT_EQ(r.q[third.variable], third.open);
+  EXPECT_EQ(r.q[m.fingers()[0].variable], m.fingers()[0].closed);
+  EXPECT_EQ(r.q[m.fingers()[1].variable], m.fingers()[1].closed);
+}
+
 TEST(Collision, TableAndBaseAreDetected) {
   const RobotModel& m = wam();
   CollisionChecker checker(m);

@@ -43,6 +43,7 @@ static Json posesJson(const std::vector<GraspPoseRecord>& poses) {
                    {"preshape", p.preshape},
                    {"edge", p.edge},
                    {"pinch", p.pinch},
+                   {"two_finger", p.two_finger},
                    {"epsilon", round4(p.epsilon)},
                    {"result", p.result}});
   return out;

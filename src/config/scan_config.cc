@@ -214,6 +214,10 @@ void visitConfig(V& v, ScanConfig& c) {
     g.num("edge_inset_m", o.edge_inset_m, "edge poses: the model ends this far beyond the palm, m");
     g.boolean("pinch_poses", o.pinch_poses,
               "pinch poses: straight down, fingertips straddling the model's footprint");
+    g.boolean("two_finger_pinch", o.two_finger_pinch,
+              "two-finger pinch poses: the first two fingers facing, the others closed");
+    g.num("two_finger_spread", o.two_finger_spread,
+          "the spread at which the first two fingers face each other, rad");
     g.num("friction", o.friction, "μ at each contact (stability)");
     g.integer("cone_edges", o.cone_edges, "friction-cone linearisation");
     g.integer("wrench_directions", o.wrench_directions, "directions sampled for ε");
@@ -312,6 +316,8 @@ void visitConfig(V& v, ScanConfig& c) {
                 "a closed finger resists this multiple of its drive force (worm drive)");
           p.num("breakaway_rate", x.breakaway_rate,
                 "TorqueSwitch: coupled joints' rate after the driven joint stalls, relative to it");
+          p.num("table_sweep_m", x.table_sweep_m,
+                "a hand closing this near the table top is lowered as its fingertips rise, m");
           p.num("ramp_s", x.ramp_s,
                 "each motion segment speeds up and slows down over this long, s");
           p.num("settle_s", x.settle_s, "longest wait for the object to come to rest, s");

@@ -6,6 +6,7 @@
 #include <map>
 #include <optional>
 #include <random>
+#include <tuple>
 
 #include "inhand/core/error.h"
 #include "inhand/core/fast_math.h"
@@ -44,6 +45,7 @@ std::string GraspOptions::validate() const {
     if (!(f >= 0 && f < 1)) return "preshapes must be in [0, 1)";
   for (double s : edge_spreads)
     if (!std::isfinite(s)) return "edge_spreads must be finite";
+  if (!std::isfinite(two_finger_spread)) return "two_finger_spread must be finite";
   if (!(edge_inset_m >= 0 && edge_inset_m < 0.05)) return "edge_inset_m must be in [0, 0.05) m";
   if (!(friction > 0 && friction <= 2)) return "friction must be in (0, 2]";
   if (cone_edges < 3 || cone_edges > 64) return "cone_edges must be in 3..64";
@@ -103,23 +105,78 @@ struct Pose {
   bool edge;
   double preshape = 0;
   bool pinch = false;
+  bool two_finger = false;  // fingers past the first two closed out of the way
   Vec3 offset = Vec3::Zero();
 };
 
+// The hand as pose ps comes in: every finger preshaped, or for a two-finger pinch the first two
+// preshaped and the others open (they then stay open: RobotModel::closingFingers).
+JointVector poseHand(const RobotModel& robot, double spread, double preshape, bool two_finger) {
+  JointVector q = robot.preshapedHand(spread, preshape);
+  if (two_finger && preshape > 0) {
+    for (size_t k = 2; k < robot.fingers().size(); ++k)
+      q[robot.fingers()[k].variable] = robot.fingers()[k].open;
+    robot.applyCouplings(&q);
+  }
+  return q;
+}
+JointVector poseHand(const RobotModel& robot, const Pose& ps) {
+  return poseHand(robot, ps.spread, ps.preshape, ps.two_finger);
+}
+
 // How far apart the open hand's lowest points (those within 5 mm of the farthest along palm z:
-// the fingertips of a preshaped hand) lie along palm x, at `spread` and preshape `f`.
-double tipGap(const RobotModel& robot, double spread, double f) {
+// the fingertips of a preshaped hand) lie along palm x, at `spread` and preshape `f`; for a
+// two-finger pinch, the gap between those on either side of the palm axis along palm y (between
+// the two fingertips' inner faces).
+double tipGap(const RobotModel& robot, double spread, double f, bool two_finger = false) {
   const TriangleMesh hand =
-      HandGeometry(robot, robot.preshapedHand(spread, f), Iso3::Identity()).mesh();
+      HandGeometry(robot, poseHand(robot, spread, f, two_finger), Iso3::Identity()).mesh();
   double zmax = -std::numeric_limits<double>::infinity();
   for (const Vec3f& v : hand.vertices) zmax = std::max(zmax, double(v.z()));
-  double x0 = std::numeric_limits<double>::infinity(), x1 = -x0;
+  const double inf = std::numeric_limits<double>::infinity();
+  double x0 = inf, x1 = -inf, yPlus = inf, yMinus = -inf;
   for (const Vec3f& v : hand.vertices)
     if (v.z() > zmax - 0.005) {
       x0 = std::min(x0, double(v.x()));
       x1 = std::max(x1, double(v.x()));
+      if (v.y() > 0) yPlus = std::min(yPlus, double(v.y()));
+      if (v.y() < 0) yMinus = std::max(yMinus, double(v.y()));
     }
+  if (two_finger) return std::isfinite(yPlus) && std::isfinite(yMinus) ? yPlus - yMinus : -1.0;
   return x1 - x0;
+}
+
+// The fingertips' gap at preshapes from f0 to f1 in steps of df, while it narrows (further on,
+// other parts of the curled fingers are the lowest). With `narrowest_run`, the run of preshapes
+// over which it narrows to its least value instead (before that run, other parts of the fingers
+// may be the lowest).
+std::vector<std::pair<double, double>> tipGaps(const RobotModel& robot, double spread,
+                                               bool two_finger, double f0, double f1, double df,
+                                               bool narrowest_run = false) {
+  std::vector<std::pair<double, double>> gaps;
+  for (double f = f0; f <= f1 + 1e-9; f += df) {
+    const double gap = tipGap(robot, spread, f, two_finger);
+    if (gap < 0 || (!narrowest_run && !gaps.empty() && gap > gaps.back().second)) break;
+    gaps.push_back({f, gap});
+  }
+  if (narrowest_run && !gaps.empty()) {
+    size_t end = 0;
+    for (size_t k = 1; k < gaps.size(); ++k)
+      if (gaps[k].second < gaps[end].second) end = k;
+    size_t begin = end;
+    while (begin > 0 && gaps[begin - 1].second > gaps[begin].second) --begin;
+    gaps = std::vector<std::pair<double, double>>(gaps.begin() + long(begin),
+                                                  gaps.begin() + long(end) + 1);
+  }
+  return gaps;
+}
+
+// The most closed preshape whose gap is at least `needed`, or -1.
+double preshapeForGap(const std::vector<std::pair<double, double>>& gaps, double needed) {
+  double best = -1;
+  for (const auto& [f, gap] : gaps)
+    if (gap >= needed) best = f;
+  return best;
 }
 
 // Pinch poses: the hand straight down the table normal onto the model's footprint (the axis
@@ -129,11 +186,8 @@ double tipGap(const RobotModel& robot, double spread, double f) {
 // beside the model to the table (or onto it, on a tall model) and close on it low: the grasp of
 // a pen, a remote or a box lying flat, which the approaches spread over the sphere catch only
 // when one happens to line up with the model.
-void addPinchPoses(const RobotModel& robot, const std::vector<SurfacePoint>& samples,
-                   const Vec3& centre, const Vec3& up, const GraspOptions& o,
-                   std::vector<Pose>* poses) {
-  std::vector<Vec3> points;
-  for (const SurfacePoint& sm : samples) points.push_back(sm.p);
+void addPinchPoses(const RobotModel& robot, const std::vector<Vec3>& points, const Vec3& centre,
+                   const Vec3& up, const GraspOptions& o, std::vector<Pose>* poses) {
   const PrincipalAxes A = principalAxesUpright(points, up, 0.0);
   Vec3 mid = centre;
   std::vector<std::pair<Vec3, double>> sides;  // (horizontal axis, the model's width along it)
@@ -144,20 +198,10 @@ void addPinchPoses(const RobotModel& robot, const std::vector<SurfacePoint>& sam
     sides.push_back({a, A.max[k] - A.min[k]});
   }
   for (double s : o.spreads) {
-    // The fingertips' gap along palm x as the preshape closes, while it narrows (further on,
-    // other parts of the curled fingers are the lowest).
-    std::vector<std::pair<double, double>> gaps;
-    for (double f = 0.2; f <= 0.9 + 1e-9; f += 0.025) {
-      const double gap = tipGap(robot, s, f);
-      if (!gaps.empty() && gap > gaps.back().second) break;
-      gaps.push_back({f, gap});
-    }
+    const auto gaps = tipGaps(robot, s, false, 0.2, 0.9, 0.025);
     for (const auto& [a, width] : sides)
       for (double margin : {0.008, 0.020}) {
-        // The most closed preshape whose gap still clears the width with the margin.
-        double best = -1;
-        for (const auto& [f, gap] : gaps)
-          if (gap >= width + 2 * margin) best = f;
+        const double best = preshapeForGap(gaps, width + 2 * margin);
         if (best < 0) continue;
         for (double sx : {1.0, -1.0}) {
           Mat3 R;
@@ -171,14 +215,33 @@ void addPinchPoses(const RobotModel& robot, const std::vector<SurfacePoint>& sam
         }
       }
   }
+  // Two-finger pinches: palm y across the side; the window of preshapes that meet a thin body
+  // at its middle is narrow (the fingertips rise as they close), hence the fine steps.
+  if (!o.two_finger_pinch || robot.spreadVariable() < 0 || robot.fingers().size() < 3) return;
+  const auto gaps = tipGaps(robot, o.two_finger_spread, true, 0.2, 0.95, 0.01, true);
+  for (const auto& [a, width] : sides)
+    for (double margin : {0.003, 0.006, 0.010}) {
+      const double best = preshapeForGap(gaps, width + 2 * margin);
+      if (best < 0) continue;
+      Mat3 R;
+      R.col(2) = -up;
+      R.col(1) = a;
+      R.col(0) = R.col(1).cross(R.col(2));
+      Pose ps{R, o.two_finger_spread, false, best};
+      ps.pinch = true;
+      ps.two_finger = true;
+      ps.offset = mid - centre;
+      poses->push_back(ps);
+    }
 }
 
 // Every (approach, roll, spread, preshape) pose with the palm axis through the centre; then the
 // edge poses, aligned with the model's principal axes (palm z along ± one axis, palm y along
 // another, palm x either way along the third: the hand is not symmetric there); then the pinch
-// poses (addPinchPoses; `up`: the table normal in O).
+// poses (addPinchPoses on `footprint`, else the samples; `up`: the table normal in O).
 std::vector<Pose> candidatePoses(const RobotModel& robot, const std::vector<SurfacePoint>& samples,
-                                 const Vec3& centre, const Vec3& up, const GraspOptions& o) {
+                                 const Vec3& centre, const Vec3& up, const GraspOptions& o,
+                                 const std::vector<Vec3>* footprint) {
   std::vector<Pose> poses;
   for (const Vec3& d : fibonacciSphere(o.approaches))
     for (int r = 0; r < o.rolls; ++r) {
@@ -204,7 +267,14 @@ std::vector<Pose> candidatePoses(const RobotModel& robot, const std::vector<Surf
           }
         }
   }
-  if (o.pinch_poses) addPinchPoses(robot, samples, centre, up, o, &poses);
+  if (o.pinch_poses) {
+    std::vector<Vec3> points;
+    if (footprint && !footprint->empty())
+      points = *footprint;
+    else
+      for (const SurfacePoint& sm : samples) points.push_back(sm.p);
+    addPinchPoses(robot, points, centre, up, o, &poses);
+  }
   return poses;
 }
 
@@ -217,6 +287,7 @@ GraspPoseRecord poseRecord(const Pose& ps) {
   rec.preshape = ps.preshape;
   rec.edge = ps.edge;
   rec.pinch = ps.pinch;
+  rec.two_finger = ps.two_finger;
   rec.result = "no_contact";
   return rec;
 }
@@ -337,11 +408,9 @@ class PoseCloser {
     }
     // The preshaped hand's bounding box in the palm frame, per (spread, preshape).
     for (const Pose& ps : poses)
-      if (!openHandBox_.count({ps.spread, ps.preshape}))
-        openHandBox_[{ps.spread, ps.preshape}] =
-            HandGeometry(robot, robot.preshapedHand(ps.spread, ps.preshape), Iso3::Identity())
-                .mesh()
-                .bounds();
+      if (!openHandBox_.count(boxKey(ps)))
+        openHandBox_[boxKey(ps)] =
+            HandGeometry(robot, poseHand(robot, ps), Iso3::Identity()).mesh().bounds();
   }
 
  public:
@@ -349,7 +418,7 @@ class PoseCloser {
   std::optional<GraspCandidate> operator()(const Pose& ps, int pose, GraspPoseRecord& rec) const {
     Iso3 T = Iso3::Identity();
     T.linear() = ps.R;
-    const JointVector q = robot_.preshapedHand(ps.spread, ps.preshape);
+    const JointVector q = poseHand(robot_, ps);
     // Edge poses: the palm axis moves along palm x until the model's extent along it ends
     // `edge_inset_m` beyond the axis, so that fingers 1 and 2 (across palm y at a 90° spread)
     // straddle the object near its edge and finger 3 closes over that edge.
@@ -423,7 +492,7 @@ class PoseCloser {
                 const FingerCloser& closer, Iso3* T) const {
     const Mat3& R = ps.R;
     const bool firstContact = o_.approach == GraspApproach::kFirstContact;
-    const Aabb box = firstContact ? openHandBox_.at({ps.spread, ps.preshape}) : palm_;
+    const Aabb box = firstContact ? openHandBox_.at(boxKey(ps)) : palm_;
     const double margin = firstContact ? 0.005 : 0.0;
     const double x0 = box.min.x() - margin, x1 = box.max.x() + margin, y0 = box.min.y() - margin,
                  y1 = box.max.y() + margin;
@@ -457,7 +526,9 @@ class PoseCloser {
   double rho_ = 0;
   Aabb palm_;
   FingerCloser closer_, modelCloser_;
-  std::map<std::pair<double, double>, Aabb> openHandBox_;
+  using BoxKey = std::tuple<double, double, bool>;
+  static BoxKey boxKey(const Pose& ps) { return {ps.spread, ps.preshape, ps.two_finger}; }
+  std::map<BoxKey, Aabb> openHandBox_;
 };
 
 }  // namespace
@@ -475,7 +546,8 @@ bool sameGrasp(const RobotModel& robot, const GraspCandidate& a, const GraspCand
 }  // namespace
 
 GraspGeneration generateGrasps(const RobotModel& robot, const TriangleMesh& model,
-                               const Iso3& T_B_O, const JointVector& q_now, const GraspOptions& o) {
+                               const Iso3& T_B_O, const JointVector& q_now, const GraspOptions& o,
+                               const std::vector<Vec3>* footprint_O) {
   const auto t0 = std::chrono::steady_clock::now();
   std::string problem = o.validate();
   if (!problem.empty()) throw Error("grasp options: " + problem);
@@ -487,8 +559,9 @@ GraspGeneration generateGrasps(const RobotModel& robot, const TriangleMesh& mode
   if (mesh.empty()) return out;
   // Surface samples with outward normals (vertices, plus a lattice on large triangles).
   const std::vector<SurfacePoint> samples = surfaceSamples(mesh, 0.5 * o.contact_cell_m);
-  const std::vector<Pose> poses = candidatePoses(robot, samples, mesh.bounds().center(),
-                                                 T_B_O.linear().transpose() * Vec3::UnitZ(), o);
+  const std::vector<Pose> poses =
+      candidatePoses(robot, samples, mesh.bounds().center(),
+                     T_B_O.linear().transpose() * Vec3::UnitZ(), o, footprint_O);
   out.tried = int(poses.size());
   for (const Pose& ps : poses) out.poses.push_back(poseRecord(ps));
   // The hand stops at the model and at the table: approaching, and closing its fingers. Each

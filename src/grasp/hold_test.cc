@@ -111,8 +111,13 @@ HoldTrial tryHold(PhysicsWorld& world, const Iso3& T_B_O, const Iso3& T_O_palm,
   }
   // The turn: about the horizontal axis across the palm's approach (gravity then pulls along the
   // approach or across it), through the object's centre.
+  // A palm within 3° of vertical (a grasp from above, tilted a little by the close) turns about
+  // its own x made horizontal: the axis does not swing with a tilt of a fraction of a degree.
   Vec3 axis = Vec3::UnitZ().cross(world.palmPose().linear().col(2));
-  if (axis.norm() < 1e-6) axis = world.palmPose().linear().col(0);
+  if (axis.norm() < std::sin(3 * M_PI / 180)) {
+    axis = world.palmPose().linear().col(0);
+    axis.z() = 0;
+  }
   const Iso3 lifted = world.palmPose();
   if (!movePalmHolding(world, lifted, Vec3::Zero(),
                        Eigen::AngleAxisd(o.turn_rad, axis.normalized()),

@@ -16,6 +16,7 @@
 
 #include "inhand/core/error.h"
 #include "inhand/core/pose.h"
+#include "inhand/robot/collision.h"
 
 namespace inhand {
 
@@ -31,6 +32,7 @@ std::string PhysicsOptions::validate() const {
   if (!(hold_force_factor >= 1 && hold_force_factor <= 1000))
     return "hold_force_factor must be in [1, 1000]";
   if (!(breakaway_rate >= 0 && breakaway_rate <= 10)) return "breakaway_rate must be in [0, 10]";
+  if (!(table_sweep_m >= 0 && table_sweep_m <= 0.05)) return "table_sweep_m must be in [0, 0.05]";
   if (!(ramp_s >= 0 && ramp_s <= 2)) return "ramp_s must be in [0, 2]";
   if (!(settle_s >= 0 && settle_s <= 20)) return "settle_s must be in [0, 20]";
   if (std::string p = decomposition.validate(); !p.empty()) return "decomposition." + p;
@@ -534,7 +536,8 @@ void holdBack(PhysicsWorld::Impl& I, const HandJoint& hj, double fraction, Closi
 // The fingers close at their speed until each joint stalls on something or reaches its end (at
 // most twice finger_close_time_s): driven joints from their command, coupled ones with it until
 // the driven joint stops, then on at breakaway_rate (TorqueSwitch).
-void closeUntilStalled(PhysicsWorld::Impl& I, std::vector<Closing>& st, double fraction) {
+void closeUntilStalled(PhysicsWorld::Impl& I, std::vector<Closing>& st, double fraction,
+                       const std::function<void()>& eachStep) {
   const RobotModel& model = *I.robot;
   const double dt = I.m->opt.timestep;
   std::vector<int> driverOf(model.fingers().size(), -1);
@@ -573,20 +576,44 @@ void closeUntilStalled(PhysicsWorld::Impl& I, std::vector<Closing>& st, double f
       if (st[k].stalled_s > 0.05 || st[k].atLimit) st[k].done = true;
     }
     if (all) break;
+    if (eachStep) eachStep();
     I.step(1);
   }
   for (size_t k = 0; k < I.joints.size(); ++k)
     if (I.joints[k].finger >= 0) I.d->ctrl[I.joints[k].actuator] = st[k].target;
 }
 
+// The table-level pinch (PhysicsOptions::table_sweep_m): a step function that lowers the palm's
+// target from `start` as the hand's lowest point, with the hand joints as simulated, rises above
+// where it was at the start; empty when the hand does not start near the table top.
+std::function<void()> tableSweep(PhysicsWorld& world, PhysicsWorld::Impl& I, const JointVector& q,
+                                 const Iso3& start) {
+  if (I.options.table_sweep_m <= 0) return {};
+  auto lowest = [&I, &world, q](const Iso3& T_B_palm) {
+    return HandGeometry(*I.robot, world.handJoints(q), T_B_palm).bounds().min.z();
+  };
+  const double top = I.robot->table().topZ(), z0 = lowest(start);
+  if (z0 - top > I.options.table_sweep_m || z0 < top - 0.002) return {};
+  return [&I, start, z0, lowest] {
+    const double rise = std::clamp(lowest(start) - z0, 0.0, 0.03);
+    Iso3 T = start;
+    T.translation().z() -= rise;
+    I.setMocap(T);
+  };
+}
+
 JointVector PhysicsWorld::closeHand(const JointVector& q) {
   Impl& I = *impl_;
   const RobotModel& model = *I.robot;
   std::vector<Closing> st(I.joints.size());
+  // The fingers that close from the preshape the hand is in (RobotModel::closingFingers).
+  const std::vector<bool> closing = model.closingFingers(handJoints(q));
   for (size_t k = 0; k < I.joints.size(); ++k) {
     const HandJoint& hj = I.joints[k];
-    if (hj.finger < 0) {
+    if (hj.finger < 0 || !closing[size_t(hj.finger)]) {
       st[k].done = true;
+      st[k].atLimit = hj.finger >= 0;  // stays open: no squeeze
+      st[k].target = I.d->qpos[hj.qpos];
       continue;
     }
     const JointInfo& j = model.variable(hj.variable);
@@ -600,7 +627,7 @@ JointVector PhysicsWorld::closeHand(const JointVector& q) {
   // push the object away from the others), then squeeze with the full force.
   const double touch = I.options.touch_force_n / I.options.finger_force_n;
   setFingerForce(I.m, I.joints, touch);
-  closeUntilStalled(I, st, touch);
+  closeUntilStalled(I, st, touch, tableSweep(*this, I, q, I.mocapPose()));
   setFingerForce(I.m, I.joints, 1.0);
   for (size_t k = 0; k < I.joints.size(); ++k) {
     const HandJoint& hj = I.joints[k];
@@ -706,6 +733,32 @@ bool PhysicsWorld::objectTouchesTable() const {
       return true;
   }
   return false;
+}
+
+std::vector<PhysicsWorld::Contact> PhysicsWorld::objectContacts() const {
+  const Impl& I = *impl_;
+  std::vector<Contact> out;
+  for (int c = 0; c < I.d->ncon; ++c) {
+    const mjContact& k = I.d->contact[c];
+    const int b1 = I.m->geom_bodyid[k.geom1], b2 = I.m->geom_bodyid[k.geom2];
+    if (b1 != I.objectBody && b2 != I.objectBody) continue;
+    // MuJoCo's normal (the frame's first row) points from geom1 to geom2.
+    Vec3 n(k.frame[0], k.frame[1], k.frame[2]);
+    const int other = b1 == I.objectBody ? b2 : b1;
+    const int g = b1 == I.objectBody ? k.geom2 : k.geom1;
+    if (b1 == I.objectBody) n = -n;
+    int link = -2;
+    if (g == I.tableGeom)
+      link = -1;
+    else if (other == I.palmBody)
+      link = I.robot->tipLink();
+    else if (const char* name = mj_id2name(I.m, mjOBJ_BODY, other);
+             name && std::strncmp(name, "link", 4) == 0)
+      link = std::atoi(name + 4);
+    if (link == -2) continue;
+    out.push_back({Vec3(k.pos[0], k.pos[1], k.pos[2]), n, link});
+  }
+  return out;
 }
 
 std::vector<std::pair<int, Iso3>> PhysicsWorld::handLinkPoses() const {

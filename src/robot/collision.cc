@@ -352,8 +352,16 @@ ClosingResult FingerCloser::close(const JointVector& qIn, const Iso3& T_O_palm, 
   result.q = qIn;
   INHAND_CHECK(!free_from || free_from->fingers.size() == model.fingers().size(),
                "free_from: one closing per finger");
+  const std::vector<bool> closing = model.closingFingers(qIn);
   for (size_t fi = 0; fi < model.fingers().size(); ++fi) {
     const FingerInfo& f = model.fingers()[fi];
+    if (!closing[fi]) {  // stays open (RobotModel::closingFingers)
+      FingerClosing fc;
+      fc.value = qIn[f.variable];
+      fc.free_steps = 0;
+      result.fingers.push_back(fc);
+      continue;
+    }
     // Steps already known free (a finger's links depend only on its own joints and the spread).
     const int known = free_from ? free_from->fingers[fi].free_steps : -1;
     // Collision of this finger's links at finger value v (other joints as in result.q).

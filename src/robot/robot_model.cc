@@ -609,6 +609,15 @@ JointVector RobotModel::preshapedHand(double spread, double fraction) const {
   return q;
 }
 
+std::vector<bool> RobotModel::closingFingers(const JointVector& q) const {
+  bool partly = false;
+  for (const FingerInfo& f : fingers_) partly = partly || q[f.variable] != f.open;
+  std::vector<bool> closing(fingers_.size(), true);
+  for (size_t k = 0; k < fingers_.size(); ++k)
+    closing[k] = !partly || q[fingers_[k].variable] != fingers_[k].open;
+  return closing;
+}
+
 int RobotModel::fingerOfLink(int link) const {
   for (size_t k = 0; k < fingers_.size(); ++k)
     if (std::find(fingers_[k].links.begin(), fingers_[k].links.end(), link) !=

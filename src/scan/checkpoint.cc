@@ -118,6 +118,7 @@ Json tableTopJson(const TableTopRecord& t) {
                      {"preshape", p.preshape},
                      {"edge", p.edge},
                      {"pinch", p.pinch},
+                     {"two_finger", p.two_finger},
                      {"epsilon", p.epsilon},
                      {"result", p.result}});
   Json axes = Json::array();
@@ -170,6 +171,7 @@ TableTopRecord tableTopFrom(const Json& j) {
     r.preshape = p.at("preshape").get<double>();
     r.edge = p.at("edge").get<bool>();
     r.pinch = p.value("pinch", false);  // (checkpoints written before pinch poses)
+    r.two_finger = p.value("two_finger", false);
     r.epsilon = p.at("epsilon").get<double>();
     r.result = p.at("result").get<std::string>();
     t.poses.push_back(r);

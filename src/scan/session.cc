@@ -1262,7 +1262,13 @@ GraspPlan ScanSession::planGrasps(const Iso3& T_B_O_rest, const JointVector& q_n
       return plan;
     }
   }
-  plan.generation = generateGrasps(*s.model, S_obj.mesh, T_B_O_rest, q_now, s.multi.grasp);
+  // The pinch poses' footprint: the model's measured surface (its hole-filled parts left out).
+  std::vector<Vec3> measured;
+  for (size_t i = 0; i < S_obj.mesh.vertices.size(); ++i)
+    if (i < S_obj.observed.size() && S_obj.observed[i])
+      measured.push_back(S_obj.mesh.vertices[i].cast<double>());
+  plan.generation =
+      generateGrasps(*s.model, S_obj.mesh, T_B_O_rest, q_now, s.multi.grasp, &measured);
   const GraspGeneration& gen = plan.generation;
   std::snprintf(line, sizeof(line),
                 "grasp candidates: %d poses, %d touching, %d stable, %d clear of the table, %zu "

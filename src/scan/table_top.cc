@@ -167,7 +167,8 @@ GraspGeneration firstGrasps(const ScanSession& session, const TableTopObject& ob
     }
     if (keep) model.triangles.push_back(t);
   }
-  GraspGeneration first = generateGrasps(m, model, T_B_O_rest, q_now, session.multiOptions().grasp);
+  GraspGeneration first =
+      generateGrasps(m, model, T_B_O_rest, q_now, session.multiOptions().grasp, &object.points_O);
   // Most stable first; among equally stable (to 10 %), the cheaper arm motion.
   for (GraspCandidate& c : first.candidates) c.score = trajectoryTime(m, m.arm(q_now), m.arm(c.q));
   std::stable_sort(first.candidates.begin(), first.candidates.end(),

@@ -67,6 +67,16 @@ struct GraspOptions {
   // its least-area rectangle on the table, fingertips preshaped to straddle the model just wider
   // than it (8 and 20 mm each side), coming down beside it to the table and closing on it low.
   bool pinch_poses = true;
+  // Two-finger pinch poses (hands with a spread joint and three fingers or more), with the pinch
+  // poses: the spread at `two_finger_spread`, where the first two fingers face each other (the
+  // BarrettHand's fingers 1 and 2 at 90°), every other finger left open out of the way
+  // (RobotModel::closingFingers), palm y across each side of the footprint, the two fingertips
+  // preshaped 3, 6 and 10 mm wider than the model on each side. Their end faces then meet a thin
+  // body lying on the table at its middle or below it (with PhysicsOptions::table_sweep_m): the
+  // grasp that lifts a pen or a marker, where three fingers closing from both sides meet it
+  // above its middle with their inclined distal links.
+  bool two_finger_pinch = true;
+  double two_finger_spread = M_PI / 2;
   double friction = 0.5;          // μ at each contact
   int cone_edges = 8;             // friction-cone linearisation
   int wrench_directions = 1000;   // directions sampled for ε
@@ -76,7 +86,7 @@ struct GraspOptions {
   double stability_weight = 0.0;  // score = quality + weight·ε
   // Failed pick-ups per grasp before the scan gives up on that grasp (first grasp:
   // pick_up_failed; a re-grasp: regrasp_failed, with the model of the grasps so far).
-  int max_failed_pick_ups = 8;
+  int max_failed_pick_ups = 3;
   int max_candidates = 50;  // ranked at most (the most stable first)
   HoldTestOptions hold;     // the candidates tried in physics on the model (grasp/hold_test.h)
   double lift_m = 0.15;     // the object is lifted this far after the pick
@@ -110,8 +120,9 @@ struct GraspPoseRecord {
   double roll_rad = 0;             // palm x about it, from the approach's reference direction
   double spread = 0, preshape = 0;
   bool edge = false;
-  bool pinch = false;  // a pinch pose (GraspOptions::pinch_poses)
-  double epsilon = 0;  // when the closed hand touched with two links or more
+  bool pinch = false;       // a pinch pose (GraspOptions::pinch_poses)
+  bool two_finger = false;  // a two-finger pinch (GraspOptions::two_finger_pinch)
+  double epsilon = 0;       // when the closed hand touched with two links or more
   // kept, no_contact (the hand met nothing or started in contact), table (the hand cannot clear
   // the table), fewer_than_two_links, not_force_closure, hand_in_table, unreachable, or
   // beyond_max_candidates; duplicate: its closed hand is an earlier pose's (the same palm pose
@@ -130,10 +141,13 @@ struct GraspGeneration {
 };
 
 // Candidates on `model_O` (the current S_obj) with the object resting on the table at T_B_O;
-// `q_now` gives the arm's current state (IK seed).
+// `q_now` gives the arm's current state (IK seed). `footprint_O`: points of the object as
+// measured, from which the pinch poses take its footprint on the table (a model's hole-filled
+// surface, such as the table hidden behind a thin object, widens it); else the model's surface.
 GraspGeneration generateGrasps(const RobotModel& robot, const TriangleMesh& model_O,
                                const Iso3& T_B_O, const JointVector& q_now,
-                               const GraspOptions& options);
+                               const GraspOptions& options,
+                               const std::vector<Vec3>* footprint_O = nullptr);
 
 // Fills quality, reachable_views and score of each candidate by one Alg. 1 pass of `planner`
 // over S_obj with the hand at that grasp (usually a coarse planner: fewer directions, rolls and

@@ -35,6 +35,11 @@ struct PhysicsOptions {
   // TorqueSwitch: once a finger's driven (proximal) joint stalls, its coupled (distal) joints
   // close on at this multiple of the driven joint's rate (BH8-280: 125 / 93.75 reductions).
   double breakaway_rate = 125.0 / 93.75;
+  // The table-level pinch: when the hand's lowest point starts within this of the table top as
+  // the fingers close, the arm lowers the palm as they close so that the lowest point stays
+  // where it started (the fingertips sweep along the table rather than rising with the curling
+  // fingers: they meet a thin body at its middle or below), by at most 3 cm. 0: off.
+  double table_sweep_m = 0.005;
   // The arm's motions: each trajectory segment speeds up and slows down over at most this long
   // (a trapezoidal profile at the joints' speed limits), m/s² at the palm stay those of an arm.
   double ramp_s = 0.3;
@@ -86,6 +91,14 @@ class PhysicsWorld {
   double objectSpeed() const;  // m/s of its centre of mass
   bool objectTouchesHand() const;
   bool objectTouchesTable() const;
+  // The object's contacts now: where (base frame), the normal pointing into the object, and what
+  // it touches (a hand link's index into RobotModel::links(), or -1 for the table).
+  struct Contact {
+    Vec3 p_B;
+    Vec3 normal_B;
+    int link;
+  };
+  std::vector<Contact> objectContacts() const;
   JointVector handJoints(const JointVector& q) const;  // q with the hand joints as simulated
   // Each hand link's pose as simulated (link index into RobotModel::links(), T_B_link).
   std::vector<std::pair<int, Iso3>> handLinkPoses() const;

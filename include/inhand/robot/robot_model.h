@@ -122,6 +122,11 @@ class RobotModel {
   // The hand preshaped for an approach: spread as given, every finger `fraction` of the way
   // from open to closed (0: open), couplings applied; the arm at home.
   JointVector preshapedHand(double spread, double fraction) const;
+  // Which fingers (fingers() order) close from the preshape q: every one, except that in a
+  // preshape with a finger partly closed, a finger exactly at its `open` value stays open (the
+  // third finger of a two-finger pinch, kept out of the way). Kinematic closing, the simulated
+  // pick-up and physics all follow it; a robot's driver should too.
+  std::vector<bool> closingFingers(const JointVector& q) const;
   // The finger (index into fingers()) that `link` moves with, or -1 (the palm, the arm).
   int fingerOfLink(int link) const;
   // The palm face: the top of the palm (tip) link's collision geometry along palm z, m.
