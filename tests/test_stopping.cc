@@ -210,6 +210,7 @@ TEST(Stopping, TheRegraspDecisionUsesTheSameRule) {
   for (double s : {0.5, 2.0}) {
     ScanConfig c = stoppingConfig(StopRule::kRelative, "table", s);
     c.multi.max_grasps = 2;
+    c.multi.grasp.max_failed_pick_ups = 8;  // (the half-size can's first candidates fall)
     const SimulatedScan scan = runSimulatedScan(test::wam(), scaled(can, s), c);
     const std::vector<GraspRecord>& grasps = scan.result.grasps;
     ASSERT_FALSE(grasps.empty());
