@@ -215,7 +215,7 @@ void visitConfig(V& v, ScanConfig& c) {
     g.boolean("pinch_poses", o.pinch_poses,
               "pinch poses: straight down, fingertips straddling the model's footprint");
     g.boolean("two_finger_pinch", o.two_finger_pinch,
-              "two-finger pinch poses: the first two fingers facing, the others closed");
+              "two-finger pinch poses: the first two fingers facing, the others left open");
     g.num("two_finger_spread", o.two_finger_spread,
           "the spread at which the first two fingers face each other, rad");
     g.num("friction", o.friction, "μ at each contact (stability)");

@@ -105,7 +105,7 @@ struct Pose {
   bool edge;
   double preshape = 0;
   bool pinch = false;
-  bool two_finger = false;  // fingers past the first two closed out of the way
+  bool two_finger = false;  // fingers past the first two left open (closingFingers)
   Vec3 offset = Vec3::Zero();
 };
 
