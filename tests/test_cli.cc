@@ -606,7 +606,7 @@ TEST(Cli, ScanOfTheCrackerBoxMeetsItsOutcomeBounds) {
     "max_views": 3, "grasp": {"approaches": 32}})");
   const fs::path out = dir.path() / "scan";
   const Result r = run("scan --object builtin:cracker_box --max-grasps 2 --seed 3 --config " +
-                           config.string() + " --out " + out.string(),
+                           config.string() + " --export mjcf,urdf --out " + out.string(),
                        dir);
   ASSERT_EQ(r.code, 0) << r.output;
   const Json s = readJsonFile(out / "summary.json");
@@ -636,6 +636,58 @@ TEST(Cli, ScanOfTheCrackerBoxMeetsItsOutcomeBounds) {
   EXPECT_TRUE(ply.mesh.isWatertight());
   EXPECT_GT(ply.mesh.vertices.size(), 1000u);
   EXPECT_EQ(ply.mesh.vertices.size(), s["vertices"].get<size_t>());
+  // --export: the asset beside the model; its mass that of the true box at the config's
+  // density within 10 %; the grasps the scan tried, the one it scanned with among them, held.
+  const Json asset = readJsonFile(out / "asset" / "asset.json");
+  const Vec3 size = loadObject("builtin:cracker_box").bounds().size();
+  const double density = s["options"]["sim"]["physics"]["density_kg_m3"].get<double>();
+  EXPECT_NEAR(asset["mass_kg"].get<double>(), density * size.prod(), 0.1 * density * size.prod());
+  EXPECT_TRUE(fs::exists(out / "asset" / "object.xml"));
+  EXPECT_TRUE(fs::exists(out / "asset" / "object.urdf"));
+  EXPECT_FALSE(fs::exists(out / "asset" / "object.sdf"));
+  const Json graspSet = readJsonFile(out / "asset" / "grasps.json");
+  int tried = 0, held = 0;
+  for (const Json& g : s["grasps"]) tried += int(g["pick_up_attempts"].size());
+  for (const Json& g : graspSet) {
+    EXPECT_EQ(g["T_O_palm"].size(), 16u);
+    EXPECT_FALSE(g["preshape"].empty());
+    held += g["outcome"] == "held";
+  }
+  EXPECT_EQ(int(graspSet.size()), tried + int(s["failed_regrasp_attempts"].size()));
+  EXPECT_GE(held, 1);
+}
+
+TEST(Cli, ExportRefusesBadInputByNameAndWritesNothing) {
+  test::TempDir dir;
+  const fs::path out = dir.path() / "asset";
+  TriangleMesh sheet;  // an open mesh: no enclosed volume
+  sheet.vertices = {Vec3f(0, 0, 0), Vec3f(0.1f, 0, 0), Vec3f(0, 0.1f, 0)};
+  sheet.triangles = {Tri(0, 1, 2)};
+  writePly(dir.path() / "sheet.ply", sheet);
+  writePly(dir.path() / "box.ply", makeBox(Vec3(0.05, 0.04, 0.03)));
+  fs::create_directories(dir.path() / "empty");
+  const std::vector<std::pair<std::string, std::string>> cases{
+      {"export " + (dir.path() / "missing").string(), "no such mesh file"},
+      {"export " + (dir.path() / "empty").string(), "no model.ply"},
+      {"export " + (dir.path() / "sheet.ply").string(), "encloses no volume"},
+      {"export " + (dir.path() / "box.ply").string() + " --format mjcf,gltf", "'gltf'"},
+      {"export " + (dir.path() / "box.ply").string() + " --density -3", "density"},
+      {"export " + (dir.path() / "box.ply").string() + " --name 'a b'", "name"},
+      {"scan --object builtin:cracker_box --export obj", "'obj'"}};
+  for (const auto& [args, message] : cases) {
+    const Result r = run(args + " --out " + out.string(), dir);
+    EXPECT_EQ(r.code, 1) << args << "\n" << r.output;
+    EXPECT_NE(r.output.find(message), std::string::npos) << args << "\n" << r.output;
+    EXPECT_FALSE(fs::exists(out)) << args;
+  }
+  // A closed mesh file exports: the box's mass at 200 kg/m³.
+  const Result r = run("export " + (dir.path() / "box.ply").string() +
+                           " --density 200 --format sdf --out " + out.string(),
+                       dir);
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_NEAR(readJsonFile(out / "asset.json")["mass_kg"].get<double>(), 200 * 0.05 * 0.04 * 0.03,
+              1e-9);
+  EXPECT_TRUE(fs::exists(out / "object.sdf"));
 }
 
 namespace {

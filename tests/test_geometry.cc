@@ -1318,3 +1318,26 @@ TEST(StablePoses, UnstableFacesPassTheirProbabilityOn) {
   }
   EXPECT_NEAR(sum, 1.0, 1e-12);
 }
+
+TEST(Geometry, ClusteringKeepsTheShapeWithinACellAndStlRoundTrips) {
+  const TriangleMesh sphere = makeSphere(0.05, 5);
+  const size_t limit = sphere.triangles.size() / 8;
+  const TriangleMesh fewer = simplifiedTo(sphere, limit);
+  EXPECT_LE(fewer.triangles.size(), limit);
+  EXPECT_GT(fewer.triangles.size(), limit / 4);
+  EXPECT_EQ(validateMesh(fewer), "");
+  EXPECT_TRUE(fewer.isWatertight());
+  // Every vertex within a few mm of the sphere; the enclosed volume within 3 %.
+  for (const Vec3f& v : fewer.vertices) EXPECT_NEAR(v.cast<double>().norm(), 0.05, 0.003);
+  EXPECT_NEAR(massProperties(fewer).volume_m3, massProperties(sphere).volume_m3,
+              0.03 * massProperties(sphere).volume_m3);
+  EXPECT_EQ(simplifiedTo(sphere, sphere.triangles.size()).triangles.size(),
+            sphere.triangles.size());
+  // Binary STL: written and read back, the same triangles (welded: the same vertices).
+  test::TempDir dir;
+  writeStl(dir.path() / "s.stl", fewer);
+  const TriangleMesh back = importMesh(dir.path() / "s.stl");
+  EXPECT_EQ(back.triangles.size(), fewer.triangles.size());
+  EXPECT_EQ(back.vertices.size(), fewer.vertices.size());
+  EXPECT_NEAR(massProperties(back).volume_m3, massProperties(fewer).volume_m3, 1e-12);
+}

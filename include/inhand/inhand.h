@@ -1,5 +1,6 @@
 #pragma once
 // inhand: every public header of the library (link inhand::inhand).
+#include "inhand/asset/asset.h"
 #include "inhand/config/scan_config.h"
 #include "inhand/config/simulated_scan.h"
 #include "inhand/core/clock.h"

@@ -4,6 +4,9 @@
 #include <cstdint>
 #include <optional>
 #include <string>
+#include <vector>
+
+#include "inhand/asset/asset.h"
 
 namespace inhand::app {
 
@@ -75,9 +78,28 @@ struct ScanArgs {
   std::string tracking;             // on | off: overrides tracking.enabled when set
   std::string resume;               // a scan's output directory with checkpoint.inhand: go on
   bool save_frames = false;         // OUT/frames: the in-hand frames as the robot gave them
+  std::string export_formats;       // non-empty: OUT/asset in these formats (inhand export)
 };
 
 int runScan(const ScanArgs& args);
+
+struct ExportArgs {
+  std::string input;                      // a scan's output directory, or a closed mesh file
+  std::string out;                        // output directory (new or empty)
+  std::string formats = "mjcf,urdf,sdf";  // comma-separated
+  std::string name = "object";            // body, link and model name
+  double density_kg_m3 = 300;             // of the enclosed solid
+  double mass_kg = 0;                     // > 0: this mass instead
+};
+
+// `inhand export`: the model as a simulator's asset (docs/asset.md).
+int runExport(const ExportArgs& args);
+// "mjcf,urdf": the formats; throws Error naming one that is not mjcf, urdf or sdf.
+std::vector<AssetFormat> parseAssetFormats(const std::string& list);
+// The asset of `in` (a scan's directory: its model.ply and the grasps of its summary.json; or a
+// closed mesh file) written to `out`; prints one line.
+void exportAsset(const std::filesystem::path& in, const std::filesystem::path& out,
+                 const std::vector<AssetFormat>& formats, const AssetOptions& options);
 
 struct EvalArgs {
   std::string objects;  // comma-separated: builtin:NAME or mesh files

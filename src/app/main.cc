@@ -165,6 +165,10 @@ CLI::App* addScan(CLI::App& app, ScanArgs& scan) {
       "--save-frames", scan.save_frames,
       "write the in-hand depth frames with the joints and camera poses the robot reported to "
       "OUT/frames (frames.json: the input of `inhand fuse --robot`)"));
+  scanOptions.push_back(
+      sc->add_option("--export", scan.export_formats,
+                     "FORMATS (mjcf,urdf,sdf): write the model as a simulator's asset to "
+                     "OUT/asset, as `inhand export OUT --out OUT/asset` does"));
   auto* resume =
       sc->add_option("--resume", scan.resume,
                      "DIR: go on with the interrupted scan in DIR (its checkpoint.inhand), "
@@ -242,6 +246,21 @@ int main(int argc, char** argv) {
   et->add_option("dir", taskDir, "the eval directory")->required();
   et->add_option("list", taskList, "the file of run indices, one per array task")->required();
 
+  ExportArgs exp;
+  auto* ex = app.add_subcommand(
+      "export",
+      "a scanned model as an asset: MJCF, URDF, SDF with mass, inertia, convex pieces, "
+      "grasps");
+  ex->add_option("input", exp.input, "a scan's output directory (or a closed mesh file)")
+      ->required();
+  ex->add_option("--out", exp.out, "output directory (new or empty)")->required();
+  ex->add_option("--format", exp.formats, "comma-separated: mjcf, urdf, sdf")
+      ->capture_default_str();
+  ex->add_option("--name", exp.name, "the body's name")->capture_default_str();
+  ex->add_option("--density", exp.density_kg_m3, "kg/m³ of the enclosed solid")
+      ->capture_default_str();
+  ex->add_option("--mass", exp.mass_kg, "kg: the object's mass (overrides --density)");
+
   std::string reportDir;
   auto* rp = app.add_subcommand("report", "rebuild the HTML report of a scan or an eval directory");
   rp->add_option("dir", reportDir, "a scan's or an eval's output directory")->required();
@@ -269,6 +288,7 @@ int main(int argc, char** argv) {
     }
     if (*et) return inhand::app::runEvalTask(taskDir, taskList);
     if (*rp) return inhand::app::runReport(reportDir);
+    if (*ex) return inhand::app::runExport(exp);
     if (*cf) return inhand::app::runConfig(configFile, configReference);
     if (*rb) return inhand::app::runRobot(robot);
     if (*cmp)

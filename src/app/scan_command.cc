@@ -335,6 +335,7 @@ int runScan(const ScanArgs& given) {
   ScanConfig o;
   std::string objectToLoad;
   const bool resuming = !args.resume.empty();
+  if (!args.export_formats.empty()) parseAssetFormats(args.export_formats);  // before the scan
   fs::path checkpoint;
   if (resuming) {
     // The scan goes on with the arguments and options it was started with.
@@ -554,6 +555,16 @@ int runScan(const ScanArgs& given) {
     writeScanReport(out.path(), webDirectory());
   } catch (const Error& e) {
     std::fprintf(stderr, "scan: warning: no report.html: %s\n", e.what());
+  }
+  if (!args.export_formats.empty() && fs::exists(out.path() / "model.ply")) {
+    AssetOptions asset;
+    asset.density_kg_m3 = o.sim.physics.density_kg_m3;
+    asset.mass_kg = o.sim.physics.mass_kg;
+    try {
+      exportAsset(out.path(), out.path() / "asset", parseAssetFormats(args.export_formats), asset);
+    } catch (const Error& e) {  // the scan is kept whatever became of its asset
+      std::fprintf(stderr, "scan: warning: no asset: %s\n", e.what());
+    }
   }
   out.commit();  // replaces the directory that held the checkpoint
   cleanup.armed = false;

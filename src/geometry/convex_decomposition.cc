@@ -39,6 +39,27 @@ MassProperties massProperties(const TriangleMesh& mesh) {
   return out;
 }
 
+MassProperties massProperties(const std::vector<ConvexPiece>& pieces) {
+  MassProperties mp;
+  std::vector<MassProperties> each;
+  for (const ConvexPiece& p : pieces) {
+    TriangleMesh hull;
+    for (const Vec3& v : p.hull.vertices) hull.vertices.push_back(v.cast<float>());
+    for (const auto& t : p.hull.triangles) hull.triangles.push_back(Tri(t[0], t[1], t[2]));
+    each.push_back(massProperties(hull));
+    mp.volume_m3 += each.back().volume_m3;
+    mp.com += each.back().volume_m3 * each.back().com;
+  }
+  if (!(mp.volume_m3 > 0)) return MassProperties{};
+  mp.com /= mp.volume_m3;
+  for (const MassProperties& e : each) {
+    const Vec3 d = e.com - mp.com;
+    mp.inertia_com +=
+        e.inertia_com + e.volume_m3 * (d.squaredNorm() * Mat3::Identity() - d * d.transpose());
+  }
+  return mp;
+}
+
 double hullVolume(const ConvexHull& hull) {
   if (hull.triangles.empty()) return 0;
   const Vec3& o = hull.vertices[0];

@@ -267,6 +267,31 @@ std::array<uint8_t, 3> confidenceColor(float variance_m2) {
   return c;
 }
 
+void writeStl(const fs::path& path, const TriangleMesh& mesh) {
+  if (mesh.triangles.size() > 0xffffffffu) throw Error(path.string() + ": too many triangles");
+  writeFileAtomically(path, [&](const fs::path& tmp) {
+    std::string buf(84 + 50 * mesh.triangles.size(), '\0');
+    const std::string header = "binary STL written by inhand; units: metres";
+    std::memcpy(buf.data(), header.data(), header.size());
+    const uint32_t n = uint32_t(mesh.triangles.size());
+    std::memcpy(buf.data() + 80, &n, 4);
+    for (size_t t = 0; t < mesh.triangles.size(); ++t) {
+      const Tri& f = mesh.triangles[t];
+      const Vec3f &a = mesh.vertices[f[0]], &b = mesh.vertices[f[1]], &c = mesh.vertices[f[2]];
+      Vec3f normal = (b - a).cross(c - a);
+      normal = normal.norm() > 0 ? Vec3f(normal.normalized()) : Vec3f::Zero();
+      char* p = buf.data() + 84 + 50 * t;
+      for (const Vec3f* v : std::array<const Vec3f*, 4>{&normal, &a, &b, &c}) {
+        std::memcpy(p, v->data(), 12);
+        p += 12;
+      }
+    }
+    std::ofstream out(tmp, std::ios::binary);
+    if (!out.write(buf.data(), std::streamsize(buf.size())))
+      throw Error(path.string() + ": cannot write");
+  });
+}
+
 void writePly(const fs::path& path, const TriangleMesh& mesh, const std::vector<float>* variance,
               const std::vector<std::array<uint8_t, 4>>* rgba) {
   if (variance && variance->size() != mesh.vertices.size())

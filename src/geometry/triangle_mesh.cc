@@ -2,6 +2,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <map>
+#include <set>
 #include <unordered_map>
 
 namespace inhand {
@@ -133,6 +135,63 @@ TriangleMesh welded(const TriangleMesh& mesh, double tolerance_m, std::vector<in
   }
   if (vertex_remap) *vertex_remap = std::move(remap);
   return out;
+}
+
+TriangleMesh clustered(const TriangleMesh& mesh, double cell_m) {
+  std::vector<int> remap;
+  TriangleMesh out = welded(mesh, cell_m, nullptr, &remap);
+  std::vector<Vec3> sum(out.vertices.size(), Vec3::Zero());
+  std::vector<int> count(out.vertices.size(), 0);
+  for (size_t i = 0; i < remap.size(); ++i) {
+    sum[size_t(remap[i])] += mesh.vertices[i].cast<double>();
+    ++count[size_t(remap[i])];
+  }
+  for (size_t i = 0; i < out.vertices.size(); ++i)
+    out.vertices[i] = (sum[i] / std::max(count[i], 1)).cast<float>();
+  // Triangles on the same three vertices: a pair facing opposite ways is a sheet collapsed onto
+  // itself (both go: the surface stays closed), one facing the same way as another repeats it.
+  struct Count {
+    int up = 0, down = 0;  // triangles facing each way
+    bool done = false;     // one kept
+  };
+  std::map<std::array<int, 3>, Count> faces;  // by sorted vertices
+  auto keyOf = [](const Tri& t, int* sign) {
+    std::array<int, 3> k{t[0], t[1], t[2]};
+    const int r = int(std::min_element(k.begin(), k.end()) - k.begin());
+    std::rotate(k.begin(), k.begin() + r, k.end());  // smallest first, orientation kept
+    *sign = k[1] < k[2] ? 1 : -1;
+    if (k[1] > k[2]) std::swap(k[1], k[2]);
+    return k;
+  };
+  for (const Tri& t : out.triangles) {
+    int sign = 0;
+    const auto k = keyOf(t, &sign);
+    (sign > 0 ? faces[k].up : faces[k].down)++;
+  }
+  std::vector<Tri> kept;
+  kept.reserve(out.triangles.size());
+  for (const Tri& t : out.triangles) {
+    int sign = 0;
+    Count& c = faces[keyOf(t, &sign)];
+    if (!c.done && (sign > 0 ? c.up > c.down : c.down > c.up)) {  // the orientation that wins
+      kept.push_back(t);
+      c.done = true;
+    }
+  }
+  out.triangles = std::move(kept);
+  return withoutUnusedVertices(out);
+}
+
+TriangleMesh simplifiedTo(const TriangleMesh& mesh, size_t max_triangles) {
+  if (mesh.triangles.size() <= max_triangles || mesh.triangles.empty()) return mesh;
+  double edges = 0;
+  for (const Tri& t : mesh.triangles) edges += (mesh.vertices[t[1]] - mesh.vertices[t[0]]).norm();
+  double cell = std::max(edges / double(mesh.triangles.size()), 1e-6);
+  for (;;) {
+    TriangleMesh out = clustered(mesh, cell);
+    if (out.triangles.size() <= max_triangles) return out;
+    cell *= 1.25;
+  }
 }
 
 TriangleMesh withoutUnusedVertices(const TriangleMesh& mesh) {

@@ -385,25 +385,8 @@ PhysicsWorld::PhysicsWorld(const RobotModel& model, std::vector<ConvexPiece> pie
     : impl_(std::make_unique<Impl>()) {
   if (std::string p = options.validate(); !p.empty()) throw Error("physics options: " + p);
   if (pieces.empty()) throw Error("physics: the object has no convex pieces");
-  // The solid as the union of the pieces (they do not overlap): volumes, centres and inertias
-  // added about the common centre of mass (parallel axis theorem).
-  MassProperties mp;
-  std::vector<MassProperties> each;
-  for (const ConvexPiece& p : pieces) {
-    TriangleMesh hull;
-    for (const Vec3& v : p.hull.vertices) hull.vertices.push_back(v.cast<float>());
-    for (const auto& t : p.hull.triangles) hull.triangles.push_back(Tri(t[0], t[1], t[2]));
-    each.push_back(massProperties(hull));
-    mp.volume_m3 += each.back().volume_m3;
-    mp.com += each.back().volume_m3 * each.back().com;
-  }
+  const MassProperties mp = massProperties(pieces);  // their union (they do not overlap)
   if (!(mp.volume_m3 > 0)) throw Error("physics: the object's pieces enclose no volume");
-  mp.com /= mp.volume_m3;
-  for (const MassProperties& e : each) {
-    const Vec3 d = e.com - mp.com;
-    mp.inertia_com +=
-        e.inertia_com + e.volume_m3 * (d.squaredNorm() * Mat3::Identity() - d * d.transpose());
-  }
   build(model, std::move(pieces), mp, friction, options);
 }
 

@@ -351,9 +351,22 @@ LiftCheck checkAfterLift(ScanSession& session, RobotInterface& robot, DepthSenso
   return out;
 }
 
+// The hand's joints of q (every variable not of the arm), by name.
+std::vector<std::pair<std::string, double>> handJoints(const RobotModel& m, const JointVector& q) {
+  std::vector<std::pair<std::string, double>> out;
+  const std::vector<int>& arm = m.armVariables();
+  for (int v = 0; v < m.variableCount() && v < int(q.size()); ++v)
+    if (std::find(arm.begin(), arm.end(), v) == arm.end())
+      out.emplace_back(m.variable(v).name, q[v]);
+  return out;
+}
+
 // The record of trying candidate c, the rank-th of its ranking (its outcome still to come).
-PickAttempt attemptOf(const GraspCandidate& c, int rank) {
+PickAttempt attemptOf(const GraspCandidate& c, int rank, const RobotModel& m) {
   PickAttempt a;
+  a.T_O_palm = c.T_O_palm;
+  a.preshape = handJoints(m, c.q_open);
+  a.closed = handJoints(m, c.q);
   a.rank = rank;
   a.pose = c.pose;
   a.hold_test = c.hold;
@@ -403,7 +416,7 @@ PickOutcome pickAndVerify(ScanSession& session, RobotInterface& robot, DepthSens
           " attempts (grasp.max_failed_pick_ups); giving up on this grasp");
       break;
     }
-    PickAttempt attempt = attemptOf(c, int(rank));
+    PickAttempt attempt = attemptOf(c, int(rank), m);
     auto record = [&](const char* outcome) {
       attempt.outcome = outcome;
       out.attempts.push_back(attempt);
@@ -594,18 +607,38 @@ void runGrasps(RobotInterface& robot, DepthSensor& sensor, ScanSession& session,
 }
 }  // namespace
 
+namespace {
+Json jointsByName(const std::vector<std::pair<std::string, double>>& joints) {
+  Json out = Json::object();
+  for (const auto& [name, value] : joints) out[name] = value;
+  return out;
+}
+std::vector<std::pair<std::string, double>> jointsFromJson(const Json& j) {
+  std::vector<std::pair<std::string, double>> out;
+  for (const auto& [name, value] : j.items()) out.emplace_back(name, value.get<double>());
+  return out;
+}
+}  // namespace
+
 Json attemptsJson(const std::vector<PickAttempt>& attempts) {
   Json out = Json::array();
-  for (const PickAttempt& a : attempts)
-    out.push_back({{"outcome", a.outcome},
-                   {"rank", a.rank},
-                   {"pose", a.pose},
-                   {"hold_test", a.hold_test < 0 ? Json() : Json(a.hold_test == 1)},
-                   {"hold_margin", a.hold_margin < 0 ? Json() : Json(a.hold_margin == 1)},
-                   {"hold_failure", a.hold_test == 0 ? Json(a.hold_failure) : Json()},
-                   {"kind", a.palm_contact ? "enveloping" : "fingertips"},
-                   {"epsilon", a.epsilon},
-                   {"shift_in_hand_mm", a.shift_m < 0 ? Json() : Json(1000 * a.shift_m)}});
+  for (const PickAttempt& a : attempts) {
+    Json& e = out.emplace_back(
+        Json{{"outcome", a.outcome},
+             {"rank", a.rank},
+             {"pose", a.pose},
+             {"hold_test", a.hold_test < 0 ? Json() : Json(a.hold_test == 1)},
+             {"hold_margin", a.hold_margin < 0 ? Json() : Json(a.hold_margin == 1)},
+             {"hold_failure", a.hold_test == 0 ? Json(a.hold_failure) : Json()},
+             {"kind", a.palm_contact ? "enveloping" : "fingertips"},
+             {"epsilon", a.epsilon},
+             {"shift_in_hand_mm", a.shift_m < 0 ? Json() : Json(1000 * a.shift_m)}});
+    if (a.T_O_palm) {
+      e["T_O_palm"] = isoJson(*a.T_O_palm);
+      e["preshape"] = jointsByName(a.preshape);
+      e["closed"] = jointsByName(a.closed);
+    }
+  }
   return out;
 }
 
@@ -629,6 +662,11 @@ std::vector<PickAttempt> attemptsFrom(const Json& j) {
       a.epsilon = e.at("epsilon").get<double>();
       a.shift_m =
           e.at("shift_in_hand_mm").is_null() ? -1.0 : e.at("shift_in_hand_mm").get<double>() / 1000;
+      if (e.contains("T_O_palm")) {  // absent before grasps were recorded with their poses
+        a.T_O_palm = isoFrom(e.at("T_O_palm"));
+        a.preshape = jointsFromJson(e.at("preshape"));
+        a.closed = jointsFromJson(e.at("closed"));
+      }
     }
     out.push_back(a);
   }

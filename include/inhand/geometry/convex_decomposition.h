@@ -13,12 +13,17 @@ namespace inhand {
 // (m³), centre of mass and inertia tensor about the centre of mass (kg·m² per kg/m³), by the
 // divergence theorem over the tetrahedra the triangles span with a point (exact for a closed
 // mesh). Multiply volume and inertia by a density for kilograms.
+struct ConvexPiece;
 struct MassProperties {
   double volume_m3 = 0;
   Vec3 com = Vec3::Zero();
   Mat3 inertia_com = Mat3::Zero();
 };
 MassProperties massProperties(const TriangleMesh& closed);
+// The solid as the union of convex pieces that do not overlap (each the solid its hull
+// encloses): volumes and centres added, inertias about the common centre of mass (parallel
+// axis theorem).
+MassProperties massProperties(const std::vector<ConvexPiece>& pieces);
 
 // The volume a convex hull encloses (m³).
 double hullVolume(const ConvexHull& hull);

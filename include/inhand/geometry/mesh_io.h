@@ -40,6 +40,10 @@ void writePly(const std::filesystem::path& path, const TriangleMesh& mesh,
               const std::vector<float>* variance_m2 = nullptr,
               const std::vector<std::array<uint8_t, 4>>* rgba = nullptr);
 
+// Writes binary STL (float coordinates, each triangle's unit normal). Atomic. Throws Error on
+// failure.
+void writeStl(const std::filesystem::path& path, const TriangleMesh& mesh);
+
 // Reads a PLY file (ASCII, binary little- or big-endian) keeping every per-vertex scalar property.
 // Faces must be a list property; polygons are fan-triangulated. Throws Error naming the file.
 PlyData readPly(const std::filesystem::path& path);

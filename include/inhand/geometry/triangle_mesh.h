@@ -64,6 +64,15 @@ TriangleMesh welded(const TriangleMesh& mesh, double tolerance_m = 1e-7,
                     std::vector<int>* kept_triangles = nullptr,
                     std::vector<int>* vertex_remap = nullptr);
 
+// The mesh with fewer triangles by vertex clustering: vertices in one cube of `cell_m` (a grid
+// through the origin) become one, at their mean; triangles that become degenerate or repeat
+// another (the same three vertices, either orientation) are dropped. Shape error at most about
+// a cell; the topology may change where parts are thinner than a cell.
+TriangleMesh clustered(const TriangleMesh& mesh, double cell_m);
+// clustered() at the smallest cell (from the mean edge length, growing by 25 % a step) that
+// leaves at most `max_triangles`; the mesh itself when it has no more than that.
+TriangleMesh simplifiedTo(const TriangleMesh& mesh, size_t max_triangles);
+
 // The mesh without the vertices no triangle uses (the triangles renumbered, in order): what a
 // mesh cut out of a bigger one keeps, so that its bounds and samples are its triangles'.
 TriangleMesh withoutUnusedVertices(const TriangleMesh& mesh);

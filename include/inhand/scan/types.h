@@ -238,6 +238,10 @@ struct PickAttempt {
   double epsilon = 0;         // its force-closure ε
   // After the lift: how far the object sat in the hand from the planned grasp (−1: not seen).
   double shift_m = -1;
+  // The grasp: the palm in the object's frame, and the hand's joints (by URDF name) as it came
+  // in (the preshape) and as planned closed on the model. Absent from records of older scans.
+  std::optional<Iso3> T_O_palm;
+  std::vector<std::pair<std::string, double>> preshape, closed;
 };
 Json attemptsJson(const std::vector<PickAttempt>& attempts);
 // Throws Error on a malformed list; a list of outcome strings (older checkpoints) is read too.

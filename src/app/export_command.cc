@@ -1,0 +1,100 @@
+// `inhand export`: a scanned model as an asset for simulators and planners (docs/asset.md).
+#include <cstdio>
+
+#include "commands.h"
+#include "inhand/asset/asset.h"
+#include "inhand/core/error.h"
+#include "inhand/core/file_util.h"
+#include "inhand/geometry/mesh_io.h"
+
+namespace inhand::app {
+
+namespace {
+
+// The grasps a scan tried (summary.json), each with what became of it: held (it was lifted and
+// the scan went on with it), lost_in_hand (lifted, then lost during the scan), dropped (it fell in
+// the lift), empty_hand (the fingers closed on nothing), no_contact (the hand met nothing).
+// Attempts recorded without their pose (older scans) are left out.
+Json triedGrasps(const Json& summary, const std::string& where) {
+  Json out = Json::array();
+  auto add = [&](const Json& attempts, const std::string& stage, bool lost) {
+    if (!attempts.is_array()) throw Error(where + ": pick_up_attempts is not a list");
+    for (const Json& a : attempts) {
+      if (!a.is_object() || !a.contains("T_O_palm")) continue;
+      std::string outcome = a.value("outcome", "");
+      if (outcome == "picked") outcome = lost ? "lost_in_hand" : "held";
+      out.push_back({{"source", "tried"},
+                     {"stage", stage},
+                     {"outcome", outcome},
+                     {"T_O_palm", a.at("T_O_palm")},
+                     {"preshape", a.at("preshape")},
+                     {"closed", a.at("closed")},
+                     {"kind", a.value("kind", "")},
+                     {"epsilon", a.value("epsilon", 0.0)}});
+    }
+  };
+  const Json grasps = summary.value("grasps", Json::array());
+  for (size_t i = 0; i < grasps.size(); ++i)
+    add(grasps[i].value("pick_up_attempts", Json::array()), "grasp " + std::to_string(i + 1),
+        grasps[i].value("termination", "") == "object_lost");
+  add(summary.value("failed_regrasp_attempts", Json::array()), "failed re-grasp", false);
+  return out;
+}
+
+}  // namespace
+
+std::vector<AssetFormat> parseAssetFormats(const std::string& list) {
+  std::vector<AssetFormat> out;
+  size_t start = 0;
+  while (start <= list.size()) {
+    const size_t comma = std::min(list.find(',', start), list.size());
+    const std::string name = list.substr(start, comma - start);
+    const auto f = assetFormatFromName(name);
+    if (!f) throw Error("--format: '" + name + "' is not one of mjcf, urdf, sdf");
+    if (std::find(out.begin(), out.end(), *f) == out.end()) out.push_back(*f);
+    start = comma + 1;
+  }
+  return out;
+}
+
+void exportAsset(const fs::path& in, const fs::path& out, const std::vector<AssetFormat>& formats,
+                 const AssetOptions& options) {
+  if (std::string p = options.validate(); !p.empty()) throw Error("export: " + p);
+  std::error_code ec;
+  fs::path model = in;
+  Json grasps = Json::array();
+  if (fs::is_directory(in, ec)) {
+    model = in / "model.ply";
+    if (!fs::exists(model, ec))
+      throw Error(in.string() + ": no model.ply (not a scan's output directory?)");
+    if (fs::exists(in / "summary.json", ec))
+      grasps = triedGrasps(readJsonFile(in / "summary.json"), (in / "summary.json").string());
+  }
+  // The model as written: the closed (hole-filled) surface, its triangles kept as they are.
+  TriangleMesh mesh = model.extension() == ".ply" ? readPly(model).mesh : importMesh(model);
+  ObjectAsset asset = makeAsset(mesh, options);
+  asset.grasps = std::move(grasps);
+  std::optional<fs::path> ply;
+  if (model.extension() == ".ply") ply = model;
+  writeAsset(asset, out, formats, ply);
+  int held = 0;
+  for (const Json& g : asset.grasps) held += g.value("outcome", "") == "held";
+  std::printf(
+      "export: %s: %.1f cm³, %.3f kg (%.0f kg/m³), centre of mass %.1f %.1f %.1f mm; %zu convex "
+      "pieces (+%.1f %% volume); visual %zu triangles; %zu grasps (%d held) -> %s\n",
+      model.string().c_str(), 1e6 * asset.volume_m3, asset.mass_kg, asset.density_kg_m3,
+      1000 * asset.com_O.x(), 1000 * asset.com_O.y(), 1000 * asset.com_O.z(), asset.pieces.size(),
+      100 * (asset.pieces_volume_m3 / asset.volume_m3 - 1), asset.visual_O.triangles.size(),
+      asset.grasps.size(), held, out.string().c_str());
+}
+
+int runExport(const ExportArgs& args) {
+  AssetOptions options;
+  options.name = args.name;
+  options.density_kg_m3 = args.density_kg_m3;
+  options.mass_kg = args.mass_kg;
+  exportAsset(args.input, args.out, parseAssetFormats(args.formats), options);
+  return 0;
+}
+
+}  // namespace inhand::app
