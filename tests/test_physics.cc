@@ -12,6 +12,7 @@
 #include "inhand/grasp/grasp.h"
 #include "inhand/physics/physics.h"
 #include "inhand/robot/collision.h"
+#include "inhand/robot/payload.h"
 #include "inhand/sim/sim_world.h"
 #include "test_util.h"
 
@@ -448,6 +449,55 @@ TEST(ConvexDecomposition, AClippedPieceKeepsItsPartOfTheVolume) {
   EXPECT_NEAR(half->volume_m3, 0.5, 1e-9);
   EXPECT_FALSE(clipPiece(pieces[0], n, 10.0));                        // nothing beyond the plane
   EXPECT_NEAR(clipPiece(pieces[0], n, -10.0)->volume_m3, 1.0, 1e-9);  // all of it
+}
+
+// The arm's joint torques at rest weigh what it holds: the simulator's torques (links' and the
+// object's weight, noise) fitted by PayloadEstimator over the configurations that present an
+// object to the camera.
+TEST(Payload, TheArmsJointTorquesWeighTheHeldObject) {
+  const RobotModel& m = test::wam();
+  Iso3 shift = Iso3::Identity();
+  shift.translation() = Vec3(0.01, -0.02, 0.03);  // the centre of mass off the frame's origin
+  const TriangleMesh box = transformed(makeBox(Vec3(0.06, 0.1, 0.2)), shift);
+  const Iso3 T_O_palm = boxGrasp(m, box, true);
+  const Vec3 com_palm = T_O_palm.inverse() * Vec3(0.01, -0.02, 0.03);
+  const std::vector<JointVector> configs = presentationConfigurations(m);
+  ASSERT_GE(configs.size(), 6u);
+  for (const bool exact : {true, false}) {
+    SimOptions so;
+    so.physics.density_kg_m3 = 400;  // 0.48 kg
+    if (exact) {
+      so.torque_noise_nm = 0;
+      so.arm_error_m = 0;
+    }
+    SimWorld world(m, box, T_O_palm, DepthCameraOptions{}, NoiseModelOptions{}, so);
+    SimRobot robot(&world);
+    EXPECT_NEAR(world.objectMass_kg(), 400 * 0.06 * 0.1 * 0.2, 1e-6);
+    PayloadEstimator est(m), empty(m);
+    for (const JointVector& q : configs) {
+      world.q = q;
+      world.held = true;
+      est.add(q, *robot.jointTorques());
+      world.held = false;
+      empty.add(q, *robot.jointTorques());
+    }
+    const PayloadEstimate e = *est.estimate();
+    const double truth = world.objectMass_kg();
+    EXPECT_EQ(e.readings, int(configs.size()));
+    if (exact) {
+      EXPECT_NEAR(e.mass_kg, truth, 1e-6 * truth);
+      EXPECT_TRUE(e.com_observed);
+      EXPECT_NEAR((e.com - com_palm).norm(), 0, 1e-5);
+      EXPECT_NEAR(empty.estimate()->mass_kg, 0, 1e-9);
+    } else {
+      EXPECT_NEAR(e.mass_kg, truth, 0.1 * truth);
+      EXPECT_LT(std::abs(e.mass_kg - truth), 4 * e.sigma_kg + 0.02 * truth);
+      EXPECT_GT(e.sigma_kg, 0);
+      EXPECT_LT(e.sigma_kg, 0.05 * truth);
+      EXPECT_LT((e.com - com_palm).norm(), 0.02);
+      EXPECT_LT(std::abs(empty.estimate()->mass_kg), 0.05 * truth);
+    }
+  }
 }
 
 }  // namespace

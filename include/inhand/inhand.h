@@ -33,6 +33,7 @@
 #include "inhand/report/snapshot.h"
 #include "inhand/robot/collision.h"
 #include "inhand/robot/ik.h"
+#include "inhand/robot/payload.h"
 #include "inhand/robot/reachability.h"
 #include "inhand/robot/robot_interface.h"
 #include "inhand/robot/robot_model.h"

@@ -96,10 +96,12 @@ struct ExportArgs {
 int runExport(const ExportArgs& args);
 // "mjcf,urdf": the formats; throws Error naming one that is not mjcf, urdf or sdf.
 std::vector<AssetFormat> parseAssetFormats(const std::string& list);
-// The asset of `in` (a scan's directory: its model.ply and the grasps of its summary.json; or a
-// closed mesh file) written to `out`; prints one line.
+// The asset of `in` (a scan's directory: its model.ply, and from its summary.json the grasps
+// and the mass the arm weighed; or a closed mesh file) written to `out`; prints one line. The
+// mass: options.mass_kg when > 0, else the weighed one, else options.density_kg_m3's.
 void exportAsset(const std::filesystem::path& in, const std::filesystem::path& out,
-                 const std::vector<AssetFormat>& formats, const AssetOptions& options);
+                 const std::vector<AssetFormat>& formats, AssetOptions options,
+                 const std::string& shown_out = "");
 
 struct EvalArgs {
   std::string objects;  // comma-separated: builtin:NAME or mesh files

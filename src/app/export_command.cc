@@ -1,4 +1,5 @@
 // `inhand export`: a scanned model as an asset for simulators and planners (docs/asset.md).
+#include <cmath>
 #include <cstdio>
 
 #include "commands.h"
@@ -58,8 +59,9 @@ std::vector<AssetFormat> parseAssetFormats(const std::string& list) {
 }
 
 void exportAsset(const fs::path& in, const fs::path& out, const std::vector<AssetFormat>& formats,
-                 const AssetOptions& options) {
+                 AssetOptions options, const std::string& shown_out) {
   if (std::string p = options.validate(); !p.empty()) throw Error("export: " + p);
+  std::string massFrom = options.mass_kg > 0 ? "given" : "density";
   std::error_code ec;
   fs::path model = in;
   Json grasps = Json::array();
@@ -67,8 +69,20 @@ void exportAsset(const fs::path& in, const fs::path& out, const std::vector<Asse
     model = in / "model.ply";
     if (!fs::exists(model, ec))
       throw Error(in.string() + ": no model.ply (not a scan's output directory?)");
-    if (fs::exists(in / "summary.json", ec))
-      grasps = triedGrasps(readJsonFile(in / "summary.json"), (in / "summary.json").string());
+    if (fs::exists(in / "summary.json", ec)) {
+      const Json summary = readJsonFile(in / "summary.json");
+      grasps = triedGrasps(summary, (in / "summary.json").string());
+      // The weight the arm measured, unless a mass was given: when three readings or more
+      // determine it to 20 %.
+      const Json payload = summary.value("payload", Json());
+      if (options.mass_kg == 0 && payload.is_object()) {
+        const double m = payload.value("mass_kg", 0.0), s = payload.value("sigma_kg", 0.0);
+        if (payload.value("readings", 0) >= 3 && m > 0 && s < 0.2 * m) {
+          options.mass_kg = m;
+          massFrom = "weighed by the arm, ±" + std::to_string(int(std::lround(1000 * s))) + " g";
+        }
+      }
+    }
   }
   // The model as written: the closed (hole-filled) surface, its triangles kept as they are.
   TriangleMesh mesh = model.extension() == ".ply" ? readPly(model).mesh : importMesh(model);
@@ -80,12 +94,12 @@ void exportAsset(const fs::path& in, const fs::path& out, const std::vector<Asse
   int held = 0;
   for (const Json& g : asset.grasps) held += g.value("outcome", "") == "held";
   std::printf(
-      "export: %s: %.1f cm³, %.3f kg (%.0f kg/m³), centre of mass %.1f %.1f %.1f mm; %zu convex "
+      "export: %.1f cm³, %.3f kg (%s; %.0f kg/m³), centre of mass %.1f %.1f %.1f mm; %zu convex "
       "pieces (+%.1f %% volume); visual %zu triangles; %zu grasps (%d held) -> %s\n",
-      model.string().c_str(), 1e6 * asset.volume_m3, asset.mass_kg, asset.density_kg_m3,
+      1e6 * asset.volume_m3, asset.mass_kg, massFrom.c_str(), asset.density_kg_m3,
       1000 * asset.com_O.x(), 1000 * asset.com_O.y(), 1000 * asset.com_O.z(), asset.pieces.size(),
       100 * (asset.pieces_volume_m3 / asset.volume_m3 - 1), asset.visual_O.triangles.size(),
-      asset.grasps.size(), held, out.string().c_str());
+      asset.grasps.size(), held, shown_out.empty() ? out.string().c_str() : shown_out.c_str());
 }
 
 int runExport(const ExportArgs& args) {

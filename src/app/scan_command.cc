@@ -503,6 +503,15 @@ int runScan(const ScanArgs& given) {
     for (double r : mr.refind_residuals_m) mm.push_back(1000 * r);
     summary["refound_on_table_residual_mm"] = mm;
   }
+  if (const std::optional<PayloadEstimate>& p = r.payload) {
+    summary["payload"] = {{"mass_kg", p->mass_kg},
+                          {"sigma_kg", p->sigma_kg},
+                          {"com_O", p->com_observed ? vecJson(p->com) : Json()},
+                          {"readings", p->readings},
+                          {"residual_nm", p->residual_nm},
+                          {"true_mass_kg", sim.true_mass_kg},
+                          {"true_com_O", vecJson(sim.true_com_O)}};
+  }
   summary["physics"] = {{"enabled", sim.physics},
                         {"mass_kg", sim.mass_kg},
                         {"convex_pieces", sim.pieces},
@@ -561,7 +570,8 @@ int runScan(const ScanArgs& given) {
     asset.density_kg_m3 = o.sim.physics.density_kg_m3;
     asset.mass_kg = o.sim.physics.mass_kg;
     try {
-      exportAsset(out.path(), out.path() / "asset", parseAssetFormats(args.export_formats), asset);
+      exportAsset(out.path(), out.path() / "asset", parseAssetFormats(args.export_formats), asset,
+                  (fs::path(args.out) / "asset").string());
     } catch (const Error& e) {  // the scan is kept whatever became of its asset
       std::fprintf(stderr, "scan: warning: no asset: %s\n", e.what());
     }

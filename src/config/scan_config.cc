@@ -292,6 +292,9 @@ void visitConfig(V& v, ScanConfig& c) {
           "slow drift of every joint (periods 20-120 s), RMS as a fraction of the fixed offsets");
     o.num("arm_error_noise", c.sim.arm_error_noise,
           "per-frame joint noise, RMS as a fraction of the fixed offsets");
+    o.num("torque_noise_nm", c.sim.torque_noise_nm,
+          "noise (standard deviation, N·m) of the joint torques the arm reports at rest, from "
+          "which the scan weighs the object");
     o.boolean("grasp_error", c.sim.grasp_error,
               "the arm's error also at pick-ups: the object sits in the hand off where the "
               "reported joints say");

@@ -123,6 +123,8 @@ SimulatedScan runSimulatedScan(const RobotModel& model, const TriangleMesh& mesh
     out.colour.psnr_db = colourPsnr(out.result.scan.model, object, colours);
   }
   out.drops = world.drops;
+  out.true_mass_kg = world.objectMass_kg();
+  out.true_com_O = centreOfMass(object);
   out.faults = world.faults;
   out.render_s = world.render_s;
   if (const PhysicsWorld* ph = world.physics()) {

@@ -671,25 +671,39 @@ std::vector<Iso3> RobotModel::linkPoses(const JointVector& qIn) const {
 
 Iso3 RobotModel::tipPose(const JointVector& q) const { return linkPoses(q)[tipLink_]; }
 
+namespace {
+// Adds to tau what f_B at p_B on link `link` puts on the joints between it and the root.
+void addPointForce(const std::vector<LinkInfo>& links, const std::vector<JointInfo>& joints,
+                   const std::vector<Iso3>& T, int link, const Vec3& p_B, const Vec3& f_B,
+                   JointVector* tau) {
+  for (int ji = links[size_t(link)].parentJoint; ji >= 0;
+       ji = links[size_t(joints[size_t(ji)].parentLink)].parentJoint) {
+    const JointInfo& j = joints[size_t(ji)];
+    if (j.variable < 0 || j.mimicOf >= 0) continue;
+    const Iso3 T_B_joint = T[size_t(j.parentLink)] * j.T_parent_joint;
+    const Vec3 a = T_B_joint.linear() * j.axis;
+    (*tau)[j.variable] += j.type == JointInfo::Type::kPrismatic
+                              ? a.dot(f_B)
+                              : a.dot((p_B - T_B_joint.translation()).cross(f_B));
+  }
+}
+}  // namespace
+
 JointVector RobotModel::gravityTorques(const JointVector& q, const Vec3& g_B) const {
   const std::vector<Iso3> T = linkPoses(q);
   JointVector tau = JointVector::Zero(variableCount());
   // Each link's weight acts on every joint between it and the root.
-  for (size_t l = 0; l < links_.size(); ++l) {
-    if (!(links_[l].mass > 0)) continue;
-    const Vec3 c = T[l] * links_[l].com;
-    const Vec3 f = links_[l].mass * g_B;
-    for (int ji = links_[l].parentJoint; ji >= 0;
-         ji = links_[size_t(joints_[size_t(ji)].parentLink)].parentJoint) {
-      const JointInfo& j = joints_[size_t(ji)];
-      if (j.variable < 0 || j.mimicOf >= 0) continue;
-      const Iso3 T_B_joint = T[size_t(j.parentLink)] * j.T_parent_joint;
-      const Vec3 a = T_B_joint.linear() * j.axis;
-      tau[j.variable] += j.type == JointInfo::Type::kPrismatic
-                             ? a.dot(f)
-                             : a.dot((c - T_B_joint.translation()).cross(f));
-    }
-  }
+  for (size_t l = 0; l < links_.size(); ++l)
+    if (links_[l].mass > 0)
+      addPointForce(links_, joints_, T, int(l), T[l] * links_[l].com, links_[l].mass * g_B, &tau);
+  return tau;
+}
+
+JointVector RobotModel::pointForceTorques(const JointVector& q, int link, const Vec3& p_B,
+                                          const Vec3& f_B) const {
+  JointVector tau = JointVector::Zero(variableCount());
+  if (link >= 0 && link < int(links_.size()))
+    addPointForce(links_, joints_, linkPoses(q), link, p_B, f_B, &tau);
   return tau;
 }
 

@@ -188,6 +188,9 @@ Termination runGraspViews(ScanSession& session, RobotInterface& robot, DepthSens
     session.finishView();
     if (lost()) return Termination::kObjectLost;
     if (stopped) break;
+    // At rest at the view's end: the arm's torques weigh the object (robots that report them).
+    if (const std::optional<JointVector> tau = robot.jointTorques())
+      session.addJointTorques(robot.joints(), *tau);
     if (after_view) after_view();
   }
   session.finish(Termination::kInterrupted, "interrupted by the caller");

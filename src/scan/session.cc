@@ -50,6 +50,12 @@ struct SlipMeasure {
 };
 }  // namespace
 
+// A reading of the arm's joint torques at rest, with the grasp it was taken in.
+struct TorqueReading {
+  JointVector q, tau;
+  Iso3 T_O_palm;
+};
+
 struct ScanSession::State {
   State(const RobotModel& robot, const DepthCameraOptions& camera, const NoiseModelOptions& noise,
         const ScanOptions& options, const MultiGraspOptions& multi, const Vec3& centre_O)
@@ -81,6 +87,7 @@ struct ScanSession::State {
 
   // The grasp.
   bool holding = false;
+  std::vector<TorqueReading> torqueReadings;  // addJointTorques
   int grasp = -1;
   Iso3 T_O_palm = Iso3::Identity();
   JointVector qGrasp;  // the robot's joints when the grasp began (the hand as it holds)
@@ -1331,7 +1338,20 @@ void ScanSession::finish(Termination termination, const std::string& message) {
   s_->summary.message = message.empty() ? terminationName(termination) : message;
 }
 
-ScanSession::Summary ScanSession::summary() const { return s_->summary; }
+ScanSession::Summary ScanSession::summary() const {
+  Summary out = s_->summary;
+  if (!s_->torqueReadings.empty()) {
+    PayloadEstimator est(*s_->model);
+    for (const TorqueReading& r : s_->torqueReadings) est.add(r.q, r.tau, r.T_O_palm.inverse());
+    out.payload = est.estimate();
+  }
+  return out;
+}
+
+void ScanSession::addJointTorques(const JointVector& q, const JointVector& tau) {
+  if (!s_->holding) return;
+  s_->torqueReadings.push_back({q, tau, s_->T_O_palm});
+}
 
 void ScanSession::Summary::copyTo(ScanResult* r) const {
   r->view_evaluations = view_evaluations;
@@ -1350,6 +1370,7 @@ void ScanSession::Summary::copyTo(ScanResult* r) const {
   r->frames_in_free_space = frames_in_free_space;
   r->frames_moving = frames_moving;
   r->slips = slips;
+  r->payload = payload;
 }
 
 std::string ScanSession::Summary::brief() const {
@@ -1398,6 +1419,11 @@ void ScanSession::save(const std::filesystem::path& path, const Json& extra) con
   }
   h["tracking_from_full_model"] = s.trackingFromFull;
   h["unsupported_streak"] = s.unsupportedStreak;
+  for (const TorqueReading& r : s.torqueReadings)
+    h["torque_readings"].push_back(
+        {{"q", std::vector<double>(r.q.data(), r.q.data() + r.q.size())},
+         {"tau", std::vector<double>(r.tau.data(), r.tau.data() + r.tau.size())},
+         {"T_O_palm", isoJson(r.T_O_palm)}});
   for (size_t i = 0; i < s.views.size(); ++i) {
     const ViewRecord& r = s.views[i];
     h["views"].push_back({{"grasp", s.viewGrasp[i]},
@@ -1604,6 +1630,14 @@ ScanSession ScanSession::load(const std::filesystem::path& path, const RobotMode
     // planning model when the grasp began).
     s.trackingFromFull = h.value("tracking_from_full_model", false);
     s.unsupportedStreak = h.value("unsupported_streak", 0);
+    for (const Json& r : h.value("torque_readings", Json::array())) {
+      const auto q = r.at("q").get<std::vector<double>>();
+      const auto tau = r.at("tau").get<std::vector<double>>();
+      s.torqueReadings.push_back(
+          {Eigen::Map<const JointVector>(q.data(), Eigen::Index(q.size())),
+           Eigen::Map<const JointVector>(tau.data(), Eigen::Index(tau.size())),
+           isoFrom(r.at("T_O_palm"))});
+    }
     if (s.holding && modelPointsNeeded(options)) {
       if (s.trackingFromFull) {
         const ObjectModel m = session.model();

@@ -37,6 +37,7 @@ std::string SimOptions::validate() const {
   if (frame_subsample < 1) return "frame_subsample must be >= 1";
   if (!(room_radius_m >= 0)) return "room_radius_m must be >= 0";
   if (!(friction > 0 && friction <= 2)) return "friction must be in (0, 2]";
+  if (!(torque_noise_nm >= 0 && torque_noise_nm <= 10)) return "torque_noise_nm must be in [0, 10]";
   if (!(hold_min_epsilon >= 0)) return "hold_min_epsilon must be >= 0";
   if (!R_B_O_rest.allFinite() || std::abs(R_B_O_rest.determinant() - 1) > 1e-6)
     return "the rest orientation must be a rotation";
@@ -137,6 +138,7 @@ SimWorld::SimWorld(const RobotModel& model, const TriangleMesh& object_O, const 
       }
   }
   objectMesh_ = object_O;
+  objectSolid_ = massProperties(object_O);
   tablePose = restPose();
   if (options.physics.enabled)
     physics_ = std::make_unique<PhysicsWorld>(model, object_O, options.friction, options.physics);
@@ -441,6 +443,25 @@ RgbImage SimWorld::renderColour() {
   return out;
 }
 
+double SimWorld::objectMass_kg() const {
+  if (physics_) return physics_->mass_kg();
+  const PhysicsOptions& p = options_.physics;
+  return p.mass_kg > 0 ? p.mass_kg : p.density_kg_m3 * std::abs(objectSolid_.volume_m3);
+}
+
+JointVector SimWorld::jointTorques() {
+  const JointVector qt = trueJoints();
+  JointVector tau = model_->gravityTorques(qt);
+  if (held)
+    tau += model_->pointForceTorques(qt, model_->tipLink(), objectPose() * objectSolid_.com,
+                                     objectMass_kg() * Vec3(0, 0, -9.81));
+  const uint64_t read = torqueReads_++;
+  for (int v : model_->armVariables())
+    tau[v] +=
+        options_.torque_noise_nm * gaussianAt(options_.seed ^ 0x70C0E5ull, read * 64 + uint64_t(v));
+  return tau;
+}
+
 double SimWorld::faultDraw(int kind) {
   const uint64_t h = mixSeed(options_.seed ^ 0x5EED0FFA17ull, faultDraws_++ * 8 + uint64_t(kind));
   return double(h >> 11) * 0x1.0p-53;
@@ -606,6 +627,7 @@ Json SimWorld::state() const {
           {"drops", drops},
           {"frame", frame_},
           {"fault_draws", faultDraws_},
+          {"torque_reads", torqueReads_},
           {"motions", motions},
           {"grasp_motions", graspMotions},
           {"table_pose", isoJson(tablePose)},
@@ -630,6 +652,7 @@ void SimWorld::setState(const Json& j) {
     drops = j.at("drops").get<int>();
     frame_ = j.at("frame").get<uint64_t>();
     faultDraws_ = j.value("fault_draws", uint64_t(0));
+    torqueReads_ = j.value("torque_reads", uint64_t(0));
     motions = j.value("motions", 0);
     graspMotions = j.value("grasp_motions", 0);
     if (j.contains("table_pose")) tablePose = isoFrom(j.at("table_pose"));

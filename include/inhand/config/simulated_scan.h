@@ -27,6 +27,8 @@ struct SimulatedScan {
   // hulls' volume against the mesh's, physics time simulated and computed, motions in which the
   // object moved in the hand by more than 2 mm and the largest such movement.
   bool physics = false;
+  double true_mass_kg = 0;  // the simulated object's mass (physics', or the density's)
+  Vec3 true_com_O = Vec3::Zero();
   double mass_kg = 0, pieces_volume_ratio = 0, physics_simulated_s = 0, physics_s = 0;
   int pieces = 0, slips = 0, unstable_steps = 0;
   double slip_max_m = 0;

@@ -29,6 +29,10 @@ class RobotInterface {
   // the object that far from where its joints say. A driver that cannot re-grasp returns false /
   // nullopt (the scan then ends after its first grasp).
   virtual bool putDown() { return false; }
+  // The driven joints' torques (N·m; N for prismatic joints) the robot reports now, holding
+  // still, gravity's included (a WAM reports them): the object's weight is estimated from them
+  // (PayloadEstimator). nullopt for a robot that reports none.
+  virtual std::optional<JointVector> jointTorques() { return std::nullopt; }
   virtual std::optional<Iso3> pickUp(const Iso3& /*T_O_palm*/, const JointVector& /*q*/) {
     return std::nullopt;
   }

@@ -141,6 +141,10 @@ class RobotModel {
   // the weights of the links it carries (URDF masses at their centres of mass): N·m for
   // revolute joints, N for prismatic ones; 0 for coupled (mimic) joints and without masses.
   JointVector gravityTorques(const JointVector& q, const Vec3& g_B = Vec3(0, 0, -9.81)) const;
+  // The generalised force a force f_B (N, base frame) applied at p_B on `link` puts on each
+  // driven joint between that link and the root (as gravityTorques counts a link's weight).
+  JointVector pointForceTorques(const JointVector& q, int link, const Vec3& p_B,
+                                const Vec3& f_B) const;
 
  private:
   friend struct RobotModelLoader;

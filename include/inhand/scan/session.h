@@ -69,7 +69,8 @@ class ScanSession {
     // Colour (camera.colour): pixels whose colour was fused, and the time it took (in fusion_s).
     long colour_pixels = 0;
     double colour_s = 0;
-    std::string brief() const;  // one line
+    std::optional<PayloadEstimate> payload;  // from addJointTorques' readings (O frame)
+    std::string brief() const;               // one line
     // Copies every count and time of this summary into `result` (the one place that does, so
     // that no counter is left out).
     void copyTo(ScanResult* result) const;
@@ -187,6 +188,10 @@ class ScanSession {
   // grasps).
   void finish(Termination termination, const std::string& message = "");
   Summary summary() const;
+  // The arm's joint torques (RobotInterface::jointTorques) read at rest with the object held in
+  // the current grasp: the readings of every grasp give the object's mass and its centre of
+  // mass in O (Summary::payload). Ignored while nothing is held.
+  void addJointTorques(const JointVector& q, const JointVector& tau);
 
   // A checkpoint: the volume, the grasp, the views so far and the counters, written atomically,
   // with the caller's `extra` (e.g. its own loop's state; null: none). load() resumes from it

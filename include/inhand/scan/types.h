@@ -13,6 +13,7 @@
 #include "inhand/grasp/grasp.h"
 #include "inhand/mesh/extract.h"
 #include "inhand/planning/view_selection.h"
+#include "inhand/robot/payload.h"
 #include "inhand/robot/robot_interface.h"
 #include "inhand/robot/robot_scenes.h"
 #include "inhand/scan/tracking.h"
@@ -198,6 +199,9 @@ struct ScanResult {
   double tracking_s = 0;   // aligning in-hand frames (ScanOptions::tracking), apart from fusion_s
   long colour_pixels = 0;  // pixels whose colour was fused (camera.colour)
   double colour_s = 0;     // … the time that took (part of fusion_s)
+  // The object's weight from the arm's joint torques at rest (its centre of mass in O), when
+  // the robot reports torques (ScanSession::addJointTorques).
+  std::optional<PayloadEstimate> payload;
   int frames = 0;
   // In-hand frames not fused (ScanSession::Summary): tracking could not align them; dropped or
   // empty; joints off the planned path; the object not in the hand. And frames repaired.

@@ -106,6 +106,10 @@ struct SimOptions {
   // the object sits in the hand off where the reported joints say (a real arm's case). false: the
   // hand grasps the object exactly as planned (the error shows only while it is held).
   bool grasp_error = false;
+  // The joint torques the simulated arm reports at rest: gravity's on its links (URDF masses)
+  // and on the object it holds (its true mass at its true centre of mass), plus Gaussian noise
+  // of this standard deviation per joint (N·m).
+  double torque_noise_nm = 0.1;
   // Rigid-body physics (MuJoCo) for every pick-up, motion with the object in the hand and
   // put-down; off: the kinematic simulator (check_hold decides at the pick-up).
   PhysicsOptions physics;
@@ -167,6 +171,9 @@ class SimWorld {
   // Whether the hand at q, T_O_palm holds the object (SimOptions::check_hold; the kinematic
   // simulator's verdict).
   bool graspHolds() const;
+  // The arm's joint torques now, at rest (SimOptions::torque_noise_nm; a counter seeds the noise).
+  JointVector jointTorques();
+  double objectMass_kg() const;  // the true object's mass (physics', or the density's)
   // The physics (SimOptions::physics; null when off).
   PhysicsWorld* physics() { return physics_.get(); }
   const PhysicsWorld* physics() const { return physics_.get(); }
@@ -199,6 +206,8 @@ class SimWorld {
   std::vector<SurfacePoint> objectSamples_;  // for the pick-up clearance test
   uint64_t frame_ = 0;
   uint64_t faultDraws_ = 0;
+  uint64_t torqueReads_ = 0;
+  MassProperties objectSolid_;  // of the true mesh (unit density)
   // The arm error's changing parts (from the options and seed): the scale of its unit parts,
   // gravity's typical torque norm (RMS over configurations), each arm joint's drift periods (s)
   // and phases.
@@ -227,6 +236,7 @@ class SimRobot : public RobotInterface {
   // what the reported joints say (the plan, moved as the palm moved): the object sits in the
   // hand that far from where the robot believes.
   std::optional<Iso3> pickUp(const Iso3& T_O_palm, const JointVector& q) override;
+  std::optional<JointVector> jointTorques() override { return world_->jointTorques(); }
 
  private:
   std::optional<Iso3> grasp(const Iso3& T_O_palm, const JointVector& q);

@@ -1,0 +1,59 @@
+#include "inhand/robot/payload.h"
+
+#include <Eigen/Eigenvalues>
+#include <cmath>
+
+namespace inhand {
+
+PayloadEstimator::PayloadEstimator(const RobotModel& model, const Vec3& g_B)
+    : model_(&model), g_(g_B) {}
+
+void PayloadEstimator::add(const JointVector& q, const JointVector& tau, const Iso3& T_palm_F) {
+  const RobotModel& m = *model_;
+  const int tip = m.tipLink();
+  const Iso3 T_B_palm = m.tipPose(q) * T_palm_F;
+  // Unknowns x = (m, m·c): the weight at the palm's origin, and its moment per unit m·c along
+  // each palm axis.
+  const JointVector own = m.gravityTorques(q, g_);
+  const JointVector a0 = m.pointForceTorques(q, tip, T_B_palm.translation(), g_);
+  JointVector ak[3];
+  for (int k = 0; k < 3; ++k)
+    ak[k] = m.pointForceTorques(q, tip, T_B_palm.translation() + T_B_palm.linear().col(k), g_) - a0;
+  for (int v : m.armVariables()) {
+    const Eigen::Vector4d row(a0[v], ak[0][v], ak[1][v], ak[2][v]);
+    const double b = tau[v] - own[v];
+    AtA_ += row * row.transpose();
+    Atb_ += row * b;
+    btb_ += b * b;
+    ++rows_;
+  }
+  ++readings_;
+}
+
+std::optional<PayloadEstimate> PayloadEstimator::estimate() const {
+  if (readings_ == 0) return std::nullopt;
+  // A pseudo-inverse of the normal equations: directions of m·c that no reading constrains
+  // (along gravity when the palm never turned) are left at zero.
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix4d> es(AtA_);
+  const double top = std::max(es.eigenvalues().maxCoeff(), 1e-300);
+  Eigen::Matrix4d inv = Eigen::Matrix4d::Zero();
+  int rank = 0;
+  for (int i = 0; i < 4; ++i)
+    if (es.eigenvalues()[i] > 1e-8 * top) {
+      inv += es.eigenvectors().col(i) * es.eigenvectors().col(i).transpose() / es.eigenvalues()[i];
+      ++rank;
+    }
+  const Eigen::Vector4d x = inv * Atb_;
+  PayloadEstimate e;
+  e.readings = readings_;
+  e.mass_kg = x[0];
+  e.com_observed = rank == 4;
+  e.com = std::abs(x[0]) > 1e-9 ? Vec3(x.tail<3>() / x[0]) : Vec3::Zero();
+  const double rss = std::max(0.0, btb_ - 2 * x.dot(Atb_) + x.dot(AtA_ * x));
+  const int dof = std::max(1, rows_ - rank);
+  e.residual_nm = std::sqrt(rss / std::max(1, rows_));
+  e.sigma_kg = std::sqrt(rss / dof * std::max(0.0, inv(0, 0)));
+  return e;
+}
+
+}  // namespace inhand
