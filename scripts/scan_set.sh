@@ -7,6 +7,8 @@
 # (first grasp made, grasps, views, coverage, accuracy, seconds, termination) as runs finish.
 # Usage: scripts/scan_set.sh [OUT]   (default out/scan_set; the build must exist)
 # SCAN_CONFIG=FILE adds `--config FILE` to every scan (e.g. physics on: docs/physics.md).
+# SCAN_EXPORT=mjcf,urdf adds `--export mjcf,urdf` (each run's asset; scripts/asset_table.py OUT
+# tabulates them: docs/asset.md).
 set -uo pipefail
 cd "$(dirname "$0")/.."
 out="${1:-out/scan_set}"
@@ -15,6 +17,7 @@ mkdir -p "$out/runs" "$out/bin"
 cp build/inhand "$out/bin/inhand"  # the build may change while this runs
 config=()
 [ -n "${SCAN_CONFIG:-}" ] && config=(--config "$SCAN_CONFIG")
+[ -n "${SCAN_EXPORT:-}" ] && config+=(--export "$SCAN_EXPORT")
 /usr/bin/python3 scripts/make_test_objects.py "$out/objects"
 objects=()
 for f in "$out"/objects/*.obj; do objects+=("$f:0"); done

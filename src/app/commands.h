@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "inhand/asset/asset.h"
+#include "inhand/robot/robot_model.h"
 
 namespace inhand::app {
 
@@ -90,6 +91,8 @@ struct ExportArgs {
   std::string name = "object";            // body, link and model name
   double density_kg_m3 = 300;             // of the enclosed solid
   double mass_kg = 0;                     // > 0: this mass instead
+  int ranked = 10;    // candidates on the model that held the hold test, at most
+  std::string robot;  // robot config for them (default: the WAM + BarrettHand)
 };
 
 // `inhand export`: the model as a simulator's asset (docs/asset.md).
@@ -98,9 +101,11 @@ int runExport(const ExportArgs& args);
 std::vector<AssetFormat> parseAssetFormats(const std::string& list);
 // The asset of `in` (a scan's directory: its model.ply, and from its summary.json the grasps
 // and the mass the arm weighed; or a closed mesh file) written to `out`; prints one line. The
-// mass: options.mass_kg when > 0, else the weighed one, else options.density_kg_m3's.
+// mass: options.mass_kg when > 0, else the weighed one, else options.density_kg_m3's. With a
+// robot, up to `ranked` candidates on the model that hold it in the hold test join the grasps.
 void exportAsset(const std::filesystem::path& in, const std::filesystem::path& out,
                  const std::vector<AssetFormat>& formats, AssetOptions options,
+                 const RobotModel* robot = nullptr, int ranked = 0,
                  const std::string& shown_out = "");
 
 struct EvalArgs {

@@ -7,6 +7,9 @@
 #include "inhand/core/error.h"
 #include "inhand/core/file_util.h"
 #include "inhand/geometry/mesh_io.h"
+#include "inhand/geometry/stable_poses.h"
+#include "inhand/grasp/grasp.h"
+#include "inhand/grasp/hold_test.h"
 
 namespace inhand::app {
 
@@ -42,6 +45,52 @@ Json triedGrasps(const Json& summary, const std::string& where) {
   return out;
 }
 
+// Candidates on the finished model, chosen as the scan chooses them: the model resting in its
+// most probable stable pose on the robot's table under the presentation point, candidates
+// generated there (generateGrasps) and closed, lifted and turned on the model in physics at the
+// asset's mass (the hold test); those that held, in the hold test's order (those that held with
+// its margin first), at most `max`. In O, like the tried ones.
+Json rankedGrasps(const ObjectAsset& asset, const RobotModel& robot, int max, std::string* line) {
+  Json out = Json::array();
+  const std::vector<StablePose> poses = stablePoses(asset.model_O);
+  if (max <= 0 || poses.empty()) return out;
+  Iso3 T_B_O = Iso3::Identity();
+  T_B_O.linear() = poses[0].R_B_O;
+  Aabb b;
+  for (const Vec3f& v : asset.model_O.vertices) b.extend(poses[0].R_B_O * v.cast<double>());
+  const Vec3 at = robot.camera().lookAt_B;
+  T_B_O.translation() =
+      Vec3(at.x() - b.center().x(), at.y() - b.center().y(), robot.table().topZ() - b.min.z());
+  GraspOptions go;
+  go.hold.density_kg_m3 = asset.density_kg_m3;
+  go.hold.max_candidates = 16;  // more than a scan tests: the set offers several that held
+  std::vector<Vec3> footprint;
+  for (const Vec3f& v : asset.model_O.vertices) footprint.push_back(v.cast<double>());
+  GraspGeneration gen = generateGrasps(robot, asset.model_O, T_B_O, robot.home(), go, &footprint);
+  const double seconds =
+      rankByHold(robot, asset.model_O, T_B_O, nullptr, go.friction, go.hold, &gen.candidates);
+  *line = holdLine(gen.candidates, seconds);
+  const std::vector<int>& arm = robot.armVariables();
+  auto hand = [&](const JointVector& q) {
+    Json j = Json::object();
+    for (int v = 0; v < robot.variableCount(); ++v)
+      if (std::find(arm.begin(), arm.end(), v) == arm.end()) j[robot.variable(v).name] = q[v];
+    return j;
+  };
+  for (const GraspCandidate& c : gen.candidates) {
+    if (c.hold != 1 || int(out.size()) >= max) continue;
+    out.push_back({{"source", "ranked"},
+                   {"stage", "hold test on the model, rest pose 0"},
+                   {"outcome", c.hold_margin == 1 ? "held_with_margin" : "held"},
+                   {"T_O_palm", isoJson(c.T_O_palm)},
+                   {"preshape", hand(c.q_open)},
+                   {"closed", hand(c.q)},
+                   {"kind", c.palm_contact ? "enveloping" : "fingertips"},
+                   {"epsilon", c.epsilon}});
+  }
+  return out;
+}
+
 }  // namespace
 
 std::vector<AssetFormat> parseAssetFormats(const std::string& list) {
@@ -59,7 +108,8 @@ std::vector<AssetFormat> parseAssetFormats(const std::string& list) {
 }
 
 void exportAsset(const fs::path& in, const fs::path& out, const std::vector<AssetFormat>& formats,
-                 AssetOptions options, const std::string& shown_out) {
+                 AssetOptions options, const RobotModel* robot, int ranked,
+                 const std::string& shown_out) {
   if (std::string p = options.validate(); !p.empty()) throw Error("export: " + p);
   std::string massFrom = options.mass_kg > 0 ? "given" : "density";
   std::error_code ec;
@@ -88,14 +138,20 @@ void exportAsset(const fs::path& in, const fs::path& out, const std::vector<Asse
   TriangleMesh mesh = model.extension() == ".ply" ? readPly(model).mesh : importMesh(model);
   ObjectAsset asset = makeAsset(mesh, options);
   asset.grasps = std::move(grasps);
+  std::string holdSummary;
+  if (robot && ranked > 0)
+    for (Json& g : rankedGrasps(asset, *robot, ranked, &holdSummary))
+      asset.grasps.push_back(std::move(g));
+  if (!holdSummary.empty()) std::printf("export: %s\n", holdSummary.c_str());
   std::optional<fs::path> ply;
   if (model.extension() == ".ply") ply = model;
   writeAsset(asset, out, formats, ply);
   int held = 0;
-  for (const Json& g : asset.grasps) held += g.value("outcome", "") == "held";
+  for (const Json& g : asset.grasps)
+    held += g.value("source", "") == "tried" && g.value("outcome", "") == "held";
   std::printf(
       "export: %.1f cm³, %.3f kg (%s; %.0f kg/m³), centre of mass %.1f %.1f %.1f mm; %zu convex "
-      "pieces (+%.1f %% volume); visual %zu triangles; %zu grasps (%d held) -> %s\n",
+      "pieces (+%.1f %% volume); visual %zu triangles; %zu grasps (%d tried and held) -> %s\n",
       1e6 * asset.volume_m3, asset.mass_kg, massFrom.c_str(), asset.density_kg_m3,
       1000 * asset.com_O.x(), 1000 * asset.com_O.y(), 1000 * asset.com_O.z(), asset.pieces.size(),
       100 * (asset.pieces_volume_m3 / asset.volume_m3 - 1), asset.visual_O.triangles.size(),
@@ -107,7 +163,14 @@ int runExport(const ExportArgs& args) {
   options.name = args.name;
   options.density_kg_m3 = args.density_kg_m3;
   options.mass_kg = args.mass_kg;
-  exportAsset(args.input, args.out, parseAssetFormats(args.formats), options);
+  const std::vector<AssetFormat> formats = parseAssetFormats(args.formats);
+  if (args.ranked < 0 || args.ranked > 100) throw Error("--ranked must be in 0..100");
+  std::optional<RobotModel> robot;
+  if (args.ranked > 0)
+    robot = RobotModel::load(args.robot.empty() ? resourceDirectory("data", INHAND_DATA_DIR) /
+                                                      "robots/wam_barretthand.json"
+                                                : fs::path(args.robot));
+  exportAsset(args.input, args.out, formats, options, robot ? &*robot : nullptr, args.ranked);
   return 0;
 }
 

@@ -567,11 +567,10 @@ int runScan(const ScanArgs& given) {
   }
   if (!args.export_formats.empty() && fs::exists(out.path() / "model.ply")) {
     AssetOptions asset;
-    asset.density_kg_m3 = o.sim.physics.density_kg_m3;
-    asset.mass_kg = o.sim.physics.mass_kg;
+    asset.density_kg_m3 = o.sim.physics.density_kg_m3;  // when the arm did not weigh it
     try {
       exportAsset(out.path(), out.path() / "asset", parseAssetFormats(args.export_formats), asset,
-                  (fs::path(args.out) / "asset").string());
+                  &model, 10, (fs::path(args.out) / "asset").string());
     } catch (const Error& e) {  // the scan is kept whatever became of its asset
       std::fprintf(stderr, "scan: warning: no asset: %s\n", e.what());
     }

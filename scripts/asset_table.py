@@ -1,0 +1,55 @@
+#!/usr/bin/python3
+"""Tabulates the assets of a scan set run with SCAN_EXPORT (scripts/scan_set.sh): per object the
+mass the arm weighed against the simulated truth, the centre of mass, the asset's volume against
+the true solid's, its convex pieces, and the grasps the scan tried. Writes OUT/assets.md.
+Usage: scripts/asset_table.py OUT"""
+import json
+import math
+import pathlib
+import sys
+
+out = pathlib.Path(sys.argv[1] if len(sys.argv) > 1 else "out/scan_set")
+rows = []
+errors = []
+for run in sorted((out / "runs").iterdir()):
+    if not run.is_dir() or not (run / "summary.json").exists():
+        continue
+    s = json.loads((run / "summary.json").read_text())
+    asset_file = run / "asset" / "asset.json"
+    a = json.loads(asset_file.read_text()) if asset_file.exists() else None
+    p = s.get("payload")
+    density = s["options"]["sim"]["physics"]["density_kg_m3"]
+    row = [run.name, s["termination"]]
+    if p:
+        err = 100 * (p["mass_kg"] / p["true_mass_kg"] - 1)
+        errors.append(abs(err))
+        com = "–"
+        if p.get("com_O") is not None:
+            com = "%.0f" % (1000 * math.dist(p["com_O"], p["true_com_O"]))
+        row += ["%.3f ± %.3f" % (p["mass_kg"], p["sigma_kg"]), "%.3f" % p["true_mass_kg"],
+                "%+.1f" % err, com, str(p["readings"])]
+        true_volume = p["true_mass_kg"] / density
+    else:
+        row += ["–"] * 5
+        true_volume = None
+    if a:
+        vol = "%+.1f" % (100 * (a["volume_m3"] / true_volume - 1)) if true_volume else "–"
+        g = json.loads((run / "asset" / "grasps.json").read_text())
+        held = sum(1 for x in g if x["outcome"] == "held")
+        row += [vol, str(a["collision_pieces"]), "%d (%d held)" % (len(g), held)]
+    else:
+        row += ["no asset", "–", "–"]
+    rows.append(row)
+
+head = ["run", "termination", "weighed kg", "true kg", "mass error %", "centre of mass error mm",
+        "readings", "asset volume vs true %", "convex pieces", "grasps tried"]
+lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+lines += ["| " + " | ".join(r) + " |" for r in rows]
+if errors:
+    errors.sort()
+    lines.append("")
+    lines.append("Mass error over %d runs: median %.1f %%, largest %.1f %%; within 10 %%: %d." %
+                 (len(errors), errors[len(errors) // 2], errors[-1],
+                  sum(1 for e in errors if e <= 10)))
+(out / "assets.md").write_text("\n".join(lines) + "\n")
+print("\n".join(lines[-3:]))
