@@ -397,6 +397,18 @@ void bindSession(py::module_& m) {
           "slips", [](const ScanSession::Summary& s) { return slipsJson(s.slips).dump(); },
           "the slips found in the hand, as summary.json's slips_found (a JSON string)")
       .def_readonly("tracking_s", &ScanSession::Summary::tracking_s)
+      .def_property_readonly(
+          "payload",
+          [](const ScanSession::Summary& s) -> py::object {
+            if (!s.payload) return py::none();
+            py::dict d;
+            d["mass_kg"] = s.payload->mass_kg;
+            d["sigma_kg"] = s.payload->sigma_kg;
+            d["com_O"] = s.payload->com_observed ? py::cast(s.payload->com) : py::none();
+            d["readings"] = s.payload->readings;
+            return d;
+          },
+          "the object weighed from add_joint_torques' readings (dict), or None")
       .def("__repr__", &ScanSession::Summary::brief);
 
   py::class_<Session>(m, "ScanSession", "the scan driven from the caller's own loop")
@@ -497,6 +509,14 @@ void bindSession(py::module_& m) {
            })
       .def("summary", [](const Session& s) { return s.s->summary(); })
       .def(
+          "add_joint_torques",
+          [](Session& s, const Eigen::VectorXd& q, const Eigen::VectorXd& tau) {
+            s.s->addJointTorques(q, tau);
+          },
+          py::arg("q"), py::arg("tau"),
+          "the arm's joint torques (N·m) read at rest with the object held: they weigh it "
+          "(summary().payload)")
+      .def(
           "save", [](const Session& s, const std::filesystem::path& p) { s.s->save(p); },
           py::arg("path"), "a checkpoint (written atomically)");
 }
@@ -550,6 +570,11 @@ void bindSimulator(py::module_& m) {
           py::arg("waypoints"), py::arg("on_state"),
           "moves along joint waypoints, calling on_state(q) at each sensor frame")
       .def("put_down", [](Simulator& s) { return s.robot->putDown(); })
+      .def(
+          "joint_torques", [](Simulator& s) { return *s.robot->jointTorques(); },
+          "the joint torques the simulated arm reports now, at rest (N·m; sim.torque_noise_nm)")
+      .def_property_readonly("object_mass_kg",
+                             [](const Simulator& s) { return s.world->objectMass_kg(); })
       .def(
           "pick_up",
           [](Simulator& s, const Eigen::Matrix4d& T_O_palm,

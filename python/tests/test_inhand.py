@@ -139,6 +139,7 @@ def drive(session, sim):
         sim.execute(view.waypoints,
                     lambda q: session.add_frame(sim.capture(), q, sim.camera_pose()))
         session.finish_view()
+        session.add_joint_torques(sim.q, sim.joint_torques())  # at rest: they weigh the object
     return session.summary().termination
 
 
@@ -170,6 +171,9 @@ def test_session_driven_from_python_equals_the_cpp_scan(tmp_path):
     termination = drive(resumed, sim)
 
     assert termination == cpp.termination
+    payload = resumed.summary().payload  # weighed at the end of each view driven in Python
+    assert payload["readings"] >= 2
+    assert abs(payload["mass_kg"] - sim.object_mass_kg) < 0.1 * sim.object_mass_kg
     model = resumed.model()
     np.testing.assert_array_equal(model.vertices, cpp.model.vertices)
     np.testing.assert_array_equal(model.variance, cpp.model.variance)

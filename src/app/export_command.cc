@@ -70,11 +70,9 @@ Json rankedGrasps(const ObjectAsset& asset, const RobotModel& robot, int max, st
   const double seconds =
       rankByHold(robot, asset.model_O, T_B_O, nullptr, go.friction, go.hold, &gen.candidates);
   *line = holdLine(gen.candidates, seconds);
-  const std::vector<int>& arm = robot.armVariables();
   auto hand = [&](const JointVector& q) {
     Json j = Json::object();
-    for (int v = 0; v < robot.variableCount(); ++v)
-      if (std::find(arm.begin(), arm.end(), v) == arm.end()) j[robot.variable(v).name] = q[v];
+    for (const auto& [name, value] : robot.handJointValues(q)) j[name] = value;
     return j;
   };
   for (const GraspCandidate& c : gen.candidates) {

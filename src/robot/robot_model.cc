@@ -699,6 +699,15 @@ JointVector RobotModel::gravityTorques(const JointVector& q, const Vec3& g_B) co
   return tau;
 }
 
+std::vector<std::pair<std::string, double>> RobotModel::handJointValues(
+    const JointVector& q) const {
+  std::vector<std::pair<std::string, double>> out;
+  for (int v = 0; v < variableCount() && v < int(q.size()); ++v)
+    if (std::find(armVariables_.begin(), armVariables_.end(), v) == armVariables_.end())
+      out.emplace_back(variable(v).name, q[v]);
+  return out;
+}
+
 JointVector RobotModel::pointForceTorques(const JointVector& q, int link, const Vec3& p_B,
                                           const Vec3& f_B) const {
   JointVector tau = JointVector::Zero(variableCount());

@@ -351,22 +351,12 @@ LiftCheck checkAfterLift(ScanSession& session, RobotInterface& robot, DepthSenso
   return out;
 }
 
-// The hand's joints of q (every variable not of the arm), by name.
-std::vector<std::pair<std::string, double>> handJoints(const RobotModel& m, const JointVector& q) {
-  std::vector<std::pair<std::string, double>> out;
-  const std::vector<int>& arm = m.armVariables();
-  for (int v = 0; v < m.variableCount() && v < int(q.size()); ++v)
-    if (std::find(arm.begin(), arm.end(), v) == arm.end())
-      out.emplace_back(m.variable(v).name, q[v]);
-  return out;
-}
-
 // The record of trying candidate c, the rank-th of its ranking (its outcome still to come).
 PickAttempt attemptOf(const GraspCandidate& c, int rank, const RobotModel& m) {
   PickAttempt a;
   a.T_O_palm = c.T_O_palm;
-  a.preshape = handJoints(m, c.q_open);
-  a.closed = handJoints(m, c.q);
+  a.preshape = m.handJointValues(c.q_open);
+  a.closed = m.handJointValues(c.q);
   a.rank = rank;
   a.pose = c.pose;
   a.hold_test = c.hold;

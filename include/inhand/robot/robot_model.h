@@ -132,6 +132,8 @@ class RobotModel {
   // The palm face: the top of the palm (tip) link's collision geometry along palm z, m.
   double palmFaceZ() const;
   Eigen::VectorXd arm(const JointVector& q) const;
+  // The hand's joints of q (every variable not of the arm), by URDF name, in variable order.
+  std::vector<std::pair<std::string, double>> handJointValues(const JointVector& q) const;
   bool withinLimits(const JointVector& q, double tol = 1e-9) const;
 
   // T_B_link for every link (base frame), couplings applied to a copy of q.
