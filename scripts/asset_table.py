@@ -12,7 +12,7 @@ out = pathlib.Path(sys.argv[1] if len(sys.argv) > 1 else "out/scan_set")
 rows = []
 errors = []
 for run in sorted((out / "runs").iterdir()):
-    if not run.is_dir() or not (run / "summary.json").exists():
+    if run.name.startswith(".") or not run.is_dir() or not (run / "summary.json").exists():
         continue
     s = json.loads((run / "summary.json").read_text())
     asset_file = run / "asset" / "asset.json"
@@ -22,7 +22,8 @@ for run in sorted((out / "runs").iterdir()):
     row = [run.name, s["termination"]]
     if p:
         err = 100 * (p["mass_kg"] / p["true_mass_kg"] - 1)
-        errors.append(abs(err))
+        errors.append((abs(err), abs(p["mass_kg"] - p["true_mass_kg"]) <= 2 * p["sigma_kg"],
+                       p["true_mass_kg"]))
         com = "–"
         if p.get("com_O") is not None:
             com = "%.0f" % (1000 * math.dist(p["com_O"], p["true_com_O"]))
@@ -46,10 +47,14 @@ head = ["run", "termination", "weighed kg", "true kg", "mass error %", "centre o
 lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
 lines += ["| " + " | ".join(r) + " |" for r in rows]
 if errors:
-    errors.sort()
+    e = sorted(x[0] for x in errors)
+    heavy = [x for x in errors if x[2] >= 0.1]
     lines.append("")
-    lines.append("Mass error over %d runs: median %.1f %%, largest %.1f %%; within 10 %%: %d." %
-                 (len(errors), errors[len(errors) // 2], errors[-1],
-                  sum(1 for e in errors if e <= 10)))
+    lines.append("Mass error over %d runs: median %.1f %%, largest %.1f %%; within 10 %%: %d; "
+                 "within 2 σ: %d. Objects of 0.1 kg or more: %d runs, within 10 %%: %d, largest "
+                 "%.1f %%." %
+                 (len(e), e[len(e) // 2], e[-1], sum(1 for x in e if x <= 10),
+                  sum(1 for x in errors if x[1]), len(heavy),
+                  sum(1 for x in heavy if x[0] <= 10), max([x[0] for x in heavy] or [0])))
 (out / "assets.md").write_text("\n".join(lines) + "\n")
 print("\n".join(lines[-3:]))

@@ -927,3 +927,28 @@ TEST(Robot, GravityTorquesAreTheSlopeOfThePotentialEnergy) {
     EXPECT_GT(tau.norm(), 1.0);
   }
 }
+
+// A force at a point on the palm puts on each arm joint the work it does per unit of that joint's
+// motion (virtual work): τ_j = f · ∂p/∂q_j, the derivative taken by central differences of the
+// forward kinematics — an answer independent of the joint-axis formula.
+TEST(Robot, PointForceTorquesAreTheVirtualWorkOfTheForce) {
+  const RobotModel& m = test::wam();
+  Rng rng = makeRng(11);
+  std::uniform_real_distribution<double> u(-0.5, 0.5);
+  const Vec3 p_palm(0.02, -0.03, 0.12);
+  const Vec3 f(1.5, -0.7, -4.9);
+  for (int trial = 0; trial < 5; ++trial) {
+    JointVector q = m.home();
+    for (int v : m.armVariables()) q[v] += u(rng);
+    const Vec3 p_B = m.tipPose(q) * p_palm;
+    const JointVector tau = m.pointForceTorques(q, m.tipLink(), p_B, f);
+    for (int v : m.armVariables()) {
+      const double h = 1e-6;
+      JointVector a = q, b = q;
+      a[v] += h;
+      b[v] -= h;
+      const double work = f.dot(m.tipPose(a) * p_palm - m.tipPose(b) * p_palm) / (2 * h);
+      EXPECT_NEAR(tau[v], work, 1e-6) << "joint " << v;
+    }
+  }
+}

@@ -121,11 +121,11 @@ void exportAsset(const fs::path& in, const fs::path& out, const std::vector<Asse
       const Json summary = readJsonFile(in / "summary.json");
       grasps = triedGrasps(summary, (in / "summary.json").string());
       // The weight the arm measured, unless a mass was given: when three readings or more
-      // determine it to 20 %.
+      // determine it to 10 % (lighter objects' weight is lost in the torques' noise).
       const Json payload = summary.value("payload", Json());
       if (options.mass_kg == 0 && payload.is_object()) {
         const double m = payload.value("mass_kg", 0.0), s = payload.value("sigma_kg", 0.0);
-        if (payload.value("readings", 0) >= 3 && m > 0 && s < 0.2 * m) {
+        if (payload.value("readings", 0) >= 3 && m > 0 && s < 0.1 * m) {
           options.mass_kg = m;
           massFrom = "weighed by the arm, ±" + std::to_string(int(std::lround(1000 * s))) + " g";
         }
