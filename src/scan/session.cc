@@ -68,7 +68,8 @@ struct ScanSession::State {
         volume(makeScanVolume(centre_O, options)),
         planner(robot, camera, noise, options.planner),
         ranker(robot, camera, noise, multi.ranking),
-        scenes(robot) {}
+        scenes(robot),
+        payload(robot) {}
 
   const RobotModel* model;
   DepthCameraOptions camera;
@@ -87,7 +88,12 @@ struct ScanSession::State {
 
   // The grasp.
   bool holding = false;
-  std::vector<TorqueReading> torqueReadings;  // addJointTorques
+  std::vector<TorqueReading> torqueReadings;  // addJointTorques (kept for checkpoints)
+  PayloadEstimator payload;                   // … fitted as they come (O frame)
+  void addTorques(TorqueReading r) {
+    payload.add(r.q, r.tau, r.T_O_palm.inverse());
+    torqueReadings.push_back(std::move(r));
+  }
   int grasp = -1;
   Iso3 T_O_palm = Iso3::Identity();
   JointVector qGrasp;  // the robot's joints when the grasp began (the hand as it holds)
@@ -1340,17 +1346,13 @@ void ScanSession::finish(Termination termination, const std::string& message) {
 
 ScanSession::Summary ScanSession::summary() const {
   Summary out = s_->summary;
-  if (!s_->torqueReadings.empty()) {
-    PayloadEstimator est(*s_->model);
-    for (const TorqueReading& r : s_->torqueReadings) est.add(r.q, r.tau, r.T_O_palm.inverse());
-    out.payload = est.estimate();
-  }
+  out.payload = s_->payload.estimate();  // nullopt before any reading
   return out;
 }
 
 void ScanSession::addJointTorques(const JointVector& q, const JointVector& tau) {
   if (!s_->holding) return;
-  s_->torqueReadings.push_back({q, tau, s_->T_O_palm});
+  s_->addTorques({q, tau, s_->T_O_palm});
 }
 
 void ScanSession::Summary::copyTo(ScanResult* r) const {
@@ -1633,10 +1635,9 @@ ScanSession ScanSession::load(const std::filesystem::path& path, const RobotMode
     for (const Json& r : h.value("torque_readings", Json::array())) {
       const auto q = r.at("q").get<std::vector<double>>();
       const auto tau = r.at("tau").get<std::vector<double>>();
-      s.torqueReadings.push_back(
-          {Eigen::Map<const JointVector>(q.data(), Eigen::Index(q.size())),
-           Eigen::Map<const JointVector>(tau.data(), Eigen::Index(tau.size())),
-           isoFrom(r.at("T_O_palm"))});
+      s.addTorques({Eigen::Map<const JointVector>(q.data(), Eigen::Index(q.size())),
+                    Eigen::Map<const JointVector>(tau.data(), Eigen::Index(tau.size())),
+                    isoFrom(r.at("T_O_palm"))});
     }
     if (s.holding && modelPointsNeeded(options)) {
       if (s.trackingFromFull) {
