@@ -681,6 +681,7 @@ TEST(Cli, ExportRefusesBadInputByNameAndWritesNothing) {
       {"export " + (dir.path() / "box.ply").string() + " --format mjcf,gltf", "'gltf'"},
       {"export " + (dir.path() / "box.ply").string() + " --density -3", "density"},
       {"export " + (dir.path() / "box.ply").string() + " --name 'a b'", "name"},
+      {"export " + (dir.path() / "box.ply").string() + " --ranked 200", "--ranked"},
       {"scan --object builtin:cracker_box --export obj", "'obj'"}};
   for (const auto& [args, message] : cases) {
     const Result r = run(args + " --out " + out.string(), dir);
@@ -690,7 +691,7 @@ TEST(Cli, ExportRefusesBadInputByNameAndWritesNothing) {
   }
   // A closed mesh file exports: the box's mass at 200 kg/m³.
   const Result r = run("export " + (dir.path() / "box.ply").string() +
-                           " --density 200 --format sdf --out " + out.string(),
+                           " --density 200 --format sdf --ranked 0 --out " + out.string(),
                        dir);
   ASSERT_EQ(r.code, 0) << r.output;
   EXPECT_NEAR(readJsonFile(out / "asset.json")["mass_kg"].get<double>(), 200 * 0.05 * 0.04 * 0.03,

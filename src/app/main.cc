@@ -260,6 +260,12 @@ int main(int argc, char** argv) {
   ex->add_option("--density", exp.density_kg_m3, "kg/m³ of the enclosed solid")
       ->capture_default_str();
   ex->add_option("--mass", exp.mass_kg, "kg: the object's mass (overrides --density)");
+  ex->add_option("--ranked", exp.ranked,
+                 "candidates on the model that hold it in the hold test (physics) added to the "
+                 "grasp set, at most (0: none)")
+      ->capture_default_str();
+  ex->add_option("--robot", exp.robot,
+                 "robot config JSON for --ranked (default: data/robots/wam_barretthand.json)");
 
   std::string reportDir;
   auto* rp = app.add_subcommand("report", "rebuild the HTML report of a scan or an eval directory");

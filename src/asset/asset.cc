@@ -73,25 +73,6 @@ ObjectAsset makeAsset(const TriangleMesh& closed_O, const AssetOptions& options)
   return a;
 }
 
-std::optional<AssetFormat> assetFormatFromName(const std::string& name) {
-  if (name == "mjcf") return AssetFormat::kMjcf;
-  if (name == "urdf") return AssetFormat::kUrdf;
-  if (name == "sdf") return AssetFormat::kSdf;
-  return std::nullopt;
-}
-
-const char* assetFormatName(AssetFormat format) {
-  switch (format) {
-    case AssetFormat::kMjcf:
-      return "mjcf";
-    case AssetFormat::kUrdf:
-      return "urdf";
-    case AssetFormat::kSdf:
-      return "sdf";
-  }
-  return "?";
-}
-
 std::string mjcfText(const ObjectAsset& a) {
   const Mat3& I = a.inertia_kg_m2;
   std::string x = "<mujoco model=\"" + a.name + "\">\n";
@@ -151,6 +132,35 @@ std::string sdfText(const ObjectAsset& a) {
   return x + "    </link>\n  </model>\n</sdf>\n";
 }
 
+namespace {
+// Each format: its name, its file's extension, its text.
+struct FormatInfo {
+  AssetFormat format;
+  const char* name;
+  const char* extension;
+  std::string (*text)(const ObjectAsset&);
+};
+const FormatInfo kFormats[] = {{AssetFormat::kMjcf, "mjcf", ".xml", mjcfText},
+                               {AssetFormat::kUrdf, "urdf", ".urdf", urdfText},
+                               {AssetFormat::kSdf, "sdf", ".sdf", sdfText}};
+const FormatInfo& infoOf(AssetFormat format) {
+  for (const FormatInfo& f : kFormats)
+    if (f.format == format) return f;
+  throw Error("asset: unknown format");
+}
+std::string fileOf(const ObjectAsset& a, AssetFormat format) {
+  return a.name + infoOf(format).extension;
+}
+}  // namespace
+
+std::optional<AssetFormat> assetFormatFromName(const std::string& name) {
+  for (const FormatInfo& f : kFormats)
+    if (name == f.name) return f.format;
+  return std::nullopt;
+}
+
+const char* assetFormatName(AssetFormat format) { return infoOf(format).name; }
+
 double mujocoBodyMass(const std::filesystem::path& model_file, const std::string& body) {
   char error[1000] = "";
   mjModel* m = mj_loadXML(model_file.string().c_str(), nullptr, error, sizeof error);
@@ -166,10 +176,7 @@ namespace {
 
 Json assetJson(const ObjectAsset& a, const std::vector<AssetFormat>& formats) {
   Json files = Json::object();
-  for (AssetFormat f : formats)
-    files[assetFormatName(f)] = a.name + (f == AssetFormat::kMjcf   ? ".xml"
-                                          : f == AssetFormat::kUrdf ? ".urdf"
-                                                                    : ".sdf");
+  for (AssetFormat f : formats) files[assetFormatName(f)] = fileOf(a, f);
   Json inertia = Json::array();
   for (int r = 0; r < 3; ++r)
     inertia.push_back({a.inertia_kg_m2(r, 0), a.inertia_kg_m2(r, 1), a.inertia_kg_m2(r, 2)});
@@ -193,7 +200,7 @@ void checkWritten(const ObjectAsset& a, const fs::path& dir,
                   const std::vector<AssetFormat>& formats) {
   for (AssetFormat f : formats) {
     if (f == AssetFormat::kSdf) continue;
-    const fs::path file = dir / (a.name + (f == AssetFormat::kMjcf ? ".xml" : ".urdf"));
+    const fs::path file = dir / fileOf(a, f);
     if (f == AssetFormat::kUrdf && !urdf::parseURDF(readTextFile(file)))
       throw Error("asset: urdfdom refused the URDF it wrote");
     const double mass = mujocoBodyMass(file, a.name);
@@ -219,19 +226,7 @@ void writeAsset(const ObjectAsset& a, const fs::path& dir, const std::vector<Ass
   } else {
     writePly(s / "model.ply", a.model_O);
   }
-  for (AssetFormat f : formats) {
-    switch (f) {
-      case AssetFormat::kMjcf:
-        writeTextAtomically(s / (a.name + ".xml"), mjcfText(a));
-        break;
-      case AssetFormat::kUrdf:
-        writeTextAtomically(s / (a.name + ".urdf"), urdfText(a));
-        break;
-      case AssetFormat::kSdf:
-        writeTextAtomically(s / (a.name + ".sdf"), sdfText(a));
-        break;
-    }
-  }
+  for (AssetFormat f : formats) writeTextAtomically(s / fileOf(a, f), infoOf(f).text(a));
   writeTextAtomically(s / "grasps.json", a.grasps.dump(1) + "\n");
   writeTextAtomically(s / "asset.json", assetJson(a, formats).dump(1) + "\n");
   checkWritten(a, s, formats);
