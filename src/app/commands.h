@@ -95,6 +95,20 @@ struct ExportArgs {
   std::string robot;  // robot config for them (default: the WAM + BarrettHand)
 };
 
+struct RegraspArgs {
+  std::string asset;        // an asset directory (inhand export)
+  std::string object;       // the true object: builtin:NAME or a mesh file
+  std::string robot;        // robot config (default: the WAM + BarrettHand in data/robots)
+  std::string config;       // JSON of scan options (the simulator's, the table top's, the grasps')
+  int rest_pose = 1;        // the true object's stable pose (0: the most probable)
+  double heading_deg = 30;  // … turned this far about the vertical
+  uint64_t seed = 1;
+  double scale = 1.0;
+  std::string out;  // the report (JSON), optional
+};
+// `inhand regrasp-test`: exit 0 when the object was lifted, 4 when not (docs/asset.md).
+int runRegraspTest(const RegraspArgs& args);
+
 // `inhand export`: the model as a simulator's asset (docs/asset.md).
 int runExport(const ExportArgs& args);
 // "mjcf,urdf": the formats; throws Error naming one that is not mjcf, urdf or sdf.

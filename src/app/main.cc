@@ -267,6 +267,25 @@ int main(int argc, char** argv) {
   ex->add_option("--robot", exp.robot,
                  "robot config JSON for --ranked (default: data/robots/wam_barretthand.json)");
 
+  RegraspArgs rg;
+  auto* rt = app.add_subcommand(
+      "regrasp-test",
+      "a simulated robot finds the true object on the table with the asset alone, picks a grasp "
+      "from its grasp set and lifts it with physics");
+  rt->add_option("asset", rg.asset, "an asset directory (inhand export)")->required();
+  rt->add_option("--object", rg.object, "the true object: builtin:NAME or a mesh file")->required();
+  rt->add_option("--rest-pose", rg.rest_pose,
+                 "the true object's stable pose on the table (0: the most probable)")
+      ->capture_default_str();
+  rt->add_option("--heading", rg.heading_deg, "… turned this many degrees about the vertical")
+      ->capture_default_str();
+  rt->add_option("--scale", rg.scale, "the mesh's coordinates times this")->capture_default_str();
+  rt->add_option("--seed", rg.seed, "sensor noise and the arm's error")->capture_default_str();
+  rt->add_option("--robot", rg.robot,
+                 "robot config JSON (default: data/robots/wam_barretthand.json)");
+  rt->add_option("--config", rg.config, "scan options JSON (sim, table_top, grasp)");
+  rt->add_option("--out", rg.out, "write the report (JSON) here");
+
   std::string reportDir;
   auto* rp = app.add_subcommand("report", "rebuild the HTML report of a scan or an eval directory");
   rp->add_option("dir", reportDir, "a scan's or an eval's output directory")->required();
@@ -295,6 +314,7 @@ int main(int argc, char** argv) {
     if (*et) return inhand::app::runEvalTask(taskDir, taskList);
     if (*rp) return inhand::app::runReport(reportDir);
     if (*ex) return inhand::app::runExport(exp);
+    if (*rt) return inhand::app::runRegraspTest(rg);
     if (*cf) return inhand::app::runConfig(configFile, configReference);
     if (*rb) return inhand::app::runRobot(robot);
     if (*cmp)

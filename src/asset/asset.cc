@@ -3,6 +3,7 @@
 #include <mujoco/mujoco.h>
 #include <urdf_parser/urdf_parser.h>
 
+#include <cmath>
 #include <cstdio>
 #include <fstream>
 
@@ -231,6 +232,38 @@ void writeAsset(const ObjectAsset& a, const fs::path& dir, const std::vector<Ass
   writeTextAtomically(s / "asset.json", assetJson(a, formats).dump(1) + "\n");
   checkWritten(a, s, formats);
   staged.commit();
+}
+
+LoadedAsset readAsset(const fs::path& dir) {
+  std::error_code ec;
+  if (!fs::is_directory(dir, ec)) throw Error(dir.string() + ": not an asset directory");
+  LoadedAsset out;
+  const fs::path info = dir / "asset.json", grasps = dir / "grasps.json", model = dir / "model.ply";
+  for (const fs::path& f : {info, grasps, model})
+    if (!fs::exists(f, ec))
+      throw Error(f.string() + ": missing (not an asset written by inhand export?)");
+  const Json a = readJsonFile(info);
+  try {
+    out.name = a.at("name").get<std::string>();
+    out.mass_kg = a.at("mass_kg").get<double>();
+    const auto c = a.at("com_O").get<std::vector<double>>();
+    if (c.size() != 3) throw Error(info.string() + ": com_O must have 3 numbers");
+    out.com_O = Vec3(c[0], c[1], c[2]);
+  } catch (const Json::exception& e) {
+    throw Error(info.string() + ": " + e.what());
+  }
+  if (!(std::isfinite(out.mass_kg) && out.mass_kg > 0))
+    throw Error(info.string() + ": mass_kg must be a positive number");
+  out.grasps = readJsonFile(grasps);
+  if (!out.grasps.is_array()) throw Error(grasps.string() + ": not a list of grasps");
+  PlyData ply = readPly(model);
+  out.model_O = std::move(ply.mesh);
+  if (out.model_O.triangles.empty()) throw Error(model.string() + ": no triangles");
+  out.observed.assign(out.model_O.vertices.size(), 1);
+  if (const auto v = ply.vertexProperties.find("variance"); v != ply.vertexProperties.end())
+    for (size_t k = 0; k < out.observed.size() && k < v->second.size(); ++k)
+      out.observed[k] = v->second[k] < 0.99f * 0.05f * 0.05f;
+  return out;
 }
 
 }  // namespace inhand

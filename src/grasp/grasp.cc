@@ -107,6 +107,10 @@ struct Pose {
   bool pinch = false;
   bool two_finger = false;  // fingers past the first two left open (closingFingers)
   Vec3 offset = Vec3::Zero();
+  // A known grasp made again (graspsFromSet): the hand as it comes in, and a point of its palm
+  // axis in O (instead of the model's centre plus `offset`).
+  JointVector hand = JointVector();
+  std::optional<Vec3> axis_O = std::nullopt;
 };
 
 // The hand as pose ps comes in: every finger preshaped, or for a two-finger pinch the first two
@@ -121,6 +125,7 @@ JointVector poseHand(const RobotModel& robot, double spread, double preshape, bo
   return q;
 }
 JointVector poseHand(const RobotModel& robot, const Pose& ps) {
+  if (ps.hand.size() > 0) return ps.hand;
   return poseHand(robot, ps.spread, ps.preshape, ps.two_finger);
 }
 
@@ -410,7 +415,7 @@ class PoseCloser {
     for (const Pose& ps : poses)
       if (!openHandBox_.count(boxKey(ps)))
         openHandBox_[boxKey(ps)] =
-            HandGeometry(robot, poseHand(robot, ps), Iso3::Identity()).mesh().bounds();
+            HandGeometry(robot_, poseHand(robot_, ps), Iso3::Identity()).mesh().bounds();
   }
 
  public:
@@ -422,7 +427,7 @@ class PoseCloser {
     // Edge poses: the palm axis moves along palm x until the model's extent along it ends
     // `edge_inset_m` beyond the axis, so that fingers 1 and 2 (across palm y at a 90° spread)
     // straddle the object near its edge and finger 3 closes over that edge.
-    Vec3 origin = centre_ + ps.offset;
+    Vec3 origin = ps.axis_O ? *ps.axis_O : centre_ + ps.offset;
     if (ps.edge) origin += (extent(ps.R.col(0)) - o_.edge_inset_m) * ps.R.col(0);
     // The hand first comes to the model alone: where it then reaches below the table top, the
     // palm rises along the table normal until it clears it (by 3 mm) and comes in again, now
@@ -526,8 +531,12 @@ class PoseCloser {
   double rho_ = 0;
   Aabb palm_;
   FingerCloser closer_, modelCloser_;
-  using BoxKey = std::tuple<double, double, bool>;
-  static BoxKey boxKey(const Pose& ps) { return {ps.spread, ps.preshape, ps.two_finger}; }
+  // The open hand's joint values.
+  using BoxKey = std::vector<double>;
+  BoxKey boxKey(const Pose& ps) const {
+    const JointVector q = poseHand(robot_, ps);
+    return BoxKey(q.data(), q.data() + q.size());
+  }
   std::map<BoxKey, Aabb> openHandBox_;
 };
 
@@ -545,32 +554,24 @@ bool sameGrasp(const RobotModel& robot, const GraspCandidate& a, const GraspCand
 }
 }  // namespace
 
-GraspGeneration generateGrasps(const RobotModel& robot, const TriangleMesh& model,
-                               const Iso3& T_B_O, const JointVector& q_now, const GraspOptions& o,
-                               const std::vector<Vec3>* footprint_O) {
-  const auto t0 = std::chrono::steady_clock::now();
-  std::string problem = o.validate();
-  if (!problem.empty()) throw Error("grasp options: " + problem);
-  INHAND_CHECK(!robot.fingers().empty(), "the hand has no fingers to grasp with");
-  GraspGeneration out;
-  // Vertices no triangle uses (a model cut out of a bigger one keeps them) would be samples,
-  // contacts and bounds of surface that is not there.
-  const TriangleMesh mesh = withoutUnusedVertices(model);
-  if (mesh.empty()) return out;
-  // Surface samples with outward normals (vertices, plus a lattice on large triangles).
-  const std::vector<SurfacePoint> samples = surfaceSamples(mesh, 0.5 * o.contact_cell_m);
-  const std::vector<Pose> poses =
-      candidatePoses(robot, samples, mesh.bounds().center(),
-                     T_B_O.linear().transpose() * Vec3::UnitZ(), o, footprint_O);
+namespace {
+// The poses' hands brought to `mesh` resting at T_B_O and closed (PoseCloser, on both cores), kept
+// as candidates (in the poses' order) when force closure with ε ≥ min_epsilon, above the table
+// top (fingers stop at the table top when they close: 1 mm tolerance) and reachable at the table
+// (IK to the palm pose and the lift, arm and hand free of table and base); out.poses says why
+// not. `distinct`: preshapes that close to the same grasp (the same palm pose, the same finger
+// joints) are one candidate, the first.
+std::vector<GraspCandidate> closeAndKeep(const RobotModel& robot, const TriangleMesh& mesh,
+                                         const Iso3& T_B_O, const JointVector& q_now,
+                                         const GraspOptions& o,
+                                         const std::vector<SurfacePoint>& samples,
+                                         const std::vector<Pose>& poses, bool distinct,
+                                         GraspGeneration& out) {
   out.tried = int(poses.size());
   for (const Pose& ps : poses) out.poses.push_back(poseRecord(ps));
-  // The hand stops at the model and at the table: approaching, and closing its fingers. Each
-  // pose closed to contact, on both cores.
   const PoseCloser close(robot, mesh, T_B_O, o, samples, poses);
   std::vector<std::optional<GraspCandidate>> found(poses.size());
   parallelFor(0, int(poses.size()), [&](int i) { found[i] = close(poses[i], i, out.poses[i]); });
-  // Stable (force closure with ε ≥ min_epsilon), and the hand on the object resting on the table
-  // above the table top (fingers stop at the table top when they close: 1 mm tolerance).
   std::vector<GraspCandidate> kept;
   for (size_t i = 0; i < found.size(); ++i) {
     auto& f = found[i];
@@ -586,17 +587,15 @@ GraspGeneration generateGrasps(const RobotModel& robot, const TriangleMesh& mode
       continue;
     }
     ++out.table_free;
-    // Preshapes that close to the same grasp (the same palm pose, the same finger joints) are
-    // one candidate: the first.
-    const bool same = std::any_of(kept.begin(), kept.end(),
-                                  [&](const GraspCandidate& k) { return sameGrasp(robot, k, *f); });
+    const bool same =
+        distinct && std::any_of(kept.begin(), kept.end(),
+                                [&](const GraspCandidate& k) { return sameGrasp(robot, k, *f); });
     if (same) {
       out.poses[i].result = "duplicate";
       continue;
     }
     kept.push_back(std::move(*f));
   }
-  // Reachable at the table (IK to the palm pose, arm and hand free of table and base).
   std::vector<Iso3> targets;
   std::vector<JointVector> hands;
   for (const GraspCandidate& c : kept) {
@@ -604,6 +603,7 @@ GraspGeneration generateGrasps(const RobotModel& robot, const TriangleMesh& mode
     hands.push_back(c.q);
   }
   const auto reach = pickAndLift(robot, targets, hands, q_now, o.lift_m, 2, 7);
+  std::vector<GraspCandidate> candidates;
   for (size_t k = 0; k < kept.size(); ++k) {
     if (!reach[k]) {
       out.poses[kept[k].pose].result = "unreachable";
@@ -613,14 +613,69 @@ GraspGeneration generateGrasps(const RobotModel& robot, const TriangleMesh& mode
     kept[k].q = reach[k]->q;
     kept[k].q_lift = reach[k]->q_lift;
     kept[k].q_open = robot.withArm(kept[k].q_open, robot.arm(reach[k]->q));
-    out.candidates.push_back(std::move(kept[k]));
+    candidates.push_back(std::move(kept[k]));
   }
+  return candidates;
+}
+
+// The model's vertices that triangles use (a model cut out of a bigger one keeps others: they
+// would be samples, contacts and bounds of surface that is not there), and its surface samples
+// with outward normals (vertices, plus a lattice on large triangles).
+std::pair<TriangleMesh, std::vector<SurfacePoint>> graspSurface(const TriangleMesh& model,
+                                                                const GraspOptions& o) {
+  TriangleMesh mesh = withoutUnusedVertices(model);
+  std::vector<SurfacePoint> samples = surfaceSamples(mesh, 0.5 * o.contact_cell_m);
+  return {std::move(mesh), std::move(samples)};
+}
+}  // namespace
+
+GraspGeneration generateGrasps(const RobotModel& robot, const TriangleMesh& model,
+                               const Iso3& T_B_O, const JointVector& q_now, const GraspOptions& o,
+                               const std::vector<Vec3>* footprint_O) {
+  const auto t0 = std::chrono::steady_clock::now();
+  std::string problem = o.validate();
+  if (!problem.empty()) throw Error("grasp options: " + problem);
+  INHAND_CHECK(!robot.fingers().empty(), "the hand has no fingers to grasp with");
+  GraspGeneration out;
+  const auto [mesh, samples] = graspSurface(model, o);
+  if (mesh.empty()) return out;
+  const std::vector<Pose> poses =
+      candidatePoses(robot, samples, mesh.bounds().center(),
+                     T_B_O.linear().transpose() * Vec3::UnitZ(), o, footprint_O);
+  out.candidates = closeAndKeep(robot, mesh, T_B_O, q_now, o, samples, poses, true, out);
   std::stable_sort(
       out.candidates.begin(), out.candidates.end(),
       [](const GraspCandidate& a, const GraspCandidate& b) { return a.epsilon > b.epsilon; });
   for (size_t k = o.max_candidates; k < out.candidates.size(); ++k)
     out.poses[out.candidates[k].pose].result = "beyond_max_candidates";
   if (int(out.candidates.size()) > o.max_candidates) out.candidates.resize(o.max_candidates);
+  out.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  return out;
+}
+
+GraspGeneration graspsFromSet(const RobotModel& robot, const TriangleMesh& model, const Iso3& T_B_O,
+                              const JointVector& q_now, const std::vector<KnownGrasp>& set,
+                              const GraspOptions& o) {
+  const auto t0 = std::chrono::steady_clock::now();
+  std::string problem = o.validate();
+  if (!problem.empty()) throw Error("grasp options: " + problem);
+  INHAND_CHECK(!robot.fingers().empty(), "the hand has no fingers to grasp with");
+  GraspGeneration out;
+  const auto [mesh, samples] = graspSurface(model, o);
+  if (mesh.empty()) return out;
+  std::vector<Pose> poses;
+  const int s = robot.spreadVariable();
+  for (const KnownGrasp& g : set) {
+    if (g.hand.size() != robot.variableCount())
+      throw Error("graspsFromSet: a grasp's hand has " + std::to_string(g.hand.size()) +
+                  " joint values, the robot " + std::to_string(robot.variableCount()));
+    Pose ps{g.T_O_palm.linear(), s >= 0 ? g.hand[s] : 0.0, false};
+    ps.hand = g.hand;
+    robot.applyCouplings(&ps.hand);
+    ps.axis_O = g.T_O_palm.translation();
+    poses.push_back(ps);
+  }
+  out.candidates = closeAndKeep(robot, mesh, T_B_O, q_now, o, samples, poses, false, out);
   out.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return out;
 }

@@ -12,6 +12,7 @@
 #include "inhand/geometry/stable_poses.h"
 #include "inhand/robot/collision.h"
 #include "inhand/scan/checkpoint.h"
+#include "inhand/scan/registration.h"
 #include "inhand/scan/session.h"
 #include "inhand/scan/table_top.h"
 #include "inhand/sensor/render.h"
@@ -43,51 +44,10 @@ std::string MultiGraspOptions::validate() const {
 namespace {
 using Clock = std::chrono::steady_clock;
 
-// A frame from the sensor that can be used: one that arrived (the camera's size) with depth in
-// it, non-finite depths as no return; up to `tries` captures. nullopt when none came.
-std::optional<DepthImage> captureUsable(DepthSensor& sensor, const FrameChecks& checks,
-                                        int tries = 5) {
-  const CameraIntrinsics& K = sensor.camera().intrinsics;
-  for (int t = 0; t < tries; ++t) {
-    DepthImage d = sensor.capture();
-    if (d.width != K.width || d.height != K.height) continue;
-    for (float& z : d.depth_m)
-      if (!(std::isfinite(z) && z >= 0)) z = 0;
-    if (d.validCount() < checks.min_valid_fraction * double(d.depth_m.size())) continue;
-    return d;
-  }
-  return std::nullopt;
-}
-
 void validate(const ScanOptions& options, const MultiGraspOptions& multi) {
   std::string problem = options.validate();
   if (problem.empty()) problem = multi.validate();
   if (!problem.empty()) throw Error("scan options: " + problem);
-}
-
-// How far a depth frame bears out object points `points_B`: of those in view whose pixel
-// measured something, the fraction measured within 1 cm of the point's depth, against those
-// measured more than 1 cm behind it (the camera sees through where the point should be). Points
-// in front of their measurement (occluded) and robot pixels do not count. -1: none counted.
-double depthSupport(const DepthImage& d, const Iso3& T_B_C, const CameraIntrinsics& K,
-                    const std::vector<uint8_t>& robotMask, const std::vector<Vec3>& points_B) {
-  const Iso3 T_C_B = T_B_C.inverse();
-  int support = 0, against = 0;
-  for (const Vec3& p_B : points_B) {
-    const Vec3 p = T_C_B * p_B;
-    if (p.z() <= 0.1) continue;
-    const Vec2 uv = K.project(p);
-    const int u = int(std::lround(uv.x())), v = int(std::lround(uv.y()));
-    if (u < 0 || v < 0 || u >= d.width || v >= d.height) continue;
-    const size_t i = size_t(v) * d.width + u;
-    const float z = d.depth_m[i];
-    if (!(z > 0) || robotMask[i]) continue;
-    if (std::abs(z - p.z()) < 0.01)
-      ++support;
-    else if (z > p.z() + 0.01)
-      ++against;
-  }
-  return support + against == 0 ? -1.0 : double(support) / (support + against);
 }
 
 // The object lifted but not where the grasp `T_O_palm` says: the model registered to the lift's

@@ -149,6 +149,23 @@ GraspGeneration generateGrasps(const RobotModel& robot, const TriangleMesh& mode
                                const GraspOptions& options,
                                const std::vector<Vec3>* footprint_O = nullptr);
 
+// A grasp known to work on the object (an asset's grasp set), in its frame O: the palm's pose and
+// the hand as it comes in (every variable; the arm's are not used).
+struct KnownGrasp {
+  Iso3 T_O_palm = Iso3::Identity();
+  JointVector hand;
+};
+
+// The grasps of `set` made again on `model_O` resting at T_B_O, each as generateGrasps makes a
+// candidate: the palm's orientation and axis as the set has them, the hand as it comes in, brought
+// along its axis from outside until it first touches the model or the table, closed, kept when
+// force closure, clear of the table and reachable (GraspGeneration::poses, one per grasp of the
+// set, says why not). The candidates in the set's order; `pose` is the grasp's index in `set`.
+// Throws Error when a grasp's hand is not the robot's.
+GraspGeneration graspsFromSet(const RobotModel& robot, const TriangleMesh& model_O,
+                              const Iso3& T_B_O, const JointVector& q_now,
+                              const std::vector<KnownGrasp>& set, const GraspOptions& options);
+
 // Fills quality, reachable_views and score of each candidate by one Alg. 1 pass of `planner`
 // over S_obj with the hand at that grasp (usually a coarse planner: fewer directions, rolls and
 // a pixel stride), and sorts them best first. Returns the seconds spent. A candidate's quality is

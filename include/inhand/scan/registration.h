@@ -1,0 +1,59 @@
+#pragma once
+// Registering a model of the object (frame O) to a depth frame in which the object is seen
+// without the hand's help: after a put-down, after a fall, or when a robot meets an object it
+// holds an asset of. The model's observed surface is aligned with the frame from each of several
+// start poses (a coarse point-to-point alignment brings each within reach, then alignBodyToDepth),
+// and a frame tells how far it bears a pose out (depthSupport).
+#include <optional>
+#include <utility>
+#include <vector>
+
+#include "inhand/mesh/extract.h"
+#include "inhand/scan/tracking.h"
+#include "inhand/scan/types.h"
+#include "inhand/sensor/depth_sensor.h"
+#include "inhand/sensor/noise_model.h"
+
+namespace inhand {
+
+// The model's observed triangles (all three vertices observed): centroids and outward normals,
+// every k-th so that about `budget` remain (none for budget <= 0), moved by T.
+std::vector<SurfacePoint> observedSurface(const ObjectModel& m, int budget, const Iso3& T);
+
+// Every k-th vertex of the model (about 6000), moved by T: what hides the surface behind it.
+std::vector<Vec3> modelOccluders(const ObjectModel& m, const Iso3& T);
+
+// A model as registration aligns it, in its frame: its observed surface (about
+// max(2000, options.max_object_points) points) and the whole model as occluders.
+struct RegistrationModel {
+  std::vector<SurfacePoint> points;
+  std::vector<Vec3> occluders;
+};
+RegistrationModel registrationModel(const ObjectModel& m, const TrackingOptions& options);
+
+// The model registered to `depth` (camera at T_B_C, intrinsics K; `hidden`: one per pixel, those
+// that pair with nothing, such as the robot's and the table's) from each start pose T_B_O: the
+// frame's points within 30 cm of the starts' mean, every other pixel each way, aligned with the
+// model's points by point-to-point ICP (nearest model point within a gate shrinking from 4 to
+// 1 cm, Umeyama's motion, 20 rounds), then alignBodyToDepth with the sensor's axial σ at the
+// model's depth. One result per start, in parallel; the pose (T_B_O) where alignment succeeded.
+std::vector<std::pair<std::optional<Iso3>, TrackResult>> registerModelAt(
+    const RegistrationModel& model, const DepthImage& depth, const std::vector<uint8_t>& hidden,
+    const Iso3& T_B_C, const CameraIntrinsics& K, const NoiseModelOptions& noise,
+    const TrackingOptions& options, const std::vector<Iso3>& starts);
+
+// How far a depth frame bears out object points `points_B`: of those in view whose pixel
+// measured something, the fraction measured within 1 cm of the point's depth, against those
+// measured more than 1 cm behind it (the camera sees through where the point should be). Points
+// in front of their measurement (occluded) and `hidden` pixels (empty: none) do not count.
+// -1: none counted.
+double depthSupport(const DepthImage& d, const Iso3& T_B_C, const CameraIntrinsics& K,
+                    const std::vector<uint8_t>& hidden, const std::vector<Vec3>& points_B);
+
+// A frame from the sensor that can be used: one that arrived (the camera's size) with depth in
+// it (checks.min_valid_fraction), non-finite depths as no return; up to `tries` captures. nullopt
+// when none came.
+std::optional<DepthImage> captureUsable(DepthSensor& sensor, const FrameChecks& checks,
+                                        int tries = 5);
+
+}  // namespace inhand

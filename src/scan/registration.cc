@@ -1,0 +1,221 @@
+#include "inhand/scan/registration.h"
+
+#include <Eigen/Geometry>
+#include <algorithm>
+#include <cmath>
+
+#include "inhand/core/error.h"
+#include "inhand/core/parallel.h"
+
+namespace inhand {
+
+// The model's observed triangles (all three vertices observed): centroids and outward normals,
+// every k-th so that about `budget` remain (none for budget <= 0), moved by T.
+std::vector<SurfacePoint> observedSurface(const ObjectModel& m, int budget, const Iso3& T) {
+  std::vector<size_t> observed;
+  for (size_t t = 0; t < m.mesh.triangles.size(); ++t) {
+    const Tri& f = m.mesh.triangles[t];
+    if (m.observed[size_t(f[0])] && m.observed[size_t(f[1])] && m.observed[size_t(f[2])])
+      observed.push_back(t);
+  }
+  std::vector<SurfacePoint> points;
+  const size_t step = std::max<size_t>(1, observed.size() / size_t(std::max(1, budget)) + 1);
+  for (size_t k = 0; budget > 0 && k < observed.size(); k += step) {
+    const Tri& f = m.mesh.triangles[observed[k]];
+    const Vec3 a = m.mesh.vertices[size_t(f[0])].cast<double>();
+    const Vec3 b = m.mesh.vertices[size_t(f[1])].cast<double>();
+    const Vec3 c = m.mesh.vertices[size_t(f[2])].cast<double>();
+    const Vec3 n = (b - a).cross(c - a);
+    if (n.norm() < 1e-12) continue;
+    points.push_back({T * ((a + b + c) / 3), T.linear() * n.normalized()});
+  }
+  return points;
+}
+
+// Every k-th vertex of the model (about 6000), moved by T: what hides the surface behind it.
+std::vector<Vec3> modelOccluders(const ObjectModel& m, const Iso3& T) {
+  std::vector<Vec3> out;
+  const size_t every = std::max<size_t>(1, m.mesh.vertices.size() / 6000 + 1);
+  for (size_t k = 0; k < m.mesh.vertices.size(); k += every)
+    out.push_back(T * m.mesh.vertices[k].cast<double>());
+  return out;
+}
+
+RegistrationModel registrationModel(const ObjectModel& m, const TrackingOptions& o) {
+  return {observedSurface(m, std::max(2000, o.max_object_points), Iso3::Identity()),
+          modelOccluders(m, Iso3::Identity())};
+}
+
+namespace {
+// The nearest model point (frame O) of every 5 mm cell within 4.5 cm of the model: a
+// breadth-first sweep out from the cells the points lie in (near enough to the nearest for
+// pairing). Built once per model, shared by every start.
+struct NearestGrid {
+  const std::vector<Vec3>& model_O;
+  double cell = 0.005;
+  Aabb bounds;
+  Eigen::Vector3i n;
+  std::vector<int> nearest;
+
+  explicit NearestGrid(const std::vector<Vec3>& model) : model_O(model) {
+    for (const Vec3& p : model_O) bounds.extend(p);
+    bounds.min.array() -= 0.045;
+    bounds.max.array() += 0.045;
+    n = ((bounds.max - bounds.min) / cell).array().ceil().cast<int>().max(1);
+    nearest.assign(size_t(n.prod()), -1);
+    std::vector<Eigen::Vector3i> front, next;
+    for (size_t i = 0; i < model_O.size(); ++i)
+      if (const auto c = cellOf(model_O[i]); c && nearest[index(*c)] < 0) {
+        nearest[index(*c)] = int(i);
+        front.push_back(*c);
+      }
+    for (int ring = 0; ring < 9 && !front.empty(); ++ring, front.swap(next)) {
+      next.clear();
+      for (const Eigen::Vector3i& c : front)
+        for (int a = 0; a < 3; ++a)
+          for (int step : {-1, 1}) {
+            Eigen::Vector3i d = c;
+            d[a] += step;
+            if (d[a] < 0 || d[a] >= n[a] || nearest[index(d)] >= 0) continue;
+            nearest[index(d)] = nearest[index(c)];
+            next.push_back(d);
+          }
+    }
+  }
+  size_t index(const Eigen::Vector3i& c) const {
+    return (size_t(c.z()) * size_t(n.y()) + size_t(c.y())) * size_t(n.x()) + size_t(c.x());
+  }
+  std::optional<Eigen::Vector3i> cellOf(const Vec3& p) const {
+    const Eigen::Vector3i c = ((p - bounds.min) / cell).array().floor().cast<int>();
+    if ((c.array() < 0).any() || (c.array() >= n.array()).any()) return std::nullopt;
+    return c;
+  }
+};
+
+// A coarse alignment of the model points (frame O) with a frame's points (frame B) from T_B_O:
+// point-to-point ICP, each frame point paired with the nearest model point (of the grid's
+// neighbouring cells) within a gate that shrinks from 4 cm to 1 cm, the rigid motion of the pairs
+// by Umeyama's method (Eigen), 20 rounds. It brings a start within the reach of the fine
+// alignment (alignBodyToDepth pairs along rays within centimetres).
+Iso3 coarseAlign(const std::vector<Vec3>& frame_B, const NearestGrid& grid, Iso3 T) {
+  const std::vector<Vec3>& model_O = grid.model_O;
+  const Eigen::Vector3i& n = grid.n;
+  for (int round = 0; round < 20; ++round) {
+    const double gate = std::max(0.01, 0.04 - 0.003 * round);
+    const Iso3 T_O_B = T.inverse();
+    Eigen::Matrix3Xd src(3, 0), dst(3, 0);
+    std::vector<Vec3> a, b;
+    for (const Vec3& p_B : frame_B) {
+      const Vec3 p = T_O_B * p_B;
+      const auto c = grid.cellOf(p);
+      if (!c) continue;
+      // The nearest of the neighbouring cells' nearest points.
+      int found = -1;
+      double best = gate * gate;
+      for (int dz = -1; dz <= 1; ++dz)
+        for (int dy = -1; dy <= 1; ++dy)
+          for (int dx = -1; dx <= 1; ++dx) {
+            const Eigen::Vector3i d = *c + Eigen::Vector3i(dx, dy, dz);
+            if ((d.array() < 0).any() || (d.array() >= n.array()).any()) continue;
+            const int k = grid.nearest[grid.index(d)];
+            if (k < 0) continue;
+            if (const double e = (model_O[size_t(k)] - p).squaredNorm(); e < best) {
+              best = e;
+              found = k;
+            }
+          }
+      if (found < 0) continue;
+      a.push_back(T * model_O[size_t(found)]);
+      b.push_back(p_B);
+    }
+    if (a.size() < 20) break;
+    src.resize(3, long(a.size()));
+    dst.resize(3, long(b.size()));
+    for (size_t i = 0; i < a.size(); ++i) {
+      src.col(long(i)) = a[i];
+      dst.col(long(i)) = b[i];
+    }
+    const Eigen::Matrix4d U = Eigen::umeyama(src, dst, false);
+    Iso3 D = Iso3::Identity();
+    D.linear() = U.block<3, 3>(0, 0);
+    D.translation() = U.block<3, 1>(0, 3);
+    T = D * T;
+    if (D.translation().norm() < 1e-5 && Eigen::AngleAxisd(D.linear()).angle() < 1e-4) break;
+  }
+  return T;
+}
+}  // namespace
+
+std::vector<std::pair<std::optional<Iso3>, TrackResult>> registerModelAt(
+    const RegistrationModel& model, const DepthImage& depth, const std::vector<uint8_t>& hidden,
+    const Iso3& T_B_C, const CameraIntrinsics& K, const NoiseModelOptions& noise,
+    const TrackingOptions& options, const std::vector<Iso3>& starts) {
+  if (hidden.size() != depth.depth_m.size())
+    throw Error("registerModelAt: the hidden mask does not match the image");
+  // The frame's points near the starts (every other pixel each way, not hidden), for the coarse
+  // alignment; the model's observed points.
+  Vec3 near = Vec3::Zero();
+  for (const Iso3& T : starts) near += T.translation();
+  near /= double(std::max<size_t>(1, starts.size()));
+  std::vector<Vec3> frame_B, model_O;
+  for (int v = 0; v < depth.height; v += 2)
+    for (int u = 0; u < depth.width; u += 2) {
+      const size_t i = size_t(v) * size_t(depth.width) + size_t(u);
+      if (hidden[i] || !(depth.depth_m[i] > 0)) continue;
+      const Vec3 p = T_B_C * (double(depth.depth_m[i]) * K.rayZ1(u, v));
+      if ((p - near).norm() < 0.3) frame_B.push_back(p);
+    }
+  for (const SurfacePoint& sp : model.points) model_O.push_back(sp.p);
+  std::vector<std::pair<std::optional<Iso3>, TrackResult>> out(starts.size());
+  const NearestGrid grid(model_O);
+  parallelFor(0, int(starts.size()), [&](int k) {
+    const Iso3 T_C_O = T_B_C.inverse() * coarseAlign(frame_B, grid, starts[size_t(k)]);
+    TrackResult r = alignBodyToDepth(depth, hidden, K, model.points, model.occluders, T_C_O,
+                                     axialSigma(noise, T_C_O.translation().z(), 0), options);
+    if (r.ok) out[size_t(k)].first = T_B_C * r.correction * T_C_O;
+    out[size_t(k)].second = std::move(r);
+  });
+  return out;
+}
+
+// How far a depth frame bears out object points `points_B`: of those in view whose pixel
+// measured something, the fraction measured within 1 cm of the point's depth, against those
+// measured more than 1 cm behind it (the camera sees through where the point should be). Points
+// in front of their measurement (occluded) and robot pixels do not count. -1: none counted.
+double depthSupport(const DepthImage& d, const Iso3& T_B_C, const CameraIntrinsics& K,
+                    const std::vector<uint8_t>& hidden, const std::vector<Vec3>& points_B) {
+  const Iso3 T_C_B = T_B_C.inverse();
+  int support = 0, against = 0;
+  for (const Vec3& p_B : points_B) {
+    const Vec3 p = T_C_B * p_B;
+    if (p.z() <= 0.1) continue;
+    const Vec2 uv = K.project(p);
+    const int u = int(std::lround(uv.x())), v = int(std::lround(uv.y()));
+    if (u < 0 || v < 0 || u >= d.width || v >= d.height) continue;
+    const size_t i = size_t(v) * d.width + u;
+    const float z = d.depth_m[i];
+    if (!(z > 0) || (!hidden.empty() && hidden[i])) continue;
+    if (std::abs(z - p.z()) < 0.01)
+      ++support;
+    else if (z > p.z() + 0.01)
+      ++against;
+  }
+  return support + against == 0 ? -1.0 : double(support) / (support + against);
+}
+
+// A frame from the sensor that can be used: one that arrived (the camera's size) with depth in
+// it, non-finite depths as no return; up to `tries` captures. nullopt when none came.
+std::optional<DepthImage> captureUsable(DepthSensor& sensor, const FrameChecks& checks, int tries) {
+  const CameraIntrinsics& K = sensor.camera().intrinsics;
+  for (int t = 0; t < tries; ++t) {
+    DepthImage d = sensor.capture();
+    if (d.width != K.width || d.height != K.height) continue;
+    for (float& z : d.depth_m)
+      if (!(std::isfinite(z) && z >= 0)) z = 0;
+    if (d.validCount() < checks.min_valid_fraction * double(d.depth_m.size())) continue;
+    return d;
+  }
+  return std::nullopt;
+}
+
+}  // namespace inhand

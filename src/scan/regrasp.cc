@@ -1,0 +1,252 @@
+#include "inhand/scan/regrasp.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+
+#include "inhand/core/error.h"
+#include "inhand/core/pose.h"
+#include "inhand/grasp/hold_test.h"
+#include "inhand/robot/robot_scenes.h"
+#include "inhand/scan/registration.h"
+#include "inhand/scan/table_top.h"
+
+namespace inhand {
+
+namespace {
+using Clock = std::chrono::steady_clock;
+double secondsFrom(Clock::time_point t0) {
+  return std::chrono::duration<double>(Clock::now() - t0).count();
+}
+
+// Every 7th observed vertex of the model (what depthSupport checks a pose against).
+std::vector<Vec3> observedPoints(const ObjectModel& m) {
+  std::vector<Vec3> out;
+  for (size_t k = 0; k < m.mesh.vertices.size(); k += 7)
+    if (m.observed.empty() || m.observed[k]) out.push_back(m.mesh.vertices[k].cast<double>());
+  return out;
+}
+
+// The model registered to one frame of the table aimed over look_at_B: the object's points (the
+// largest cluster above the table near there), the model's resting orientations at headings over
+// them as starts, the robot's pixels and the table's (at most 5 mm above its top) pairing with
+// nothing; the registration the frame bears out most (the smaller residual among those within
+// 2 % of it).
+void findOnTable(RobotInterface& robot, DepthSensor& sensor, const ObjectModel& model,
+                 const Vec3& look_at_B, const RegraspOptions& o, RegraspResult& out,
+                 const std::function<void(const std::string&)>& log) {
+  const RobotModel& m = robot.model();
+  const CameraIntrinsics& K = sensor.camera().intrinsics;
+  const double top = m.table().topZ();
+  const Iso3 guess(Eigen::Translation3d(look_at_B.x(), look_at_B.y(), top));
+  const std::optional<Iso3> aim =
+      m.camera().aimAt(guess.translation() + Vec3(0, 0, o.table_top.aim_height_m));
+  std::optional<DepthImage> frame;
+  if (aim) {
+    sensor.setPose(*aim);
+    frame = captureUsable(sensor, o.scan.checks);
+  }
+  if (!frame) {
+    out.failure = "object_not_found";
+    log("no usable frame of the table");
+    return;
+  }
+  const DepthImage& d = *frame;
+  const RobotOccluders scenes(m);
+  const std::vector<uint8_t> mask =
+      robotPixelMask(d, *aim, robot.joints(), scenes, sensor.camera(), o.scan.t_hand_m,
+                     o.scan.carve_radius_px, /*with_table=*/false);
+  const TableTopObject object =
+      findObjectOnTable({d}, {mask}, *aim, K, guess, m, o.scan, o.table_top, nullptr, {});
+  if (object.problem == Termination::kObjectNotFound) {
+    out.failure = "object_not_found";
+    log("no object on the table there");
+    return;
+  }
+  Vec3 centre_B = Vec3::Zero();
+  for (const Vec3& p : object.points_O) centre_B += guess * p;
+  centre_B /= double(std::max<size_t>(1, object.points_O.size()));
+  std::vector<uint8_t> hidden = mask;
+  for (int v = 0; v < d.height; ++v)
+    for (int u = 0; u < d.width; ++u) {
+      const size_t i = size_t(v) * size_t(d.width) + size_t(u);
+      const float z = d.depth_m[i];
+      if (z > 0 && (*aim * (double(z) * K.rayZ1(u, v))).z() < top + 0.005) hidden[i] = 1;
+    }
+  const std::vector<Iso3> starts =
+      restingStarts(model.mesh, centre_B, aim->translation(), top, o.orientations, o.headings);
+  out.starts = int(starts.size());
+  const std::vector<Vec3> known_O = observedPoints(model);
+  struct Fit {
+    Iso3 T;
+    double support, rms;
+  };
+  std::vector<Fit> fits;
+  double most = -1;
+  for (const auto& [T, r] : registerModelAt(registrationModel(model, o.scan.tracking), d, hidden,
+                                            *aim, K, o.noise, o.scan.tracking, starts)) {
+    if (!T) continue;
+    std::vector<Vec3> at_B;
+    for (const Vec3& p : known_O) at_B.push_back(*T * p);
+    fits.push_back({*T, depthSupport(d, *aim, K, hidden, at_B), r.rms_m});
+    most = std::max(most, fits.back().support);
+  }
+  const Fit* best = nullptr;
+  for (const Fit& f : fits)
+    if (f.support >= most - 0.02 && (!best || f.rms < best->rms)) best = &f;
+  if (!best || best->support < o.min_support) {
+    out.failure = "not_registered";
+    log("the model does not fit what the camera sees (best " +
+        std::to_string(int(std::lround(100 * std::max(0.0, most)))) + " % borne out)");
+    return;
+  }
+  out.T_B_O = best->T;
+  out.support = best->support;
+  out.rms_m = best->rms;
+  char line[200];
+  std::snprintf(line, sizeof line,
+                "found: the model registered from %d starts, %d %% borne out, residual %.2f mm",
+                out.starts, int(std::lround(100 * out.support)), 1000 * out.rms_m);
+  log(line);
+}
+
+// After the lift: how far a frame aimed at the hand bears out the model where the hand holds it
+// and where it lay.
+void checkLift(RobotInterface& robot, DepthSensor& sensor, const ObjectModel& model,
+               const Iso3& T_O_palm, const Iso3& T_B_O_rest, const RegraspOptions& o,
+               RegraspResult& out) {
+  const RobotModel& m = robot.model();
+  const Iso3 T_B_O_held = m.tipPose(robot.joints()) * T_O_palm.inverse();
+  std::vector<Vec3> held_B, rest_B;
+  Aabb box;
+  for (const Vec3& p : observedPoints(model)) {
+    held_B.push_back(T_B_O_held * p);
+    box.extend(held_B.back());
+    const Vec3 r = T_B_O_rest * p;
+    if (r.z() > m.table().topZ() + 0.015) rest_B.push_back(r);  // the table is near the others
+  }
+  const std::optional<Iso3> aim = m.camera().aimAt(box.center());
+  if (!aim) return;
+  sensor.setPose(*aim);
+  const std::optional<DepthImage> d = captureUsable(sensor, o.scan.checks);
+  if (!d) return;
+  const std::vector<uint8_t> mask =
+      robotPixelMask(*d, *aim, robot.joints(), RobotOccluders(m), sensor.camera(), o.scan.t_hand_m,
+                     o.scan.carve_radius_px, /*with_table=*/false);
+  out.in_hand = depthSupport(*d, *aim, sensor.camera().intrinsics, mask, held_B);
+  out.on_table = depthSupport(*d, *aim, sensor.camera().intrinsics, mask, rest_B);
+}
+
+// The load the joint torques `tau` show at q with the object held at T_O_palm, its centre of mass
+// at com_O: the torques less the links' own weight, projected on those of a unit mass there (least
+// squares in one unknown). −1 without torques.
+double weighAt(const RobotModel& m, const JointVector& q, const std::optional<JointVector>& tau,
+               const Iso3& T_O_palm, const Vec3& com_O) {
+  if (!tau || tau->size() != q.size()) return -1;
+  const Vec3 c_B = m.tipPose(q) * (T_O_palm.inverse() * com_O);
+  const JointVector unit = m.pointForceTorques(q, m.tipLink(), c_B, Vec3(0, 0, -9.81));
+  const JointVector load = *tau - m.gravityTorques(q);
+  double num = 0, den = 0;
+  for (int v : m.armVariables()) {
+    num += unit[v] * load[v];
+    den += unit[v] * unit[v];
+  }
+  return den > 0 ? std::max(0.0, num / den) : -1;
+}
+}  // namespace
+
+std::string RegraspOptions::validate() const {
+  if (std::string p = scan.validate(); !p.empty()) return p;
+  if (std::string p = table_top.validate(); !p.empty()) return "table_top." + p;
+  if (std::string p = grasp.validate(); !p.empty()) return "grasp." + p;
+  if (std::string p = noise.validate(); !p.empty()) return "noise." + p;
+  if (orientations < 1 || headings < 1) return "orientations and headings must be at least 1";
+  if (!(min_support > 0 && min_support <= 1)) return "min_support must be in (0, 1]";
+  return "";
+}
+
+RegraspResult pickUpKnownObject(RobotInterface& robot, DepthSensor& sensor,
+                                const KnownObject& object, const Vec3& look_at_B,
+                                const RegraspOptions& options,
+                                const std::function<void(const std::string&)>& logTo) {
+  if (std::string p = options.validate(); !p.empty()) throw Error("regrasp options: " + p);
+  const double mass_kg = object.mass_kg;
+  if (!(mass_kg > 0)) throw Error("pickUpKnownObject: the object's mass must be positive");
+  const ObjectModel& model_O = object.model_O;
+  const std::vector<KnownGrasp>& set = object.grasps;
+  auto log = [&](const std::string& s) {
+    if (logTo) logTo(s);
+  };
+  const RobotModel& m = robot.model();
+  RegraspResult out;
+  out.set = int(set.size());
+  // The arm out of the camera's way: home, the hand open.
+  const JointVector home = m.withFingersOpen(m.home());
+  if (!robot.joints().isApprox(home, 1e-9))
+    robot.execute({robot.joints(), home}, [](const JointVector&) {});
+  auto t0 = Clock::now();
+  findOnTable(robot, sensor, model_O, look_at_B, options, out, log);
+  out.find_s = secondsFrom(t0);
+  if (!out.T_B_O) return out;
+
+  // The set's grasps made here, tried on the model in physics at its mass.
+  t0 = Clock::now();
+  out.generation = graspsFromSet(m, model_O.mesh, *out.T_B_O, robot.joints(), set, options.grasp);
+  std::vector<GraspCandidate>& made = out.generation.candidates;
+  out.made = int(made.size());
+  if (made.empty()) {
+    out.plan_s = secondsFrom(t0);
+    out.failure = "no_grasp_here";
+    log("none of the " + std::to_string(out.set) +
+        " grasps of the set can be made where the object lies");
+    return out;
+  }
+  HoldTestOptions hold = options.grasp.hold;
+  const double volume = massProperties(model_O.mesh).volume_m3;
+  if (volume > 0) hold.density_kg_m3 = mass_kg / volume;
+  const double holdSeconds =
+      rankByHold(m, model_O.mesh, *out.T_B_O, nullptr, options.grasp.friction, hold, &made);
+  for (const GraspCandidate& c : made) out.held_in_test += c.hold == 1;
+  out.plan_s = secondsFrom(t0);
+  log(std::to_string(out.made) + " of the set's " + std::to_string(out.set) +
+      " grasps can be made here; " + holdLine(made, holdSeconds));
+  const GraspCandidate& c = made.front();
+  out.grasp = c;
+  out.chosen = c.pose;
+
+  // The pick-up and the lift.
+  t0 = Clock::now();
+  const std::optional<Iso3> achieved = robot.pickUp(c.T_O_palm, c.q_open);
+  out.picked = bool(achieved);
+  if (!achieved) {
+    out.failure = "no_contact";
+  } else {
+    const JointVector q = robot.joints();
+    bool empty = true;
+    for (const FingerInfo& f : m.fingers())
+      if (std::abs(q[f.variable] - f.closed) > 1e-3) empty = false;
+    if (empty) {
+      out.failure = "empty_hand";
+    } else {
+      robot.execute({robot.joints(), m.withArm(robot.joints(), m.arm(c.q_lift))},
+                    [](const JointVector&) {});
+      checkLift(robot, sensor, model_O, *achieved, *out.T_B_O, options, out);
+      out.weighed_kg = weighAt(m, robot.joints(), robot.jointTorques(), *achieved, object.com_O);
+      out.lifted = out.weighed_kg >= 0 ? out.weighed_kg > 0.5 * mass_kg
+                                       : out.in_hand > 0.5 && !(out.on_table > 0.5);
+      if (!out.lifted) out.failure = "not_in_hand";
+    }
+  }
+  out.pick_s = secondsFrom(t0);
+  char line[200];
+  std::snprintf(line, sizeof line,
+                "grasp %d of the set: %s (the arm weighs %.3f kg of %.3f; the model borne out in "
+                "the hand %d %%, where it lay %d %%)",
+                out.chosen, out.lifted ? "lifted" : out.failure.c_str(), out.weighed_kg, mass_kg,
+                int(std::lround(100 * out.in_hand)), int(std::lround(100 * out.on_table)));
+  log(line);
+  return out;
+}
+
+}  // namespace inhand
