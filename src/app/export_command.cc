@@ -1,4 +1,5 @@
 // `inhand export`: a scanned model as an asset for simulators and planners (docs/asset.md).
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 
@@ -6,6 +7,7 @@
 #include "inhand/asset/asset.h"
 #include "inhand/core/error.h"
 #include "inhand/core/file_util.h"
+#include "inhand/core/pose.h"
 #include "inhand/geometry/mesh_io.h"
 #include "inhand/geometry/stable_poses.h"
 #include "inhand/grasp/grasp.h"
@@ -45,46 +47,61 @@ Json triedGrasps(const Json& summary, const std::string& where) {
   return out;
 }
 
-// Candidates on the finished model, chosen as the scan chooses them: the model resting in its
-// most probable stable pose on the robot's table under the presentation point, candidates
-// generated there (generateGrasps) and closed, lifted and turned on the model in physics at the
-// asset's mass (the hold test); those that held, in the hold test's order (those that held with
-// its margin first), at most `max`. In O, like the tried ones.
+// Candidates on the finished model, chosen as the scan chooses them, in each of its most probable
+// stable poses (those of probability 5 % or more, at most 4, the most probable first): the model
+// resting in that pose on the robot's table under the presentation point, candidates generated
+// there (generateGrasps) and closed, lifted and turned on the model in physics at the asset's mass
+// (the hold test); those that held, in the hold test's order (those that held with its margin
+// first), at most `max` per pose, none within 5 mm and 5° of one taken before. In O, like the
+// tried ones.
 Json rankedGrasps(const ObjectAsset& asset, const RobotModel& robot, int max, std::string* line) {
   Json out = Json::array();
   const std::vector<StablePose> poses = stablePoses(asset.model_O);
   if (max <= 0 || poses.empty()) return out;
-  Iso3 T_B_O = Iso3::Identity();
-  T_B_O.linear() = poses[0].R_B_O;
-  Aabb b;
-  for (const Vec3f& v : asset.model_O.vertices) b.extend(poses[0].R_B_O * v.cast<double>());
-  const Vec3 at = robot.camera().lookAt_B;
-  T_B_O.translation() =
-      Vec3(at.x() - b.center().x(), at.y() - b.center().y(), robot.table().topZ() - b.min.z());
   GraspOptions go;
   go.hold.density_kg_m3 = asset.density_kg_m3;
   go.hold.max_candidates = 16;  // more than a scan tests: the set offers several that held
   std::vector<Vec3> footprint;
   for (const Vec3f& v : asset.model_O.vertices) footprint.push_back(v.cast<double>());
-  GraspGeneration gen = generateGrasps(robot, asset.model_O, T_B_O, robot.home(), go, &footprint);
-  const double seconds =
-      rankByHold(robot, asset.model_O, T_B_O, nullptr, go.friction, go.hold, &gen.candidates);
-  *line = holdLine(gen.candidates, seconds);
   auto hand = [&](const JointVector& q) {
     Json j = Json::object();
     for (const auto& [name, value] : robot.handJointValues(q)) j[name] = value;
     return j;
   };
-  for (const GraspCandidate& c : gen.candidates) {
-    if (c.hold != 1 || int(out.size()) >= max) continue;
-    out.push_back({{"source", "ranked"},
-                   {"stage", "hold test on the model, rest pose 0"},
-                   {"outcome", c.hold_margin == 1 ? "held_with_margin" : "held"},
-                   {"T_O_palm", isoJson(c.T_O_palm)},
-                   {"preshape", hand(c.q_open)},
-                   {"closed", hand(c.q)},
-                   {"kind", c.palm_contact ? "enveloping" : "fingertips"},
-                   {"epsilon", c.epsilon}});
+  std::vector<Iso3> taken;
+  for (size_t k = 0; k < poses.size() && k < 4; ++k) {
+    if (k > 0 && poses[k].probability < 0.05) break;
+    Iso3 T_B_O = Iso3::Identity();
+    T_B_O.linear() = poses[k].R_B_O;
+    Aabb b;
+    for (const Vec3f& v : asset.model_O.vertices) b.extend(poses[k].R_B_O * v.cast<double>());
+    const Vec3 at = robot.camera().lookAt_B;
+    T_B_O.translation() =
+        Vec3(at.x() - b.center().x(), at.y() - b.center().y(), robot.table().topZ() - b.min.z());
+    GraspGeneration gen = generateGrasps(robot, asset.model_O, T_B_O, robot.home(), go, &footprint);
+    const double seconds =
+        rankByHold(robot, asset.model_O, T_B_O, nullptr, go.friction, go.hold, &gen.candidates);
+    *line += (line->empty() ? "" : "; ") + std::string("rest pose ") + std::to_string(k) + ": " +
+             holdLine(gen.candidates, seconds);
+    int added = 0;
+    for (const GraspCandidate& c : gen.candidates) {
+      if (c.hold != 1 || added >= max) continue;
+      const bool near = std::any_of(taken.begin(), taken.end(), [&](const Iso3& T) {
+        return (T.translation() - c.T_O_palm.translation()).norm() < 0.005 &&
+               rotationBetween(T, c.T_O_palm) < 5 * M_PI / 180;
+      });
+      if (near) continue;
+      taken.push_back(c.T_O_palm);
+      ++added;
+      out.push_back({{"source", "ranked"},
+                     {"stage", "hold test on the model, rest pose " + std::to_string(k)},
+                     {"outcome", c.hold_margin == 1 ? "held_with_margin" : "held"},
+                     {"T_O_palm", isoJson(c.T_O_palm)},
+                     {"preshape", hand(c.q_open)},
+                     {"closed", hand(c.q)},
+                     {"kind", c.palm_contact ? "enveloping" : "fingertips"},
+                     {"epsilon", c.epsilon}});
+    }
   }
   return out;
 }

@@ -164,11 +164,11 @@ int runRegraspTest(const RegraspArgs& args) {
   if (r.T_B_O) {
     const PoseError e = poseError(object, truth, *r.T_B_O);
     found = e.centre_m <= 0.003 && (e.rotation_rad <= 3 * M_PI / 180 || e.adds_m <= 0.001);
-    report["found"] = {{"centre_error_m", e.centre_m},
-                       {"rotation_error_deg", e.rotation_rad * 180 / M_PI},
-                       {"adds_m", e.adds_m},
-                       {"support", r.support},
-                       {"within_3mm_3deg", found}};
+    report["found"] = {
+        {"T_B_O", isoJson(*r.T_B_O)},   {"T_B_O_true", isoJson(truth)},
+        {"centre_error_m", e.centre_m}, {"rotation_error_deg", e.rotation_rad * 180 / M_PI},
+        {"adds_m", e.adds_m},           {"support", r.support},
+        {"within_3mm_3deg", found}};
     std::printf("regrasp-test: found %.1f mm and %.1f° from the truth (ADD-S %.2f mm): %s\n",
                 1000 * e.centre_m, e.rotation_rad * 180 / M_PI, 1000 * e.adds_m,
                 found ? "within 3 mm / 3°" : "not within 3 mm / 3°");

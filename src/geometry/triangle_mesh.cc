@@ -6,6 +6,8 @@
 #include <set>
 #include <unordered_map>
 
+#include "inhand/core/error.h"
+
 namespace inhand {
 
 Aabb TriangleMesh::bounds() const {
@@ -353,6 +355,58 @@ std::vector<SurfacePoint> evenSurfaceSamples(const TriangleMesh& mesh, double sp
     }
   }
   return samples;
+}
+
+TriangleMesh subdivided(const TriangleMesh& mesh, double max_edge_m, std::vector<uint8_t>* flags) {
+  INHAND_CHECK(max_edge_m > 0, "subdivided: the edge length must be positive");
+  TriangleMesh out = mesh;
+  const float max2 = float(max_edge_m * max_edge_m);
+  for (int pass = 0; pass < 64; ++pass) {
+    // The midpoint of every edge too long, shared by the two triangles on it.
+    std::map<std::pair<int, int>, int> mid;
+    auto split = [&](int a, int b) -> int {
+      if ((out.vertices[size_t(a)] - out.vertices[size_t(b)]).squaredNorm() <= max2) return -1;
+      const auto key = std::minmax(a, b);
+      if (auto it = mid.find(key); it != mid.end()) return it->second;
+      const int m = int(out.vertices.size());
+      out.vertices.push_back(0.5f * (out.vertices[size_t(a)] + out.vertices[size_t(b)]));
+      if (flags) flags->push_back((*flags)[size_t(a)] && (*flags)[size_t(b)]);
+      mid.emplace(key, m);
+      return m;
+    };
+    std::vector<Tri> next;
+    next.reserve(out.triangles.size());
+    for (const Tri& t : out.triangles) {
+      const int v[3] = {t[0], t[1], t[2]};
+      const int m[3] = {split(v[0], v[1]), split(v[1], v[2]), split(v[2], v[0])};
+      const int n = (m[0] >= 0) + (m[1] >= 0) + (m[2] >= 0);
+      if (n == 0) {
+        next.push_back(t);
+      } else if (n == 3) {
+        next.push_back(Tri(v[0], m[0], m[2]));
+        next.push_back(Tri(m[0], v[1], m[1]));
+        next.push_back(Tri(m[2], m[1], v[2]));
+        next.push_back(Tri(m[0], m[1], m[2]));
+      } else if (n == 1) {
+        const int k = m[0] >= 0 ? 0 : m[1] >= 0 ? 1 : 2;  // the split edge, from v[k]
+        const int a = v[k], b = v[(k + 1) % 3], c = v[(k + 2) % 3];
+        next.push_back(Tri(a, m[k], c));
+        next.push_back(Tri(m[k], b, c));
+      } else {
+        const int k = m[0] < 0 ? 0 : m[1] < 0 ? 1 : 2;  // the edge not split
+        const int s = (k + 1) % 3;                      // edges s and s+1 are split
+        const int a = v[s], b = v[(s + 1) % 3], c = v[(s + 2) % 3];
+        const int ab = m[s], bc = m[(s + 1) % 3];
+        next.push_back(Tri(ab, b, bc));
+        next.push_back(Tri(a, ab, bc));
+        next.push_back(Tri(a, bc, c));
+      }
+    }
+    const bool changed = !mid.empty();
+    out.triangles = std::move(next);
+    if (!changed) break;
+  }
+  return out;
 }
 
 }  // namespace inhand

@@ -6,7 +6,9 @@
 #include <cstdio>
 
 #include "inhand/core/error.h"
+#include "inhand/core/parallel.h"
 #include "inhand/core/pose.h"
+#include "inhand/geometry/surface_distance.h"
 #include "inhand/grasp/hold_test.h"
 #include "inhand/robot/robot_scenes.h"
 #include "inhand/scan/registration.h"
@@ -28,11 +30,38 @@ std::vector<Vec3> observedPoints(const ObjectModel& m) {
   return out;
 }
 
+// How far a frame bears out the model at T_B_O where it faces the camera: of the points facing it
+// (`surface_O`, outward normals) in view on pixels that measured something and are not hidden,
+// the fraction measured within 1 cm of the point's depth. Unlike depthSupport, a facing point
+// that the frame shows something in front of counts against: a model pushed behind what the
+// camera sees (into the object, where every point is "occluded") is not borne out. -1: none.
+double facingSupport(const DepthImage& d, const Iso3& T_B_C, const CameraIntrinsics& K,
+                     const std::vector<uint8_t>& hidden, const std::vector<SurfacePoint>& surface_O,
+                     const Iso3& T_B_O) {
+  const Iso3 T_C_O = T_B_C.inverse() * T_B_O;
+  int support = 0, against = 0;
+  for (const SurfacePoint& s : surface_O) {
+    const Vec3 p = T_C_O * s.p;
+    if (p.z() <= 0.1 || (T_C_O.linear() * s.n).dot(p) >= 0) continue;  // facing away
+    const Vec2 uv = K.project(p);
+    const int u = int(std::lround(uv.x())), v = int(std::lround(uv.y()));
+    if (u < 0 || v < 0 || u >= d.width || v >= d.height) continue;
+    const size_t i = size_t(v) * size_t(d.width) + size_t(u);
+    const float z = d.depth_m[i];
+    if (!(z > 0) || hidden[i]) continue;
+    if (std::abs(z - p.z()) < 0.01)
+      ++support;
+    else
+      ++against;
+  }
+  return support + against == 0 ? -1.0 : double(support) / (support + against);
+}
+
 // The model registered to one frame of the table aimed over look_at_B: the object's points (the
 // largest cluster above the table near there), the model's resting orientations at headings over
 // them as starts, the robot's pixels and the table's (at most 5 mm above its top) pairing with
-// nothing; the registration the frame bears out most (the smaller residual among those within
-// 2 % of it).
+// nothing; the registration the frame bears out most (facingSupport) and that covers most of the
+// object's points.
 void findOnTable(RobotInterface& robot, DepthSensor& sensor, const ObjectModel& model,
                  const Vec3& look_at_B, const RegraspOptions& o, RegraspResult& out,
                  const std::function<void(const std::string&)>& log) {
@@ -67,35 +96,54 @@ void findOnTable(RobotInterface& robot, DepthSensor& sensor, const ObjectModel& 
   Vec3 centre_B = Vec3::Zero();
   for (const Vec3& p : object.points_O) centre_B += guess * p;
   centre_B /= double(std::max<size_t>(1, object.points_O.size()));
-  std::vector<uint8_t> hidden = mask;
+  // The table (its pixels at most 5 mm above its top) is no return for the registration: the
+  // model is drawn to the object's pixels and away from the table's, and pairs with neither.
+  DepthImage objectOnly = d;
   for (int v = 0; v < d.height; ++v)
     for (int u = 0; u < d.width; ++u) {
       const size_t i = size_t(v) * size_t(d.width) + size_t(u);
       const float z = d.depth_m[i];
-      if (z > 0 && (*aim * (double(z) * K.rayZ1(u, v))).z() < top + 0.005) hidden[i] = 1;
+      if (z > 0 && (*aim * (double(z) * K.rayZ1(u, v))).z() < top + 0.005)
+        objectOnly.depth_m[i] = 0;
     }
   const std::vector<Iso3> starts =
       restingStarts(model.mesh, centre_B, aim->translation(), top, o.orientations, o.headings);
   out.starts = int(starts.size());
-  const std::vector<Vec3> known_O = observedPoints(model);
+  const RegistrationModel reg = registrationModel(model, o.scan.tracking);
+  // Each registration: how far the frame bears the model out where it faces the camera, and how
+  // much of the object's points (up to 2000) lie within 4 mm of the model's surface (a model that
+  // fits the faces it shows may still leave part of the object uncovered: a box slid along its
+  // top face). The best bears out and covers most (their sum; the smaller residual within 1 %).
   struct Fit {
     Iso3 T;
-    double support, rms;
+    double support, rms, covered = 0;
   };
   std::vector<Fit> fits;
-  double most = -1;
-  for (const auto& [T, r] : registerModelAt(registrationModel(model, o.scan.tracking), d, hidden,
-                                            *aim, K, o.noise, o.scan.tracking, starts)) {
-    if (!T) continue;
-    std::vector<Vec3> at_B;
-    for (const Vec3& p : known_O) at_B.push_back(*T * p);
-    fits.push_back({*T, depthSupport(d, *aim, K, hidden, at_B), r.rms_m});
-    most = std::max(most, fits.back().support);
-  }
+  for (const auto& [T, r] :
+       registerModelAt(reg, objectOnly, mask, *aim, K, o.noise, o.scan.tracking, starts))
+    if (T) fits.push_back({*T, facingSupport(d, *aim, K, mask, reg.points, *T), r.rms_m});
+  std::vector<Vec3> seen_B;
+  const size_t every = object.points_O.size() / 2000 + 1;
+  for (size_t k = 0; k < object.points_O.size(); k += every)
+    seen_B.push_back(guess * object.points_O[k]);
+  const TriangleDistanceIndex surface(model.mesh);
+  parallelFor(0, int(fits.size()), [&](int k) {
+    Fit& f = fits[size_t(k)];
+    if (f.support < o.min_support || seen_B.empty()) return;
+    const Iso3 T_O_B = f.T.inverse();
+    int near = 0;
+    for (const Vec3& p : seen_B) near += surface.within(T_O_B * p, 0.004);
+    f.covered = double(near) / double(seen_B.size());
+  });
   const Fit* best = nullptr;
+  double most = -1;
+  for (const Fit& f : fits) most = std::max(most, f.support);
+  auto score = [](const Fit& f) { return f.support + f.covered; };
   for (const Fit& f : fits)
-    if (f.support >= most - 0.02 && (!best || f.rms < best->rms)) best = &f;
-  if (!best || best->support < o.min_support) {
+    if (f.support >= o.min_support && (!best || score(f) > score(*best) + 0.01 ||
+                                       (score(f) > score(*best) - 0.01 && f.rms < best->rms)))
+      best = &f;
+  if (!best) {
     out.failure = "not_registered";
     log("the model does not fit what the camera sees (best " +
         std::to_string(int(std::lround(100 * std::max(0.0, most)))) + " % borne out)");
@@ -106,8 +154,10 @@ void findOnTable(RobotInterface& robot, DepthSensor& sensor, const ObjectModel& 
   out.rms_m = best->rms;
   char line[200];
   std::snprintf(line, sizeof line,
-                "found: the model registered from %d starts, %d %% borne out, residual %.2f mm",
-                out.starts, int(std::lround(100 * out.support)), 1000 * out.rms_m);
+                "found: the model registered from %d starts, %d %% borne out, %d %% of the "
+                "object's points covered, residual %.2f mm",
+                out.starts, int(std::lround(100 * out.support)),
+                int(std::lround(100 * best->covered)), 1000 * out.rms_m);
   log(line);
 }
 
@@ -186,7 +236,14 @@ RegraspResult pickUpKnownObject(RobotInterface& robot, DepthSensor& sensor,
   if (!robot.joints().isApprox(home, 1e-9))
     robot.execute({robot.joints(), home}, [](const JointVector&) {});
   auto t0 = Clock::now();
-  findOnTable(robot, sensor, model_O, look_at_B, options, out, log);
+  // Registration works on the model's surface points: a coarse model (a box of 12 triangles) is
+  // subdivided to edges of at most 4 mm first.
+  ObjectModel dense;
+  dense.observed = model_O.observed;
+  if (dense.observed.size() != model_O.mesh.vertices.size())
+    dense.observed.assign(model_O.mesh.vertices.size(), 1);
+  dense.mesh = subdivided(model_O.mesh, 0.004, &dense.observed);
+  findOnTable(robot, sensor, dense, look_at_B, options, out, log);
   out.find_s = secondsFrom(t0);
   if (!out.T_B_O) return out;
 
@@ -231,7 +288,7 @@ RegraspResult pickUpKnownObject(RobotInterface& robot, DepthSensor& sensor,
     } else {
       robot.execute({robot.joints(), m.withArm(robot.joints(), m.arm(c.q_lift))},
                     [](const JointVector&) {});
-      checkLift(robot, sensor, model_O, *achieved, *out.T_B_O, options, out);
+      checkLift(robot, sensor, dense, *achieved, *out.T_B_O, options, out);
       out.weighed_kg = weighAt(m, robot.joints(), robot.jointTorques(), *achieved, object.com_O);
       out.lifted = out.weighed_kg >= 0 ? out.weighed_kg > 0.5 * mass_kg
                                        : out.in_hand > 0.5 && !(out.on_table > 0.5);

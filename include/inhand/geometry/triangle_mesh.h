@@ -98,6 +98,13 @@ std::vector<SurfacePoint> surfaceSamples(const TriangleMesh& mesh, double spacin
 // with its triangle's outward normal. In mesh order: the same points for the same mesh.
 std::vector<SurfacePoint> evenSurfaceSamples(const TriangleMesh& mesh, double spacing_m);
 
+// The mesh with every edge longer than max_edge_m split at its middle until none is (red-green
+// refinement: a triangle with one, two or three split edges becomes two, three or four, so that
+// neighbours stay joined and the orientation is kept); the surface is unchanged. `flags` (optional,
+// one per vertex) is extended: a new vertex is flagged when both ends of its edge are.
+TriangleMesh subdivided(const TriangleMesh& mesh, double max_edge_m,
+                        std::vector<uint8_t>* flags = nullptr);
+
 // Checks indices and finite coordinates; returns an empty string when valid, else the problem.
 std::string validateMesh(const TriangleMesh& mesh);
 
