@@ -1341,3 +1341,43 @@ TEST(Geometry, ClusteringKeepsTheShapeWithinACellAndStlRoundTrips) {
   EXPECT_EQ(back.vertices.size(), fewer.vertices.size());
   EXPECT_NEAR(massProperties(back).volume_m3, massProperties(fewer).volume_m3, 1e-12);
 }
+
+// Subdivision splits every long edge and leaves the surface as it was: the same enclosed volume
+// and area (exact: midpoints lie on the edges), closed (every edge shared by two triangles, so
+// the volume is still the box's), flags carried to the midpoints of flagged edges only.
+TEST(Geometry, SubdividedSplitsEveryLongEdgeAndKeepsTheSurface) {
+  const TriangleMesh box = makeBox(Vec3(0.06, 0.05, 0.10));
+  std::vector<uint8_t> flags(box.vertices.size(), 1);
+  flags[0] = 0;
+  const TriangleMesh fine = subdivided(box, 0.01, &flags);
+  ASSERT_EQ(flags.size(), fine.vertices.size());
+  EXPECT_GT(fine.triangles.size(), 100 * box.triangles.size() / 10);
+  std::map<std::pair<int, int>, int> edges;
+  double area = 0;
+  for (const Tri& t : fine.triangles) {
+    for (int k = 0; k < 3; ++k) {
+      const int a = t[k], b = t[(k + 1) % 3];
+      EXPECT_LE((fine.vertices[size_t(a)] - fine.vertices[size_t(b)]).norm(), 0.01 + 1e-6);
+      ++edges[std::minmax(a, b)];
+    }
+    const Vec3 p = fine.vertices[size_t(t[0])].cast<double>();
+    area += 0.5 * (fine.vertices[size_t(t[1])].cast<double>() - p)
+                      .cross(fine.vertices[size_t(t[2])].cast<double>() - p)
+                      .norm();
+  }
+  for (const auto& [e, n] : edges) EXPECT_EQ(n, 2) << e.first << " " << e.second;
+  EXPECT_NEAR(area, 2 * (0.06 * 0.05 + 0.06 * 0.10 + 0.05 * 0.10), 1e-6);
+  EXPECT_NEAR(massProperties(fine).volume_m3, 0.06 * 0.05 * 0.10, 1e-9);
+  // A vertex is unflagged only where it lies on an edge from the unflagged corner's side.
+  int unflagged = 0;
+  for (size_t k = 0; k < flags.size(); ++k)
+    if (!flags[k]) {
+      ++unflagged;
+      const Vec3f d = fine.vertices[k] - box.vertices[0];
+      int off = 0;  // coordinates away from the corner: on an edge or face through it
+      for (int a = 0; a < 3; ++a) off += std::abs(d[a]) > 1e-6f;
+      EXPECT_LE(off, 2);
+    }
+  EXPECT_GE(unflagged, 1);
+  EXPECT_THROW(subdivided(box, 0), std::runtime_error);
+}

@@ -513,3 +513,47 @@ TEST(GraspGeneration, FirstContactApproachNeverStartsInsideTheObject) {
   EXPECT_STREQ(graspApproachName(a), "first_contact");
   EXPECT_FALSE(parseGraspApproach("slide", &a));
 }
+
+// A grasp set made again where the grasps were found gives the same grasps (the hand comes along
+// the same palm axis to the same first contact and closes the same way), in the set's order; the
+// same set on the box turned a quarter turn about the vertical as well (the grasps are in O); and
+// a grasp whose approach comes up through the table cannot be made.
+TEST(GraspGeneration, AGraspSetMadeAgainGivesTheSameGrasps) {
+  const RobotModel& r = test::wam();
+  const TriangleMesh box = makeBox(Vec3(0.05, 0.07, 0.12));
+  Iso3 T_B_O(Eigen::Translation3d(r.camera().lookAt_B.x(), r.camera().lookAt_B.y(),
+                                  r.table().topZ() + 0.06));
+  GraspOptions o;
+  o.approaches = 16;
+  o.rolls = 2;
+  const GraspGeneration g = generateGrasps(r, box, T_B_O, r.home(), o);
+  ASSERT_GE(g.candidates.size(), 3u);
+  std::vector<KnownGrasp> set;
+  for (size_t k = 0; k < 3; ++k) set.push_back({g.candidates[k].T_O_palm, g.candidates[k].q_open});
+  KnownGrasp below;  // palm z (into the object) up: the hand would come from under the table
+  below.T_O_palm.translation() = Vec3(0, 0, -0.2);
+  below.hand = r.preshapedHand(0, 0);
+  set.push_back(below);
+  for (double turn : {0.0, M_PI / 2}) {
+    const Iso3 T = Iso3(Eigen::AngleAxisd(turn, Vec3::UnitZ())) * T_B_O;
+    const Iso3 at(Eigen::Translation3d(T_B_O.translation() - T.translation()));
+    const GraspGeneration again = graspsFromSet(r, box, at * T, r.home(), set, o);
+    ASSERT_EQ(again.poses.size(), set.size());
+    EXPECT_NE(again.poses[3].result, "kept");
+    ASSERT_GE(again.candidates.size(), 2u) << "turn " << turn;
+    for (size_t k = 0; k < again.candidates.size(); ++k) {
+      const GraspCandidate& c = again.candidates[k];
+      ASSERT_LT(c.pose, 3);
+      if (k > 0) {
+        EXPECT_GT(c.pose, again.candidates[k - 1].pose);  // the set's order
+      }
+      const GraspCandidate& was = g.candidates[size_t(c.pose)];
+      EXPECT_LT((c.T_O_palm.translation() - was.T_O_palm.translation()).norm(), 0.002);
+      EXPECT_LT(rotationBetween(c.T_O_palm, was.T_O_palm), 1e-6);
+      EXPECT_NEAR(c.epsilon, was.epsilon, 0.2 * was.epsilon + 1e-3);
+    }
+  }
+  KnownGrasp wrong = set[0];
+  wrong.hand = JointVector::Zero(3);
+  EXPECT_THROW(graspsFromSet(r, box, T_B_O, r.home(), {wrong}, o), std::runtime_error);
+}

@@ -358,7 +358,7 @@ std::vector<SurfacePoint> evenSurfaceSamples(const TriangleMesh& mesh, double sp
 }
 
 TriangleMesh subdivided(const TriangleMesh& mesh, double max_edge_m, std::vector<uint8_t>* flags) {
-  INHAND_CHECK(max_edge_m > 0, "subdivided: the edge length must be positive");
+  if (!(max_edge_m > 0)) throw Error("subdivided: the edge length must be positive");
   TriangleMesh out = mesh;
   const float max2 = float(max_edge_m * max_edge_m);
   for (int pass = 0; pass < 64; ++pass) {
