@@ -4,6 +4,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <limits>
 
 #include "inhand/core/error.h"
 #include "inhand/core/parallel.h"
@@ -32,24 +33,38 @@ std::vector<Vec3> observedPoints(const ObjectModel& m) {
 
 // How far a frame bears out the model at T_B_O where it faces the camera: of the points facing it
 // (`surface_O`, outward normals) in view on pixels that measured something and are not hidden,
-// the fraction measured within 1 cm of the point's depth. Unlike depthSupport, a facing point
+// and not behind the model's own nearer surface, the fraction measured within 1 cm of the
+// point's depth. Unlike depthSupport, a facing point
 // that the frame shows something in front of counts against: a model pushed behind what the
 // camera sees (into the object, where every point is "occluded") is not borne out. -1: none.
 double facingSupport(const DepthImage& d, const Iso3& T_B_C, const CameraIntrinsics& K,
                      const std::vector<uint8_t>& hidden, const std::vector<SurfacePoint>& surface_O,
                      const Iso3& T_B_O) {
   const Iso3 T_C_O = T_B_C.inverse() * T_B_O;
-  int support = 0, against = 0;
+  // The facing points in view, and the model's own nearest depth per 4 × 4 pixel cell: a facing
+  // point more than 1 cm behind it is hidden by the model itself (a mug's handle).
+  struct Seen {
+    size_t pixel, cell;
+    double z;
+  };
+  std::vector<Seen> seen;
+  const int cw = (d.width + 3) / 4, ch = (d.height + 3) / 4;
+  std::vector<double> nearest(size_t(cw) * size_t(ch), std::numeric_limits<double>::infinity());
   for (const SurfacePoint& s : surface_O) {
     const Vec3 p = T_C_O * s.p;
     if (p.z() <= 0.1 || (T_C_O.linear() * s.n).dot(p) >= 0) continue;  // facing away
     const Vec2 uv = K.project(p);
     const int u = int(std::lround(uv.x())), v = int(std::lround(uv.y()));
     if (u < 0 || v < 0 || u >= d.width || v >= d.height) continue;
-    const size_t i = size_t(v) * size_t(d.width) + size_t(u);
-    const float z = d.depth_m[i];
-    if (!(z > 0) || hidden[i]) continue;
-    if (std::abs(z - p.z()) < 0.01)
+    const size_t cell = size_t(v / 4) * size_t(cw) + size_t(u / 4);
+    nearest[cell] = std::min(nearest[cell], p.z());
+    seen.push_back({size_t(v) * size_t(d.width) + size_t(u), cell, p.z()});
+  }
+  int support = 0, against = 0;
+  for (const Seen& s : seen) {
+    const float z = d.depth_m[s.pixel];
+    if (!(z > 0) || hidden[s.pixel] || s.z > nearest[s.cell] + 0.01) continue;
+    if (std::abs(z - s.z) < 0.01)
       ++support;
     else
       ++against;
