@@ -174,6 +174,10 @@ int runRegraspTest(const RegraspArgs& args) {
                  {"find_s", r.find_s},
                  {"plan_s", r.plan_s},
                  {"pick_s", r.pick_s}};
+  Json made = Json::array();  // what became of each working grasp where the object lies
+  for (size_t k = 0; k < r.generation.poses.size() && k < index.size(); ++k)
+    made.push_back({{"grasp", index[k]}, {"result", r.generation.poses[k].result}});
+  report["working_grasps_here"] = made;
   bool found = false;
   if (r.T_B_O) {
     const PoseError e = poseError(object, truth, *r.T_B_O);

@@ -9,6 +9,7 @@
 #include "inhand/core/error.h"
 #include "inhand/core/parallel.h"
 #include "inhand/core/pose.h"
+#include "inhand/geometry/stable_poses.h"
 #include "inhand/geometry/surface_distance.h"
 #include "inhand/grasp/hold_test.h"
 #include "inhand/robot/robot_scenes.h"
@@ -72,14 +73,64 @@ double facingSupport(const DepthImage& d, const Iso3& T_B_C, const CameraIntrins
   return support + against == 0 ? -1.0 : double(support) / (support + against);
 }
 
+// T_B_O, then the poses that put a symmetric object's surface where T_B_O puts it (a can on its
+// side rolled, a box turned over): the model in each of its 4 most probable resting orientations
+// (stablePoses), at headings every 5° about the vertical, its centre over T_B_O's and its lowest
+// point on the table top, whose surface lies within 1.5 mm of the model at T_B_O on average (500
+// points); each more than 10° from those before, at most 8, the nearest first.
+std::vector<Iso3> turnsAsGood(const TriangleMesh& mesh, const Iso3& T_B_O, double top) {
+  std::vector<Iso3> out{T_B_O};
+  std::vector<StablePose> rests;
+  try {
+    rests = stablePoses(mesh);
+  } catch (const Error&) {
+    return out;
+  }
+  const std::vector<Vec3> points = sampleSurfaceUniform(mesh, 500, 11);
+  const TriangleDistanceIndex index(mesh);
+  const Vec3 c = mesh.bounds().center(), at = T_B_O * c;
+  const size_t turns = std::min<size_t>(rests.size(), 4) * 72;
+  std::vector<std::pair<double, Iso3>> all(turns, {1.0, Iso3::Identity()});
+  parallelFor(0, int(turns), [&](int i) {
+    Iso3 T = Iso3::Identity();
+    T.linear() =
+        Eigen::AngleAxisd((i % 72) * M_PI / 36, Vec3::UnitZ()) * rests[size_t(i / 72)].R_B_O;
+    double lowest = std::numeric_limits<double>::infinity();
+    for (const Vec3f& v : mesh.vertices) lowest = std::min(lowest, (T * v.cast<double>()).z());
+    const Vec3 c_B = T * c;
+    T.translation() = Vec3(at.x() - c_B.x(), at.y() - c_B.y(), top - lowest);
+    const Iso3 moved = T_B_O.inverse() * T;
+    // The first 100 points tell most turns apart: those off by 3 mm on average stop there.
+    double sum = 0;
+    for (size_t k = 0; k < points.size(); ++k) {
+      sum += index.distance(moved * points[k], 0.01);
+      if (k == 99 && sum > 100 * 0.003) return;
+    }
+    all[size_t(i)] = {sum / double(std::max<size_t>(1, points.size())), T};
+  });
+  std::vector<std::pair<double, Iso3>> near;
+  for (const auto& a : all)
+    if (a.first <= 0.0015) near.push_back(a);
+  std::stable_sort(near.begin(), near.end(),
+                   [](const auto& a, const auto& b) { return a.first < b.first; });
+  for (const auto& [mean, T] : near) {
+    if (out.size() >= 9) break;
+    const bool other = std::all_of(out.begin(), out.end(), [&](const Iso3& U) {
+      return rotationBetween(U, T) > 10 * M_PI / 180;
+    });
+    if (other) out.push_back(T);
+  }
+  return out;
+}
+
 // The model registered to one frame of the table aimed over look_at_B: the object's points (the
 // largest cluster above the table near there), the model's resting orientations at headings over
 // them as starts, the robot's pixels and the table's (at most 5 mm above its top) pairing with
 // nothing; the registration the frame bears out most (facingSupport) and that covers most of the
-// object's points.
-void findOnTable(RobotInterface& robot, DepthSensor& sensor, const ObjectModel& model,
-                 const Vec3& look_at_B, const RegraspOptions& o, RegraspResult& out,
-                 const std::function<void(const std::string&)>& log) {
+// object's points, set down on the table top when within 5 mm of it.
+std::vector<Iso3> findOnTable(RobotInterface& robot, DepthSensor& sensor, const ObjectModel& model,
+                              const Vec3& look_at_B, const RegraspOptions& o, RegraspResult& out,
+                              const std::function<void(const std::string&)>& log) {
   const RobotModel& m = robot.model();
   const CameraIntrinsics& K = sensor.camera().intrinsics;
   const double top = m.table().topZ();
@@ -94,7 +145,7 @@ void findOnTable(RobotInterface& robot, DepthSensor& sensor, const ObjectModel& 
   if (!frame) {
     out.failure = "object_not_found";
     log("no usable frame of the table");
-    return;
+    return {};
   }
   const DepthImage& d = *frame;
   const RobotOccluders scenes(m);
@@ -106,7 +157,7 @@ void findOnTable(RobotInterface& robot, DepthSensor& sensor, const ObjectModel& 
   if (object.problem == Termination::kObjectNotFound) {
     out.failure = "object_not_found";
     log("no object on the table there");
-    return;
+    return {};
   }
   Vec3 centre_B = Vec3::Zero();
   for (const Vec3& p : object.points_O) centre_B += guess * p;
@@ -162,9 +213,19 @@ void findOnTable(RobotInterface& robot, DepthSensor& sensor, const ObjectModel& 
     out.failure = "not_registered";
     log("the model does not fit what the camera sees (best " +
         std::to_string(int(std::lround(100 * std::max(0.0, most)))) + " % borne out)");
-    return;
+    return {};
   }
-  out.T_B_O = best->T;
+  // The object rests on the table: the model's lowest point on its top (the registration leaves
+  // it a millimetre or two above or in it; the set's grasps were made with the model resting so).
+  auto onTable = [&](Iso3 T) {
+    double lowest = std::numeric_limits<double>::infinity();
+    for (const Vec3f& v : model.mesh.vertices)
+      lowest = std::min(lowest, (T * v.cast<double>()).z());
+    if (std::abs(top - lowest) < 0.005) T.translation().z() += top - lowest;
+    return T;
+  };
+  std::vector<Iso3> equivalent = turnsAsGood(model.mesh, onTable(best->T), top);
+  out.T_B_O = equivalent.front();
   out.support = best->support;
   out.rms_m = best->rms;
   char line[200];
@@ -174,6 +235,7 @@ void findOnTable(RobotInterface& robot, DepthSensor& sensor, const ObjectModel& 
                 out.starts, int(std::lround(100 * out.support)),
                 int(std::lround(100 * best->covered)), 1000 * out.rms_m);
   log(line);
+  return equivalent;
 }
 
 // After the lift: how far a frame aimed at the hand bears out the model where the hand holds it
@@ -258,13 +320,28 @@ RegraspResult pickUpKnownObject(RobotInterface& robot, DepthSensor& sensor,
   if (dense.observed.size() != model_O.mesh.vertices.size())
     dense.observed.assign(model_O.mesh.vertices.size(), 1);
   dense.mesh = subdivided(model_O.mesh, 0.004, &dense.observed);
-  findOnTable(robot, sensor, dense, look_at_B, options, out, log);
+  const std::vector<Iso3> equivalent =
+      findOnTable(robot, sensor, dense, look_at_B, options, out, log);
   out.find_s = secondsFrom(t0);
   if (!out.T_B_O) return out;
 
   // The set's grasps made here, tried on the model in physics at its mass.
   t0 = Clock::now();
-  out.generation = graspsFromSet(m, model_O.mesh, *out.T_B_O, robot.joints(), set, options.grasp);
+  // A symmetric object fits the frame as well turned: the first pose, in the order found, where
+  // the set's grasps can be made (the object is the same there; its frame O is not).
+  for (size_t k = 0; k < equivalent.size(); ++k) {
+    out.generation =
+        graspsFromSet(m, model_O.mesh, equivalent[k], robot.joints(), set, options.grasp);
+    if (out.generation.candidates.empty()) continue;
+    if (k > 0) {
+      log("the set's grasps are made on a pose as well borne out, turned " +
+          std::to_string(
+              int(std::lround(180 / M_PI * rotationBetween(equivalent[0], equivalent[k])))) +
+          "° from the best (the object's symmetry)");
+      out.T_B_O = equivalent[k];
+    }
+    break;
+  }
   std::vector<GraspCandidate>& made = out.generation.candidates;
   out.made = int(made.size());
   if (made.empty()) {
