@@ -1,5 +1,6 @@
 #include "inhand/scan/regrasp.h"
 
+#include <Eigen/Geometry>
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -75,10 +76,11 @@ double facingSupport(const DepthImage& d, const Iso3& T_B_C, const CameraIntrins
 
 // T_B_O, then the poses that put a symmetric object's surface where T_B_O puts it (a can on its
 // side rolled, a box turned over): the model in each of its 4 most probable resting orientations
-// (stablePoses), at headings every 5° about the vertical, its centre over T_B_O's and its lowest
-// point on the table top, whose surface lies within 1.5 mm of the model at T_B_O on average (500
-// points); each more than 10° from those before, at most 8, the nearest first.
-std::vector<Iso3> turnsAsGood(const TriangleMesh& mesh, const Iso3& T_B_O, double top) {
+// (stablePoses) at headings every 5° about the vertical, its surface's centroid where T_B_O puts
+// it, whose surface lies within 1.5 mm of the model at T_B_O on average (500 points), each brought
+// onto it by 10 rounds of point-to-point ICP (nearest points, Umeyama's motion); each more than
+// 10° from those before, at most 8, the nearest first.
+std::vector<Iso3> turnsAsGood(const TriangleMesh& mesh, const Iso3& T_B_O) {
   std::vector<Iso3> out{T_B_O};
   std::vector<StablePose> rests;
   try {
@@ -87,34 +89,54 @@ std::vector<Iso3> turnsAsGood(const TriangleMesh& mesh, const Iso3& T_B_O, doubl
     return out;
   }
   const std::vector<Vec3> points = sampleSurfaceUniform(mesh, 500, 11);
+  if (points.empty()) return out;
   const TriangleDistanceIndex index(mesh);
-  const Vec3 c = mesh.bounds().center(), at = T_B_O * c;
+  Vec3 c = Vec3::Zero();
+  for (const Vec3& p : points) c += p;
+  c /= double(points.size());
+  const Vec3 at = T_B_O * c;
+  // The mean distance of the points moved by `moved` (frame O to frame O) from the surface.
+  auto meanDistance = [&](const Iso3& moved) {
+    double sum = 0;
+    for (size_t k = 0; k < points.size(); ++k) {
+      sum += index.distance(moved * points[k], 0.01);
+      if (k == 99 && sum > 100 * 0.003) return 1.0;  // most turns are told apart here
+    }
+    return sum / double(points.size());
+  };
   const size_t turns = std::min<size_t>(rests.size(), 4) * 72;
   std::vector<std::pair<double, Iso3>> all(turns, {1.0, Iso3::Identity()});
   parallelFor(0, int(turns), [&](int i) {
     Iso3 T = Iso3::Identity();
     T.linear() =
         Eigen::AngleAxisd((i % 72) * M_PI / 36, Vec3::UnitZ()) * rests[size_t(i / 72)].R_B_O;
-    double lowest = std::numeric_limits<double>::infinity();
-    for (const Vec3f& v : mesh.vertices) lowest = std::min(lowest, (T * v.cast<double>()).z());
-    const Vec3 c_B = T * c;
-    T.translation() = Vec3(at.x() - c_B.x(), at.y() - c_B.y(), top - lowest);
-    const Iso3 moved = T_B_O.inverse() * T;
-    // The first 100 points tell most turns apart: those off by 3 mm on average stop there.
-    double sum = 0;
-    for (size_t k = 0; k < points.size(); ++k) {
-      sum += index.distance(moved * points[k], 0.01);
-      if (k == 99 && sum > 100 * 0.003) return;
-    }
-    all[size_t(i)] = {sum / double(std::max<size_t>(1, points.size())), T};
+    T.translation() = at - T.linear() * c;
+    all[size_t(i)] = {meanDistance(T_B_O.inverse() * T), T};
   });
   std::vector<std::pair<double, Iso3>> near;
   for (const auto& a : all)
     if (a.first <= 0.0015) near.push_back(a);
   std::stable_sort(near.begin(), near.end(),
                    [](const auto& a, const auto& b) { return a.first < b.first; });
-  for (const auto& [mean, T] : near) {
+  for (auto [mean, T] : near) {
     if (out.size() >= 9) break;
+    // Brought onto the surface at T_B_O: the points at T paired with their nearest on it.
+    for (int round = 0; round < 10; ++round) {
+      const Iso3 moved = T_B_O.inverse() * T;
+      Eigen::Matrix3Xd src(3, long(points.size())), dst(3, long(points.size()));
+      for (size_t k = 0; k < points.size(); ++k) {
+        int tri = -1;
+        Vec3 q;
+        index.nearest(moved * points[k], &tri, &q);
+        src.col(long(k)) = T * points[k];
+        dst.col(long(k)) = T_B_O * q;
+      }
+      const Eigen::Matrix4d U = Eigen::umeyama(src, dst, false);
+      Iso3 D = Iso3::Identity();
+      D.linear() = U.block<3, 3>(0, 0);
+      D.translation() = U.block<3, 1>(0, 3);
+      T = D * T;
+    }
     const bool other = std::all_of(out.begin(), out.end(), [&](const Iso3& U) {
       return rotationBetween(U, T) > 10 * M_PI / 180;
     });
@@ -127,7 +149,7 @@ std::vector<Iso3> turnsAsGood(const TriangleMesh& mesh, const Iso3& T_B_O, doubl
 // largest cluster above the table near there), the model's resting orientations at headings over
 // them as starts, the robot's pixels and the table's (at most 5 mm above its top) pairing with
 // nothing; the registration the frame bears out most (facingSupport) and that covers most of the
-// object's points, set down on the table top when within 5 mm of it.
+// object's points.
 std::vector<Iso3> findOnTable(RobotInterface& robot, DepthSensor& sensor, const ObjectModel& model,
                               const Vec3& look_at_B, const RegraspOptions& o, RegraspResult& out,
                               const std::function<void(const std::string&)>& log) {
@@ -215,16 +237,7 @@ std::vector<Iso3> findOnTable(RobotInterface& robot, DepthSensor& sensor, const 
         std::to_string(int(std::lround(100 * std::max(0.0, most)))) + " % borne out)");
     return {};
   }
-  // The object rests on the table: the model's lowest point on its top (the registration leaves
-  // it a millimetre or two above or in it; the set's grasps were made with the model resting so).
-  auto onTable = [&](Iso3 T) {
-    double lowest = std::numeric_limits<double>::infinity();
-    for (const Vec3f& v : model.mesh.vertices)
-      lowest = std::min(lowest, (T * v.cast<double>()).z());
-    if (std::abs(top - lowest) < 0.005) T.translation().z() += top - lowest;
-    return T;
-  };
-  std::vector<Iso3> equivalent = turnsAsGood(model.mesh, onTable(best->T), top);
+  std::vector<Iso3> equivalent = turnsAsGood(model.mesh, best->T);
   out.T_B_O = equivalent.front();
   out.support = best->support;
   out.rms_m = best->rms;
