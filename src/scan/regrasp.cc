@@ -395,8 +395,14 @@ RegraspResult pickUpKnownObject(RobotInterface& robot, DepthSensor& sensor,
                     [](const JointVector&) {});
       checkLift(robot, sensor, dense, *achieved, *out.T_B_O, options, out);
       out.weighed_kg = weighAt(m, robot.joints(), robot.jointTorques(), *achieved, object.com_O);
-      out.lifted = out.weighed_kg >= 0 ? out.weighed_kg > 0.5 * mass_kg
-                                       : out.in_hand > 0.5 && !(out.on_table > 0.5);
+      // The weight decides when it can be the object's (less than half its mass: not in the
+      // hand; more than twice: the torques' noise on a light object, or something else, and the
+      // frame decides, as it does without torques).
+      const bool seen = out.in_hand > 0.5 && !(out.on_table > 0.5);
+      if (out.weighed_kg < 0 || out.weighed_kg >= 2 * mass_kg)
+        out.lifted = seen;
+      else
+        out.lifted = out.weighed_kg > 0.5 * mass_kg;
       if (!out.lifted) out.failure = "not_in_hand";
     }
   }

@@ -56,8 +56,9 @@ struct RegraspResult {
   // centre of mass (weighed_kg; −1: the robot reports no torques).
   bool picked = false;
   double in_hand = -1, on_table = -1, weighed_kg = -1;
-  // The robot's verdict: the torques show at least half the object's mass when the robot reports
-  // torques; else in_hand > 0.5 and on_table ≤ 0.5.
+  // The robot's verdict: with torques, a load of half to twice the object's mass (less: not in
+  // the hand; more: the frame decides, as without torques); the frame: in_hand > 0.5 and
+  // on_table ≤ 0.5.
   bool lifted = false;
   // Why not lifted: object_not_found, not_registered, no_grasp_here, no_contact, empty_hand,
   // not_in_hand; empty when lifted.
