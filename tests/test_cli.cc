@@ -662,7 +662,7 @@ TEST(Cli, ScanOfTheCrackerBoxMeetsItsOutcomeBounds) {
   }
   EXPECT_EQ(listed, tried + int(s["failed_regrasp_attempts"].size()));
   EXPECT_GE(held, 1);
-  EXPECT_LE(ranked, 10);
+  EXPECT_LE(ranked, 4 * 10);  // at most --ranked per stable pose, in up to 4 poses
 }
 
 TEST(Cli, ExportRefusesBadInputByNameAndWritesNothing) {
