@@ -618,11 +618,14 @@ std::vector<GraspCandidate> closeAndKeep(const RobotModel& robot, const Triangle
   return candidates;
 }
 
-// The model's vertices that triangles use (a model cut out of a bigger one keeps others: they
-// would be samples, contacts and bounds of surface that is not there), and its surface samples
-// with outward normals (vertices, plus a lattice on large triangles).
-std::pair<TriangleMesh, std::vector<SurfacePoint>> graspSurface(const TriangleMesh& model,
+// The options checked; the model's vertices that triangles use (a model cut out of a bigger one
+// keeps others: they would be samples, contacts and bounds of surface that is not there), and its
+// surface samples with outward normals (vertices, plus a lattice on large triangles).
+std::pair<TriangleMesh, std::vector<SurfacePoint>> graspSurface(const RobotModel& robot,
+                                                                const TriangleMesh& model,
                                                                 const GraspOptions& o) {
+  if (std::string p = o.validate(); !p.empty()) throw Error("grasp options: " + p);
+  INHAND_CHECK(!robot.fingers().empty(), "the hand has no fingers to grasp with");
   TriangleMesh mesh = withoutUnusedVertices(model);
   std::vector<SurfacePoint> samples = surfaceSamples(mesh, 0.5 * o.contact_cell_m);
   return {std::move(mesh), std::move(samples)};
@@ -633,11 +636,8 @@ GraspGeneration generateGrasps(const RobotModel& robot, const TriangleMesh& mode
                                const Iso3& T_B_O, const JointVector& q_now, const GraspOptions& o,
                                const std::vector<Vec3>* footprint_O) {
   const auto t0 = std::chrono::steady_clock::now();
-  std::string problem = o.validate();
-  if (!problem.empty()) throw Error("grasp options: " + problem);
-  INHAND_CHECK(!robot.fingers().empty(), "the hand has no fingers to grasp with");
   GraspGeneration out;
-  const auto [mesh, samples] = graspSurface(model, o);
+  const auto [mesh, samples] = graspSurface(robot, model, o);
   if (mesh.empty()) return out;
   const std::vector<Pose> poses =
       candidatePoses(robot, samples, mesh.bounds().center(),
@@ -657,11 +657,8 @@ GraspGeneration graspsFromSet(const RobotModel& robot, const TriangleMesh& model
                               const JointVector& q_now, const std::vector<KnownGrasp>& set,
                               const GraspOptions& o) {
   const auto t0 = std::chrono::steady_clock::now();
-  std::string problem = o.validate();
-  if (!problem.empty()) throw Error("grasp options: " + problem);
-  INHAND_CHECK(!robot.fingers().empty(), "the hand has no fingers to grasp with");
   GraspGeneration out;
-  const auto [mesh, samples] = graspSurface(model, o);
+  const auto [mesh, samples] = graspSurface(robot, model, o);
   if (mesh.empty()) return out;
   std::vector<Pose> poses;
   const int s = robot.spreadVariable();
