@@ -79,14 +79,6 @@ std::optional<std::pair<Iso3, double>> refindInHand(
   return std::make_pair(*found, support);
 }
 
-// The model's observed vertices, every 7th (enough for depthSupport to tell where it lies).
-std::vector<Vec3> observedVertices(const ObjectModel& model) {
-  std::vector<Vec3> out;
-  for (size_t k = 0; k < model.mesh.vertices.size(); k += 7)
-    if (model.observed[k]) out.push_back(model.mesh.vertices[k].cast<double>());
-  return out;
-}
-
 // The object found on the table again after it was put down or fell: a frame aimed where it is
 // believed to lie (T_B_O_guess), the largest cluster above the table near there
 // (findObjectOnTable), and the model so far registered to the frame from the believed pose and
@@ -377,11 +369,7 @@ PickOutcome pickAndVerify(ScanSession& session, RobotInterface& robot, DepthSens
       log("pick-up failed (the hand met nothing there); trying the next candidate");
       continue;
     }
-    const JointVector q = robot.joints();
-    bool empty = true;
-    for (const FingerInfo& f : m.fingers())
-      if (std::abs(q[f.variable] - f.closed) > 1e-3) empty = false;
-    if (empty) {
+    if (fingersClosedOnNothing(m, robot.joints())) {
       robot.putDown();
       record("empty_hand");
       log("the fingers closed on nothing; trying the next candidate");

@@ -218,4 +218,18 @@ std::optional<DepthImage> captureUsable(DepthSensor& sensor, const FrameChecks& 
   return std::nullopt;
 }
 
+std::vector<Vec3> observedVertices(const ObjectModel& model) {
+  std::vector<Vec3> out;
+  for (size_t k = 0; k < model.mesh.vertices.size(); k += 7)
+    if (model.observed.empty() || model.observed[k])
+      out.push_back(model.mesh.vertices[k].cast<double>());
+  return out;
+}
+
+bool fingersClosedOnNothing(const RobotModel& robot, const JointVector& q) {
+  for (const FingerInfo& f : robot.fingers())
+    if (std::abs(q[f.variable] - f.closed) > 1e-3) return false;
+  return true;
+}
+
 }  // namespace inhand

@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "inhand/mesh/extract.h"
+#include "inhand/robot/robot_model.h"
 #include "inhand/scan/tracking.h"
 #include "inhand/scan/types.h"
 #include "inhand/sensor/depth_sensor.h"
@@ -49,6 +50,13 @@ std::vector<std::pair<std::optional<Iso3>, TrackResult>> registerModelAt(
 // -1: none counted.
 double depthSupport(const DepthImage& d, const Iso3& T_B_C, const CameraIntrinsics& K,
                     const std::vector<uint8_t>& hidden, const std::vector<Vec3>& points_B);
+
+// Every 7th observed vertex of the model (all of them observed when `observed` is empty): enough
+// for depthSupport to tell where it lies.
+std::vector<Vec3> observedVertices(const ObjectModel& model);
+
+// After a pick-up: every finger closed to its limit, so the hand holds nothing.
+bool fingersClosedOnNothing(const RobotModel& robot, const JointVector& q);
 
 // A frame from the sensor that can be used: one that arrived (the camera's size) with depth in
 // it (checks.min_valid_fraction), non-finite depths as no return; up to `tries` captures. nullopt
