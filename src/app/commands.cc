@@ -620,4 +620,8 @@ int runCompare(const std::string& modelPath, const std::string& truthSpec, doubl
   return 0;
 }
 
+std::string defaultRobotConfig() {
+  return (resourceDirectory("data", INHAND_DATA_DIR) / "robots/wam_barretthand.json").string();
+}
+
 }  // namespace inhand::app

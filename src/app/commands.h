@@ -95,6 +95,9 @@ struct ExportArgs {
   std::string robot;  // robot config for them (default: the WAM + BarrettHand)
 };
 
+// The robot config used when none is given: the WAM + BarrettHand in data/robots.
+std::string defaultRobotConfig();
+
 struct RegraspArgs {
   std::string asset;        // an asset directory (inhand export)
   std::string object;       // the true object: builtin:NAME or a mesh file

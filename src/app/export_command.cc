@@ -182,9 +182,7 @@ int runExport(const ExportArgs& args) {
   if (args.ranked < 0 || args.ranked > 100) throw Error("--ranked must be in 0..100");
   std::optional<RobotModel> robot;
   if (args.ranked > 0)
-    robot = RobotModel::load(args.robot.empty() ? resourceDirectory("data", INHAND_DATA_DIR) /
-                                                      "robots/wam_barretthand.json"
-                                                : fs::path(args.robot));
+    robot = RobotModel::load(args.robot.empty() ? defaultRobotConfig() : args.robot);
   exportAsset(args.input, args.out, formats, options, robot ? &*robot : nullptr, args.ranked);
   return 0;
 }

@@ -90,16 +90,15 @@ PoseError poseError(const TriangleMesh& object, const Iso3& truth, const Iso3& f
   return e;
 }
 
-}  // namespace
-
-int runRegraspTest(const RegraspArgs& args) {
+// The scan options for a regrasp-test (the config file's, physics on whatever it says) and the
+// command line checked.
+ScanConfig regraspConfig(const RegraspArgs& args) {
   ScanConfig o;
   if (!args.config.empty()) readScanConfigFile(args.config, &o);
   if (!args.robot.empty()) o.robot = args.robot;
-  if (o.robot.empty())
-    o.robot = (resourceDirectory("data", INHAND_DATA_DIR) / "robots/wam_barretthand.json").string();
+  if (o.robot.empty()) o.robot = defaultRobotConfig();
   o.sim.seed = args.seed;
-  o.sim.physics.enabled = true;  // the pick-up and the lift in physics, whatever the config says
+  o.sim.physics.enabled = true;  // the pick-up and the lift in physics
   if (std::string p = o.validate(); !p.empty()) throw Error(p);
   if (!(std::isfinite(args.heading_deg) && std::abs(args.heading_deg) <= 360))
     throw Error("--heading: must be degrees in [-360, 360]");
@@ -108,13 +107,12 @@ int runRegraspTest(const RegraspArgs& args) {
   const fs::path out = args.out;
   if (!out.empty() && out.has_parent_path() && !fs::is_directory(out.parent_path()))
     throw Error("--out: " + out.parent_path().string() + " is not a directory");
-  const LoadedAsset asset = readAsset(args.asset);
-  const RobotModel model = RobotModel::load(o.robot);
-  std::vector<int> index;
-  const std::vector<KnownGrasp> set =
-      workingGrasps(asset.grasps, model, (fs::path(args.asset) / "grasps.json").string(), &index);
+  return o;
+}
 
-  // The true object in its rest pose, turned about the vertical.
+// The true object (closed, scaled), with o->sim.R_B_O_rest set to its --rest-pose turned by
+// --heading about the vertical.
+TriangleMesh trueObject(const RegraspArgs& args, ScanConfig* o) {
   TriangleMesh object = withHolesClosed(loadSimulatedObject(args.object, false).mesh);
   if (args.scale != 1)
     for (Vec3f& v : object.vertices) v *= float(args.scale);
@@ -123,25 +121,34 @@ int runRegraspTest(const RegraspArgs& args) {
     throw Error("--rest-pose: " + args.object + " has " + std::to_string(poses.size()) +
                 " stable poses (0.." + std::to_string(int(poses.size()) - 1) + "), not " +
                 std::to_string(args.rest_pose));
-  o.sim.R_B_O_rest = Eigen::AngleAxisd(args.heading_deg * M_PI / 180, Vec3::UnitZ()) *
-                     poses[size_t(args.rest_pose)].R_B_O;
+  o->sim.R_B_O_rest = Eigen::AngleAxisd(args.heading_deg * M_PI / 180, Vec3::UnitZ()) *
+                      poses[size_t(args.rest_pose)].R_B_O;
+  return object;
+}
+
+}  // namespace
+
+int runRegraspTest(const RegraspArgs& args) {
+  ScanConfig o = regraspConfig(args);
+  const LoadedAsset asset = readAsset(args.asset);
+  const RobotModel model = RobotModel::load(o.robot);
+  std::vector<int> index;
+  KnownObject known;
+  known.grasps =
+      workingGrasps(asset.grasps, model, (fs::path(args.asset) / "grasps.json").string(), &index);
+  known.model_O.mesh = asset.model_O;
+  known.model_O.observed = asset.observed;
+  known.mass_kg = asset.mass_kg;
+  known.com_O = asset.com_O;
+  const TriangleMesh object = trueObject(args, &o);
   DepthCameraOptions camera;
   NoiseModelOptions noise;
-  auto [T_O_palm, qGrasp] = defaultGrasp(model, object);
-  (void)qGrasp;
-  SimWorld world(model, object, T_O_palm, camera, noise, o.sim);
+  SimWorld world(model, object, defaultGrasp(model, object).first, camera, noise, o.sim);
   world.held = false;
   world.q = model.home();
   SimRobot robot(&world);
   SimSensor sensor(&world, camera);
   const Iso3 truth = world.tablePose;
-
-  KnownObject known;
-  known.model_O.mesh = asset.model_O;
-  known.model_O.observed = asset.observed;
-  known.mass_kg = asset.mass_kg;
-  known.com_O = asset.com_O;
-  known.grasps = set;
   RegraspOptions ro;
   ro.scan = o.scan;
   ro.table_top = o.multi.table_top;
@@ -152,19 +159,19 @@ int runRegraspTest(const RegraspArgs& args) {
                         [](const std::string& s) { std::printf("regrasp-test: %s\n", s.c_str()); });
 
   // The truth: where the object is, whether it rose with the hand.
-  const Iso3 now = world.objectPose();
-  const double rose = now.translation().z() - truth.translation().z();
+  const double rose = world.objectPose().translation().z() - truth.translation().z();
   const bool held = world.held && rose > 0.5 * ro.grasp.lift_m;
+  auto setIndex = [&](int k) { return k >= 0 ? Json(index[size_t(k)]) : Json(); };
   Json report = {{"asset", args.asset},
                  {"object", args.object},
                  {"rest_pose", args.rest_pose},
                  {"heading_deg", args.heading_deg},
                  {"seed", args.seed},
                  {"set", r.set},
-                 {"working_grasps", set.size()},
+                 {"working_grasps", known.grasps.size()},
                  {"made_here", r.made},
                  {"held_in_hold_test", r.held_in_test},
-                 {"chosen", r.chosen >= 0 ? Json(index[size_t(r.chosen)]) : Json()},
+                 {"chosen", setIndex(r.chosen)},
                  {"robot_says_lifted", r.lifted},
                  {"weighed_kg", r.weighed_kg},
                  {"asset_mass_kg", asset.mass_kg},
@@ -173,31 +180,29 @@ int runRegraspTest(const RegraspArgs& args) {
                  {"rose_m", rose},
                  {"find_s", r.find_s},
                  {"plan_s", r.plan_s},
-                 {"pick_s", r.pick_s}};
-  Json made = Json::array();  // what became of each working grasp where the object lies
+                 {"pick_s", r.pick_s},
+                 {"working_grasps_here", Json::array()}};
   for (size_t k = 0; k < r.generation.poses.size() && k < index.size(); ++k)
-    made.push_back({{"grasp", index[k]}, {"result", r.generation.poses[k].result}});
-  report["working_grasps_here"] = made;
-  bool found = false;
+    report["working_grasps_here"].push_back(
+        {{"grasp", index[k]}, {"result", r.generation.poses[k].result}});
   if (r.T_B_O) {
     const PoseError e = poseError(object, truth, *r.T_B_O);
-    found = e.within();
     report["found"] = {
         {"T_B_O", isoJson(*r.T_B_O)},   {"T_B_O_true", isoJson(truth)},
         {"centre_error_m", e.centre_m}, {"rotation_error_deg", e.rotation_rad * 180 / M_PI},
         {"adds_m", e.adds_m},           {"adds_3deg_m", e.adds_3deg_m},
-        {"support", r.support},         {"within_3mm_3deg", found}};
+        {"support", r.support},         {"within_3mm_3deg", e.within()}};
     std::printf("regrasp-test: found %.1f mm and %.1f° from the truth (ADD-S %.2f mm): %s\n",
                 1000 * e.centre_m, e.rotation_rad * 180 / M_PI, 1000 * e.adds_m,
-                found ? "within 3 mm / 3°" : "not within 3 mm / 3°");
+                e.within() ? "within 3 mm / 3°" : "not within 3 mm / 3°");
   }
   std::printf(
       "regrasp-test: %s (grasp %s of the set; %d of %zu working grasps made here; "
       "%.1f + %.1f + %.1f s)\n",
       held ? "HELD: the object rose with the hand" : "NOT HELD",
-      r.chosen >= 0 ? std::to_string(index[size_t(r.chosen)]).c_str() : "none", r.made, set.size(),
-      r.find_s, r.plan_s, r.pick_s);
-  if (!out.empty()) writeTextAtomically(out, report.dump(1) + "\n");
+      (r.chosen >= 0 ? setIndex(r.chosen).dump() : std::string("none")).c_str(), r.made,
+      known.grasps.size(), r.find_s, r.plan_s, r.pick_s);
+  if (!args.out.empty()) writeTextAtomically(args.out, report.dump(1) + "\n");
   return held ? 0 : 4;
 }
 

@@ -63,8 +63,7 @@ ScanConfig scanConfigFor(const ScanArgs& args) {
   }
   if (!args.config.empty()) readScanConfigFile(args.config, &o);
   if (!args.robot.empty()) o.robot = args.robot;
-  if (o.robot.empty())
-    o.robot = (resourceDirectory("data", INHAND_DATA_DIR) / "robots/wam_barretthand.json").string();
+  if (o.robot.empty()) o.robot = defaultRobotConfig();
   if (args.max_views >= 0) o.scan.max_views = args.max_views;
   if (args.max_grasps != -1) o.multi.max_grasps = args.max_grasps;
   if (!args.hand_mode.empty() && !parseHandMode(args.hand_mode, &o.scan.hand_mode))
