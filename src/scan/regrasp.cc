@@ -110,8 +110,9 @@ std::vector<Iso3> turnsAsGood(const TriangleMesh& mesh, const Iso3& T_B_O) {
     if (a.first <= 0.0015) near.push_back(a);
   std::stable_sort(near.begin(), near.end(),
                    [](const auto& a, const auto& b) { return a.first < b.first; });
-  for (auto [mean, T] : near) {
+  for (const auto& candidate : near) {
     if (out.size() >= 9) break;
+    Iso3 T = candidate.second;
     // Brought onto the surface at T_B_O: the points at T paired with their nearest on it.
     for (int round = 0; round < 10; ++round) {
       const Iso3 moved = T_B_O.inverse() * T;
