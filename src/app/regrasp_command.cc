@@ -197,7 +197,7 @@ int runRegraspTest(const RegraspArgs& args) {
                 e.within() ? "within 3 mm / 3°" : "not within 3 mm / 3°");
   }
   std::printf(
-      "regrasp-test: %s (grasp %s of the set; %d of %zu working grasps made here; "
+      "regrasp-test: %s (grasp %s of the asset's set; %d of %zu working grasps made here; "
       "%.1f + %.1f + %.1f s)\n",
       held ? "HELD: the object rose with the hand" : "NOT HELD",
       (r.chosen >= 0 ? setIndex(r.chosen).dump() : std::string("none")).c_str(), r.made,

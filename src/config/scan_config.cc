@@ -244,6 +244,11 @@ void visitConfig(V& v, ScanConfig& c) {
                h.num("margin_mass", x.margin_mass,
                      "those that held, tried this many times as heavy: those that hold go first");
                h.num("margin_friction", x.margin_friction, "… with this fraction of the friction");
+               h.num("pose_tolerance_m", x.pose_tolerance_m,
+                     "those that held, tried with the model moved this far each way across the "
+                     "table: the first that holds in all goes first (0: not tried), m");
+               h.integer("robust_checked", x.robust_checked,
+                         "… at most this many of them, in their order");
              });
     g.object("ranking", "Alg. 1 as used to rank grasp candidates",
              [&](V& p) { visitPlanner(p, m.ranking); });

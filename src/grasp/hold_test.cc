@@ -1,6 +1,7 @@
 #include "inhand/grasp/hold_test.h"
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -23,6 +24,9 @@ std::string HoldTestOptions::validate() const {
   if (!(max_slip_m > 0 && max_slip_m < 0.2)) return "max_slip_m must be in (0, 0.2) m";
   if (!(margin_mass >= 1 && margin_mass <= 20)) return "margin_mass must be in [1, 20]";
   if (!(margin_friction > 0 && margin_friction <= 1)) return "margin_friction must be in (0, 1]";
+  if (!(pose_tolerance_m >= 0 && pose_tolerance_m < 0.05))
+    return "pose_tolerance_m must be in [0, 0.05) m";
+  if (robust_checked < 1) return "robust_checked must be >= 1";
   if (std::string p = decomposition.validate(); !p.empty()) return "decomposition." + p;
   return {};
 }
@@ -133,6 +137,35 @@ HoldTrial tryHold(PhysicsWorld& world, const Iso3& T_B_O, const Iso3& T_O_palm,
   return t;
 }
 
+namespace {
+// The first of the h candidates that held (in their order, at most o.robust_checked) that holds
+// too with the model moved o.pose_tolerance_m each way across the table, moved to the front.
+void robustFirst(const RobotModel& robot, const std::vector<ConvexPiece>& pieces, const Iso3& T_B_O,
+                 double friction, const PhysicsOptions& po, const HoldTestOptions& o,
+                 std::vector<GraspCandidate>* candidates, int h) {
+  const double d = o.pose_tolerance_m;
+  const std::array<Vec3, 4> shifts{Vec3(d, 0, 0), Vec3(-d, 0, 0), Vec3(0, d, 0), Vec3(0, -d, 0)};
+  const int workers = std::max(1, std::min(threadCount(), int(shifts.size())));
+  for (int i = 0; i < std::min(h, o.robust_checked); ++i) {
+    GraspCandidate& c = (*candidates)[size_t(i)];
+    const Iso3 T_B_palm = T_B_O * c.T_O_palm;
+    std::array<uint8_t, 4> held{};
+    parallelFor(0, workers, [&](int w) {
+      PhysicsWorld world(robot, pieces, friction, po);
+      for (size_t k = size_t(w); k < shifts.size(); k += size_t(workers)) {
+        const Iso3 T = Eigen::Translation3d(shifts[k]) * T_B_O;
+        held[k] = tryHold(world, T, T.inverse() * T_B_palm, c.q_open, c.q, o).held;
+      }
+    });
+    c.hold_robust = std::all_of(held.begin(), held.end(), [](uint8_t x) { return x != 0; });
+    if (c.hold_robust == 1) {
+      std::rotate(candidates->begin(), candidates->begin() + i, candidates->begin() + i + 1);
+      return;
+    }
+  }
+}
+}  // namespace
+
 double rankByHold(const RobotModel& robot, const TriangleMesh& model_O, const Iso3& T_B_O,
                   const Aabb* keep_O, double friction, const HoldTestOptions& o,
                   std::vector<GraspCandidate>* candidates) {
@@ -196,6 +229,8 @@ double rankByHold(const RobotModel& robot, const TriangleMesh& model_O, const Is
     std::stable_partition(candidates->begin(), held,
                           [](const GraspCandidate& c) { return c.hold_margin == 1; });
   }
+  if (h > 0 && o.pose_tolerance_m > 0)
+    robustFirst(robot, pieces, T_B_O, friction, po, o, candidates, h);
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 }
 

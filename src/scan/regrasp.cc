@@ -291,11 +291,19 @@ bool chooseGrasp(const RobotModel& m, const JointVector& q_now, const KnownObjec
   HoldTestOptions hold = options.grasp.hold;
   const double volume = massProperties(mesh).volume_m3;
   if (volume > 0) hold.density_kg_m3 = object.mass_kg / volume;
+  hold.pose_tolerance_m = options.pose_tolerance_m;
   const double seconds =
       rankByHold(m, mesh, *out.T_B_O, nullptr, options.grasp.friction, hold, &made);
   for (const GraspCandidate& c : made) out.held_in_test += c.hold == 1;
+  int robust = 0, tried = 0;
+  for (const GraspCandidate& c : made) {
+    robust += c.hold_robust == 1;
+    tried += c.hold_robust >= 0;
+  }
   log(std::to_string(out.made) + " of the set's " + std::to_string(out.set) +
-      " grasps can be made here; " + holdLine(made, seconds));
+      " grasps can be made here; " + holdLine(made, seconds) + "; " + std::to_string(robust) +
+      " of " + std::to_string(tried) + " tried held with the model moved " +
+      std::to_string(int(std::lround(1000 * hold.pose_tolerance_m))) + " mm each way");
   out.grasp = made.front();
   out.chosen = made.front().pose;
   return true;
@@ -353,6 +361,8 @@ std::string RegraspOptions::validate() const {
   if (std::string p = noise.validate(); !p.empty()) return "noise." + p;
   if (orientations < 1 || headings < 1) return "orientations and headings must be at least 1";
   if (!(min_support > 0 && min_support <= 1)) return "min_support must be in (0, 1]";
+  if (!(pose_tolerance_m >= 0 && pose_tolerance_m < 0.05))
+    return "pose_tolerance_m must be in [0, 0.05) m";
   return "";
 }
 
@@ -414,7 +424,7 @@ RegraspResult pickUpKnownObject(RobotInterface& robot, DepthSensor& sensor,
   out.pick_s = secondsFrom(t0);
   char line[200];
   std::snprintf(line, sizeof line,
-                "grasp %d of the set: %s (the arm weighs %.3f kg of %.3f; the model borne out in "
+                "known grasp %d: %s (the arm weighs %.3f kg of %.3f; the model borne out in "
                 "the hand %d %%, where it lay %d %%)",
                 out.chosen, out.lifted ? "lifted" : out.failure.c_str(), out.weighed_kg,
                 object.mass_kg, int(std::lround(100 * out.in_hand)),

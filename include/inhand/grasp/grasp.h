@@ -65,7 +65,10 @@ struct GraspOptions {
   double edge_inset_m = 0.005;
   // Pinch poses: the hand straight down onto the model's footprint, palm x across each side of
   // its least-area rectangle on the table, fingertips preshaped to straddle the model just wider
-  // than it (8 and 20 mm each side), coming down beside it to the table and closing on it low.
+  // than it (8 and 20 mm each side), coming down beside it to the table and closing on it low;
+  // and the same over the footprint's narrow parts (a handle, a ring's rim, a hammer's head: runs
+  // of the footprint along its principal axes at least 10 mm narrower than the whole; the 12
+  // nearest the model's centre).
   bool pinch_poses = true;
   // Two-finger pinch poses (hands with a spread joint and three fingers or more), with the pinch
   // poses: the spread at `two_finger_spread`, where the first two fingers face each other (the
@@ -112,6 +115,7 @@ struct GraspCandidate {
   int hold = -1;             // the hold test: 1 held, 0 did not, -1 not tested
   std::string hold_failure;  // why it did not (HoldTrial::failure)
   int hold_margin = -1;      // held also with the test's margin (1), not (0), not tried (-1)
+  int hold_robust = -1;      // held also with the model moved by the pose tolerance (1), not (0)
 };
 
 // What became of one candidate pose.

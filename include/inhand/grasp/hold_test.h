@@ -37,6 +37,12 @@ struct HoldTestOptions {
   // with this fraction of the friction; those that hold then too go first (1 and 1: no margin).
   double margin_mass = 2.0;
   double margin_friction = 0.7;
+  // Where the object lies is known to the registration's error: the candidates that held are
+  // tried again, in order, with the model moved this far each way across the table (four trials,
+  // the hand where it was); the first that holds in all goes first. At most robust_checked
+  // candidates are tried so. 0: not tried.
+  double pose_tolerance_m = 0;
+  int robust_checked = 4;
   // The model's pieces (at most 64; coarser hulls bulge beside thin and flat models, where a pinch
   // then starts inside them and closes over the model).
   ConvexDecompositionOptions decomposition{64, 64, 0.02};
@@ -72,7 +78,9 @@ HoldTrial tryHold(PhysicsWorld& world, const Iso3& T_B_O, const Iso3& T_O_palm,
 // modelPiecesAboveTable; GraspCandidate::hold: 1 held, 0 not, -1 not tested) and moves those
 // that held ahead of those that did not among the tested, those that held with the margin first
 // (GraspCandidate::hold_margin), those that did not by how far they got (holdStage); each group
-// in its order. `friction`: μ the planner assumes.
+// in its order; then, with options.pose_tolerance_m, the first that held that also holds with the
+// model moved by the tolerance (GraspCandidate::hold_robust) ahead of all. `friction`: μ the
+// planner assumes.
 // Returns the seconds it took. Nothing happens with options.enabled false.
 double rankByHold(const RobotModel& robot, const TriangleMesh& model_O, const Iso3& T_B_O,
                   const Aabb* keep_O, double friction, const HoldTestOptions& options,

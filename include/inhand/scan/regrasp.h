@@ -28,6 +28,10 @@ struct RegraspOptions {
   int orientations = 6;
   int headings = 12;
   double min_support = 0.6;  // the frame must bear out this fraction of the registered model
+  // The hold test's pose tolerance (HoldTestOptions::pose_tolerance_m): the found pose is right
+  // to about the registration's error; a grasp that holds the model moved this far each way is
+  // chosen first.
+  double pose_tolerance_m = 0.002;
   std::string validate() const;
 };
 
