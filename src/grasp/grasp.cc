@@ -240,6 +240,132 @@ void addPinchPoses(const RobotModel& robot, const std::vector<Vec3>& points, con
     }
 }
 
+// A narrow part of the footprint: its middle (in the plane's coordinates) and width along `dir`.
+struct FootprintPart {
+  Eigen::Vector2d middle, dir;
+  double width;
+};
+
+// The narrow parts of a footprint, which a pinch can straddle where it cannot straddle the
+// whole: the footprint (`points` in the plane's coordinates, on a grid of `cell` metres, each
+// point's cell and its neighbours filled) is crossed from seeds every 4 cells along each
+// coordinate axis (the footprint's principal axes); the run of filled cells through a seed,
+// within a strip `strip_m` wide (a fingertip's width) and bridging gaps narrower than `gap_m`
+// (no finger fits between), is a part when it is at most `max_width` wide and at least 10 mm
+// narrower than the footprint along that axis. Parts of the same direction whose middles lie
+// within 8 mm are one. The `count` nearest to `centre2` are returned, nearest first.
+std::vector<FootprintPart> footprintParts(const std::vector<Eigen::Vector2d>& points,
+                                          const Eigen::Vector2d& centre2, double max_width,
+                                          int count) {
+  const double cell = 0.003, strip_m = 0.012, gap_m = 0.012;
+  Eigen::Vector2d lo = points.front(), hi = points.front();
+  for (const auto& p : points) {
+    lo = lo.cwiseMin(p);
+    hi = hi.cwiseMax(p);
+  }
+  lo -= Eigen::Vector2d::Constant(2 * cell);
+  const int nx = int((hi.x() - lo.x()) / cell) + 4, ny = int((hi.y() - lo.y()) / cell) + 4;
+  std::vector<uint8_t> grid(size_t(nx) * size_t(ny), 0);
+  for (const auto& p : points) {
+    const int i = int((p.x() - lo.x()) / cell), j = int((p.y() - lo.y()) / cell);
+    for (int di = -1; di <= 1; ++di)
+      for (int dj = -1; dj <= 1; ++dj) grid[size_t(j + dj) * size_t(nx) + size_t(i + di)] = 1;
+  }
+  auto filled = [&](const Eigen::Vector2d& q) {
+    const int i = int(std::floor((q.x() - lo.x()) / cell)),
+              j = int(std::floor((q.y() - lo.y()) / cell));
+    return i >= 0 && j >= 0 && i < nx && j < ny && grid[size_t(j) * size_t(nx) + size_t(i)];
+  };
+  // Filled anywhere across the strip at q.
+  auto solid = [&](const Eigen::Vector2d& q, const Eigen::Vector2d& across) {
+    for (double t = -0.5 * strip_m; t <= 0.5 * strip_m + 1e-9; t += cell)
+      if (filled(q + t * across)) return true;
+    return false;
+  };
+  std::vector<FootprintPart> parts;
+  for (int a = 0; a < 2; ++a) {
+    const Eigen::Vector2d d = Eigen::Vector2d::Unit(a), e = Eigen::Vector2d::Unit(1 - a);
+    const double extent = hi[a] - lo[a] - 2 * cell;
+    for (int j = 0; j < ny; j += 4)
+      for (int i = 0; i < nx; i += 4) {
+        if (!grid[size_t(j) * size_t(nx) + size_t(i)]) continue;
+        const Eigen::Vector2d seed = lo + cell * Eigen::Vector2d(i + 0.5, j + 0.5);
+        double ends[2] = {0, 0};
+        for (int side = 0; side < 2; ++side) {
+          const double sgn = side == 0 ? 1 : -1;
+          double last = 0;
+          for (double t = cell; t - last < gap_m && t < max_width + gap_m; t += cell)
+            if (solid(seed + sgn * t * d, e)) last = t;
+          ends[side] = sgn * last;
+        }
+        const double width = ends[0] - ends[1] + cell;
+        if (width > max_width || width > extent - 0.010) continue;
+        const Eigen::Vector2d middle = seed + 0.5 * (ends[0] + ends[1]) * d;
+        const bool known = std::any_of(parts.begin(), parts.end(), [&](const FootprintPart& p) {
+          return p.dir == d && (p.middle - middle).norm() < 0.008;
+        });
+        if (!known) parts.push_back({middle, d, width});
+      }
+  }
+  std::stable_sort(parts.begin(), parts.end(), [&](const FootprintPart& x, const FootprintPart& y) {
+    return (x.middle - centre2).norm() < (y.middle - centre2).norm();
+  });
+  if (int(parts.size()) > count) parts.resize(size_t(count));
+  return parts;
+}
+
+// Pinch poses on the footprint's narrow parts (footprintParts, the 12 nearest the centre): a ring's
+// rim, a hammer's handle or head, a mug's handle, which the pinch across the whole footprint cannot
+// span or spans far from the mass. As addPinchPoses, with the palm axis over the part's middle and
+// palm x (palm y for the two-finger pinch) across it.
+void addPartPinchPoses(const RobotModel& robot, const std::vector<Vec3>& points, const Vec3& centre,
+                       const Vec3& up, const GraspOptions& o, std::vector<Pose>* poses) {
+  if (points.size() < 3) return;
+  const PrincipalAxes A = principalAxesUpright(points, up, 0.0);
+  std::vector<Vec3> across;  // the footprint's two principal axes
+  for (int k = 0; k < 3; ++k)
+    if (std::abs(A.axes.col(k).dot(up)) <= 0.5) across.push_back(A.axes.col(k));
+  if (across.size() != 2) return;
+  const Vec3 a0 = across[0], a1 = across[1];
+  std::vector<Eigen::Vector2d> flat;
+  for (const Vec3& p : points) flat.push_back({p.dot(a0), p.dot(a1)});
+  const Eigen::Vector2d centre2(centre.dot(a0), centre.dot(a1));
+  auto poseOver = [&](const FootprintPart& part, const Vec3& x_dir, double spread, double f) {
+    Mat3 R;
+    R.col(2) = -up;
+    R.col(0) = x_dir;
+    R.col(1) = R.col(2).cross(R.col(0));
+    Pose ps{R, spread, false, f};
+    ps.pinch = true;
+    ps.offset = (part.middle.x() - centre2.x()) * a0 + (part.middle.y() - centre2.y()) * a1;
+    return ps;
+  };
+  for (double s : o.spreads) {
+    const auto gaps = tipGaps(robot, s, false, 0.2, 0.9, 0.025);
+    if (gaps.empty()) continue;
+    for (const FootprintPart& part : footprintParts(flat, centre2, gaps.front().second - 0.016, 12))
+      for (double margin : {0.008, 0.020}) {
+        const double best = preshapeForGap(gaps, part.width + 2 * margin);
+        if (best < 0) continue;
+        const Vec3 d = part.dir.x() * a0 + part.dir.y() * a1;
+        for (double sx : {1.0, -1.0}) poses->push_back(poseOver(part, sx * d, s, best));
+      }
+  }
+  if (!o.two_finger_pinch || robot.spreadVariable() < 0 || robot.fingers().size() < 3) return;
+  const auto gaps = tipGaps(robot, o.two_finger_spread, true, 0.2, 0.95, 0.01, true);
+  if (gaps.empty()) return;
+  for (const FootprintPart& part : footprintParts(flat, centre2, gaps.front().second - 0.006, 12))
+    for (double margin : {0.003, 0.006, 0.010}) {
+      const double best = preshapeForGap(gaps, part.width + 2 * margin);
+      if (best < 0) continue;
+      const Vec3 d = part.dir.x() * a0 + part.dir.y() * a1;
+      // Palm y across the part: palm x = y × z with z = −up.
+      Pose ps = poseOver(part, d.cross(-up), o.two_finger_spread, best);
+      ps.two_finger = true;
+      poses->push_back(ps);
+    }
+}
+
 // Every (approach, roll, spread, preshape) pose with the palm axis through the centre; then the
 // edge poses, aligned with the model's principal axes (palm z along ± one axis, palm y along
 // another, palm x either way along the third: the hand is not symmetric there); then the pinch
@@ -279,6 +405,7 @@ std::vector<Pose> candidatePoses(const RobotModel& robot, const std::vector<Surf
     else
       for (const SurfacePoint& sm : samples) points.push_back(sm.p);
     addPinchPoses(robot, points, centre, up, o, &poses);
+    addPartPinchPoses(robot, points, centre, up, o, &poses);
   }
   return poses;
 }
