@@ -328,108 +328,91 @@ class FrameRecorder {
 
 }  // namespace
 
-int runScan(const ScanArgs& given) {
-  const auto t0 = std::chrono::steady_clock::now();
-  ScanArgs args = given;
-  ScanConfig o;
-  std::string objectToLoad;
-  const bool resuming = !args.resume.empty();
-  if (!args.export_formats.empty()) parseAssetFormats(args.export_formats);  // before the scan
-  fs::path checkpoint;
-  if (resuming) {
-    // The scan goes on with the arguments and options it was started with.
-    checkpoint = fs::path(args.resume) / kCheckpointName;
-    if (!fs::exists(checkpoint))
-      throw Error(args.resume + ": no " + kCheckpointName +
-                  " (not the output of an interrupted scan, or the scan stopped before its first "
-                  "grasp began: run it again)");
-    const Json caller = readScanCheckpointExtra(checkpoint).value("caller", Json());
-    try {
-      args.object = caller.at("object").get<std::string>();
-      objectToLoad = caller.at("object_load").get<std::string>();
-      args.planner = caller.at("planner").get<std::string>();
-      args.seed = caller.at("seed").get<uint64_t>();
-      args.rest_pose = caller.at("rest_pose").get<std::string>();
-      args.scale = caller.value("scale", 1.0);
-      // What the planner's name sets that is not an option (the baselines' metric), then the
-      // options as they were.
-      if (!applyPlannerName(args.planner, &o.scan.planner))
-        throw Error(checkpoint.string() + ": unknown planner \"" + args.planner + "\"");
-      readScanConfig(caller.at("options"), checkpoint.string() + ": options", &o);
-    } catch (const Json::exception& e) {
-      throw Error(checkpoint.string() + ": not a checkpoint of `inhand scan` (" + e.what() + ")");
-    }
-    if (std::string p = o.validate(); !p.empty()) throw Error(checkpoint.string() + ": " + p);
-    args.out = args.resume;
-  } else {
-    if (args.object.empty()) throw Error("--object is required (or --resume DIR)");
-    if (args.out.empty()) throw Error("--out is required (or --resume DIR)");
-    o = scanConfigFor(args);
-    objectToLoad = args.object;
-  }
-  RobotModel model = RobotModel::load(o.robot);
-  if (!(std::isfinite(args.scale) && args.scale > 0))
-    throw Error("--scale: must be a positive number, not " + std::to_string(args.scale));
-  // A solid, as the simulator takes it (runSimulatedScan): truth.ply is what was scanned.
-  int holes = 0;
-  // With the colour camera: the object's colours from its file (OBJ + MTL + PNG, PLY colours),
-  // a built-in object's checkerboard, or flat grey.
-  TexturedMesh loaded = loadSimulatedObject(objectToLoad, o.sim.colour.enabled);
-  const SurfaceColours& colours = loaded.colours;
-  TriangleMesh object = withHolesClosed(loaded.mesh, &holes);
-  if (holes > 0)
-    std::fprintf(stderr, "scan: %s: the mesh is open: %d holes closed (a solid is simulated)\n",
-                 args.object.c_str(), holes);
-  if (args.scale != 1.0)
-    for (auto& v : object.vertices) v *= float(args.scale);
-  const Json restJson = applyRestPose(args, object, &o);
-  // An object too large for the volume is refused before the output directory exists.
-  if (o.start == "held" && object.bounds().size().maxCoeff() > o.scan.volume_size_m - 0.02)
-    throw Error(args.object + ": the object (" + std::to_string(object.bounds().size().maxCoeff()) +
-                " m across) does not fit the scan volume (volume_size_m = " +
-                std::to_string(o.scan.volume_size_m) + " m)");
-  StagedDirectory out(args.out, /*replace=*/resuming);
-  // The checkpoint lives in the output directory while the scan runs (a crash or a power cut
-  // leaves it there for --resume); a scan that ends removes it, one that is interrupted keeps
-  // it beside its outputs. A scan that fails (an error) leaves nothing it created.
-  bool createdOut = false;
-  if (!resuming) {
-    std::error_code ec;
-    createdOut = fs::create_directory(args.out, ec);
-    checkpoint = fs::path(args.out) / kCheckpointName;
-  }
-  struct Cleanup {
-    fs::path dir, file;
-    bool created, armed = true;
-    ~Cleanup() {
-      if (!armed || file.empty()) return;
-      std::error_code ec;
-      fs::remove(file, ec);
-      if (created) fs::remove(dir, ec);  // only when empty
-    }
-  } cleanup{args.out, resuming ? fs::path() : checkpoint, createdOut};
-  SimulatedScanCheckpoints checkpoints;
-  checkpoints.file = checkpoint;
-  checkpoints.resume = resuming;
-  checkpoints.extra = argsJson(args, o);
-  if (resuming) checkpoints.extra["object_load"] = objectToLoad;
-  StopSignals signals;
-  ScanProgress progress;
-  progress.log = [](const std::string& s) { std::fprintf(stderr, "scan: %s\n", s.c_str()); };
-  progress.interrupted = [] { return StopSignals::raised(); };
-  std::optional<FrameRecorder> recorder;
-  if (args.save_frames) {
-    recorder.emplace(model, out.path() / "frames");
-    progress.frame_input = [&](const ScanSession& s, const DepthImage& d, const JointVector& q,
-                               const Iso3& T_B_C) { recorder->add(s, d, q, T_B_C); };
-  }
-  const SimulatedScan sim = runSimulatedScan(model, object, o, progress, checkpoints, colours);
-  if (recorder && !recorder->finish())
-    std::fprintf(stderr, "scan: --save-frames: no in-hand frame to save\n");
-  const bool interrupted = sim.result.scan.termination == Termination::kInterrupted;
+namespace {
+
+// The physics the simulator ran (summary.json "physics").
+Json physicsJson(const SimulatedScan& sim) {
+  return {{"enabled", sim.physics},
+          {"mass_kg", sim.mass_kg},
+          {"convex_pieces", sim.pieces},
+          {"pieces_volume_ratio", sim.pieces_volume_ratio},
+          {"simulated_s", sim.physics_simulated_s},
+          {"computation_s", sim.physics_s},
+          {"slips", sim.slips},
+          {"slip_max_mm", 1000 * sim.slip_max_m},
+          {"unstable_steps_undone", sim.unstable_steps}};
+}
+
+// The faults the simulator injected (summary.json "faults_injected").
+Json faultsJson(const SimFaultLog& f) {
+  return {{"dropped_frames", f.dropped_frames},
+          {"corrupted_frames", f.corrupted_frames},
+          {"pose_jumps", f.pose_jumps},
+          {"stopped_short", f.stopped_short},
+          {"slips", f.slips},
+          {"object_drops", f.object_drops},
+          {"refused_motions", f.refused_motions},
+          {"failed_pickups", f.failed_pickups}};
+}
+
+// Where the time went (summary.json "timing_s"): every grasp planning, the one that ended the
+// scan included.
+Json timingJson(const SimulatedScan& sim, std::chrono::steady_clock::time_point t0) {
   const MultiGraspResult& mr = sim.result;
   const ScanResult& r = mr.scan;
-  writeModels(out.path(), model, object, mr);
+  return {{"total", std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count()},
+          {"planning", r.planning_s},
+          {"fusion", r.fusion_s},
+          {"tracking", r.tracking_s},
+          {"simulation", sim.render_s},
+          {"fusion_ms_per_frame", r.frames > 0 ? 1000 * r.fusion_s / r.frames : 0.0},
+          // Every grasp planning, the one that ended the scan included.
+          {"grasp_generation",
+           [&] {
+             double t = mr.unused_generation_s;
+             for (const GraspRecord& g : mr.grasps) t += g.generation_s;
+             return t;
+           }()},
+          {"grasp_ranking", [&] {
+             double t = mr.unused_ranking_s;
+             for (const GraspRecord& g : mr.grasps) t += g.ranking_s;
+             return t;
+           }()}};
+}
+
+// In-hand tracking (summary.json "tracking").
+Json trackingJson(const ScanConfig& o, const SimulatedScan& sim) {
+  const ScanResult& r = sim.result.scan;
+  return {
+      {"enabled", o.scan.tracking.enabled},
+      {"palm_error_mm",
+       {{"median", 1000 * sim.palm_error_median_m}, {"p95", 1000 * sim.palm_error_p95_m}}},
+      {"object_pose_error_mm",
+       {{"median", 1000 * sim.object_error_median_m}, {"p95", 1000 * sim.object_error_p95_m}}},
+      {"frames_rejected", r.frames_rejected},
+      {"ms_per_frame", sim.frames_fused_in_hand + r.frames_rejected > 0
+                           ? 1000 * r.tracking_s / (sim.frames_fused_in_hand + r.frames_rejected)
+                           : 0.0}};
+}
+
+// How the model's colours compare with the true ones, and what colour fusion cost
+// (summary.json "colour").
+Json colourJson(const SimulatedScan& sim) {
+  const ScanResult& r = sim.result.scan;
+  return {{"vertices_compared", sim.colour.vertices},
+          {"delta_e76_mean", sim.colour.delta_e_mean},
+          {"delta_e76_p95", sim.colour.delta_e_p95},
+          {"psnr_db_8_views", sim.colour.psnr_db},
+          {"pixels_fused", r.colour_pixels},
+          {"fusion_s", r.colour_s},
+          {"fusion_ms_per_frame", r.frames > 0 ? 1000 * r.colour_s / r.frames : 0.0}};
+}
+
+// summary.json of a simulated scan (docs/commands.md), less the options and the resume line.
+Json scanSummary(const ScanArgs& args, const ScanConfig& o, const SimulatedScan& sim,
+                 const Json& restJson, std::chrono::steady_clock::time_point t0) {
+  const MultiGraspResult& mr = sim.result;
+  const ScanResult& r = mr.scan;
   const SurfaceMetrics& sm = sim.metrics;
   const Json views = viewsJson(mr);
   Json summary;
@@ -451,15 +434,7 @@ int runScan(const ScanArgs& given) {
   summary["fscore"] = fs;
   summary["detached_area_m2"] = sm.detached_area_m2;
   summary["detached_pieces"] = sm.detached_pieces;
-  if (sim.camera.colour.enabled)
-    summary["colour"] = {
-        {"vertices_compared", sim.colour.vertices},
-        {"delta_e76_mean", sim.colour.delta_e_mean},
-        {"delta_e76_p95", sim.colour.delta_e_p95},
-        {"psnr_db_8_views", sim.colour.psnr_db},
-        {"pixels_fused", r.colour_pixels},
-        {"fusion_s", r.colour_s},
-        {"fusion_ms_per_frame", r.frames > 0 ? 1000 * r.colour_s / r.frames : 0.0}};
+  if (sim.camera.colour.enabled) summary["colour"] = colourJson(sim);
   summary["trajectory_s"] = views.empty() ? 0.0 : views.back()["trajectory_s"].get<double>();
   summary["views"] = views;
   summary["grasps"] = graspsJson(mr);
@@ -478,16 +453,7 @@ int runScan(const ScanArgs& given) {
   // In-hand frames fused and not (for any reason: frames_not_fused says which).
   summary["in_hand_frames"] = {{"fused", sim.frames_fused_in_hand},
                                {"not_fused", sim.frames_rejected}};
-  summary["tracking"] = {
-      {"enabled", o.scan.tracking.enabled},
-      {"palm_error_mm",
-       {{"median", 1000 * sim.palm_error_median_m}, {"p95", 1000 * sim.palm_error_p95_m}}},
-      {"object_pose_error_mm",
-       {{"median", 1000 * sim.object_error_median_m}, {"p95", 1000 * sim.object_error_p95_m}}},
-      {"frames_rejected", r.frames_rejected},
-      {"ms_per_frame", sim.frames_fused_in_hand + r.frames_rejected > 0
-                           ? 1000 * r.tracking_s / (sim.frames_fused_in_hand + r.frames_rejected)
-                           : 0.0}};
+  summary["tracking"] = trackingJson(o, sim);
   summary["frames_not_fused"] = {{"tracking", r.frames_rejected},
                                  {"dropped_or_empty", r.frames_dropped},
                                  {"off_path", r.frames_off_path},
@@ -511,69 +477,173 @@ int runScan(const ScanArgs& given) {
                           {"true_mass_kg", sim.true_mass_kg},
                           {"true_com_O", vecJson(sim.true_com_O)}};
   }
-  summary["physics"] = {{"enabled", sim.physics},
-                        {"mass_kg", sim.mass_kg},
-                        {"convex_pieces", sim.pieces},
-                        {"pieces_volume_ratio", sim.pieces_volume_ratio},
-                        {"simulated_s", sim.physics_simulated_s},
-                        {"computation_s", sim.physics_s},
-                        {"slips", sim.slips},
-                        {"slip_max_mm", 1000 * sim.slip_max_m},
-                        {"unstable_steps_undone", sim.unstable_steps}};
-  const SimFaultLog& f = sim.faults;
-  summary["faults_injected"] = {{"dropped_frames", f.dropped_frames},
-                                {"corrupted_frames", f.corrupted_frames},
-                                {"pose_jumps", f.pose_jumps},
-                                {"stopped_short", f.stopped_short},
-                                {"slips", f.slips},
-                                {"object_drops", f.object_drops},
-                                {"refused_motions", f.refused_motions},
-                                {"failed_pickups", f.failed_pickups}};
+  summary["physics"] = physicsJson(sim);
+  summary["faults_injected"] = faultsJson(sim.faults);
   summary["mean_entropy"] = r.model.meanEntropy();
   summary["observed_fraction"] = r.model.observedAreaFraction();
   summary["vertices"] = r.model.mesh.vertices.size();
   summary["triangles"] = r.model.mesh.triangles.size();
-  summary["timing_s"] = {
-      {"total", std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count()},
-      {"planning", r.planning_s},
-      {"fusion", r.fusion_s},
-      {"tracking", r.tracking_s},
-      {"simulation", sim.render_s},
-      {"fusion_ms_per_frame", r.frames > 0 ? 1000 * r.fusion_s / r.frames : 0.0},
-      // Every grasp planning, the one that ended the scan included.
-      {"grasp_generation",
-       [&] {
-         double t = mr.unused_generation_s;
-         for (const GraspRecord& g : mr.grasps) t += g.generation_s;
-         return t;
-       }()},
-      {"grasp_ranking", [&] {
-         double t = mr.unused_ranking_s;
-         for (const GraspRecord& g : mr.grasps) t += g.ranking_s;
-         return t;
-       }()}};
+  summary["timing_s"] = timingJson(sim, t0);
+  return summary;
+}
+
+}  // namespace
+
+namespace {
+
+// The scan's arguments and options: those a checkpoint was started with (--resume: args->out
+// becomes the resumed directory, *checkpoint its checkpoint) or those given; *objectToLoad: the
+// mesh to load (a resumed scan's as it was loaded).
+ScanConfig scanArguments(ScanArgs* args, std::string* objectToLoad, fs::path* checkpoint) {
+  ScanConfig o;
+  const bool resuming = !args->resume.empty();
+  if (resuming) {
+    // The scan goes on with the arguments and options it was started with.
+    *checkpoint = fs::path(args->resume) / kCheckpointName;
+    if (!fs::exists(*checkpoint))
+      throw Error(args->resume + ": no " + kCheckpointName +
+                  " (not the output of an interrupted scan, or the scan stopped before its first "
+                  "grasp began: run it again)");
+    const Json caller = readScanCheckpointExtra(*checkpoint).value("caller", Json());
+    try {
+      args->object = caller.at("object").get<std::string>();
+      *objectToLoad = caller.at("object_load").get<std::string>();
+      args->planner = caller.at("planner").get<std::string>();
+      args->seed = caller.at("seed").get<uint64_t>();
+      args->rest_pose = caller.at("rest_pose").get<std::string>();
+      args->scale = caller.value("scale", 1.0);
+      // What the planner's name sets that is not an option (the baselines' metric), then the
+      // options as they were.
+      if (!applyPlannerName(args->planner, &o.scan.planner))
+        throw Error(checkpoint->string() + ": unknown planner \"" + args->planner + "\"");
+      readScanConfig(caller.at("options"), checkpoint->string() + ": options", &o);
+    } catch (const Json::exception& e) {
+      throw Error(checkpoint->string() + ": not a checkpoint of `inhand scan` (" + e.what() + ")");
+    }
+    if (std::string p = o.validate(); !p.empty()) throw Error(checkpoint->string() + ": " + p);
+    args->out = args->resume;
+  } else {
+    if (args->object.empty()) throw Error("--object is required (or --resume DIR)");
+    if (args->out.empty()) throw Error("--out is required (or --resume DIR)");
+    o = scanConfigFor(*args);
+    *objectToLoad = args->object;
+  }
+  return o;
+}
+
+// The object as the simulator takes it (runSimulatedScan; truth.ply is what was scanned): a
+// solid (holes closed), scaled by --scale; with the colour camera, its colours from its file (OBJ
+// + MTL + PNG, PLY colours), a built-in object's checkerboard, or flat grey.
+TriangleMesh simulatedObject(const ScanArgs& args, const std::string& file, bool colour,
+                             SurfaceColours* colours) {
+  int holes = 0;
+  TexturedMesh loaded = loadSimulatedObject(file, colour);
+  *colours = loaded.colours;
+  TriangleMesh object = withHolesClosed(loaded.mesh, &holes);
+  if (holes > 0)
+    std::fprintf(stderr, "scan: %s: the mesh is open: %d holes closed (a solid is simulated)\n",
+                 args.object.c_str(), holes);
+  if (args.scale != 1.0)
+    for (auto& v : object.vertices) v *= float(args.scale);
+  return object;
+}
+
+// The report and, with --export, the asset, in `dir` (the staged output): a missing front-end
+// install costs the report only, a failed export the asset only, never the scan.
+void writeReportAndAsset(const fs::path& dir, const ScanArgs& args, const ScanConfig& o,
+                         const RobotModel& model) {
+  try {
+    writeScanReport(dir, webDirectory());
+  } catch (const Error& e) {
+    std::fprintf(stderr, "scan: warning: no report.html: %s\n", e.what());
+  }
+  if (args.export_formats.empty() || !fs::exists(dir / "model.ply")) return;
+  AssetOptions asset;
+  asset.density_kg_m3 = o.sim.physics.density_kg_m3;  // when the arm did not weigh it
+  try {
+    exportAsset(dir, dir / "asset", parseAssetFormats(args.export_formats), asset, &model, 10,
+                (fs::path(args.out) / "asset").string());
+  } catch (const Error& e) {
+    std::fprintf(stderr, "scan: warning: no asset: %s\n", e.what());
+  }
+}
+
+// A scan that fails (an error) removes the checkpoint it started (and the output directory it
+// created, when empty) unless disarmed.
+struct CheckpointCleanup {
+  fs::path dir, file;
+  bool created, armed = true;
+  ~CheckpointCleanup() {
+    if (!armed || file.empty()) return;
+    std::error_code ec;
+    fs::remove(file, ec);
+    if (created) fs::remove(dir, ec);  // only when empty
+  }
+};
+
+}  // namespace
+
+int runScan(const ScanArgs& given) {
+  const auto t0 = std::chrono::steady_clock::now();
+  ScanArgs args = given;
+  std::string objectToLoad;
+  const bool resuming = !args.resume.empty();
+  if (!args.export_formats.empty()) parseAssetFormats(args.export_formats);  // before the scan
+  fs::path checkpoint;
+  ScanConfig o = scanArguments(&args, &objectToLoad, &checkpoint);
+  RobotModel model = RobotModel::load(o.robot);
+  if (!(std::isfinite(args.scale) && args.scale > 0))
+    throw Error("--scale: must be a positive number, not " + std::to_string(args.scale));
+  SurfaceColours colours;
+  TriangleMesh object = simulatedObject(args, objectToLoad, o.sim.colour.enabled, &colours);
+  const Json restJson = applyRestPose(args, object, &o);
+  // An object too large for the volume is refused before the output directory exists.
+  if (o.start == "held" && object.bounds().size().maxCoeff() > o.scan.volume_size_m - 0.02)
+    throw Error(args.object + ": the object (" + std::to_string(object.bounds().size().maxCoeff()) +
+                " m across) does not fit the scan volume (volume_size_m = " +
+                std::to_string(o.scan.volume_size_m) + " m)");
+  StagedDirectory out(args.out, /*replace=*/resuming);
+  // The checkpoint lives in the output directory while the scan runs (a crash or a power cut
+  // leaves it there for --resume); a scan that ends removes it, one that is interrupted keeps
+  // it beside its outputs. A scan that fails (an error) leaves nothing it created.
+  bool createdOut = false;
+  if (!resuming) {
+    std::error_code ec;
+    createdOut = fs::create_directory(args.out, ec);
+    checkpoint = fs::path(args.out) / kCheckpointName;
+  }
+  CheckpointCleanup cleanup{args.out, resuming ? fs::path() : checkpoint, createdOut};
+  SimulatedScanCheckpoints checkpoints;
+  checkpoints.file = checkpoint;
+  checkpoints.resume = resuming;
+  checkpoints.extra = argsJson(args, o);
+  if (resuming) checkpoints.extra["object_load"] = objectToLoad;
+  StopSignals signals;
+  ScanProgress progress;
+  progress.log = [](const std::string& s) { std::fprintf(stderr, "scan: %s\n", s.c_str()); };
+  progress.interrupted = [] { return StopSignals::raised(); };
+  std::optional<FrameRecorder> recorder;
+  if (args.save_frames) {
+    recorder.emplace(model, out.path() / "frames");
+    progress.frame_input = [&](const ScanSession& s, const DepthImage& d, const JointVector& q,
+                               const Iso3& T_B_C) { recorder->add(s, d, q, T_B_C); };
+  }
+  const SimulatedScan sim = runSimulatedScan(model, object, o, progress, checkpoints, colours);
+  if (recorder && !recorder->finish())
+    std::fprintf(stderr, "scan: --save-frames: no in-hand frame to save\n");
+  const bool interrupted = sim.result.scan.termination == Termination::kInterrupted;
+  const MultiGraspResult& mr = sim.result;
+  const ScanResult& r = mr.scan;
+  writeModels(out.path(), model, object, mr);
+  Json summary = scanSummary(args, o, sim, restJson, t0);
+  const SurfaceMetrics& sm = sim.metrics;
   summary["options"] = scanConfigJson(o);
   if (interrupted && fs::exists(checkpoint)) {
     summary["resume"] = "inhand scan --resume " + args.out;
     fs::copy_file(checkpoint, out.path() / kCheckpointName);
   }
   writeTextAtomically(out.path() / "summary.json", summary.dump(2) + "\n");
-  // The report: a missing front-end install costs the report only, never the scan.
-  try {
-    writeScanReport(out.path(), webDirectory());
-  } catch (const Error& e) {
-    std::fprintf(stderr, "scan: warning: no report.html: %s\n", e.what());
-  }
-  if (!args.export_formats.empty() && fs::exists(out.path() / "model.ply")) {
-    AssetOptions asset;
-    asset.density_kg_m3 = o.sim.physics.density_kg_m3;  // when the arm did not weigh it
-    try {
-      exportAsset(out.path(), out.path() / "asset", parseAssetFormats(args.export_formats), asset,
-                  &model, 10, (fs::path(args.out) / "asset").string());
-    } catch (const Error& e) {  // the scan is kept whatever became of its asset
-      std::fprintf(stderr, "scan: warning: no asset: %s\n", e.what());
-    }
-  }
+  writeReportAndAsset(out.path(), args, o, model);
   out.commit();  // replaces the directory that held the checkpoint
   cleanup.armed = false;
   if (interrupted)
