@@ -218,6 +218,67 @@ CLI::App* addEval(CLI::App& app, EvalArgs& eval, CLI::Option** backendOpt) {
   return ev;
 }
 
+CLI::App* addExport(CLI::App& app, ExportArgs& exp) {
+  auto* ex = app.add_subcommand(
+      "export",
+      "a scanned model as an asset: MJCF, URDF, SDF with mass, inertia, convex pieces, "
+      "grasps");
+  ex->add_option("input", exp.input, "a scan's output directory (or a closed mesh file)")
+      ->required();
+  ex->add_option("--out", exp.out, "output directory (new or empty)")->required();
+  ex->add_option("--format", exp.formats, "comma-separated: mjcf, urdf, sdf")
+      ->capture_default_str();
+  ex->add_option("--name", exp.name, "the body's name")->capture_default_str();
+  ex->add_option("--density", exp.density_kg_m3, "kg/m³ of the enclosed solid")
+      ->capture_default_str();
+  ex->add_option("--mass", exp.mass_kg, "kg: the object's mass (overrides --density)");
+  ex->add_option("--ranked", exp.ranked,
+                 "candidates on the model that hold it in the hold test (physics) added to the "
+                 "grasp set, at most (0: none)")
+      ->capture_default_str();
+  ex->add_option("--robot", exp.robot,
+                 "robot config JSON for --ranked (default: data/robots/wam_barretthand.json)");
+  return ex;
+}
+
+CLI::App* addRegraspTest(CLI::App& app, RegraspArgs& rg) {
+  auto* rt = app.add_subcommand(
+      "regrasp-test",
+      "a simulated robot finds the true object on the table with the asset alone, picks a grasp "
+      "from its grasp set and lifts it with physics");
+  rt->add_option("asset", rg.asset, "an asset directory (inhand export)")->required();
+  rt->add_option("--object", rg.object, "the true object: builtin:NAME or a mesh file")->required();
+  rt->add_option("--rest-pose", rg.rest_pose,
+                 "the true object's stable pose on the table (0: the most probable)")
+      ->capture_default_str();
+  rt->add_option("--heading", rg.heading_deg, "… turned this many degrees about the vertical")
+      ->capture_default_str();
+  rt->add_option("--scale", rg.scale, "the mesh's coordinates times this")->capture_default_str();
+  rt->add_option("--seed", rg.seed, "sensor noise and the arm's error")->capture_default_str();
+  rt->add_option("--robot", rg.robot,
+                 "robot config JSON (default: data/robots/wam_barretthand.json)");
+  rt->add_option("--config", rg.config, "scan options JSON (sim, table_top, grasp)");
+  rt->add_option("--out", rg.out, "write the report (JSON) here");
+  return rt;
+}
+
+CLI::App* addEvalTask(CLI::App& app, std::string& taskDir, std::string& taskList) {
+  auto* et = app.add_subcommand("eval-task", "one run of an eval, as a Slurm array task");
+  et->group("");  // not listed: `inhand eval --backend slurm` submits it
+  et->add_option("dir", taskDir, "the eval directory")->required();
+  et->add_option("list", taskList, "the file of run indices, one per array task")->required();
+  return et;
+}
+
+CLI::App* addConfig(CLI::App& app, std::string& configFile, bool& configReference) {
+  auto* cf = app.add_subcommand(
+      "config", "print every scan option with its value (JSON): the defaults, or FILE's over them");
+  cf->add_option("file", configFile, "a scan options JSON to check and complete");
+  cf->add_flag("--reference", configReference,
+               "print the options reference (Markdown, as in docs/config.md) instead");
+  return cf;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -241,50 +302,12 @@ int main(int argc, char** argv) {
   auto* ev = addEval(app, eval, &backendOpt);
 
   std::string taskDir, taskList;
-  auto* et = app.add_subcommand("eval-task", "one run of an eval, as a Slurm array task");
-  et->group("");  // not listed: `inhand eval --backend slurm` submits it
-  et->add_option("dir", taskDir, "the eval directory")->required();
-  et->add_option("list", taskList, "the file of run indices, one per array task")->required();
+  auto* et = addEvalTask(app, taskDir, taskList);
 
   ExportArgs exp;
-  auto* ex = app.add_subcommand(
-      "export",
-      "a scanned model as an asset: MJCF, URDF, SDF with mass, inertia, convex pieces, "
-      "grasps");
-  ex->add_option("input", exp.input, "a scan's output directory (or a closed mesh file)")
-      ->required();
-  ex->add_option("--out", exp.out, "output directory (new or empty)")->required();
-  ex->add_option("--format", exp.formats, "comma-separated: mjcf, urdf, sdf")
-      ->capture_default_str();
-  ex->add_option("--name", exp.name, "the body's name")->capture_default_str();
-  ex->add_option("--density", exp.density_kg_m3, "kg/m³ of the enclosed solid")
-      ->capture_default_str();
-  ex->add_option("--mass", exp.mass_kg, "kg: the object's mass (overrides --density)");
-  ex->add_option("--ranked", exp.ranked,
-                 "candidates on the model that hold it in the hold test (physics) added to the "
-                 "grasp set, at most (0: none)")
-      ->capture_default_str();
-  ex->add_option("--robot", exp.robot,
-                 "robot config JSON for --ranked (default: data/robots/wam_barretthand.json)");
-
+  auto* ex = addExport(app, exp);
   RegraspArgs rg;
-  auto* rt = app.add_subcommand(
-      "regrasp-test",
-      "a simulated robot finds the true object on the table with the asset alone, picks a grasp "
-      "from its grasp set and lifts it with physics");
-  rt->add_option("asset", rg.asset, "an asset directory (inhand export)")->required();
-  rt->add_option("--object", rg.object, "the true object: builtin:NAME or a mesh file")->required();
-  rt->add_option("--rest-pose", rg.rest_pose,
-                 "the true object's stable pose on the table (0: the most probable)")
-      ->capture_default_str();
-  rt->add_option("--heading", rg.heading_deg, "… turned this many degrees about the vertical")
-      ->capture_default_str();
-  rt->add_option("--scale", rg.scale, "the mesh's coordinates times this")->capture_default_str();
-  rt->add_option("--seed", rg.seed, "sensor noise and the arm's error")->capture_default_str();
-  rt->add_option("--robot", rg.robot,
-                 "robot config JSON (default: data/robots/wam_barretthand.json)");
-  rt->add_option("--config", rg.config, "scan options JSON (sim, table_top, grasp)");
-  rt->add_option("--out", rg.out, "write the report (JSON) here");
+  auto* rt = addRegraspTest(app, rg);
 
   std::string reportDir;
   auto* rp = app.add_subcommand("report", "rebuild the HTML report of a scan or an eval directory");
@@ -292,11 +315,7 @@ int main(int argc, char** argv) {
 
   std::string configFile;
   bool configReference = false;
-  auto* cf = app.add_subcommand(
-      "config", "print every scan option with its value (JSON): the defaults, or FILE's over them");
-  cf->add_option("file", configFile, "a scan options JSON to check and complete");
-  cf->add_flag("--reference", configReference,
-               "print the options reference (Markdown, as in docs/config.md) instead");
+  auto* cf = addConfig(app, configFile, configReference);
 
   try {
     app.parse(argc, argv);
