@@ -171,6 +171,162 @@ JointVector jointsOf(const RobotModel& model, const FrameRecord& rec, const std:
   return q;
 }
 
+// The volume's bounds (frame O): --bounds, else frames.json's bounds_O, else (without a robot)
+// around the measured points.
+Aabb fuseBounds(const FuseArgs& args, const fs::path& dir, const FrameSet& set) {
+  Aabb box;
+  if (args.bounds) {
+    const auto& b = *args.bounds;
+    box.min = Vec3(b[0], b[1], b[2]);
+    box.max = Vec3(b[3], b[4], b[5]);
+    if (!(box.min.array() < box.max.array()).all())
+      throw Error("--bounds: each min must be below its max (xmin ymin zmin xmax ymax zmax)");
+  } else if (set.bounds_O) {
+    box = *set.bounds_O;
+  } else if (!args.robot.empty()) {
+    throw Error((dir / "frames.json").string() +
+                ": no bounds_O; give --bounds around the object (with the robot in view, the "
+                "measured points would take in the arm)");
+  } else {
+    box = autoBounds(dir, set, args.margin_m);
+  }
+  return box;
+}
+
+// The volume's figures (fuse's summary "volume").
+Json volumeJson(const TsdfVolume& volume, int64_t updated) {
+  return {{"voxel_size_m", volume.voxelSize()},
+          {"truncation_m", volume.truncation()},
+          {"dims", {volume.dims().x(), volume.dims().y(), volume.dims().z()}},
+          {"origin_m", {volume.origin().x(), volume.origin().y(), volume.origin().z()}},
+          {"voxels_observed", volume.countState(VoxelState::kObserved)},
+          {"voxels_empty", volume.countState(VoxelState::kEmpty)},
+          {"voxels_unknown", volume.countState(VoxelState::kUnknown)},
+          {"voxel_updates", updated}};
+}
+
+// The scan options of `inhand fuse --robot`: the config's, tracking from --tracking (default on),
+// the volume a cube around the bounds' centre, as large as their largest side, of --voxel.
+ScanOptions robotFuseOptions(const FuseArgs& args, const ScanOptions& given, const Aabb& box,
+                             const MeshOptions& mo) {
+  ScanOptions o = given;
+  if (!args.tracking.empty()) {
+    if (args.tracking != "on" && args.tracking != "off")
+      throw Error("--tracking: must be on or off, not \"" + args.tracking + "\"");
+    o.tracking.enabled = args.tracking == "on";
+  } else {
+    o.tracking.enabled = true;
+  }
+  o.voxel_m = args.voxel_m;
+  o.volume_size_m = box.size().maxCoeff();
+  o.fit_volume = false;
+  o.volume_budget.memory_budget_mb = args.memory_mb;
+  o.mesh.hole_sigma_m = mo.hole_sigma_m;
+  if (args.truncation_m > 0) o.volume_budget.truncation_m = args.truncation_m;
+  o.volume_budget.band_sigmas = args.band_sigmas;
+  o.volume_budget.smooth_depth = args.smooth_depth;
+  if (std::string p = o.validate(); !p.empty()) throw Error(p);
+  return o;
+}
+
+// What fusing the frames took and did.
+struct FuseFigures {
+  double integrate_s = 0, colour_s = 0, load_and_integrate_s = 0;
+  int64_t updated = 0, colour_pixels = 0;
+};
+
+// Every frame of the set (plain poses, T_O_C) fused into `volume`, and its colour image, where
+// it has one, into `colour` (the camera as frames.json gives it).
+FuseFigures integrateFrames(const fs::path& dir, const FrameSet& set, TsdfVolume* volume,
+                            ColourVolume* colour) {
+  FuseFigures f;
+  const NoiseModelOptions noise;
+  const auto t0 = Clock::now();
+  DepthCameraOptions camera;
+  camera.intrinsics = set.intrinsics;
+  camera.colour = set.colour;
+  for (size_t i = 0; i < set.frames.size(); ++i) {
+    DepthImage depth = loadFrameDepth(dir, set, i);
+    const RgbImage rgb = loadFrameColour(dir, set, i);
+    auto ti = Clock::now();
+    // σ only where the volume's voxels can project (integrate reads no other pixel).
+    const PixelRect rect = volumeImageRect(*volume, set.frames[i].T_O_C, set.intrinsics);
+    std::vector<float> sigma = measurementSigma(depth, set.intrinsics, noise, &rect);
+    f.updated += integrate(depth, set.frames[i].T_O_C, set.intrinsics, sigma, volume).updated;
+    f.integrate_s += secondsSince(ti);
+    if (!rgb.empty()) {
+      auto tc = Clock::now();
+      f.colour_pixels +=
+          integrateColour(depth, rgb, set.frames[i].T_O_C, camera, sigma, colour).pixels;
+      f.colour_s += secondsSince(tc);
+    }
+    progress("fuse: frames", i + 1, set.frames.size());
+  }
+  f.load_and_integrate_s = secondsSince(t0);
+  return f;
+}
+
+// Colour fusion's figures (fuse's summary "colour").
+Json fuseColourJson(const ObjectModel& model, const ColourVolume& colour, int64_t pixels) {
+  size_t coloured = 0;
+  for (const auto& c : model.rgba) coloured += c[3] == 255;
+  return {{"pixels_fused", pixels},
+          {"voxels", colour.voxels()},
+          {"memory_mb", double(colour.bytes()) / (1 << 20)},
+          {"vertices_with_colour", coloured}};
+}
+
+// The volume options fuse's arguments give (checked).
+VolumeOptions fuseVolumeOptions(const FuseArgs& args) {
+  VolumeOptions vo;
+  vo.voxel_size_m = args.voxel_m;
+  vo.truncation_m = args.truncation_m;
+  vo.band_sigmas = args.band_sigmas;
+  vo.smooth_depth = args.smooth_depth;
+  vo.memory_budget_mb = args.memory_mb;
+  if (std::string p = vo.validate(); !p.empty()) throw Error("volume options: " + p);
+  return vo;
+}
+
+// Each frame's joints and grasp (T_O_palm: its own, else the set's), checked; `file` names
+// frames.json in the errors.
+void robotFrames(const RobotModel& model, const FrameSet& set, const std::string& file,
+                 std::vector<JointVector>* qs, std::vector<Iso3>* palms) {
+  for (size_t i = 0; i < set.frames.size(); ++i) {
+    const FrameRecord& rec = set.frames[i];
+    const std::string where = file + ": frames[" + std::to_string(i) + "]";
+    if (rec.q.empty()) throw Error(where + ": no q (the joints; --robot needs them)");
+    if (!rec.T_B_C) throw Error(where + ": no T_B_C (the camera in the base frame)");
+    if (!rec.T_O_palm && !set.T_O_palm)
+      throw Error(where + ": no T_O_palm, here or at the top (the palm in the object frame)");
+    qs->push_back(jointsOf(model, rec, where));
+    palms->push_back(rec.T_O_palm ? *rec.T_O_palm : *set.T_O_palm);
+  }
+}
+
+// Why frames were not fused, by reason (fuse --robot's summary "frames_not_fused").
+Json framesNotFusedJson(const ScanSession::Summary& sum) {
+  return {{"tracking", sum.frames_rejected},
+          {"dropped_or_empty", sum.frames_dropped},
+          {"object_not_in_hand", sum.frames_unsupported},
+          {"in_known_free_space", sum.frames_in_free_space},
+          {"object_moving_in_hand", sum.frames_moving}};
+}
+
+// frames_tracked.json beside the model; when it cannot be written, the model and its summary
+// are removed too (no half-written output).
+void writeFramesTracked(const fs::path& outPath, const fs::path& summaryPath, const Json& tracked) {
+  try {
+    writeTextAtomically(fs::absolute(outPath).parent_path() / "frames_tracked.json",
+                        Json({{"frames", tracked}}).dump(1) + "\n");
+  } catch (...) {
+    std::error_code ec;
+    fs::remove(outPath, ec);
+    fs::remove(summaryPath, ec);
+    throw;
+  }
+}
+
 // `inhand fuse --robot`: the frames as a robot holding the object gave them (joints, camera in the
 // base frame, the grasp), fused by a ScanSession: the robot's own pixels carve only, the voxels
 // inside it are emptied, tracking aligns each frame with the hand and the model so far.
@@ -181,37 +337,11 @@ int fuseWithRobot(const FuseArgs& args, const fs::path& dir, const FrameSet& set
   const RobotModel model = RobotModel::load(args.robot);
   ScanConfig config;
   if (!args.config.empty()) readScanConfigFile(args.config, &config);
-  ScanOptions o = config.scan;
-  if (!args.tracking.empty()) {
-    if (args.tracking != "on" && args.tracking != "off")
-      throw Error("--tracking: must be on or off, not \"" + args.tracking + "\"");
-    o.tracking.enabled = args.tracking == "on";
-  } else {
-    o.tracking.enabled = true;
-  }
-  // The volume: a cube around the bounds' centre, as large as their largest side, of --voxel.
-  o.voxel_m = args.voxel_m;
-  o.volume_size_m = box.size().maxCoeff();
-  o.fit_volume = false;
-  o.volume_budget.memory_budget_mb = args.memory_mb;
-  o.mesh.hole_sigma_m = mo.hole_sigma_m;
-  if (args.truncation_m > 0) o.volume_budget.truncation_m = args.truncation_m;
-  o.volume_budget.band_sigmas = args.band_sigmas;
-  o.volume_budget.smooth_depth = args.smooth_depth;
-  if (std::string p = o.validate(); !p.empty()) throw Error(p);
+  const ScanOptions o = robotFuseOptions(args, config.scan, box, mo);
   const std::string file = (dir / "frames.json").string();
   std::vector<JointVector> qs;
   std::vector<Iso3> palms;
-  for (size_t i = 0; i < set.frames.size(); ++i) {
-    const FrameRecord& rec = set.frames[i];
-    const std::string where = file + ": frames[" + std::to_string(i) + "]";
-    if (rec.q.empty()) throw Error(where + ": no q (the joints; --robot needs them)");
-    if (!rec.T_B_C) throw Error(where + ": no T_B_C (the camera in the base frame)");
-    if (!rec.T_O_palm && !set.T_O_palm)
-      throw Error(where + ": no T_O_palm, here or at the top (the palm in the object frame)");
-    qs.push_back(jointsOf(model, rec, where));
-    palms.push_back(rec.T_O_palm ? *rec.T_O_palm : *set.T_O_palm);
-  }
+  robotFrames(model, set, file, &qs, &palms);
   DepthCameraOptions camera;
   camera.intrinsics = set.intrinsics;
   camera.colour = set.colour;
@@ -261,11 +391,7 @@ int fuseWithRobot(const FuseArgs& args, const fs::path& dir, const FrameSet& set
   summary["grasps"] = grasps;
   summary["robot"] = args.robot;
   summary["tracking"] = o.tracking.enabled;
-  summary["frames_not_fused"] = {{"tracking", sum.frames_rejected},
-                                 {"dropped_or_empty", sum.frames_dropped},
-                                 {"object_not_in_hand", sum.frames_unsupported},
-                                 {"in_known_free_space", sum.frames_in_free_space},
-                                 {"object_moving_in_hand", sum.frames_moving}};
+  summary["frames_not_fused"] = framesNotFusedJson(sum);
   summary["slips_found"] = slipsJson(sum.slips);
   summary["frames_tracked"] = "frames_tracked.json";
   addModelFigures(result, args.surface, &summary);
@@ -274,15 +400,7 @@ int fuseWithRobot(const FuseArgs& args, const fs::path& dir, const FrameSet& set
                          {"mesh", meshS},
                          {"total", secondsSince(t0)}};
   writeFusedModel(outPath, summaryPath, result, summary);
-  try {
-    writeTextAtomically(fs::absolute(outPath).parent_path() / "frames_tracked.json",
-                        Json({{"frames", tracked}}).dump(1) + "\n");
-  } catch (...) {
-    std::error_code ec;
-    fs::remove(outPath, ec);
-    fs::remove(summaryPath, ec);
-    throw;
-  }
+  writeFramesTracked(outPath, summaryPath, tracked);
   std::printf(
       "fuse: %zu frames (%d fused, %d grasps, tracking %s) -> %s: %zu vertices, observed %.1f%% "
       "of the surface (%.2f s; corrected poses in frames_tracked.json)\n",
@@ -303,13 +421,7 @@ int runFuse(const FuseArgs& args) {
   fs::path summaryPath =
       args.summary.empty() ? fs::path(outPath).replace_extension(".json") : fs::path(args.summary);
   if (!(args.margin_m >= 0)) throw Error("--margin must be >= 0");
-  VolumeOptions vo;
-  vo.voxel_size_m = args.voxel_m;
-  vo.truncation_m = args.truncation_m;
-  vo.band_sigmas = args.band_sigmas;
-  vo.smooth_depth = args.smooth_depth;
-  vo.memory_budget_mb = args.memory_mb;
-  if (std::string p = vo.validate(); !p.empty()) throw Error("volume options: " + p);
+  const VolumeOptions vo = fuseVolumeOptions(args);
   MeshOptions mo;
   mo.hole_sigma_m = args.hole_sigma_m;
   if (std::string p = mo.validate(); !p.empty()) throw Error("--hole-sigma: " + p);
@@ -335,54 +447,14 @@ int runFuse(const FuseArgs& args) {
         throw Error((dir / "frames.json").string() + ": frames[" + std::to_string(i) +
                     "] has no T_O_C, only the robot's q and T_B_C: fuse with --robot CONFIG");
   }
-  Aabb box;
-  if (args.bounds) {
-    const auto& b = *args.bounds;
-    box.min = Vec3(b[0], b[1], b[2]);
-    box.max = Vec3(b[3], b[4], b[5]);
-    if (!(box.min.array() < box.max.array()).all())
-      throw Error("--bounds: each min must be below its max (xmin ymin zmin xmax ymax zmax)");
-  } else if (set.bounds_O) {
-    box = *set.bounds_O;
-  } else if (!args.robot.empty()) {
-    throw Error((dir / "frames.json").string() +
-                ": no bounds_O; give --bounds around the object (with the robot in view, the "
-                "measured points would take in the arm)");
-  } else {
-    box = autoBounds(dir, set, args.margin_m);
-  }
+  const Aabb box = fuseBounds(args, dir, set);
   if (!args.robot.empty()) return fuseWithRobot(args, dir, set, box, outPath, summaryPath, mo, t0);
   TsdfVolume volume(box, vo);
   std::fprintf(stderr, "fuse: volume %d x %d x %d voxels of %.1f mm (%.0f MiB)\n",
                volume.dims().x(), volume.dims().y(), volume.dims().z(), vo.voxel_size_m * 1000,
                TsdfVolume::megabytesFor(volume.dims()));
-  NoiseModelOptions noise;
-  auto tIntegrate = Clock::now();
-  double integrateS = 0, colourS = 0;
-  int64_t updated = 0, colourPixels = 0;
-  // Colour (frames with a colour image): the camera as frames.json gives it.
-  DepthCameraOptions camera;
-  camera.intrinsics = set.intrinsics;
-  camera.colour = set.colour;
   ColourVolume colour(volume);
-  for (size_t i = 0; i < set.frames.size(); ++i) {
-    DepthImage depth = loadFrameDepth(dir, set, i);
-    const RgbImage rgb = loadFrameColour(dir, set, i);
-    auto ti = Clock::now();
-    // σ only where the volume's voxels can project (integrate reads no other pixel).
-    const PixelRect rect = volumeImageRect(volume, set.frames[i].T_O_C, set.intrinsics);
-    std::vector<float> sigma = measurementSigma(depth, set.intrinsics, noise, &rect);
-    updated += integrate(depth, set.frames[i].T_O_C, set.intrinsics, sigma, &volume).updated;
-    integrateS += secondsSince(ti);
-    if (!rgb.empty()) {
-      auto tc = Clock::now();
-      colourPixels +=
-          integrateColour(depth, rgb, set.frames[i].T_O_C, camera, sigma, &colour).pixels;
-      colourS += secondsSince(tc);
-    }
-    progress("fuse: frames", i + 1, set.frames.size());
-  }
-  double loadAndIntegrateS = secondsSince(tIntegrate);
+  const FuseFigures ff = integrateFrames(dir, set, &volume, &colour);
   auto tMesh = Clock::now();
   ObjectModel model = extractModel(volume, mo);
   if (args.surface == "observed") model = model.observedSurface();
@@ -397,26 +469,11 @@ int runFuse(const FuseArgs& args) {
   summary["model"] = fs::path(outPath).filename().string();
   summary["frames"] = set.frames.size();
   addModelFigures(model, args.surface, &summary);
-  summary["volume"] = {
-      {"voxel_size_m", volume.voxelSize()},
-      {"truncation_m", volume.truncation()},
-      {"dims", {volume.dims().x(), volume.dims().y(), volume.dims().z()}},
-      {"origin_m", {volume.origin().x(), volume.origin().y(), volume.origin().z()}},
-      {"voxels_observed", volume.countState(VoxelState::kObserved)},
-      {"voxels_empty", volume.countState(VoxelState::kEmpty)},
-      {"voxels_unknown", volume.countState(VoxelState::kUnknown)},
-      {"voxel_updates", updated}};
-  if (set.colour.enabled) {
-    size_t coloured = 0;
-    for (const auto& c : model.rgba) coloured += c[3] == 255;
-    summary["colour"] = {{"pixels_fused", colourPixels},
-                         {"voxels", colour.voxels()},
-                         {"memory_mb", double(colour.bytes()) / (1 << 20)},
-                         {"vertices_with_colour", coloured}};
-  }
-  summary["timing_s"] = {{"integrate", integrateS},
-                         {"colour", colourS},
-                         {"load_and_integrate", loadAndIntegrateS},
+  summary["volume"] = volumeJson(volume, ff.updated);
+  if (set.colour.enabled) summary["colour"] = fuseColourJson(model, colour, ff.colour_pixels);
+  summary["timing_s"] = {{"integrate", ff.integrate_s},
+                         {"colour", ff.colour_s},
+                         {"load_and_integrate", ff.load_and_integrate_s},
                          {"mesh", meshS},
                          {"total", secondsSince(t0)}};
   writeFusedModel(outPath, summaryPath, model, summary);
