@@ -97,78 +97,67 @@ std::string num(double x) {
   return b;
 }
 
-// results.csv, results.md, curves.csv and curves.json in `dir` from the runs.
-void tabulate(const fs::path& dir, const std::vector<EvalRun>& runs,
-              const std::vector<std::string>& objects, const std::vector<std::string>& planners,
-              const std::string& description) {
-  // results.csv: one row per run.
-  const std::vector<double> levels{0.90, 0.95, 0.99};
-  std::ostringstream csv;
-  csv << "object,planner,seed,exit_status,termination,views,grasps,coverage,accuracy_mean_mm,"
-         "accuracy_rms_mm,accuracy_p95_mm,fscore_2mm,fscore_5mm,fscore_10mm,mean_entropy,"
-         "observed_fraction,trajectory_s,planning_s,grasp_ranking_s,total_s,views_to_90,"
-         "views_to_95,views_to_99,trajectory_s_to_90,trajectory_s_to_95,trajectory_s_to_99,"
-         "view_evaluations,detached_area_m2\n";
-  std::ostringstream curves;
-  curves << "object,planner,seed,view,grasp,initial,coverage,mean_entropy,trajectory_s,quality,"
-            "cost_s\n";
-  Json curvesJson = Json::array();
-  for (const EvalRun& r : runs) {
-    csv << csvField(r.name) << "," << r.planner << "," << r.seed << "," << r.status << ",";
-    if (!r.summary.is_object()) {
-      csv << (r.exited ? "error" : "missing") << std::string(23, ',') << "\n";
-      continue;
-    }
-    const Json& s = r.summary;
-    const Json& views = s["views"];
-    auto fs = [&](const char* k) {
-      return s.contains("fscore") && s["fscore"].contains(k) ? s["fscore"][k].value("f", NAN) : NAN;
-    };
-    const Json& t = s["timing_s"];
-    csv << s.value("termination", std::string()) << "," << views.size() << "," << s["grasps"].size()
-        << "," << num(s.value("coverage", NAN)) << "," << num(s["accuracy_mm"].value("mean", NAN))
-        << "," << num(s["accuracy_mm"].value("rms", NAN)) << ","
-        << num(s["accuracy_mm"].value("p95", NAN)) << "," << num(fs("2mm")) << "," << num(fs("5mm"))
-        << "," << num(fs("10mm")) << "," << num(s.value("mean_entropy", NAN)) << ","
-        << num(s.value("observed_fraction", NAN)) << "," << num(s.value("trajectory_s", NAN)) << ","
-        << num(t.value("planning", NAN)) << "," << num(t.value("grasp_ranking", NAN)) << ","
-        << num(t.value("total", NAN));
-    for (double l : levels) csv << "," << num(firstReaching(views, l).first);
-    for (double l : levels) csv << "," << num(firstReaching(views, l).second);
-    csv << "," << s.value("view_evaluations", 0) << "," << num(s.value("detached_area_m2", NAN))
-        << "\n";
-    Json c = {{"object", r.name},
-              {"planner", r.planner},
-              {"seed", r.seed},
-              {"report", (r.rel / "report.html").string()}};
-    Json cov = Json::array(), ent = Json::array(), traj = Json::array();
-    for (size_t i = 0; i < views.size(); ++i) {
-      const Json& v = views[i];
-      curves << csvField(r.name) << "," << r.planner << "," << r.seed << "," << i + 1 << ","
-             << v.value("grasp", 1) << "," << (v.value("initial", false) ? 1 : 0) << ","
-             << num(v.value("coverage", NAN)) << "," << num(v.value("mean_entropy", NAN)) << ","
-             << num(v.value("trajectory_s", NAN)) << "," << num(v.value("quality", NAN)) << ","
-             << num(v.value("cost_s", NAN)) << "\n";
-      cov.push_back(v.value("coverage", -1.0));
-      ent.push_back(v.value("mean_entropy", 0.0));
-      traj.push_back(v.value("trajectory_s", 0.0));
-    }
-    c["coverage"] = cov;
-    c["mean_entropy"] = ent;
-    c["trajectory_s"] = traj;
-    curvesJson.push_back(c);
+// One run's row of results.csv and its views' rows of curves.csv and entry of curves.json.
+void addRunRows(const EvalRun& r, const std::vector<double>& levels, std::ostringstream& csv,
+                std::ostringstream& curves, Json& curvesJson) {
+  csv << csvField(r.name) << "," << r.planner << "," << r.seed << "," << r.status << ",";
+  if (!r.summary.is_object()) {
+    csv << (r.exited ? "error" : "missing") << std::string(23, ',') << "\n";
+    return;
   }
+  const Json& s = r.summary;
+  const Json& views = s["views"];
+  auto fs = [&](const char* k) {
+    return s.contains("fscore") && s["fscore"].contains(k) ? s["fscore"][k].value("f", NAN) : NAN;
+  };
+  const Json& t = s["timing_s"];
+  csv << s.value("termination", std::string()) << "," << views.size() << "," << s["grasps"].size()
+      << "," << num(s.value("coverage", NAN)) << "," << num(s["accuracy_mm"].value("mean", NAN))
+      << "," << num(s["accuracy_mm"].value("rms", NAN)) << ","
+      << num(s["accuracy_mm"].value("p95", NAN)) << "," << num(fs("2mm")) << "," << num(fs("5mm"))
+      << "," << num(fs("10mm")) << "," << num(s.value("mean_entropy", NAN)) << ","
+      << num(s.value("observed_fraction", NAN)) << "," << num(s.value("trajectory_s", NAN)) << ","
+      << num(t.value("planning", NAN)) << "," << num(t.value("grasp_ranking", NAN)) << ","
+      << num(t.value("total", NAN));
+  for (double l : levels) csv << "," << num(firstReaching(views, l).first);
+  for (double l : levels) csv << "," << num(firstReaching(views, l).second);
+  csv << "," << s.value("view_evaluations", 0) << "," << num(s.value("detached_area_m2", NAN))
+      << "\n";
+  Json c = {{"object", r.name},
+            {"planner", r.planner},
+            {"seed", r.seed},
+            {"report", (r.rel / "report.html").string()}};
+  Json cov = Json::array(), ent = Json::array(), traj = Json::array();
+  for (size_t i = 0; i < views.size(); ++i) {
+    const Json& v = views[i];
+    curves << csvField(r.name) << "," << r.planner << "," << r.seed << "," << i + 1 << ","
+           << v.value("grasp", 1) << "," << (v.value("initial", false) ? 1 : 0) << ","
+           << num(v.value("coverage", NAN)) << "," << num(v.value("mean_entropy", NAN)) << ","
+           << num(v.value("trajectory_s", NAN)) << "," << num(v.value("quality", NAN)) << ","
+           << num(v.value("cost_s", NAN)) << "\n";
+    cov.push_back(v.value("coverage", -1.0));
+    ent.push_back(v.value("mean_entropy", 0.0));
+    traj.push_back(v.value("trajectory_s", 0.0));
+  }
+  c["coverage"] = cov;
+  c["mean_entropy"] = ent;
+  c["trajectory_s"] = traj;
+  curvesJson.push_back(c);
+}
 
-  // results.md: per object and planner, mean ± sample standard deviation over the seeds.
+// results.md's per-object table (mean ± sample standard deviation over the seeds); `overall`
+// gathers, per planner: final coverage, coverage after 5 / 7 / 10 views, views to 90%, runs
+// reaching 90%, views.
+std::string perObjectTable(const std::vector<EvalRun>& runs,
+                           const std::vector<std::string>& objects,
+                           const std::vector<std::string>& planners,
+                           std::map<std::string, std::array<Stat, 7>>* overall) {
   std::ostringstream md;
   md << "| object | planner | views to 90% | views to 95% | views to 99% | trajectory s to 90% | "
         "trajectory s to 95% | trajectory s to 99% | final coverage % | accuracy mean mm | grasps "
         "| "
         "views | planning s |\n"
         "|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
-  // planner → final coverage, coverage after 5 / 7 / 10 views, views to 90%, runs reaching 90%,
-  // views
-  std::map<std::string, std::array<Stat, 7>> overall;
   for (const std::string& o : objects)
     for (const std::string& p : planners) {
       Stat v90, v95, v99, t90, t95, t99, cov, acc, gr, nv, plan;
@@ -191,7 +180,7 @@ void tabulate(const fs::path& dir, const std::vector<EvalRun>& runs,
         gr.add(double(s["grasps"].size()));
         nv.add(double(s["views"].size()));
         plan.add(s["timing_s"].value("planning", NAN) + s["timing_s"].value("grasp_ranking", 0.0));
-        auto& ov = overall[p];
+        auto& ov = (*overall)[p];
         ov[0].add(100 * s.value("coverage", NAN));
         for (int k = 0; k < 3; ++k)
           ov[1 + k].add(100 * coverageAfter(s["views"], 5 + 2 * k + (k == 2)));
@@ -204,6 +193,30 @@ void tabulate(const fs::path& dir, const std::vector<EvalRun>& runs,
          << cov.str(1) << " | " << acc.str(2) << " | " << gr.str(1) << " | " << nv.str(1) << " | "
          << plan.str(1) << " |\n";
     }
+  return md.str();
+}
+
+// results.csv, results.md, curves.csv and curves.json in `dir` from the runs.
+void tabulate(const fs::path& dir, const std::vector<EvalRun>& runs,
+              const std::vector<std::string>& objects, const std::vector<std::string>& planners,
+              const std::string& description) {
+  // results.csv: one row per run.
+  const std::vector<double> levels{0.90, 0.95, 0.99};
+  std::ostringstream csv;
+  csv << "object,planner,seed,exit_status,termination,views,grasps,coverage,accuracy_mean_mm,"
+         "accuracy_rms_mm,accuracy_p95_mm,fscore_2mm,fscore_5mm,fscore_10mm,mean_entropy,"
+         "observed_fraction,trajectory_s,planning_s,grasp_ranking_s,total_s,views_to_90,"
+         "views_to_95,views_to_99,trajectory_s_to_90,trajectory_s_to_95,trajectory_s_to_99,"
+         "view_evaluations,detached_area_m2\n";
+  std::ostringstream curves;
+  curves << "object,planner,seed,view,grasp,initial,coverage,mean_entropy,trajectory_s,quality,"
+            "cost_s\n";
+  Json curvesJson = Json::array();
+  for (const EvalRun& r : runs) addRunRows(r, levels, csv, curves, curvesJson);
+
+  // results.md: per object and planner, mean ± sample standard deviation over the seeds.
+  std::map<std::string, std::array<Stat, 7>> overall;
+  const std::string perObject = perObjectTable(runs, objects, planners, &overall);
   std::ostringstream head;
   head
       << "# inhand eval\n\n"
@@ -224,7 +237,7 @@ void tabulate(const fs::path& dir, const std::vector<EvalRun>& runs,
   writeTextAtomically(dir / "results.csv", csv.str());
   writeTextAtomically(dir / "curves.csv", curves.str());
   writeTextAtomically(dir / "curves.json", curvesJson.dump(1) + "\n");
-  writeTextAtomically(dir / "results.md", head.str() + md.str());
+  writeTextAtomically(dir / "results.md", head.str() + perObject);
 }
 
 }  // namespace
@@ -441,32 +454,10 @@ int resumeEval(const EvalArgs& args) {
 
 }  // namespace
 
-int runEval(const EvalArgs& args) {
-  const auto t0 = std::chrono::steady_clock::now();
-  if (args.backend != "local" && args.backend != "slurm")
-    throw Error("--backend: \"" + args.backend + "\" is neither local nor slurm");
-  if (args.backend != "slurm" && !args.slurm_args.empty())
-    throw Error("--slurm-args: only with --backend slurm");
-  if (args.backend != "slurm" && args.no_wait) throw Error("--no-wait: only with --backend slurm");
-  if (args.jobs < 0 || args.jobs > 10000)
-    throw Error("--jobs: must be in 0..10000 (0: one per core, or no Slurm limit)");
-  if (!args.resume.empty()) return resumeEval(args);
-  if (args.objects.empty()) throw Error("--objects is required (or --resume DIR)");
-  if (args.out.empty()) throw Error("--out is required (or --resume DIR)");
-  const std::vector<std::string> objects = splitList(args.objects);
-  const std::vector<std::string> planners = splitList(args.planners);
-  if (objects.empty()) throw Error("--objects: give at least one object (comma-separated)");
-  if (planners.empty()) throw Error("--planners: give at least one planner (comma-separated)");
-  if (args.seeds < 1 || args.seeds > 1000) throw Error("--seeds: must be in 1..1000");
-  if (args.backend == "local" && args.jobs > 64)
-    throw Error("--jobs: must be in 0..64 on this machine (0: one per core)");
-  const std::vector<std::string> known = plannerNames();
-  for (const std::string& p : planners)
-    if (std::find(known.begin(), known.end(), p) == known.end())
-      throw Error("--planners: unknown planner \"" + p + "\"");
-  // Rest poses: as-is, or stable pose indices (each object must have that many).
-  const std::vector<std::string> restPoses = splitList(args.rest_poses);
-  if (restPoses.empty()) throw Error("--rest-poses: give as-is or stable pose indices (0, 1, ...)");
+namespace {
+
+// The largest stable pose index of --rest-poses (-1: as-is only); each entry checked.
+int largestRestPose(const std::vector<std::string>& restPoses) {
   int maxPose = -1;
   for (const std::string& rp : restPoses) {
     if (rp == "as-is") continue;
@@ -476,6 +467,12 @@ int runEval(const EvalArgs& args) {
       throw Error("--rest-poses: \"" + rp + "\" is neither as-is nor a stable pose's index");
     maxPose = std::max(maxPose, int(n));
   }
+  return maxPose;
+}
+
+// Every object loads, their short names are unique, and each has the stable poses asked for;
+// else an error naming the object.
+void checkObjects(const std::vector<std::string>& objects, int maxPose) {
   std::map<std::string, std::string> names;  // short name → spec (must be unique)
   for (const std::string& o : objects) {
     const TriangleMesh mesh = loadObject(o);  // fails here, naming the object, before any scan
@@ -495,9 +492,12 @@ int runEval(const EvalArgs& args) {
                     std::to_string(count - 1) + "), not " + std::to_string(maxPose));
     }
   }
-  if (!args.config.empty()) readJsonFile(args.config);  // readable JSON (scan checks the keys)
-  if (args.backend == "slurm") checkSlurmTools();
+}
 
+// The eval's runs (objects × rest poses × planners × seeds) and its description.
+EvalPlan evalPlan(const EvalArgs& args, const std::vector<std::string>& objects,
+                  const std::vector<std::string>& restPoses,
+                  const std::vector<std::string>& planners) {
   EvalPlan plan;
   plan.planners = planners;
   plan.seeds = args.seeds;
@@ -532,6 +532,43 @@ int runEval(const EvalArgs& args) {
   if (args.max_views >= 0) desc << "; --max-views " << args.max_views;
   if (!args.config.empty()) desc << "; --config " << args.config;
   plan.description = desc.str();
+  return plan;
+}
+
+}  // namespace
+
+int runEval(const EvalArgs& args) {
+  const auto t0 = std::chrono::steady_clock::now();
+  if (args.backend != "local" && args.backend != "slurm")
+    throw Error("--backend: \"" + args.backend + "\" is neither local nor slurm");
+  if (args.backend != "slurm" && !args.slurm_args.empty())
+    throw Error("--slurm-args: only with --backend slurm");
+  if (args.backend != "slurm" && args.no_wait) throw Error("--no-wait: only with --backend slurm");
+  if (args.jobs < 0 || args.jobs > 10000)
+    throw Error("--jobs: must be in 0..10000 (0: one per core, or no Slurm limit)");
+  if (!args.resume.empty()) return resumeEval(args);
+  if (args.objects.empty()) throw Error("--objects is required (or --resume DIR)");
+  if (args.out.empty()) throw Error("--out is required (or --resume DIR)");
+  const std::vector<std::string> objects = splitList(args.objects);
+  const std::vector<std::string> planners = splitList(args.planners);
+  if (objects.empty()) throw Error("--objects: give at least one object (comma-separated)");
+  if (planners.empty()) throw Error("--planners: give at least one planner (comma-separated)");
+  if (args.seeds < 1 || args.seeds > 1000) throw Error("--seeds: must be in 1..1000");
+  if (args.backend == "local" && args.jobs > 64)
+    throw Error("--jobs: must be in 0..64 on this machine (0: one per core)");
+  const std::vector<std::string> known = plannerNames();
+  for (const std::string& p : planners)
+    if (std::find(known.begin(), known.end(), p) == known.end())
+      throw Error("--planners: unknown planner \"" + p + "\"");
+  // Rest poses: as-is, or stable pose indices (each object must have that many).
+  const std::vector<std::string> restPoses = splitList(args.rest_poses);
+  if (restPoses.empty()) throw Error("--rest-poses: give as-is or stable pose indices (0, 1, ...)");
+  const int maxPose = largestRestPose(restPoses);
+  checkObjects(objects, maxPose);
+  if (!args.config.empty()) readJsonFile(args.config);  // readable JSON (scan checks the keys)
+  if (args.backend == "slurm") checkSlurmTools();
+
+  EvalPlan plan = evalPlan(args, objects, restPoses, planners);
   std::vector<size_t> all(plan.runs.size());
   for (size_t i = 0; i < all.size(); ++i) all[i] = i;
   const int jobs = threadsForJobs(args.jobs);
