@@ -11,6 +11,7 @@
 #include <cstdlib>
 #include <cstring>
 #include <fstream>
+#include <functional>
 #include <limits>
 
 #include "inhand/core/clock.h"
@@ -164,6 +165,10 @@ struct ScanSession::State {
   }
   // The grasp's near-hand grids: the planner's (eq. 9 skips hits within its t_hand) and fusion's
   // (measurements within ScanOptions::t_hand_m only carve), one grid when the two agree.
+  // The arm's torque readings from a checkpoint's header (load).
+  void readTorques(const Json& h);
+  // The tracking filter's state from a checkpoint's header (load).
+  void readTrackingFilter(const Json& h, const std::function<Error(const std::string&)>& bad);
   void buildNearHand(const RobotModel& robot, const JointVector& q, const Iso3& T_O_palm_) {
     const HandGeometry hand(robot, q, T_O_palm_);
     const ViewQualityOptions& vq = options.planner.quality;
@@ -1320,6 +1325,130 @@ void ScanSession::save(const std::filesystem::path& path, const Json& extra) con
   });
 }
 
+namespace {
+
+// The checkpoint's volume (its header's "volume", `dims` voxels) is the options' `v`; else an
+// error naming both.
+void checkVolumeMatches(const std::filesystem::path& path, const Json& vj, const Vec3i& dims,
+                        const TsdfVolume& v) {
+  if (v.dims() != dims || std::abs(v.voxelSize() - vj.at("voxel_m").get<double>()) > 1e-12 ||
+      (v.origin() - vecFrom(vj.at("origin"))).norm() > 1e-9)
+    throw Error(path.string() + ": the checkpoint's volume (" + std::to_string(dims.x()) + "x" +
+                std::to_string(dims.y()) + "x" + std::to_string(dims.z()) + " voxels of " +
+                std::to_string(vj.at("voxel_m").get<double>()) + " m) differs from the options' (" +
+                std::to_string(v.dims().x()) + "x" + std::to_string(v.dims().y()) + "x" +
+                std::to_string(v.dims().z()) + " voxels of " + std::to_string(v.voxelSize()) +
+                " m)");
+}
+
+// A checkpoint's voxel data after its header `h` (save's layout): the volume's, then the colour
+// sums of the voxels that have them.
+void readVolumeData(std::istream& f, const Json& h, TsdfVolume& v,
+                    std::unique_ptr<ColourVolume>* colour,
+                    const std::function<Error(const std::string&)>& bad) {
+  const std::string encoding = h.at("volume").value("encoding", std::string("raw"));
+  if (encoding == "runs") {
+    if (std::string problem = v.readData(f); !problem.empty()) throw bad(problem);
+  } else if (encoding == "raw") {
+    const size_t n = v.voxelCount();
+    if (!f.read(reinterpret_cast<char*>(v.sumWD()), std::streamsize(n * sizeof(float))) ||
+        !f.read(reinterpret_cast<char*>(v.sumW()), std::streamsize(n * sizeof(float))) ||
+        !f.read(reinterpret_cast<char*>(v.states()), std::streamsize(n)))
+      throw bad("voxel data cut short");
+    for (size_t i = 0; i < n; ++i)
+      if (v.states()[i] > uint8_t(VoxelState::kObserved)) throw bad("invalid voxel state");
+  } else {
+    throw bad("unknown volume encoding \"" + encoding + "\"");
+  }
+  if (h.contains("colour_voxels")) {
+    const size_t n = h.at("colour_voxels").get<size_t>();
+    *colour = std::make_unique<ColourVolume>(v);
+    for (size_t k = 0; k < n; ++k) {
+      uint64_t index = 0;
+      float sums[4];
+      if (!f.read(reinterpret_cast<char*>(&index), sizeof index) ||
+          !f.read(reinterpret_cast<char*>(sums), sizeof sums))
+        throw bad("colour data cut short");
+      if (index >= v.voxelCount()) throw bad("colour voxel index out of the volume");
+      (*colour)->sums()[size_t(index)] = {sums[0], sums[1], sums[2], sums[3]};
+    }
+  }
+}
+
+// One view of a checkpoint's "views" (as ScanSession::save writes it).
+ViewRecord viewRecordFrom(const Json& r) {
+  ViewRecord rec;
+  rec.initial = r.at("initial").get<bool>();
+  rec.dir_O = vecFrom(r.at("dir_O"));
+  rec.T_O_C = isoFrom(r.at("T_O_C"));
+  rec.quality = r.at("quality").get<double>();
+  rec.gain = numberOrNan(r.value("gain", Json()));
+  rec.t_q = numberOrNan(r.value("t_q", Json()));
+  rec.unresolved = r.value("unresolved", 0.0);
+  rec.cost_s = r.at("cost_s").get<double>();
+  rec.score = r.at("score").get<double>();
+  rec.mean_entropy = r.at("mean_entropy").get<double>();
+  rec.observed_fraction = r.at("observed_fraction").get<double>();
+  rec.coverage = r.at("coverage").get<double>();
+  rec.frames = r.at("frames").get<int>();
+  rec.candidates = r.at("candidates").get<int>();
+  rec.planning_s = r.at("planning_s").get<double>();
+  return rec;
+}
+
+// A checkpoint's "summary" counters and times (its termination aside).
+void readSummaryCounts(const Json& m, ScanSession::Summary* sum) {
+  sum->message = m.at("message").get<std::string>();
+  sum->grasps = m.at("grasps").get<int>();
+  sum->views = m.at("views").get<int>();
+  sum->frames = m.at("frames").get<int>();
+  sum->frames_rejected = m.value("frames_rejected", 0);
+  sum->frames_dropped = m.value("frames_dropped", 0);
+  sum->frames_off_path = m.value("frames_off_path", 0);
+  sum->frames_unsupported = m.value("frames_unsupported", 0);
+  sum->frames_in_free_space = m.value("frames_in_free_space", 0);
+  sum->frames_moving = m.value("frames_moving", 0);
+  if (m.contains("slips")) sum->slips = slipsFrom(m.at("slips"));
+  sum->frames_repaired = m.value("frames_repaired", 0);
+  sum->tracking_s = m.value("tracking_s", 0.0);
+  sum->view_evaluations = m.at("view_evaluations").get<int>();
+  sum->view_refinements = m.at("view_refinements").get<int>();
+  sum->planning_s = m.at("planning_s").get<double>();
+  sum->fusion_s = m.at("fusion_s").get<double>();
+  sum->colour_pixels = m.value("colour_pixels", 0L);
+  sum->colour_s = m.value("colour_s", 0.0);
+}
+
+}  // namespace
+
+void ScanSession::State::readTrackingFilter(const Json& h,
+                                            const std::function<Error(const std::string&)>& bad) {
+  filterStarted = h.contains("tracking_filter");
+  if (filterStarted) {
+    const Json& f = h.at("tracking_filter");
+    const auto x = f.at("x").get<std::vector<double>>();
+    const auto P = f.at("P").get<std::vector<double>>();
+    const auto fq = f.at("q").get<std::vector<double>>();
+    if (x.size() != 6 || P.size() != 36 || int(fq.size()) != model->variableCount())
+      throw bad("tracking_filter: " + std::to_string(x.size()) + " values in x, " +
+                std::to_string(P.size()) + " in P, " + std::to_string(fq.size()) +
+                " joints (6, 36 and the robot's)");
+    filterX = Eigen::Map<const Eigen::Matrix<double, 6, 1>>(x.data());
+    filterP = Eigen::Map<const Eigen::Matrix<double, 6, 6>>(P.data());
+    filterQ = Eigen::Map<const Eigen::VectorXd>(fq.data(), Eigen::Index(fq.size()));
+  }
+}
+
+void ScanSession::State::readTorques(const Json& h) {
+  for (const Json& r : h.value("torque_readings", Json::array())) {
+    const auto q = r.at("q").get<std::vector<double>>();
+    const auto tau = r.at("tau").get<std::vector<double>>();
+    addTorques({Eigen::Map<const JointVector>(q.data(), Eigen::Index(q.size())),
+                Eigen::Map<const JointVector>(tau.data(), Eigen::Index(tau.size())),
+                isoFrom(r.at("T_O_palm"))});
+  }
+}
+
 ScanSession ScanSession::load(const std::filesystem::path& path, const RobotModel& robot,
                               const DepthCameraOptions& camera, const NoiseModelOptions& noise,
                               const ScanOptions& options, const MultiGraspOptions& multi,
@@ -1347,41 +1476,8 @@ ScanSession ScanSession::load(const std::filesystem::path& path, const RobotMode
     State& s = *session.s_;
     TsdfVolume& v = s.volume;
     ++s.revision;
-    if (v.dims() != dims || std::abs(v.voxelSize() - vj.at("voxel_m").get<double>()) > 1e-12 ||
-        (v.origin() - vecFrom(vj.at("origin"))).norm() > 1e-9)
-      throw Error(path.string() + ": the checkpoint's volume (" + std::to_string(dims.x()) + "x" +
-                  std::to_string(dims.y()) + "x" + std::to_string(dims.z()) + " voxels of " +
-                  std::to_string(vj.at("voxel_m").get<double>()) +
-                  " m) differs from the options' (" + std::to_string(v.dims().x()) + "x" +
-                  std::to_string(v.dims().y()) + "x" + std::to_string(v.dims().z()) +
-                  " voxels of " + std::to_string(v.voxelSize()) + " m)");
-    const std::string encoding = vj.value("encoding", std::string("raw"));
-    if (encoding == "runs") {
-      if (std::string problem = v.readData(f); !problem.empty()) throw bad(problem);
-    } else if (encoding == "raw") {
-      const size_t n = v.voxelCount();
-      if (!f.read(reinterpret_cast<char*>(v.sumWD()), std::streamsize(n * sizeof(float))) ||
-          !f.read(reinterpret_cast<char*>(v.sumW()), std::streamsize(n * sizeof(float))) ||
-          !f.read(reinterpret_cast<char*>(v.states()), std::streamsize(n)))
-        throw bad("voxel data cut short");
-      for (size_t i = 0; i < n; ++i)
-        if (v.states()[i] > uint8_t(VoxelState::kObserved)) throw bad("invalid voxel state");
-    } else {
-      throw bad("unknown volume encoding \"" + encoding + "\"");
-    }
-    if (h.contains("colour_voxels")) {
-      const size_t n = h.at("colour_voxels").get<size_t>();
-      s.colour = std::make_unique<ColourVolume>(v);
-      for (size_t k = 0; k < n; ++k) {
-        uint64_t index = 0;
-        float sums[4];
-        if (!f.read(reinterpret_cast<char*>(&index), sizeof index) ||
-            !f.read(reinterpret_cast<char*>(sums), sizeof sums))
-          throw bad("colour data cut short");
-        if (index >= v.voxelCount()) throw bad("colour voxel index out of the volume");
-        s.colour->sums()[size_t(index)] = {sums[0], sums[1], sums[2], sums[3]};
-      }
-    }
+    checkVolumeMatches(path, vj, dims, v);
+    readVolumeData(f, h, v, &s.colour, bad);
     s.holding = h.at("holding").get<bool>();
     s.grasp = h.at("grasp").get<int>();
     s.T_O_palm = isoFrom(h.at("T_O_palm"));
@@ -1393,62 +1489,15 @@ ScanSession ScanSession::load(const std::filesystem::path& path, const RobotMode
       s.initialDirs.push_back(vecFrom(d));
     s.alg1Views = h.at("alg1_views").get<int>();
     for (const Json& r : h.value("views", Json::array())) {
-      ViewRecord rec;
-      rec.initial = r.at("initial").get<bool>();
-      rec.dir_O = vecFrom(r.at("dir_O"));
-      rec.T_O_C = isoFrom(r.at("T_O_C"));
-      rec.quality = r.at("quality").get<double>();
-      rec.gain = numberOrNan(r.value("gain", Json()));
-      rec.t_q = numberOrNan(r.value("t_q", Json()));
-      rec.unresolved = r.value("unresolved", 0.0);
-      rec.cost_s = r.at("cost_s").get<double>();
-      rec.score = r.at("score").get<double>();
-      rec.mean_entropy = r.at("mean_entropy").get<double>();
-      rec.observed_fraction = r.at("observed_fraction").get<double>();
-      rec.coverage = r.at("coverage").get<double>();
-      rec.frames = r.at("frames").get<int>();
-      rec.candidates = r.at("candidates").get<int>();
-      rec.planning_s = r.at("planning_s").get<double>();
-      s.views.push_back(rec);
+      s.views.push_back(viewRecordFrom(r));
       s.viewGrasp.push_back(r.at("grasp").get<int>());
     }
     const Json& m = h.at("summary");
     if (!parseTermination(m.at("termination").get<std::string>(), &s.summary.termination))
       throw bad("unknown termination " + m.at("termination").get<std::string>());
-    s.summary.message = m.at("message").get<std::string>();
-    s.summary.grasps = m.at("grasps").get<int>();
-    s.summary.views = m.at("views").get<int>();
-    s.summary.frames = m.at("frames").get<int>();
-    s.summary.frames_rejected = m.value("frames_rejected", 0);
-    s.summary.frames_dropped = m.value("frames_dropped", 0);
-    s.summary.frames_off_path = m.value("frames_off_path", 0);
-    s.summary.frames_unsupported = m.value("frames_unsupported", 0);
-    s.summary.frames_in_free_space = m.value("frames_in_free_space", 0);
-    s.summary.frames_moving = m.value("frames_moving", 0);
-    if (m.contains("slips")) s.summary.slips = slipsFrom(m.at("slips"));
-    s.summary.frames_repaired = m.value("frames_repaired", 0);
-    s.summary.tracking_s = m.value("tracking_s", 0.0);
+    readSummaryCounts(m, &s.summary);
     if (h.contains("tracking_correction")) s.correction = isoFrom(h.at("tracking_correction"));
-    s.filterStarted = h.contains("tracking_filter");
-    if (s.filterStarted) {
-      const Json& f = h.at("tracking_filter");
-      const auto x = f.at("x").get<std::vector<double>>();
-      const auto P = f.at("P").get<std::vector<double>>();
-      const auto fq = f.at("q").get<std::vector<double>>();
-      if (x.size() != 6 || P.size() != 36 || int(fq.size()) != s.model->variableCount())
-        throw bad("tracking_filter: " + std::to_string(x.size()) + " values in x, " +
-                  std::to_string(P.size()) + " in P, " + std::to_string(fq.size()) +
-                  " joints (6, 36 and the robot's)");
-      s.filterX = Eigen::Map<const Eigen::Matrix<double, 6, 1>>(x.data());
-      s.filterP = Eigen::Map<const Eigen::Matrix<double, 6, 6>>(P.data());
-      s.filterQ = Eigen::Map<const Eigen::VectorXd>(fq.data(), Eigen::Index(fq.size()));
-    }
-    s.summary.view_evaluations = m.at("view_evaluations").get<int>();
-    s.summary.view_refinements = m.at("view_refinements").get<int>();
-    s.summary.planning_s = m.at("planning_s").get<double>();
-    s.summary.fusion_s = m.at("fusion_s").get<double>();
-    s.summary.colour_pixels = m.value("colour_pixels", 0L);
-    s.summary.colour_s = m.value("colour_s", 0.0);
+    s.readTrackingFilter(h, bad);
     const Json& qj = h.at("q_grasp");
     if (s.grasp >= 0 && qj.size() != size_t(robot.variableCount()))
       throw Error(path.string() + ": the checkpoint's joint state has " +
@@ -1463,13 +1512,7 @@ ScanSession ScanSession::load(const std::filesystem::path& path, const RobotMode
     // planning model when the grasp began).
     s.trackingFromFull = h.value("tracking_from_full_model", false);
     s.unsupportedStreak = h.value("unsupported_streak", 0);
-    for (const Json& r : h.value("torque_readings", Json::array())) {
-      const auto q = r.at("q").get<std::vector<double>>();
-      const auto tau = r.at("tau").get<std::vector<double>>();
-      s.addTorques({Eigen::Map<const JointVector>(q.data(), Eigen::Index(q.size())),
-                    Eigen::Map<const JointVector>(tau.data(), Eigen::Index(tau.size())),
-                    isoFrom(r.at("T_O_palm"))});
-    }
+    s.readTorques(h);
     if (s.holding && modelPointsNeeded(options)) {
       if (s.trackingFromFull) {
         const ObjectModel m = session.model();
