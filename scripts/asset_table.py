@@ -1,7 +1,8 @@
 #!/usr/bin/python3
 """Tabulates the assets of a scan set run with SCAN_EXPORT (scripts/scan_set.sh): per object the
 mass the arm weighed against the simulated truth, the centre of mass, the asset's volume against
-the true solid's, its convex pieces, and the grasps the scan tried. Writes OUT/assets.md.
+the true solid's, its convex pieces, and its grasp set (the grasps the scan tried, and the
+ranked ones that held the model in the hold test). Writes OUT/assets.md.
 Usage: scripts/asset_table.py OUT"""
 import json
 import math
@@ -36,14 +37,16 @@ for run in sorted((out / "runs").iterdir()):
     if a:
         vol = "%+.1f" % (100 * (a["volume_m3"] / true_volume - 1)) if true_volume else "–"
         g = json.loads((run / "asset" / "grasps.json").read_text())
-        held = sum(1 for x in g if x["outcome"] == "held")
-        row += [vol, str(a["collision_pieces"]), "%d (%d held)" % (len(g), held)]
+        tried = [x for x in g if x.get("source", "tried") == "tried"]
+        held = sum(1 for x in tried if x["outcome"] == "held")
+        row += [vol, str(a["collision_pieces"]),
+                "%d (%d held) + %d ranked" % (len(tried), held, len(g) - len(tried))]
     else:
         row += ["no asset", "–", "–"]
     rows.append(row)
 
 head = ["run", "termination", "weighed kg", "true kg", "mass error %", "centre of mass error mm",
-        "readings", "asset volume vs true %", "convex pieces", "grasps tried"]
+        "readings", "asset volume vs true %", "convex pieces", "grasp set: tried + ranked"]
 lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
 lines += ["| " + " | ".join(r) + " |" for r in rows]
 if errors:
