@@ -184,6 +184,26 @@ double preshapeForGap(const std::vector<std::pair<double, double>>& gaps, double
   return best;
 }
 
+// The open hand's fingertip gaps the pinch poses choose their preshapes from (tipGaps): one
+// list per spread of o.spreads, and the two-finger pinch's (empty without one). Computed once per
+// generation: each entry is a hand mesh built and measured.
+struct PinchGaps {
+  std::vector<std::vector<std::pair<double, double>>> spreads;
+  std::vector<std::pair<double, double>> two_finger;
+};
+
+bool hasTwoFingerPinch(const RobotModel& robot, const GraspOptions& o) {
+  return o.two_finger_pinch && robot.spreadVariable() >= 0 && robot.fingers().size() >= 3;
+}
+
+PinchGaps pinchGaps(const RobotModel& robot, const GraspOptions& o) {
+  PinchGaps g;
+  for (double s : o.spreads) g.spreads.push_back(tipGaps(robot, s, false, 0.2, 0.9, 0.025));
+  if (hasTwoFingerPinch(robot, o))
+    g.two_finger = tipGaps(robot, o.two_finger_spread, true, 0.2, 0.95, 0.01, true);
+  return g;
+}
+
 // Pinch poses: the hand straight down the table normal onto the model's footprint (the axis
 // through the centre of its least-area rectangle on the table), palm x across each of the
 // rectangle's sides either way, at each spread, with the preshape whose fingertips straddle the
@@ -192,7 +212,8 @@ double preshapeForGap(const std::vector<std::pair<double, double>>& gaps, double
 // a pen, a remote or a box lying flat, which the approaches spread over the sphere catch only
 // when one happens to line up with the model.
 void addPinchPoses(const RobotModel& robot, const std::vector<Vec3>& points, const Vec3& centre,
-                   const Vec3& up, const GraspOptions& o, std::vector<Pose>* poses) {
+                   const Vec3& up, const GraspOptions& o, const PinchGaps& g,
+                   std::vector<Pose>* poses) {
   const PrincipalAxes A = principalAxesUpright(points, up, 0.0);
   Vec3 mid = centre;
   std::vector<std::pair<Vec3, double>> sides;  // (horizontal axis, the model's width along it)
@@ -202,8 +223,9 @@ void addPinchPoses(const RobotModel& robot, const std::vector<Vec3>& points, con
     mid += (0.5 * (A.min[k] + A.max[k]) + (A.centroid - centre).dot(a)) * a;
     sides.push_back({a, A.max[k] - A.min[k]});
   }
-  for (double s : o.spreads) {
-    const auto gaps = tipGaps(robot, s, false, 0.2, 0.9, 0.025);
+  for (size_t k = 0; k < o.spreads.size(); ++k) {
+    const double s = o.spreads[k];
+    const auto& gaps = g.spreads[k];
     for (const auto& [a, width] : sides)
       for (double margin : {0.008, 0.020}) {
         const double best = preshapeForGap(gaps, width + 2 * margin);
@@ -222,8 +244,8 @@ void addPinchPoses(const RobotModel& robot, const std::vector<Vec3>& points, con
   }
   // Two-finger pinches: palm y across the side; the window of preshapes that meet a thin body
   // at its middle is narrow (the fingertips rise as they close), hence the fine steps.
-  if (!o.two_finger_pinch || robot.spreadVariable() < 0 || robot.fingers().size() < 3) return;
-  const auto gaps = tipGaps(robot, o.two_finger_spread, true, 0.2, 0.95, 0.01, true);
+  if (!hasTwoFingerPinch(robot, o)) return;
+  const auto& gaps = g.two_finger;
   for (const auto& [a, width] : sides)
     for (double margin : {0.003, 0.006, 0.010}) {
       const double best = preshapeForGap(gaps, width + 2 * margin);
@@ -318,8 +340,8 @@ std::vector<FootprintPart> footprintParts(const std::vector<Eigen::Vector2d>& po
 // rim, a hammer's handle or head, a mug's handle, which the pinch across the whole footprint cannot
 // span or spans far from the mass. As addPinchPoses, with the palm axis over the part's middle and
 // palm x (palm y for the two-finger pinch) across it.
-void addPartPinchPoses(const RobotModel& robot, const std::vector<Vec3>& points, const Vec3& centre,
-                       const Vec3& up, const GraspOptions& o, std::vector<Pose>* poses) {
+void addPartPinchPoses(const std::vector<Vec3>& points, const Vec3& centre, const Vec3& up,
+                       const GraspOptions& o, const PinchGaps& g, std::vector<Pose>* poses) {
   if (points.size() < 3) return;
   const PrincipalAxes A = principalAxesUpright(points, up, 0.0);
   std::vector<Vec3> across;  // the footprint's two principal axes
@@ -340,8 +362,9 @@ void addPartPinchPoses(const RobotModel& robot, const std::vector<Vec3>& points,
     ps.offset = (part.middle.x() - centre2.x()) * a0 + (part.middle.y() - centre2.y()) * a1;
     return ps;
   };
-  for (double s : o.spreads) {
-    const auto gaps = tipGaps(robot, s, false, 0.2, 0.9, 0.025);
+  for (size_t k = 0; k < o.spreads.size(); ++k) {
+    const double s = o.spreads[k];
+    const auto& gaps = g.spreads[k];
     if (gaps.empty()) continue;
     for (const FootprintPart& part : footprintParts(flat, centre2, gaps.front().second - 0.016, 12))
       for (double margin : {0.008, 0.020}) {
@@ -351,8 +374,7 @@ void addPartPinchPoses(const RobotModel& robot, const std::vector<Vec3>& points,
         for (double sx : {1.0, -1.0}) poses->push_back(poseOver(part, sx * d, s, best));
       }
   }
-  if (!o.two_finger_pinch || robot.spreadVariable() < 0 || robot.fingers().size() < 3) return;
-  const auto gaps = tipGaps(robot, o.two_finger_spread, true, 0.2, 0.95, 0.01, true);
+  const auto& gaps = g.two_finger;
   if (gaps.empty()) return;
   for (const FootprintPart& part : footprintParts(flat, centre2, gaps.front().second - 0.006, 12))
     for (double margin : {0.003, 0.006, 0.010}) {
@@ -404,8 +426,9 @@ std::vector<Pose> candidatePoses(const RobotModel& robot, const std::vector<Surf
       points = *footprint;
     else
       for (const SurfacePoint& sm : samples) points.push_back(sm.p);
-    addPinchPoses(robot, points, centre, up, o, &poses);
-    addPartPinchPoses(robot, points, centre, up, o, &poses);
+    const PinchGaps gaps = pinchGaps(robot, o);
+    addPinchPoses(robot, points, centre, up, o, gaps, &poses);
+    addPartPinchPoses(points, centre, up, o, gaps, &poses);
   }
   return poses;
 }
