@@ -5,7 +5,7 @@ packages=(
   build-essential cmake ninja-build pkg-config
   libeigen3-dev libembree-dev libtbb-dev libassimp-dev libpng-dev libjpeg-dev
   nlohmann-json3-dev libcli11-dev
-  liburdfdom-dev liborocos-kdl-dev libfcl-dev libmujoco-dev
+  liburdfdom-dev libsdformat-dev liborocos-kdl-dev libfcl-dev libmujoco-dev
   libgtest-dev libbenchmark-dev
   clang libclang-rt-14-dev clang-format
   python3-dev pybind11-dev python3-numpy python3-pytest

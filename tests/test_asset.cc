@@ -1,9 +1,13 @@
-// The scanned object as an asset: mass and inertia against analytic solids, the written MJCF and
-// URDF as MuJoCo and urdfdom read them, and an exported cup dropped on a table in MuJoCo.
+// The scanned object as an asset: mass and inertia against analytic solids, the written MJCF,
+// URDF and SDF as MuJoCo, urdfdom and libsdformat read them, and an exported cup dropped on a
+// table in MuJoCo.
 #include <gtest/gtest.h>
 #include <mujoco/mujoco.h>
 #include <urdf_parser/urdf_parser.h>
 #include <Eigen/Eigenvalues>
+#include <sdf/Link.hh>
+#include <sdf/Model.hh>
+#include <sdf/Root.hh>
 
 #include <cmath>
 #include <cstdio>
@@ -124,6 +128,20 @@ TEST(Asset, WrittenMjcfAndUrdfLoadInMujocoAndUrdfdomWithTheAssetsInertia) {
   EXPECT_NEAR(link->inertial->mass, 0.35, 1e-6);
   EXPECT_NEAR(link->inertial->izz, a.inertia_kg_m2(2, 2), 1e-6 * a.inertia_kg_m2(2, 2));
   EXPECT_EQ(link->collision_array.size(), a.pieces.size());
+  // libsdformat (Gazebo's parser): no error; the link's mass, inertia, centre of mass, pieces.
+  sdf::Root root;
+  const sdf::Errors errors = root.Load((dir / "part.sdf").string());
+  EXPECT_TRUE(errors.empty()) << (errors.empty() ? "" : errors.front().Message());
+  const sdf::Link* sdfLink = root.Model() ? root.Model()->LinkByName("part") : nullptr;
+  ASSERT_TRUE(sdfLink);
+  const auto& inertial = sdfLink->Inertial();
+  EXPECT_NEAR(inertial.MassMatrix().Mass(), 0.35, 1e-6);
+  EXPECT_NEAR(inertial.MassMatrix().Izz(), a.inertia_kg_m2(2, 2), 1e-6 * a.inertia_kg_m2(2, 2));
+  EXPECT_NEAR(inertial.MassMatrix().Ixy(), a.inertia_kg_m2(0, 1), 1e-6 * a.inertia_kg_m2(2, 2));
+  const auto& com = inertial.Pose().Pos();
+  EXPECT_NEAR((Vec3(com.X(), com.Y(), com.Z()) - a.com_O).norm(), 0, 1e-6);
+  EXPECT_EQ(sdfLink->CollisionCount(), a.pieces.size());
+  EXPECT_EQ(sdfLink->VisualCount(), 1u);
   // MuJoCo: the MJCF and the URDF compile to a body of that mass; its principal moments and
   // centre of mass are the asset's.
   for (const char* f : {"part.xml", "part.urdf"}) {

@@ -500,6 +500,51 @@ TEST(Payload, TheArmsJointTorquesWeighTheHeldObject) {
   }
 }
 
+// A rest's readings taken in a row (torquesAtRest) weigh a light object (a 12 g marker-like
+// box): given as their mean and scatter (TorqueSamples) they fit exactly as each reading added
+// in turn; one reading per rest leaves σ near the object's mass, 500 shrink it by √500 and the
+// weight comes within 10 %.
+TEST(Payload, ReadingsInARowAtEachRestWeighALightObject) {
+  const RobotModel& m = test::wam();
+  const TriangleMesh box = makeBox(Vec3(0.02, 0.02, 0.12));
+  const Iso3 T_O_palm = boxGrasp(m, box, true);
+  SimOptions so;
+  so.physics.density_kg_m3 = 250;  // 12 g
+  SimWorld world(m, box, T_O_palm, DepthCameraOptions{}, NoiseModelOptions{}, so);
+  SimRobot robot(&world);
+  world.held = true;
+  const double truth = world.objectMass_kg();
+  EXPECT_NEAR(truth, 0.012, 1e-9);
+  PayloadEstimator one(m), each(m), rests(m);
+  for (const JointVector& q : presentationConfigurations(m)) {
+    world.q = q;
+    one.add(q, *robot.jointTorques());
+    TorqueSamples rest;
+    for (int i = 0; i < 500; ++i) {
+      const JointVector tau = *robot.jointTorques();
+      each.add(q, tau);
+      rest.add(tau, m.armVariables());
+    }
+    EXPECT_EQ(rest.count(), 500);
+    rests.add(q, rest.mean(), Iso3::Identity(), rest.count(), rest.scatter_nm2());
+    const std::optional<TorqueSamples> read = torquesAtRest(robot, 3);
+    ASSERT_TRUE(read);
+    EXPECT_EQ(read->count(), 3);
+  }
+  const PayloadEstimate e1 = *one.estimate(), ea = *each.estimate(), er = *rests.estimate();
+  EXPECT_EQ(er.readings, ea.readings);
+  EXPECT_NEAR(er.mass_kg, ea.mass_kg, 1e-9);
+  EXPECT_NEAR(er.sigma_kg, ea.sigma_kg, 1e-6 * ea.sigma_kg);
+  EXPECT_NEAR(er.residual_nm, ea.residual_nm, 1e-6 * ea.residual_nm);
+  EXPECT_NEAR((er.com - ea.com).norm(), 0, 1e-6);
+  EXPECT_GT(e1.sigma_kg, 0.25 * truth);  // one reading a rest cannot weigh it
+  EXPECT_NEAR(er.sigma_kg * std::sqrt(500.0), e1.sigma_kg, 0.5 * e1.sigma_kg);
+  EXPECT_NEAR(er.mass_kg, truth, 0.1 * truth);
+  EXPECT_LT(std::abs(er.mass_kg - truth), 4 * er.sigma_kg);
+  // The fit's residual is the simulator's torque noise (0.1 N·m per joint).
+  EXPECT_NEAR(ea.residual_nm, so.torque_noise_nm, 0.1 * so.torque_noise_nm);
+}
+
 // The pose tolerance (HoldTestOptions::pose_tolerance_m): the pinch and the enveloping grasp of
 // the 0.25 kg box both hold it where it is (no margin: the pinch stays first). Tried again with
 // the box moved 1 cm each way across the table (the hand where it was), the pinch holds in all

@@ -118,6 +118,8 @@ void visitConfig(V& v, ScanConfig& c) {
             "(a fitted plane) rather than from its raw depth");
   v.boolean("fit_volume", s.fit_volume,
             "from the table: a cube of 1.5 × the object's extent + 4 cm, as many voxels across");
+  v.integer("torque_readings", s.torque_readings,
+            "joint-torque readings at rest after each view that weigh the object (noise 1/√N)");
   v.num("t_hand_m", s.t_hand_m, "measurements this close to the robot only carve (§IV), m");
   v.integer("carve_radius_px", s.carve_radius_px, "… or this close to it in the image, pixels");
   v.num("edge_jump_m", s.edge_jump_m,

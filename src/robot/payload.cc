@@ -1,5 +1,7 @@
 #include "inhand/robot/payload.h"
 
+#include "inhand/robot/robot_interface.h"
+
 #include <Eigen/Eigenvalues>
 #include <cmath>
 
@@ -8,7 +10,34 @@ namespace inhand {
 PayloadEstimator::PayloadEstimator(const RobotModel& model, const Vec3& g_B)
     : model_(&model), g_(g_B) {}
 
+void TorqueSamples::add(const JointVector& tau, const std::vector<int>& joints) {
+  if (count_ == 0) mean_ = JointVector::Zero(tau.size());
+  ++count_;
+  for (int v : joints) {
+    const double d = tau[v] - mean_[v];
+    mean_[v] += d / count_;
+    scatter_ += d * (tau[v] - mean_[v]);
+  }
+}
+
+std::optional<TorqueSamples> torquesAtRest(RobotInterface& robot, int readings) {
+  TorqueSamples rest;
+  for (int i = 0; i < readings; ++i) {
+    const std::optional<JointVector> tau = robot.jointTorques();
+    if (!tau) return std::nullopt;
+    rest.add(*tau, robot.model().armVariables());
+  }
+  if (rest.count() == 0) return std::nullopt;
+  return rest;
+}
+
 void PayloadEstimator::add(const JointVector& q, const JointVector& tau, const Iso3& T_palm_F) {
+  add(q, tau, T_palm_F, 1, 0.0);
+}
+
+void PayloadEstimator::add(const JointVector& q, const JointVector& tau, const Iso3& T_palm_F,
+                           int samples, double scatter_nm2) {
+  if (samples < 1) return;
   const RobotModel& m = *model_;
   const int tip = m.tipLink();
   const Iso3 T_B_palm = m.tipPose(q) * T_palm_F;
@@ -22,12 +51,14 @@ void PayloadEstimator::add(const JointVector& q, const JointVector& tau, const I
   for (int v : m.armVariables()) {
     const Eigen::Vector4d row(a0[v], ak[0][v], ak[1][v], ak[2][v]);
     const double b = tau[v] - own[v];
-    AtA_ += row * row.transpose();
-    Atb_ += row * b;
-    btb_ += b * b;
-    ++rows_;
+    // Each of the `samples` readings is a row; their residuals about their mean add the scatter.
+    AtA_ += samples * (row * row.transpose());
+    Atb_ += samples * (row * b);
+    btb_ += samples * b * b;
+    rows_ += samples;
   }
-  ++readings_;
+  btb_ += std::max(0.0, scatter_nm2);
+  readings_ += samples;
 }
 
 std::optional<PayloadEstimate> PayloadEstimator::estimate() const {

@@ -339,9 +339,10 @@ void checkLift(RobotInterface& robot, DepthSensor& sensor, const ObjectModel& mo
 // The load the joint torques `tau` show at q with the object held at T_O_palm, its centre of mass
 // at com_O: the torques less the links' own weight, projected on those of a unit mass there (least
 // squares in one unknown). −1 without torques.
-double weighAt(const RobotModel& m, const JointVector& q, const std::optional<JointVector>& tau,
+double weighAt(const RobotModel& m, const JointVector& q, const std::optional<TorqueSamples>& rest,
                const Iso3& T_O_palm, const Vec3& com_O) {
-  if (!tau || tau->size() != q.size()) return -1;
+  if (!rest || rest->mean().size() != q.size()) return -1;
+  const JointVector* tau = &rest->mean();
   const Vec3 c_B = m.tipPose(q) * (T_O_palm.inverse() * com_O);
   const JointVector unit = m.pointForceTorques(q, m.tipLink(), c_B, Vec3(0, 0, -9.81));
   const JointVector load = *tau - m.gravityTorques(q);
@@ -411,7 +412,8 @@ RegraspResult pickUpKnownObject(RobotInterface& robot, DepthSensor& sensor,
     robot.execute({robot.joints(), m.withArm(robot.joints(), m.arm(c.q_lift))},
                   [](const JointVector&) {});
     checkLift(robot, sensor, dense, *achieved, *out.T_B_O, options, out);
-    out.weighed_kg = weighAt(m, robot.joints(), robot.jointTorques(), *achieved, object.com_O);
+    out.weighed_kg = weighAt(m, robot.joints(), torquesAtRest(robot, options.scan.torque_readings),
+                             *achieved, object.com_O);
     // The weight decides when it can be the object's (less than half its mass: not in the hand;
     // more than twice: the torques' noise on a light object, or something else, and the frame
     // decides, as it does without torques).

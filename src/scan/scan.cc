@@ -124,6 +124,8 @@ std::string ScanOptions::validate() const {
   if (planning_stride < 1 || planning_stride > 4) return "planning_stride must be in 1..4";
   if (carve_radius_px < 0 || carve_radius_px > 10) return "carve_radius_px must be in 0..10";
   if (!(edge_jump_m >= 0 && edge_jump_m < 1)) return "edge_jump_m must be in [0, 1) m";
+  if (torque_readings < 1 || torque_readings > 100000)
+    return "torque_readings must be in 1..100000";
   if (!(volume_budget.truncation_m >= 0 && volume_budget.truncation_m < 0.1))
     return "truncation_m must be in [0, 0.1) m (0: 4 voxels)";
   if (volume_budget.truncation_m > 0 && volume_budget.truncation_m < voxel_m)
@@ -189,8 +191,9 @@ Termination runGraspViews(ScanSession& session, RobotInterface& robot, DepthSens
     if (lost()) return Termination::kObjectLost;
     if (stopped) break;
     // At rest at the view's end: the arm's torques weigh the object (robots that report them).
-    if (const std::optional<JointVector> tau = robot.jointTorques())
-      session.addJointTorques(robot.joints(), *tau);
+    if (const std::optional<TorqueSamples> rest =
+            torquesAtRest(robot, session.options().torque_readings))
+      session.addJointTorques(robot.joints(), *rest);
     if (after_view) after_view();
   }
   session.finish(Termination::kInterrupted, "interrupted by the caller");

@@ -54,8 +54,10 @@ struct SlipMeasure {
 
 // A reading of the arm's joint torques at rest, with the grasp it was taken in.
 struct TorqueReading {
-  JointVector q, tau;
+  JointVector q, tau;  // tau: the mean of `samples` readings at q
   Iso3 T_O_palm;
+  int samples = 1;
+  double scatter_nm2 = 0;  // TorqueSamples::scatter_nm2
 };
 
 struct ScanSession::State {
@@ -93,7 +95,7 @@ struct ScanSession::State {
   std::vector<TorqueReading> torqueReadings;  // addJointTorques (kept for checkpoints)
   PayloadEstimator payload;                   // … fitted as they come (O frame)
   void addTorques(TorqueReading r) {
-    payload.add(r.q, r.tau, r.T_O_palm.inverse());
+    payload.add(r.q, r.tau, r.T_O_palm.inverse(), r.samples, r.scatter_nm2);
     torqueReadings.push_back(std::move(r));
   }
   int grasp = -1;
@@ -1191,6 +1193,11 @@ void ScanSession::addJointTorques(const JointVector& q, const JointVector& tau) 
   s_->addTorques({q, tau, s_->T_O_palm});
 }
 
+void ScanSession::addJointTorques(const JointVector& q, const TorqueSamples& rest) {
+  if (!s_->holding || rest.count() < 1) return;
+  s_->addTorques({q, rest.mean(), s_->T_O_palm, rest.count(), rest.scatter_nm2()});
+}
+
 void ScanSession::Summary::copyTo(ScanResult* r) const {
   r->view_evaluations = view_evaluations;
   r->view_refinements = view_refinements;
@@ -1261,7 +1268,9 @@ void ScanSession::save(const std::filesystem::path& path, const Json& extra) con
     h["torque_readings"].push_back(
         {{"q", std::vector<double>(r.q.data(), r.q.data() + r.q.size())},
          {"tau", std::vector<double>(r.tau.data(), r.tau.data() + r.tau.size())},
-         {"T_O_palm", isoJson(r.T_O_palm)}});
+         {"T_O_palm", isoJson(r.T_O_palm)},
+         {"samples", r.samples},
+         {"scatter_nm2", r.scatter_nm2}});
   for (size_t i = 0; i < s.views.size(); ++i) {
     const ViewRecord& r = s.views[i];
     h["views"].push_back({{"grasp", s.viewGrasp[i]},
@@ -1445,7 +1454,7 @@ void ScanSession::State::readTorques(const Json& h) {
     const auto tau = r.at("tau").get<std::vector<double>>();
     addTorques({Eigen::Map<const JointVector>(q.data(), Eigen::Index(q.size())),
                 Eigen::Map<const JointVector>(tau.data(), Eigen::Index(tau.size())),
-                isoFrom(r.at("T_O_palm"))});
+                isoFrom(r.at("T_O_palm")), r.value("samples", 1), r.value("scatter_nm2", 0.0)});
   }
 }
 

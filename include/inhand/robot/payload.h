@@ -5,6 +5,7 @@
 // frame), linear in m and m·c; readings at several palm orientations give c in all three
 // directions, one gives m and c across gravity only.
 #include <optional>
+#include <vector>
 
 #include "inhand/robot/robot_model.h"
 
@@ -19,6 +20,28 @@ struct PayloadEstimate {
   double residual_nm = 0;  // RMS joint-torque residual of the fit
 };
 
+// Readings of the joint torques taken in a row at one rest (the arm holding still): their mean
+// and their scatter, Σ over readings and arm joints of (τ − mean)² (Welford's update). A robot's
+// torques are noisy; a rest of N readings (a WAM reports 500 a second) weighs with 1/√N the
+// noise of one.
+class TorqueSamples {
+ public:
+  void add(const JointVector& tau, const std::vector<int>& joints);
+  const JointVector& mean() const { return mean_; }
+  double scatter_nm2() const { return scatter_; }
+  int count() const { return count_; }
+
+ private:
+  JointVector mean_;
+  double scatter_ = 0;
+  int count_ = 0;
+};
+
+class RobotInterface;
+// `readings` readings of the arm's joint torques (RobotInterface::jointTorques) in a row, the
+// robot holding still; nullopt for a robot that reports none.
+std::optional<TorqueSamples> torquesAtRest(RobotInterface& robot, int readings);
+
 class PayloadEstimator {
  public:
   explicit PayloadEstimator(const RobotModel& model, const Vec3& g_B = Vec3(0, 0, -9.81));
@@ -27,6 +50,10 @@ class PayloadEstimator {
   // T_palm_F (the palm's own by default; the object's, T_O_palm⁻¹, pools readings of several
   // grasps).
   void add(const JointVector& q, const JointVector& tau, const Iso3& T_palm_F = Iso3::Identity());
+  // The same for `samples` readings held at q, given as their mean torques and their scatter
+  // (TorqueSamples): the same fit and σ as adding each reading in turn.
+  void add(const JointVector& q, const JointVector& mean_tau, const Iso3& T_palm_F, int samples,
+           double scatter_nm2);
   // The least-squares fit; nullopt before any reading.
   std::optional<PayloadEstimate> estimate() const;
   int readings() const { return readings_; }

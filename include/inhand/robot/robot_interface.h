@@ -31,7 +31,9 @@ class RobotInterface {
   virtual bool putDown() { return false; }
   // The driven joints' torques (N·m; N for prismatic joints) the robot reports now, holding
   // still, gravity's included (a WAM reports them): the object's weight is estimated from them
-  // (PayloadEstimator). nullopt for a robot that reports none.
+  // (PayloadEstimator). Each call is a new reading (a driver returns its controller's next one:
+  // a WAM's come at 500 Hz); a scan reads ScanOptions::torque_readings of them at each rest.
+  // nullopt for a robot that reports none.
   virtual std::optional<JointVector> jointTorques() { return std::nullopt; }
   virtual std::optional<Iso3> pickUp(const Iso3& /*T_O_palm*/, const JointVector& /*q*/) {
     return std::nullopt;

@@ -192,6 +192,8 @@ class ScanSession {
   // the current grasp: the readings of every grasp give the object's mass and its centre of
   // mass in O (Summary::payload). Ignored while nothing is held.
   void addJointTorques(const JointVector& q, const JointVector& tau);
+  // … a rest's readings in a row at q (their mean and scatter).
+  void addJointTorques(const JointVector& q, const TorqueSamples& rest);
 
   // A checkpoint: the volume, the grasp, the views so far and the counters, written atomically,
   // with the caller's `extra` (e.g. its own loop's state; null: none). load() resumes from it

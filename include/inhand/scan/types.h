@@ -87,6 +87,10 @@ struct ScanOptions {
   // its largest extent + 4 cm (at most volume_size_m) with as many voxels across as
   // volume_size_m / voxel_m (the same cost; finer voxels for smaller objects).
   bool fit_volume = true;
+  // Joint-torque readings (RobotInterface::jointTorques) taken in a row at the end of each view,
+  // the arm holding still, that weigh the object (PayloadEstimator): their noise averages down
+  // as 1/√N. 500: a second of a WAM's 500 Hz.
+  int torque_readings = 500;
   double t_hand_m = 0.01;   // measurements this close to the robot only carve (§IV), m
   int carve_radius_px = 2;  // … this close to it in the image, too (lateral noise), pixels
   // In the hand, a pixel next to one farther by more than this is not fused (a silhouette: its
