@@ -402,6 +402,93 @@ PickOutcome pickAndVerify(ScanSession& session, RobotInterface& robot, DepthSens
   return out;
 }
 
+// A grasp's record once its views ended: the model then (at the planning stride: a quarter of
+// the triangles), its views, how they ended.
+GraspRecord graspEnded(GraspRecord rec, const ScanResult& all, int views, Termination ended) {
+  rec.model = all.planning_model;
+  rec.views = views;
+  rec.termination = ended;
+  rec.hole_area_m2 = all.model.holeArea();
+  rec.mean_entropy = all.model.meanEntropy();
+  return rec;
+}
+
+// The next grasp's record from the plan and the pick-up that achieved it.
+GraspRecord graspPicked(const GraspPlan& plan, const PickOutcome& pick,
+                        const std::vector<PickAttempt>& attempts, int keep_ranked) {
+  GraspRecord next;
+  next.T_O_palm = *pick.achieved;
+  next.candidates = int(plan.candidates.size());
+  next.tried = plan.generation.tried;
+  next.quality = pick.picked->quality;
+  next.t_q = plan.t_q;
+  next.model_area_m2 = plan.model_area_m2;
+  next.epsilon = pick.picked->epsilon;
+  next.generation_s = plan.generation.seconds;
+  next.ranking_s = plan.ranking_s;
+  next.attempts = attempts;
+  for (const GraspCandidate& c : plan.candidates) {
+    if (int(next.ranked.size()) >= keep_ranked) break;
+    next.ranked.push_back({c.T_O_palm, c.q, c.quality, c.epsilon});
+  }
+  return next;
+}
+
+// After a put-down: the object found again where it came to rest (T_B_O_rest updated), then
+// the best candidate the robot manages to pick up and hold. Picked up: `next` describes the new
+// grasp and nullopt is returned; else how the scan ends.
+std::optional<Termination> regrasp(ScanSession& session, RobotInterface& robot, DepthSensor& sensor,
+                                   Iso3& T_B_O_rest, MultiGraspResult& out, GraspRecord& next,
+                                   const std::function<void(const std::string&)>& log) {
+  const ScanProgress& progress = session.progress();
+  const ScanResult& all = out.scan;
+  // Where the object came to rest (it may have tipped, or fallen during the views): the model
+  // registered to a frame of the table, before any re-grasp is planned.
+  const Refound found = refindOnTable(session, robot, sensor, T_B_O_rest, session.options(), log);
+  if (!found.T_B_O) {
+    log("the object not found on the table: " + found.reason);
+    return Termination::kObjectLost;
+  }
+  T_B_O_rest = *found.T_B_O;
+  out.refind_residuals_m.push_back(found.rms_m);
+  // The best candidate the robot manages to pick up and hold (a real hand may fail where the
+  // model said it would not; the next one above t_q is tried). Lifted, not fused. Found
+  // elsewhere after a failed attempt: planned again where it lies.
+  const std::vector<Vec3> known_O = observedVertices(all.model);
+  GraspPlan plan;
+  PickOutcome pick;
+  std::vector<PickAttempt> attempts;
+  for (;;) {
+    plan = session.planGrasps(T_B_O_rest, robot.joints());
+    if (plan.above_threshold == 0) break;
+    const std::vector<GraspCandidate> usable(plan.candidates.begin(),
+                                             plan.candidates.begin() + plan.above_threshold);
+    pick = pickAndVerify(session, robot, sensor, T_B_O_rest, known_O, usable, session.options(),
+                         log, int(attempts.size()));
+    attempts.insert(attempts.end(), pick.attempts.begin(), pick.attempts.end());
+    if (pick.achieved || !pick.moved_to || progress.stopRequested()) break;
+    T_B_O_rest = *pick.moved_to;
+  }
+  if (plan.above_threshold == 0) {
+    out.unused_generation_s += plan.generation.seconds;
+    out.unused_ranking_s += plan.ranking_s;
+    // No re-grasp can be made (none stable, clear of the table and reachable): the model of
+    // the grasps so far stands, as when every re-grasp's pick-up failed.
+    const Termination t = session.summary().termination;
+    return t == Termination::kNoReachableGrasp ? Termination::kRegraspFailed : t;
+  }
+  if (!pick.achieved) {
+    out.failed_regrasp_attempts = attempts;
+    out.unused_generation_s += plan.generation.seconds;
+    out.unused_ranking_s += plan.ranking_s;
+    return progress.stopRequested() ? Termination::kInterrupted
+           : pick.lost              ? Termination::kObjectLost
+                                    : Termination::kRegraspFailed;
+  }
+  next = graspPicked(plan, pick, attempts, session.multiOptions().keep_ranked);
+  return std::nullopt;
+}
+
 // The grasp loop from grasp `first` on (the robot holds the object at T_O_palm0), over
 // `session`; `next` describes that grasp, `box_O` where the object is believed to lie for the
 // first grasp's initial trajectory (empty: unknown). `resumed`: the grasp has begun already (a
@@ -446,14 +533,9 @@ void runGrasps(RobotInterface& robot, DepthSensor& sensor, ScanSession& session,
       all.termination = ended;
       break;
     }
-    GraspRecord rec = next;
-    rec.model = all.planning_model;  // at the planning stride: a quarter of the triangles
-    rec.views = int(session.views().size() - viewsBefore);
-    rec.termination = ended;
-    rec.hole_area_m2 = all.model.holeArea();
-    rec.mean_entropy = all.model.meanEntropy();
-    out.grasps.push_back(rec);
+    out.grasps.push_back(graspEnded(next, all, int(session.views().size() - viewsBefore), ended));
     char line[200];
+    const GraspRecord& rec = out.grasps.back();
     std::snprintf(line, sizeof(line),
                   "grasp %d: %d views (%s), unknown area %.4f m², mean entropy %.3f", g + 1,
                   rec.views, terminationName(rec.termination).c_str(), rec.hole_area_m2,
@@ -474,69 +556,12 @@ void runGrasps(RobotInterface& robot, DepthSensor& sensor, ScanSession& session,
       break;
     }
     session.endGrasp();
-    // Where the object came to rest (it may have tipped, or fallen during the views): the model
-    // registered to a frame of the table, before any re-grasp is planned.
-    const Refound found = refindOnTable(session, robot, sensor, T_B_O_rest, session.options(), log);
-    if (!found.T_B_O) {
-      log("the object not found on the table: " + found.reason);
-      all.termination = Termination::kObjectLost;
+    if (const std::optional<Termination> end =
+            regrasp(session, robot, sensor, T_B_O_rest, out, next, log)) {
+      all.termination = *end;
       break;
     }
-    T_B_O_rest = *found.T_B_O;
-    out.refind_residuals_m.push_back(found.rms_m);
-    // The best candidate the robot manages to pick up and hold (a real hand may fail where the
-    // model said it would not; the next one above t_q is tried). Lifted, not fused. Found
-    // elsewhere after a failed attempt: planned again where it lies.
-    const std::vector<Vec3> known_O = observedVertices(all.model);
-    GraspPlan plan;
-    PickOutcome pick;
-    std::vector<PickAttempt> attempts;
-    for (;;) {
-      plan = session.planGrasps(T_B_O_rest, robot.joints());
-      if (plan.above_threshold == 0) break;
-      const std::vector<GraspCandidate> usable(plan.candidates.begin(),
-                                               plan.candidates.begin() + plan.above_threshold);
-      pick = pickAndVerify(session, robot, sensor, T_B_O_rest, known_O, usable, session.options(),
-                           log, int(attempts.size()));
-      attempts.insert(attempts.end(), pick.attempts.begin(), pick.attempts.end());
-      if (pick.achieved || !pick.moved_to || progress.stopRequested()) break;
-      T_B_O_rest = *pick.moved_to;
-    }
-    if (plan.above_threshold == 0) {
-      all.termination = session.summary().termination;
-      // No re-grasp can be made (none stable, clear of the table and reachable): the model of
-      // the grasps so far stands, as when every re-grasp's pick-up failed.
-      if (all.termination == Termination::kNoReachableGrasp)
-        all.termination = Termination::kRegraspFailed;
-      out.unused_generation_s += plan.generation.seconds;
-      out.unused_ranking_s += plan.ranking_s;
-      break;
-    }
-    if (!pick.achieved) {
-      out.failed_regrasp_attempts = attempts;
-      all.termination = progress.stopRequested() ? Termination::kInterrupted
-                        : pick.lost              ? Termination::kObjectLost
-                                                 : Termination::kRegraspFailed;
-      out.unused_generation_s += plan.generation.seconds;
-      out.unused_ranking_s += plan.ranking_s;
-      break;
-    }
-    T_O_palm = *pick.achieved;
-    next = GraspRecord{};
-    next.T_O_palm = T_O_palm;
-    next.candidates = int(plan.candidates.size());
-    next.tried = plan.generation.tried;
-    next.quality = pick.picked->quality;
-    next.t_q = plan.t_q;
-    next.model_area_m2 = plan.model_area_m2;
-    next.epsilon = pick.picked->epsilon;
-    next.generation_s = plan.generation.seconds;
-    next.ranking_s = plan.ranking_s;
-    next.attempts = attempts;
-    for (const GraspCandidate& c : plan.candidates) {
-      if (int(next.ranked.size()) >= multi.keep_ranked) break;
-      next.ranked.push_back({c.T_O_palm, c.q, c.quality, c.epsilon});
-    }
+    T_O_palm = next.T_O_palm;
   }
   session.finish(all.termination);
   const ScanSession::Summary sum = session.summary();
@@ -645,6 +670,94 @@ MultiGraspResult scanMultiGrasp(RobotInterface& robot, DepthSensor& sensor, cons
   return out;
 }
 
+namespace {
+// The table-top stage's frames of the object where it rests (the camera at T_B_C, the robot at
+// q): the usable depth frames, each with its robot pixels (they only carve) and its colour.
+struct TableFrames {
+  std::vector<DepthImage> depth;
+  std::vector<std::vector<uint8_t>> robotMask;
+  std::vector<RgbImage> colour;
+};
+TableFrames captureOnTable(DepthSensor& sensor, const RobotModel& m, const Iso3& T_B_C,
+                           const JointVector& q, const ScanOptions& options, int frames,
+                           const std::function<void(const std::string&)>& log) {
+  const RobotOccluders scenes(m);
+  TableFrames out;
+  for (int f = 0; f < frames; ++f) {
+    std::optional<DepthImage> d = captureUsable(sensor, options.checks);
+    if (!d) {
+      log("table top: no usable depth frame from the sensor");
+      continue;
+    }
+    out.depth.push_back(std::move(*d));
+    out.colour.push_back(sensor.camera().colour.enabled ? sensor.captureColour() : RgbImage());
+    out.robotMask.push_back(robotPixelMask(out.depth.back(), T_B_C, q, scenes, sensor.camera(),
+                                           options.t_hand_m, options.carve_radius_px,
+                                           /*with_table=*/false));
+  }
+  return out;
+}
+
+// The frames fused (the camera at T_B_C, the object at T_B_O): table pixels (on or below the
+// plane table_O, up to above_table_m over it) and robot pixels only carve.
+void fuseOnTable(ScanSession& session, TableFrames& table, const JointVector& q, const Iso3& T_B_C,
+                 const Iso3& T_B_O, const Plane& table_O, double above_table_m) {
+  const CameraIntrinsics& K = session.camera().intrinsics;
+  const Iso3 T_O_C = T_B_O.inverse() * T_B_C;
+  for (size_t f = 0; f < table.depth.size(); ++f) {
+    std::vector<uint8_t> carve = tablePixels(table.depth[f], T_O_C, K, table_O, above_table_m);
+    for (size_t i = 0; i < carve.size(); ++i) carve[i] |= table.robotMask[f][i];
+    session.setColourOfNextFrame(std::move(table.colour[f]));
+    session.addFrameOfObjectAt(table.depth[f], q, T_B_C, T_B_O, &carve,
+                               /*carve_includes_robot=*/true);
+  }
+}
+
+// The first grasp's candidate counts into the table-top record; the line that logs them.
+std::string recordFirstGrasps(const GraspGeneration& first, TableTopRecord* tt) {
+  tt->tried = first.tried;
+  tt->poses = first.poses;
+  tt->touching = first.touching;
+  tt->stable = first.stable;
+  tt->table_free = first.table_free;
+  tt->reachable = int(first.candidates.size());
+  char line[200];
+  std::snprintf(line, sizeof(line),
+                "first grasp: %d poses, %d touching, %d stable, %d clear of the table, %d "
+                "reachable (%.2f s)",
+                tt->tried, tt->touching, tt->stable, tt->table_free, tt->reachable, first.seconds);
+  return line;
+}
+
+// The first pick-up from the table, the candidates in turn (their attempts into tt). Found
+// elsewhere after a failed attempt: candidates planned where it lies now (the table plane in
+// its frame moved with it; T_B_O_now follows it), the attempts left tried on them.
+PickOutcome pickFromTable(ScanSession& session, RobotInterface& robot, DepthSensor& sensor,
+                          const TableTopObject& object, const GraspGeneration& first,
+                          const std::vector<Vec3>& seen_O, const ScanOptions& options,
+                          Iso3& T_B_O_now, TableTopRecord* tt,
+                          const std::function<void(const std::string&)>& log) {
+  PickOutcome pick =
+      pickAndVerify(session, robot, sensor, T_B_O_now, seen_O, first.candidates, options, log);
+  tt->attempts = pick.attempts;
+  TableTopObject there = object;
+  while (!pick.achieved && pick.moved_to && !session.progress().stopRequested()) {
+    const Vec3 n_B = T_B_O_now.linear() * there.table_O.n;
+    const Vec3 on_B = T_B_O_now * (-there.table_O.d * there.table_O.n);
+    T_B_O_now = *pick.moved_to;
+    there.table_O.n = T_B_O_now.linear().transpose() * n_B;
+    there.table_O.d = -there.table_O.n.dot(T_B_O_now.inverse() * on_B);
+    const GraspGeneration again = firstGrasps(session, there, T_B_O_now, robot.joints());
+    log("grasp candidates where it lies now: " + std::to_string(again.candidates.size()));
+    if (again.candidates.empty()) break;
+    pick = pickAndVerify(session, robot, sensor, T_B_O_now, seen_O, again.candidates, options, log,
+                         int(tt->attempts.size()));
+    tt->attempts.insert(tt->attempts.end(), pick.attempts.begin(), pick.attempts.end());
+  }
+  return pick;
+}
+}  // namespace
+
 MultiGraspResult scanFromTable(RobotInterface& robot, DepthSensor& sensor, const Iso3& T_B_O_rest,
                                const ScanOptions& options, const MultiGraspOptions& multi,
                                const NoiseModelOptions& noise, const ScanProgress& progress) {
@@ -673,26 +786,11 @@ MultiGraspResult scanFromTable(RobotInterface& robot, DepthSensor& sensor, const
       m.camera().aimAt(T_B_O_rest.translation() + Vec3(0, 0, to.aim_height_m));
   if (!aim) return finish(Termination::kObjectOutOfView);
   sensor.setPose(*aim);
-  const RobotOccluders scenes(m);
   const JointVector q = robot.joints();
-  std::vector<DepthImage> frames;
-  std::vector<std::vector<uint8_t>> robotMask;
-  std::vector<RgbImage> colours;
-  for (int f = 0; f < to.frames; ++f) {
-    std::optional<DepthImage> d = captureUsable(sensor, options.checks);
-    if (!d) {
-      log("table top: no usable depth frame from the sensor");
-      continue;
-    }
-    frames.push_back(std::move(*d));
-    colours.push_back(sensor.camera().colour.enabled ? sensor.captureColour() : RgbImage());
-    robotMask.push_back(robotPixelMask(frames.back(), *aim, q, scenes, sensor.camera(),
-                                       options.t_hand_m, options.carve_radius_px,
-                                       /*with_table=*/false));
-  }
+  TableFrames table = captureOnTable(sensor, m, *aim, q, options, to.frames, log);
   if (progress.stopRequested()) return finish(Termination::kInterrupted);
-  const TableTopObject object =
-      findObjectOnTable(frames, robotMask, *aim, K, T_B_O_rest, m, options, to, &tt, log);
+  const TableTopObject object = findObjectOnTable(table.depth, table.robotMask, *aim, K, T_B_O_rest,
+                                                  m, options, to, &tt, log);
   if (object.problem != Termination::kRunning) return finish(object.problem);  // nothing fused
 
   // The volume fitted to the object, the frames fused into it: table pixels (on or below the
@@ -702,32 +800,14 @@ MultiGraspResult scanFromTable(RobotInterface& robot, DepthSensor& sensor, const
   tt.voxel_m = fitted.voxel_m;
   ScanSession session(m, sensor.camera(), noise, fitted, multi, object.centre_O);
   session.setProgress(progress);
-  const Iso3 T_O_C = T_B_O_rest.inverse() * *aim;
-  for (size_t f = 0; f < frames.size(); ++f) {
-    std::vector<uint8_t> carve = tablePixels(frames[f], T_O_C, K, object.table_O, to.above_table_m);
-    for (size_t i = 0; i < carve.size(); ++i) carve[i] |= robotMask[f][i];
-    session.setColourOfNextFrame(std::move(colours[f]));
-    session.addFrameOfObjectAt(frames[f], q, *aim, T_B_O_rest, &carve,
-                               /*carve_includes_robot=*/true);
-  }
+  fuseOnTable(session, table, q, *aim, T_B_O_rest, object.table_O, to.above_table_m);
   all.frames = session.summary().frames;
   all.fusion_s = session.summary().fusion_s;
 
   // The first grasp: candidates on what the camera saw, the robot picks the object up with the
   // first that holds.
   const GraspGeneration first = firstGrasps(session, object, T_B_O_rest, robot.joints());
-  tt.tried = first.tried;
-  tt.poses = first.poses;
-  tt.touching = first.touching;
-  tt.stable = first.stable;
-  tt.table_free = first.table_free;
-  tt.reachable = int(first.candidates.size());
-  char line[200];
-  std::snprintf(line, sizeof(line),
-                "first grasp: %d poses, %d touching, %d stable, %d clear of the table, %d "
-                "reachable (%.2f s)",
-                tt.tried, tt.touching, tt.stable, tt.table_free, tt.reachable, first.seconds);
-  log(line);
+  log(recordFirstGrasps(first, &tt));
   tt.seconds = std::chrono::duration<double>(Clock::now() - t0).count();
   if (first.candidates.empty() || progress.stopRequested()) {
     all.model = session.model();
@@ -738,25 +818,8 @@ MultiGraspResult scanFromTable(RobotInterface& robot, DepthSensor& sensor, const
   std::vector<Vec3> seen_O;
   for (size_t k = 0; k < object.points_O.size(); k += 5) seen_O.push_back(object.points_O[k]);
   Iso3 T_B_O_now = T_B_O_rest;
-  PickOutcome pick =
-      pickAndVerify(session, robot, sensor, T_B_O_now, seen_O, first.candidates, options, log);
-  tt.attempts = pick.attempts;
-  // Found elsewhere after a failed attempt: candidates planned where it lies now (the table
-  // plane in its frame moved with it), the attempts left tried on them.
-  TableTopObject there = object;
-  while (!pick.achieved && pick.moved_to && !progress.stopRequested()) {
-    const Vec3 n_B = T_B_O_now.linear() * there.table_O.n;
-    const Vec3 on_B = T_B_O_now * (-there.table_O.d * there.table_O.n);
-    T_B_O_now = *pick.moved_to;
-    there.table_O.n = T_B_O_now.linear().transpose() * n_B;
-    there.table_O.d = -there.table_O.n.dot(T_B_O_now.inverse() * on_B);
-    const GraspGeneration again = firstGrasps(session, there, T_B_O_now, robot.joints());
-    log("grasp candidates where it lies now: " + std::to_string(again.candidates.size()));
-    if (again.candidates.empty()) break;
-    pick = pickAndVerify(session, robot, sensor, T_B_O_now, seen_O, again.candidates, options, log,
-                         int(tt.attempts.size()));
-    tt.attempts.insert(tt.attempts.end(), pick.attempts.begin(), pick.attempts.end());
-  }
+  const PickOutcome pick =
+      pickFromTable(session, robot, sensor, object, first, seen_O, options, T_B_O_now, &tt, log);
   if (!pick.achieved) {
     all.model = session.model();
     return finish(progress.stopRequested() ? Termination::kInterrupted

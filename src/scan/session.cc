@@ -167,6 +167,14 @@ struct ScanSession::State {
   }
   // The grasp's near-hand grids: the planner's (eq. 9 skips hits within its t_hand) and fusion's
   // (measurements within ScanOptions::t_hand_m only carve), one grid when the two agree.
+  // addFrame's checks: the reported joints' distance from the open view's path (the largest
+  // joint's, rad); the held object's measured surface points (supportPoints) the frame bears
+  // out and those it sees past (the palm at T_C_palm).
+  double offPath(const JointVector& q) const;
+  std::pair<int, int> supportIn(const DepthImage& depth, const Iso3& T_C_palm) const;
+  // Why the frame does not show the object where the hand holds it (FrameChecks::min_support;
+  // too few of those points borne out), or "" (the streak of such frames then ends).
+  std::string notHeldIn(const DepthImage& depth, const Iso3& T_C_palm);
   // The arm's torque readings from a checkpoint's header (load).
   void readTorques(const Json& h);
   // The tracking filter's state from a checkpoint's header (load).
@@ -540,6 +548,72 @@ FrameReport ScanSession::fuse(const DepthImage& input, const JointVector& q, con
   return r;
 }
 
+namespace {
+// The image with its non-finite and negative depths set to 0 (no return); nullopt when it has
+// none.
+std::optional<DepthImage> withoutInvalidDepths(const DepthImage& input) {
+  auto valid = [](float z) { return std::isfinite(z) && z >= 0; };
+  if (std::all_of(input.depth_m.begin(), input.depth_m.end(), valid)) return std::nullopt;
+  DepthImage repaired = input;
+  for (float& z : repaired.depth_m)
+    if (!valid(z)) z = 0;
+  return repaired;
+}
+}  // namespace
+
+double ScanSession::State::offPath(const JointVector& q) const {
+  const RobotModel& m = *model;
+  const Eigen::VectorXd a = m.arm(q);
+  double best = std::numeric_limits<double>::infinity();
+  for (size_t k = 1; k < viewPath.size(); ++k) {
+    const Eigen::VectorXd p = m.arm(viewPath[k - 1]), e = m.arm(viewPath[k]);
+    const Eigen::VectorXd d = e - p;
+    const double t =
+        d.squaredNorm() > 0 ? std::clamp((a - p).dot(d) / d.squaredNorm(), 0.0, 1.0) : 0.0;
+    best = std::min(best, (a - (p + t * d)).cwiseAbs().maxCoeff());
+  }
+  return best;
+}
+
+std::string ScanSession::State::notHeldIn(const DepthImage& depth, const Iso3& T_C_palm) {
+  const FrameChecks& fc = options.checks;
+  if (!(fc.min_support > 0) || supportPoints.empty()) return "";
+  const auto [support, against] = supportIn(depth, T_C_palm);
+  const int counted = support + against;
+  if (counted >= fc.min_points && support < fc.min_support * counted) {
+    char why[200];
+    std::snprintf(why, sizeof why,
+                  "the object is not where the hand holds it (%d of %d known surface points "
+                  "borne out)",
+                  support, counted);
+    return why;
+  }
+  unsupportedStreak = 0;
+  return "";
+}
+
+std::pair<int, int> ScanSession::State::supportIn(const DepthImage& depth,
+                                                  const Iso3& T_C_palm) const {
+  const CameraIntrinsics& K = camera.intrinsics;
+  int support = 0, against = 0;
+  for (const Vec3& p_palm : supportPoints) {
+    const Vec3 p = T_C_palm * p_palm;
+    // Only points the sensor could measure count (nearer than its minimum range, the object
+    // gives no return, and the pixel may see past its edge).
+    if (p.z() < camera.min_range_m || p.z() > camera.max_range_m) continue;
+    const Vec2 uv = K.project(p);
+    const int u = int(std::lround(uv.x())), v = int(std::lround(uv.y()));
+    if (u < 0 || v < 0 || u >= depth.width || v >= depth.height) continue;
+    const float z = depth.at(u, v);
+    if (!(z > 0)) continue;
+    if (std::abs(z - p.z()) < 0.02)
+      ++support;
+    else if (z > p.z() + 0.03)
+      ++against;
+  }
+  return {support, against};
+}
+
 FrameReport ScanSession::addFrame(const DepthImage& input, const JointVector& q,
                                   const Iso3& T_B_C) {
   if (!s_->holding) throw Error("addFrame: no grasp (beginGrasp first)");
@@ -548,11 +622,15 @@ FrameReport ScanSession::addFrame(const DepthImage& input, const JointVector& q,
   const RgbImage colour = std::exchange(s.nextColour, RgbImage());
   if (s.progress.frame_input) s.progress.frame_input(*this, input, q, T_B_C);
   const FrameChecks& fc = s.options.checks;
-  auto refuse = [&](const std::string& why, int* counter) {
+  auto refuse = [&](const std::string& why, int* counter, const TrackResult* track = nullptr) {
     ++*counter;
     FrameReport r;
     r.fused = false;
     r.rejected = why;
+    if (track) {
+      r.tracking_inliers = track->inliers;
+      r.tracking_rms_m = track->rms_m;
+    }
     log("frame not fused: " + why);
     if (s.progress.frame) s.progress.frame(r, q, T_B_C);
     return r;
@@ -561,38 +639,19 @@ FrameReport ScanSession::addFrame(const DepthImage& input, const JointVector& q,
   if (input.width == 0 && input.height == 0)
     return refuse("no image (a dropped frame)", &s.summary.frames_dropped);
   checkFrameSize(input, s.camera.intrinsics);
-  const DepthImage* d = &input;
-  DepthImage repaired;
-  if (!std::all_of(input.depth_m.begin(), input.depth_m.end(),
-                   [](float z) { return std::isfinite(z) && z >= 0; })) {
-    repaired = input;
-    for (float& z : repaired.depth_m)
-      if (!(std::isfinite(z) && z >= 0)) z = 0;
-    d = &repaired;
-    ++s.summary.frames_repaired;
-  }
-  const DepthImage& depth = *d;
+  const std::optional<DepthImage> repaired = withoutInvalidDepths(input);
+  if (repaired) ++s.summary.frames_repaired;
+  const DepthImage& depth = repaired ? *repaired : input;
   if (depth.validCount() < fc.min_valid_fraction * double(depth.depth_m.size()))
     return refuse("an empty frame (" + std::to_string(depth.validCount()) + " depth pixels)",
                   &s.summary.frames_dropped);
   // The reported joints must lie on the path the arm was sent along.
-  if (fc.max_path_deviation_rad > 0 && s.viewOpen && s.viewPath.size() >= 2) {
-    const RobotModel& m = *s.model;
-    const Eigen::VectorXd a = m.arm(q);
-    double best = std::numeric_limits<double>::infinity();
-    for (size_t k = 1; k < s.viewPath.size(); ++k) {
-      const Eigen::VectorXd p = m.arm(s.viewPath[k - 1]), e = m.arm(s.viewPath[k]);
-      const Eigen::VectorXd d = e - p;
-      const double t =
-          d.squaredNorm() > 0 ? std::clamp((a - p).dot(d) / d.squaredNorm(), 0.0, 1.0) : 0.0;
-      best = std::min(best, (a - (p + t * d)).cwiseAbs().maxCoeff());
-    }
-    if (best > fc.max_path_deviation_rad) {
+  if (fc.max_path_deviation_rad > 0 && s.viewOpen && s.viewPath.size() >= 2)
+    if (const double off = s.offPath(q); off > fc.max_path_deviation_rad) {
       char why[160];
-      std::snprintf(why, sizeof why, "joints %.3f rad off the planned path (a jump)", best);
+      std::snprintf(why, sizeof why, "joints %.3f rad off the planned path (a jump)", off);
       return refuse(why, &s.summary.frames_off_path);
     }
-  }
   Iso3 T_B_C_used = T_B_C;
   TrackResult track;
   if (s.options.tracking.enabled) {
@@ -602,65 +661,26 @@ FrameReport ScanSession::addFrame(const DepthImage& input, const JointVector& q,
                                   : Iso3(T_B_C.inverse() * s.model->tipPose(q) * s.correction);
     if (std::string why = followSlip(depth, q, T_B_C, T_C_held); !why.empty())
       return refuse(why, &s.summary.frames_moving);
-    if (!tracked) {
-      ++s.summary.frames_rejected;
-      FrameReport r;
-      r.fused = false;
-      r.rejected = track.reason;
-      r.tracking_inliers = track.inliers;
-      r.tracking_rms_m = track.rms_m;
-      log("frame not fused: " + track.reason);
-      if (s.progress.frame) s.progress.frame(r, q, T_B_C);
-      return r;
-    }
+    if (!tracked) return refuse(track.reason, &s.summary.frames_rejected, &track);
     T_B_C_used = *tracked;
     const Iso3 T_C_palm = T_B_C.inverse() * s.model->tipPose(q);
     s.correction = T_C_palm.inverse() * track.correction * T_C_palm;
   }
   // The object must be where the hand holds it.
-  if (fc.min_support > 0 && !s.supportPoints.empty()) {
-    const Iso3 T_C_palm = T_B_C_used.inverse() * s.model->tipPose(q);
-    const CameraIntrinsics& K = s.camera.intrinsics;
-    int support = 0, against = 0;
-    const DepthCameraOptions& cam = s.camera;
-    for (const Vec3& p_palm : s.supportPoints) {
-      const Vec3 p = T_C_palm * p_palm;
-      // Only points the sensor could measure count (nearer than its minimum range, the object
-      // gives no return, and the pixel may see past its edge).
-      if (p.z() < cam.min_range_m || p.z() > cam.max_range_m) continue;
-      const Vec2 uv = K.project(p);
-      const int u = int(std::lround(uv.x())), v = int(std::lround(uv.y()));
-      if (u < 0 || v < 0 || u >= depth.width || v >= depth.height) continue;
-      const float z = depth.at(u, v);
-      if (!(z > 0)) continue;
-      if (std::abs(z - p.z()) < 0.02)
-        ++support;
-      else if (z > p.z() + 0.03)
-        ++against;
-    }
-    const int counted = support + against;
-    if (counted >= fc.min_points && support < fc.min_support * counted) {
-      char why[200];
-      std::snprintf(why, sizeof why,
-                    "the object is not where the hand holds it (%d of %d known surface points "
-                    "borne out)",
-                    support, counted);
-      if (++s.unsupportedStreak >= fc.lost_after)
-        finish(Termination::kObjectLost, "in-hand frames stopped showing the object");
-      return refuse(why, &s.summary.frames_unsupported);
-    }
-    s.unsupportedStreak = 0;
+  if (std::string why = s.notHeldIn(depth, T_B_C_used.inverse() * s.model->tipPose(q));
+      !why.empty()) {
+    if (++s.unsupportedStreak >= fc.lost_after)
+      finish(Termination::kObjectLost, "in-hand frames stopped showing the object");
+    return refuse(why, &s.summary.frames_unsupported);
   }
   // With tracking, the robot as the frame shows it: the joint offsets that put the palm where
   // the frame says (armOffsetsFromPalmError) place the other links too, for the robot's pixels
   // and the space inside it (Fig. 3 c); the camera where it reported itself, the palm as
   // tracked. Without, the reported joints.
-  JointVector qSeen = q;
-  Iso3 T_B_C_seen = T_B_C_used;
-  if (s.options.tracking.enabled) {
-    qSeen = q + armOffsetsFromPalmError(*s.model, q, s.correction);
-    T_B_C_seen = T_B_C;
-  }
+  const bool tracking = s.options.tracking.enabled;
+  const JointVector qSeen =
+      tracking ? JointVector(q + armOffsetsFromPalmError(*s.model, q, s.correction)) : q;
+  const Iso3& T_B_C_seen = tracking ? T_B_C : T_B_C_used;
   const Iso3 T_O_B = s.T_O_palm * s.model->tipPose(qSeen).inverse();
   FrameReport r = fuse(depth, qSeen, T_B_C_seen, T_O_B, nullptr, true,
                        s.options.hand_mode != HandMode::kNaive, colour);
