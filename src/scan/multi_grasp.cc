@@ -89,6 +89,42 @@ struct Refound {
   double support = -1, rms_m = 0;
   std::string reason;  // why not found
 };
+// Pixels whose point lies below height `below_z` (base frame; the camera at T_B_C) marked.
+void markBelow(const DepthImage& d, const Iso3& T_B_C, const CameraIntrinsics& K, double below_z,
+               std::vector<uint8_t>* marked) {
+  for (int v = 0; v < d.height; ++v)
+    for (int u = 0; u < d.width; ++u) {
+      const size_t i = size_t(v) * size_t(d.width) + size_t(u);
+      const float z = d.depth_m[i];
+      if (z > 0 && (T_B_C * (double(z) * K.rayZ1(u, v))).z() < below_z) (*marked)[i] = 1;
+    }
+}
+
+// Of the registrations (each with the support the frame gives it), the one nearest where the
+// object was believed to lie among those within 2 % of the most borne out (a symmetric object
+// fits turned poses as well: the belief decides between them); found if borne out over 60 %.
+// When the frame bears out the belief itself as well (`believed_support` within 2 %), the
+// object did not move (a registration also slides along what the frame cannot tell apart, such
+// as a can's turn about its axis), and the belief, which the fused model was built in, stays.
+Refound nearestOfTheBest(const std::vector<Refound>& fits, const Iso3& T_B_O_guess,
+                         double believed_support) {
+  double most = -1;
+  for (const Refound& f : fits) most = std::max(most, f.support);
+  auto away = [&](const Iso3& T) {
+    return (T.translation() - T_B_O_guess.translation()).norm() +
+           0.1 * rotationBetween(T_B_O_guess, T);
+  };
+  const Refound* best = nullptr;
+  for (const Refound& f : fits)
+    if (f.support >= most - 0.02 && (!best || away(*f.T_B_O) < away(*best->T_B_O))) best = &f;
+  Refound out;
+  if (!best) return out;
+  out.support = best->support;
+  out.rms_m = best->rms_m;
+  if (best->support > 0.6) out.T_B_O = believed_support >= most - 0.02 ? T_B_O_guess : *best->T_B_O;
+  return out;
+}
+
 Refound refindOnTable(ScanSession& session, RobotInterface& robot, DepthSensor& sensor,
                       const Iso3& T_B_O_guess, const ScanOptions& options,
                       const std::function<void(const std::string&)>& log) {
@@ -127,53 +163,23 @@ Refound refindOnTable(ScanSession& session, RobotInterface& robot, DepthSensor& 
   centre_B /= double(std::max<size_t>(1, object.points_O.size()));
   // The robot's pixels and the table's (at most 5 mm above its top) pair with nothing.
   std::vector<uint8_t> hidden = mask;
-  const double top = m.table().topZ() + 0.005;
-  for (int v = 0; v < d.height; ++v)
-    for (int u = 0; u < d.width; ++u) {
-      const size_t i = size_t(v) * size_t(d.width) + size_t(u);
-      const float z = d.depth_m[i];
-      if (z > 0 && (*aim * (double(z) * K.rayZ1(u, v))).z() < top) hidden[i] = 1;
-    }
+  markBelow(d, *aim, K, m.table().topZ() + 0.005, &hidden);
   // Starts: where it is believed to lie; resting on the table over the cluster.
   const ObjectModel model = session.planningModel();
   std::vector<Iso3> starts{T_B_O_guess};
   for (const Iso3& T : restingStarts(model.mesh, centre_B, aim->translation(), m.table().topZ()))
     starts.push_back(T);
   const std::vector<Vec3> known_O = observedVertices(model);
-  // The best: among the poses the frame bears out within 2 % of the most borne out, the one
-  // nearest where it was believed to lie (a symmetric object fits turned poses as well: the
-  // belief decides between them).
-  struct Fit {
-    Iso3 T;
-    double support, rms;
-  };
-  std::vector<Fit> fits;
-  double most = -1;
-  for (const auto& [T, r] : session.registerObjectAt(d, hidden, *aim, starts)) {
-    if (!T) continue;
+  // The best: nearestOfTheBest.
+  auto supportAt = [&](const Iso3& T) {
     std::vector<Vec3> at_B;
-    for (const Vec3& p : known_O) at_B.push_back(*T * p);
-    fits.push_back({*T, depthSupport(d, *aim, K, hidden, at_B), r.rms_m});
-    most = std::max(most, fits.back().support);
-  }
-  auto away = [&](const Iso3& T) {
-    return (T.translation() - T_B_O_guess.translation()).norm() +
-           0.1 * rotationBetween(T_B_O_guess, T);
+    for (const Vec3& p : known_O) at_B.push_back(T * p);
+    return depthSupport(d, *aim, K, hidden, at_B);
   };
-  const Fit* best = nullptr;
-  for (const Fit& f : fits)
-    if (f.support >= most - 0.02 && (!best || away(f.T) < away(best->T))) best = &f;
-  if (best) {
-    out.support = best->support;
-    out.rms_m = best->rms;
-    // The frame bears out the belief itself as well (within 2 %): the object did not move (a
-    // registration also slides along what the frame cannot tell apart, such as a can's turn
-    // about its axis), and the belief, which the fused model was built in, stays.
-    std::vector<Vec3> believed_B;
-    for (const Vec3& p : known_O) believed_B.push_back(T_B_O_guess * p);
-    const bool same = depthSupport(d, *aim, K, hidden, believed_B) >= most - 0.02;
-    if (best->support > 0.6) out.T_B_O = same ? T_B_O_guess : best->T;
-  }
+  std::vector<Refound> fits;
+  for (const auto& [T, r] : session.registerObjectAt(d, hidden, *aim, starts))
+    if (T) fits.push_back({*T, supportAt(*T), r.rms_m, ""});
+  out = nearestOfTheBest(fits, T_B_O_guess, supportAt(T_B_O_guess));
   if (!out.T_B_O) {
     out.reason = "the model does not fit what the camera sees there";
     return out;
