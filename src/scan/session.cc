@@ -1255,6 +1255,58 @@ constexpr char kMagic[] = "INHAND-SESSION 1\n";
 
 }  // namespace
 
+namespace {
+// A checkpoint's records (read back by load: State::readTorques, viewRecordFrom,
+// readSummaryCounts).
+Json torqueJson(const TorqueReading& r) {
+  return {{"q", std::vector<double>(r.q.data(), r.q.data() + r.q.size())},
+          {"tau", std::vector<double>(r.tau.data(), r.tau.data() + r.tau.size())},
+          {"T_O_palm", isoJson(r.T_O_palm)},
+          {"samples", r.samples},
+          {"scatter_nm2", r.scatter_nm2}};
+}
+Json checkpointViewJson(const ViewRecord& r, int grasp) {
+  return {{"grasp", grasp},
+          {"initial", r.initial},
+          {"dir_O", vecJson(r.dir_O)},
+          {"T_O_C", isoJson(r.T_O_C)},
+          {"quality", r.quality},
+          {"gain", r.gain},
+          {"t_q", r.t_q},
+          {"unresolved", r.unresolved},
+          {"cost_s", r.cost_s},
+          {"score", r.score},
+          {"mean_entropy", r.mean_entropy},
+          {"observed_fraction", r.observed_fraction},
+          {"coverage", r.coverage},
+          {"frames", r.frames},
+          {"candidates", r.candidates},
+          {"planning_s", r.planning_s}};
+}
+Json checkpointSummaryJson(const ScanSession::Summary& m) {
+  return {{"termination", terminationName(m.termination)},
+          {"message", m.message},
+          {"grasps", m.grasps},
+          {"views", m.views},
+          {"frames", m.frames},
+          {"frames_rejected", m.frames_rejected},
+          {"frames_dropped", m.frames_dropped},
+          {"frames_off_path", m.frames_off_path},
+          {"frames_unsupported", m.frames_unsupported},
+          {"frames_in_free_space", m.frames_in_free_space},
+          {"frames_moving", m.frames_moving},
+          {"slips", slipsJson(m.slips)},
+          {"frames_repaired", m.frames_repaired},
+          {"tracking_s", m.tracking_s},
+          {"view_evaluations", m.view_evaluations},
+          {"view_refinements", m.view_refinements},
+          {"planning_s", m.planning_s},
+          {"fusion_s", m.fusion_s},
+          {"colour_pixels", m.colour_pixels},
+          {"colour_s", m.colour_s}};
+}
+}  // namespace
+
 void ScanSession::save(const std::filesystem::path& path, const Json& extra) const {
   const State& s = *s_;
   if (s.viewOpen) throw Error("save: finish the current view first (finishView)");
@@ -1284,53 +1336,10 @@ void ScanSession::save(const std::filesystem::path& path, const Json& extra) con
   }
   h["tracking_from_full_model"] = s.trackingFromFull;
   h["unsupported_streak"] = s.unsupportedStreak;
-  for (const TorqueReading& r : s.torqueReadings)
-    h["torque_readings"].push_back(
-        {{"q", std::vector<double>(r.q.data(), r.q.data() + r.q.size())},
-         {"tau", std::vector<double>(r.tau.data(), r.tau.data() + r.tau.size())},
-         {"T_O_palm", isoJson(r.T_O_palm)},
-         {"samples", r.samples},
-         {"scatter_nm2", r.scatter_nm2}});
-  for (size_t i = 0; i < s.views.size(); ++i) {
-    const ViewRecord& r = s.views[i];
-    h["views"].push_back({{"grasp", s.viewGrasp[i]},
-                          {"initial", r.initial},
-                          {"dir_O", vecJson(r.dir_O)},
-                          {"T_O_C", isoJson(r.T_O_C)},
-                          {"quality", r.quality},
-                          {"gain", r.gain},
-                          {"t_q", r.t_q},
-                          {"unresolved", r.unresolved},
-                          {"cost_s", r.cost_s},
-                          {"score", r.score},
-                          {"mean_entropy", r.mean_entropy},
-                          {"observed_fraction", r.observed_fraction},
-                          {"coverage", r.coverage},
-                          {"frames", r.frames},
-                          {"candidates", r.candidates},
-                          {"planning_s", r.planning_s}});
-  }
-  const Summary& m = s.summary;
-  h["summary"] = {{"termination", terminationName(m.termination)},
-                  {"message", m.message},
-                  {"grasps", m.grasps},
-                  {"views", m.views},
-                  {"frames", m.frames},
-                  {"frames_rejected", m.frames_rejected},
-                  {"frames_dropped", m.frames_dropped},
-                  {"frames_off_path", m.frames_off_path},
-                  {"frames_unsupported", m.frames_unsupported},
-                  {"frames_in_free_space", m.frames_in_free_space},
-                  {"frames_moving", m.frames_moving},
-                  {"slips", slipsJson(m.slips)},
-                  {"frames_repaired", m.frames_repaired},
-                  {"tracking_s", m.tracking_s},
-                  {"view_evaluations", m.view_evaluations},
-                  {"view_refinements", m.view_refinements},
-                  {"planning_s", m.planning_s},
-                  {"fusion_s", m.fusion_s},
-                  {"colour_pixels", m.colour_pixels},
-                  {"colour_s", m.colour_s}};
+  for (const TorqueReading& r : s.torqueReadings) h["torque_readings"].push_back(torqueJson(r));
+  for (size_t i = 0; i < s.views.size(); ++i)
+    h["views"].push_back(checkpointViewJson(s.views[i], s.viewGrasp[i]));
+  h["summary"] = checkpointSummaryJson(s.summary);
   if (!extra.is_null()) h["extra"] = extra;
   // The colours (camera.colour): after the voxels, one record per coloured voxel in index order
   // (its index, then Σw, Σw·r, Σw·g, Σw·b as floats).
