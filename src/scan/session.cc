@@ -167,6 +167,44 @@ struct ScanSession::State {
   }
   // The grasp's near-hand grids: the planner's (eq. 9 skips hits within its t_hand) and fusion's
   // (measurements within ScanOptions::t_hand_m only carve), one grid when the two agree.
+  // The initial trajectory's next view that the arm reaches from the grasp's joints (the
+  // directions it does not are skipped, and logged); nullopt when none is left.
+  std::optional<PlannedView> initialView(const GraspState& g,
+                                         const std::function<void(const std::string&)>& log) {
+    const RobotModel& m = *model;
+    const JointVector& q_now = g.q;
+    while (!initialDirs.empty()) {
+      const Vec3 dir = initialDirs.front();
+      initialDirs.erase(initialDirs.begin());
+      const std::optional<ViewCandidate> c = planner.reach({dir}, centre, objectBox, g, true)[0];
+      if (!c) {
+        log("initial view skipped: no collision-free move there");
+        continue;
+      }
+      PlannedView v;
+      v.initial = true;
+      v.dir_O = c->dir_O;
+      v.T_O_C = c->T_O_C;
+      v.waypoints = {q_now, m.withArm(q_now, c->arm)};
+      v.cost_s = trajectoryTime(m, m.arm(q_now), c->arm);
+      ViewRecord rec;
+      rec.initial = true;
+      rec.dir_O = v.dir_O;
+      rec.T_O_C = v.T_O_C;
+      rec.cost_s = v.cost_s;
+      openView(rec, v.waypoints);
+      return v;
+    }
+    return std::nullopt;
+  }
+  // A view begins: its record, its direction used, the path the arm is sent along.
+  void openView(const ViewRecord& rec, const std::vector<JointVector>& path) {
+    views.push_back(rec);
+    viewGrasp.push_back(grasp);
+    used.push_back(rec.dir_O);
+    viewOpen = true;
+    viewPath = path;
+  }
   // addFrame's checks: the reported joints' distance from the open view's path (the largest
   // joint's, rad); the held object's measured surface points (supportPoints) the frame bears
   // out and those it sees past (the palm at T_C_palm).
@@ -1001,33 +1039,9 @@ std::optional<PlannedView> ScanSession::nextView(const JointVector& q_now) {
   // The initial trajectory: directions spread over the sphere, each move from where the arm is
   // kept clear of the object in the hand (a forearm swinging through it would also empty its
   // inside in the model).
-  while (!s.initialDirs.empty()) {
-    const Vec3 dir = s.initialDirs.front();
-    s.initialDirs.erase(s.initialDirs.begin());
-    const std::optional<ViewCandidate> c =
-        s.planner.reach({dir}, s.centre, s.objectBox, g, true)[0];
-    if (!c) {
-      log("initial view skipped: no collision-free move there");
-      continue;
-    }
-    PlannedView v;
-    v.initial = true;
-    v.dir_O = c->dir_O;
-    v.T_O_C = c->T_O_C;
-    v.waypoints = {q_now, m.withArm(q_now, c->arm)};
-    v.cost_s = trajectoryTime(m, m.arm(q_now), c->arm);
-    ViewRecord rec;
-    rec.initial = true;
-    rec.dir_O = v.dir_O;
-    rec.T_O_C = v.T_O_C;
-    rec.cost_s = v.cost_s;
-    s.views.push_back(rec);
-    s.viewGrasp.push_back(s.grasp);
-    s.used.push_back(c->dir_O);
-    s.viewOpen = true;
-    s.viewPath = v.waypoints;
+  if (std::optional<PlannedView> v =
+          s.initialView(g, [this](const std::string& line) { log(line); }))
     return v;
-  }
   if (s.alg1Views >= s.options.max_views) {
     finish(Termination::kMaxViews,
            "the grasp's view limit (" + std::to_string(s.options.max_views) + ") is reached");
@@ -1040,12 +1054,13 @@ std::optional<PlannedView> ScanSession::nextView(const JointVector& q_now) {
   s.summary.view_evaluations += sel.evaluated;
   s.summary.view_refinements += sel.refined;
   if (!sel.best) {
+    const std::string none =
+        "no view reaches t_q (" + std::to_string(sel.evaluated) + " candidates)";
     if (sel.reachable == 0)
       finish(Termination::kNoReachableView, "the arm reaches no view with this grasp");
     else
-      finish(Termination::kNoViewAboveThreshold,
-             "no view reaches t_q (" + std::to_string(sel.evaluated) + " candidates)");
-    log("no view reaches t_q (" + std::to_string(sel.evaluated) + " candidates): done");
+      finish(Termination::kNoViewAboveThreshold, none);
+    log(none + ": done");
     return std::nullopt;
   }
   const ViewCandidate& c = *sel.best;
@@ -1069,11 +1084,7 @@ std::optional<PlannedView> ScanSession::nextView(const JointVector& q_now) {
   rec.score = c.score;
   rec.candidates = sel.evaluated;
   rec.planning_s = sel.total_s;
-  s.views.push_back(rec);
-  s.viewGrasp.push_back(s.grasp);
-  s.used.push_back(c.dir_O);
-  s.viewOpen = true;
-  s.viewPath = v.waypoints;
+  s.openView(rec, v.waypoints);
   char line[240];
   std::snprintf(line, sizeof(line),
                 "view %d: quality %.4f, cost %.2f s, %d candidates, %d at full resolution (%.2f "
