@@ -298,6 +298,142 @@ ViewSelection ViewPlanner::select(const ObjectModel& S_obj, const GraspState& gr
   return select(scene, grasp, used, std::move(nearHand), volume);
 }
 
+namespace {
+// Line 5 of Alg. 1: of `n` directions over the sphere, those at least min_angle_deg from every
+// used view.
+std::vector<Vec3> directionsAwayFrom(const std::vector<Vec3>& used, int n, double min_angle_deg) {
+  const double cosMin = std::cos(min_angle_deg * M_PI / 180);
+  std::vector<Vec3> dirs;
+  for (const Vec3& d : fibonacciSphere(n)) {
+    bool far = true;
+    for (const Vec3& u : used)
+      if (d.dot(u.normalized()) > cosMin) {
+        far = false;
+        break;
+      }
+    if (far) dirs.push_back(d);
+  }
+  return dirs;
+}
+
+// Best score first; ties to the cheaper view, then by direction (deterministic).
+bool betterView(const ViewCandidate& a, const ViewCandidate& b) {
+  if (a.score != b.score) return a.score > b.score;
+  if (a.cost_s != b.cost_s) return a.cost_s < b.cost_s;
+  return a.dir_O.x() < b.dir_O.x();
+}
+
+// Lines 11–14 for one candidate at a pixel stride: its quality by the planner's metric (eq. 9,
+// a volumetric one, or a random draw per (seed, pass, direction), independent of threads and of
+// the other candidates' reachability), its eq. 9 gain when that is the metric at full
+// resolution, its score (less α·cost).
+struct CandidateScoring {
+  const ViewPlannerOptions& o;
+  const RobotModel& model;
+  const RobotOccluders& occluders;
+  const GraspState& grasp;
+  ViewQualityScene& scene;
+  const VolumetricScorer* voxels;
+  uint64_t passSeed;
+  double alpha;
+  bool eq9;
+
+  // The robot where the candidate puts it, as occluders in the object frame (none without
+  // hand reasoning).
+  std::vector<Occluder> occludersOf(const ViewCandidate& c) const {
+    if (!o.hand_occlusion) return {};
+    return occluders.at(model.withArm(grasp.q, c.arm), c.T_B_O.inverse());
+  }
+  void operator()(size_t k, ViewCandidate& c, int stride) const {
+    if (o.metric == ViewMetric::kRandom) {
+      Rng rng = makeRng(passSeed, k);
+      c.quality = std::uniform_real_distribution<double>(0.0, 1.0)(rng);
+    } else if (o.metric == ViewMetric::kInformationGain) {
+      c.quality = scene.quality(c.T_O_C, occludersOf(c), nullptr, stride);
+    } else {
+      c.quality = voxels->score(c.T_O_C,
+                                o.metric == ViewMetric::kUnobservedVoxels
+                                    ? VolumetricMetric::kUnobservedVoxels
+                                    : VolumetricMetric::kRearSideEntropy,
+                                occludersOf(c));
+    }
+    c.pixel_stride = stride;
+    if (eq9) c.gain = stride == o.quality.pixel_stride ? c.quality : NAN;
+    c.score = c.quality - (o.use_cost ? alpha * c.cost_s : 0.0);
+  }
+};
+
+// Line 15: the best of `pool` (betterView) whose joint-space path from q is collision-free
+// (checker null: not checked).
+std::optional<ViewCandidate> bestWithFreePath(std::vector<const ViewCandidate*> pool,
+                                              const CollisionChecker* checker,
+                                              const RobotModel& model, const JointVector& q) {
+  std::sort(pool.begin(), pool.end(),
+            [](const ViewCandidate* a, const ViewCandidate* b) { return betterView(*a, *b); });
+  for (const ViewCandidate* c : pool)
+    if (!checker || checker->pathFree(q, model.withArm(q, c->arm), 0.05)) return *c;
+  return std::nullopt;
+}
+
+// Under the relative rule a baseline stops as ig does: eq. 9 (`gainOf` at a pixel stride) of
+// every reachable candidate, coarse to fine as ig's own pass (the `refine` largest at the
+// prescreen stride, then at full resolution); their gains set, the largest returned.
+double largestGain(std::vector<std::optional<ViewCandidate>>& chosen,
+                   const std::vector<size_t>& reachable, const ViewPlannerOptions& o,
+                   const std::function<double(const ViewCandidate&, int)>& gainOf, int* refined) {
+  const int fine = o.quality.pixel_stride;
+  const int coarseStride = o.refine > 0 && o.prescreen_stride > fine ? o.prescreen_stride : fine;
+  std::vector<double> coarseGain(chosen.size(), 0.0);
+  parallelForThreads(0, int(reachable.size()), [&](int i) {
+    coarseGain[reachable[size_t(i)]] = gainOf(*chosen[reachable[size_t(i)]], coarseStride);
+  });
+  std::vector<size_t> order = reachable;
+  std::stable_sort(order.begin(), order.end(),
+                   [&](size_t a, size_t b) { return coarseGain[a] > coarseGain[b]; });
+  if (coarseStride != fine && o.refine > 0 && order.size() > size_t(o.refine))
+    order.resize(size_t(o.refine));
+  if (coarseStride != fine) {
+    parallelForThreads(0, int(order.size()), [&](int i) {
+      chosen[order[size_t(i)]]->gain = gainOf(*chosen[order[size_t(i)]], fine);
+    });
+  } else {
+    for (size_t k : order) chosen[k]->gain = coarseGain[k];
+  }
+  double maxGain = 0;
+  for (size_t k : order) maxGain = std::max(maxGain, chosen[k]->gain);
+  *refined = int(order.size());
+  return maxGain;
+}
+
+// Coarse to fine: the candidates (scored at the prescreen stride) in order of score, in batches
+// of `refine` evaluated at full resolution (after the first batch only those within half the
+// threshold) until `pick` finds the best among those refined.
+std::optional<ViewCandidate> refineInBatches(
+    const std::vector<std::optional<ViewCandidate>>& chosen, const std::vector<size_t>& reachable,
+    int refine, double threshold,
+    const std::function<void(const std::vector<size_t>&)>& evaluateFine,
+    const std::function<std::optional<ViewCandidate>(const std::vector<size_t>&)>& pick,
+    int* refinedCount) {
+  std::vector<size_t> coarse = reachable;
+  std::sort(coarse.begin(), coarse.end(),
+            [&](size_t a, size_t b) { return betterView(*chosen[a], *chosen[b]); });
+  std::vector<size_t> refined;
+  std::optional<ViewCandidate> best;
+  for (size_t next = 0; next < coarse.size() && !best;) {
+    std::vector<size_t> batch;
+    for (; next < coarse.size() && batch.size() < size_t(refine); ++next)
+      if (refined.empty() || chosen[coarse[next]]->quality >= 0.5 * threshold)
+        batch.push_back(coarse[next]);
+    if (batch.empty()) break;
+    evaluateFine(batch);
+    refined.insert(refined.end(), batch.begin(), batch.end());
+    best = pick(refined);
+  }
+  *refinedCount = int(refined.size());
+  return best;
+}
+}  // namespace
+
 ViewSelection ViewPlanner::select(ViewQualityScene& scene, const GraspState& grasp,
                                   const std::vector<Vec3>& used,
                                   std::shared_ptr<const NearHandGrid> nearHand,
@@ -326,17 +462,7 @@ ViewSelection ViewPlanner::select(ViewQualityScene& scene, const GraspState& gra
   const double alpha = costWeight(o, area);
 
   // Line 5: directions at least t_θ from every used view.
-  const double cosMin = std::cos(o.min_angle_deg * M_PI / 180);
-  std::vector<Vec3> dirs;
-  for (const Vec3& d : fibonacciSphere(o.directions)) {
-    bool far = true;
-    for (const Vec3& u : used)
-      if (d.dot(u.normalized()) > cosMin) {
-        far = false;
-        break;
-      }
-    if (far) dirs.push_back(d);
-  }
+  const std::vector<Vec3> dirs = directionsAwayFrom(used, o.directions, o.min_angle_deg);
   out.directions = int(dirs.size());
 
   // Line 7: free DOFs.
@@ -360,47 +486,18 @@ ViewSelection ViewPlanner::select(ViewQualityScene& scene, const GraspState& gra
   // Random: one draw per (seed, pass, direction), independent of threads and of the other
   // candidates' reachability.
   const uint64_t passSeed = mixSeed(o.seed, 0x7a11 + used.size());
-  auto evaluate = [&](size_t k, int stride) {
-    ViewCandidate& c = *chosen[k];
-    if (o.metric == ViewMetric::kRandom) {
-      Rng rng = makeRng(passSeed, k);
-      c.quality = std::uniform_real_distribution<double>(0.0, 1.0)(rng);
-    } else {
-      std::vector<Occluder> occ;
-      if (o.hand_occlusion) occ = occluders_.at(model_->withArm(grasp.q, c.arm), c.T_B_O.inverse());
-      if (o.metric == ViewMetric::kInformationGain)
-        c.quality = scene.quality(c.T_O_C, occ, nullptr, stride);
-      else
-        c.quality = voxels->score(c.T_O_C,
-                                  o.metric == ViewMetric::kUnobservedVoxels
-                                      ? VolumetricMetric::kUnobservedVoxels
-                                      : VolumetricMetric::kRearSideEntropy,
-                                  occ);
-    }
-    c.pixel_stride = stride;
-    if (eq9) c.gain = stride == o.quality.pixel_stride ? c.quality : NAN;
-    c.score = c.quality - (o.use_cost ? alpha * c.cost_s : 0.0);
-  };
+  const CandidateScoring scoring{
+      o, *model_, occluders_, grasp, scene, voxels ? &*voxels : nullptr, passSeed, alpha, eq9};
   auto evaluateAll = [&](const std::vector<size_t>& ks, int stride) {
-    parallelForThreads(0, int(ks.size()), [&](int i) { evaluate(ks[size_t(i)], stride); });
-  };
-  // Best score first; ties to the cheaper view, then by direction (deterministic).
-  auto better = [](const ViewCandidate& a, const ViewCandidate& b) {
-    if (a.score != b.score) return a.score > b.score;
-    if (a.cost_s != b.cost_s) return a.cost_s < b.cost_s;
-    return a.dir_O.x() < b.dir_O.x();
+    parallelForThreads(0, int(ks.size()),
+                       [&](int i) { scoring(ks[size_t(i)], *chosen[ks[size_t(i)]], stride); });
   };
   // Line 15: the best score among `pool` with q ≥ t_q whose joint-space path is collision-free.
   auto pick = [&](const std::vector<size_t>& pool) -> std::optional<ViewCandidate> {
     std::vector<const ViewCandidate*> order;
     for (size_t k : pool)
       if (chosen[k]->quality >= ownThreshold) order.push_back(&*chosen[k]);
-    std::sort(order.begin(), order.end(),
-              [&](const ViewCandidate* a, const ViewCandidate* b) { return better(*a, *b); });
-    for (const ViewCandidate* c : order)
-      if (!o.check_collisions || checker.pathFree(grasp.q, model_->withArm(grasp.q, c->arm), 0.05))
-        return *c;
-    return std::nullopt;
+    return bestWithFreePath(order, o.check_collisions ? &checker : nullptr, *model_, grasp.q);
   };
   const int fine = o.quality.pixel_stride;
   const bool coarseToFine = o.metric == ViewMetric::kInformationGain && o.refine > 0 &&
@@ -417,38 +514,14 @@ ViewSelection ViewPlanner::select(ViewQualityScene& scene, const GraspState& gra
     gainScene = &*own;
   }
   auto gainOf = [&](const ViewCandidate& c, int stride) {
-    std::vector<Occluder> occ;
-    if (o.hand_occlusion) occ = occluders_.at(model_->withArm(grasp.q, c.arm), c.T_B_O.inverse());
-    return gainScene->quality(c.T_O_C, occ, nullptr, stride);
+    return gainScene->quality(c.T_O_C, scoring.occludersOf(c), nullptr, stride);
   };
-  if (commonStop) {
-    // eq. 9 of every reachable candidate, coarse to fine as ig's own pass: the largest decides.
-    const int coarseStride = o.refine > 0 && o.prescreen_stride > fine ? o.prescreen_stride : fine;
-    std::vector<double> coarseGain(chosen.size(), 0.0);
-    parallelForThreads(0, int(reachable.size()), [&](int i) {
-      coarseGain[reachable[size_t(i)]] = gainOf(*chosen[reachable[size_t(i)]], coarseStride);
-    });
-    std::vector<size_t> order = reachable;
-    std::stable_sort(order.begin(), order.end(),
-                     [&](size_t a, size_t b) { return coarseGain[a] > coarseGain[b]; });
-    if (coarseStride != fine && o.refine > 0 && order.size() > size_t(o.refine))
-      order.resize(size_t(o.refine));
-    if (coarseStride != fine) {
-      parallelForThreads(0, int(order.size()), [&](int i) {
-        chosen[order[size_t(i)]]->gain = gainOf(*chosen[order[size_t(i)]], fine);
-      });
-    } else {
-      for (size_t k : order) chosen[k]->gain = coarseGain[k];
-    }
-    double maxGain = 0;
-    for (size_t k : order) maxGain = std::max(maxGain, chosen[k]->gain);
-    out.refined = int(order.size());
-    if (maxGain < out.t_q) {
-      out.quality_s = secs(tQ);
-      for (size_t k : reachable) out.candidates.push_back(*chosen[k]);
-      out.total_s = secs(t0);
-      return out;
-    }
+  // eq. 9 of every reachable candidate, coarse to fine as ig's own pass: the largest decides.
+  if (commonStop && largestGain(chosen, reachable, o, gainOf, &out.refined) < out.t_q) {
+    out.quality_s = secs(tQ);
+    for (size_t k : reachable) out.candidates.push_back(*chosen[k]);
+    out.total_s = secs(t0);
+    return out;
   }
   if (!coarseToFine) {
     evaluateAll(reachable, fine);
@@ -456,21 +529,9 @@ ViewSelection ViewPlanner::select(ViewQualityScene& scene, const GraspState& gra
     out.best = pick(reachable);
   } else {
     evaluateAll(reachable, o.prescreen_stride);
-    std::vector<size_t> coarse = reachable;
-    std::sort(coarse.begin(), coarse.end(),
-              [&](size_t a, size_t b) { return better(*chosen[a], *chosen[b]); });
-    std::vector<size_t> refined;
-    for (size_t next = 0; next < coarse.size() && !out.best;) {
-      std::vector<size_t> batch;
-      for (; next < coarse.size() && batch.size() < size_t(o.refine); ++next)
-        if (refined.empty() || chosen[coarse[next]]->quality >= 0.5 * ownThreshold)
-          batch.push_back(coarse[next]);
-      if (batch.empty()) break;
-      evaluateAll(batch, fine);
-      refined.insert(refined.end(), batch.begin(), batch.end());
-      out.best = pick(refined);
-    }
-    out.refined = int(refined.size());
+    out.best = refineInBatches(
+        chosen, reachable, o.refine, ownThreshold,
+        [&](const std::vector<size_t>& batch) { evaluateAll(batch, fine); }, pick, &out.refined);
   }
   // The chosen baseline view's own eq. 9 gain at full resolution (the planner's prediction).
   if (commonStop && out.best && std::isnan(out.best->gain))
