@@ -294,160 +294,194 @@ void dropSmallComponents(ObjectModel* m, double fraction) {
 
 }  // namespace
 
-ObjectModel extractModel(const TsdfVolume& volume, const MeshOptions& options) {
-  constexpr uint8_t kEmptyState = uint8_t(VoxelState::kEmpty);
-  const Vec3i d = volume.dims();
-  std::vector<uint8_t> attached;
-  if (options.drop_floating_unknown) attached = unknownAttachedToObserved(volume);
-  auto isUnknown = [&](uint32_t v) {
-    return volume.state(v) == VoxelState::kUnknown && (attached.empty() || attached[v]);
-  };
-  const float mu = float(volume.truncation());
-  const int k = std::max(1, options.stride);
-  const Vec3i n((d.x() + k - 1) / k, (d.y() + k - 1) / k, (d.z() + k - 1) / k);  // samples used
-  // Padded grid: one extra sample on each side, treated as empty.
-  ScalarGrid grid;
-  grid.dims = n + Vec3i::Constant(2);
-  grid.spacing = k * volume.voxelSize();
-  grid.origin = volume.origin() - Vec3::Constant(grid.spacing);
-  grid.values.assign(size_t(grid.dims.prod()), mu);
-  // The voxel of padded sample (x, y, z) (UINT32_MAX on the padding), and of a sample's index.
-  auto voxelAt = [&](int x, int y, int z) {
-    if (x < 1 || y < 1 || z < 1 || x > n.x() || y > n.y() || z > n.z()) return UINT32_MAX;
-    return uint32_t(volume.index((x - 1) * k, (y - 1) * k, (z - 1) * k));
-  };
-  const size_t gx = size_t(grid.dims.x()), gxy = gx * size_t(grid.dims.y());
-  auto voxelOf = [&](size_t g) {
-    return voxelAt(int(g % gx), int(g / gx % size_t(grid.dims.y())), int(g / gxy));
-  };
+namespace {
+// The volume sampled at every `stride`-th voxel into a padded grid of signed distances (one
+// extra sample on each side, treated as empty) for contouring: observed voxels their distance,
+// empty ones +μ, unknown ones −μ (floating unknown pockets count as empty with
+// MeshOptions::drop_floating_unknown).
+class ModelGrid {
+ public:
+  ModelGrid(const TsdfVolume& volume, const MeshOptions& options)
+      : volume_(volume),
+        mu_(float(volume.truncation())),
+        k_(std::max(1, options.stride)),
+        n_((volume.dims().x() + k_ - 1) / k_, (volume.dims().y() + k_ - 1) / k_,
+           (volume.dims().z() + k_ - 1) / k_),
+        holeVar_(float(options.hole_sigma_m * options.hole_sigma_m)) {
+    if (options.drop_floating_unknown) attached_ = unknownAttachedToObserved(volume);
+    grid_.dims = n_ + Vec3i::Constant(2);
+    grid_.spacing = k_ * volume.voxelSize();
+    grid_.origin = volume.origin() - Vec3::Constant(grid_.spacing);
+    grid_.values.assign(size_t(grid_.dims.prod()), mu_);
+    behindMeasured_.assign(grid_.values.size(), 0);
+  }
+
   // Samples of empty voxels keep the +μ the grid was filled with: rows of samples with none but
   // empty voxels are passed over. Which rows have an unknown sample is noted for the next pass.
-  std::vector<uint8_t> rowUnknown(size_t(n.y()) * n.z(), 0);
-  const uint8_t* states = volume.states();
-  parallelFor(0, n.z(), [&](int zs) {
-    for (int ys = 0; ys < n.y(); ++ys) {
-      const size_t i0 = volume.index(0, ys * k, zs * k);
-      if (k == 1) {
-        bool allEmpty = true;
-        for (int xs = 0; xs < n.x(); ++xs) allEmpty &= states[i0 + size_t(xs)] == kEmptyState;
-        if (allEmpty) continue;
-      }
-      bool unknown = false;
-      for (int xs = 0; xs < n.x(); ++xs) {
-        const size_t i = i0 + size_t(xs) * size_t(k);
-        size_t g = grid.index(xs + 1, ys + 1, zs + 1);
-        VoxelState st = volume.state(i);
-        if (st == VoxelState::kUnknown && !isUnknown(uint32_t(i))) st = VoxelState::kEmpty;
-        switch (st) {
-          case VoxelState::kObserved: {
-            float s = volume.distance(i);
-            grid.values[g] = s == 0.f ? 1e-7f : s;  // keep exact zeros off the surface's corners
-            break;
-          }
-          case VoxelState::kEmpty:
-            grid.values[g] = mu;
-            break;
-          case VoxelState::kUnknown:
-            grid.values[g] = -mu;
-            unknown = true;
-            break;
+  void sample() {
+    constexpr uint8_t kEmptyState = uint8_t(VoxelState::kEmpty);
+    rowUnknown_.assign(size_t(n_.y()) * n_.z(), 0);
+    const uint8_t* states = volume_.states();
+    parallelFor(0, n_.z(), [&](int zs) {
+      for (int ys = 0; ys < n_.y(); ++ys) {
+        const size_t i0 = volume_.index(0, ys * k_, zs * k_);
+        if (k_ == 1) {
+          bool allEmpty = true;
+          for (int xs = 0; xs < n_.x(); ++xs) allEmpty &= states[i0 + size_t(xs)] == kEmptyState;
+          if (allEmpty) continue;
         }
+        bool unknown = false;
+        for (int xs = 0; xs < n_.x(); ++xs) {
+          const size_t i = i0 + size_t(xs) * size_t(k_);
+          const size_t g = grid_.index(xs + 1, ys + 1, zs + 1);
+          switch (stateOf(uint32_t(i))) {
+            case VoxelState::kObserved: {
+              const float s = volume_.distance(i);
+              grid_.values[g] = s == 0.f ? 1e-7f : s;  // exact zeros off the surface's corners
+              break;
+            }
+            case VoxelState::kEmpty:
+              grid_.values[g] = mu_;
+              break;
+            case VoxelState::kUnknown:
+              grid_.values[g] = -mu_;
+              unknown = true;
+              break;
+          }
+        }
+        rowUnknown_[size_t(zs) * n_.y() + size_t(ys)] = unknown;
       }
-      rowUnknown[size_t(zs) * n.y() + size_t(ys)] = unknown;
-    }
-  });
-  // An unknown sample next to an observed one that lies less than their distance in front of the
-  // surface is behind that measured surface: its signed distance is at least the neighbour's less
-  // their distance (a distance changes by at most that much), the tightest such bound over its 26
-  // neighbours (the contouring's edges include the cubes' diagonals). The crossing then sits where
-  // the measurement puts it and counts as observed (the measured end's variance) instead of a hole
-  // vertex pulled towards the measured voxel by −μ: a reach behind the surface narrower than μ
-  // (VolumeOptions::band_sigmas) leaves voxels a little behind some measured surfaces unknown.
-  std::vector<uint8_t> behindMeasured(grid.values.size(), 0);
-  {
-    const float h = float(grid.spacing);
+    });
+  }
+
+  // An unknown sample next to an observed one that lies less than their distance in front of
+  // the surface is behind that measured surface: its signed distance is at least the
+  // neighbour's less their distance (a distance changes by at most that much), the tightest
+  // such bound over its 26 neighbours (the contouring's edges include the cubes' diagonals). The
+  // crossing then sits where the measurement puts it and counts as observed (the measured end's
+  // variance) instead of a hole vertex pulled towards the measured voxel by −μ: a reach behind
+  // the surface narrower than μ (VolumeOptions::band_sigmas) leaves voxels a little behind some
+  // measured surfaces unknown. Only unknown samples are written and only observed ones read: no
+  // sample read changes.
+  void boundBehindMeasured() {
+    const float h = float(grid_.spacing);
     const std::array<float, 4> stepLength{0.f, h, std::sqrt(2.f) * h, std::sqrt(3.f) * h};
-    // Only unknown samples are written and only observed ones read: no sample read changes.
-    parallelFor(1, grid.dims.z() - 1, [&](int z) {
-      for (int y = 1; y < grid.dims.y() - 1; ++y) {
-        if (!rowUnknown[size_t(z - 1) * n.y() + size_t(y - 1)]) continue;
-        for (int x = 1; x < grid.dims.x() - 1; ++x) {
-          const size_t g = grid.index(x, y, z);
+    parallelFor(1, grid_.dims.z() - 1, [&](int z) {
+      for (int y = 1; y < grid_.dims.y() - 1; ++y) {
+        if (!rowUnknown_[size_t(z - 1) * n_.y() + size_t(y - 1)]) continue;
+        for (int x = 1; x < grid_.dims.x() - 1; ++x) {
           const uint32_t v = voxelAt(x, y, z);
           if (v == UINT32_MAX || !isUnknown(v)) continue;
-          float best = -mu;
+          float best = -mu_;
           for (int dz = -1; dz <= 1; ++dz)
             for (int dy = -1; dy <= 1; ++dy)
               for (int dx = -1; dx <= 1; ++dx) {
                 const int steps = std::abs(dx) + std::abs(dy) + std::abs(dz);
                 if (steps == 0) continue;
                 const uint32_t vn = voxelAt(x + dx, y + dy, z + dz);
-                if (vn == UINT32_MAX || volume.state(vn) != VoxelState::kObserved) continue;
-                const float dn = grid.values[grid.index(x + dx, y + dy, z + dz)],
+                if (vn == UINT32_MAX || volume_.state(vn) != VoxelState::kObserved) continue;
+                const float dn = grid_.values[grid_.index(x + dx, y + dy, z + dz)],
                             len = stepLength[size_t(steps)];
                 if (dn > 0.f && dn < len) best = std::max(best, dn - len);
               }
-          if (best > -mu) {
-            grid.values[g] = best;
-            behindMeasured[g] = 1;
+          if (best > -mu_) {
+            const size_t g = grid_.index(x, y, z);
+            grid_.values[g] = best;
+            behindMeasured_[g] = 1;
           }
         }
       }
     });
   }
-  ContourResult c =
-      options.method == SurfaceMethod::kSurfaceNets ? surfaceNets(grid) : contour(grid);
-  ObjectModel model;
-  model.mesh = std::move(c.mesh);
-  const size_t nv = model.mesh.vertices.size();
-  model.variance.resize(nv);
-  model.observed.resize(nv);
-  const float holeVar = float(options.hole_sigma_m * options.hole_sigma_m);
-  auto stateOf = [&](uint32_t v) {
+
+  // The zero set, each vertex's variance the mean over its crossings, observed only if every
+  // crossing is; one crossing next to the unknown makes it a hole vertex (σ_hole), as for
+  // marching tetrahedra.
+  ObjectModel contourModel(SurfaceMethod method) const {
+    ContourResult c = method == SurfaceMethod::kSurfaceNets ? surfaceNets(grid_) : contour(grid_);
+    ObjectModel model;
+    model.mesh = std::move(c.mesh);
+    const size_t nv = model.mesh.vertices.size();
+    model.variance.resize(nv);
+    model.observed.resize(nv);
+    parallelFor(
+        0, int(nv),
+        [&](int k) {
+          double sum = 0;
+          bool observed = true;
+          for (uint32_t s = c.first[k]; s < c.first[k + 1]; ++s) {
+            const float var = crossingVariance(c.sources[s]);
+            sum += var;
+            observed = observed && var < holeVar_;
+          }
+          model.variance[k] =
+              observed ? float(sum / double(c.first[k + 1] - c.first[k])) : holeVar_;
+          model.observed[k] = observed;
+        },
+        4096);
+    return model;
+  }
+
+ private:
+  bool isUnknown(uint32_t v) const {
+    return volume_.state(v) == VoxelState::kUnknown && (attached_.empty() || attached_[v]);
+  }
+  // The voxel of padded sample (x, y, z) (UINT32_MAX on the padding), and of a sample's index.
+  uint32_t voxelAt(int x, int y, int z) const {
+    if (x < 1 || y < 1 || z < 1 || x > n_.x() || y > n_.y() || z > n_.z()) return UINT32_MAX;
+    return uint32_t(volume_.index((x - 1) * k_, (y - 1) * k_, (z - 1) * k_));
+  }
+  uint32_t voxelOf(size_t g) const {
+    const size_t gx = size_t(grid_.dims.x()), gxy = gx * size_t(grid_.dims.y());
+    return voxelAt(int(g % gx), int(g / gx % size_t(grid_.dims.y())), int(g / gxy));
+  }
+  // A voxel's state as the surface sees it (a floating unknown one as empty; padding empty).
+  VoxelState stateOf(uint32_t v) const {
     if (v == UINT32_MAX) return VoxelState::kEmpty;
-    VoxelState st = volume.state(v);
+    const VoxelState st = volume_.state(v);
     return (st == VoxelState::kUnknown && !isUnknown(v)) ? VoxelState::kEmpty : st;
-  };
+  }
   // One crossing's variance: σ_hole² next to an unknown voxel, else 1/Σw interpolated between
   // observed voxels (or the observed end's, next to an empty voxel).
-  auto crossingVariance = [&](const EdgeVertex& e) {
-    uint32_t va = voxelOf(e.a), vb = voxelOf(e.b);
-    VoxelState sa = stateOf(va), sb = stateOf(vb);
-    // Behind a measured surface (above): the crossing is that measurement's.
-    if (behindMeasured[e.a] && sb == VoxelState::kObserved)
-      return std::min(volume.variance(vb), holeVar);
-    if (behindMeasured[e.b] && sa == VoxelState::kObserved)
-      return std::min(volume.variance(va), holeVar);
-    if (sa == VoxelState::kUnknown || sb == VoxelState::kUnknown) return holeVar;
+  float crossingVariance(const EdgeVertex& e) const {
+    const uint32_t va = voxelOf(e.a), vb = voxelOf(e.b);
+    const VoxelState sa = stateOf(va), sb = stateOf(vb);
+    // Behind a measured surface (boundBehindMeasured): the crossing is that measurement's.
+    if (behindMeasured_[e.a] && sb == VoxelState::kObserved)
+      return std::min(volume_.variance(vb), holeVar_);
+    if (behindMeasured_[e.b] && sa == VoxelState::kObserved)
+      return std::min(volume_.variance(va), holeVar_);
+    if (sa == VoxelState::kUnknown || sb == VoxelState::kUnknown) return holeVar_;
     float var;
     if (sa == VoxelState::kObserved && sb == VoxelState::kObserved)
       // The end in front of the surface: every measurement of the surface reaches it, while one
       // reaches only so far behind (VolumeOptions::band_sigmas).
-      var = grid.values[e.a] > 0 ? volume.variance(va) : volume.variance(vb);
+      var = grid_.values[e.a] > 0 ? volume_.variance(va) : volume_.variance(vb);
     else if (sa == VoxelState::kObserved)
-      var = volume.variance(va);
+      var = volume_.variance(va);
     else if (sb == VoxelState::kObserved)
-      var = volume.variance(vb);
+      var = volume_.variance(vb);
     else
-      var = holeVar;  // empty next to empty cannot cross zero; kept for safety
-    return std::min(var, holeVar);
-  };
-  parallelFor(
-      0, int(nv),
-      [&](int k) {
-        // The mean over the vertex's crossings, observed only if every crossing is; one crossing
-        // next to the unknown makes it a hole vertex (σ_hole), as for marching tetrahedra.
-        double sum = 0;
-        bool observed = true;
-        for (uint32_t s = c.first[k]; s < c.first[k + 1]; ++s) {
-          const float var = crossingVariance(c.sources[s]);
-          sum += var;
-          observed = observed && var < holeVar;
-        }
-        model.variance[k] = observed ? float(sum / double(c.first[k + 1] - c.first[k])) : holeVar;
-        model.observed[k] = observed;
-      },
-      4096);
+      var = holeVar_;  // empty next to empty cannot cross zero; kept for safety
+    return std::min(var, holeVar_);
+  }
+
+  const TsdfVolume& volume_;
+  std::vector<uint8_t> attached_;
+  float mu_;
+  int k_;
+  Vec3i n_;  // samples used
+  float holeVar_;
+  ScalarGrid grid_;
+  std::vector<uint8_t> rowUnknown_, behindMeasured_;
+};
+}  // namespace
+
+ObjectModel extractModel(const TsdfVolume& volume, const MeshOptions& options) {
+  ModelGrid grid(volume, options);
+  grid.sample();
+  grid.boundBehindMeasured();
+  ObjectModel model = grid.contourModel(options.method);
   if (options.min_component_fraction > 0)
     dropSmallComponents(&model, options.min_component_fraction);
   return model;
