@@ -433,9 +433,14 @@ double decode(const char* p, PlyType t, bool bigEndian) {
 
 }  // namespace
 
-PlyData readPly(const fs::path& path) {
-  std::string data = readTextFile(path);
-  const std::string where = path.string();
+namespace {
+// A PLY file's header: its format, its elements with their properties, where the body starts.
+struct PlyHeader {
+  std::string format;
+  std::vector<PlyElement> elements;
+  size_t bodyStart = 0;
+};
+PlyHeader readPlyHeader(const std::string& data, const std::string& where) {
   size_t headerEnd = data.find("end_header");
   if (data.rfind("ply", 0) != 0 || headerEnd == std::string::npos)
     throw Error(where + ": not a PLY file (no 'ply' magic or 'end_header')");
@@ -473,6 +478,14 @@ PlyData readPly(const fs::path& path) {
   if (format != "binary_little_endian" && format != "binary_big_endian" && format != "ascii")
     throw Error(where + ": PLY format '" + format +
                 "' is not supported (ascii, binary_little_endian, binary_big_endian)");
+  return {format, elements, bodyStart};
+}
+}  // namespace
+
+PlyData readPly(const fs::path& path) {
+  std::string data = readTextFile(path);
+  const std::string where = path.string();
+  const auto [format, elements, bodyStart] = readPlyHeader(data, where);
   const bool ascii = format == "ascii", bigEndian = format == "binary_big_endian";
   PlyData out;
   size_t pos = bodyStart;
