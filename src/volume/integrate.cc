@@ -531,6 +531,129 @@ inline void clipLinear(double a, double b, double* lo, double* hi) {
     *hi = -1;  // never satisfied
 }
 
+// The voxels x of a row (camera coordinates a + x·step) that lie in front of the camera and
+// project inside the image, widened by one each side and clipped to [0, nx − 1]: z > 0 and
+// −0.5 ≤ fx·X/Z + cx < w − 0.5 (the same for v) are linear in x once multiplied by Z. False when
+// none does.
+inline bool rowOnImage(const Vec3& a, const Vec3& step, const CameraIntrinsics& K, int nx, int* x0,
+                       int* x1) {
+  const int w = K.width, h = K.height;
+  double lo = 0, hi = nx - 1;
+  clipLinear(a.z() - 1e-6, step.z(), &lo, &hi);
+  clipLinear(K.fx * a.x() + (K.cx + 0.5) * a.z(), K.fx * step.x() + (K.cx + 0.5) * step.z(), &lo,
+             &hi);
+  clipLinear(-K.fx * a.x() + (w - 0.5 - K.cx) * a.z(),
+             -K.fx * step.x() + (w - 0.5 - K.cx) * step.z(), &lo, &hi);
+  clipLinear(K.fy * a.y() + (K.cy + 0.5) * a.z(), K.fy * step.y() + (K.cy + 0.5) * step.z(), &lo,
+             &hi);
+  clipLinear(-K.fy * a.y() + (h - 0.5 - K.cy) * a.z(),
+             -K.fy * step.y() + (h - 0.5 - K.cy) * step.z(), &lo, &hi);
+  if (lo > hi) return false;
+  *x0 = std::max(0, int(std::floor(lo)) - 1);
+  *x1 = std::min(nx - 1, int(std::ceil(hi)) + 1);
+  return true;
+}
+
+// One voxel of the row from its depth Z and its projection (fu, fv) + 0.5 (the plain path: each
+// test in turn). The row is taken by value: the compiler keeps its fields in registers (through
+// a reference it reloads them after every store to the volume).
+inline void integrateVoxel(const RowOfVoxels r, int x, float Z, float fu, float fv,
+                           int64_t* visited, int64_t* updated) {
+  if (Z <= 0.f) return;
+  // Nearest pixel. Truncation equals floor for non-negative values, and is much cheaper than
+  // std::floor without SSE4.1; negatives are rejected first.
+  if (!(fu >= 0.f && fv >= 0.f)) return;
+  const int u = int(fu), v = int(fv);
+  if (u >= r.w || v >= r.h) return;
+  const int p = v * r.w + u;
+  const float Dm = r.D[p];
+  if (!(Dm > 0.f)) return;
+  const float d = Dm - Z;
+  if (r.useBand ? Z > r.F[p] : d < -r.mu) return;  // predictable: the same every voxel
+  ++*visited;
+  const size_t i = r.base + size_t(x);
+  *updated +=
+      updateVoxel(d, r.mu, r.W[p], r.carve && r.carve[p], &r.sumWD[i], &r.sumW[i], &r.state[i]);
+}
+
+// Voxels x … x1 one at a time, in single precision as the four-voxel kernel computes them.
+inline void integrateOneByOne(const RowOfVoxels r, int x, int x1, int64_t* visited,
+                              int64_t* updated) {
+  for (; x <= x1; ++x) {
+    const float Z = r.az + float(x) * r.sz;
+    if (Z <= 0.f) continue;
+    const float inv = 1.f / Z;
+    integrateVoxel(r, x, Z, r.fx * (r.ax + float(x) * r.sx) * inv + r.cx + 0.5f,
+                   r.fy * (r.ay + float(x) * r.sy) * inv + r.cy + 0.5f, visited, updated);
+  }
+}
+
+// Voxels x, x + 1, … four at a time while all four lie in [x, x1]: depth, its reciprocal and the
+// projection in SSE2, each operation the scalar one in the same order (IEEE single precision,
+// no fused multiply-add), so the pixels are those of integrateOneByOne to the last bit. With
+// `simdPixels` the tests too, four at once; else each voxel through integrateVoxel. Returns the
+// first voxel not processed.
+inline int integrateFour(const RowOfVoxels r, int x, int x1, bool simdPixels, int64_t* visited,
+                         int64_t* updated) {
+  const __m128 vax = _mm_set1_ps(r.ax), vay = _mm_set1_ps(r.ay), vaz = _mm_set1_ps(r.az);
+  const __m128 vsx = _mm_set1_ps(r.sx), vsy = _mm_set1_ps(r.sy), vsz = _mm_set1_ps(r.sz);
+  const __m128 vfx = _mm_set1_ps(r.fx), vfy = _mm_set1_ps(r.fy), vcx = _mm_set1_ps(r.cx),
+               vcy = _mm_set1_ps(r.cy), half = _mm_set1_ps(0.5f), one = _mm_set1_ps(1.f);
+  const __m128 zero4 = _mm_setzero_ps(), w4 = _mm_set1_ps(float(r.w)), h4 = _mm_set1_ps(float(r.h)),
+               negMu4 = _mm_set1_ps(-r.mu);
+  alignas(16) float Zs[4], us[4], vs[4];
+  for (; x + 3 <= x1; x += 4) {
+    const __m128 xf = _mm_set_ps(float(x + 3), float(x + 2), float(x + 1), float(x));
+    const __m128 Z = _mm_add_ps(vaz, _mm_mul_ps(xf, vsz));
+    const __m128 inv = _mm_div_ps(one, Z);
+    const __m128 fu = _mm_add_ps(
+        _mm_add_ps(_mm_mul_ps(_mm_mul_ps(vfx, _mm_add_ps(vax, _mm_mul_ps(xf, vsx))), inv), vcx),
+        half);
+    const __m128 fv = _mm_add_ps(
+        _mm_add_ps(_mm_mul_ps(_mm_mul_ps(vfy, _mm_add_ps(vay, _mm_mul_ps(xf, vsy))), inv), vcy),
+        half);
+    if (!simdPixels) {
+      _mm_store_ps(Zs, Z);
+      _mm_store_ps(us, fu);
+      _mm_store_ps(vs, fv);
+      for (int l = 0; l < 4; ++l) integrateVoxel(r, x + l, Zs[l], us[l], vs[l], visited, updated);
+      continue;
+    }
+    // integrateVoxel's tests for the four at once, the same comparisons: in front of the camera,
+    // on the image (trunc(f) < w ⇔ f < w for f ≥ 0), a depth there, within reach; the pixel
+    // index v·w + u exact in single precision (< 2^24).
+    const __m128 inImage =
+        _mm_and_ps(_mm_and_ps(_mm_cmpgt_ps(Z, zero4),
+                              _mm_and_ps(_mm_cmpge_ps(fu, zero4), _mm_cmpge_ps(fv, zero4))),
+                   _mm_and_ps(_mm_cmplt_ps(fu, w4), _mm_cmplt_ps(fv, h4)));
+    if (!_mm_movemask_ps(inImage)) continue;
+    const __m128 pf = _mm_add_ps(_mm_mul_ps(_mm_cvtepi32_ps(_mm_cvttps_epi32(fv)), w4),
+                                 _mm_cvtepi32_ps(_mm_cvttps_epi32(fu)));
+    alignas(16) int ps[4];
+    _mm_store_si128(reinterpret_cast<__m128i*>(ps),
+                    _mm_and_si128(_mm_cvttps_epi32(pf), _mm_castps_si128(inImage)));
+    const __m128 Dm = _mm_set_ps(r.D[ps[3]], r.D[ps[2]], r.D[ps[1]], r.D[ps[0]]);
+    const __m128 d = _mm_sub_ps(Dm, Z);
+    __m128 keep = _mm_and_ps(inImage, _mm_cmpgt_ps(Dm, zero4));
+    keep = r.useBand ? _mm_and_ps(keep, _mm_cmpngt_ps(Z, _mm_set_ps(r.F[ps[3]], r.F[ps[2]],
+                                                                    r.F[ps[1]], r.F[ps[0]])))
+                     : _mm_and_ps(keep, _mm_cmpnlt_ps(d, negMu4));
+    int lanes = _mm_movemask_ps(keep);
+    if (!lanes) continue;
+    alignas(16) float ds[4];
+    _mm_store_ps(ds, d);
+    for (; lanes; lanes &= lanes - 1) {
+      const int l = __builtin_ctz(unsigned(lanes));
+      const int p = ps[l];
+      ++*visited;
+      const size_t i = r.base + size_t(x + l);
+      *updated += updateVoxel(ds[l], r.mu, r.W[p], r.carve && r.carve[p], &r.sumWD[i], &r.sumW[i],
+                              &r.state[i]);
+    }
+  }
+  return x;
+}
+
 constexpr int kBrick = 8;      // voxels per brick edge
 constexpr int kDepthTile = 8;  // pixels per depth tile edge
 
@@ -657,20 +780,25 @@ struct BrickCull {
 
 }  // namespace
 
-IntegrationStats integrate(const DepthImage& depth, const Iso3& T_O_C, const CameraIntrinsics& K,
-                           const std::vector<float>& sigma_m, TsdfVolume* volume,
-                           const std::vector<uint8_t>* carve_only, bool skip_unchanged_bricks) {
-  checkInputs(depth, K, sigma_m, carve_only);
-  const int w = K.width, h = K.height;
-  // Per pixel: the weight w = 1/σ², the farthest depth the measurement reaches (band_sigmas) and
-  // the depth it updates from (smooth_depth), so the kernel reads two or three floats per voxel;
-  // only where the volume's voxels can project (the kernel reads no other pixel).
-  const PixelRect rect = volumeImageRect(*volume, T_O_C, K);
-  const float muFull = float(volume->truncation());
-  const float k = float(volume->bandSigmas());
-  const float voxelF = float(volume->voxelSize());
+// The pixels as the kernel reads them: per pixel the weight w = 1/σ², the farthest depth the
+// measurement reaches (band_sigmas) and the depth it updates from (smooth_depth), so the kernel
+// reads two or three floats per voxel; only where the volume's voxels can project (`rect`: the
+// kernel reads no other pixel). The arrays are this thread's buffers, valid until its next call.
+struct PreparedPixels {
+  PixelRect rect;
+  const DepthImage* depth;  // the depths the voxels are updated from
+  const float *weight, *farZ;
+};
+PreparedPixels preparePixels(const DepthImage& depth, const Iso3& T_O_C, const CameraIntrinsics& K,
+                             const std::vector<float>& sigma_m, const TsdfVolume& volume,
+                             const std::vector<uint8_t>* carve_only) {
+  const int w = K.width;
+  const PixelRect rect = volumeImageRect(volume, T_O_C, K);
+  const float muFull = float(volume.truncation());
+  const float k = float(volume.bandSigmas());
+  const float voxelF = float(volume.voxelSize());
   const bool useBand = k > 0;  // else every measurement reaches μ behind its depth: no far image
-  const bool smooth = volume->smoothDepth();
+  const bool smooth = volume.smoothDepth();
   // Per-thread buffers of the image's size: only the rect's entries are written and read, so they
   // are neither cleared nor allocated again frame after frame.
   thread_local std::vector<float> weight, farZ;
@@ -683,7 +811,7 @@ IntegrationStats integrate(const DepthImage& depth, const Iso3& T_O_C, const Cam
   // The volume's depth range in this camera (its corners).
   const Iso3 T_C_O = T_O_C.inverse();
   float zNear = std::numeric_limits<float>::infinity(), zFar = -zNear;
-  for (const Vec3& p : cornersInCamera(*volume, T_C_O)) {
+  for (const Vec3& p : cornersInCamera(volume, T_C_O)) {
     zNear = std::min(zNear, float(p.z()));
     zFar = std::max(zFar, float(p.z()));
   }
@@ -724,7 +852,22 @@ IntegrationStats integrate(const DepthImage& depth, const Iso3& T_O_C, const Cam
       if (useBand) F[i] = farLimit(Dv, sm, sigma_m[i], k, voxelF, muFull);
     });
   // The depths the voxels are updated from: the smoothed ones with VolumeOptions::smooth_depth.
-  const DepthImage& used = smooth ? smoothed : depth;
+  return {rect, smooth ? &smoothed : &depth, Wt, F};
+}
+
+IntegrationStats integrate(const DepthImage& depth, const Iso3& T_O_C, const CameraIntrinsics& K,
+                           const std::vector<float>& sigma_m, TsdfVolume* volume,
+                           const std::vector<uint8_t>* carve_only, bool skip_unchanged_bricks) {
+  checkInputs(depth, K, sigma_m, carve_only);
+  const int w = K.width, h = K.height;
+  const PreparedPixels pixels = preparePixels(depth, T_O_C, K, sigma_m, *volume, carve_only);
+  const PixelRect& rect = pixels.rect;
+  const float muFull = float(volume->truncation());
+  const bool useBand = volume->bandSigmas() > 0;
+  const Iso3 T_C_O = T_O_C.inverse();
+  const DepthImage& used = *pixels.depth;
+  const float* F = pixels.farZ;
+  const float* Wt = pixels.weight;
   const DepthTiles tiles(used, rect, carve_only ? carve_only->data() : nullptr);
   const Mat3 R = T_C_O.linear();
   const Vec3 step = R.col(0) * volume->voxelSize();  // camera-frame step along voxel x
@@ -760,7 +903,7 @@ IntegrationStats integrate(const DepthImage& depth, const Iso3& T_O_C, const Cam
         if (skip_unchanged_bricks && cull.skip(Vec3i(bx, by, bz))) continue;
         const int first = bx * kBrick, last = std::min(dims.x(), first + kBrick) - 1;
         if (!spans.empty() && spans.back().second + 1 == first)
-          spans.back().second = last;
+          spans.back().second = last;  // consecutive bricks: one span
         else
           spans.emplace_back(first, last);
       }
@@ -768,56 +911,11 @@ IntegrationStats integrate(const DepthImage& depth, const Iso3& T_O_C, const Cam
       for (int z = bz * kBrick; z < std::min(dims.z(), (bz + 1) * kBrick); ++z)
         for (int y = by * kBrick; y < std::min(dims.y(), (by + 1) * kBrick); ++y) {
           const Vec3 a = T_C_O * volume->point(0, y, z);  // camera coords of voxel x = 0
-          // Clip x to where the voxel is in front of the camera and projects inside the image:
-          // z > 0 and −0.5 ≤ fx·X/Z + cx < w − 0.5 (same for v) are linear in x once multiplied by
-          // Z.
-          double lo = 0, hi = dims.x() - 1;
-          clipLinear(a.z() - 1e-6, step.z(), &lo, &hi);
-          clipLinear(K.fx * a.x() + (K.cx + 0.5) * a.z(), K.fx * step.x() + (K.cx + 0.5) * step.z(),
-                     &lo, &hi);
-          clipLinear(-K.fx * a.x() + (w - 0.5 - K.cx) * a.z(),
-                     -K.fx * step.x() + (w - 0.5 - K.cx) * step.z(), &lo, &hi);
-          clipLinear(K.fy * a.y() + (K.cy + 0.5) * a.z(), K.fy * step.y() + (K.cy + 0.5) * step.z(),
-                     &lo, &hi);
-          clipLinear(-K.fy * a.y() + (h - 0.5 - K.cy) * a.z(),
-                     -K.fy * step.y() + (h - 0.5 - K.cy) * step.z(), &lo, &hi);
-          if (lo > hi) continue;
-          const int rowX0 = std::max(0, int(std::floor(lo)) - 1),
-                    rowX1 = std::min(dims.x() - 1, int(std::ceil(hi)) + 1);
+          int rowX0, rowX1;
+          if (!rowOnImage(a, step, K, dims.x(), &rowX0, &rowX1)) continue;
           const float ax = float(a.x()), ay = float(a.y()), az = float(a.z());
           const float sx = float(step.x()), sy = float(step.y()), sz = float(step.z());
           const size_t base = volume->index(0, y, z);
-          // One voxel from its depth Z and its projection (fu, fv) + 0.5.
-          // Captured by value: the compiler keeps them in registers (through references it reloads
-          // them after every store to the volume).
-          auto voxel = [D, F, useBand, W = Wt, carve, w, h, muFull, base, sumWD, sumW, state,
-                        &myVisited, &myUpdated](int x, float Z, float fu, float fv) {
-            if (Z <= 0.f) return;
-            // Nearest pixel. Truncation equals floor for non-negative values, and is much cheaper
-            // than std::floor without SSE4.1; negatives are rejected first.
-            if (!(fu >= 0.f && fv >= 0.f)) return;
-            const int u = int(fu), v = int(fv);
-            if (u >= w || v >= h) return;
-            const int p = v * w + u;
-            const float Dm = D[p];
-            if (!(Dm > 0.f)) return;
-            const float d = Dm - Z;
-            if (useBand ? Z > F[p] : d < -muFull) return;  // predictable: the same every voxel
-            ++myVisited;
-            const size_t i = base + size_t(x);
-            myUpdated +=
-                updateVoxel(d, muFull, W[p], carve && carve[p], &sumWD[i], &sumW[i], &state[i]);
-          };
-          // Four voxels at a time: depth, its reciprocal and the projection in SSE2, each operation
-          // the scalar one in the same order (IEEE single precision, no fused multiply-add), so the
-          // pixels are those of the scalar loop below to the last bit.
-          const __m128 vax = _mm_set1_ps(ax), vay = _mm_set1_ps(ay), vaz = _mm_set1_ps(az);
-          const __m128 vsx = _mm_set1_ps(sx), vsy = _mm_set1_ps(sy), vsz = _mm_set1_ps(sz);
-          const __m128 vfx = _mm_set1_ps(fx), vfy = _mm_set1_ps(fy), vcx = _mm_set1_ps(cx),
-                       vcy = _mm_set1_ps(cy), half = _mm_set1_ps(0.5f), one = _mm_set1_ps(1.f);
-          const __m128 zero4 = _mm_setzero_ps(), w4 = _mm_set1_ps(float(w)),
-                       h4 = _mm_set1_ps(float(h)), negMu4 = _mm_set1_ps(-muFull);
-          alignas(16) float Zs[4], us[4], vs[4];
           const RowOfVoxels row{ax, ay,     az,      sx, sy, sz, fx,    fy,   cx,    cy,   w,
                                 h,  muFull, useBand, D,  F,  Wt, carve, base, sumWD, sumW, state};
           for (const auto& [spanFirst, spanLast] : spans) {
@@ -826,64 +924,8 @@ IntegrationStats integrate(const DepthImage& depth, const Iso3& T_O_C, const Cam
 #if INHAND_FAST_MATH_AVX2
             if (eightWide) x = integrateEight(row, x, x1, &myVisited, &myUpdated);
 #endif
-            for (; x + 3 <= x1; x += 4) {
-              const __m128 xf = _mm_set_ps(float(x + 3), float(x + 2), float(x + 1), float(x));
-              const __m128 Z = _mm_add_ps(vaz, _mm_mul_ps(xf, vsz));
-              const __m128 inv = _mm_div_ps(one, Z);
-              const __m128 fu = _mm_add_ps(
-                  _mm_add_ps(_mm_mul_ps(_mm_mul_ps(vfx, _mm_add_ps(vax, _mm_mul_ps(xf, vsx))), inv),
-                             vcx),
-                  half);
-              const __m128 fv = _mm_add_ps(
-                  _mm_add_ps(_mm_mul_ps(_mm_mul_ps(vfy, _mm_add_ps(vay, _mm_mul_ps(xf, vsy))), inv),
-                             vcy),
-                  half);
-              if (!simdPixels) {
-                _mm_store_ps(Zs, Z);
-                _mm_store_ps(us, fu);
-                _mm_store_ps(vs, fv);
-                for (int l = 0; l < 4; ++l) voxel(x + l, Zs[l], us[l], vs[l]);
-                continue;
-              }
-              // voxel()'s tests for the four at once, the same comparisons: in front of the
-              // camera, on the image (trunc(f) < w ⇔ f < w for f ≥ 0), a depth there, within
-              // reach; the pixel index v·w + u exact in single precision (< 2^24).
-              const __m128 inImage = _mm_and_ps(
-                  _mm_and_ps(_mm_cmpgt_ps(Z, zero4),
-                             _mm_and_ps(_mm_cmpge_ps(fu, zero4), _mm_cmpge_ps(fv, zero4))),
-                  _mm_and_ps(_mm_cmplt_ps(fu, w4), _mm_cmplt_ps(fv, h4)));
-              if (!_mm_movemask_ps(inImage)) continue;
-              const __m128 pf = _mm_add_ps(_mm_mul_ps(_mm_cvtepi32_ps(_mm_cvttps_epi32(fv)), w4),
-                                           _mm_cvtepi32_ps(_mm_cvttps_epi32(fu)));
-              alignas(16) int ps[4];
-              _mm_store_si128(reinterpret_cast<__m128i*>(ps),
-                              _mm_and_si128(_mm_cvttps_epi32(pf), _mm_castps_si128(inImage)));
-              const __m128 Dm = _mm_set_ps(D[ps[3]], D[ps[2]], D[ps[1]], D[ps[0]]);
-              const __m128 d = _mm_sub_ps(Dm, Z);
-              __m128 keep = _mm_and_ps(inImage, _mm_cmpgt_ps(Dm, zero4));
-              keep = useBand ? _mm_and_ps(keep, _mm_cmpngt_ps(Z, _mm_set_ps(F[ps[3]], F[ps[2]],
-                                                                            F[ps[1]], F[ps[0]])))
-                             : _mm_and_ps(keep, _mm_cmpnlt_ps(d, negMu4));
-              int lanes = _mm_movemask_ps(keep);
-              if (!lanes) continue;
-              alignas(16) float ds[4];
-              _mm_store_ps(ds, d);
-              for (; lanes; lanes &= lanes - 1) {
-                const int l = __builtin_ctz(unsigned(lanes));
-                const int p = ps[l];
-                ++myVisited;
-                const size_t i = base + size_t(x + l);
-                myUpdated += updateVoxel(ds[l], muFull, Wt[p], carve && carve[p], &sumWD[i],
-                                         &sumW[i], &state[i]);
-              }
-            }
-            for (; x <= x1; ++x) {
-              const float Z = az + float(x) * sz;
-              if (Z <= 0.f) continue;
-              const float inv = 1.f / Z;
-              voxel(x, Z, fx * (ax + float(x) * sx) * inv + cx + 0.5f,
-                    fy * (ay + float(x) * sy) * inv + cy + 0.5f);
-            }
+            x = integrateFour(row, x, x1, simdPixels, &myVisited, &myUpdated);
+            integrateOneByOne(row, x, x1, &myVisited, &myUpdated);
           }
         }
     }
