@@ -29,6 +29,159 @@ constexpr std::array<uint8_t, 128> kBitCount = [] {
 
 }  // namespace
 
+namespace {
+// Pass 1 of contour: which of the 7 edges leaving each sample (towards +x,+y,+z combinations)
+// cross 0 (bit dir − 1 of its mask), which rows (y, z) have any, how many crossings each slice
+// has. Every sample's mask is written, so the mask is not zeroed first.
+struct CrossingMasks {
+  std::unique_ptr<uint8_t[]> mask;
+  std::vector<uint8_t> rowAny;
+  std::vector<uint32_t> sliceCount;
+};
+
+// Each sample's side as a byte (0 or 1), then each row's masks from the four rows (y, z),
+// (y+1, z), (y, z+1), (y+1, z+1) in straight loops the compiler vectorises: bit dir − 1 is the
+// sample's side XOR its neighbour's along dir. A neighbour off the grid reads a row of the grid
+// instead and its bit is cleared.
+void crossingMasksVectorised(const ScalarGrid& grid, CrossingMasks* out) {
+  const int nx = grid.dims.x(), ny = grid.dims.y(), nz = grid.dims.z();
+  const size_t n = grid.values.size();
+  const size_t sy = size_t(nx), sz = size_t(nx) * ny;
+  const float* f = grid.values.data();
+  uint8_t* mask = out->mask.get();
+  std::vector<uint8_t>& rowAny = out->rowAny;
+  std::vector<uint32_t>& sliceCount = out->sliceCount;
+  const std::unique_ptr<uint8_t[]> side = std::make_unique_for_overwrite<uint8_t[]>(n);
+  parallelFor(0, nz, [&](int z) {
+    const size_t i0 = size_t(z) * sz;
+    for (size_t i = i0; i < i0 + sz; ++i) side[i] = uint8_t(inside(f[i]));
+  });
+  parallelFor(0, nz, [&](int z) {
+    uint32_t count = 0;
+    for (int y = 0; y < ny; ++y) {
+      const bool upY = y + 1 < ny, upZ = z + 1 < nz;
+      const size_t row = grid.index(0, y, z);
+      const uint8_t* a = side.get() + row;
+      const uint8_t* b = upY ? a + sy : a;
+      const uint8_t* c = upZ ? a + sz : a;
+      const uint8_t* d = upY && upZ ? a + sy + sz : a;
+      // Bits (dir − 1) of the directions with dy (dirs 2, 3, 6, 7) and with dz (4 … 7).
+      uint8_t allowed = 0x7f;
+      if (!upY) allowed &= uint8_t(~0x66);
+      if (!upZ) allowed &= uint8_t(~0x78);
+      uint8_t* m = mask + row;
+      uint8_t any = 0;
+      for (int x = 0; x + 1 < nx; ++x) {
+        const uint8_t s = a[x];
+        const uint8_t bits =
+            uint8_t((s ^ a[x + 1]) | (s ^ b[x]) << 1 | (s ^ b[x + 1]) << 2 | (s ^ c[x]) << 3 |
+                    (s ^ c[x + 1]) << 4 | (s ^ d[x]) << 5 | (s ^ d[x + 1]) << 6) &
+            allowed;
+        m[x] = bits;
+        any |= bits;
+      }
+      // The last sample of the row has no +x neighbour (dirs 1, 3, 5, 7).
+      const int x = nx - 1;
+      const uint8_t s = a[x];
+      m[x] = uint8_t((s ^ b[x]) << 1 | (s ^ c[x]) << 3 | (s ^ d[x]) << 5) & allowed;
+      any |= m[x];
+      rowAny[size_t(z) * ny + y] = any != 0;
+      if (any)
+        for (int k = 0; k < nx; ++k) count += kBitCount[m[k]];
+    }
+    sliceCount[z] = count;
+  });
+}
+
+// The same masks, sample by sample and edge by edge (the reference the vectorised pass is
+// tested against).
+void crossingMasksPlain(const ScalarGrid& grid, CrossingMasks* out) {
+  const int nx = grid.dims.x(), ny = grid.dims.y(), nz = grid.dims.z();
+  const size_t sx = 1, sy = size_t(nx), sz = size_t(nx) * ny;
+  const float* f = grid.values.data();
+  uint8_t* mask = out->mask.get();
+  std::vector<uint8_t>& rowAny = out->rowAny;
+  std::vector<uint32_t>& sliceCount = out->sliceCount;
+  parallelFor(0, nz, [&](int z) {
+    uint32_t count = 0;
+    for (int y = 0; y < ny; ++y) {
+      uint8_t any = 0;
+      for (int x = 0; x < nx; ++x) {
+        size_t i = grid.index(x, y, z);
+        bool in = inside(f[i]);
+        uint8_t m = 0;
+        for (int dir = 1; dir < 8; ++dir) {
+          int dx = dir & 1, dy = (dir >> 1) & 1, dz = (dir >> 2) & 1;
+          if (x + dx >= nx || y + dy >= ny || z + dz >= nz) continue;
+          if (inside(f[i + dx * sx + dy * sy + dz * sz]) != in) m |= uint8_t(1u << (dir - 1));
+        }
+        mask[i] = m;
+        any |= m;
+        count += kBitCount[m];
+      }
+      rowAny[size_t(z) * ny + y] = any != 0;
+    }
+    sliceCount[z] = count;
+  });
+}
+
+// Pass 3 of contour for one cube (corner samples `corner`, `in`: which are inside): the
+// triangles of its six Kuhn tetrahedra, their vertices the crossings of pass 2 (a sample's
+// first at offset[sample], then one per set bit of its mask below the edge's).
+void cubeTriangles(uint8_t in, const size_t corner[8], const uint32_t* offset, const uint8_t* mask,
+                   std::vector<Tri>& out) {
+  auto edgeVertex = [&](size_t owner, int dir) {
+    return int(offset[owner] + uint32_t(kBitCount[mask[owner] & ((1u << (dir - 1)) - 1)]));
+  };
+  for (const auto& tet : kTets) {
+    int insideList[4], outsideList[4], ni = 0, no = 0;
+    for (int k = 0; k < 4; ++k) {
+      if (in & (1u << tet[k]))
+        insideList[ni++] = tet[k];
+      else
+        outsideList[no++] = tet[k];
+    }
+    if (ni == 0 || no == 0) continue;
+    auto vid = [&](int ca, int cb) {
+      int lo = ca < cb ? ca : cb, hi = ca < cb ? cb : ca;  // lo ⊂ hi along the Kuhn path
+      return edgeVertex(corner[lo], hi ^ lo);
+    };
+    // Orientation is decided combinatorially (exactly), not from the interpolated vertex
+    // positions: within a tetrahedron the linear iso-surface is a planar, convex polygon
+    // whose facing follows from the orientation of the corners.
+    auto corner3 = [](int c) { return Vec3(c & 1, (c >> 1) & 1, (c >> 2) & 1); };
+    auto det = [&](int o, int p, int q, int r) {
+      Vec3 base = corner3(o);
+      Mat3 m;
+      m.col(0) = corner3(p) - base;
+      m.col(1) = corner3(q) - base;
+      m.col(2) = corner3(r) - base;
+      return m.determinant();
+    };
+    if (ni == 1 || no == 1) {
+      int lone = ni == 1 ? insideList[0] : outsideList[0];
+      const int* others = ni == 1 ? outsideList : insideList;
+      int a = vid(lone, others[0]), b = vid(lone, others[1]), c = vid(lone, others[2]);
+      // The triangle's normal points away from `lone` iff det(e_j, e_k, e_l) > 0; it must
+      // point away from an inside lone corner and towards an outside one.
+      double s = det(lone, others[0], others[1], others[2]);
+      if ((ni == 1) != (s > 0)) std::swap(b, c);
+      out.emplace_back(a, b, c);
+    } else {
+      int a = vid(insideList[0], outsideList[0]), b = vid(insideList[0], outsideList[1]);
+      int c = vid(insideList[1], outsideList[1]), d = vid(insideList[1], outsideList[0]);
+      if (det(insideList[0], insideList[1], outsideList[0], outsideList[1]) > 0) {
+        out.emplace_back(a, b, c);
+        out.emplace_back(a, c, d);
+      } else {
+        out.emplace_back(a, c, b);
+        out.emplace_back(a, d, c);
+      }
+    }
+  }
+}
+}  // namespace
+
 ContourResult contour(const ScalarGrid& grid, const ContourOptions& options) {
   const int nx = grid.dims.x(), ny = grid.dims.y(), nz = grid.dims.z();
   INHAND_CHECK(grid.values.size() == size_t(nx) * ny * nz, "grid value count mismatch");
@@ -38,82 +191,19 @@ ContourResult contour(const ScalarGrid& grid, const ContourOptions& options) {
   const size_t sx = 1, sy = size_t(nx), sz = size_t(nx) * ny;
   const float* f = grid.values.data();
 
-  // Pass 1: which of the 7 edges leaving each sample (towards +x,+y,+z combinations) cross 0,
-  // and which rows (y, z) have any.
-  // Every sample's mask is written below, and the offsets of every sample in a row with a
-  // crossing (the only ones read): neither is zeroed first (25 MB on one core for a 172³ grid).
-  const std::unique_ptr<uint8_t[]> mask = std::make_unique_for_overwrite<uint8_t[]>(n);
+  // Pass 1 (CrossingMasks). The offsets of every sample in a row with a crossing (the only ones
+  // read) are written in pass 2: neither they nor the masks are zeroed first (25 MB on one core
+  // for a 172³ grid).
   const std::unique_ptr<uint32_t[]> offset = std::make_unique_for_overwrite<uint32_t[]>(n);
-  std::vector<uint8_t> rowAny(size_t(ny) * nz, 0);
-  std::vector<uint32_t> sliceCount(nz, 0);
-  if (options.vectorised) {
-    // Each sample's side as a byte (0 or 1), then each row's masks from the four rows (y, z),
-    // (y+1, z), (y, z+1), (y+1, z+1) in straight loops the compiler vectorises: bit dir − 1 is
-    // the sample's side XOR its neighbour's along dir. A neighbour off the grid reads a row of
-    // the grid instead and its bit is cleared.
-    const std::unique_ptr<uint8_t[]> side = std::make_unique_for_overwrite<uint8_t[]>(n);
-    parallelFor(0, nz, [&](int z) {
-      const size_t i0 = size_t(z) * sz;
-      for (size_t i = i0; i < i0 + sz; ++i) side[i] = uint8_t(inside(f[i]));
-    });
-    parallelFor(0, nz, [&](int z) {
-      uint32_t count = 0;
-      for (int y = 0; y < ny; ++y) {
-        const bool upY = y + 1 < ny, upZ = z + 1 < nz;
-        const size_t row = grid.index(0, y, z);
-        const uint8_t* a = side.get() + row;
-        const uint8_t* b = upY ? a + sy : a;
-        const uint8_t* c = upZ ? a + sz : a;
-        const uint8_t* d = upY && upZ ? a + sy + sz : a;
-        // Bits (dir − 1) of the directions with dy (dirs 2, 3, 6, 7) and with dz (4 … 7).
-        uint8_t allowed = 0x7f;
-        if (!upY) allowed &= uint8_t(~0x66);
-        if (!upZ) allowed &= uint8_t(~0x78);
-        uint8_t* m = mask.get() + row;
-        uint8_t any = 0;
-        for (int x = 0; x + 1 < nx; ++x) {
-          const uint8_t s = a[x];
-          const uint8_t bits =
-              uint8_t((s ^ a[x + 1]) | (s ^ b[x]) << 1 | (s ^ b[x + 1]) << 2 | (s ^ c[x]) << 3 |
-                      (s ^ c[x + 1]) << 4 | (s ^ d[x]) << 5 | (s ^ d[x + 1]) << 6) &
-              allowed;
-          m[x] = bits;
-          any |= bits;
-        }
-        // The last sample of the row has no +x neighbour (dirs 1, 3, 5, 7).
-        const int x = nx - 1;
-        const uint8_t s = a[x];
-        m[x] = uint8_t((s ^ b[x]) << 1 | (s ^ c[x]) << 3 | (s ^ d[x]) << 5) & allowed;
-        any |= m[x];
-        rowAny[size_t(z) * ny + y] = any != 0;
-        if (any)
-          for (int k = 0; k < nx; ++k) count += kBitCount[m[k]];
-      }
-      sliceCount[z] = count;
-    });
-  } else {
-    parallelFor(0, nz, [&](int z) {
-      uint32_t count = 0;
-      for (int y = 0; y < ny; ++y) {
-        uint8_t any = 0;
-        for (int x = 0; x < nx; ++x) {
-          size_t i = grid.index(x, y, z);
-          bool in = inside(f[i]);
-          uint8_t m = 0;
-          for (int dir = 1; dir < 8; ++dir) {
-            int dx = dir & 1, dy = (dir >> 1) & 1, dz = (dir >> 2) & 1;
-            if (x + dx >= nx || y + dy >= ny || z + dz >= nz) continue;
-            if (inside(f[i + dx * sx + dy * sy + dz * sz]) != in) m |= uint8_t(1u << (dir - 1));
-          }
-          mask[i] = m;
-          any |= m;
-          count += kBitCount[m];
-        }
-        rowAny[size_t(z) * ny + y] = any != 0;
-      }
-      sliceCount[z] = count;
-    });
-  }
+  CrossingMasks masks{std::make_unique_for_overwrite<uint8_t[]>(n),
+                      std::vector<uint8_t>(size_t(ny) * nz, 0), std::vector<uint32_t>(nz, 0)};
+  if (options.vectorised)
+    crossingMasksVectorised(grid, &masks);
+  else
+    crossingMasksPlain(grid, &masks);
+  const uint8_t* mask = masks.mask.get();
+  const std::vector<uint8_t>& rowAny = masks.rowAny;
+  const std::vector<uint32_t>& sliceCount = masks.sliceCount;
 
   // Pass 2: vertex id of each sample's first edge (exclusive prefix sum, slice by slice).
   std::vector<uint32_t> sliceBase(nz + 1, 0);
@@ -146,10 +236,6 @@ ContourResult contour(const ScalarGrid& grid, const ContourOptions& options) {
     }
   });
 
-  auto edgeVertex = [&](size_t owner, int dir) {
-    return int(offset[owner] + uint32_t(kBitCount[mask[owner] & ((1u << (dir - 1)) - 1)]));
-  };
-
   // Pass 3: triangles, per slice of cubes, concatenated in slice order (deterministic). Corner 0
   // of a cube is joined to each other corner by one of its edges (the Kuhn tetrahedra's), so a
   // cube with corners on both sides has a crossing in its corner 0's mask: cubes and rows of
@@ -169,52 +255,7 @@ ContourResult contour(const ScalarGrid& grid, const ContourOptions& options) {
           if (inside(f[corner[c]])) in |= uint8_t(1u << c);
         }
         if (in == 0 || in == 0xff) continue;
-        for (const auto& tet : kTets) {
-          int insideList[4], outsideList[4], ni = 0, no = 0;
-          for (int k = 0; k < 4; ++k) {
-            if (in & (1u << tet[k]))
-              insideList[ni++] = tet[k];
-            else
-              outsideList[no++] = tet[k];
-          }
-          if (ni == 0 || no == 0) continue;
-          auto vid = [&](int ca, int cb) {
-            int lo = ca < cb ? ca : cb, hi = ca < cb ? cb : ca;  // lo ⊂ hi along the Kuhn path
-            return edgeVertex(corner[lo], hi ^ lo);
-          };
-          // Orientation is decided combinatorially (exactly), not from the interpolated vertex
-          // positions: within a tetrahedron the linear iso-surface is a planar, convex polygon
-          // whose facing follows from the orientation of the corners.
-          auto corner3 = [](int c) { return Vec3(c & 1, (c >> 1) & 1, (c >> 2) & 1); };
-          auto det = [&](int o, int p, int q, int r) {
-            Vec3 base = corner3(o);
-            Mat3 m;
-            m.col(0) = corner3(p) - base;
-            m.col(1) = corner3(q) - base;
-            m.col(2) = corner3(r) - base;
-            return m.determinant();
-          };
-          if (ni == 1 || no == 1) {
-            int lone = ni == 1 ? insideList[0] : outsideList[0];
-            const int* others = ni == 1 ? outsideList : insideList;
-            int a = vid(lone, others[0]), b = vid(lone, others[1]), c = vid(lone, others[2]);
-            // The triangle's normal points away from `lone` iff det(e_j, e_k, e_l) > 0; it must
-            // point away from an inside lone corner and towards an outside one.
-            double s = det(lone, others[0], others[1], others[2]);
-            if ((ni == 1) != (s > 0)) std::swap(b, c);
-            out.emplace_back(a, b, c);
-          } else {
-            int a = vid(insideList[0], outsideList[0]), b = vid(insideList[0], outsideList[1]);
-            int c = vid(insideList[1], outsideList[1]), d = vid(insideList[1], outsideList[0]);
-            if (det(insideList[0], insideList[1], outsideList[0], outsideList[1]) > 0) {
-              out.emplace_back(a, b, c);
-              out.emplace_back(a, c, d);
-            } else {
-              out.emplace_back(a, c, b);
-              out.emplace_back(a, d, c);
-            }
-          }
-        }
+        cubeTriangles(in, corner, offset.get(), mask, out);
       }
     }
   });
