@@ -28,7 +28,7 @@ for run in sorted((out / "runs").iterdir()):
         com = "–"
         if p.get("com_O") is not None:
             com = "%.0f" % (1000 * math.dist(p["com_O"], p["true_com_O"]))
-        row += ["%.3f ± %.3f" % (p["mass_kg"], p["sigma_kg"]), "%.3f" % p["true_mass_kg"],
+        row += ["%.4f ± %.4f" % (p["mass_kg"], p["sigma_kg"]), "%.4f" % p["true_mass_kg"],
                 "%+.1f" % err, com, str(p["readings"])]
         true_volume = p["true_mass_kg"] / density
     else:

@@ -410,6 +410,229 @@ __attribute__((target("avx2"))) int depthFour(const DepthStep& s, const Ray* ray
 
 }  // namespace
 
+namespace {
+// One band's working set (renderDepth): its rays, hits and shadow rays, and each pixel's noise
+// draws.
+constexpr int kBand = 1024;
+struct Band {
+  Ray rays[kBand], shadows[kBand];
+  Hit hits[kBand];
+  uint8_t ok[kBand], blocked[kBand], packedBlocked[kBand];
+  int shadowIndex[kBand];
+  uint64_t lateral[kBand], axial[kBand];
+  float gu[kBand], gv[kBand], gz[kBand];  // each pixel's standard normal draws
+};
+
+// A frame's rendering: what every band of pixels shares, and the steps each band goes through
+// (primary rays, lateral noise, the acceptance and projector-shadow test, the depths written).
+struct FrameRender {
+  const RayScene& scene;
+  const Iso3& T_S_C;
+  const CameraIntrinsics& K;
+  const DepthCameraOptions& camera;
+  const NoiseModelOptions& noise;
+  const RenderOptions& options;
+  int w;
+  Vec3 projector_S;
+  std::vector<double> xs, ys;  // the pixel centres' rays: K.rayZ1's per-column and per-row terms
+  Vec3f origin;
+  Mat3 R;
+  Background background;
+  IncidenceLimits limits;
+  double f, cosGrazing;
+  DepthImage* out;
+  std::vector<int>* geometry_out;
+#if INHAND_FAST_MATH_AVX2
+  bool vectorised;
+  LateralStep lateralStep;
+  AcceptStep acceptStep;
+  DepthStep depthStep;
+#endif
+
+  FrameRender(const RayScene& scene_, const Iso3& T_S_C_, const DepthCameraOptions& camera_,
+              const NoiseModelOptions& noise_, const RenderOptions& options_, DepthImage* out_,
+              std::vector<int>* geometry_out_)
+      : scene(scene_),
+        T_S_C(T_S_C_),
+        K(camera_.intrinsics),
+        camera(camera_),
+        noise(noise_),
+        options(options_),
+        w(K.width),
+        projector_S(T_S_C * camera.projector_C),
+        xs(size_t(K.width)),
+        ys(size_t(K.height)),
+        origin(T_S_C.translation().cast<float>()),
+        R(T_S_C.linear()),
+        background(scene, options),
+        limits(camera),
+        f(K.fx),
+        cosGrazing(std::cos(noise.grazing_start_deg * M_PI / 180)),
+        out(out_),
+        geometry_out(geometry_out_)
+#if INHAND_FAST_MATH_AVX2
+        ,
+        vectorised(options.vectorised && fastMathAvx2()),
+        lateralStep{&background,
+                    origin.cast<double>() - background.centre,
+                    noise.lateral_c0_px,
+                    noise.lateral_c1_px,
+                    noise.max_incidence_deg * M_PI / 180.0,
+                    K.cx,
+                    K.cy,
+                    K.fx,
+                    K.fy,
+                    R,
+                    w},
+        acceptStep{&background,
+                   origin.cast<double>() - background.centre,
+                   origin,
+                   projector_S,
+                   camera.min_range_m,
+                   camera.max_range_m,
+                   limits.camera,
+                   limits.projector,
+                   &camera,
+                   &limits},
+        depthStep{cosGrazing,         noise.axial_c0_m,        noise.axial_c1,
+                  noise.axial_z0_m,   f * camera.baseline_m(), noise.disparity_step_px,
+                  camera.min_range_m, camera.max_range_m,      noise.quantize}
+#endif
+  {
+    for (int u = 0; u < K.width; ++u) xs[size_t(u)] = K.rayZ1(u, 0).x();
+    for (int v = 0; v < K.height; ++v) ys[size_t(v)] = K.rayZ1(0, v).y();
+  }
+  FrameRender(const FrameRender&) = delete;  // the steps point at background and limits
+
+  // The band's m pixels `px` rendered into `out`.
+  void render(Band& band, const int* px, int m) const {
+    for (int k = 0; k < m; ++k) {
+      const int p = px[k];
+      band.rays[k] = Ray{};
+      band.rays[k].origin = origin;
+      band.rays[k].dir = (R * Vec3(xs[size_t(p % w)], ys[size_t(p / w)], 1.0)).cast<float>();
+    }
+    scene.intersect(band.rays, band.hits, size_t(m), false);
+    if (options.noise) lateralNoise(band, px, m);
+    acceptAndShadow(band, m);
+    writeDepths(band, px, m);
+  }
+
+ private:
+  // Each pixel's draws (the lateral pair at index 3p, the axial one at 3p + 2). Lateral noise:
+  // the return comes from a point displaced by N(0, σ_L(θ)) pixels, so the ray is cast again
+  // through the displaced sub-pixel position (this also makes ragged, mixed depth edges).
+  void lateralNoise(Band& band, const int* px, int m) const {
+    Ray* rays = band.rays;
+    Hit* hits = band.hits;
+    for (int k = 0; k < m; ++k) {
+      band.lateral[k] = 3 * uint64_t(px[k]);
+      band.axial[k] = band.lateral[k] + 2;
+    }
+    gaussianPairsF(options.seed, band.lateral, size_t(m), band.gu, band.gv);
+    gaussianPairsF(options.seed, band.axial, size_t(m), band.gz, nullptr);
+    int k = 0;
+#if INHAND_FAST_MATH_AVX2
+    if (vectorised)
+      for (; k + 4 <= m; k += 4)
+        lateralFour(lateralStep, px + k, band.gu + k, band.gv + k, rays + k, hits + k);
+#endif
+    for (; k < m; ++k) {
+      background.fill(rays[k], hits[k]);
+      if (!hits[k].valid()) continue;
+      const int p = px[k];
+      const double theta = incidenceF(hits[k].normal, rays[k].dir);
+      const double s = lateralSigmaPx(noise, theta);
+      const double du = s * band.gu[k], dv = s * band.gv[k];
+      rays[k] = pixelRay(T_S_C, K, p % w + du, p / w + dv);
+    }
+    scene.intersect(rays, hits, size_t(m), false);
+  }
+
+  // Which hits the sensor accepts (band.ok), and which of those the projector cannot see
+  // (band.blocked): the shadow rays packed in pixel order (over the band's own), so packets
+  // stay full.
+  void acceptAndShadow(Band& band, int m) const {
+    int shadowCount = 0;
+    auto pack = [&](int k) {
+      band.blocked[k] = 0;
+      if (band.ok[k] && options.projector_shadows) {
+        band.shadows[shadowCount] = band.shadows[k];
+        band.shadowIndex[shadowCount++] = k;
+      }
+    };
+    int k = 0;
+#if INHAND_FAST_MATH_AVX2
+    if (vectorised)
+      for (; k + 4 <= m; k += 4) {
+        const int ok = acceptFour(acceptStep, band.rays + k, band.hits + k, band.shadows + k);
+        for (int j = 0; j < 4; ++j) {
+          band.ok[k + j] = uint8_t(ok >> j & 1);
+          pack(k + j);
+        }
+      }
+#endif
+    for (; k < m; ++k) {
+      background.fill(band.rays[k], band.hits[k]);
+      band.ok[k] =
+          acceptHit(band.hits[k], band.rays[k], projector_S, camera, limits, &band.shadows[k]);
+      pack(k);
+    }
+    if (shadowCount > 0) {
+      scene.occluded(band.shadows, band.packedBlocked, size_t(shadowCount), false);
+      for (int j = 0; j < shadowCount; ++j)
+        band.blocked[band.shadowIndex[j]] = band.packedBlocked[j];
+    }
+  }
+
+  // One accepted pixel's depth with axial noise (the angle matters to the axial σ only beyond
+  // grazing_start_deg) and quantisation; none outside the sensor's range.
+  void writeDepth(const Band& band, const int* px, int k) const {
+    if (!band.ok[k] || band.blocked[k]) return;
+    const int p = px[k];
+    double z = band.hits[k].t;
+    if (options.noise) {
+      double theta = 0;
+      if (!(cosGrazing > 0) ||
+          !cosCertainlyAtLeastF(band.hits[k].normal, band.rays[k].dir, cosGrazing)) {
+        const double c = cosIncidenceF(band.hits[k].normal, band.rays[k].dir);
+        theta = c < cosGrazing ? std::acos(c) : 0.0;
+      }
+      z += axialSigma(noise, z, theta) * band.gz[k];
+      if (noise.quantize) z = quantizeDepth(z, f, camera.baseline_m(), noise.disparity_step_px);
+      if (z < camera.min_range_m || z > camera.max_range_m) return;
+    }
+    out->depth_m[size_t(p)] = float(z);
+    if (geometry_out) (*geometry_out)[size_t(p)] = band.hits[k].geometry;
+  }
+
+  void writeDepths(const Band& band, const int* px, int m) const {
+    int k = 0;
+#if INHAND_FAST_MATH_AVX2
+    if (vectorised && options.noise && cosGrazing > 0)
+      for (; k + 4 <= m; k += 4) {
+        int live = 0;
+        for (int j = 0; j < 4; ++j) live |= (band.ok[k + j] && !band.blocked[k + j]) << j;
+        if (live == 0) continue;
+        float z[4];
+        int rest = 0;
+        const int written =
+            depthFour(depthStep, band.rays + k, band.hits + k, band.gz + k, live, z, &rest);
+        for (int j = 0; j < 4; ++j) {
+          if (rest >> j & 1) {
+            writeDepth(band, px, k + j);
+          } else if (written >> j & 1) {
+            out->depth_m[size_t(px[k + j])] = z[j];
+            if (geometry_out) (*geometry_out)[size_t(px[k + j])] = band.hits[k + j].geometry;
+          }
+        }
+      }
+#endif
+    for (; k < m; ++k) writeDepth(band, px, k);
+  }
+};
+}  // namespace
+
 DepthImage renderDepth(const RayScene& scene, const Iso3& T_S_C, const DepthCameraOptions& camera,
                        const NoiseModelOptions& noise, const RenderOptions& options,
                        std::vector<int>* geometry_out) {
@@ -431,169 +654,17 @@ DepthImage renderDepth(const RayScene& scene, const Iso3& T_S_C, const DepthCame
                   std::clamp(options.region_u1, 0, w), std::clamp(options.region_v1, 0, h));
   const std::vector<int>& order = whole ? wholeOrder : regionOrder;
   const int n = int(order.size());
-  const Vec3 projector_S = T_S_C * camera.projector_C;
-  // The pixel centres' rays: K.rayZ1's per-column and per-row terms once, the same values.
-  std::vector<double> xs(static_cast<size_t>(w)), ys(static_cast<size_t>(h));
-  for (int u = 0; u < w; ++u) xs[size_t(u)] = K.rayZ1(u, 0).x();
-  for (int v = 0; v < h; ++v) ys[size_t(v)] = K.rayZ1(0, v).y();
-  const Vec3f origin = T_S_C.translation().cast<float>();
-  const Mat3 R = T_S_C.linear();
-  const Background background(scene, options);
-  const IncidenceLimits limits(camera);
-  const double f = K.fx;
-  const double cosGrazing = std::cos(noise.grazing_start_deg * M_PI / 180);
-#if INHAND_FAST_MATH_AVX2
-  const bool vectorised = options.vectorised && fastMathAvx2();
-  const LateralStep lateralStep{&background,
-                                origin.cast<double>() - background.centre,
-                                noise.lateral_c0_px,
-                                noise.lateral_c1_px,
-                                noise.max_incidence_deg * M_PI / 180.0,
-                                K.cx,
-                                K.cy,
-                                K.fx,
-                                K.fy,
-                                R,
-                                w};
-  const AcceptStep acceptStep{&background,
-                              origin.cast<double>() - background.centre,
-                              origin,
-                              projector_S,
-                              camera.min_range_m,
-                              camera.max_range_m,
-                              limits.camera,
-                              limits.projector,
-                              &camera,
-                              &limits};
-  const DepthStep depthStep{cosGrazing,         noise.axial_c0_m,        noise.axial_c1,
-                            noise.axial_z0_m,   f * camera.baseline_m(), noise.disparity_step_px,
-                            camera.min_range_m, camera.max_range_m,      noise.quantize};
-#endif
-
   DepthImage out(w, h);
   if (geometry_out) geometry_out->assign(size_t(w) * h, -1);
+  const FrameRender frame(scene, T_S_C, camera, noise, options, &out, geometry_out);
   // Each task takes a band of pixels through every step, rays cast in packets on its own core:
   // the band's rays, hits and shadow rays (~100 KB) stay in the core's cache from one step to the
   // next (passes over the whole image's ~25 MB of them cost as much in memory traffic as the
   // ray casting). A band starts at a multiple of kBand, so the noise draws are the same ones.
-  constexpr int kBand = 1024;
   parallelFor(0, (n + kBand - 1) / kBand, [&](int b) {
-    thread_local struct Band {
-      Ray rays[kBand], shadows[kBand];
-      Hit hits[kBand];
-      uint8_t ok[kBand], blocked[kBand], packedBlocked[kBand];
-      int shadowIndex[kBand];
-      uint64_t lateral[kBand], axial[kBand];
-      float gu[kBand], gv[kBand], gz[kBand];  // each pixel's standard normal draws
-    } band;
+    thread_local Band band;
     const int i0 = b * kBand, m = std::min(n, i0 + kBand) - i0;
-    const int* px = order.data() + i0;
-    Ray* rays = band.rays;
-    Hit* hits = band.hits;
-    for (int k = 0; k < m; ++k) {
-      const int p = px[k];
-      rays[k] = Ray{};
-      rays[k].origin = origin;
-      rays[k].dir = (R * Vec3(xs[size_t(p % w)], ys[size_t(p / w)], 1.0)).cast<float>();
-    }
-    scene.intersect(rays, hits, size_t(m), false);
-    if (options.noise) {
-      // Each pixel's draws: the lateral pair at index 3p, the axial one at 3p + 2.
-      for (int k = 0; k < m; ++k) {
-        band.lateral[k] = 3 * uint64_t(px[k]);
-        band.axial[k] = band.lateral[k] + 2;
-      }
-      gaussianPairsF(options.seed, band.lateral, size_t(m), band.gu, band.gv);
-      gaussianPairsF(options.seed, band.axial, size_t(m), band.gz, nullptr);
-      // Lateral noise: the return comes from a point displaced by N(0, σ_L(θ)) pixels, so
-      // re-cast through the displaced sub-pixel position (this also makes ragged, mixed depth
-      // edges).
-      int k = 0;
-#if INHAND_FAST_MATH_AVX2
-      if (vectorised)
-        for (; k + 4 <= m; k += 4)
-          lateralFour(lateralStep, px + k, band.gu + k, band.gv + k, rays + k, hits + k);
-#endif
-      for (; k < m; ++k) {
-        background.fill(rays[k], hits[k]);
-        if (!hits[k].valid()) continue;
-        const int p = px[k];
-        const double theta = incidenceF(hits[k].normal, rays[k].dir);
-        const double s = lateralSigmaPx(noise, theta);
-        const double du = s * band.gu[k], dv = s * band.gv[k];
-        rays[k] = pixelRay(T_S_C, K, p % w + du, p / w + dv);
-      }
-      scene.intersect(rays, hits, size_t(m), false);
-    }
-    int shadowCount = 0;
-    // The shadow rays packed in pixel order (over the band's own), so packets stay full.
-    auto pack = [&](int k) {
-      band.blocked[k] = 0;
-      if (band.ok[k] && options.projector_shadows) {
-        band.shadows[shadowCount] = band.shadows[k];
-        band.shadowIndex[shadowCount++] = k;
-      }
-    };
-    int k = 0;
-#if INHAND_FAST_MATH_AVX2
-    if (vectorised)
-      for (; k + 4 <= m; k += 4) {
-        const int ok = acceptFour(acceptStep, rays + k, hits + k, band.shadows + k);
-        for (int j = 0; j < 4; ++j) {
-          band.ok[k + j] = uint8_t(ok >> j & 1);
-          pack(k + j);
-        }
-      }
-#endif
-    for (; k < m; ++k) {
-      background.fill(rays[k], hits[k]);
-      band.ok[k] = acceptHit(hits[k], rays[k], projector_S, camera, limits, &band.shadows[k]);
-      pack(k);
-    }
-    if (shadowCount > 0) {
-      scene.occluded(band.shadows, band.packedBlocked, size_t(shadowCount), false);
-      for (int j = 0; j < shadowCount; ++j)
-        band.blocked[band.shadowIndex[j]] = band.packedBlocked[j];
-    }
-    auto depth = [&](int k) {
-      if (!band.ok[k] || band.blocked[k]) return;
-      const int p = px[k];
-      double z = hits[k].t;
-      if (options.noise) {
-        // The angle matters to the axial σ only beyond grazing_start_deg.
-        double theta = 0;
-        if (!(cosGrazing > 0) || !cosCertainlyAtLeastF(hits[k].normal, rays[k].dir, cosGrazing)) {
-          const double c = cosIncidenceF(hits[k].normal, rays[k].dir);
-          theta = c < cosGrazing ? std::acos(c) : 0.0;
-        }
-        z += axialSigma(noise, z, theta) * band.gz[k];
-        if (noise.quantize) z = quantizeDepth(z, f, camera.baseline_m(), noise.disparity_step_px);
-        if (z < camera.min_range_m || z > camera.max_range_m) return;
-      }
-      out.depth_m[size_t(p)] = float(z);
-      if (geometry_out) (*geometry_out)[size_t(p)] = hits[k].geometry;
-    };
-    k = 0;
-#if INHAND_FAST_MATH_AVX2
-    if (vectorised && options.noise && cosGrazing > 0)
-      for (; k + 4 <= m; k += 4) {
-        int live = 0;
-        for (int j = 0; j < 4; ++j) live |= (band.ok[k + j] && !band.blocked[k + j]) << j;
-        if (live == 0) continue;
-        float z[4];
-        int rest = 0;
-        const int written = depthFour(depthStep, rays + k, hits + k, band.gz + k, live, z, &rest);
-        for (int j = 0; j < 4; ++j) {
-          if (rest >> j & 1) {
-            depth(k + j);
-          } else if (written >> j & 1) {
-            out.depth_m[size_t(px[k + j])] = z[j];
-            if (geometry_out) (*geometry_out)[size_t(px[k + j])] = hits[k + j].geometry;
-          }
-        }
-      }
-#endif
-    for (; k < m; ++k) depth(k);
+    frame.render(band, order.data() + i0, m);
   });
   return out;
 }
