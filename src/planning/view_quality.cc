@@ -428,44 +428,116 @@ void hitTriangle(const Ray& r, const Vec3& p0, const Vec3& p1, const Vec3& p2, H
 
 }  // namespace
 
+struct ViewQualityScene::RasterScratch {
+  DepthRaster object;
+  std::vector<RayScene::PlacedMesh> robotMeshes;
+  std::vector<uint8_t> robotSolid;
+  std::vector<uint64_t> facing;
+};
+
+// A sample the fast rules kept: the depth d along the ray, the squared distance to the
+// projector and the direction towards it, its variance, |cos| of the normal to the optical axis
+// (at least 0.05) and the axial σ.
+struct ViewQualityScene::FastSample {
+  double d, dist2, var, nz, sz;
+  Vec3 p, toP;
+};
+
+void ViewQualityScene::drawCameraView(const Iso3& T_O_C, const std::vector<Occluder>& occluders,
+                                      RasterScratch* scratch) const {
+  const Iso3 T_C_O = T_O_C.inverse();
+  DepthRaster& object = scratch->object;
+  const Vec3 c = T_O_C.translation();
+  // A closed S_obj seen from outside: only its triangles that may face the camera are looked at.
+  const bool cullObject = closed_ && !bounds_.contains(c);
+  if (cullObject) facing_.mayFace(c, &scratch->facing);
+  object.draw(model_.mesh, T_C_O, 0, cullObject, 0, nullptr,
+              cullObject ? &scratch->facing : nullptr);
+  if (occluders.empty()) return;
+  // Robot surfaces deeper than S_obj's farthest corner hide nothing of it.
+  double far = 0;
+  for (int k = 0; k < 8; ++k) far = std::max(far, (T_C_O * bounds_.corner(k)).z());
+  for (const Occluder& o : occluders) {
+    const size_t first = scratch->robotMeshes.size();
+    o.scene->collectMeshes(T_C_O * o.T_O_scene, &scratch->robotMeshes);
+    for (size_t k = first; k < scratch->robotMeshes.size(); ++k) {
+      const RayScene::PlacedMesh& m = scratch->robotMeshes[k];
+      // Back faces of a solid may go when the camera (the origin) is outside its bounds.
+      const bool inside = m.bounds->contains(m.T.inverse().translation());
+      object.drawOccluder(*m.mesh, m.T, o.solid && !inside, far, m.bounds);
+      scratch->robotSolid.push_back(o.solid);
+    }
+  }
+}
+
+bool ViewQualityScene::fastSample(int tri, const Vec3& o, const Vec3& dir, const ViewContext& view,
+                                  FastSample* out, ViewQualityStats* st) const {
+  // The ray R·((u − cx)/fx, (v − cy)/fy, 1) meets the winning triangle's plane at depth d (the
+  // ray's camera z is 1); the rules and the gain as surfaceGain, in squared form where a cosine
+  // is compared.
+  const TrianglePlane& tp = planes_[size_t(tri)];
+  const double nd = tp.n.dot(dir);
+  const double d = (tp.offset - tp.n.dot(o)) / nd;
+  const Vec3 p = o + d * dir;
+  if (nearHand_ && mayBeNearHand_[size_t(tri)] && nearHand_->near(p)) {
+    ++st->near_hand;
+    return false;
+  }
+  const double dir2 = dir.squaredNorm();
+  if (nd * nd < cosMaxIncidence_ * cosMaxIncidence_ * dir2) {
+    ++st->too_oblique;
+    return false;
+  }
+  const Vec3 toP = view.projector_O - p;
+  const double dist2 = toP.squaredNorm(), np = tp.n.dot(toP);
+  if (np * np < cosMaxProjector_ * cosMaxProjector_ * dist2) {
+    ++st->projector_oblique;
+    return false;
+  }
+  out->d = d;
+  out->p = p;
+  out->toP = toP;
+  out->dist2 = dist2;
+  out->var = std::clamp(tp.grad.dot(p) + tp.at0, tp.varMin, tp.varMax);
+  out->nz = std::max(0.05, std::abs(view.axis_O.dot(tp.n)));
+  if (nd * nd >= cosGrazing_ * cosGrazing_ * dir2) {
+    const double dz = d - noise_.axial_z0_m;
+    out->sz = noise_.axial_c0_m + noise_.axial_c1 * dz * dz;  // axialSigma at θ = 0
+  } else {
+    out->sz = axialSigma(noise_, d, std::acos(std::min(1.0, std::abs(nd) / std::sqrt(dir2))));
+  }
+  return true;
+}
+
+void ViewQualityScene::drawProjectorView(const Iso3& T_O_C, const ViewContext& view,
+                                         RasterScratch* scratch, ProjectorShadows* rows) const {
+  // The projector's view, at each pending sample's own projector column: S_obj from the
+  // vertices its raster already projected, then the robot's surfaces.
+  rows->index();
+  const Vec3 projector = view.projector_O;
+  const bool cullProjector = closed_ && !bounds_.contains(projector);
+  if (cullProjector) facing_.mayFace(projector, &scratch->facing);
+  rows->draw(model_.mesh, T_O_C.inverse(), cullProjector, &scratch->object.projected(), nullptr,
+             cullProjector ? &scratch->facing : nullptr);
+  for (size_t k = 0; k < scratch->robotMeshes.size(); ++k) {
+    const RayScene::PlacedMesh& m = scratch->robotMeshes[k];
+    const bool inside = m.bounds->contains(m.T.inverse() * camera_.projector_C);
+    rows->draw(*m.mesh, m.T, scratch->robotSolid[k] && !inside, nullptr, m.bounds);
+  }
+}
+
 void ViewQualityScene::rasterGains(const Iso3& T_O_C, const RasterWindow& w,
                                    const std::vector<Occluder>& occluders,
                                    std::vector<Ray>* shadows, std::vector<double>* gains,
                                    std::vector<double>* logArgs, ProjectorShadows* rows,
                                    ViewQualityStats* st) const {
   const CameraIntrinsics& K = camera_.intrinsics;
-  const PinholeProjection P{K.fx, K.fy, K.cx, K.cy};
-  const Iso3 T_C_O = T_O_C.inverse();
-  thread_local DepthRaster object;
-  thread_local std::vector<RayScene::PlacedMesh> robotMeshes;
-  thread_local std::vector<uint8_t> robotSolid;
-  thread_local std::vector<uint64_t> facing;
-  robotMeshes.clear();
-  robotSolid.clear();
-  object.reset(P, w);
-  const Vec3 c = T_O_C.translation();
-  const bool outside = !bounds_.contains(c);
-  // A closed S_obj seen from outside: only its triangles that may face the camera are looked at.
-  const bool cullObject = closed_ && outside;
-  if (cullObject) facing_.mayFace(c, &facing);
-  object.draw(model_.mesh, T_C_O, 0, cullObject, 0, nullptr, cullObject ? &facing : nullptr);
-  const bool withRobot = !occluders.empty();
-  if (withRobot) {
-    // Robot surfaces deeper than S_obj's farthest corner hide nothing of it.
-    double far = 0;
-    for (int k = 0; k < 8; ++k) far = std::max(far, (T_C_O * bounds_.corner(k)).z());
-    for (const Occluder& o : occluders) {
-      const size_t first = robotMeshes.size();
-      o.scene->collectMeshes(T_C_O * o.T_O_scene, &robotMeshes);
-      for (size_t k = first; k < robotMeshes.size(); ++k) {
-        const RayScene::PlacedMesh& m = robotMeshes[k];
-        // Back faces of a solid may go when the camera (the origin) is outside its bounds.
-        const bool inside = m.bounds->contains(m.T.inverse().translation());
-        object.drawOccluder(*m.mesh, m.T, o.solid && !inside, far, m.bounds);
-        robotSolid.push_back(o.solid);
-      }
-    }
-  }
+  thread_local RasterScratch scratch;
+  scratch.robotMeshes.clear();
+  scratch.robotSolid.clear();
+  scratch.object.reset(PinholeProjection{K.fx, K.fy, K.cx, K.cy}, w);
+  drawCameraView(T_O_C, occluders, &scratch);
+  DepthRaster& object = scratch.object;
   const Vec3f origin = T_O_C.translation().cast<float>();
   const Mat3 R = T_O_C.linear();
   const auto& V = model_.mesh.vertices;
@@ -474,9 +546,6 @@ void ViewQualityScene::rasterGains(const Iso3& T_O_C, const RasterWindow& w,
   // surfaceGain with an exact hit per sample.
   const bool fast = options_.integrand == QualityIntegrand::kInformationGain;
   const Vec3 o = T_O_C.translation();
-  const double cos2Incidence = cosMaxIncidence_ * cosMaxIncidence_;
-  const double cos2Projector = cosMaxProjector_ * cosMaxProjector_;
-  const double cos2Grazing = cosGrazing_ * cosGrazing_;
   const double fxfy = K.fx * K.fy;
   // With the projector's view rasterised, the fast path leaves each sample's last divisions and
   // square root to the end of its row: there the samples are independent and branch-free, so
@@ -513,57 +582,27 @@ void ViewQualityScene::rasterGains(const Iso3& T_O_C, const RasterWindow& w,
         continue;
       }
       if (fast) {
-        // The ray R·((u − cx)/fx, (v − cy)/fy, 1) meets the winning triangle's plane at depth
-        // d (the ray's camera z is 1); the rules and the gain as surfaceGain, in squared form
-        // where a cosine is compared.
-        const TrianglePlane& tp = planes_[size_t(tri)];
-        const Vec3 dir = dirRow + colDir[size_t(i - w.i0)];
-        const double nd = tp.n.dot(dir);
-        const double d = (tp.offset - tp.n.dot(o)) / nd;
-        const Vec3 p = o + d * dir;
-        if (nearHand_ && mayBeNearHand_[size_t(tri)] && nearHand_->near(p)) {
-          ++st->near_hand;
-          continue;
-        }
-        const double dir2 = dir.squaredNorm();
-        if (nd * nd < cos2Incidence * dir2) {
-          ++st->too_oblique;
-          continue;
-        }
-        const Vec3 toP = view.projector_O - p;
-        const double dist2 = toP.squaredNorm(), np = tp.n.dot(toP);
-        if (np * np < cos2Projector * dist2) {
-          ++st->projector_oblique;
-          continue;
-        }
-        const double var = std::clamp(tp.grad.dot(p) + tp.at0, tp.varMin, tp.varMax);
-        const double nz = std::max(0.05, std::abs(view.axis_O.dot(tp.n)));
-        double sz;
-        if (nd * nd >= cos2Grazing * dir2) {
-          const double dz = d - noise_.axial_z0_m;
-          sz = noise_.axial_c0_m + noise_.axial_c1 * dz * dz;  // axialSigma at θ = 0
-        } else {
-          sz = axialSigma(noise_, d, std::acos(std::min(1.0, std::abs(nd) / std::sqrt(dir2))));
-        }
+        FastSample f;
+        if (!fastSample(tri, o, dirRow + colDir[size_t(i - w.i0)], view, &f, st)) continue;
         if (defer) {  // eq9Terms, its division done later for a whole row
-          const double sz2 = sz * sz, a = fxfy * nz;
-          pending.push_back({i, d, dist2, sz2 * a, 0.5 * d * d * sz2, var * a});
+          const double sz2 = f.sz * f.sz, a = fxfy * f.nz;
+          pending.push_back({i, f.d, f.dist2, sz2 * a, 0.5 * f.d * f.d * sz2, f.var * a});
           continue;
         }
-        const Eq9Terms e = eq9Terms(d, sz * sz, var, fxfy * nz);
+        const Eq9Terms e = eq9Terms(f.d, f.sz * f.sz, f.var, fxfy * f.nz);
         if (logArgs) {  // the logarithm later, for the samples the projector sees
           gains->push_back(e.weight);
           logArgs->push_back(e.ratio);
         } else {
           gains->push_back(e.weight * log1pNonNegative(e.ratio));
         }
-        const double dist = std::sqrt(dist2);
+        const double dist = std::sqrt(f.dist2);
         if (rows) {
-          addShadowPoint(rows, j, i, d, dist);
+          addShadowPoint(rows, j, i, f.d, dist);
         } else {
           Ray shadow;
-          shadow.origin = p.cast<float>();
-          shadow.dir = (toP / dist).cast<float>();
+          shadow.origin = f.p.cast<float>();
+          shadow.dir = (f.toP / dist).cast<float>();
           shadow.tnear = float(kShadowMargin);
           shadow.tfar = float(dist - kShadowMargin);
           shadows->push_back(shadow);
@@ -599,21 +638,7 @@ void ViewQualityScene::rasterGains(const Iso3& T_O_C, const RasterWindow& w,
     }
     pending.clear();
   }
-  if (!rows) return;
-  // The projector's view, at each pending sample's own projector column: S_obj from the
-  // vertices its raster already projected, then the robot's surfaces.
-  rows->index();
-  const Vec3 projector = view.projector_O;
-  const bool projectorOutside = !bounds_.contains(projector);
-  const bool cullProjector = closed_ && projectorOutside;
-  if (cullProjector) facing_.mayFace(projector, &facing);
-  rows->draw(model_.mesh, T_C_O, cullProjector, &object.projected(), nullptr,
-             cullProjector ? &facing : nullptr);
-  for (size_t k = 0; k < robotMeshes.size(); ++k) {
-    const RayScene::PlacedMesh& m = robotMeshes[k];
-    const bool inside = m.bounds->contains(m.T.inverse() * camera_.projector_C);
-    rows->draw(*m.mesh, m.T, robotSolid[k] && !inside, nullptr, m.bounds);
-  }
+  if (rows) drawProjectorView(T_O_C, view, &scratch, rows);
 }
 
 void ViewQualityScene::primaryHitsRayCast(const Iso3& T_O_C, const RasterWindow& w,

@@ -134,6 +134,18 @@ class ViewQualityScene {
                    const std::vector<Occluder>& occluders, std::vector<Ray>* shadows,
                    std::vector<double>* gains, std::vector<double>* logArgs, ProjectorShadows* rows,
                    ViewQualityStats* st) const;
+  // rasterGains' stages (RasterScratch: this thread's rasters and lists, view_quality.cc): S_obj
+  // and the robot's surfaces drawn as the camera sees them; the fast per-sample rules (eq. 9's
+  // integrand) for a sample on triangle `tri` along `dir` (false: a rule refused it, counted);
+  // the projector's view drawn into `rows`.
+  struct RasterScratch;
+  struct FastSample;
+  void drawCameraView(const Iso3& T_O_C, const std::vector<Occluder>& occluders,
+                      RasterScratch* scratch) const;
+  bool fastSample(int tri, const Vec3& o, const Vec3& dir, const ViewContext& view, FastSample* out,
+                  ViewQualityStats* st) const;
+  void drawProjectorView(const Iso3& T_O_C, const ViewContext& view, RasterScratch* scratch,
+                         ProjectorShadows* rows) const;
   // First S_obj hit per sample of `window` not hidden by a robot surface (rays[i], hits[i];
   // counts misses and robot-first pixels), by Embree.
   void primaryHitsRayCast(const Iso3& T_O_C, const RasterWindow& window, const RayScene* robot,
