@@ -125,6 +125,46 @@ void crossingMasksPlain(const ScalarGrid& grid, CrossingMasks* out) {
   });
 }
 
+// Pass 2 of contour: the crossings' vertices and their sources, numbered slice by slice (each
+// sample's first at offset[sample]: an exclusive prefix sum); returns how many. Rows without a
+// crossing add no vertex, and their offsets are never read.
+uint32_t crossingVertices(const ScalarGrid& grid, const CrossingMasks& masks, uint32_t* offset,
+                          ContourResult* result) {
+  const int nx = grid.dims.x(), ny = grid.dims.y(), nz = grid.dims.z();
+  const size_t sx = 1, sy = size_t(nx), sz = size_t(nx) * ny;
+  const float* f = grid.values.data();
+  const uint8_t* mask = masks.mask.get();
+  std::vector<uint32_t> sliceBase(nz + 1, 0);
+  for (int z = 0; z < nz; ++z) sliceBase[z + 1] = sliceBase[z] + masks.sliceCount[z];
+  const uint32_t vertexCount = sliceBase[nz];
+  result->mesh.vertices.resize(vertexCount);
+  result->sources.resize(vertexCount);
+  parallelFor(0, nz, [&](int z) {
+    uint32_t next = sliceBase[z];
+    for (int y = 0; y < ny; ++y) {
+      if (!masks.rowAny[size_t(z) * ny + y]) continue;
+      for (int x = 0; x < nx; ++x) {
+        size_t i = grid.index(x, y, z);
+        offset[i] = next;
+        uint8_t m = mask[i];
+        if (!m) continue;
+        Vec3 p = grid.point(x, y, z);
+        for (int dir = 1; dir < 8; ++dir) {
+          if (!(m & (1u << (dir - 1)))) continue;
+          int dx = dir & 1, dy = (dir >> 1) & 1, dz = (dir >> 2) & 1;
+          size_t j = i + dx * sx + dy * sy + dz * sz;
+          float t = f[i] / (f[i] - f[j]);
+          Vec3 q = p + grid.spacing * t * Vec3(dx, dy, dz);
+          result->mesh.vertices[next] = q.cast<float>();
+          result->sources[next] = {uint32_t(i), uint32_t(j), t};
+          ++next;
+        }
+      }
+    }
+  });
+  return vertexCount;
+}
+
 // Pass 3 of contour for one cube (corner samples `corner`, `in`: which are inside): the
 // triangles of its six Kuhn tetrahedra, their vertices the crossings of pass 2 (a sample's
 // first at offset[sample], then one per set bit of its mask below the edge's).
@@ -203,38 +243,9 @@ ContourResult contour(const ScalarGrid& grid, const ContourOptions& options) {
     crossingMasksPlain(grid, &masks);
   const uint8_t* mask = masks.mask.get();
   const std::vector<uint8_t>& rowAny = masks.rowAny;
-  const std::vector<uint32_t>& sliceCount = masks.sliceCount;
 
-  // Pass 2: vertex id of each sample's first edge (exclusive prefix sum, slice by slice).
-  std::vector<uint32_t> sliceBase(nz + 1, 0);
-  for (int z = 0; z < nz; ++z) sliceBase[z + 1] = sliceBase[z] + sliceCount[z];
-  const uint32_t vertexCount = sliceBase[nz];
-  result.mesh.vertices.resize(vertexCount);
-  result.sources.resize(vertexCount);
-  // Rows without a crossing add no vertex, and their offsets are never read.
-  parallelFor(0, nz, [&](int z) {
-    uint32_t next = sliceBase[z];
-    for (int y = 0; y < ny; ++y) {
-      if (!rowAny[size_t(z) * ny + y]) continue;
-      for (int x = 0; x < nx; ++x) {
-        size_t i = grid.index(x, y, z);
-        offset[i] = next;
-        uint8_t m = mask[i];
-        if (!m) continue;
-        Vec3 p = grid.point(x, y, z);
-        for (int dir = 1; dir < 8; ++dir) {
-          if (!(m & (1u << (dir - 1)))) continue;
-          int dx = dir & 1, dy = (dir >> 1) & 1, dz = (dir >> 2) & 1;
-          size_t j = i + dx * sx + dy * sy + dz * sz;
-          float t = f[i] / (f[i] - f[j]);
-          Vec3 q = p + grid.spacing * t * Vec3(dx, dy, dz);
-          result.mesh.vertices[next] = q.cast<float>();
-          result.sources[next] = {uint32_t(i), uint32_t(j), t};
-          ++next;
-        }
-      }
-    }
-  });
+  // Pass 2 (crossingVertices).
+  const uint32_t vertexCount = crossingVertices(grid, masks, offset.get(), &result);
 
   // Pass 3: triangles, per slice of cubes, concatenated in slice order (deterministic). Corner 0
   // of a cube is joined to each other corner by one of its edges (the Kuhn tetrahedra's), so a

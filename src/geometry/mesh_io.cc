@@ -482,6 +482,37 @@ PlyHeader readPlyHeader(const std::string& data, const std::string& where) {
 }
 }  // namespace
 
+namespace {
+// Where each property's values go, decided once per element: a coordinate (0-2), a vertex
+// property's values (in out), a face's indices, or nowhere.
+struct PlyTarget {
+  int coordinate = -1;
+  std::vector<float>* values = nullptr;
+  bool indices = false;
+};
+std::vector<PlyTarget> plyTargets(const PlyElement& e, PlyData* out) {
+  const bool isVertex = e.name == "vertex", isFace = e.name == "face";
+  std::vector<PlyTarget> targets(e.props.size());
+  for (size_t k = 0; k < e.props.size() && e.count > 0; ++k) {
+    const PlyProperty& p = e.props[k];
+    PlyTarget& t = targets[k];
+    if (!p.countType.empty()) {
+      t.indices = isFace && (p.name == "vertex_indices" || p.name == "vertex_index");
+    } else if (isVertex) {
+      if (p.name == "x")
+        t.coordinate = 0;
+      else if (p.name == "y")
+        t.coordinate = 1;
+      else if (p.name == "z")
+        t.coordinate = 2;
+      else
+        t.values = &out->vertexProperties[p.name];
+    }
+  }
+  return targets;
+}
+}  // namespace
+
 PlyData readPly(const fs::path& path) {
   std::string data = readTextFile(path);
   const std::string where = path.string();
@@ -514,40 +545,17 @@ PlyData readPly(const fs::path& path) {
   };
   std::vector<int> idx;  // one face's indices
   for (const PlyElement& e : elements) {
-    const bool isVertex = e.name == "vertex", isFace = e.name == "face";
+    const bool isVertex = e.name == "vertex";
     if (e.props.empty()) continue;  // nothing to read
     if (e.count > bodyBytes)
       throw Error(where + ": PLY element '" + e.name + "' claims " + std::to_string(e.count) +
                   " entries, more than the file's " + std::to_string(bodyBytes) + " body bytes");
-    // Where each property's values go, decided once per element: a coordinate (0-2), a vertex
-    // property's values, a face's indices, or nowhere.
-    struct Target {
-      int coordinate = -1;
-      std::vector<float>* values = nullptr;
-      bool indices = false;
-    };
-    std::vector<Target> targets(e.props.size());
-    for (size_t k = 0; k < e.props.size() && e.count > 0; ++k) {
-      const PlyProperty& p = e.props[k];
-      Target& t = targets[k];
-      if (!p.countType.empty()) {
-        t.indices = isFace && (p.name == "vertex_indices" || p.name == "vertex_index");
-      } else if (isVertex) {
-        if (p.name == "x")
-          t.coordinate = 0;
-        else if (p.name == "y")
-          t.coordinate = 1;
-        else if (p.name == "z")
-          t.coordinate = 2;
-        else
-          t.values = &out.vertexProperties[p.name];
-      }
-    }
+    const std::vector<PlyTarget> targets = plyTargets(e, &out);
     for (size_t i = 0; i < e.count; ++i) {
       Vec3f v = Vec3f::Zero();
       for (size_t k = 0; k < e.props.size(); ++k) {
         const PlyProperty& p = e.props[k];
-        const Target& t = targets[k];
+        const PlyTarget& t = targets[k];
         if (p.countKind != PlyType::kNone) {
           const int n = index(readValue(p.countKind), "list length");
           if (size_t(n) > bodyBytes)
