@@ -31,6 +31,50 @@ double smallestExtent(const TableTopObject& o) {
 
 }  // namespace
 
+namespace {
+// The frames' points (not the robot's) within search_radius_m across and 0.5 m up or down of the
+// rest pose's origin, frame O.
+std::vector<Vec3> pointsNear(const std::vector<DepthImage>& frames,
+                             const std::vector<std::vector<uint8_t>>& robotMask, const Iso3& T_B_C,
+                             const CameraIntrinsics& K, const Iso3& T_B_O_rest,
+                             double search_radius_m) {
+  const Vec3 rest_B = T_B_O_rest.translation();
+  const Iso3 T_O_B = T_B_O_rest.inverse();
+  std::vector<Vec3> near;
+  for (size_t f = 0; f < frames.size(); ++f) {
+    const DepthImage& d = frames[f];
+    for (int v = 0; v < d.height; ++v)
+      for (int u = 0; u < d.width; ++u) {
+        const size_t i = size_t(v) * d.width + u;
+        const float z = d.depth_m[i];
+        if (!(z > 0) || robotMask[f][i]) continue;
+        const Vec3 p_B = T_B_C * (double(z) * K.rayZ1(u, v));
+        if ((p_B - rest_B).head<2>().norm() > search_radius_m ||
+            std::abs(p_B.z() - rest_B.z()) > 0.5)
+          continue;
+        near.push_back(T_O_B * p_B);
+      }
+  }
+  return near;
+}
+
+// Where the object may be: the points' box mirrored through the centre (the far side unseen),
+// from the table (onTable) up to its top (onTable + up), 5 mm more each way.
+Aabb believedBox(const Aabb& box, const Vec3& centre, const Vec3& onTable, const Vec3& up) {
+  Aabb out;
+  for (int c = 0; c < 8; ++c) {
+    const Vec3 p = box.corner(c);
+    out.extend(p);
+    out.extend(2 * centre - p);
+  }
+  out.extend(onTable);
+  out.extend(onTable + up);
+  out.min.array() -= 0.005;
+  out.max.array() += 0.005;
+  return out;
+}
+}  // namespace
+
 TableTopObject findObjectOnTable(const std::vector<DepthImage>& frames,
                                  const std::vector<std::vector<uint8_t>>& robotMask,
                                  const Iso3& T_B_C, const CameraIntrinsics& K,
@@ -43,23 +87,9 @@ TableTopObject findObjectOnTable(const std::vector<DepthImage>& frames,
   TableTopObject out;
   const Vec3 rest_B = T_B_O_rest.translation();
   const Iso3 T_O_B = T_B_O_rest.inverse();
-  // Points near the rest pose (frame O).
-  std::vector<Vec3> near;
   tt.frames = int(frames.size());
-  for (size_t f = 0; f < frames.size(); ++f) {
-    const DepthImage& d = frames[f];
-    for (int v = 0; v < d.height; ++v)
-      for (int u = 0; u < d.width; ++u) {
-        const size_t i = size_t(v) * d.width + u;
-        const float z = d.depth_m[i];
-        if (!(z > 0) || robotMask[f][i]) continue;
-        const Vec3 p_B = T_B_C * (double(z) * K.rayZ1(u, v));
-        if ((p_B - rest_B).head<2>().norm() > to.search_radius_m ||
-            std::abs(p_B.z() - rest_B.z()) > 0.5)
-          continue;
-        near.push_back(T_O_B * p_B);
-      }
-  }
+  const std::vector<Vec3> near =
+      pointsNear(frames, robotMask, T_B_C, K, T_B_O_rest, to.search_radius_m);
   tt.points = int(near.size());
   PlaneFitOptions po = to.plane;
   po.expected_normal = T_O_B.linear() * Vec3::UnitZ();
@@ -114,15 +144,7 @@ TableTopObject findObjectOnTable(const std::vector<DepthImage>& frames,
     out.problem = Termination::kObjectTooLargeForVolume;
     return out;
   }
-  for (int c = 0; c < 8; ++c) {
-    const Vec3 p = box.corner(c);
-    out.box_O.extend(p);
-    out.box_O.extend(2 * out.centre_O - p);
-  }
-  out.box_O.extend(onTable);
-  out.box_O.extend(onTable + out.height_m * n);
-  out.box_O.min.array() -= 0.005;
-  out.box_O.max.array() += 0.005;
+  out.box_O = believedBox(box, out.centre_O, onTable, out.height_m * n);
   return out;
 }
 
