@@ -7,8 +7,8 @@
 #include <fstream>
 #include <string>
 
-#include "inhand/config/simulated_scan.h"
 #include "inhand/core/error.h"
+#include "inhand/driver/simulated_scan.h"
 #include "inhand/geometry/builtin_objects.h"
 #include "inhand/scan/checkpoint.h"
 #include "test_util.h"

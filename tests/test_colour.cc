@@ -4,8 +4,8 @@
 #include <cmath>
 #include <fstream>
 
-#include "inhand/config/simulated_scan.h"
 #include "inhand/core/error.h"
+#include "inhand/driver/simulated_scan.h"
 #include "inhand/geometry/appearance.h"
 #include "inhand/geometry/builtin_objects.h"
 #include "inhand/geometry/mesh_io.h"

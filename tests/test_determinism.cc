@@ -2,9 +2,9 @@
 // (setThreadCount; INHAND_THREADS for the command line).
 #include <gtest/gtest.h>
 
-#include "inhand/config/simulated_scan.h"
 #include "inhand/core/file_util.h"
 #include "inhand/core/parallel.h"
+#include "inhand/driver/simulated_scan.h"
 #include "inhand/geometry/builtin_objects.h"
 #include "inhand/geometry/mesh_io.h"
 #include "test_util.h"

@@ -2,7 +2,7 @@
 // counters, and the model stays the model of the object (docs/reliability.md has the figures).
 #include <gtest/gtest.h>
 
-#include "inhand/config/simulated_scan.h"
+#include "inhand/driver/simulated_scan.h"
 #include "inhand/geometry/builtin_objects.h"
 #include "test_util.h"
 

@@ -7,8 +7,8 @@
 #include <algorithm>
 #include <cstdio>
 
-#include "inhand/config/simulated_scan.h"
 #include "inhand/core/pose.h"
+#include "inhand/driver/simulated_scan.h"
 #include "inhand/geometry/builtin_objects.h"
 #include "inhand/geometry/primitives.h"
 #include "inhand/planning/view_quality.h"

@@ -2,7 +2,6 @@
 // inhand: every public header of the library (link inhand::inhand).
 #include "inhand/asset/asset.h"
 #include "inhand/config/scan_config.h"
-#include "inhand/config/simulated_scan.h"
 #include "inhand/core/clock.h"
 #include "inhand/core/error.h"
 #include "inhand/core/fast_math.h"
@@ -12,6 +11,7 @@
 #include "inhand/core/pose.h"
 #include "inhand/core/random.h"
 #include "inhand/core/types.h"
+#include "inhand/driver/simulated_scan.h"
 #include "inhand/eval/metrics.h"
 #include "inhand/geometry/builtin_objects.h"
 #include "inhand/geometry/contour.h"

@@ -8,10 +8,10 @@
 
 #include "commands.h"
 #include "inhand/config/scan_config.h"
-#include "inhand/config/simulated_scan.h"
 #include "inhand/core/error.h"
 #include "inhand/core/file_util.h"
 #include "inhand/core/pose.h"
+#include "inhand/driver/simulated_scan.h"
 #include "inhand/geometry/stable_poses.h"
 #include "inhand/geometry/surface_distance.h"
 #include "inhand/scan/regrasp.h"

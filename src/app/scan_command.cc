@@ -9,11 +9,11 @@
 #include <set>
 
 #include "commands.h"
-#include "inhand/config/simulated_scan.h"
 #include "inhand/core/error.h"
 #include "inhand/core/file_util.h"
 #include "inhand/core/json_util.h"
 #include "inhand/core/pose.h"
+#include "inhand/driver/simulated_scan.h"
 #include "inhand/eval/metrics.h"
 #include "inhand/geometry/builtin_objects.h"
 #include "inhand/geometry/mesh_io.h"

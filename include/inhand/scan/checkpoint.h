@@ -17,16 +17,6 @@
 
 namespace inhand {
 
-// What a driver hands to ScanProgress::checkpoint.
-struct ScanCheckpoint {
-  const ScanSession* session = nullptr;     // the model, views and counters
-  const MultiGraspResult* sofar = nullptr;  // the grasps finished, the table-top record
-  int grasp = 0;                            // the grasp whose views are under way (0-based)
-  const GraspRecord* current = nullptr;     // its record so far
-  Iso3 T_B_O_rest = Iso3::Identity();       // where the object rests between grasps
-  Aabb object_box_O;                        // the first grasp's object box (initial trajectory)
-};
-
 // Writes `checkpoint` and the caller's `extra` to `path` atomically. Throws Error naming the file.
 void saveScanCheckpoint(const std::filesystem::path& path, const ScanCheckpoint& checkpoint,
                         const Json& extra = Json());

@@ -4,7 +4,7 @@
 // the best view Alg. 1 finds with the hand there, pick the object up with the best one, and go
 // on, the model kept in the object frame throughout, until no candidate grasp promises a view
 // above t_q or a grasp limit.
-#include "inhand/scan/types.h"
+#include "inhand/scan/session.h"
 
 namespace inhand {
 

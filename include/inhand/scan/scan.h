@@ -3,7 +3,7 @@
 // the object is held at a known grasp; a simple initial trajectory, then Alg. 1 view after view
 // until no view reaches t_q or a view limit; every depth frame along every trajectory is fused
 // with the pose the robot reports (T_O_C = T_O_palm · T_palm_B(q) · T_B_C), hand-aware (§IV).
-#include "inhand/scan/types.h"
+#include "inhand/scan/session.h"
 
 namespace inhand {
 

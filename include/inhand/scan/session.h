@@ -28,6 +28,43 @@
 
 namespace inhand {
 
+class ScanSession;
+
+// What a driver hands to ScanProgress::checkpoint.
+struct ScanCheckpoint {
+  const ScanSession* session = nullptr;     // the model, views and counters
+  const MultiGraspResult* sofar = nullptr;  // the grasps finished, the table-top record
+  int grasp = 0;                            // the grasp whose views are under way (0-based)
+  const GraspRecord* current = nullptr;     // its record so far
+  Iso3 T_B_O_rest = Iso3::Identity();       // where the object rests between grasps
+  Aabb object_box_O;                        // the first grasp's object box (initial trajectory)
+};
+
+// What the caller follows of a scan: log lines, ground truth, each frame, stop requests,
+// checkpoints.
+struct ScanProgress {
+  std::function<void(const std::string&)> log;  // one line per event (may be empty)
+  // Ground-truth coverage of a model (set when the object's true mesh is known): recorded in
+  // each view's record after its frames.
+  std::function<double(const ObjectModel&)> coverage;
+  // Each in-hand frame as ScanSession::addFrame handled it, with the joints and the camera pose
+  // it was given (may be empty).
+  std::function<void(const FrameReport&, const JointVector& q, const Iso3& T_B_C)> frame;
+  // Each in-hand frame as given to ScanSession::addFrame, before any check: what a robot
+  // delivers, for recording it (`inhand scan --save-frames`). May be empty.
+  std::function<void(const ScanSession&, const DepthImage&, const JointVector& q,
+                     const Iso3& T_B_C)>
+      frame_input;
+  // Asked before each step and at every frame: true ends the scan at the next frame with
+  // Termination::kInterrupted and the model so far (frames after it are not fused). For a
+  // SIGINT handler's flag; may be empty.
+  std::function<bool()> interrupted;
+  // Called at every point a scan can resume from (scan/checkpoint.h): when a grasp's views begin
+  // and after each view. May be empty.
+  std::function<void(const ScanCheckpoint&)> checkpoint;
+  bool stopRequested() const { return interrupted && interrupted(); }
+};
+
 // A view the session chose: move the arm along `waypoints` (joint space, the first is the state
 // it was planned from) and add the frames taken on the way.
 struct PlannedView {

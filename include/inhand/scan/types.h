@@ -31,9 +31,6 @@ enum class HandMode {
 std::string handModeName(HandMode m);
 bool parseHandMode(const std::string& s, HandMode* out);
 
-struct ScanCheckpoint;
-class ScanSession;
-
 // Why a scan (or one grasp's views) ended.
 enum class Termination {
   kRunning,                  // not ended
@@ -167,29 +164,6 @@ struct FrameReport {
   int tracking_hand_inliers = 0, tracking_hand_see_through = 0;  // of the hand's
   double tracking_rms_m = 0;
   double seconds = 0;
-};
-
-struct ScanProgress {
-  std::function<void(const std::string&)> log;  // one line per event (may be empty)
-  // Ground-truth coverage of a model (set when the object's true mesh is known): recorded in
-  // each view's record after its frames.
-  std::function<double(const ObjectModel&)> coverage;
-  // Each in-hand frame as ScanSession::addFrame handled it, with the joints and the camera pose
-  // it was given (may be empty).
-  std::function<void(const FrameReport&, const JointVector& q, const Iso3& T_B_C)> frame;
-  // Each in-hand frame as given to ScanSession::addFrame, before any check: what a robot
-  // delivers, for recording it (`inhand scan --save-frames`). May be empty.
-  std::function<void(const ScanSession&, const DepthImage&, const JointVector& q,
-                     const Iso3& T_B_C)>
-      frame_input;
-  // Asked before each step and at every frame: true ends the scan at the next frame with
-  // Termination::kInterrupted and the model so far (frames after it are not fused). For a
-  // SIGINT handler's flag; may be empty.
-  std::function<bool()> interrupted;
-  // Called at every point a scan can resume from (scan/checkpoint.h): when a grasp's views begin
-  // and after each view. May be empty.
-  std::function<void(const ScanCheckpoint&)> checkpoint;
-  bool stopRequested() const { return interrupted && interrupted(); }
 };
 
 struct ScanResult {

@@ -1,4 +1,4 @@
-#include "inhand/config/simulated_scan.h"
+#include "inhand/driver/simulated_scan.h"
 
 #include <algorithm>
 
