@@ -22,7 +22,7 @@
 #include <string>
 #include <vector>
 
-#include "inhand/core/parallel.h"
+#include "inhand/core/internal/parallel.h"
 #include "inhand/core/pose.h"
 #include "inhand/core/random.h"
 #include "inhand/geometry/builtin_objects.h"

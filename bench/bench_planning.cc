@@ -18,7 +18,7 @@
 #define CALLGRIND_STOP_INSTRUMENTATION
 #endif
 
-#include "inhand/core/parallel.h"
+#include "inhand/core/internal/parallel.h"
 #include "inhand/core/pose.h"
 #include "inhand/geometry/builtin_objects.h"
 #include "inhand/grasp/grasp.h"

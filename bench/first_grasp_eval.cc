@@ -124,7 +124,7 @@ int main(int argc, char** argv) {
       const bool two = a[k].pose >= 0 && r.table_top->poses[size_t(a[k].pose)].two_finger;
       std::printf("%d,%d,%.3f,%s,%s,%.1f,%s,%d,%d\n", a[k].rank, a[k].hold_test, a[k].epsilon,
                   a[k].palm_contact ? "enveloping" : "fingertips", o.what.c_str(), o.moved_mm,
-                  a[k].hold_failure.c_str(), int(pinch), int(two));
+                  holdFailureName(a[k].hold_failure), int(pinch), int(two));
       const int v = a[k].hold_test == 1;
       held[v] += o.what == "held";
       ++tested[v];

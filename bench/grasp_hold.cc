@@ -69,8 +69,9 @@ int main(int argc, char** argv) {
       predHeld[c.hold == 1] += outcome == "held" || outcome == "slipped";
       predN[c.hold == 1] += 1;
       const double up = -(T_B_O.linear() * c.T_O_palm.linear().col(2)).z();
-      std::printf("%d,%d,%s,%.4f,%d,%d,%.2f,%s,%.0f,%.1f\n", k + 1, c.hold, c.hold_failure.c_str(),
-                  c.epsilon, c.links_in_contact, int(palm), up, outcome.c_str(), rise, slip);
+      std::printf("%d,%d,%s,%.4f,%d,%d,%.2f,%s,%.0f,%.1f\n", k + 1, c.hold,
+                  holdFailureName(c.hold_failure), c.epsilon, c.links_in_contact, int(palm), up,
+                  outcome.c_str(), rise, slip);
     }
     std::printf("held %d of %d; predicted to hold: %d of %d held; predicted not: %d of %d held\n",
                 held, tried, predHeld[1], predN[1], predHeld[0], predN[0]);

@@ -55,23 +55,42 @@ py::array_t<float> depthArray(DepthImage&& d) {
   return py::array_t<float>(std::vector<py::ssize_t>{d.height, d.width}, owner->data(), free);
 }
 
+// A JSON value as Python objects (null: None).
+py::object pyFrom(const Json& j) {
+  switch (j.type()) {
+    case Json::value_t::object: {
+      py::dict d;
+      for (const auto& [k, v] : j.items()) d[py::str(k)] = pyFrom(v);
+      return d;
+    }
+    case Json::value_t::array: {
+      py::list l;
+      for (const Json& v : j) l.append(pyFrom(v));
+      return l;
+    }
+    case Json::value_t::string:
+      return py::str(j.get<std::string>());
+    case Json::value_t::boolean:
+      return py::bool_(j.get<bool>());
+    case Json::value_t::number_integer:
+    case Json::value_t::number_unsigned:
+      return py::int_(j.get<long long>());
+    case Json::value_t::number_float:
+      return py::float_(j.get<double>());
+    default:
+      return py::none();
+  }
+}
+
+// A view's record as summary.json writes it (scan/records.h), its vectors as numpy arrays, its
+// unknown figures NaN.
 py::dict viewDict(const ViewRecord& r, int grasp) {
-  py::dict d;
+  py::dict d = pyFrom(viewRecordJson(r));
   d["grasp"] = grasp;
-  d["initial"] = r.initial;
-  d["dir_O"] = Eigen::Vector3d(r.dir_O);
+  d["direction_O"] = Eigen::Vector3d(r.dir_O);
   d["T_O_C"] = matrixOf(r.T_O_C);
-  d["quality"] = r.quality;
   d["predicted_gain"] = r.gain;  // NaN for the initial views
   d["t_q"] = r.t_q;
-  d["unresolved"] = r.unresolved;
-  d["cost_s"] = r.cost_s;
-  d["score"] = r.score;
-  d["mean_entropy"] = r.mean_entropy;
-  d["observed_fraction"] = r.observed_fraction;
-  d["coverage"] = r.coverage;
-  d["frames"] = r.frames;
-  d["candidates"] = r.candidates;
   return d;
 }
 
@@ -462,6 +481,7 @@ void bindSession(py::module_& m) {
             py::gil_scoped_acquire acquire;
             py::dict out;
             out["fused"] = r.fused;
+            out["refusal"] = frameRefusalName(r.refusal);
             out["rejected"] = r.rejected;
             out["pixels"] = r.pixels;
             out["carve_pixels"] = r.carve_pixels;

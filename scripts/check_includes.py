@@ -36,7 +36,7 @@ if "--graph" in sys.argv:
 bad = []
 for name in deps:
     allowed = closure(name) | {name}
-    files = list((root / "src" / name).glob("*")) + list((root / "include" / "inhand" / name).glob("*"))
+    files = list((root / "src" / name).rglob("*")) + list((root / "include" / "inhand" / name).rglob("*"))
     for f in sorted(files):
         if f.suffix not in (".h", ".cc"):
             continue

@@ -3,14 +3,17 @@
 // never stopped: the same views, grasps and model, voxel for voxel.
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <string>
 
 #include "inhand/core/error.h"
+#include "inhand/core/pose.h"
 #include "inhand/driver/simulated_scan.h"
 #include "inhand/geometry/builtin_objects.h"
 #include "inhand/scan/checkpoint.h"
+#include "inhand/scan/records.h"
 #include "test_util.h"
 
 using namespace inhand;
@@ -168,4 +171,75 @@ TEST(Checkpoint, RefusesAFileThatIsNotOneAndNamesIt) {
   }
   cp.file = dir.path() / "missing.inhand";
   EXPECT_THROW(runSimulatedScan(test::wam(), object(), fastConfig(false), {}, cp), Error);
+}
+
+// One JSON form per record (scan/records.h): a view's and a grasp's record round-trip exactly
+// under summary.json's key names, and records written under the names checkpoints used before
+// (dir_O, gain, tried, epsilon, hole_area_m2, attempts) read back the same.
+TEST(Records, RoundTripAndReadTheNamesOlderCheckpointsUsed) {
+  ViewRecord v;
+  v.dir_O = Vec3(0.6, -0.8, 0);
+  v.T_O_C = lookAt(Vec3(0.3, -0.2, 0.5), Vec3::Zero());
+  v.quality = 0.25;
+  v.gain = 0.125;
+  v.t_q = 0.01;
+  v.unresolved = 3.5;
+  v.cost_s = 2;
+  v.frames = 17;
+  v.candidates = 400;
+  Json j = viewRecordJson(v);
+  EXPECT_EQ(j.at("direction_O").size(), 3u);
+  EXPECT_EQ(j.at("predicted_gain").get<double>(), 0.125);
+  ViewRecord back = viewRecordFrom(j);
+  EXPECT_EQ(back.dir_O, v.dir_O);
+  EXPECT_TRUE(back.T_O_C.isApprox(v.T_O_C, 0));
+  EXPECT_EQ(back.gain, v.gain);
+  EXPECT_EQ(back.frames, 17);
+  j["dir_O"] = j.at("direction_O");
+  j["gain"] = j.at("predicted_gain");
+  j.erase("direction_O");
+  j.erase("predicted_gain");
+  back = viewRecordFrom(j);
+  EXPECT_EQ(back.dir_O, v.dir_O);
+  EXPECT_EQ(back.gain, v.gain);
+  ViewRecord initial;  // an unknown gain is written as null and read back as NaN
+  EXPECT_TRUE(viewRecordJson(initial).at("predicted_gain").is_null());
+  EXPECT_TRUE(std::isnan(viewRecordFrom(viewRecordJson(initial)).gain));
+
+  GraspRecord g;
+  g.q = JointVector::LinSpaced(7, -1, 1);
+  g.tried = 40;
+  g.epsilon = 0.2;
+  g.hole_area_m2 = 0.003;
+  g.termination = Termination::kNoViewAboveThreshold;
+  PickAttempt a;
+  a.outcome = PickOutcome::kDropped;
+  a.hold_test = 0;
+  a.hold_failure = HoldFailure::kDroppedInTurn;
+  g.attempts = {a};
+  g.ranked.push_back({Iso3::Identity(), g.q, 0.5, 0.1});
+  Json k = graspRecordJson(g);
+  EXPECT_EQ(k.at("poses_tried").get<int>(), 40);
+  EXPECT_EQ(k.at("pick_up_attempts").at(0).at("outcome"), "dropped");
+  EXPECT_EQ(k.at("pick_up_attempts").at(0).at("hold_failure"), "dropped_in_turn");
+  for (const auto& [now, before] : {std::pair{"poses_tried", "tried"},
+                                    {"stability_epsilon", "epsilon"},
+                                    {"unknown_area_m2", "hole_area_m2"},
+                                    {"pick_up_attempts", "attempts"}}) {
+    k[before] = k.at(now);
+    k.erase(now);
+  }
+  const GraspRecord h = graspRecordFrom(k);
+  EXPECT_EQ(h.q, g.q);
+  EXPECT_EQ(h.tried, 40);
+  EXPECT_EQ(h.epsilon, 0.2);
+  EXPECT_EQ(h.hole_area_m2, 0.003);
+  EXPECT_EQ(h.termination, Termination::kNoViewAboveThreshold);
+  ASSERT_EQ(h.attempts.size(), 1u);
+  EXPECT_EQ(h.attempts[0].outcome, PickOutcome::kDropped);
+  EXPECT_EQ(h.attempts[0].hold_failure, HoldFailure::kDroppedInTurn);
+  ASSERT_EQ(h.ranked.size(), 1u);
+  EXPECT_EQ(h.ranked[0].epsilon, 0.1);
+  k["pick_up_attempts"] = Json::array({{{"outcome", "fell"}}});
+  EXPECT_THROW(graspRecordFrom(k), std::exception);  // an outcome with no name
 }

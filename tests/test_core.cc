@@ -6,10 +6,10 @@
 #include <stdexcept>
 
 #include "inhand/core/error.h"
-#include "inhand/core/fast_math.h"
 #include "inhand/core/file_util.h"
+#include "inhand/core/internal/fast_math.h"
+#include "inhand/core/internal/parallel.h"
 #include "inhand/core/json_util.h"
-#include "inhand/core/parallel.h"
 #include "inhand/core/pose.h"
 #include "inhand/core/random.h"
 #include "test_util.h"
@@ -117,25 +117,26 @@ TEST(Pose, LookAtPutsTargetOnOpticalAxis) {
 }
 
 TEST(Pose, RowMajorRoundTripAndRejection) {
+  auto rowMajor = [](const Iso3& P) { return isoJson(P).get<std::array<double, 16>>(); };
   Iso3 T = lookAt(Vec3(0.3, -0.2, 0.5), Vec3::Zero());
   std::string why;
-  auto back = poseFromRowMajor(poseToRowMajor(T), &why);
+  auto back = poseFromRowMajor(rowMajor(T), &why);
   ASSERT_TRUE(back);
   EXPECT_TRUE(back->isApprox(T, 1e-12));
   std::array<double, 16> singular{};
   singular[15] = 1;
   EXPECT_FALSE(poseFromRowMajor(singular, &why));
   EXPECT_NE(why.find("singular"), std::string::npos);
-  auto reflect = poseToRowMajor(Iso3::Identity());
+  auto reflect = rowMajor(Iso3::Identity());
   reflect[0] = -1;
   EXPECT_FALSE(poseFromRowMajor(reflect, &why));
-  auto scaled = poseToRowMajor(Iso3::Identity());
+  auto scaled = rowMajor(Iso3::Identity());
   scaled[5] = 2;
   EXPECT_FALSE(poseFromRowMajor(scaled, &why));
   EXPECT_NE(why.find("orthonormal"), std::string::npos);
   // A pose file's 7 significant digits (|RᵀR − I| ~1e-7..1e-4) is accepted as the nearest
   // rotation, within 1e-6 of the pose written; a rotation 5 % off is not; nor is a NaN.
-  std::array<double, 16> rounded = poseToRowMajor(T);
+  std::array<double, 16> rounded = rowMajor(T);
   for (double& v : rounded) v = std::stod(std::to_string(v).substr(0, 9));
   rounded[0] += 1e-4;  // and one entry off further, as real files have
   double deviation = 0;
@@ -144,10 +145,10 @@ TEST(Pose, RowMajorRoundTripAndRejection) {
   EXPECT_GT(deviation, 5e-5);
   EXPECT_NEAR((near->linear().transpose() * near->linear() - Mat3::Identity()).norm(), 0, 1e-12);
   EXPECT_TRUE(near->isApprox(T, 1e-4));
-  auto off = poseToRowMajor(T);
+  auto off = rowMajor(T);
   off[0] *= 1.05;
   EXPECT_FALSE(poseFromRowMajor(off, &why));
-  auto nan = poseToRowMajor(T);
+  auto nan = rowMajor(T);
   nan[6] = std::nan("");
   EXPECT_FALSE(poseFromRowMajor(nan, &why));
   EXPECT_NE(why.find("non-finite"), std::string::npos);

@@ -3,7 +3,7 @@
 #include <gtest/gtest.h>
 
 #include "inhand/core/file_util.h"
-#include "inhand/core/parallel.h"
+#include "inhand/core/internal/parallel.h"
 #include "inhand/driver/simulated_scan.h"
 #include "inhand/geometry/builtin_objects.h"
 #include "inhand/geometry/mesh_io.h"

@@ -156,9 +156,11 @@ TEST(Faults, RefusedMotionsAreReplannedAndFailedPickUpsTryTheNextCandidate) {
   ASSERT_GT(s.faults.failed_pickups, 0);
   // Each failed pick-up is an attempt that met nothing; the scan went on to the next candidate.
   int noContact = 0;
-  if (s.result.table_top) noContact += countOutcome(s.result.table_top->attempts, "no_contact");
-  for (const GraspRecord& g : s.result.grasps) noContact += countOutcome(g.attempts, "no_contact");
-  noContact += countOutcome(s.result.failed_regrasp_attempts, "no_contact");
+  if (s.result.table_top)
+    noContact += countOutcome(s.result.table_top->attempts, PickOutcome::kNoContact);
+  for (const GraspRecord& g : s.result.grasps)
+    noContact += countOutcome(g.attempts, PickOutcome::kNoContact);
+  noContact += countOutcome(s.result.failed_regrasp_attempts, PickOutcome::kNoContact);
   EXPECT_GE(noContact, s.faults.failed_pickups);
   EXPECT_NE(s.result.scan.termination, Termination::kRunning);
   // Ending with regrasp_failed keeps the first grasp's model (the can seen from one grasp: about

@@ -384,7 +384,7 @@ TEST(GraspGeneration, TwoFingerPinchesLiftAMarkerLyingOnTheTable) {
     if (!pose.pinch) continue;
     const HoldTrial t = tryHold(world, T_B_O, c.T_O_palm, c.q_open, c.q, {});
     std::printf("%s pinch, preshape %.2f: %s, moved %.1f mm\n", pose.two_finger ? "two" : "three",
-                pose.preshape, t.held ? "held" : t.failure.c_str(), 1000 * t.slip_m);
+                pose.preshape, t.held ? "held" : holdFailureName(t.failure), 1000 * t.slip_m);
     if (!pose.two_finger) {
       ++three;
       EXPECT_LE(holdStage(t.failure), 1);
@@ -397,7 +397,7 @@ TEST(GraspGeneration, TwoFingerPinchesLiftAMarkerLyingOnTheTable) {
     EXPECT_NEAR((T_B_O.linear() * c.T_O_palm.linear().col(2)).z(), -1.0, 1e-9);  // down
     // Across the marker: palm y (the two fingers' closing direction) square to its axis.
     EXPECT_LT(std::abs(c.T_O_palm.linear().col(1).dot(Vec3::UnitZ())), 0.05);
-    EXPECT_GE(holdStage(t.held ? "" : t.failure), 3);
+    EXPECT_GE(holdStage(t.held ? HoldFailure::kNone : t.failure), 3);
   }
   EXPECT_GE(two, 2);
   EXPECT_GE(three, 2);

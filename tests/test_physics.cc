@@ -377,10 +377,10 @@ TEST(HoldTest, PutsTheEnvelopingGraspOfABoxAheadOfThePinch) {
   const double s = rankByHold(m, box, boxOnTable(m), nullptr, 0.5, o, &candidates);
   EXPECT_GT(s, 0);
   EXPECT_EQ(candidates[0].pose, 1);
-  EXPECT_EQ(candidates[0].hold, 1) << candidates[0].hold_failure;
+  EXPECT_EQ(candidates[0].hold, 1) << holdFailureName(candidates[0].hold_failure);
   EXPECT_EQ(candidates[1].pose, 0);
   EXPECT_EQ(candidates[1].hold, 0);
-  EXPECT_FALSE(candidates[1].hold_failure.empty());
+  EXPECT_NE(candidates[1].hold_failure, HoldFailure::kNone);
   // The model's pieces above the table: the whole box (it stands on the top).
   double v = 0;
   for (const ConvexPiece& p :
@@ -402,7 +402,7 @@ TEST(HoldTest, TestsTheNextBatchWhenNoneOfTheFirstHolds) {
   std::vector<GraspCandidate> all = candidates;
   rankByHold(m, box, boxOnTable(m), nullptr, 0.5, o, &all);
   EXPECT_EQ(all[0].pose, 3);
-  EXPECT_EQ(all[0].hold, 1) << all[0].hold_failure;
+  EXPECT_EQ(all[0].hold, 1) << holdFailureName(all[0].hold_failure);
   for (size_t k = 1; k < 4; ++k) EXPECT_EQ(all[k].hold, 0) << k;
   o.max_tested = 2;  // the first batch only: nothing moves, the rest untested
   std::vector<GraspCandidate> first = candidates;
@@ -423,8 +423,8 @@ TEST(HoldTest, PutsTheGraspThatHoldsWithAMarginFirst) {
   o.density_kg_m3 = 0.25 / box.signedVolume();  // 0.25 kg (0.1 kg: the pinch holds 0.2 kg too)
   std::vector<GraspCandidate> c = boxCandidates(m, box, 2);
   rankByHold(m, box, boxOnTable(m), nullptr, 0.5, o, &c);
-  ASSERT_EQ(c[0].hold, 1) << c[0].hold_failure;
-  ASSERT_EQ(c[1].hold, 1) << c[1].hold_failure;
+  ASSERT_EQ(c[0].hold, 1) << holdFailureName(c[0].hold_failure);
+  ASSERT_EQ(c[1].hold, 1) << holdFailureName(c[1].hold_failure);
   EXPECT_EQ(c[0].pose, 1);
   EXPECT_EQ(c[0].hold_margin, 1);
   EXPECT_EQ(c[1].pose, 0);
@@ -562,8 +562,8 @@ TEST(HoldTest, PutsTheGraspThatHoldsWithTheObjectMovedFirst) {
     o.pose_tolerance_m = tolerance;
     std::vector<GraspCandidate> c = boxCandidates(m, box, 2);
     rankByHold(m, box, boxOnTable(m), nullptr, 0.5, o, &c);
-    EXPECT_EQ(c[0].hold, 1) << c[0].hold_failure;
-    EXPECT_EQ(c[1].hold, 1) << c[1].hold_failure;
+    EXPECT_EQ(c[0].hold, 1) << holdFailureName(c[0].hold_failure);
+    EXPECT_EQ(c[1].hold, 1) << holdFailureName(c[1].hold_failure);
     return c;
   };
   std::vector<GraspCandidate> c = ranked(0);

@@ -141,10 +141,10 @@ TEST(Scan, DropsSeenInTheDepthFramesAreTheSimulatorsDrops) {
   ASSERT_TRUE(r.table_top);
   const std::vector<PickAttempt>& attempts = r.table_top->attempts;
   ASSERT_FALSE(attempts.empty());
-  const int dropped = countOutcome(attempts, "dropped");
+  const int dropped = countOutcome(attempts, PickOutcome::kDropped);
   EXPECT_GT(dropped, 0) << "with μ = 0.1 some grasp should fail";
   EXPECT_EQ(dropped, world.drops);
-  if (attempts.back().outcome == "picked") {
+  if (attempts.back().outcome == PickOutcome::kPicked) {
     EXPECT_TRUE(world.held);
     EXPECT_EQ(r.grasps.size(), 1u);
   } else {

@@ -1,25 +1,23 @@
 #pragma once
-// inhand: every public header of the library (link inhand::inhand).
+// inhand: every public header of the library (link inhand::inhand). The kernels' own headers
+// (`inhand/<module>/internal/`: fast elementary functions, the parallel-for, the rasteriser,
+// projector shadows, iso-surface extraction, box overlap) are installed for the public headers
+// that use them but are not the API.
 #include "inhand/asset/asset.h"
 #include "inhand/config/scan_config.h"
 #include "inhand/core/clock.h"
 #include "inhand/core/error.h"
-#include "inhand/core/fast_math.h"
 #include "inhand/core/file_util.h"
 #include "inhand/core/json_util.h"
-#include "inhand/core/parallel.h"
 #include "inhand/core/pose.h"
 #include "inhand/core/random.h"
 #include "inhand/core/types.h"
 #include "inhand/driver/simulated_scan.h"
 #include "inhand/eval/metrics.h"
 #include "inhand/geometry/builtin_objects.h"
-#include "inhand/geometry/contour.h"
 #include "inhand/geometry/mesh_io.h"
 #include "inhand/geometry/point_cloud.h"
 #include "inhand/geometry/primitives.h"
-#include "inhand/geometry/projector_shadows.h"
-#include "inhand/geometry/raster.h"
 #include "inhand/geometry/ray_scene.h"
 #include "inhand/geometry/stable_poses.h"
 #include "inhand/geometry/surface_distance.h"
@@ -41,6 +39,7 @@
 #include "inhand/robot/wrench.h"
 #include "inhand/scan/checkpoint.h"
 #include "inhand/scan/multi_grasp.h"
+#include "inhand/scan/records.h"
 #include "inhand/scan/scan.h"
 #include "inhand/scan/session.h"
 #include "inhand/scan/table_top.h"

@@ -365,11 +365,12 @@ int fuseWithRobot(const FuseArgs& args, const fs::path& dir, const FrameSet& set
     Json t = {{"file", set.frames[i].file}, {"fused", r.fused}};
     if (r.fused) {
       const Iso3 T_O_B = palms[i] * model.tipPose(qs[i]).inverse();
-      t["T_B_C"] = poseToRowMajor(r.T_B_C);
-      t["T_O_C"] = poseToRowMajor(T_O_B * r.T_B_C);
+      t["T_B_C"] = isoJson(r.T_B_C);
+      t["T_O_C"] = isoJson(T_O_B * r.T_B_C);
       const Vec3 moved = (r.T_B_C.translation() - set.frames[i].T_B_C->translation());
       t["camera_correction_mm"] = 1000 * moved.norm();
     } else {
+      t["refusal"] = frameRefusalName(r.refusal);
       t["rejected"] = r.rejected;
     }
     tracked.push_back(t);

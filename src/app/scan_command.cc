@@ -22,6 +22,7 @@
 #include "inhand/robot/collision.h"
 #include "inhand/scan/checkpoint.h"
 #include "inhand/scan/multi_grasp.h"
+#include "inhand/scan/records.h"
 #include "inhand/scan/session.h"
 #include "inhand/sensor/frame_set.h"
 #include "inhand/sim/sim_world.h"
@@ -32,23 +33,6 @@ namespace fs = std::filesystem;
 
 // Every first-grasp pose tried, compactly: approach (palm z in O), roll, spread, preshape,
 // edge, ε, and what became of it.
-static Json posesJson(const std::vector<GraspPoseRecord>& poses) {
-  Json out = Json::array();
-  auto round4 = [](double v) { return std::round(v * 1e4) / 1e4; };
-  for (const GraspPoseRecord& p : poses)
-    out.push_back({{"approach_O",
-                    {round4(p.approach_O.x()), round4(p.approach_O.y()), round4(p.approach_O.z())}},
-                   {"roll_rad", round4(p.roll_rad)},
-                   {"spread", round4(p.spread)},
-                   {"preshape", p.preshape},
-                   {"edge", p.edge},
-                   {"pinch", p.pinch},
-                   {"two_finger", p.two_finger},
-                   {"epsilon", round4(p.epsilon)},
-                   {"result", p.result}});
-  return out;
-}
-
 namespace {
 
 // The options of a scan: the named planner, the config file over it, the command line over both.
@@ -144,81 +128,18 @@ Json viewsJson(const MultiGraspResult& mr) {
   for (size_t vi = 0; vi < r.views.size(); ++vi) {
     const ViewRecord& v = r.views[vi];
     trajectory += v.cost_s;
-    views.push_back({{"initial", v.initial},
-                     {"direction_O", {v.dir_O.x(), v.dir_O.y(), v.dir_O.z()}},
-                     {"T_O_C", poseToRowMajor(v.T_O_C)},
-                     {"quality", v.quality},
-                     {"predicted_gain", v.gain},
-                     {"t_q", v.t_q},
-                     {"unresolved", v.unresolved},
-                     {"cost_s", v.cost_s},
-                     {"score", v.score},
-                     {"mean_entropy", v.mean_entropy},
-                     {"observed_fraction", v.observed_fraction},
-                     {"frames", v.frames},
-                     {"candidates", v.candidates},
-                     {"planning_s", v.planning_s},
-                     {"coverage", v.coverage},
-                     {"trajectory_s", trajectory},
-                     {"grasp", vi < viewGrasp.size() ? viewGrasp[vi] : int(mr.grasps.size())}});
+    Json j = viewRecordJson(v);
+    j["trajectory_s"] = trajectory;
+    j["grasp"] = vi < viewGrasp.size() ? viewGrasp[vi] : int(mr.grasps.size());
+    views.push_back(std::move(j));
   }
   return views;
 }
 
 Json graspsJson(const MultiGraspResult& mr) {
   Json grasps = Json::array();
-  for (const GraspRecord& g : mr.grasps) {
-    Json ranked = Json::array();
-    for (const RankedGrasp& c : g.ranked)
-      ranked.push_back({{"T_O_palm", poseToRowMajor(c.T_O_palm)},
-                        {"quality", c.quality},
-                        {"stability_epsilon", c.epsilon}});
-    grasps.push_back({{"T_O_palm", poseToRowMajor(g.T_O_palm)},
-                      {"ranked", ranked},
-                      {"candidates", g.candidates},
-                      {"poses_tried", g.tried},
-                      {"quality", g.quality},
-                      {"t_q", g.t_q},
-                      {"model_area_m2", g.model_area_m2},
-                      {"stability_epsilon", std::isfinite(g.epsilon) ? Json(g.epsilon) : Json()},
-                      {"views", g.views},
-                      {"termination", terminationName(g.termination)},
-                      {"unknown_area_m2", g.hole_area_m2},
-                      {"mean_entropy", g.mean_entropy},
-                      {"generation_s", g.generation_s},
-                      {"pick_up_attempts", attemptsJson(g.attempts)},
-                      {"ranking_s", g.ranking_s}});
-  }
+  for (const GraspRecord& g : mr.grasps) grasps.push_back(graspRecordJson(g));
   return grasps;
-}
-
-Json tableTopJson(const TableTopRecord& t) {
-  const Vec3 n = t.table_O.n;
-  Json axes = Json::array();
-  for (int k = 0; k < 3; ++k)
-    axes.push_back({{"axis_O", {t.axes.axes(0, k), t.axes.axes(1, k), t.axes.axes(2, k)}},
-                    {"extent_m", t.axes.max[k] - t.axes.min[k]}});
-  return {{"frames", t.frames},
-          {"points", t.points},
-          {"table_inliers", t.table_inliers},
-          {"object_points", t.object_points},
-          {"table_plane_O", {n.x(), n.y(), n.z(), t.table_O.d}},
-          {"centroid_O", {t.axes.centroid.x(), t.axes.centroid.y(), t.axes.centroid.z()}},
-          {"principal_axes", axes},
-          {"grasp_poses_tried", t.tried},
-          {"grasp_poses_touching", t.touching},
-          {"grasp_poses_stable", t.stable},
-          {"grasp_poses_table_free", t.table_free},
-          {"grasp_poses_reachable", t.reachable},
-          {"grasp_rejected",
-           {{"no_two_link_contact", t.tried - t.touching},
-            {"not_force_closure", t.touching - t.stable},
-            {"hand_in_table", t.stable - t.table_free},
-            {"unreachable", t.table_free - t.reachable}}},
-          {"pick_up_attempts", attemptsJson(t.attempts)},
-          {"grasp_poses", posesJson(t.poses)},
-          {"volume", {{"size_m", t.volume_size_m}, {"voxel_m", t.voxel_m}}},
-          {"seconds", t.seconds}};
 }
 
 // Exit status: 3 no view reachable, 4 no grasp, 6 no object to scan, 130 interrupted; 0 for a
@@ -441,7 +362,7 @@ Json scanSummary(const ScanArgs& args, const ScanConfig& o, const SimulatedScan&
   summary["failed_regrasp_attempts"] = attemptsJson(mr.failed_regrasp_attempts);
   summary["start"] = o.start;
   summary["rest_pose"] = restJson;
-  if (mr.table_top) summary["table_top"] = tableTopJson(*mr.table_top);
+  if (mr.table_top) summary["table_top"] = tableTopRecordJson(*mr.table_top);
   const CameraIntrinsics& K = sim.camera.intrinsics;
   summary["camera"] = {{"width", K.width}, {"height", K.height}, {"fx", K.fx},
                        {"fy", K.fy},       {"cx", K.cx},         {"cy", K.cy}};

@@ -2,6 +2,7 @@
 
 #include <cmath>
 #include <limits>
+#include <vector>
 
 #include "inhand/core/error.h"
 #include "inhand/core/file_util.h"
@@ -63,6 +64,17 @@ Json vecJson(const Vec3& v) { return {v.x(), v.y(), v.z()}; }
 
 Vec3 vecFrom(const Json& j) {
   return {j.at(0).get<double>(), j.at(1).get<double>(), j.at(2).get<double>()};
+}
+
+Json vectorJson(const Eigen::VectorXd& v) {
+  Json j = Json::array();
+  for (Eigen::Index i = 0; i < v.size(); ++i) j.push_back(v[i]);
+  return j;
+}
+
+Eigen::VectorXd vectorFrom(const Json& j) {
+  const std::vector<double> v = j.get<std::vector<double>>();
+  return Eigen::Map<const Eigen::VectorXd>(v.data(), Eigen::Index(v.size()));
 }
 
 double numberOrNan(const Json& j) {

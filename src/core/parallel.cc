@@ -1,4 +1,4 @@
-#include "inhand/core/parallel.h"
+#include "inhand/core/internal/parallel.h"
 
 #include <sched.h>
 #include <tbb/global_control.h>

@@ -57,14 +57,6 @@ double rotationBetween(const Iso3& a, const Iso3& b) {
   return Eigen::AngleAxisd(b.linear() * a.linear().transpose()).angle();
 }
 
-std::array<double, 16> poseToRowMajor(const Iso3& T) {
-  std::array<double, 16> m{};
-  Mat4 M = T.matrix();
-  for (int r = 0; r < 4; ++r)
-    for (int c = 0; c < 4; ++c) m[r * 4 + c] = M(r, c);
-  return m;
-}
-
 Iso3 orthonormalized(const Iso3& T) {
   Eigen::JacobiSVD<Mat3> svd(T.linear(), Eigen::ComputeFullU | Eigen::ComputeFullV);
   Mat3 R = svd.matrixU() * svd.matrixV().transpose();

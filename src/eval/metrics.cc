@@ -5,7 +5,7 @@
 #include <tuple>
 
 #include "inhand/core/error.h"
-#include "inhand/core/parallel.h"
+#include "inhand/core/internal/parallel.h"
 #include "inhand/core/pose.h"
 #include "inhand/geometry/ray_scene.h"
 #include "inhand/sensor/depth_camera.h"

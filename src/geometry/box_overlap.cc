@@ -1,4 +1,4 @@
-#include "inhand/geometry/box_overlap.h"
+#include "inhand/geometry/internal/box_overlap.h"
 
 #include <algorithm>
 #include <array>

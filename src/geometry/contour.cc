@@ -1,11 +1,11 @@
-#include "inhand/geometry/contour.h"
+#include "inhand/geometry/internal/contour.h"
 
 #include <array>
 #include <bit>
 #include <memory>
 
 #include "inhand/core/error.h"
-#include "inhand/core/parallel.h"
+#include "inhand/core/internal/parallel.h"
 
 namespace inhand {
 

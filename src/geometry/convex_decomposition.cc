@@ -4,7 +4,7 @@
 #include <cmath>
 #include <unordered_map>
 
-#include "inhand/core/parallel.h"
+#include "inhand/core/internal/parallel.h"
 #include "inhand/geometry/primitives.h"
 
 namespace inhand {

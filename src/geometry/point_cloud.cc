@@ -7,7 +7,7 @@
 #include <tuple>
 
 #include "inhand/core/error.h"
-#include "inhand/core/parallel.h"
+#include "inhand/core/internal/parallel.h"
 #include "inhand/core/random.h"
 
 namespace inhand {

@@ -4,8 +4,8 @@
 #include <map>
 
 #include "inhand/core/error.h"
-#include "inhand/core/parallel.h"
-#include "inhand/geometry/contour.h"
+#include "inhand/core/internal/parallel.h"
+#include "inhand/geometry/internal/contour.h"
 
 namespace inhand {
 

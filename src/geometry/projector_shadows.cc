@@ -1,4 +1,4 @@
-#include "inhand/geometry/projector_shadows.h"
+#include "inhand/geometry/internal/projector_shadows.h"
 
 #include <algorithm>
 #include <cmath>

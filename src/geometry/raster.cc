@@ -1,9 +1,9 @@
-#include "inhand/geometry/raster.h"
+#include "inhand/geometry/internal/raster.h"
 
 #include <algorithm>
 #include <cmath>
 #if INHAND_RASTER_AVX2
-#include "inhand/core/fast_math.h"
+#include "inhand/core/internal/fast_math.h"
 #include "raster_avx2.h"
 #elif defined(__SSE2__)
 #include <emmintrin.h>

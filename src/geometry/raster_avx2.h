@@ -1,7 +1,7 @@
 #pragma once
 // Shared by the rasterisers' four-triangle set-ups (DepthRaster::drawFour,
 // ProjectorShadows::drawFour); private to the geometry module.
-#include "inhand/geometry/raster.h"
+#include "inhand/geometry/internal/raster.h"
 
 #if INHAND_RASTER_AVX2
 #include <immintrin.h>

@@ -6,8 +6,8 @@
 #include <mutex>
 
 #include "inhand/core/error.h"
-#include "inhand/core/fast_math.h"
-#include "inhand/core/parallel.h"
+#include "inhand/core/internal/fast_math.h"
+#include "inhand/core/internal/parallel.h"
 
 #include <tbb/task_arena.h>
 

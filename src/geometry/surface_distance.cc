@@ -4,7 +4,7 @@
 #include <cmath>
 
 #include "inhand/core/error.h"
-#include "inhand/core/parallel.h"
+#include "inhand/core/internal/parallel.h"
 #include "inhand/core/random.h"
 
 namespace inhand {

@@ -9,8 +9,8 @@
 #include <tuple>
 
 #include "inhand/core/error.h"
-#include "inhand/core/fast_math.h"
-#include "inhand/core/parallel.h"
+#include "inhand/core/internal/fast_math.h"
+#include "inhand/core/internal/parallel.h"
 #include "inhand/core/pose.h"
 #include "inhand/core/random.h"
 #include "inhand/geometry/primitives.h"

@@ -7,11 +7,25 @@
 #include <cstdio>
 #include <optional>
 
+#include "inhand/core/enum_names.h"
 #include "inhand/core/error.h"
-#include "inhand/core/parallel.h"
+#include "inhand/core/internal/parallel.h"
 #include "inhand/grasp/grasp.h"
 
 namespace inhand {
+
+namespace {
+const EnumNames<HoldFailure, 5> kHoldFailures = {{HoldFailure::kNone, ""},
+                                                 {HoldFailure::kNotTouching, "not_touching"},
+                                                 {HoldFailure::kDroppedInLift, "dropped_in_lift"},
+                                                 {HoldFailure::kDroppedInTurn, "dropped_in_turn"},
+                                                 {HoldFailure::kSlipped, "slipped"}};
+}  // namespace
+
+const char* holdFailureName(HoldFailure f) { return enumName(kHoldFailures, f); }
+bool parseHoldFailure(const std::string& name, HoldFailure* out) {
+  return enumFromName(kHoldFailures, name, out);
+}
 
 std::string HoldTestOptions::validate() const {
   if (max_candidates < 1) return "max_candidates must be >= 1";
@@ -50,12 +64,20 @@ std::vector<ConvexPiece> modelPiecesAboveTable(const TriangleMesh& model_O, cons
   return out;
 }
 
-int holdStage(const std::string& failure) {
-  if (failure.empty()) return 4;
-  if (failure == "slipped") return 3;
-  if (failure == "dropped_in_turn") return 2;
-  if (failure == "dropped_in_lift") return 1;
-  return 0;  // not_touching
+int holdStage(HoldFailure failure) {
+  switch (failure) {
+    case HoldFailure::kNone:
+      return 4;
+    case HoldFailure::kSlipped:
+      return 3;
+    case HoldFailure::kDroppedInTurn:
+      return 2;
+    case HoldFailure::kDroppedInLift:
+      return 1;
+    case HoldFailure::kNotTouching:
+      break;
+  }
+  return 0;
 }
 
 namespace {
@@ -98,7 +120,7 @@ HoldTrial tryHold(PhysicsWorld& world, const Iso3& T_B_O, const Iso3& T_O_palm,
   world.reset(T_B_O, T_B_palm, q_open);
   world.closeHand(q_closed);
   if (!world.objectTouchesHand()) {
-    t.failure = "not_touching";
+    t.failure = HoldFailure::kNotTouching;
     return t;
   }
   const Iso3 grip = world.palmPose().inverse() * world.objectPose();
@@ -109,7 +131,7 @@ HoldTrial tryHold(PhysicsWorld& world, const Iso3& T_B_O, const Iso3& T_O_palm,
   const Iso3 start = world.palmPose();
   if (!movePalmHolding(world, start, Vec3(0, 0, o.lift_m), Eigen::AngleAxisd(0, Vec3::UnitX()),
                        start.translation(), o.lift_s)) {
-    t.failure = "dropped_in_lift";
+    t.failure = HoldFailure::kDroppedInLift;
     t.slip_m = slip();
     return t;
   }
@@ -126,14 +148,15 @@ HoldTrial tryHold(PhysicsWorld& world, const Iso3& T_B_O, const Iso3& T_O_palm,
   if (!movePalmHolding(world, lifted, Vec3::Zero(),
                        Eigen::AngleAxisd(o.turn_rad, axis.normalized()),
                        world.objectPose().translation(), o.turn_s)) {
-    t.failure = "dropped_in_turn";
+    t.failure = HoldFailure::kDroppedInTurn;
     t.slip_m = slip();
     return t;
   }
   world.movePalm(world.palmPose(), 0.3);
   t.slip_m = slip();
   t.held = world.objectTouchesHand() && t.slip_m <= o.max_slip_m;
-  if (!t.held) t.failure = world.objectTouchesHand() ? "slipped" : "dropped_in_turn";
+  if (!t.held)
+    t.failure = world.objectTouchesHand() ? HoldFailure::kSlipped : HoldFailure::kDroppedInTurn;
   return t;
 }
 

@@ -5,8 +5,8 @@
 #include <cmath>
 #include <cstring>
 
-#include "inhand/core/parallel.h"
-#include "inhand/geometry/contour.h"
+#include "inhand/core/internal/parallel.h"
+#include "inhand/geometry/internal/contour.h"
 
 namespace inhand {
 

@@ -5,10 +5,10 @@
 #include <optional>
 
 #include "inhand/core/error.h"
-#include "inhand/core/fast_math.h"
-#include "inhand/core/parallel.h"
+#include "inhand/core/internal/fast_math.h"
+#include "inhand/core/internal/parallel.h"
+#include "inhand/geometry/internal/projector_shadows.h"
 #include "inhand/geometry/primitives.h"
-#include "inhand/geometry/projector_shadows.h"
 
 namespace inhand {
 

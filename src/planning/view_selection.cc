@@ -7,7 +7,7 @@
 #include <cmath>
 
 #include "inhand/core/error.h"
-#include "inhand/core/parallel.h"
+#include "inhand/core/internal/parallel.h"
 #include "inhand/core/pose.h"
 #include "inhand/core/random.h"
 #include "inhand/geometry/primitives.h"

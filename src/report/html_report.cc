@@ -6,8 +6,8 @@
 
 #include "inhand/core/error.h"
 #include "inhand/core/file_util.h"
+#include "inhand/core/internal/parallel.h"
 #include "inhand/core/json_util.h"
-#include "inhand/core/parallel.h"
 #include "inhand/geometry/mesh_io.h"
 
 namespace inhand {

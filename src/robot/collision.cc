@@ -8,7 +8,7 @@
 #include <set>
 
 #include "inhand/core/error.h"
-#include "inhand/geometry/box_overlap.h"
+#include "inhand/geometry/internal/box_overlap.h"
 #include "inhand/geometry/primitives.h"
 
 namespace inhand {

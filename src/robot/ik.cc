@@ -8,7 +8,7 @@
 #include <Eigen/Cholesky>
 
 #include "inhand/core/error.h"
-#include "inhand/core/parallel.h"
+#include "inhand/core/internal/parallel.h"
 
 namespace inhand {
 

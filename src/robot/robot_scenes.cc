@@ -6,9 +6,9 @@
 #include <cmath>
 
 #include "inhand/core/error.h"
-#include "inhand/core/parallel.h"
+#include "inhand/core/internal/parallel.h"
+#include "inhand/geometry/internal/raster.h"
 #include "inhand/geometry/primitives.h"
-#include "inhand/geometry/raster.h"
 
 namespace inhand {
 

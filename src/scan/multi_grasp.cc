@@ -7,6 +7,7 @@
 #include <functional>
 #include <limits>
 
+#include "inhand/core/enum_names.h"
 #include "inhand/core/error.h"
 #include "inhand/core/pose.h"
 #include "inhand/geometry/stable_poses.h"
@@ -325,7 +326,7 @@ PickAttempt attemptOf(const GraspCandidate& c, int rank, const RobotModel& m) {
   return a;
 }
 
-struct PickOutcome {
+struct PickUp {
   std::optional<Iso3> achieved;
   std::optional<GraspCandidate> picked;  // a copy: the candidates it came from may be gone
   std::vector<PickAttempt> attempts;     // per candidate tried
@@ -334,13 +335,13 @@ struct PickOutcome {
   std::optional<Iso3> moved_to;
   bool lost = false;
 };
-PickOutcome pickAndVerify(ScanSession& session, RobotInterface& robot, DepthSensor& sensor,
-                          const Iso3& T_B_O_rest, const std::vector<Vec3>& points_O,
-                          const std::vector<GraspCandidate>& candidates, const ScanOptions& options,
-                          const std::function<void(const std::string&)>& log, int used = 0) {
+PickUp pickAndVerify(ScanSession& session, RobotInterface& robot, DepthSensor& sensor,
+                     const Iso3& T_B_O_rest, const std::vector<Vec3>& points_O,
+                     const std::vector<GraspCandidate>& candidates, const ScanOptions& options,
+                     const std::function<void(const std::string&)>& log, int used = 0) {
   const RobotModel& m = robot.model();
   const RobotOccluders scenes(m);
-  PickOutcome out;
+  PickUp out;
   const int budget = session.multiOptions().grasp.max_failed_pick_ups;
   // After a failed attempt that touched the object: is it still where it rested?
   auto stillThere = [&] {
@@ -365,19 +366,19 @@ PickOutcome pickAndVerify(ScanSession& session, RobotInterface& robot, DepthSens
       break;
     }
     PickAttempt attempt = attemptOf(c, int(rank), m);
-    auto record = [&](const char* outcome) {
+    auto record = [&](PickOutcome outcome) {
       attempt.outcome = outcome;
       out.attempts.push_back(attempt);
     };
     std::optional<Iso3> achieved = robot.pickUp(c.T_O_palm, c.q_open);
     if (!achieved) {
-      record("no_contact");
+      record(PickOutcome::kNoContact);
       log("pick-up failed (the hand met nothing there); trying the next candidate");
       continue;
     }
     if (fingersClosedOnNothing(m, robot.joints())) {
       robot.putDown();
-      record("empty_hand");
+      record(PickOutcome::kEmptyHand);
       log("the fingers closed on nothing; trying the next candidate");
       if (!stillThere()) break;
       continue;
@@ -395,12 +396,12 @@ PickOutcome pickAndVerify(ScanSession& session, RobotInterface& robot, DepthSens
     if (inHand > 0.5) attempt.shift_m = (achieved->translation() - c.T_O_palm.translation()).norm();
     if (!(inHand > 0.5) || onTable > 0.5) {
       robot.putDown();
-      record("dropped");
+      record(PickOutcome::kDropped);
       log("the grasp did not hold; trying the next candidate");
       if (!(onTable > 0.5) && !stillThere()) break;  // not seen where it rested: where is it?
       continue;
     }
-    record("picked");
+    record(PickOutcome::kPicked);
     out.achieved = achieved;
     out.picked = c;
     break;
@@ -420,7 +421,7 @@ GraspRecord graspEnded(GraspRecord rec, const ScanResult& all, int views, Termin
 }
 
 // The next grasp's record from the plan and the pick-up that achieved it.
-GraspRecord graspPicked(const GraspPlan& plan, const PickOutcome& pick,
+GraspRecord graspPicked(const GraspPlan& plan, const PickUp& pick,
                         const std::vector<PickAttempt>& attempts, int keep_ranked) {
   GraspRecord next;
   next.T_O_palm = *pick.achieved;
@@ -462,7 +463,7 @@ std::optional<Termination> regrasp(ScanSession& session, RobotInterface& robot, 
   // elsewhere after a failed attempt: planned again where it lies.
   const std::vector<Vec3> known_O = observedVertices(all.model);
   GraspPlan plan;
-  PickOutcome pick;
+  PickUp pick;
   std::vector<PickAttempt> attempts;
   for (;;) {
     plan = session.planGrasps(T_B_O_rest, robot.joints());
@@ -593,12 +594,12 @@ Json attemptsJson(const std::vector<PickAttempt>& attempts) {
   Json out = Json::array();
   for (const PickAttempt& a : attempts) {
     Json& e = out.emplace_back(
-        Json{{"outcome", a.outcome},
+        Json{{"outcome", pickOutcomeName(a.outcome)},
              {"rank", a.rank},
              {"pose", a.pose},
              {"hold_test", a.hold_test < 0 ? Json() : Json(a.hold_test == 1)},
              {"hold_margin", a.hold_margin < 0 ? Json() : Json(a.hold_margin == 1)},
-             {"hold_failure", a.hold_test == 0 ? Json(a.hold_failure) : Json()},
+             {"hold_failure", a.hold_test == 0 ? Json(holdFailureName(a.hold_failure)) : Json()},
              {"kind", a.palm_contact ? "enveloping" : "fingertips"},
              {"epsilon", a.epsilon},
              {"shift_in_hand_mm", a.shift_m < 0 ? Json() : Json(1000 * a.shift_m)}});
@@ -614,19 +615,27 @@ Json attemptsJson(const std::vector<PickAttempt>& attempts) {
 std::vector<PickAttempt> attemptsFrom(const Json& j) {
   if (!j.is_array()) throw Error("pick-up attempts: not a list");
   std::vector<PickAttempt> out;
+  auto outcome = [](const Json& name) {
+    PickOutcome o;
+    if (!parsePickOutcome(name.get<std::string>(), &o))
+      throw Error("pick-up attempts: unknown outcome \"" + name.get<std::string>() + "\"");
+    return o;
+  };
   for (const Json& e : j) {
     PickAttempt a;
     if (e.is_string()) {
-      a.outcome = e.get<std::string>();
+      a.outcome = outcome(e);
     } else {
-      a.outcome = e.at("outcome").get<std::string>();
+      a.outcome = outcome(e.at("outcome"));
       a.rank = e.at("rank").get<int>();
       a.pose = e.at("pose").get<int>();
       a.hold_test = e.at("hold_test").is_null() ? -1 : int(e.at("hold_test").get<bool>());
       const Json margin = e.value("hold_margin", Json());  // absent before the margin
       a.hold_margin = margin.is_null() ? -1 : int(margin.get<bool>());
       const Json failure = e.value("hold_failure", Json());  // absent before it was recorded
-      if (failure.is_string()) a.hold_failure = failure.get<std::string>();
+      if (failure.is_string() && !parseHoldFailure(failure.get<std::string>(), &a.hold_failure))
+        throw Error("pick-up attempts: unknown hold_failure \"" + failure.get<std::string>() +
+                    "\"");
       a.palm_contact = e.at("kind").get<std::string>() == "enveloping";
       a.epsilon = e.at("epsilon").get<double>();
       a.shift_m =
@@ -642,7 +651,19 @@ std::vector<PickAttempt> attemptsFrom(const Json& j) {
   return out;
 }
 
-int countOutcome(const std::vector<PickAttempt>& attempts, const std::string& outcome) {
+namespace {
+const EnumNames<PickOutcome, 4> kPickOutcomes = {{PickOutcome::kPicked, "picked"},
+                                                 {PickOutcome::kNoContact, "no_contact"},
+                                                 {PickOutcome::kEmptyHand, "empty_hand"},
+                                                 {PickOutcome::kDropped, "dropped"}};
+}  // namespace
+
+const char* pickOutcomeName(PickOutcome o) { return enumName(kPickOutcomes, o); }
+bool parsePickOutcome(const std::string& name, PickOutcome* out) {
+  return enumFromName(kPickOutcomes, name, out);
+}
+
+int countOutcome(const std::vector<PickAttempt>& attempts, PickOutcome outcome) {
   return int(std::count_if(attempts.begin(), attempts.end(),
                            [&](const PickAttempt& a) { return a.outcome == outcome; }));
 }
@@ -738,12 +759,11 @@ std::string recordFirstGrasps(const GraspGeneration& first, TableTopRecord* tt) 
 // The first pick-up from the table, the candidates in turn (their attempts into tt). Found
 // elsewhere after a failed attempt: candidates planned where it lies now (the table plane in
 // its frame moved with it; T_B_O_now follows it), the attempts left tried on them.
-PickOutcome pickFromTable(ScanSession& session, RobotInterface& robot, DepthSensor& sensor,
-                          const TableTopObject& object, const GraspGeneration& first,
-                          const std::vector<Vec3>& seen_O, const ScanOptions& options,
-                          Iso3& T_B_O_now, TableTopRecord* tt,
-                          const std::function<void(const std::string&)>& log) {
-  PickOutcome pick =
+PickUp pickFromTable(ScanSession& session, RobotInterface& robot, DepthSensor& sensor,
+                     const TableTopObject& object, const GraspGeneration& first,
+                     const std::vector<Vec3>& seen_O, const ScanOptions& options, Iso3& T_B_O_now,
+                     TableTopRecord* tt, const std::function<void(const std::string&)>& log) {
+  PickUp pick =
       pickAndVerify(session, robot, sensor, T_B_O_now, seen_O, first.candidates, options, log);
   tt->attempts = pick.attempts;
   TableTopObject there = object;
@@ -824,7 +844,7 @@ MultiGraspResult scanFromTable(RobotInterface& robot, DepthSensor& sensor, const
   std::vector<Vec3> seen_O;
   for (size_t k = 0; k < object.points_O.size(); k += 5) seen_O.push_back(object.points_O[k]);
   Iso3 T_B_O_now = T_B_O_rest;
-  const PickOutcome pick =
+  const PickUp pick =
       pickFromTable(session, robot, sensor, object, first, seen_O, options, T_B_O_now, &tt, log);
   if (!pick.achieved) {
     all.model = session.model();

@@ -5,7 +5,7 @@
 #include <cmath>
 
 #include "inhand/core/error.h"
-#include "inhand/core/parallel.h"
+#include "inhand/core/internal/parallel.h"
 
 namespace inhand {
 

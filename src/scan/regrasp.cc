@@ -8,7 +8,7 @@
 #include <limits>
 
 #include "inhand/core/error.h"
-#include "inhand/core/parallel.h"
+#include "inhand/core/internal/parallel.h"
 #include "inhand/core/pose.h"
 #include "inhand/geometry/stable_poses.h"
 #include "inhand/geometry/surface_distance.h"

@@ -7,9 +7,9 @@
 
 #include "inhand/core/clock.h"
 #include "inhand/core/error.h"
-#include "inhand/core/parallel.h"
+#include "inhand/core/internal/parallel.h"
 #include "inhand/core/pose.h"
-#include "inhand/geometry/raster.h"
+#include "inhand/geometry/internal/raster.h"
 #include "inhand/robot/collision.h"
 #include "inhand/scan/session.h"
 

@@ -15,12 +15,14 @@
 #include <limits>
 
 #include "inhand/core/clock.h"
+#include "inhand/core/enum_names.h"
 #include "inhand/core/error.h"
 #include "inhand/core/file_util.h"
+#include "inhand/core/internal/parallel.h"
 #include "inhand/core/json_util.h"
-#include "inhand/core/parallel.h"
 #include "inhand/core/pose.h"
 #include "inhand/robot/collision.h"
+#include "inhand/scan/records.h"
 #include "inhand/scan/registration.h"
 #include "inhand/sensor/render.h"
 
@@ -547,6 +549,7 @@ FrameReport ScanSession::fuse(const DepthImage& input, const JointVector& q, con
     if (std::string why = s.inKnownFreeSpace(depth, carve, T_O_C); !why.empty()) {
       FrameReport r;
       r.fused = false;
+      r.refusal = FrameRefusal::kInFreeSpace;
       r.rejected = why;
       return r;
     }
@@ -652,6 +655,41 @@ std::pair<int, int> ScanSession::State::supportIn(const DepthImage& depth,
   return {support, against};
 }
 
+namespace {
+const EnumNames<FrameRefusal, 8> kFrameRefusals = {
+    {FrameRefusal::kNone, ""},
+    {FrameRefusal::kDropped, "dropped"},
+    {FrameRefusal::kEmpty, "empty"},
+    {FrameRefusal::kOffPath, "off_path"},
+    {FrameRefusal::kObjectMoving, "object_moving"},
+    {FrameRefusal::kNotAligned, "not_aligned"},
+    {FrameRefusal::kObjectNotHeld, "object_not_held"},
+    {FrameRefusal::kInFreeSpace, "in_free_space"}};
+
+// The summary's counter of frames refused for `r`.
+int& refusalCount(ScanSession::Summary* m, FrameRefusal r) {
+  switch (r) {
+    case FrameRefusal::kDropped:
+    case FrameRefusal::kEmpty:
+      return m->frames_dropped;
+    case FrameRefusal::kOffPath:
+      return m->frames_off_path;
+    case FrameRefusal::kObjectMoving:
+      return m->frames_moving;
+    case FrameRefusal::kNotAligned:
+      return m->frames_rejected;
+    case FrameRefusal::kObjectNotHeld:
+      return m->frames_unsupported;
+    case FrameRefusal::kInFreeSpace:
+    case FrameRefusal::kNone:
+      break;
+  }
+  return m->frames_in_free_space;
+}
+}  // namespace
+
+const char* frameRefusalName(FrameRefusal r) { return enumName(kFrameRefusals, r); }
+
 FrameReport ScanSession::addFrame(const DepthImage& input, const JointVector& q,
                                   const Iso3& T_B_C) {
   if (!s_->holding) throw Error("addFrame: no grasp (beginGrasp first)");
@@ -660,12 +698,15 @@ FrameReport ScanSession::addFrame(const DepthImage& input, const JointVector& q,
   const RgbImage colour = std::exchange(s.nextColour, RgbImage());
   if (s.progress.frame_input) s.progress.frame_input(*this, input, q, T_B_C);
   const FrameChecks& fc = s.options.checks;
-  auto refuse = [&](const std::string& why, int* counter, const TrackResult* track = nullptr) {
-    ++*counter;
+  auto refuse = [&](FrameRefusal refusal, const std::string& why,
+                    const TrackResult* track = nullptr) {
+    ++refusalCount(&s.summary, refusal);
     FrameReport r;
     r.fused = false;
+    r.refusal = refusal;
     r.rejected = why;
     if (track) {
+      r.tracking_refusal = track->refusal;
       r.tracking_inliers = track->inliers;
       r.tracking_rms_m = track->rms_m;
     }
@@ -675,20 +716,20 @@ FrameReport ScanSession::addFrame(const DepthImage& input, const JointVector& q,
   };
   // What the sensor delivered: nothing, non-finite depths, too few returns.
   if (input.width == 0 && input.height == 0)
-    return refuse("no image (a dropped frame)", &s.summary.frames_dropped);
+    return refuse(FrameRefusal::kDropped, "no image (a dropped frame)");
   checkFrameSize(input, s.camera.intrinsics);
   const std::optional<DepthImage> repaired = withoutInvalidDepths(input);
   if (repaired) ++s.summary.frames_repaired;
   const DepthImage& depth = repaired ? *repaired : input;
   if (depth.validCount() < fc.min_valid_fraction * double(depth.depth_m.size()))
-    return refuse("an empty frame (" + std::to_string(depth.validCount()) + " depth pixels)",
-                  &s.summary.frames_dropped);
+    return refuse(FrameRefusal::kEmpty,
+                  "an empty frame (" + std::to_string(depth.validCount()) + " depth pixels)");
   // The reported joints must lie on the path the arm was sent along.
   if (fc.max_path_deviation_rad > 0 && s.viewOpen && s.viewPath.size() >= 2)
     if (const double off = s.offPath(q); off > fc.max_path_deviation_rad) {
       char why[160];
       std::snprintf(why, sizeof why, "joints %.3f rad off the planned path (a jump)", off);
-      return refuse(why, &s.summary.frames_off_path);
+      return refuse(FrameRefusal::kOffPath, why);
     }
   Iso3 T_B_C_used = T_B_C;
   TrackResult track;
@@ -698,8 +739,8 @@ FrameReport ScanSession::addFrame(const DepthImage& input, const JointVector& q,
     const Iso3 T_C_held = tracked ? Iso3(tracked->inverse() * s.model->tipPose(q))
                                   : Iso3(T_B_C.inverse() * s.model->tipPose(q) * s.correction);
     if (std::string why = followSlip(depth, q, T_B_C, T_C_held); !why.empty())
-      return refuse(why, &s.summary.frames_moving);
-    if (!tracked) return refuse(track.reason, &s.summary.frames_rejected, &track);
+      return refuse(FrameRefusal::kObjectMoving, why);
+    if (!tracked) return refuse(FrameRefusal::kNotAligned, track.reason, &track);
     T_B_C_used = *tracked;
     const Iso3 T_C_palm = T_B_C.inverse() * s.model->tipPose(q);
     s.correction = T_C_palm.inverse() * track.correction * T_C_palm;
@@ -709,7 +750,7 @@ FrameReport ScanSession::addFrame(const DepthImage& input, const JointVector& q,
       !why.empty()) {
     if (++s.unsupportedStreak >= fc.lost_after)
       finish(Termination::kObjectLost, "in-hand frames stopped showing the object");
-    return refuse(why, &s.summary.frames_unsupported);
+    return refuse(FrameRefusal::kObjectNotHeld, why);
   }
   // With tracking, the robot as the frame shows it: the joint offsets that put the palm where
   // the frame says (armOffsetsFromPalmError) place the other links too, for the robot's pixels
@@ -722,7 +763,7 @@ FrameReport ScanSession::addFrame(const DepthImage& input, const JointVector& q,
   const Iso3 T_O_B = s.T_O_palm * s.model->tipPose(qSeen).inverse();
   FrameReport r = fuse(depth, qSeen, T_B_C_seen, T_O_B, nullptr, true,
                        s.options.hand_mode != HandMode::kNaive, colour);
-  if (!r.fused) return refuse(r.rejected, &s.summary.frames_in_free_space);
+  if (!r.fused) return refuse(r.refusal, r.rejected);
   r.T_B_C = T_B_C_used;  // the camera relative to the palm at the reported joints
   r.tracking_inliers = track.inliers;
   r.tracking_hand_inliers = track.hand_inliers;
@@ -1276,24 +1317,6 @@ Json torqueJson(const TorqueReading& r) {
           {"samples", r.samples},
           {"scatter_nm2", r.scatter_nm2}};
 }
-Json checkpointViewJson(const ViewRecord& r, int grasp) {
-  return {{"grasp", grasp},
-          {"initial", r.initial},
-          {"dir_O", vecJson(r.dir_O)},
-          {"T_O_C", isoJson(r.T_O_C)},
-          {"quality", r.quality},
-          {"gain", r.gain},
-          {"t_q", r.t_q},
-          {"unresolved", r.unresolved},
-          {"cost_s", r.cost_s},
-          {"score", r.score},
-          {"mean_entropy", r.mean_entropy},
-          {"observed_fraction", r.observed_fraction},
-          {"coverage", r.coverage},
-          {"frames", r.frames},
-          {"candidates", r.candidates},
-          {"planning_s", r.planning_s}};
-}
 Json checkpointSummaryJson(const ScanSession::Summary& m) {
   return {{"termination", terminationName(m.termination)},
           {"message", m.message},
@@ -1348,8 +1371,11 @@ void ScanSession::save(const std::filesystem::path& path, const Json& extra) con
   h["tracking_from_full_model"] = s.trackingFromFull;
   h["unsupported_streak"] = s.unsupportedStreak;
   for (const TorqueReading& r : s.torqueReadings) h["torque_readings"].push_back(torqueJson(r));
-  for (size_t i = 0; i < s.views.size(); ++i)
-    h["views"].push_back(checkpointViewJson(s.views[i], s.viewGrasp[i]));
+  for (size_t i = 0; i < s.views.size(); ++i) {
+    Json v = viewRecordJson(s.views[i]);
+    v["grasp"] = s.viewGrasp[i];
+    h["views"].push_back(std::move(v));
+  }
   h["summary"] = checkpointSummaryJson(s.summary);
   if (!extra.is_null()) h["extra"] = extra;
   // The colours (camera.colour): after the voxels, one record per coloured voxel in index order
@@ -1422,27 +1448,6 @@ void readVolumeData(std::istream& f, const Json& h, TsdfVolume& v,
       (*colour)->sums()[size_t(index)] = {sums[0], sums[1], sums[2], sums[3]};
     }
   }
-}
-
-// One view of a checkpoint's "views" (as ScanSession::save writes it).
-ViewRecord viewRecordFrom(const Json& r) {
-  ViewRecord rec;
-  rec.initial = r.at("initial").get<bool>();
-  rec.dir_O = vecFrom(r.at("dir_O"));
-  rec.T_O_C = isoFrom(r.at("T_O_C"));
-  rec.quality = r.at("quality").get<double>();
-  rec.gain = numberOrNan(r.value("gain", Json()));
-  rec.t_q = numberOrNan(r.value("t_q", Json()));
-  rec.unresolved = r.value("unresolved", 0.0);
-  rec.cost_s = r.at("cost_s").get<double>();
-  rec.score = r.at("score").get<double>();
-  rec.mean_entropy = r.at("mean_entropy").get<double>();
-  rec.observed_fraction = r.at("observed_fraction").get<double>();
-  rec.coverage = r.at("coverage").get<double>();
-  rec.frames = r.at("frames").get<int>();
-  rec.candidates = r.at("candidates").get<int>();
-  rec.planning_s = r.at("planning_s").get<double>();
-  return rec;
 }
 
 // A checkpoint's "summary" counters and times (its termination aside).

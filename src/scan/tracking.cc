@@ -4,9 +4,20 @@
 #include <cmath>
 #include <limits>
 
-#include "inhand/core/parallel.h"
+#include "inhand/core/enum_names.h"
+#include "inhand/core/internal/parallel.h"
 
 namespace inhand {
+
+namespace {
+const EnumNames<TrackRefusal, 5> kTrackRefusals = {{TrackRefusal::kNone, ""},
+                                                   {TrackRefusal::kTooFewPoints, "too_few_points"},
+                                                   {TrackRefusal::kSeesThrough, "sees_through"},
+                                                   {TrackRefusal::kResidual, "residual"},
+                                                   {TrackRefusal::kCorrection, "correction"}};
+}  // namespace
+
+const char* trackRefusalName(TrackRefusal r) { return enumName(kTrackRefusals, r); }
 
 std::string TrackingOptions::validate() const {
   if (!(in_hand_significance >= 0)) return "in_hand_significance must be >= 0";
@@ -276,16 +287,21 @@ TrackResult alignFrom(const DepthImage& depth, const CameraIntrinsics& K,
   const double spread = std::max(r.rms_m, 0.5 * sigma);
   r.information = last.A / (spread * spread);
   const double moved = ((D * T_C_palm).translation() - T_C_palm.translation()).norm();
-  if (r.inliers < o.min_inliers)
+  if (r.inliers < o.min_inliers) {
+    r.refusal = TrackRefusal::kTooFewPoints;
     r.reason = "too few points to align (" + std::to_string(r.inliers) + ")";
-  else if (r.see_through * 10 > r.inliers)
+  } else if (r.see_through * 10 > r.inliers) {
+    r.refusal = TrackRefusal::kSeesThrough;
     r.reason = "the camera sees through " + std::to_string(r.see_through) + " aligned points";
-  else if (r.rms_m > o.max_rms_ratio * sigma)
+  } else if (r.rms_m > o.max_rms_ratio * sigma) {
+    r.refusal = TrackRefusal::kResidual;
     r.reason = "alignment residual " + std::to_string(r.rms_m * 1000) + " mm";
-  else if (moved > o.max_correction_m)
+  } else if (moved > o.max_correction_m) {
+    r.refusal = TrackRefusal::kCorrection;
     r.reason = "correction of " + std::to_string(moved * 100) + " cm";
-  else
+  } else {
     r.ok = true;
+  }
   return r;
 }
 

@@ -155,22 +155,22 @@ void writeFrameSet(const fs::path& dir, const FrameSet& set) {
   Json frames = Json::array();
   for (const FrameRecord& f : set.frames) {
     Json r = {{"file", f.file}};
-    if (f.has_T_O_C) r["T_O_C"] = poseToRowMajor(f.T_O_C);
+    if (f.has_T_O_C) r["T_O_C"] = isoJson(f.T_O_C);
     if (!f.q.empty()) {
       Json q = Json::object();
       for (const auto& [name, value] : f.q) q[name] = value;
       r["q"] = q;
     }
-    if (f.T_B_C) r["T_B_C"] = poseToRowMajor(*f.T_B_C);
-    if (f.T_O_palm) r["T_O_palm"] = poseToRowMajor(*f.T_O_palm);
+    if (f.T_B_C) r["T_B_C"] = isoJson(*f.T_B_C);
+    if (f.T_O_palm) r["T_O_palm"] = isoJson(*f.T_O_palm);
     if (!f.colour_file.empty()) r["colour"] = f.colour_file;
     frames.push_back(r);
   }
   j["frames"] = frames;
-  if (set.T_O_palm) j["T_O_palm"] = poseToRowMajor(*set.T_O_palm);
+  if (set.T_O_palm) j["T_O_palm"] = isoJson(*set.T_O_palm);
   if (set.colour.enabled) {
     j["colour_intrinsics"] = intrinsicsJson(set.colour.intrinsics);
-    j["T_D_RGB"] = poseToRowMajor(set.colour.T_D_RGB);
+    j["T_D_RGB"] = isoJson(set.colour.T_D_RGB);
   }
   if (set.bounds_O)
     j["bounds_O"] = {

@@ -3,8 +3,8 @@
 #include <algorithm>
 #include <cmath>
 
-#include "inhand/core/fast_math.h"
-#include "inhand/core/parallel.h"
+#include "inhand/core/internal/fast_math.h"
+#include "inhand/core/internal/parallel.h"
 #include "inhand/core/random.h"
 
 namespace inhand {

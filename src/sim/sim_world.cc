@@ -5,7 +5,7 @@
 #include <cmath>
 
 #include "inhand/core/error.h"
-#include "inhand/core/parallel.h"
+#include "inhand/core/internal/parallel.h"
 #include "inhand/core/pose.h"
 #include "inhand/core/random.h"
 #include "inhand/robot/collision.h"
@@ -602,24 +602,17 @@ std::pair<Iso3, JointVector> defaultGrasp(const RobotModel& model, const Triangl
 }
 
 namespace {
-Json jointsJson(const JointVector& q) {
-  Json j = Json::array();
-  for (int i = 0; i < q.size(); ++i) j.push_back(q[i]);
-  return j;
-}
 JointVector jointsFrom(const Json& j, int n) {
   if (!j.is_array() || int(j.size()) != n)
     throw Error("simulator state: joint vector of " + std::to_string(j.size()) + " values, the " +
                 "robot has " + std::to_string(n));
-  JointVector q(n);
-  for (int i = 0; i < n; ++i) q[i] = j.at(size_t(i)).get<double>();
-  return q;
+  return vectorFrom(j);
 }
 }  // namespace
 
 Json SimWorld::state() const {
-  return {{"q", jointsJson(q)},
-          {"joint_error", jointsJson(jointError)},
+  return {{"q", vectorJson(q)},
+          {"joint_error", vectorJson(jointError)},
           {"T_B_C", isoJson(T_B_C)},
           {"T_O_palm", isoJson(T_O_palm)},
           {"held", held},

@@ -4,7 +4,7 @@
 #include <cmath>
 #include <limits>
 
-#include "inhand/core/parallel.h"
+#include "inhand/core/internal/parallel.h"
 
 namespace inhand {
 

@@ -13,8 +13,8 @@
 #include <limits>
 
 #include "inhand/core/error.h"
-#include "inhand/core/fast_math.h"
-#include "inhand/core/parallel.h"
+#include "inhand/core/internal/fast_math.h"
+#include "inhand/core/internal/parallel.h"
 
 namespace inhand {
 

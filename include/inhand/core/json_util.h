@@ -20,12 +20,15 @@ double requireNumber(const Json& obj, const std::string& key, const std::string&
 int requireInt(const Json& obj, const std::string& key, const std::string& where);
 std::string requireString(const Json& obj, const std::string& key, const std::string& where);
 
-// Exact round trips for checkpoints: a pose as its 16 row-major numbers, a vector as 3.
+// Exact round trips (summary.json, checkpoints, frames.json): a pose as its 16 row-major
+// numbers, a vector as 3, a joint vector as its values.
 Json isoJson(const Iso3& T);
 Iso3 isoFrom(const Json& j);  // throws Json::exception on a malformed value
 Json vecJson(const Vec3& v);
 // A number, or NaN for null (nlohmann writes NaN as null); throws on anything else.
 double numberOrNan(const Json& j);
 Vec3 vecFrom(const Json& j);
+Json vectorJson(const Eigen::VectorXd& v);
+Eigen::VectorXd vectorFrom(const Json& j);  // throws Json::exception on a malformed value
 
 }  // namespace inhand

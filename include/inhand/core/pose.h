@@ -19,7 +19,7 @@ Iso3 lookAt(const Vec3& eye_W, const Vec3& target_W, const Vec3& up_W = Vec3::Un
 // *deviation (when given) reports.
 std::optional<Iso3> poseFromRowMajor(const std::array<double, 16>& m, std::string* why,
                                      double tol = 1e-2, double* deviation = nullptr);
-std::array<double, 16> poseToRowMajor(const Iso3& T);
+// (Written as JSON by isoJson, core/json_util.h.)
 
 // Re-orthonormalises the rotation part (nearest rotation, via SVD).
 Iso3 orthonormalized(const Iso3& T);

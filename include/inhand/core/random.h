@@ -7,7 +7,7 @@
 #include <random>
 #include <utility>
 
-#include "inhand/core/fast_math.h"
+#include "inhand/core/internal/fast_math.h"
 
 namespace inhand {
 

@@ -108,14 +108,14 @@ struct GraspCandidate {
   int links_in_contact = 0;   // fingers touching, plus one when the palm touches
   bool palm_contact = false;  // the palm touches (an enveloping grasp; else fingertips only)
   std::vector<Contact> contacts;
-  double epsilon = 0;        // stability
-  double quality = 0;        // best view quality Alg. 1 finds with the hand there
-  double score = 0;          // quality + stability_weight·ε
-  int reachable_views = 0;   // views Alg. 1 could reach with this grasp
-  int hold = -1;             // the hold test: 1 held, 0 did not, -1 not tested
-  std::string hold_failure;  // why it did not (HoldTrial::failure)
-  int hold_margin = -1;      // held also with the test's margin (1), not (0), not tried (-1)
-  int hold_robust = -1;      // held also with the model moved by the pose tolerance (1), not (0)
+  double epsilon = 0;       // stability
+  double quality = 0;       // best view quality Alg. 1 finds with the hand there
+  double score = 0;         // quality + stability_weight·ε
+  int reachable_views = 0;  // views Alg. 1 could reach with this grasp
+  int hold = -1;            // the hold test: 1 held, 0 did not, -1 not tested
+  HoldFailure hold_failure = HoldFailure::kNone;  // why it did not (HoldTrial::failure)
+  int hold_margin = -1;  // held also with the test's margin (1), not (0), not tried (-1)
+  int hold_robust = -1;  // held also with the model moved by the pose tolerance (1), not (0)
 };
 
 // What became of one candidate pose.

@@ -49,16 +49,25 @@ struct HoldTestOptions {
   std::string validate() const;
 };
 
+// How far a grasp got in the hold test when it did not hold (grasp/hold_test.h), in the order
+// of how far: the fingers closed and touched nothing, it fell in the lift, it fell in the turn,
+// it stayed in the hand but moved too far.
+enum class HoldFailure { kNone, kNotTouching, kDroppedInLift, kDroppedInTurn, kSlipped };
+// "", "not_touching", "dropped_in_lift", "dropped_in_turn", "slipped" (summary.json's names).
+const char* holdFailureName(HoldFailure f);
+// The name back (false: not one of them; "" is kNone).
+bool parseHoldFailure(const std::string& name, HoldFailure* out);
+
 struct HoldTrial {
-  bool held = false;    // still in the hand, moved at most max_slip_m
-  double slip_m = 0;    // how far the model moved in the hand (its centre, from the close)
-  double lift_kg = 0;   // the model's mass
-  std::string failure;  // "", "dropped_in_lift", "dropped_in_turn", "slipped", "not_touching"
+  bool held = false;   // still in the hand, moved at most max_slip_m
+  double slip_m = 0;   // how far the model moved in the hand (its centre, from the close)
+  double lift_kg = 0;  // the model's mass
+  HoldFailure failure = HoldFailure::kNone;
 };
 
 // How far a trial got: 4 held, 3 slipped (in the hand, moved too far), 2 dropped in the turn,
 // 1 dropped in the lift, 0 not touching after the close.
-int holdStage(const std::string& failure);
+int holdStage(HoldFailure failure);
 
 // The closed model (frame O) resting at T_B_O, as convex pieces of its part above the robot's
 // table top (the unobserved space below the top is not the object) and, when `keep_O` is given,

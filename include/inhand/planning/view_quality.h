@@ -12,7 +12,7 @@
 #include <string>
 #include <vector>
 
-#include "inhand/geometry/raster.h"
+#include "inhand/geometry/internal/raster.h"
 #include "inhand/geometry/ray_scene.h"
 #include "inhand/mesh/extract.h"
 #include "inhand/robot/collision.h"

@@ -65,6 +65,12 @@ struct TrackingOptions {
   std::string validate() const;
 };
 
+// Why an alignment was refused: too few points aligned, the camera sees through the aligned
+// points, the residual too large, the correction too large.
+enum class TrackRefusal { kNone, kTooFewPoints, kSeesThrough, kResidual, kCorrection };
+// "", "too_few_points", "sees_through", "residual", "correction".
+const char* trackRefusalName(TrackRefusal r);
+
 struct TrackResult {
   bool ok = false;
   // The correction ΔT in the camera frame: T_C_palm = ΔT · T_C_palm(predicted).
@@ -77,7 +83,8 @@ struct TrackResult {
   // camera frame (rotation vector, then translation): the final pairs' normal equations over the
   // residual's variance (max(rms, σ/2)²).
   Eigen::Matrix<double, 6, 6> information = Eigen::Matrix<double, 6, 6>::Zero();
-  std::string reason;  // why not ok
+  TrackRefusal refusal = TrackRefusal::kNone;  // why not ok
+  std::string reason;                          // … in words, with the figure
 };
 
 // Aligns `points_palm` (surface points with outward normals in the palm frame) with the depth

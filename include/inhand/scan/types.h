@@ -152,9 +152,30 @@ struct SlipRecord {
 Json slipsJson(const std::vector<SlipRecord>& slips);
 std::vector<SlipRecord> slipsFrom(const Json& j);
 
+// Why an in-hand frame was not fused (FrameReport::refusal), each counted in
+// ScanSession::Summary: no image (dropped) or too few depth pixels (empty), frames_dropped; the
+// joints off the planned path, frames_off_path; the object moving in the hand, frames_moving;
+// tracking could not align it, frames_rejected; the object not where the hand holds it,
+// frames_unsupported; depth where the model knows space is empty, frames_in_free_space.
+enum class FrameRefusal {
+  kNone,
+  kDropped,
+  kEmpty,
+  kOffPath,
+  kObjectMoving,
+  kNotAligned,
+  kObjectNotHeld,
+  kInFreeSpace
+};
+// "", "dropped", "empty", "off_path", "object_moving", "not_aligned", "object_not_held",
+// "in_free_space".
+const char* frameRefusalName(FrameRefusal r);
+
 // What one added frame did.
 struct FrameReport {
-  bool fused = true;  // false: tracking could not align it (not fused; `rejected` says why)
+  bool fused = true;  // false: not fused (`refusal` says why, `rejected` in words)
+  FrameRefusal refusal = FrameRefusal::kNone;
+  TrackRefusal tracking_refusal = TrackRefusal::kNone;  // the alignment's, when it refused
   std::string rejected;
   int pixels = 0;        // valid depth pixels
   int carve_pixels = 0;  // of those, only carving (the robot's own where the volume is in view,
@@ -204,18 +225,23 @@ struct TableTopOptions {
   std::string validate() const;
 };
 
+// What became of a pick-up attempt: it held after the lift (picked), the hand met nothing
+// (no_contact), the fingers closed on nothing (empty_hand), the lift's frame did not show it in
+// the hand (dropped).
+enum class PickOutcome { kPicked, kNoContact, kEmptyHand, kDropped };
+// "picked", "no_contact", "empty_hand", "dropped" (summary.json's and checkpoints' names).
+const char* pickOutcomeName(PickOutcome o);
+bool parsePickOutcome(const std::string& name, PickOutcome* out);  // false: not one of them
+
 // One pick-up attempt: the candidate tried and what became of it.
 struct PickAttempt {
-  // picked (it held after the lift), no_contact (the hand met nothing), empty_hand (the fingers
-  // closed on nothing), dropped (the lift's frame did not show it in the hand)
-  std::string outcome;
+  PickOutcome outcome = PickOutcome::kPicked;
   int rank = 0;          // the candidate's place in the ranking it was tried from (0: the first)
   int pose = -1;         // its index among the poses generated (GraspCandidate::pose)
   int hold_test = -1;    // the hold test's verdict on the model: 1 held, 0 not, -1 untested
   int hold_margin = -1;  // … and with its margin (GraspCandidate::hold_margin)
-  // Where it failed the hold test (HoldTrial::failure: dropped_in_lift, dropped_in_turn,
-  // slipped, not_touching; empty when it held or was not tested).
-  std::string hold_failure;
+  // Where it failed the hold test (HoldTrial::failure; kNone when it held or was not tested).
+  HoldFailure hold_failure = HoldFailure::kNone;
   bool palm_contact = false;  // enveloping (the palm touches) or fingertips only
   double epsilon = 0;         // its force-closure ε
   // After the lift: how far the object sat in the hand from the planned grasp (−1: not seen).
@@ -228,7 +254,7 @@ struct PickAttempt {
 Json attemptsJson(const std::vector<PickAttempt>& attempts);
 // Throws Error on a malformed list; a list of outcome strings (older checkpoints) is read too.
 std::vector<PickAttempt> attemptsFrom(const Json& j);
-int countOutcome(const std::vector<PickAttempt>& attempts, const std::string& outcome);
+int countOutcome(const std::vector<PickAttempt>& attempts, PickOutcome outcome);
 
 // What the table-top stage saw and chose.
 struct TableTopRecord {

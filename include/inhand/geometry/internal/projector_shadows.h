@@ -18,7 +18,7 @@
 #include <vector>
 
 #include "inhand/core/error.h"
-#include "inhand/geometry/raster.h"
+#include "inhand/geometry/internal/raster.h"
 #include "inhand/geometry/triangle_mesh.h"
 
 namespace inhand {

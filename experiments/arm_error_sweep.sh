@@ -3,7 +3,7 @@
 # objects with three seeds, the simulated arm's error at 0, 0.5, 1, 2, 3 and 5 cm, with and without
 # tracking; the arm's error at the pick-ups too (2 cm, tracking on, the object's pose in the hand
 # registered or not); then the tables (docs/arm_error.md, .csv) and the plot (docs/arm_error.svg).
-# Usage: scripts/arm_error_sweep.sh [OUT]   (default out/arm_error; about 30 minutes on 2 cores)
+# Usage: experiments/arm_error_sweep.sh [OUT]   (default out/arm_error; about 30 minutes on 2 cores)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 out="${1:-out/arm_error}"
@@ -35,4 +35,4 @@ for inhand in false true; do
   run "g0.02_inhand${inhand}" \
     "{\"sim\": {\"arm_error_m\": 0.02, \"grasp_error\": true, \"frame_subsample\": $sub}, \"tracking\": {\"enabled\": true, \"in_hand\": $inhand}}"
 done
-/usr/bin/python3 scripts/arm_error_table.py "$out" docs
+/usr/bin/python3 experiments/arm_error_table.py "$out" docs

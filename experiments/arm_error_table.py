@@ -1,9 +1,9 @@
 #!/usr/bin/env python3
-"""Tabulates scripts/arm_error_sweep.sh: per arm error and tracking on/off, per object (mean over
+"""Tabulates experiments/arm_error_sweep.sh: per arm error and tracking on/off, per object (mean over
 seeds) and over all runs: model accuracy (mean, p95), coverage, the fused in-hand frames' palm
 error (median) and the frames tracking refused. Writes DOCS/arm_error.md, .csv and .svg.
 
-    /usr/bin/python3 scripts/arm_error_table.py OUT DOCS
+    /usr/bin/python3 experiments/arm_error_table.py OUT DOCS
 """
 import csv
 import glob
@@ -171,7 +171,7 @@ def main(out, docs):
         "the median the given distance from where the reported joints put it; with and without "
         "tracking. Means over objects and seeds; palm error: the fused in-hand "
         "frames' palm position against the true one (median per run, then the mean). Produced by "
-        "`scripts/arm_error_sweep.sh` (which runs `scripts/arm_error_table.py`); every run in "
+        "`experiments/arm_error_sweep.sh` (which runs `experiments/arm_error_table.py`); every run in "
         "[arm_error.csv](arm_error.csv) (and [arm_error_grasp.csv](arm_error_grasp.csv)).\n\n"
         "![accuracy against arm error](arm_error.svg)\n\n"
         + "\n".join(lines + glines) + "\n")

@@ -4,14 +4,14 @@
 # noise), fused at 2 mm voxels with band_sigmas 0 and raw depths (the full 8 mm band), band_sigmas
 # 2 and raw depths, and band_sigmas 2 with smoothed depths (the default), scored against its mesh
 # (`inhand compare`). Writes OUT.md (default docs/volume_band.md) and OUT.csv.
-# Usage: scripts/band_table.sh [OUT.md]   (the build must exist; meshes from ../shared/objects)
+# Usage: experiments/band_table.sh [OUT.md]   (the build must exist; meshes from ../shared/objects)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 out="${1:-docs/volume_band.md}"
 work="$(mktemp -d)"
 trap 'rm -rf "$work"' EXIT
 inhand=./build/inhand
-/usr/bin/python3 scripts/make_test_objects.py "$work/objects" > /dev/null
+/usr/bin/python3 experiments/make_test_objects.py "$work/objects" > /dev/null
 objects=()
 for n in 003_cracker_box 006_mustard_bottle 019_pitcher_base 025_mug 035_power_drill stanford_bunny; do
   [ -f "../shared/objects/$n.obj" ] && objects+=("../shared/objects/$n.obj")
@@ -51,7 +51,7 @@ echo "object,band_sigmas,smooth_depth,coverage,accuracy_mean_mm,accuracy_p95_mm,
 {
   echo "# Thin walls: the band behind each measurement"
   echo
-  echo "\`bash scripts/band_table.sh\`: each object rendered from 40 views all around at 0.7 m"
+  echo "\`bash experiments/band_table.sh\`: each object rendered from 40 views all around at 0.7 m"
   echo "(\`inhand render\`), fused at 2 mm voxels (\`inhand fuse --band-sigmas K --smooth-depth S\`),"
   echo "scored by \`inhand compare\` (coverage within 3 mm; accuracy of the observed surface). Each"
   echo "cell: the paper's full band on raw depths (K 0, S false) / the reach of 2σ behind the smoothed"

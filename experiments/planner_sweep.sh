@@ -3,7 +3,7 @@
 # from the table at default settings and with "initial_views": 1, every planner and seed; then
 # the table (docs/planner_eval.md, .csv) and the plots (docs/planner_curves.svg,
 # docs/planner_gain.svg).
-# Usage: scripts/planner_sweep.sh [OUT]   (default out/planners)
+# Usage: experiments/planner_sweep.sh [OUT]   (default out/planners)
 #   OBJECTS=spec,spec…  PLANNERS=…  SEEDS=N  CONFIGS="default initial1"
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -32,4 +32,4 @@ for config in ${CONFIGS:-initial1 default}; do
   fi
   echo "planner_sweep: $dir done"
 done
-/usr/bin/python3 scripts/planner_table.py "$out" docs
+/usr/bin/python3 experiments/planner_table.py "$out" docs

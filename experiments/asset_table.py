@@ -1,9 +1,9 @@
 #!/usr/bin/python3
-"""Tabulates the assets of a scan set run with SCAN_EXPORT (scripts/scan_set.sh): per object the
+"""Tabulates the assets of a scan set run with SCAN_EXPORT (experiments/scan_set.sh): per object the
 mass the arm weighed against the simulated truth, the centre of mass, the asset's volume against
 the true solid's, its convex pieces, and its grasp set (the grasps the scan tried, and the
 ranked ones that held the model in the hold test). Writes OUT/assets.md.
-Usage: scripts/asset_table.py OUT"""
+Usage: experiments/asset_table.py OUT"""
 import json
 import math
 import pathlib

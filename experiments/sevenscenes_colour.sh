@@ -2,7 +2,7 @@
 # Real Kinect RGB-D frames with colour (docs/colour.md): the 50 frames of ../shared/data/sevenscenes
 # written as frames.json (every frame, and 40 with every 5th held out), the 40 fused with their
 # colours by `inhand fuse` (1 cm voxels, the observed surface), and held-out frame 24 shown beside
-# the model rendered from its camera. Usage: scripts/sevenscenes_colour.sh [OUT] (default
+# the model rendered from its camera. Usage: experiments/sevenscenes_colour.sh [OUT] (default
 # out/sevenscenes; the build must exist).
 set -euo pipefail
 cd "$(dirname "$0")/.."

@@ -2,11 +2,11 @@
 # Closing the loop on the scan set (docs/asset.md): for every run of a scan_set.sh directory, the
 # asset exported from it (`inhand export`), then `inhand regrasp-test` with the true object resting
 # in another stable pose than the scan's (the next one; turned 30° about the vertical). Writes
-# OUT/regrasp/NAME/{asset,report.json,log} and OUT/regrasp.md (scripts/regrasp_table.py).
-# Usage: scripts/regrasp_set.sh OUT   (OUT: a scan_set.sh output directory; the build must exist)
+# OUT/regrasp/NAME/{asset,report.json,log} and OUT/regrasp.md (experiments/regrasp_table.py).
+# Usage: experiments/regrasp_set.sh OUT   (OUT: a scan_set.sh output directory; the build must exist)
 set -uo pipefail
 cd "$(dirname "$0")/.."
-out="${1:?usage: scripts/regrasp_set.sh SCAN_SET_OUT}"
+out="${1:?usage: experiments/regrasp_set.sh SCAN_SET_OUT}"
 bin="$out/bin/inhand-regrasp"
 cp build/inhand "$bin"  # the build may change while this runs
 for run in "$out"/runs/*/; do
@@ -31,4 +31,4 @@ print(s["object"], p, r.get("stable_poses", 1))' "$run/summary.json")
     --out "$dir/report.json" > "$dir/log" 2>&1
   echo "regrasp_set: $name (scanned in pose $pose, tested in $test_pose) exit $?"
 done
-/usr/bin/python3 scripts/regrasp_table.py "$out"
+/usr/bin/python3 experiments/regrasp_table.py "$out"

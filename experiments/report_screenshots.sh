@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # PNG screenshots of an inhand report in headless Chromium: the 3-D model view and the per-view
 # curves (and the ranked grasps when the scan re-grasped).
-#   scripts/report_screenshots.sh DIR/report.html OUT_PREFIX   →  OUT_PREFIX_model.png, …
+#   experiments/report_screenshots.sh DIR/report.html OUT_PREFIX   →  OUT_PREFIX_model.png, …
 set -euo pipefail
 report="$(realpath "$1")"
 prefix="$2"

@@ -2,7 +2,7 @@
 # Colour accuracy table (docs/colour.md): every textured mesh in ../shared/objects/textured and
 # the built-in objects (2 cm checkerboard) scanned autonomously from the table with the colour
 # camera on, as configured (shading and noise on), and with shading and noise off. Writes
-# OUT/results.md. Usage: scripts/colour_table.sh [OUT]   (default out/colour; the build must exist)
+# OUT/results.md. Usage: experiments/colour_table.sh [OUT]   (default out/colour; the build must exist)
 set -uo pipefail
 cd "$(dirname "$0")/.."
 out="${1:-out/colour}"

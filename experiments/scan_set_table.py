@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""Tabulates scripts/scan_set.sh runs: OUT/results.md and OUT/results.csv."""
+"""Tabulates experiments/scan_set.sh runs: OUT/results.md and OUT/results.csv."""
 import csv
 import json
 import os

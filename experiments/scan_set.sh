@@ -1,13 +1,13 @@
 #!/usr/bin/env bash
 # The grasping test set: every mesh in ../shared/objects in its most probable resting poses
-# (REST_POSES, default "0 1") and the procedural objects of scripts/make_test_objects.py (flat
+# (REST_POSES, default "0 1") and the procedural objects of experiments/make_test_objects.py (flat
 # box, long thin ellipsoid, bowl, bottle, ring, L-bracket, cup, marker, pen, remote-like box,
 # small flat hammer) in their most probable pose,
 # each scanned from the table with default options. Writes OUT/results.md and OUT/results.csv
 # (first grasp made, grasps, views, coverage, accuracy, seconds, termination) as runs finish.
-# Usage: scripts/scan_set.sh [OUT]   (default out/scan_set; the build must exist)
+# Usage: experiments/scan_set.sh [OUT]   (default out/scan_set; the build must exist)
 # SCAN_CONFIG=FILE adds `--config FILE` to every scan (e.g. physics on: docs/physics.md).
-# SCAN_EXPORT=mjcf,urdf adds `--export mjcf,urdf` (each run's asset; scripts/asset_table.py OUT
+# SCAN_EXPORT=mjcf,urdf adds `--export mjcf,urdf` (each run's asset; experiments/asset_table.py OUT
 # tabulates them: docs/asset.md).
 set -uo pipefail
 cd "$(dirname "$0")/.."
@@ -18,7 +18,7 @@ cp build/inhand "$out/bin/inhand"  # the build may change while this runs
 config=()
 [ -n "${SCAN_CONFIG:-}" ] && config=(--config "$SCAN_CONFIG")
 [ -n "${SCAN_EXPORT:-}" ] && config+=(--export "$SCAN_EXPORT")
-/usr/bin/python3 scripts/make_test_objects.py "$out/objects"
+/usr/bin/python3 experiments/make_test_objects.py "$out/objects"
 objects=()
 for f in "$out"/objects/*.obj; do objects+=("$f:0"); done
 if [ -d ../shared/objects ]; then
@@ -42,6 +42,6 @@ for entry in "${objects[@]}"; do
   end=$(date +%s)
   echo "$((end - start))" > "$out/runs/$name.seconds"
   echo "scan_set: $name exit $(cat "$out/runs/$name.status")"
-  /usr/bin/python3 scripts/scan_set_table.py "$out"
+  /usr/bin/python3 experiments/scan_set_table.py "$out"
 done
-/usr/bin/python3 scripts/scan_set_table.py "$out"
+/usr/bin/python3 experiments/scan_set_table.py "$out"

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Tabulates scripts/regrasp_set.sh's reports: OUT/regrasp/*/report.json -> OUT/regrasp.md."""
+"""Tabulates experiments/regrasp_set.sh's reports: OUT/regrasp/*/report.json -> OUT/regrasp.md."""
 import json
 import pathlib
 import sys
