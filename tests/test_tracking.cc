@@ -109,7 +109,7 @@ TEST(Tracking, FollowsTheHandThroughAScanWithTwoCentimetresOfArmError) {
   sensor.setPose(lookAt(wam().camera().panTilt_B, wam().camera().panTilt_B + Vec3(0, 3, 0)));
   const FrameReport away = s.addFrame(sensor.capture(), robot.joints(), sensor.pose());
   EXPECT_FALSE(away.fused);
-  EXPECT_EQ(away.refusal, FrameRefusal::kNotAligned) << away.rejected;
+  EXPECT_EQ(away.refusal, FrameRefusal::kTracking) << away.rejected;
   EXPECT_EQ(away.tracking_refusal, TrackRefusal::kTooFewPoints) << away.rejected;
   EXPECT_EQ(s.summary().frames, 0);
   EXPECT_EQ(s.summary().frames_rejected, 1);

@@ -23,6 +23,7 @@
 #include "inhand/report/snapshot.h"
 #include "inhand/robot/collision.h"
 #include "inhand/robot/reachability.h"
+#include "inhand/scan/records.h"
 #include "inhand/scan/session.h"
 #include "inhand/sensor/frame_set.h"
 #include "inhand/sensor/render.h"
@@ -302,15 +303,6 @@ void robotFrames(const RobotModel& model, const FrameSet& set, const std::string
     qs->push_back(jointsOf(model, rec, where));
     palms->push_back(rec.T_O_palm ? *rec.T_O_palm : *set.T_O_palm);
   }
-}
-
-// Why frames were not fused, by reason (fuse --robot's summary "frames_not_fused").
-Json framesNotFusedJson(const ScanSession::Summary& sum) {
-  return {{"tracking", sum.frames_rejected},
-          {"dropped_or_empty", sum.frames_dropped},
-          {"object_not_in_hand", sum.frames_unsupported},
-          {"in_known_free_space", sum.frames_in_free_space},
-          {"object_moving_in_hand", sum.frames_moving}};
 }
 
 // frames_tracked.json beside the model; when it cannot be written, the model and its summary

@@ -375,12 +375,7 @@ Json scanSummary(const ScanArgs& args, const ScanConfig& o, const SimulatedScan&
   summary["in_hand_frames"] = {{"fused", sim.frames_fused_in_hand},
                                {"not_fused", sim.frames_rejected}};
   summary["tracking"] = trackingJson(o, sim);
-  summary["frames_not_fused"] = {{"tracking", r.frames_rejected},
-                                 {"dropped_or_empty", r.frames_dropped},
-                                 {"off_path", r.frames_off_path},
-                                 {"object_not_in_hand", r.frames_unsupported},
-                                 {"in_known_free_space", r.frames_in_free_space},
-                                 {"object_moving_in_hand", r.frames_moving}};
+  summary["frames_not_fused"] = framesNotFusedJson(r);
   summary["frames_repaired"] = r.frames_repaired;
   summary["slips_found"] = slipsJson(r.slips);
   summary["object_drops"] = sim.drops;

@@ -549,7 +549,7 @@ FrameReport ScanSession::fuse(const DepthImage& input, const JointVector& q, con
     if (std::string why = s.inKnownFreeSpace(depth, carve, T_O_C); !why.empty()) {
       FrameReport r;
       r.fused = false;
-      r.refusal = FrameRefusal::kInFreeSpace;
+      r.refusal = FrameRefusal::kInKnownFreeSpace;
       r.rejected = why;
       return r;
     }
@@ -656,35 +656,27 @@ std::pair<int, int> ScanSession::State::supportIn(const DepthImage& depth,
 }
 
 namespace {
-const EnumNames<FrameRefusal, 8> kFrameRefusals = {
+const EnumNames<FrameRefusal, 7> kFrameRefusals = {
     {FrameRefusal::kNone, ""},
-    {FrameRefusal::kDropped, "dropped"},
-    {FrameRefusal::kEmpty, "empty"},
+    {FrameRefusal::kDroppedOrEmpty, "dropped_or_empty"},
     {FrameRefusal::kOffPath, "off_path"},
-    {FrameRefusal::kObjectMoving, "object_moving"},
-    {FrameRefusal::kNotAligned, "not_aligned"},
-    {FrameRefusal::kObjectNotHeld, "object_not_held"},
-    {FrameRefusal::kInFreeSpace, "in_free_space"}};
+    {FrameRefusal::kObjectMovingInHand, "object_moving_in_hand"},
+    {FrameRefusal::kTracking, "tracking"},
+    {FrameRefusal::kObjectNotInHand, "object_not_in_hand"},
+    {FrameRefusal::kInKnownFreeSpace, "in_known_free_space"}};
 
-// The summary's counter of frames refused for `r`.
-int& refusalCount(ScanSession::Summary* m, FrameRefusal r) {
-  switch (r) {
-    case FrameRefusal::kDropped:
-    case FrameRefusal::kEmpty:
-      return m->frames_dropped;
-    case FrameRefusal::kOffPath:
-      return m->frames_off_path;
-    case FrameRefusal::kObjectMoving:
-      return m->frames_moving;
-    case FrameRefusal::kNotAligned:
-      return m->frames_rejected;
-    case FrameRefusal::kObjectNotHeld:
-      return m->frames_unsupported;
-    case FrameRefusal::kInFreeSpace:
-    case FrameRefusal::kNone:
-      break;
+// The report of a frame not fused (with the alignment's figures when tracking refused it).
+FrameReport refusedFrame(FrameRefusal refusal, const std::string& why, const TrackResult* track) {
+  FrameReport r;
+  r.fused = false;
+  r.refusal = refusal;
+  r.rejected = why;
+  if (track) {
+    r.tracking_refusal = track->refusal;
+    r.tracking_inliers = track->inliers;
+    r.tracking_rms_m = track->rms_m;
   }
-  return m->frames_in_free_space;
+  return r;
 }
 }  // namespace
 
@@ -700,29 +692,21 @@ FrameReport ScanSession::addFrame(const DepthImage& input, const JointVector& q,
   const FrameChecks& fc = s.options.checks;
   auto refuse = [&](FrameRefusal refusal, const std::string& why,
                     const TrackResult* track = nullptr) {
-    ++refusalCount(&s.summary, refusal);
-    FrameReport r;
-    r.fused = false;
-    r.refusal = refusal;
-    r.rejected = why;
-    if (track) {
-      r.tracking_refusal = track->refusal;
-      r.tracking_inliers = track->inliers;
-      r.tracking_rms_m = track->rms_m;
-    }
+    ++refusedFrames(s.summary, refusal);
     log("frame not fused: " + why);
+    const FrameReport r = refusedFrame(refusal, why, track);
     if (s.progress.frame) s.progress.frame(r, q, T_B_C);
     return r;
   };
   // What the sensor delivered: nothing, non-finite depths, too few returns.
   if (input.width == 0 && input.height == 0)
-    return refuse(FrameRefusal::kDropped, "no image (a dropped frame)");
+    return refuse(FrameRefusal::kDroppedOrEmpty, "no image (a dropped frame)");
   checkFrameSize(input, s.camera.intrinsics);
   const std::optional<DepthImage> repaired = withoutInvalidDepths(input);
   if (repaired) ++s.summary.frames_repaired;
   const DepthImage& depth = repaired ? *repaired : input;
   if (depth.validCount() < fc.min_valid_fraction * double(depth.depth_m.size()))
-    return refuse(FrameRefusal::kEmpty,
+    return refuse(FrameRefusal::kDroppedOrEmpty,
                   "an empty frame (" + std::to_string(depth.validCount()) + " depth pixels)");
   // The reported joints must lie on the path the arm was sent along.
   if (fc.max_path_deviation_rad > 0 && s.viewOpen && s.viewPath.size() >= 2)
@@ -739,8 +723,8 @@ FrameReport ScanSession::addFrame(const DepthImage& input, const JointVector& q,
     const Iso3 T_C_held = tracked ? Iso3(tracked->inverse() * s.model->tipPose(q))
                                   : Iso3(T_B_C.inverse() * s.model->tipPose(q) * s.correction);
     if (std::string why = followSlip(depth, q, T_B_C, T_C_held); !why.empty())
-      return refuse(FrameRefusal::kObjectMoving, why);
-    if (!tracked) return refuse(FrameRefusal::kNotAligned, track.reason, &track);
+      return refuse(FrameRefusal::kObjectMovingInHand, why);
+    if (!tracked) return refuse(FrameRefusal::kTracking, track.reason, &track);
     T_B_C_used = *tracked;
     const Iso3 T_C_palm = T_B_C.inverse() * s.model->tipPose(q);
     s.correction = T_C_palm.inverse() * track.correction * T_C_palm;
@@ -750,7 +734,7 @@ FrameReport ScanSession::addFrame(const DepthImage& input, const JointVector& q,
       !why.empty()) {
     if (++s.unsupportedStreak >= fc.lost_after)
       finish(Termination::kObjectLost, "in-hand frames stopped showing the object");
-    return refuse(FrameRefusal::kObjectNotHeld, why);
+    return refuse(FrameRefusal::kObjectNotInHand, why);
   }
   // With tracking, the robot as the frame shows it: the joint offsets that put the palm where
   // the frame says (armOffsetsFromPalmError) place the other links too, for the robot's pixels

@@ -19,6 +19,15 @@ Json graspRecordJson(const GraspRecord& g);
 // The record without its model; throws Json::exception or Error on a malformed record.
 GraspRecord graspRecordFrom(const Json& j);
 
+// In-hand frames not fused, by reason (summary.json's frames_not_fused): each FrameRefusal's
+// name and count in a record that keeps them (ScanSession::Summary, ScanResult).
+template <class Counts>
+Json framesNotFusedJson(const Counts& c) {
+  Json j = Json::object();
+  for (FrameRefusal r : kEveryFrameRefusal) j[frameRefusalName(r)] = refusedFrames(c, r);
+  return j;
+}
+
 // frames, points, table_inliers, object_points, table_plane_O (n, d), centroid_O,
 // principal_axes (axis_O, extent_m, variance_m2, min_m, max_m), grasp_poses_tried, …_touching,
 // …_stable, …_table_free, …_reachable, grasp_rejected (counts per reason, written only),

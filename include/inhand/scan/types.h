@@ -152,24 +152,47 @@ struct SlipRecord {
 Json slipsJson(const std::vector<SlipRecord>& slips);
 std::vector<SlipRecord> slipsFrom(const Json& j);
 
-// Why an in-hand frame was not fused (FrameReport::refusal), each counted in
-// ScanSession::Summary: no image (dropped) or too few depth pixels (empty), frames_dropped; the
-// joints off the planned path, frames_off_path; the object moving in the hand, frames_moving;
-// tracking could not align it, frames_rejected; the object not where the hand holds it,
-// frames_unsupported; depth where the model knows space is empty, frames_in_free_space.
+// Why an in-hand frame was not fused (FrameReport::refusal): no image or too few depth pixels,
+// the joints off the planned path, the object moving in the hand, tracking could not align it,
+// the object not where the hand holds it, depth where the model knows space is empty.
 enum class FrameRefusal {
   kNone,
-  kDropped,
-  kEmpty,
+  kDroppedOrEmpty,
   kOffPath,
-  kObjectMoving,
-  kNotAligned,
-  kObjectNotHeld,
-  kInFreeSpace
+  kObjectMovingInHand,
+  kTracking,
+  kObjectNotInHand,
+  kInKnownFreeSpace
 };
-// "", "dropped", "empty", "off_path", "object_moving", "not_aligned", "object_not_held",
-// "in_free_space".
+inline constexpr FrameRefusal kEveryFrameRefusal[] = {
+    FrameRefusal::kTracking,         FrameRefusal::kDroppedOrEmpty,
+    FrameRefusal::kOffPath,          FrameRefusal::kObjectNotInHand,
+    FrameRefusal::kInKnownFreeSpace, FrameRefusal::kObjectMovingInHand};
+// "", "dropped_or_empty", "off_path", "object_moving_in_hand", "tracking", "object_not_in_hand",
+// "in_known_free_space": the keys of summary.json's frames_not_fused.
 const char* frameRefusalName(FrameRefusal r);
+// The counter of frames refused for `r` in a record that keeps them (ScanSession::Summary,
+// ScanResult): frames_dropped, frames_off_path, frames_moving, frames_rejected (tracking),
+// frames_unsupported, frames_in_free_space.
+template <class Counts>
+auto& refusedFrames(Counts& c, FrameRefusal r) {
+  switch (r) {
+    case FrameRefusal::kDroppedOrEmpty:
+      return c.frames_dropped;
+    case FrameRefusal::kOffPath:
+      return c.frames_off_path;
+    case FrameRefusal::kObjectMovingInHand:
+      return c.frames_moving;
+    case FrameRefusal::kTracking:
+      return c.frames_rejected;
+    case FrameRefusal::kObjectNotInHand:
+      return c.frames_unsupported;
+    case FrameRefusal::kInKnownFreeSpace:
+    case FrameRefusal::kNone:
+      break;
+  }
+  return c.frames_in_free_space;
+}
 
 // What one added frame did.
 struct FrameReport {
