@@ -1295,8 +1295,8 @@ namespace {
 // A checkpoint's records (read back by load: State::readTorques, viewRecordFrom,
 // readSummaryCounts).
 Json torqueJson(const TorqueReading& r) {
-  return {{"q", std::vector<double>(r.q.data(), r.q.data() + r.q.size())},
-          {"tau", std::vector<double>(r.tau.data(), r.tau.data() + r.tau.size())},
+  return {{"q", vectorJson(r.q)},
+          {"tau", vectorJson(r.tau)},
           {"T_O_palm", isoJson(r.T_O_palm)},
           {"samples", r.samples},
           {"scatter_nm2", r.scatter_nm2}};
@@ -1349,8 +1349,7 @@ void ScanSession::save(const std::filesystem::path& path, const Json& extra) con
   if (s.filterStarted) {
     h["tracking_filter"]["x"] = std::vector<double>(s.filterX.data(), s.filterX.data() + 6);
     h["tracking_filter"]["P"] = std::vector<double>(s.filterP.data(), s.filterP.data() + 36);
-    h["tracking_filter"]["q"] =
-        std::vector<double>(s.filterQ.data(), s.filterQ.data() + s.filterQ.size());
+    h["tracking_filter"]["q"] = vectorJson(s.filterQ);
   }
   h["tracking_from_full_model"] = s.trackingFromFull;
   h["unsupported_streak"] = s.unsupportedStreak;
@@ -1479,11 +1478,8 @@ void ScanSession::State::readTrackingFilter(const Json& h,
 
 void ScanSession::State::readTorques(const Json& h) {
   for (const Json& r : h.value("torque_readings", Json::array())) {
-    const auto q = r.at("q").get<std::vector<double>>();
-    const auto tau = r.at("tau").get<std::vector<double>>();
-    addTorques({Eigen::Map<const JointVector>(q.data(), Eigen::Index(q.size())),
-                Eigen::Map<const JointVector>(tau.data(), Eigen::Index(tau.size())),
-                isoFrom(r.at("T_O_palm")), r.value("samples", 1), r.value("scatter_nm2", 0.0)});
+    addTorques({vectorFrom(r.at("q")), vectorFrom(r.at("tau")), isoFrom(r.at("T_O_palm")),
+                r.value("samples", 1), r.value("scatter_nm2", 0.0)});
   }
 }
 
