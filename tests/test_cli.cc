@@ -111,7 +111,7 @@ TEST(Cli, BadInputIsNamedAndLeavesNoOutput) {
       "--tracking: must be on or off");
   expectError(
       "scan --object builtin:coffee_can --arm-error 0.5 --out " + (dir.path() / "a").string(),
-      "arm_error_m must be in [0, 0.2] m");
+      "arm_error_m must be in [0, 0.2] (is 0.5)");
   expectError(
       "render --object builtin:mug --views 3 --range 0.1 --out " + (dir.path() / "a").string(),
       "--range");
@@ -249,14 +249,17 @@ TEST(Cli, ScanWritesModelAndSummaryAndRejectsBadConfig) {
   rejects(R"({"planner": {"quality": {"visibility": "z"}}})",
           "planner.quality.visibility: must be auto, raster or ray_cast");
   rejects(R"({"planner": {"ik_solver": "analytic"}})", "planner.ik_solver: must be dls or kdl_lma");
-  rejects(R"({"planner": {"prescreen_stride": 0}})", "prescreen_stride must be in [1, 16]");
+  rejects(R"({"planner": {"prescreen_stride": 0}})",
+          "option planner.prescreen_stride must be in 1..16 (is 0)");
   rejects(R"({"grasp": {"approach": "slide"}})", "grasp.approach: must be palm or first_contact");
   rejects(R"({"sim": {"pick_up": "grab"}})", "sim.pick_up: must be palm or first_contact");
-  rejects(R"({"grasp": {"edge_inset_m": 0.2}})", "grasp.edge_inset_m must be in [0, 0.05) m");
+  rejects(R"({"grasp": {"edge_inset_m": 0.2}})",
+          "option grasp.edge_inset_m must be in [0, 0.05) (is 0.2)");
   rejects(R"({"table_top": {"edge_inset_m": 0.005}})",
           "table_top: unknown option \"edge_inset_m\"");
-  rejects(R"({"grasp": {"preshapes": [0, 1.5]}})", "grasp.preshapes must be in [0, 1)");
-  rejects(R"({"sim": {"friction": 0}})", "simulation options: friction must be in (0, 2]");
+  rejects(R"({"grasp": {"preshapes": [0, 1.5]}})",
+          "option grasp.preshapes must be in [0, 1) each (is 1.5)");
+  rejects(R"({"sim": {"friction": 0}})", "option sim.friction must be in (0, 2] (is 0)");
   rejects(R"({"grasp": {"edge_spreads": "x"}})", "grasp.edge_spreads: expected an array");
   r = run("scan --object builtin:coffee_can --max-grasps 0 --out " + (dir.path() / "x").string(),
           dir);

@@ -2,6 +2,7 @@
 // the key, and docs/config.md generated from the same tables.
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <functional>
 
 #include "inhand/config/scan_config.h"
@@ -83,7 +84,81 @@ TEST(Config, ErrorsNameTheKey) {
   // Values in range are the structs' own validate()'s business, through ScanConfig::validate.
   ScanConfig c;
   readScanConfig(Json::parse(R"({"voxel_m": -1})"), "cfg", &c);
-  EXPECT_NE(c.validate().find("voxel_m must be in"), std::string::npos);
+  EXPECT_EQ(c.validate(), "option voxel_m must be in (0, 0.05) (is -1)");
+}
+
+TEST(Config, RangesHaveOpenAndClosedEnds) {
+  EXPECT_TRUE(Range::closed(0, 1).contains(0));
+  EXPECT_TRUE(Range::closed(0, 1).contains(1));
+  EXPECT_FALSE(Range::open(0, 1).contains(0));
+  EXPECT_FALSE(Range::open(0, 1).contains(1));
+  EXPECT_TRUE(Range::closedOpen(0, 1).contains(0));
+  EXPECT_FALSE(Range::closedOpen(0, 1).contains(1));
+  EXPECT_FALSE(Range::openClosed(0, 1).contains(0));
+  EXPECT_FALSE(Range::atLeast(0).contains(-1e-12));
+  EXPECT_FALSE(Range::above(0).contains(0));
+  EXPECT_FALSE(Range::any().contains(std::nan("")));
+  EXPECT_TRUE(Range::any().contains(-1e300));
+  EXPECT_EQ(Range::open(0, 90).text(), "in (0, 90)");
+  EXPECT_EQ(Range::closedOpen(0, 0.05).text(), "in [0, 0.05)");
+  EXPECT_EQ(Range::atLeast(1).text(true), ">= 1");
+  EXPECT_EQ(Range::above(0).text(), "> 0");
+  EXPECT_EQ(Range::closed(1, 16).text(true), "in 1..16");
+  EXPECT_EQ(Range::open(0, 10).text(true), "in 1..9");
+}
+
+// A value just outside an end of its range, for that row's type.
+double justOutside(const ScanConfigRow& row, bool below) {
+  const Range& r = row.range;
+  const double end = below ? r.lo : r.hi;
+  const bool open = below ? r.lo_open : r.hi_open;
+  if (row.type == "integer")
+    return below ? std::ceil(end) - (open ? 0 : 1) : std::floor(end) + (open ? 0 : 1);
+  if (open) return end;
+  const double step = std::max(1e-9, std::abs(end) * 1e-6);
+  return below ? end - step : end + step;
+}
+
+// validate() of the default options with `row` set to x.
+std::string validateWith(const ScanConfigRow& row, double x) {
+  Json j = row.type == "numbers"   ? Json::array({x})
+           : row.type == "integer" ? Json(int(x))
+                                   : Json(x);
+  // {"a": {"b": {"c": x}}} from "a.b.c".
+  std::string key = row.key;
+  for (size_t dot; (dot = key.rfind('.')) != std::string::npos; key = key.substr(0, dot))
+    j = Json{{key.substr(dot + 1), j}};
+  ScanConfig c;
+  readScanConfig(Json{{key, j}}, "cfg", &c);
+  return c.validate();
+}
+
+// Every option with a range: set just outside either end (all else default), validate() refuses
+// it and names that option's key, as a config file spells it; at the end itself (a closed end) it
+// is accepted unless a relation to another option forbids it.
+TEST(Config, EveryRangedOptionJustOutsideItsRangeIsRefusedByName) {
+  int checked = 0;
+  for (const ScanConfigRow& row : scanConfigRows()) {
+    if (!row.range.bounded()) continue;
+    for (bool below : {true, false}) {
+      if (!std::isfinite(below ? row.range.lo : row.range.hi)) continue;
+      const double x = justOutside(row, below);
+      const std::string outside = validateWith(row, x);
+      EXPECT_EQ(outside.rfind("option " + row.key + " must be ", 0), 0u)
+          << row.key << " = " << x << ": " << outside;
+      // The nearest value inside (a closed end itself, the next integer) passes its own row.
+      const bool integer = row.type == "integer";
+      if (integer || !(below ? row.range.lo_open : row.range.hi_open)) {
+        const double inside =
+            integer ? x + (below ? 1 : -1) : (below ? row.range.lo : row.range.hi);
+        const std::string error = validateWith(row, inside);
+        EXPECT_NE(error.rfind("option " + row.key + " must be ", 0), 0u)
+            << row.key << " = " << inside << ": " << error;
+      }
+      ++checked;
+    }
+  }
+  EXPECT_GT(checked, 150);
 }
 
 // docs/config.md is what `inhand config --reference` prints, below its introduction.

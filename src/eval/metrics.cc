@@ -12,14 +12,7 @@
 
 namespace inhand {
 
-std::string EvalOptions::validate() const {
-  if (samples < 100 || samples > 10000000) return "samples must be in [100, 1e7]";
-  if (!(tau_m > 0 && tau_m < 1)) return "tau_m must be in (0, 1) m";
-  for (double d : fscore_m)
-    if (!(d > 0 && d < 1)) return "fscore_m values must be in (0, 1) m";
-  if (!(detached_m > 0 && detached_m < 1)) return "detached_m must be in (0, 1) m";
-  return {};
-}
+std::string EvalOptions::validate() const { return checkOptionRanges(*this); }
 
 std::vector<uint8_t> observedTriangles(const ObjectModel& model) {
   INHAND_CHECK(model.observed.size() == model.mesh.vertices.size(), "observed flag per vertex");

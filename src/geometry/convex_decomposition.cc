@@ -69,12 +69,7 @@ double hullVolume(const ConvexHull& hull) {
   return v / 6;
 }
 
-std::string ConvexDecompositionOptions::validate() const {
-  if (resolution < 4 || resolution > 512) return "resolution must be in 4..512";
-  if (max_pieces < 1 || max_pieces > 1024) return "max_pieces must be in 1..1024";
-  if (!(max_excess >= 0 && max_excess < 1)) return "max_excess must be in [0, 1)";
-  return {};
-}
+std::string ConvexDecompositionOptions::validate() const { return checkOptionRanges(*this); }
 
 namespace {
 

@@ -20,42 +20,16 @@
 
 namespace inhand {
 
-const char* graspApproachName(GraspApproach a) {
-  return a == GraspApproach::kFirstContact ? "first_contact" : "palm";
-}
+const char* graspApproachName(GraspApproach a) { return enumName(kGraspApproachNames, a); }
 
 bool parseGraspApproach(const std::string& name, GraspApproach* a) {
-  if (name == "palm")
-    *a = GraspApproach::kPalm;
-  else if (name == "first_contact")
-    *a = GraspApproach::kFirstContact;
-  else
-    return false;
-  return true;
+  return enumFromName(kGraspApproachNames, name, a);
 }
 
 std::string GraspOptions::validate() const {
-  if (approaches < 1) return "approaches must be >= 1";
-  if (rolls < 1) return "rolls must be >= 1";
-  if (max_failed_pick_ups < 1 || max_failed_pick_ups > 1000)
-    return "max_failed_pick_ups must be in 1..1000";
+  if (std::string p = checkOptionRanges(*this); !p.empty()) return p;
   if (spreads.empty()) return "spreads must not be empty";
   if (preshapes.empty()) return "preshapes must not be empty";
-  for (double f : preshapes)
-    if (!(f >= 0 && f < 1)) return "preshapes must be in [0, 1)";
-  for (double s : edge_spreads)
-    if (!std::isfinite(s)) return "edge_spreads must be finite";
-  if (!std::isfinite(two_finger_spread)) return "two_finger_spread must be finite";
-  if (!(edge_inset_m >= 0 && edge_inset_m < 0.05)) return "edge_inset_m must be in [0, 0.05) m";
-  if (!(friction > 0 && friction <= 2)) return "friction must be in (0, 2]";
-  if (cone_edges < 3 || cone_edges > 64) return "cone_edges must be in 3..64";
-  if (wrench_directions < 12) return "wrench_directions must be >= 12";
-  if (!(contact_m > 0 && contact_m < 0.05)) return "contact_m must be in (0, 0.05) m";
-  if (!(contact_cell_m > 0)) return "contact_cell_m must be > 0";
-  if (!(min_epsilon >= 0)) return "min_epsilon must be >= 0";
-  if (!(lift_m >= 0 && lift_m < 1)) return "lift_m must be in [0, 1) m";
-  if (!(stability_weight >= 0)) return "stability_weight must be >= 0";
-  if (max_candidates < 1) return "max_candidates must be >= 1";
   if (std::string p = hold.validate(); !p.empty()) return "hold." + p;
   return {};
 }

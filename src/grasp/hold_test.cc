@@ -28,20 +28,8 @@ bool parseHoldFailure(const std::string& name, HoldFailure* out) {
 }
 
 std::string HoldTestOptions::validate() const {
-  if (max_candidates < 1) return "max_candidates must be >= 1";
+  if (std::string p = checkOptionRanges(*this); !p.empty()) return p;
   if (max_tested < max_candidates) return "max_tested must be >= max_candidates";
-  if (!(density_kg_m3 > 0 && density_kg_m3 < 30000)) return "density_kg_m3 must be in (0, 30000)";
-  if (!(lift_m >= 0 && lift_m < 1)) return "lift_m must be in [0, 1) m";
-  if (!(lift_s > 0 && lift_s <= 10)) return "lift_s must be in (0, 10] s";
-  if (!(std::abs(turn_rad) <= M_PI)) return "turn_rad must be in [-pi, pi]";
-  if (!(turn_s > 0 && turn_s <= 10)) return "turn_s must be in (0, 10] s";
-  if (!(max_slip_m > 0 && max_slip_m < 0.2)) return "max_slip_m must be in (0, 0.2) m";
-  if (!(margin_mass >= 1 && margin_mass <= 20)) return "margin_mass must be in [1, 20]";
-  if (!(margin_friction > 0 && margin_friction <= 1)) return "margin_friction must be in (0, 1]";
-  if (!(pose_tolerance_m >= 0 && pose_tolerance_m < 0.05))
-    return "pose_tolerance_m must be in [0, 0.05) m";
-  if (robust_checked < 1) return "robust_checked must be >= 1";
-  if (std::string p = decomposition.validate(); !p.empty()) return "decomposition." + p;
   return {};
 }
 

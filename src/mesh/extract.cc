@@ -10,27 +10,12 @@
 
 namespace inhand {
 
-std::string MeshOptions::validate() const {
-  if (!(hole_sigma_m > 0 && std::isfinite(hole_sigma_m))) return "hole_sigma_m must be > 0";
-  if (!(min_component_fraction >= 0 && min_component_fraction <= 1))
-    return "min_component_fraction must be in [0, 1]";
-  if (stride < 1 || stride > 8) return "stride must be in 1..8";
-  if (method != SurfaceMethod::kTetrahedra && method != SurfaceMethod::kSurfaceNets)
-    return "method must be tetrahedra or surface_nets";
-  return {};
-}
+std::string MeshOptions::validate() const { return checkOptionRanges(*this); }
 
-std::string surfaceMethodName(SurfaceMethod m) {
-  return m == SurfaceMethod::kSurfaceNets ? "surface_nets" : "tetrahedra";
-}
+std::string surfaceMethodName(SurfaceMethod m) { return enumName(kSurfaceMethodNames, m); }
 
 bool parseSurfaceMethod(const std::string& s, SurfaceMethod* out) {
-  for (SurfaceMethod m : {SurfaceMethod::kTetrahedra, SurfaceMethod::kSurfaceNets})
-    if (s == surfaceMethodName(m)) {
-      *out = m;
-      return true;
-    }
-  return false;
+  return enumFromName(kSurfaceMethodNames, s, out);
 }
 
 double gaussianEntropy(double variance) { return 0.5 * std::log(2.0 * M_PI * M_E * variance); }

@@ -21,21 +21,8 @@
 namespace inhand {
 
 std::string PhysicsOptions::validate() const {
-  if (!(density_kg_m3 > 0 && density_kg_m3 <= 30000)) return "density_kg_m3 must be in (0, 30000]";
-  if (!(mass_kg >= 0 && mass_kg <= 100)) return "mass_kg must be in [0, 100]";
-  if (!(timestep_s >= 1e-4 && timestep_s <= 0.01)) return "timestep_s must be in [1e-4, 0.01]";
-  if (!(finger_force_n > 0 && finger_force_n <= 1000)) return "finger_force_n must be in (0, 1000]";
-  if (!(touch_force_n > 0 && touch_force_n <= finger_force_n))
-    return "touch_force_n must be in (0, finger_force_n]";
-  if (!(finger_close_time_s > 0.05 && finger_close_time_s <= 10))
-    return "finger_close_time_s must be in (0.05, 10]";
-  if (!(hold_force_factor >= 1 && hold_force_factor <= 1000))
-    return "hold_force_factor must be in [1, 1000]";
-  if (!(breakaway_rate >= 0 && breakaway_rate <= 10)) return "breakaway_rate must be in [0, 10]";
-  if (!(table_sweep_m >= 0 && table_sweep_m <= 0.05)) return "table_sweep_m must be in [0, 0.05]";
-  if (!(ramp_s >= 0 && ramp_s <= 2)) return "ramp_s must be in [0, 2]";
-  if (!(settle_s >= 0 && settle_s <= 20)) return "settle_s must be in [0, 20]";
-  if (std::string p = decomposition.validate(); !p.empty()) return "decomposition." + p;
+  if (std::string p = checkOptionRanges(*this); !p.empty()) return p;
+  if (!(touch_force_n <= finger_force_n)) return "touch_force_n must be at most finger_force_n";
   return {};
 }
 

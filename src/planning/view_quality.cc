@@ -109,36 +109,14 @@ ObjectModel spatiallyOrdered(const ObjectModel& in) {
 }
 }  // namespace
 
-std::string ViewQualityOptions::validate() const {
-  if (!(t_hand_m >= 0)) return "t_hand_m must be >= 0";
-  if (!(max_incidence_deg > 0 && max_incidence_deg < 90))
-    return "max_incidence_deg must be in (0, 90)";
-  if (!(max_projector_incidence_deg > 0 && max_projector_incidence_deg < 90))
-    return "max_projector_incidence_deg must be in (0, 90)";
-  if (!(near_hand_cell_m > 0)) return "near_hand_cell_m must be > 0";
-  if (!(pixel_stride >= 1 && pixel_stride <= 16)) return "pixel_stride must be in [1, 16]";
-  return {};
-}
+std::string ViewQualityOptions::validate() const { return checkOptionRanges(*this); }
 
 const char* primaryVisibilityName(PrimaryVisibility v) {
-  switch (v) {
-    case PrimaryVisibility::kRaster:
-      return "raster";
-    case PrimaryVisibility::kRayCast:
-      return "ray_cast";
-    default:
-      return "auto";
-  }
+  return enumName(kPrimaryVisibilityNames, v);
 }
 
 bool parsePrimaryVisibility(const std::string& name, PrimaryVisibility* v) {
-  for (PrimaryVisibility c :
-       {PrimaryVisibility::kAuto, PrimaryVisibility::kRaster, PrimaryVisibility::kRayCast})
-    if (name == primaryVisibilityName(c)) {
-      *v = c;
-      return true;
-    }
-  return false;
+  return enumFromName(kPrimaryVisibilityNames, name, v);
 }
 
 Iso3 cameraPoseInObject(const Vec3& centre_O, const Vec3& dir_O, double range_m, double roll_rad) {

@@ -29,24 +29,9 @@ CollisionChecker heldObjectChecker(const RobotModel& model, const Aabb& box_O, c
 }  // namespace
 
 std::string ViewPlannerOptions::validate() const {
-  if (directions < 1) return "directions must be >= 1";
-  if (!(min_angle_deg >= 0 && min_angle_deg < 180)) return "min_angle_deg must be in [0, 180)";
-  if (!(range_m > 0)) return "range_m must be > 0";
-  for (double r : fallback_ranges_m)
-    if (!(r > 0)) return "fallback_ranges_m must be positive";
-  if (rolls < 1) return "rolls must be >= 1";
-  if (!(alpha_cost >= 0)) return "alpha_cost must be >= 0";
-  if (!(t_q >= 0)) return "t_q must be >= 0";
-  if (!(t_q_relative >= 0)) return "t_q_relative must be >= 0";
-  if (!(alpha_cost_relative >= 0)) return "alpha_cost_relative must be >= 0";
-  if (ik_restarts < 0) return "ik_restarts must be >= 0";
-  if (!(prescreen_stride >= 1 && prescreen_stride <= 16))
-    return "prescreen_stride must be in [1, 16]";
-  if (refine < 0) return "refine must be >= 0";
-  std::string q = volumetric.validate();
-  if (!q.empty()) return "volumetric." + q;
-  q = quality.validate();
-  return q.empty() ? "" : "quality." + q;
+  if (std::string p = checkOptionRanges(*this); !p.empty()) return p;
+  if (std::string p = volumetric.validate(); !p.empty()) return "volumetric." + p;
+  return {};
 }
 
 double viewThreshold(const ViewPlannerOptions& o, double area_m2) {

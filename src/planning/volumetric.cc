@@ -8,11 +8,9 @@
 namespace inhand {
 
 std::string VolumetricOptions::validate() const {
-  if (ray_stride < 1 || ray_stride > 64) return "ray_stride must be in [1, 64]";
-  if (!(p_unknown > 0 && p_unknown < 1)) return "p_unknown must be in (0, 1)";
-  if (!(p_free >= 0 && p_free < p_unknown)) return "p_free must be in [0, p_unknown)";
-  if (!(p_occupied > p_unknown && p_occupied < 1)) return "p_occupied must be in (p_unknown, 1)";
-  if (!(min_visibility > 0 && min_visibility < 1)) return "min_visibility must be in (0, 1)";
+  if (std::string p = checkOptionRanges(*this); !p.empty()) return p;
+  if (!(p_free < p_unknown)) return "p_free must be below p_unknown";
+  if (!(p_occupied > p_unknown)) return "p_occupied must be above p_unknown";
   return {};
 }
 

@@ -12,16 +12,10 @@
 
 namespace inhand {
 
-const char* ikMethodName(IkMethod m) { return m == IkMethod::kKdlLma ? "kdl_lma" : "dls"; }
+const char* ikMethodName(IkMethod m) { return enumName(kIkMethodNames, m); }
 
 bool parseIkMethod(const std::string& name, IkMethod* m) {
-  if (name == "dls")
-    *m = IkMethod::kDampedLeastSquares;
-  else if (name == "kdl_lma")
-    *m = IkMethod::kKdlLma;
-  else
-    return false;
-  return true;
+  return enumFromName(kIkMethodNames, name, m);
 }
 
 std::string IkOptions::validate() const {

@@ -32,14 +32,10 @@ ViewPlannerOptions MultiGraspOptions::defaultRankingPlanner() {
 }
 
 std::string MultiGraspOptions::validate() const {
-  if (max_grasps < 1 || max_grasps > 50) return "max_grasps must be in 1..50";
-  if (keep_ranked < 0) return "keep_ranked must be >= 0";
-  std::string p = grasp.validate();
-  if (!p.empty()) return "grasp." + p;
-  p = table_top.validate();
-  if (!p.empty()) return "table_top." + p;
-  p = ranking.validate();
-  return p.empty() ? "" : "ranking." + p;
+  if (std::string p = checkOptionRanges(*this); !p.empty()) return p;
+  if (std::string p = grasp.validate(); !p.empty()) return "grasp." + p;
+  if (std::string p = ranking.validate(); !p.empty()) return "grasp.ranking." + p;
+  return {};
 }
 
 namespace {
@@ -668,21 +664,7 @@ int countOutcome(const std::vector<PickAttempt>& attempts, PickOutcome outcome) 
                            [&](const PickAttempt& a) { return a.outcome == outcome; }));
 }
 
-std::string TableTopOptions::validate() const {
-  if (frames < 1 || frames > 30) return "frames must be in 1..30";
-  if (!(aim_height_m >= -0.5 && aim_height_m <= 0.5))
-    return "aim_height_m must be in [-0.5, 0.5] m";
-  if (!(search_radius_m > 0 && search_radius_m < 2)) return "search_radius_m must be in (0, 2) m";
-  if (!(above_table_m > 0 && above_table_m < 0.1)) return "above_table_m must be in (0, 0.1) m";
-  if (min_points < 3) return "min_points must be >= 3";
-  if (!(cluster_cell_m > 0 && cluster_cell_m < 0.1)) return "cluster_cell_m must be in (0, 0.1) m";
-  if (!(plane.inlier_m > 0 && plane.inlier_m < 0.05))
-    return "plane.inlier_m must be in (0, 0.05) m";
-  if (plane.iterations < 1) return "plane.iterations must be >= 1";
-  if (!(plane.max_tilt_deg > 0 && plane.max_tilt_deg <= 90))
-    return "plane.max_tilt_deg must be in (0, 90]";
-  return {};
-}
+std::string TableTopOptions::validate() const { return checkOptionRanges(*this); }
 
 MultiGraspResult scanMultiGrasp(RobotInterface& robot, DepthSensor& sensor, const Iso3& T_O_palm0,
                                 const Vec3& centre_O, const Iso3& T_B_O_rest,

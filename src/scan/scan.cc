@@ -15,25 +15,10 @@
 
 namespace inhand {
 
-std::string handModeName(HandMode m) {
-  switch (m) {
-    case HandMode::kNaive:
-      return "naive";
-    case HandMode::kCarveOnly:
-      return "carve";
-    case HandMode::kCarveAndEmpty:
-      return "carve-empty";
-  }
-  return "?";
-}
+std::string handModeName(HandMode m) { return enumName(kHandModeNames, m); }
 
 bool parseHandMode(const std::string& s, HandMode* out) {
-  for (HandMode m : {HandMode::kNaive, HandMode::kCarveOnly, HandMode::kCarveAndEmpty})
-    if (s == handModeName(m)) {
-      *out = m;
-      return true;
-    }
-  return false;
+  return enumFromName(kHandModeNames, s, out);
 }
 
 namespace {
@@ -101,43 +86,15 @@ bool parseTermination(const std::string& s, Termination* out) {
   return false;
 }
 
-std::string FrameChecks::validate() const {
-  if (!(min_valid_fraction >= 0 && min_valid_fraction < 1))
-    return "min_valid_fraction must be in [0, 1)";
-  if (!(max_path_deviation_rad >= 0)) return "max_path_deviation_rad must be >= 0";
-  if (!(min_support >= 0 && min_support <= 1)) return "min_support must be in [0, 1]";
-  if (min_points < 1) return "min_points must be >= 1";
-  if (lost_after < 1) return "lost_after must be >= 1";
-  if (!(max_free_space_fraction > 0 && max_free_space_fraction <= 1))
-    return "max_free_space_fraction must be in (0, 1]";
-  return {};
-}
+std::string FrameChecks::validate() const { return checkOptionRanges(*this); }
 
 std::string ScanOptions::validate() const {
-  if (!(voxel_m > 0 && voxel_m < 0.05)) return "voxel_m must be in (0, 0.05) m";
-  if (std::string p = checks.validate(); !p.empty()) return "checks." + p;
-  if (!(volume_size_m > 10 * voxel_m && volume_size_m < 2))
-    return "volume_size_m must be in (10 voxels, 2 m)";
-  if (!(t_hand_m >= 0)) return "t_hand_m must be >= 0";
-  if (initial_views < 0) return "initial_views must be >= 0";
-  if (max_views < 0) return "max_views must be >= 0";
-  if (planning_stride < 1 || planning_stride > 4) return "planning_stride must be in 1..4";
-  if (carve_radius_px < 0 || carve_radius_px > 10) return "carve_radius_px must be in 0..10";
-  if (!(edge_jump_m >= 0 && edge_jump_m < 1)) return "edge_jump_m must be in [0, 1) m";
-  if (torque_readings < 1 || torque_readings > 100000)
-    return "torque_readings must be in 1..100000";
-  if (!(volume_budget.truncation_m >= 0 && volume_budget.truncation_m < 0.1))
-    return "truncation_m must be in [0, 0.1) m (0: 4 voxels)";
+  if (std::string p = checkOptionRanges(*this); !p.empty()) return p;
+  if (!(volume_size_m > 10 * voxel_m)) return "volume_size_m must be over 10 voxels (voxel_m)";
   if (volume_budget.truncation_m > 0 && volume_budget.truncation_m < voxel_m)
     return "truncation_m must be at least one voxel (voxel_m)";
-  if (!(volume_budget.band_sigmas >= 0 && volume_budget.band_sigmas <= 100))
-    return "band_sigmas must be in [0, 100]";
-  std::string p = planner.validate();
-  if (!p.empty()) return "planner." + p;
-  p = mesh.validate();
-  if (!p.empty()) return "mesh." + p;
-  p = tracking.validate();
-  if (!p.empty()) return "tracking." + p;
+  if (std::string p = planner.validate(); !p.empty()) return "planner." + p;
+  if (std::string p = tracking.validate(); !p.empty()) return "tracking." + p;
   return {};
 }
 

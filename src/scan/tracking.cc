@@ -20,24 +20,8 @@ const EnumNames<TrackRefusal, 5> kTrackRefusals = {{TrackRefusal::kNone, ""},
 const char* trackRefusalName(TrackRefusal r) { return enumName(kTrackRefusals, r); }
 
 std::string TrackingOptions::validate() const {
-  if (!(in_hand_significance >= 0)) return "in_hand_significance must be >= 0";
-  if (!(slip_m > 0 && slip_m < 0.1)) return "slip_m must be in (0, 0.1) m";
-  if (slip_points < 0) return "slip_points must be >= 0";
-  if (!(slip_gate_m > 0 && slip_gate_m < 1)) return "slip_gate_m must be in (0, 1) m";
-  if (iterations < 1 || iterations > 200) return "iterations must be in 1..200";
-  if (!(final_gate_m > 0 && final_gate_m <= gate_m && gate_m < 1))
-    return "gates must satisfy 0 < final_gate_m <= gate_m < 1 m";
-  if (min_inliers < 6) return "min_inliers must be >= 6";
-  if (!(max_rms_ratio > 0)) return "max_rms_ratio must be > 0";
-  if (!(max_correction_m > 0)) return "max_correction_m must be > 0";
-  if (!(hand_spacing_m >= 0.001 && hand_spacing_m < 0.05))
-    return "hand_spacing_m must be in [0.001, 0.05) m";
-  if (max_object_points < 0) return "max_object_points must be >= 0";
-  if (!(prior >= 0 && prior < 1)) return "prior must be in [0, 1)";
-  if (!(object_weight >= 0 && object_weight <= 1)) return "object_weight must be in [0, 1]";
-  if (!(drift_m >= 0 && drift_rad >= 0 && frame_drift_m > 0 && frame_drift_rad > 0))
-    return "drift_m and drift_rad must be >= 0, frame_drift_m and frame_drift_rad > 0";
-  if (!(pair_information > 0 && pair_information <= 1)) return "pair_information must be in (0, 1]";
+  if (std::string p = checkOptionRanges(*this); !p.empty()) return p;
+  if (!(final_gate_m <= gate_m)) return "final_gate_m must be at most gate_m";
   return {};
 }
 

@@ -14,38 +14,15 @@
 
 namespace inhand {
 
-std::string SimFaults::validate() const {
-  for (double f : {dropped_frames, corrupted_frames, pose_jumps, stopped_short, refused_motions,
-                   failed_pickups})
-    if (!(f >= 0 && f <= 1)) return "fault rates must be in [0, 1]";
-  if (!(slip_m >= 0 && slip_m <= 0.05)) return "slip_m must be in [0, 0.05] m";
-  if (drop_in_motion < -1) return "drop_in_motion must be >= -1";
-  if (slip_in_motion < 0) return "slip_in_motion must be >= 0";
-  return {};
-}
+std::string SimFaults::validate() const { return checkOptionRanges(*this); }
 
-std::string SimColourOptions::validate() const {
-  if (!(ambient >= 0 && ambient <= 1)) return "ambient must be in [0, 1]";
-  if (!(noise_sigma >= 0 && noise_sigma <= 100)) return "noise_sigma must be in [0, 100]";
-  if (!(exposure_sigma >= 0 && exposure_sigma <= 0.5)) return "exposure_sigma must be in [0, 0.5]";
-  return {};
-}
+std::string SimColourOptions::validate() const { return checkOptionRanges(*this); }
 
 std::string SimOptions::validate() const {
-  if (!(frame_rate_hz > 0)) return "frame_rate_hz must be > 0";
-  if (std::string p = colour.validate(); !p.empty()) return "colour." + p;
-  if (frame_subsample < 1) return "frame_subsample must be >= 1";
-  if (!(room_radius_m >= 0)) return "room_radius_m must be >= 0";
-  if (!(friction > 0 && friction <= 2)) return "friction must be in (0, 2]";
-  if (!(torque_noise_nm >= 0 && torque_noise_nm <= 10)) return "torque_noise_nm must be in [0, 10]";
-  if (!(hold_min_epsilon >= 0)) return "hold_min_epsilon must be >= 0";
+  if (std::string p = checkOptionRanges(*this); !p.empty()) return p;
   if (!R_B_O_rest.allFinite() || std::abs(R_B_O_rest.determinant() - 1) > 1e-6)
     return "the rest orientation must be a rotation";
-  if (!(arm_error_m >= 0 && arm_error_m <= 0.2)) return "arm_error_m must be in [0, 0.2] m";
-  for (double f : {arm_error_gravity, arm_error_drift, arm_error_noise})
-    if (!(f >= 0 && f <= 5)) return "arm_error_gravity, _drift and _noise must be in [0, 5]";
   if (std::string p = physics.validate(); !p.empty()) return "physics." + p;
-  if (std::string p = faults.validate(); !p.empty()) return "faults." + p;
   return {};
 }
 

@@ -1,9 +1,11 @@
 #pragma once
-// Every option of a scan, from one table per options struct (scan_config.cc): the same table reads
-// JSON (config files, Python dicts; unknown keys and values of the wrong type are rejected,
-// naming the key), writes it (summary.json "options") and generates the reference in
+// Every option of a scan, from the rows each options struct lists beside its defaults (its static
+// fields(): key, meaning, range; core/options.h): the same rows read JSON (config files, Python
+// dicts; unknown keys and values of the wrong type are rejected, naming the key), write it
+// (summary.json "options"), check the values' ranges (validate()) and generate the reference in
 // docs/config.md (`inhand config --reference`).
 #include <string>
+#include <vector>
 
 #include "inhand/core/json_util.h"
 #include "inhand/eval/metrics.h"
@@ -19,7 +21,16 @@ struct ScanConfig {
   MultiGraspOptions multi;
   SimOptions sim;
   EvalOptions eval;
-  std::string validate() const;  // every struct's validate(); empty when valid
+  // Every option's range, then every struct's validate(); empty when valid. An option out of its
+  // range is named by its key ("option planner.t_q must be >= 0 (is -1)").
+  std::string validate() const;
+};
+
+// One option: its dotted key as in a config file, its type and range.
+struct ScanConfigRow {
+  std::string key;
+  std::string type;  // number, integer, true/false, numbers, string, choice
+  Range range;       // of the value (of each, for numbers)
 };
 
 // Reads the keys present in `j` over `config` (the others keep their values). `where` names the
@@ -31,5 +42,7 @@ void readScanConfigFile(const std::filesystem::path& file, ScanConfig* config);
 Json scanConfigJson(const ScanConfig& config);
 // The reference (Markdown): every key, its type, default and meaning.
 std::string scanConfigReference();
+// Every option, in the reference's order.
+std::vector<ScanConfigRow> scanConfigRows();
 
 }  // namespace inhand

@@ -16,6 +16,7 @@
 #include <string>
 #include <vector>
 
+#include "inhand/core/options.h"
 #include "inhand/geometry/appearance.h"
 #include "inhand/geometry/surface_distance.h"
 #include "inhand/mesh/extract.h"
@@ -29,6 +30,18 @@ struct EvalOptions {
   double tau_m = 0.003;  // coverage radius τ
   std::vector<double> fscore_m{0.002, 0.005, 0.010};
   double detached_m = 0.005;  // a model piece with no vertex this near the truth is detached
+
+  // The options' rows (core/options.h); the seed is the caller's.
+  template <class V, class S>
+  static void fields(V& v, S& o) {
+    v.integer("samples", o.samples, "points drawn on each surface", Range::closed(100, 1e7));
+    v.num("tau_m", o.tau_m, "coverage radius τ, m", Range::open(0, 1));
+    v.numbers("fscore_m", o.fscore_m, "F-score thresholds, m", Range::open(0, 1));
+    v.num("detached_m", o.detached_m,
+          "a model piece none of whose vertices lies this near the true surface is detached "
+          "(summary detached_area_m2), m",
+          Range::open(0, 1));
+  }
   std::string validate() const;
 };
 

@@ -4,6 +4,7 @@
 #include <optional>
 #include <vector>
 
+#include "inhand/core/options.h"
 #include "inhand/geometry/stable_poses.h"
 #include "inhand/geometry/triangle_mesh.h"
 
@@ -32,6 +33,19 @@ struct ConvexDecompositionOptions {
   int resolution = 64;       // voxels along the mesh's longest side (the solid's volume per box)
   int max_pieces = 128;      // at most this many pieces
   double max_excess = 0.03;  // stop once the hulls exceed the solid by this fraction of its volume
+
+  // Rows keyed `prefix` + name ("decomposition_resolution" where an owner flattens them).
+  template <class V, class S>
+  static void fields(V& v, S& o, const std::string& prefix = "") {
+    v.integer(prefix + "resolution", o.resolution,
+              "voxels along the object's longest side for its convex decomposition",
+              Range::closed(4, 512));
+    v.integer(prefix + "max_pieces", o.max_pieces, "at most this many convex pieces",
+              Range::closed(1, 1024));
+    v.num(prefix + "max_excess", o.max_excess,
+          "the pieces' hulls exceed the solid by at most this fraction of its volume",
+          Range::closedOpen(0, 1));
+  }
   std::string validate() const;
 };
 

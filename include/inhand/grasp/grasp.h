@@ -27,6 +27,7 @@
 #include <string>
 #include <vector>
 
+#include "inhand/core/options.h"
 #include "inhand/geometry/point_cloud.h"
 #include "inhand/grasp/hold_test.h"
 #include "inhand/mesh/extract.h"
@@ -45,6 +46,8 @@ enum class GraspApproach {
   // model or the table: it never starts inside the object (physically valid; the default).
   kFirstContact,
 };
+inline constexpr EnumNames<GraspApproach, 2> kGraspApproachNames = {
+    {GraspApproach::kPalm, "palm"}, {GraspApproach::kFirstContact, "first_contact"}};
 const char* graspApproachName(GraspApproach a);  // palm, first_contact
 bool parseGraspApproach(const std::string& name, GraspApproach* a);
 
@@ -96,6 +99,47 @@ struct GraspOptions {
   // The approach's search for the nearest model sample in the hand's footprint four samples at a
   // time in AVX2 where the CPU has it (false: one at a time). The same candidates either way.
   bool vectorised = true;
+
+  // The options' rows (core/options.h); `vectorised` is a test switch, not an option.
+  template <class V, class S>
+  static void fields(V& v, S& o) {
+    v.choice("approach", o.approach, kGraspApproachNames,
+             "how the open hand comes in: palm slides to contact, or the whole hand to first "
+             "contact");
+    v.integer("approaches", o.approaches, "approach directions over the sphere", Range::atLeast(1));
+    v.integer("max_failed_pick_ups", o.max_failed_pick_ups,
+              "failed pick-ups per grasp before the scan gives up on it", Range::closed(1, 1000));
+    v.integer("rolls", o.rolls, "palm rolls about each approach (over 180°)", Range::atLeast(1));
+    v.numbers("spreads", o.spreads, "spread joint values tried (at least one)");
+    v.numbers("preshapes", o.preshapes,
+              "fingers this fraction of the way closed as the hand comes in (at least one)",
+              Range::closedOpen(0, 1));
+    v.numbers("edge_spreads", o.edge_spreads, "edge poses at each of these spreads");
+    v.num("edge_inset_m", o.edge_inset_m, "edge poses: the model ends this far beyond the palm, m",
+          Range::closedOpen(0, 0.05));
+    v.boolean("pinch_poses", o.pinch_poses,
+              "pinch poses: straight down, fingertips straddling the model's footprint");
+    v.boolean("two_finger_pinch", o.two_finger_pinch,
+              "two-finger pinch poses: the first two fingers facing, the others left open");
+    v.num("two_finger_spread", o.two_finger_spread,
+          "the spread at which the first two fingers face each other, rad");
+    v.num("friction", o.friction, "μ at each contact (stability)", Range::openClosed(0, 2));
+    v.integer("cone_edges", o.cone_edges, "friction-cone linearisation", Range::closed(3, 64));
+    v.integer("wrench_directions", o.wrench_directions, "directions sampled for ε",
+              Range::atLeast(12));
+    v.num("contact_m", o.contact_m, "model points this close to the hand are in contact, m",
+          Range::open(0, 0.05));
+    v.num("contact_cell_m", o.contact_cell_m, "contact pooling cell, m", Range::above(0));
+    v.num("min_epsilon", o.min_epsilon, "ε below this: not a stable grasp", Range::atLeast(0));
+    v.num("stability_weight", o.stability_weight, "ranking score = quality + weight · ε",
+          Range::atLeast(0));
+    v.integer("max_candidates", o.max_candidates, "ranked at most (the most stable first)",
+              Range::atLeast(1));
+    v.num("lift_m", o.lift_m, "the object is lifted this far after the pick, m",
+          Range::closedOpen(0, 1));
+    v.object("hold", "the hold test: candidates closed, lifted and turned on the model in physics",
+             [&](auto& h) { HoldTestOptions::fields(h, o.hold); });
+  }
   std::string validate() const;
 };
 

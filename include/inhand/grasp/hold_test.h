@@ -11,6 +11,7 @@
 #include <string>
 #include <vector>
 
+#include "inhand/core/options.h"
 #include "inhand/geometry/convex_decomposition.h"
 #include "inhand/physics/physics.h"
 #include "inhand/robot/robot_model.h"
@@ -46,6 +47,38 @@ struct HoldTestOptions {
   // The model's pieces (at most 64; coarser hulls bulge beside thin and flat models, where a pinch
   // then starts inside them and closes over the model).
   ConvexDecompositionOptions decomposition{64, 64, 0.02};
+
+  template <class V, class S>
+  static void fields(V& v, S& o) {
+    v.boolean("enabled", o.enabled, "test the candidates; those that hold go first");
+    v.integer("max_candidates", o.max_candidates, "the first this many are tested",
+              Range::atLeast(1));
+    v.integer("max_tested", o.max_tested,
+              "… and when none holds the model, the next as many, up to this many (at least "
+              "max_candidates)",
+              Range::atLeast(1));
+    v.num("density_kg_m3", o.density_kg_m3,
+          "assumed: the model's mass is its volume times this, kg/m³", Range::open(0, 30000));
+    v.num("lift_m", o.lift_m, "lifted this far straight up, m", Range::closedOpen(0, 1));
+    v.num("lift_s", o.lift_s, "… over this long, s", Range::openClosed(0, 10));
+    v.num("turn_rad", o.turn_rad, "then turned this far about a horizontal axis, rad",
+          Range::closed(-M_PI, M_PI));
+    v.num("turn_s", o.turn_s, "… over this long, s", Range::openClosed(0, 10));
+    v.num("max_slip_m", o.max_slip_m, "moved farther in the hand: it did not hold, m",
+          Range::open(0, 0.2));
+    v.num("margin_mass", o.margin_mass,
+          "those that held, tried this many times as heavy: those that hold go first",
+          Range::closed(1, 20));
+    v.num("margin_friction", o.margin_friction, "… with this fraction of the friction",
+          Range::openClosed(0, 1));
+    v.num("pose_tolerance_m", o.pose_tolerance_m,
+          "those that held, tried with the model moved this far each way across the table: the "
+          "first that holds in all goes first (0: not tried), m",
+          Range::closedOpen(0, 0.05));
+    v.integer("robust_checked", o.robust_checked, "… at most this many of them, in their order",
+              Range::atLeast(1));
+    ConvexDecompositionOptions::fields(v, o.decomposition, "decomposition_");
+  }
   std::string validate() const;
 };
 

@@ -10,6 +10,7 @@
 #include <string>
 #include <vector>
 
+#include "inhand/core/options.h"
 #include "inhand/geometry/triangle_mesh.h"
 #include "inhand/volume/tsdf_volume.h"
 
@@ -18,6 +19,8 @@ namespace inhand {
 // How the zero set becomes triangles (geometry/contour.h): marching tetrahedra (watertight, dense:
 // the model written out) or surface nets (about a fifth of the triangles: planning).
 enum class SurfaceMethod { kTetrahedra, kSurfaceNets };
+inline constexpr EnumNames<SurfaceMethod, 2> kSurfaceMethodNames = {
+    {SurfaceMethod::kTetrahedra, "tetrahedra"}, {SurfaceMethod::kSurfaceNets, "surface_nets"}};
 std::string surfaceMethodName(SurfaceMethod m);  // "tetrahedra" | "surface_nets"
 bool parseSurfaceMethod(const std::string& s, SurfaceMethod* out);
 
@@ -34,6 +37,19 @@ struct MeshOptions {
   // S_obj than the model written out.
   int stride = 1;
   SurfaceMethod method = SurfaceMethod::kTetrahedra;
+
+  template <class V, class S>
+  static void fields(V& v, S& o) {
+    v.num("hole_sigma_m", o.hole_sigma_m, "σ of never-observed (hole-filled) surface, m",
+          Range::above(0));
+    v.boolean("drop_floating_unknown", o.drop_floating_unknown,
+              "drop components with no observed vertex");
+    v.num("min_component_fraction", o.min_component_fraction,
+          "drop components smaller than this fraction of the largest", Range::closed(0, 1));
+    v.integer("stride", o.stride, "every n-th voxel along each axis", Range::closed(1, 8));
+    v.choice("method", o.method, kSurfaceMethodNames,
+             "marching tetrahedra (watertight) or surface nets (a fifth of the triangles)");
+  }
   std::string validate() const;
 };
 

@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "inhand/core/json_util.h"
+#include "inhand/core/options.h"
 #include "inhand/geometry/convex_decomposition.h"
 #include "inhand/robot/robot_model.h"
 
@@ -46,6 +47,39 @@ struct PhysicsOptions {
   // After a put-down or a drop the object settles for at most this long (s).
   double settle_s = 2.0;
   ConvexDecompositionOptions decomposition;
+
+  template <class V, class S>
+  static void fields(V& v, S& o) {
+    v.boolean("enabled", o.enabled,
+              "simulate every manipulation (off: the object moves rigidly with the hand)");
+    v.num("density_kg_m3", o.density_kg_m3, "the object's density, kg/m³",
+          Range::openClosed(0, 30000));
+    v.num("mass_kg", o.mass_kg, "the object's mass (0: from the density), kg",
+          Range::closed(0, 100));
+    v.num("timestep_s", o.timestep_s, "MuJoCo's time step, s", Range::closed(1e-4, 0.01));
+    v.num("finger_force_n", o.finger_force_n, "each finger's force limit at its tip, N",
+          Range::openClosed(0, 1000));
+    v.num("touch_force_n", o.touch_force_n,
+          "fingers close with this force (at most finger_force_n) until each meets something, "
+          "then squeeze, N",
+          Range::openClosed(0, 1000));
+    v.num("finger_close_time_s", o.finger_close_time_s, "fingers open to closed, s",
+          Range::openClosed(0.05, 10));
+    v.num("hold_force_factor", o.hold_force_factor,
+          "a closed finger resists this multiple of its drive force (worm drive)",
+          Range::closed(1, 1000));
+    v.num("breakaway_rate", o.breakaway_rate,
+          "TorqueSwitch: coupled joints' rate after the driven joint stalls, relative to it",
+          Range::closed(0, 10));
+    v.num("table_sweep_m", o.table_sweep_m,
+          "a hand closing this near the table top is lowered as its fingertips rise, m",
+          Range::closed(0, 0.05));
+    v.num("ramp_s", o.ramp_s, "each motion segment speeds up and slows down over this long, s",
+          Range::closed(0, 2));
+    v.num("settle_s", o.settle_s, "longest wait for the object to come to rest, s",
+          Range::closed(0, 20));
+    ConvexDecompositionOptions::fields(v, o.decomposition, "decomposition_");
+  }
   std::string validate() const;
 };
 

@@ -12,6 +12,7 @@
 #include <string>
 #include <vector>
 
+#include "inhand/core/options.h"
 #include "inhand/geometry/internal/raster.h"
 #include "inhand/geometry/ray_scene.h"
 #include "inhand/mesh/extract.h"
@@ -33,6 +34,10 @@ enum class QualityIntegrand {
 };
 
 enum class PrimaryVisibility { kAuto, kRaster, kRayCast };
+inline constexpr EnumNames<PrimaryVisibility, 3> kPrimaryVisibilityNames = {
+    {PrimaryVisibility::kAuto, "auto"},
+    {PrimaryVisibility::kRaster, "raster"},
+    {PrimaryVisibility::kRayCast, "ray_cast"}};
 const char* primaryVisibilityName(PrimaryVisibility v);  // auto, raster, ray_cast
 bool parsePrimaryVisibility(const std::string& name, PrimaryVisibility* v);
 
@@ -55,6 +60,23 @@ struct ViewQualityOptions {
   // strides 1 and 2, where it is the faster (its cost is per triangle, a ray caster's per
   // sample; measured 1.5× at stride 1, 1.05–1.2× at stride 2), and ray casting at coarser ones.
   PrimaryVisibility visibility = PrimaryVisibility::kAuto;
+
+  // The options' rows (core/options.h); `integrand` is chosen by the planner, not an option.
+  template <class V, class S>
+  static void fields(V& v, S& o) {
+    v.num("t_hand_m", o.t_hand_m, "hits this close to the hand are skipped (eq. 9), m",
+          Range::atLeast(0));
+    v.num("max_incidence_deg", o.max_incidence_deg, "camera ray vs surface normal at most, degrees",
+          Range::open(0, 90));
+    v.num("max_projector_incidence_deg", o.max_projector_incidence_deg,
+          "projector ray vs surface normal at most, degrees", Range::open(0, 90));
+    v.num("near_hand_cell_m", o.near_hand_cell_m, "resolution of the near-hand grid, m",
+          Range::above(0));
+    v.integer("pixel_stride", o.pixel_stride, "eq. 9 over every n-th pixel in u and v",
+              Range::closed(1, 16));
+    v.choice("visibility", o.visibility, kPrimaryVisibilityNames,
+             "primary visibility: rasterised or ray cast (auto: raster where it is faster)");
+  }
   std::string validate() const;
 };
 

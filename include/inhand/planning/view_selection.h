@@ -41,6 +41,8 @@ enum class StopRule {
   // The paper's absolute t_q and α_cost; a baseline stops on its own threshold in its own units.
   kAbsolute,
 };
+inline constexpr EnumNames<StopRule, 2> kStopRuleNames = {{StopRule::kRelative, "relative"},
+                                                          {StopRule::kAbsolute, "absolute"}};
 
 struct ViewPlannerOptions {
   ViewMetric metric = ViewMetric::kInformationGain;
@@ -74,6 +76,49 @@ struct ViewPlannerOptions {
   int prescreen_stride = 4;
   int refine = 32;
   ViewQualityOptions quality;
+
+  // The options' rows (core/options.h); metric and seed are set by the caller.
+  template <class V, class S>
+  static void fields(V& v, S& o) {
+    v.integer("directions", o.directions, "candidate directions on the unit sphere (Alg. 1)",
+              Range::atLeast(1));
+    v.num("min_angle_deg", o.min_angle_deg, "t_θ: minimum angle to every used view, degrees",
+          Range::closedOpen(0, 180));
+    v.num("range_m", o.range_m, "preferred camera-to-object-centre distance, m", Range::above(0));
+    v.numbers("fallback_ranges_m", o.fallback_ranges_m,
+              "ranges tried only where range_m has no IK solution, m", Range::above(0));
+    v.integer("rolls", o.rolls, "rolls swept about each viewing direction", Range::atLeast(1));
+    v.num("alpha_cost", o.alpha_cost,
+          "α_cost: score = quality − α_cost · trajectory seconds (absolute rule)",
+          Range::atLeast(0));
+    v.choice("stop", o.stop, kStopRuleNames,
+             "relative: t_q and α_cost scale with S_obj's surface area, every planner stops when "
+             "no view's eq. 9 gain reaches t_q; absolute: the paper's t_q and α_cost, each planner "
+             "on its own threshold");
+    v.num("t_q", o.t_q, "t_q: minimum quality of a view that counts (absolute rule)",
+          Range::atLeast(0));
+    v.num("t_q_relative", o.t_q_relative,
+          "relative rule: t_q = this · S_obj's area, nats per m² (0.036: 1% of the surface seen "
+          "for the first time)",
+          Range::atLeast(0));
+    v.num("alpha_cost_relative", o.alpha_cost_relative,
+          "relative rule: α_cost = this · S_obj's area, per second", Range::atLeast(0));
+    v.boolean("use_cost", o.use_cost, "false: score = quality (ablation)");
+    v.boolean("hand_occlusion", o.hand_occlusion,
+              "false: no robot occluders, no t_hand rule (ablation)");
+    v.boolean("check_collisions", o.check_collisions,
+              "reject candidates whose arm, hand or object hit the table or base");
+    v.integer("ik_restarts", o.ik_restarts, "random IK restarts after the seeded attempt",
+              Range::atLeast(0));
+    v.choice("ik_solver", o.ik_solver, kIkMethodNames, "IK: damped least squares or KDL's LMA");
+    v.integer("prescreen_stride", o.prescreen_stride,
+              "coarse pass: every n-th pixel for every reachable candidate", Range::closed(1, 16));
+    v.integer("refine", o.refine, "the best this many by the coarse pass are scored in full",
+              Range::atLeast(0));
+    v.object("quality", "eq. 9", [&](auto& q) { ViewQualityOptions::fields(q, o.quality); });
+    v.object("volumetric", "the volumetric baselines (Isler et al. 2016)",
+             [&](auto& q) { VolumetricOptions::fields(q, o.volumetric); });
+  }
   std::string validate() const;
 };
 

@@ -24,6 +24,7 @@
 #include <string>
 #include <vector>
 
+#include "inhand/core/options.h"
 #include "inhand/planning/view_quality.h"
 #include "inhand/volume/tsdf_volume.h"
 
@@ -35,6 +36,19 @@ struct VolumetricOptions {
   int ray_stride = 8;  // every n-th pixel in u and v (80×60 rays at 640×480)
   double p_unknown = 0.5, p_free = 0.0, p_occupied = 0.9;
   double min_visibility = 1e-3;  // a ray stops when its visibility falls below this
+
+  template <class V, class S>
+  static void fields(V& v, S& o) {
+    v.integer("ray_stride", o.ray_stride, "volumetric baselines: every n-th pixel in u and v",
+              Range::closed(1, 64));
+    v.num("p_unknown", o.p_unknown, "occupancy of an unknown voxel", Range::open(0, 1));
+    v.num("p_free", o.p_free, "occupancy of a voxel in front of the surface (< p_unknown)",
+          Range::closedOpen(0, 1));
+    v.num("p_occupied", o.p_occupied,
+          "occupancy of a voxel on or just behind the surface (> p_unknown)", Range::open(0, 1));
+    v.num("min_visibility", o.min_visibility, "a ray stops when its visibility falls below this",
+          Range::open(0, 1));
+  }
   std::string validate() const;
 };
 

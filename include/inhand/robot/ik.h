@@ -12,6 +12,7 @@
 #include <string>
 #include <vector>
 
+#include "inhand/core/enum_names.h"
 #include "inhand/core/random.h"
 #include "inhand/robot/robot_model.h"
 
@@ -24,6 +25,8 @@ class ChainFkSolverPos_recursive;
 namespace inhand {
 
 enum class IkMethod { kDampedLeastSquares, kKdlLma };
+inline constexpr EnumNames<IkMethod, 2> kIkMethodNames = {{IkMethod::kDampedLeastSquares, "dls"},
+                                                          {IkMethod::kKdlLma, "kdl_lma"}};
 const char* ikMethodName(IkMethod m);                      // dls, kdl_lma
 bool parseIkMethod(const std::string& name, IkMethod* m);  // false for an unknown name
 

@@ -10,6 +10,7 @@
 #include <string>
 #include <vector>
 
+#include "inhand/core/options.h"
 #include "inhand/geometry/triangle_mesh.h"
 #include "inhand/sensor/depth_camera.h"
 #include "inhand/sensor/depth_image.h"
@@ -62,6 +63,57 @@ struct TrackingOptions {
   double slip_m = 0.002;
   int slip_points = 1500;     // the model's observed surface, subsampled to this for it
   double slip_gate_m = 0.03;  // its first iteration's depth gate, m
+
+  template <class V, class S>
+  static void fields(V& v, S& o) {
+    v.boolean("enabled", o.enabled, "off: frames fused with the poses the robot reports");
+    v.integer("iterations", o.iterations, "ICP iterations per frame", Range::closed(1, 200));
+    v.num("gate_m", o.gate_m, "depth gate of the first iteration, m", Range::open(0, 1));
+    v.num("final_gate_m", o.final_gate_m, "… shrinking to this (at most gate_m), m",
+          Range::open(0, 1));
+    v.integer("min_inliers", o.min_inliers, "fewer aligned points: the frame is not fused",
+              Range::atLeast(6));
+    v.num("max_rms_ratio", o.max_rms_ratio,
+          "a final residual above this many sensor σ: the frame is not fused", Range::above(0));
+    v.num("max_correction_m", o.max_correction_m,
+          "a correction moving the palm farther: the frame is not fused, m", Range::above(0));
+    v.num("prior", o.prior, "pull towards the reported pose, relative to the data's curvature",
+          Range::closedOpen(0, 1));
+    v.num("object_weight", o.object_weight, "the model's points against the hand's",
+          Range::closed(0, 1));
+    v.num("hand_spacing_m", o.hand_spacing_m, "spacing of the hand's surface samples, m",
+          Range::closedOpen(0.001, 0.05));
+    v.integer("max_object_points", o.max_object_points,
+              "the model's observed surface, subsampled to this many points", Range::atLeast(0));
+    v.boolean("filter", o.filter,
+              "corrections Kalman-filtered over frames (a random walk); off: each frame's own");
+    v.num("drift_m", o.drift_m, "the correction's drift per radian of joint motion, m",
+          Range::atLeast(0));
+    v.num("drift_rad", o.drift_rad, "… and of its rotation, rad", Range::atLeast(0));
+    v.num("frame_drift_m", o.frame_drift_m, "the correction's drift per frame, m", Range::above(0));
+    v.num("frame_drift_rad", o.frame_drift_rad, "… and of its rotation, rad", Range::above(0));
+    v.num("pair_information", o.pair_information,
+          "each aligned point pair counts as this fraction of an independent measurement",
+          Range::openClosed(0, 1));
+    v.boolean("in_hand", o.in_hand,
+              "after each pick-up the object's pose in the hand from a frame (the model aligned "
+              "with it); off: as the robot reports it");
+    v.num("in_hand_significance", o.in_hand_significance,
+          "a pick-up's palm error is carried to the grasp only when its squared Mahalanobis "
+          "distance exceeds this (χ²(6) at 99 %)",
+          Range::atLeast(0));
+    v.boolean("slip_check", o.slip_check,
+              "each in-hand frame, the model alone aligned with it: the object's slip in the hand "
+              "found, the grasp corrected, frames not fused while it moves");
+    v.num("slip_m", o.slip_m,
+          "a significant correction moving the model's surface farther (RMS along its normals) "
+          "is a slip, m",
+          Range::open(0, 0.1));
+    v.integer("slip_points", o.slip_points,
+              "the model's observed surface, subsampled to this many points for it",
+              Range::atLeast(0));
+    v.num("slip_gate_m", o.slip_gate_m, "its first iteration's depth gate, m", Range::open(0, 1));
+  }
   std::string validate() const;
 };
 

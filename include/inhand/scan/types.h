@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "inhand/core/json_util.h"
+#include "inhand/core/options.h"
 #include "inhand/grasp/grasp.h"
 #include "inhand/mesh/extract.h"
 #include "inhand/planning/view_selection.h"
@@ -28,6 +29,10 @@ enum class HandMode {
   kCarveOnly,      // (b) measurements within t_hand of the robot only carve free space
   kCarveAndEmpty,  // (c) as (b), and voxels inside the hand are marked empty
 };
+inline constexpr EnumNames<HandMode, 3> kHandModeNames = {
+    {HandMode::kNaive, "naive"},
+    {HandMode::kCarveOnly, "carve"},
+    {HandMode::kCarveAndEmpty, "carve-empty"}};
 std::string handModeName(HandMode m);
 bool parseHandMode(const std::string& s, HandMode* out);
 
@@ -74,6 +79,27 @@ struct FrameChecks {
   // volume, at most this fraction may land where the model knows space is empty (seen through
   // before), or the frame is not fused (1: no check).
   double max_free_space_fraction = 0.2;
+
+  template <class V, class S>
+  static void fields(V& v, S& o) {
+    v.num("min_valid_fraction", o.min_valid_fraction,
+          "fewer valid depth pixels than this fraction: an empty frame", Range::closedOpen(0, 1));
+    v.num("max_path_deviation_rad", o.max_path_deviation_rad,
+          "joints farther from the planned path: a jump, not fused (0: no check), rad",
+          Range::atLeast(0));
+    v.num("min_support", o.min_support,
+          "the model's points in view the frame must bear out, or the object is not in the hand "
+          "(0: no check)",
+          Range::closed(0, 1));
+    v.integer("min_points", o.min_points, "… when at least this many are in view",
+              Range::atLeast(1));
+    v.integer("lost_after", o.lost_after, "that many such frames in a row: object_lost",
+              Range::atLeast(1));
+    v.num("max_free_space_fraction", o.max_free_space_fraction,
+          "at most this fraction of a frame's depth in the volume where the model knows space is "
+          "empty (1: no check)",
+          Range::openClosed(0, 1));
+  }
   std::string validate() const;
 };
 
@@ -112,6 +138,56 @@ struct ScanOptions {
     o.smooth_depth = true;
     return o;
   }();
+
+  // The options' rows (core/options.h), the volume's among them (volume_budget's voxel size is
+  // voxel_m's).
+  template <class V, class S>
+  static void fields(V& v, S& o) {
+    v.num("voxel_m", o.voxel_m, "volume voxel size, m", Range::open(0, 0.05));
+    v.num("volume_size_m", o.volume_size_m, "edge of the cubic volume (over 10 voxels), m",
+          Range::open(0, 2));
+    v.num("truncation_m", o.volume_budget.truncation_m,
+          "half-width μ of the signed-distance band (at least a voxel; 0: 4 voxels), m",
+          Range::closedOpen(0, 0.1));
+    v.num("band_sigmas", o.volume_budget.band_sigmas,
+          "a measurement reaches this many of its σ behind its smoothed surface (at least a voxel "
+          "across the surface, at most μ), so that both sides of a thin wall are kept; 0: μ "
+          "behind its depth",
+          Range::closed(0, 100));
+    v.boolean("smooth_depth", o.volume_budget.smooth_depth,
+              "update the voxels from each pixel's surface smoothed over its 5×5 neighbourhood "
+              "(a fitted plane) rather than from its raw depth");
+    v.num("memory_budget_mb", o.volume_budget.memory_budget_mb,
+          "a volume needing more memory than this is refused, MiB", Range::above(0));
+    v.boolean("fit_volume", o.fit_volume,
+              "from the table: a cube of 1.5 × the object's extent + 4 cm, as many voxels across");
+    v.integer("torque_readings", o.torque_readings,
+              "joint-torque readings at rest after each view that weigh the object (noise 1/√N)",
+              Range::closed(1, 100000));
+    v.num("t_hand_m", o.t_hand_m, "measurements this close to the robot only carve (§IV), m",
+          Range::atLeast(0));
+    v.integer("carve_radius_px", o.carve_radius_px, "… or this close to it in the image, pixels",
+              Range::closed(0, 10));
+    v.num("edge_jump_m", o.edge_jump_m,
+          "in the hand, a pixel next to one farther by more than this is not fused (a "
+          "silhouette); 0: off, m",
+          Range::closedOpen(0, 1));
+    v.choice("hand_mode", o.hand_mode, kHandModeNames,
+             "the robot's own measurements (Fig. 3 a, b, c)");
+    v.integer("initial_views", o.initial_views, "directions of the initial trajectory",
+              Range::atLeast(0));
+    v.integer("max_views", o.max_views, "Alg. 1 views per grasp at most", Range::atLeast(0));
+    v.integer("planning_stride", o.planning_stride, "S_obj for planning from every n-th voxel",
+              Range::closed(1, 4));
+    v.choice("planning_mesh", o.planning_method, kSurfaceMethodNames, "S_obj for planning");
+    v.object("planner", "the view planner (Alg. 1)",
+             [&](auto& p) { ViewPlannerOptions::fields(p, o.planner); });
+    v.object("tracking", "in-hand frames aligned with the hand and the model (arm error, §II)",
+             [&](auto& t) { TrackingOptions::fields(t, o.tracking); });
+    v.object("checks", "in-hand frames that are not fused (docs/reliability.md)",
+             [&](auto& k) { FrameChecks::fields(k, o.checks); });
+    v.object("mesh", "the model's surface", [&](auto& m) { MeshOptions::fields(m, o.mesh); });
+  }
   std::string validate() const;
 };
 
@@ -245,6 +321,28 @@ struct TableTopOptions {
   double cluster_cell_m = 0.01;   // the object is the largest cluster at this linking cell, m
   int min_points = 200;           // fewer object points than this: object_not_found
   PlaneFitOptions plane;          // RANSAC of the table plane
+
+  template <class V, class S>
+  static void fields(V& v, S& o) {
+    v.integer("frames", o.frames, "depth frames of the object where it rests",
+              Range::closed(1, 30));
+    v.num("aim_height_m", o.aim_height_m, "the camera aims this far above the rest pose, m",
+          Range::closed(-0.5, 0.5));
+    v.num("search_radius_m", o.search_radius_m, "object points within this of the rest pose, m",
+          Range::open(0, 2));
+    v.num("above_table_m", o.above_table_m, "… and this far above the fitted table plane, m",
+          Range::open(0, 0.1));
+    v.num("cluster_cell_m", o.cluster_cell_m, "the object: the largest cluster at this cell, m",
+          Range::open(0, 0.1));
+    v.integer("min_points", o.min_points, "fewer object points: object_not_found",
+              Range::atLeast(3));
+    v.num("plane_inlier_m", o.plane.inlier_m, "RANSAC: a point this close supports a plane, m",
+          Range::open(0, 0.05));
+    v.integer("plane_iterations", o.plane.iterations, "RANSAC hypotheses", Range::atLeast(1));
+    v.num("plane_max_tilt_deg", o.plane.max_tilt_deg,
+          "RANSAC: planes tilted more from the table's normal lose, degrees",
+          Range::openClosed(0, 90));
+  }
   std::string validate() const;
 };
 
@@ -306,6 +404,22 @@ struct MultiGraspOptions {
   ViewPlannerOptions ranking = defaultRankingPlanner();
   int keep_ranked = 12;  // candidates kept per grasp in its record (for the report)
   static ViewPlannerOptions defaultRankingPlanner();
+
+  // The options' rows (core/options.h); Alg. 1's ranking options are grasp.ranking.
+  template <class V, class S>
+  static void fields(V& v, S& o) {
+    v.integer("max_grasps", o.max_grasps, "grasps in all (1: no re-grasping)",
+              Range::closed(1, 50));
+    v.integer("keep_ranked", o.keep_ranked,
+              "ranked candidates kept per grasp in its record (the report)", Range::atLeast(0));
+    v.object("table_top", "the table-top stage",
+             [&](auto& t) { TableTopOptions::fields(t, o.table_top); });
+    v.object("grasp", "grasp candidates and their ranking", [&](auto& g) {
+      GraspOptions::fields(g, o.grasp);
+      g.object("ranking", "Alg. 1 as used to rank grasp candidates",
+               [&](auto& p) { ViewPlannerOptions::fields(p, o.ranking); });
+    });
+  }
   std::string validate() const;
 };
 

@@ -6,6 +6,7 @@
 #include <memory>
 
 #include "inhand/core/json_util.h"
+#include "inhand/core/options.h"
 #include "inhand/geometry/ray_scene.h"
 #include "inhand/physics/physics.h"
 #include "inhand/robot/robot_interface.h"
@@ -37,6 +38,28 @@ struct SimFaults {
   // The object falls out of the hand halfway through this motion with it in the hand (0-based,
   // counting every motion of the scan; -1: never). It lands where it rested.
   int drop_in_motion = -1;
+
+  template <class V, class S>
+  static void fields(V& v, S& o) {
+    const Range rate = Range::closed(0, 1);
+    v.num("dropped_frames", o.dropped_frames, "fraction of frames that never arrive", rate);
+    v.num("corrupted_frames", o.corrupted_frames,
+          "fraction corrupted: zeros, NaNs, a stripe of wrong depth (in turn)", rate);
+    v.num("pose_jumps", o.pose_jumps, "fraction of joint states with an arm joint 0.3 rad off",
+          rate);
+    v.num("stopped_short", o.stopped_short, "fraction of motions stopped part-way", rate);
+    v.num("refused_motions", o.refused_motions,
+          "fraction of motions the arm refuses (it stays where it is)", rate);
+    v.num("failed_pickups", o.failed_pickups, "fraction of pick-ups that reach nothing", rate);
+    v.num("slip_m", o.slip_m, "the object slips this far in the hand once per grasp, m",
+          Range::closed(0, 0.05));
+    v.integer("slip_in_motion", o.slip_in_motion,
+              "… halfway through this motion with it in the hand of each grasp (0-based)",
+              Range::atLeast(0));
+    v.integer("drop_in_motion", o.drop_in_motion,
+              "the object falls out of the hand during this motion (0-based; -1: never)",
+              Range::atLeast(-1));
+  }
   std::string validate() const;
 };
 
@@ -58,8 +81,24 @@ struct SimColourOptions {
   std::array<uint8_t, 3> robot{40, 60, 190};    // the arm and hand
   std::array<uint8_t, 3> table{205, 185, 150};  // the table top
   std::array<uint8_t, 3> room{128, 128, 128};   // the background
+
+  // The options' rows (core/options.h); the robot's, table's and room's colours are the scene's.
+  template <class V, class S>
+  static void fields(V& v, S& o) {
+    v.boolean("enabled", o.enabled, "render colour images and fuse their colours");
+    v.num("ambient", o.ambient,
+          "lit fraction where the lamp at the camera grazes a surface (Lambertian)",
+          Range::closed(0, 1));
+    v.num("noise_sigma", o.noise_sigma, "per-pixel Gaussian noise, 8-bit levels",
+          Range::closed(0, 100));
+    v.num("exposure_sigma", o.exposure_sigma, "per-frame exposure change, relative (Gaussian σ)",
+          Range::closed(0, 0.5));
+  }
   std::string validate() const;
 };
+
+// How the simulated pick-up comes in (SimOptions::pick_up_first_contact).
+inline constexpr EnumNames<bool, 2> kPickUpNames = {{false, "palm"}, {true, "first_contact"}};
 
 struct SimOptions {
   double frame_rate_hz = 30.0;  // sensor frame rate along trajectories
@@ -114,6 +153,51 @@ struct SimOptions {
   // put-down; off: the kinematic simulator (check_hold decides at the pick-up).
   PhysicsOptions physics;
   SimFaults faults;
+
+  // The options' rows (core/options.h); seed and R_B_O_rest are set by the caller.
+  template <class V, class S>
+  static void fields(V& v, S& o) {
+    v.num("frame_rate_hz", o.frame_rate_hz, "sensor frame rate along trajectories, Hz",
+          Range::above(0));
+    v.integer("frame_subsample", o.frame_subsample,
+              "deliver every n-th sensor frame to the scan (1: all)", Range::atLeast(1));
+    v.boolean("noise", o.noise, "sensor noise");
+    v.object("colour", "a colour camera beside the depth camera (Kinect-class, 640x480)",
+             [&](auto& c) { SimColourOptions::fields(c, o.colour); });
+    v.num("room_radius_m", o.room_radius_m, "a room around the camera (0: none), m",
+          Range::atLeast(0));
+    v.boolean("check_hold", o.check_hold, "grasps must be force closure on the true object");
+    v.num("friction", o.friction, "μ of the true contacts", Range::openClosed(0, 2));
+    v.num("hold_min_epsilon", o.hold_min_epsilon, "ε a grasp needs to hold", Range::atLeast(0));
+    v.num("arm_error_m", o.arm_error_m,
+          "the arm's error: the palm's median distance from the reported joints' FK where "
+          "objects are presented (fixed offsets and gravity's sag), m",
+          Range::closed(0, 0.2));
+    v.num("arm_error_gravity", o.arm_error_gravity,
+          "joint sag proportional to gravity's torque at the configuration (URDF masses), as a "
+          "fraction of the fixed offsets at a typical configuration",
+          Range::closed(0, 5));
+    v.num("arm_error_drift", o.arm_error_drift,
+          "slow drift of every joint (periods 20-120 s), RMS as a fraction of the fixed offsets",
+          Range::closed(0, 5));
+    v.num("arm_error_noise", o.arm_error_noise,
+          "per-frame joint noise, RMS as a fraction of the fixed offsets", Range::closed(0, 5));
+    v.num("torque_noise_nm", o.torque_noise_nm,
+          "noise (standard deviation, N·m) of the joint torques the arm reports at rest, from "
+          "which the scan weighs the object",
+          Range::closed(0, 10));
+    v.boolean("grasp_error", o.grasp_error,
+              "the arm's error also at pick-ups: the object sits in the hand off where the "
+              "reported joints say");
+    v.choice("pick_up", o.pick_up_first_contact, kPickUpNames,
+             "the simulated pick-up: palm backed off, or a guarded move to first contact");
+    v.object("physics",
+             "MuJoCo rigid-body physics for pick-ups, held motions and put-downs "
+             "(docs/physics.md)",
+             [&](auto& p) { PhysicsOptions::fields(p, o.physics); });
+    v.object("faults", "faults injected (all off by default; docs/reliability.md)",
+             [&](auto& f) { SimFaults::fields(f, o.faults); });
+  }
   std::string validate() const;
 };
 
