@@ -373,3 +373,68 @@ TEST(Session, AnObjectThatTippedIsFoundAgainOnTheTable) {
         std::min(turned, Eigen::AngleAxisd(Eigen::AngleAxisd(M_PI, Vec3::Unit(a)) * R).angle());
   EXPECT_LT(turned, 2 * M_PI / 180);
 }
+
+// Depth edges only carve (ScanOptions::discontinuities_carve_only): the cracker box on the table,
+// seen from eight headings with the sensor's noise, grows flakes beyond its edges when the edge
+// pixels are fused (with their larger σ), and almost none when they only carve; the faces stay
+// observed either way. (Counted above the table top: the test's table pixels only carve, so the
+// table's plane stays unknown and its hole-filled surface is no flake.)
+TEST(Session, DepthEdgesOnlyCarveAndGrowNoFlakesBeyondTheObjectsEdges) {
+  const TriangleMesh box = loadObject("builtin:cracker_box");
+  const Aabb truth = box.bounds();
+  SimWorld world(wam(), box, Iso3::Identity(), DepthCameraOptions{}, NoiseModelOptions{},
+                 SimOptions{});
+  world.held = false;
+  world.q = wam().home();
+  SimSensor sensor(&world, DepthCameraOptions{});
+  const StablePose rest = stablePoses(box).front();
+  const Vec3 at = wam().camera().lookAt_B;
+  const double table = wam().table().topZ();
+  auto flakes = [&](bool carveOnly) {
+    ScanOptions o = fastOptions();
+    o.voxel_m = 0.002;
+    o.discontinuities_carve_only = carveOnly;
+    ScanSession session(wam(), sensor.camera(), NoiseModelOptions{}, o, MultiGraspOptions{},
+                        truth.center());
+    for (int k = 0; k < 8; ++k) {
+      Iso3 T = Iso3::Identity();
+      T.linear() = Eigen::AngleAxisd(k * M_PI / 4, Vec3::UnitZ()).toRotationMatrix() * rest.R_B_O;
+      Aabb b;
+      for (const Vec3f& v : box.vertices) b.extend(T.linear() * v.cast<double>());
+      T.translation() = Vec3(at.x() - b.center().x(), at.y() - b.center().y(), table - b.min.z());
+      world.tablePose = T;
+      const std::optional<Iso3> aim = wam().camera().aimAt(T * truth.center());
+      EXPECT_TRUE(aim);
+      if (!aim) return std::pair<int, int>{-1, -1};
+      sensor.setPose(*aim);
+      const DepthImage d = world.render();
+      std::vector<uint8_t> tablePixels(d.depth_m.size(), 0);  // the table only carves
+      const CameraIntrinsics& K = sensor.camera().intrinsics;
+      for (int v = 0; v < d.height; ++v)
+        for (int u = 0; u < d.width; ++u) {
+          const size_t i = size_t(v) * size_t(d.width) + size_t(u);
+          if (d.depth_m[i] > 0 &&
+              (*aim * (double(d.depth_m[i]) * K.rayZ1(u, v))).z() < table + 0.005)
+            tablePixels[i] = 1;
+        }
+      session.addFrameOfObjectAt(d, world.q, *aim, T, &tablePixels);
+    }
+    const ObjectModel model = extractModel(session.volume(), o.mesh);
+    int observed = 0, outside = 0;
+    for (size_t i = 0; i < model.mesh.vertices.size(); ++i) {
+      if (!(model.variance[i] < 0.01 * 0.01)) continue;  // measured to a centimetre
+      ++observed;
+      const Vec3 p = model.mesh.vertices[i].cast<double>();
+      const Vec3 out = (truth.min - p).cwiseMax(p - truth.max).cwiseMax(0.0);
+      // Above the table top (where the table's own pixels only carve, its plane stays unknown).
+      outside += out.norm() > 0.002 && (world.tablePose * p).z() > table + 0.003;
+    }
+    return std::pair<int, int>{observed, outside};
+  };
+  const auto [fusedObserved, fusedOutside] = flakes(false);
+  const auto [carvedObserved, carvedOutside] = flakes(true);
+  EXPECT_GT(carvedObserved, 0.9 * fusedObserved);
+  EXPECT_GT(fusedOutside, 100) << "the scene no longer grows flakes: the test tests nothing";
+  EXPECT_LT(carvedOutside, fusedOutside / 4) << fusedOutside;
+  EXPECT_LT(carvedOutside, 0.005 * carvedObserved) << carvedObserved;
+}

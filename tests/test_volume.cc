@@ -304,6 +304,39 @@ TEST(Fusion, CarveOnlyPixelsAddNoSurface) {
   EXPECT_GT(vol.countState(VoxelState::kEmpty), 50000u);
 }
 
+// depthDiscontinuities marks the pixels measurementSigma counts as edges: a 5×5 block 10 cm in
+// front of a wall (its outer ring and the wall's ring around it), the four neighbours of a pixel
+// with no return, nothing at the image border for lack of a neighbour there.
+TEST(Fusion, DepthDiscontinuitiesAreTheEdgesOfBlocksAndMissingReturns) {
+  DepthImage d;
+  d.width = 20;
+  d.height = 20;
+  d.depth_m.assign(400, 1.0f);
+  for (int v = 5; v < 10; ++v)
+    for (int u = 5; u < 10; ++u) d.depth_m[size_t(v) * 20 + u] = 0.9f;
+  d.depth_m[15 * 20 + 15] = 0.0f;
+  d.depth_m[2 * 20 + 2] = 1.005f;  // 5 mm off: below the jump
+  const std::vector<uint8_t> e = depthDiscontinuities(d, 0.01);
+  auto at = [&](int u, int v) { return int(e[size_t(v) * 20 + u]); };
+  int marked = 0;
+  for (uint8_t x : e) marked += x;
+  EXPECT_EQ(marked, 16 + 20 + 4);
+  EXPECT_EQ(at(5, 5), 1);    // the block's corner
+  EXPECT_EQ(at(7, 7), 0);    // inside the block
+  EXPECT_EQ(at(4, 7), 1);    // the wall beside it
+  EXPECT_EQ(at(4, 4), 0);    // diagonal only: not a 4-neighbour
+  EXPECT_EQ(at(15, 15), 0);  // no return: nothing to mark
+  EXPECT_EQ(at(14, 15), 1);
+  EXPECT_EQ(at(2, 2), 0);
+  EXPECT_EQ(at(0, 0), 0);
+  // Only inside a region when given one.
+  const PixelRect r{0, 0, 7, 20};
+  const std::vector<uint8_t> part = depthDiscontinuities(d, 0.01, &r);
+  for (int v = 0; v < 20; ++v)
+    for (int u = 0; u < 20; ++u)
+      EXPECT_EQ(int(part[size_t(v) * 20 + u]), u < 7 ? at(u, v) : 0) << u << "," << v;
+}
+
 // writeData / readData: a volume of runs and scattered sums (-0 and NaN bits among them) back bit
 // for bit, far smaller than the arrays; a stream cut short, a bad state or runs that do not cover
 // the volume refused with a reason.

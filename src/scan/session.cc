@@ -1,6 +1,7 @@
 #include "inhand/scan/session.h"
 
 #include "inhand/volume/colour_volume.h"
+#include "inhand/volume/integrate.h"
 
 #include <Eigen/Geometry>
 #include "inhand/sensor/depth_image.h"
@@ -541,6 +542,14 @@ FrameReport ScanSession::fuse(const DepthImage& input, const JointVector& q, con
   if (extraCarve) {
     if (carve.empty()) carve.assign(depth.depth_m.size(), 0);
     for (size_t i = 0; i < carve.size(); ++i) carve[i] |= (*extraCarve)[i];
+  }
+  // Depth edges only carve (ScanOptions::discontinuities_carve_only), found after the in-hand
+  // trim: the pixels beside those it dropped are edges too.
+  if (s.options.discontinuities_carve_only) {
+    const std::vector<uint8_t> edges =
+        depthDiscontinuities(depth, s.noise.discontinuity_jump_m, &rect);
+    if (carve.empty()) carve.assign(depth.depth_m.size(), 0);
+    for (size_t i = 0; i < carve.size(); ++i) carve[i] |= edges[i];
   }
   // In the hand: measurements that land where the model knows space is empty (seen through
   // before) are not the object (a stripe of wrong depth, a reflection): a frame with many of

@@ -121,6 +121,24 @@ std::vector<float> measurementSigma(const DepthImage& depth, const CameraIntrins
   return sigma;
 }
 
+std::vector<uint8_t> depthDiscontinuities(const DepthImage& depth, double jump_m,
+                                          const PixelRect* region) {
+  const int w = depth.width, h = depth.height;
+  std::vector<uint8_t> edge(size_t(w) * h, 0);
+  const PixelRect r = region ? *region : PixelRect{0, 0, w, h};
+  parallelFor(std::max(0, r.v0), std::min(h, r.v1), [&](int v) {
+    const float* row = depth.depth_m.data() + size_t(v) * w;
+    for (int u = std::max(0, r.u0); u < std::min(w, r.u1); ++u) {
+      const double D = row[u];
+      if (!(D > 0)) continue;
+      auto off = [&](double Dn) { return !(Dn > 0) || std::abs(Dn - D) > jump_m; };
+      edge[size_t(v) * w + u] = (u > 0 && off(row[u - 1])) || (u + 1 < w && off(row[u + 1])) ||
+                                (v > 0 && off(row[u - w])) || (v + 1 < h && off(row[u + w]));
+    }
+  });
+  return edge;
+}
+
 namespace {
 
 void checkInputs(const DepthImage& depth, const CameraIntrinsics& K,

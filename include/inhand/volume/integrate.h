@@ -41,6 +41,12 @@ std::vector<float> measurementSigma(const DepthImage& depth, const CameraIntrins
                                     const PixelRect* region = nullptr,
                                     const std::vector<uint8_t>* carve_only = nullptr);
 
+// The pixels measurementSigma marks as at a depth discontinuity (1): a 4-neighbour with no return
+// or farther or nearer by more than `jump_m`. Their return may come from either side of the edge
+// (a mixed pixel, lateral noise); only pixels with a depth are marked, only in `region` if given.
+std::vector<uint8_t> depthDiscontinuities(const DepthImage& depth, double jump_m,
+                                          const PixelRect* region = nullptr);
+
 // Pixel (u, v)'s surface with the noise smoothed out: a least-squares plane through the depths of
 // its (2·kSmoothingRadius + 1)² neighbourhood that lie within `max_jump` of its own (the same
 // surface), evaluated at the pixel, and the cosine between that plane's normal and the pixel's ray
