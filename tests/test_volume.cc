@@ -171,7 +171,8 @@ std::vector<VolumeOptions> bandSettings() {
 
 // The fast kernel against the simple reference, with the fixed band and with the band behind
 // each measurement at 2σ, raw and smoothed depths (the reference computes the plane fit's reach
-// and the band on its own).
+// and the band on its own), the frames' silhouettes carving beyond the band and a stripe of rows
+// carving up to the surface.
 TEST(Fusion, OptimisedIntegrationMatchesReference) {
   TriangleMesh obj = makeBox(Vec3(0.06, 0.158, 0.21));
   RayScene scene;
@@ -186,9 +187,14 @@ TEST(Fusion, OptimisedIntegrationMatchesReference) {
     for (const Iso3& T : test::viewsAround(5, 0.7)) {
       RenderOptions ro;
       DepthImage d = renderDepth(scene, T, cam, nm, ro);
-      auto sigma = measurementSigma(d, cam.intrinsics, nm);
-      fastUpdated += integrate(d, T, cam.intrinsics, sigma, &fast).updated;
-      refUpdated += integrateReference(d, T, cam.intrinsics, sigma, &ref).updated;
+      // Silhouettes carve beyond the band, a stripe of rows up to the surface (both codes).
+      std::vector<uint8_t> carve = depthDiscontinuities(d, nm.discontinuity_jump_m);
+      for (uint8_t& c : carve) c = c ? kCarveBeyondBand : 0;
+      for (size_t i = 200 * size_t(d.width); i < 215 * size_t(d.width); ++i)
+        carve[i] = kCarveToSurface;
+      auto sigma = measurementSigma(d, cam.intrinsics, nm, nullptr, &carve);
+      fastUpdated += integrate(d, T, cam.intrinsics, sigma, &fast, &carve).updated;
+      refUpdated += integrateReference(d, T, cam.intrinsics, sigma, &ref, &carve).updated;
     }
     // Float (incremental) vs double (per-voxel) projection may round a voxel centre that lies on
     // a pixel border to the neighbouring pixel: allow a tiny fraction of differing voxels.
@@ -304,31 +310,40 @@ TEST(Fusion, CarveOnlyPixelsAddNoSurface) {
   EXPECT_GT(vol.countState(VoxelState::kEmpty), 50000u);
 }
 
-// depthDiscontinuities marks the pixels measurementSigma counts as edges: a 5×5 block 10 cm in
-// front of a wall (its outer ring and the wall's ring around it), the four neighbours of a pixel
-// with no return, nothing at the image border for lack of a neighbour there.
-TEST(Fusion, DepthDiscontinuitiesAreTheEdgesOfBlocksAndMissingReturns) {
+// depthDiscontinuities marks the near side of silhouettes: the outer ring of a 5×5 block 10 cm in
+// front of a wall, also where a gap of no return (a projector shadow) lies between it and the
+// wall; not the wall beside the block (the nearer edge), not the neighbours of a hole in the wall
+// (a shadow on its own surface), not a 5 mm step; a return followed by no return up to the image
+// border is a silhouette.
+TEST(Fusion, DepthDiscontinuitiesAreTheNearSideOfSilhouettes) {
   DepthImage d;
   d.width = 20;
   d.height = 20;
   d.depth_m.assign(400, 1.0f);
-  for (int v = 5; v < 10; ++v)
-    for (int u = 5; u < 10; ++u) d.depth_m[size_t(v) * 20 + u] = 0.9f;
-  d.depth_m[15 * 20 + 15] = 0.0f;
-  d.depth_m[2 * 20 + 2] = 1.005f;  // 5 mm off: below the jump
+  auto set = [&](int u, int v, float z) { d.depth_m[size_t(v) * 20 + u] = z; };
+  for (int v = 5; v < 10; ++v) {
+    for (int u = 5; u < 10; ++u) set(u, v, 0.9f);
+    set(10, v, 0.0f);  // a shadow right of the block, the wall beyond it
+    set(11, v, 0.0f);
+  }
+  set(15, 15, 0.0f);
+  set(2, 2, 1.005f);
+  set(19, 18, 0.0f);
   const std::vector<uint8_t> e = depthDiscontinuities(d, 0.01);
   auto at = [&](int u, int v) { return int(e[size_t(v) * 20 + u]); };
   int marked = 0;
   for (uint8_t x : e) marked += x;
-  EXPECT_EQ(marked, 16 + 20 + 4);
+  EXPECT_EQ(marked, 16 + 1);
   EXPECT_EQ(at(5, 5), 1);    // the block's corner
+  EXPECT_EQ(at(9, 7), 1);    // across the shadow: the wall, farther
   EXPECT_EQ(at(7, 7), 0);    // inside the block
-  EXPECT_EQ(at(4, 7), 1);    // the wall beside it
-  EXPECT_EQ(at(4, 4), 0);    // diagonal only: not a 4-neighbour
+  EXPECT_EQ(at(4, 7), 0);    // the wall beside it: the nearer side is the block's
+  EXPECT_EQ(at(12, 7), 0);   // the wall across the shadow
+  EXPECT_EQ(at(14, 15), 0);  // beside a hole in the wall
   EXPECT_EQ(at(15, 15), 0);  // no return: nothing to mark
-  EXPECT_EQ(at(14, 15), 1);
   EXPECT_EQ(at(2, 2), 0);
-  EXPECT_EQ(at(0, 0), 0);
+  EXPECT_EQ(at(18, 18), 1);  // no return up to the border
+  EXPECT_EQ(at(19, 17), 0);  // the wall on the other side of that hole
   // Only inside a region when given one.
   const PixelRect r{0, 0, 7, 20};
   const std::vector<uint8_t> part = depthDiscontinuities(d, 0.01, &r);

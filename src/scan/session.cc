@@ -543,13 +543,14 @@ FrameReport ScanSession::fuse(const DepthImage& input, const JointVector& q, con
     if (carve.empty()) carve.assign(depth.depth_m.size(), 0);
     for (size_t i = 0; i < carve.size(); ++i) carve[i] |= (*extraCarve)[i];
   }
-  // Depth edges only carve (ScanOptions::discontinuities_carve_only), found after the in-hand
-  // trim: the pixels beside those it dropped are edges too.
+  // Silhouette pixels only carve beyond the band (ScanOptions::discontinuities_carve_only), found
+  // after the in-hand trim: the pixels beside those it dropped are silhouettes too.
   if (s.options.discontinuities_carve_only) {
     const std::vector<uint8_t> edges =
         depthDiscontinuities(depth, s.noise.discontinuity_jump_m, &rect);
     if (carve.empty()) carve.assign(depth.depth_m.size(), 0);
-    for (size_t i = 0; i < carve.size(); ++i) carve[i] |= edges[i];
+    for (size_t i = 0; i < carve.size(); ++i)
+      if (edges[i] && !carve[i]) carve[i] = kCarveBeyondBand;
   }
   // In the hand: measurements that land where the model knows space is empty (seen through
   // before) are not the object (a stripe of wrong depth, a reflection): a frame with many of

@@ -123,17 +123,33 @@ std::vector<float> measurementSigma(const DepthImage& depth, const CameraIntrins
 
 std::vector<uint8_t> depthDiscontinuities(const DepthImage& depth, double jump_m,
                                           const PixelRect* region) {
+  constexpr int kGapPx = 8;
   const int w = depth.width, h = depth.height;
   std::vector<uint8_t> edge(size_t(w) * h, 0);
   const PixelRect r = region ? *region : PixelRect{0, 0, w, h};
+  const float* Dp = depth.depth_m.data();
   parallelFor(std::max(0, r.v0), std::min(h, r.v1), [&](int v) {
-    const float* row = depth.depth_m.data() + size_t(v) * w;
     for (int u = std::max(0, r.u0); u < std::min(w, r.u1); ++u) {
-      const double D = row[u];
+      const double D = Dp[size_t(v) * w + u];
       if (!(D > 0)) continue;
-      auto off = [&](double Dn) { return !(Dn > 0) || std::abs(Dn - D) > jump_m; };
-      edge[size_t(v) * w + u] = (u > 0 && off(row[u - 1])) || (u + 1 < w && off(row[u + 1])) ||
-                                (v > 0 && off(row[u - w])) || (v + 1 < h && off(row[u + w]));
+      // Along (du, dv): the neighbour farther by more than the jump, or a gap of no return whose
+      // first return within kGapPx lies farther (or none does, or the image ends): the pixel is
+      // at a silhouette, not beside a shadow on its own face or behind a nearer edge.
+      auto off = [&](int du, int dv) {
+        int uu = u + du, vv = v + dv;
+        if (uu < 0 || vv < 0 || uu >= w || vv >= h) return false;
+        double Dn = Dp[size_t(vv) * w + uu];
+        if (Dn > 0) return Dn - D > jump_m;
+        for (int k = 1; k < kGapPx; ++k) {
+          uu += du;
+          vv += dv;
+          if (uu < 0 || vv < 0 || uu >= w || vv >= h) return true;
+          Dn = Dp[size_t(vv) * w + uu];
+          if (Dn > 0) return Dn - D > jump_m;
+        }
+        return true;
+      };
+      edge[size_t(v) * w + u] = off(-1, 0) || off(1, 0) || off(0, -1) || off(0, 1);
     }
   });
   return edge;
@@ -429,12 +445,13 @@ namespace {
 // The per-voxel update rule shared by both kernels, for a voxel that lies within the
 // measurement's reach behind its surface (farLimit). `mu`: the volume's μ, the band in front of
 // the surface. Returns whether the voxel changed.
-inline bool updateVoxel(float d, float mu, float weight, bool carveOnly, float* sumWD, float* sumW,
+inline bool updateVoxel(float d, float mu, float weight, uint8_t carve, float* sumWD, float* sumW,
                         uint8_t* state) {
-  // A carve-only measurement is of a known surface (the robot's own): the space in front of it
-  // is free right up to it, not only beyond the band.
-  if (carveOnly) {
-    if (d > 0.25f * mu && *state == uint8_t(VoxelState::kUnknown)) {
+  // A carve-only pixel empties unknown voxels only: in front of a known surface (the robot's own)
+  // right up to it, in front of a depth edge's return only beyond the band (kCarveBeyondBand).
+  if (carve) {
+    if (d > (carve == kCarveBeyondBand ? mu : 0.25f * mu) &&
+        *state == uint8_t(VoxelState::kUnknown)) {
       *state = uint8_t(VoxelState::kEmpty);
       return true;
     }
@@ -531,8 +548,8 @@ __attribute__((target("avx2"))) int integrateEight(const RowOfVoxels& r, int x, 
       const int pix = ps[l];
       ++*visited;
       const size_t i = r.base + size_t(x + l);
-      *updated += updateVoxel(ds[l], r.mu, r.W[pix], r.carve && r.carve[pix], &r.sumWD[i],
-                              &r.sumW[i], &r.state[i]);
+      *updated += updateVoxel(ds[l], r.mu, r.W[pix], r.carve ? r.carve[pix] : uint8_t(0),
+                              &r.sumWD[i], &r.sumW[i], &r.state[i]);
     }
   }
   return x;
@@ -590,8 +607,8 @@ inline void integrateVoxel(const RowOfVoxels r, int x, float Z, float fu, float 
   if (r.useBand ? Z > r.F[p] : d < -r.mu) return;  // predictable: the same every voxel
   ++*visited;
   const size_t i = r.base + size_t(x);
-  *updated +=
-      updateVoxel(d, r.mu, r.W[p], r.carve && r.carve[p], &r.sumWD[i], &r.sumW[i], &r.state[i]);
+  *updated += updateVoxel(d, r.mu, r.W[p], r.carve ? r.carve[p] : uint8_t(0), &r.sumWD[i],
+                          &r.sumW[i], &r.state[i]);
 }
 
 // Voxels x … x1 one at a time, in single precision as the four-voxel kernel computes them.
@@ -665,8 +682,8 @@ inline int integrateFour(const RowOfVoxels r, int x, int x1, bool simdPixels, in
       const int p = ps[l];
       ++*visited;
       const size_t i = r.base + size_t(x + l);
-      *updated += updateVoxel(ds[l], r.mu, r.W[p], r.carve && r.carve[p], &r.sumWD[i], &r.sumW[i],
-                              &r.state[i]);
+      *updated += updateVoxel(ds[l], r.mu, r.W[p], r.carve ? r.carve[p] : uint8_t(0), &r.sumWD[i],
+                              &r.sumW[i], &r.state[i]);
     }
   }
   return x;
@@ -974,7 +991,7 @@ IntegrationStats integrateReference(const DepthImage& depth, const Iso3& T_O_C,
         if (!(Dm > 0)) continue;
         size_t p = size_t(v) * K.width + u;
         float s = sigma_m[p];
-        bool carve = carve_only && (*carve_only)[p];
+        const uint8_t carve = carve_only ? (*carve_only)[p] : uint8_t(0);
         const bool object = s > 0 && !carve;
         // The measured surface: the pixel's depth, or the plane fitted around it with
         // smooth_depth; with band_sigmas the reach behind the fitted plane is k·σ, at least a

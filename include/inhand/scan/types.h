@@ -119,12 +119,13 @@ struct ScanOptions {
   // In the hand, a pixel next to one farther by more than this is not fused (a silhouette: its
   // return may come from across the edge); 0: off. m
   double edge_jump_m = 0.02;
-  // Every frame's pixels at a depth discontinuity (depthDiscontinuities: a 4-neighbour with no
-  // return, or farther or nearer by more than the noise model's discontinuity_jump_m) only carve:
-  // a return there may come from either side of the edge (lateral noise, a mixed pixel), and
-  // fused, even with the noise model's larger σ, it grows flakes beyond the object's edges
-  // wherever no other frame measures the edge head-on. false: fused with that larger σ.
-  bool discontinuities_carve_only = true;
+  // Every frame's silhouette pixels (depthDiscontinuities at the noise model's
+  // discontinuity_jump_m) only carve, beyond the band (kCarveBeyondBand): a return there may come
+  // from across the edge (lateral noise, a mixed pixel), and fused, even with the noise model's
+  // larger σ, it grows flakes beyond the object's edges wherever no other frame measures the edge
+  // head-on. Off by default: on thin objects (a 12 mm pen) the slip check then finds slips that
+  // did not happen (docs/volume.md). false: fused with that larger σ.
+  bool discontinuities_carve_only = false;
   HandMode hand_mode = HandMode::kCarveAndEmpty;
   int initial_views = 4;    // the simple initial trajectory: this many directions
   int max_views = 20;       // Alg. 1 views per grasp at most (after the initial ones)
@@ -179,9 +180,9 @@ struct ScanOptions {
           "silhouette); 0: off, m",
           Range::closedOpen(0, 1));
     v.boolean("discontinuities_carve_only", o.discontinuities_carve_only,
-              "pixels at a depth discontinuity (a 4-neighbour with no return or more than the "
-              "sensor's discontinuity_jump_m away) only carve, in every frame: their return may "
-              "come from either side of the edge");
+              "silhouette pixels (a 4-neighbour, or the first return across a gap of no return, "
+              "farther by more than the sensor's discontinuity_jump_m) only carve, in every "
+              "frame: their return may come from across the edge");
     v.choice("hand_mode", o.hand_mode, kHandModeNames,
              "the robot's own measurements (Fig. 3 a, b, c)");
     v.integer("initial_views", o.initial_views, "directions of the initial trajectory",

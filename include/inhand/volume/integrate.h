@@ -7,8 +7,11 @@
 //                later corrects flying pixels;
 //   |d| ≤ μ      Σw·d += w·d, Σw += w with w = 1/σ² of the pixel; the voxel becomes observed;
 //   d < −μ       behind the band: unchanged (stays unknown if never seen).
-// Pixels flagged carve-only (measurements of the robot's own hand, §IV) only mark empty space,
-// up to μ/4 in front of the measured surface (it is a known surface, not the object's).
+// Pixels flagged carve-only only mark unknown voxels empty: kCarveToSurface (measurements of the
+// robot's own hand, §IV; the table) up to μ/4 in front of the measured surface (it is a known
+// surface, not the object's); kCarveBeyondBand (a return at a depth edge, whose side of the edge
+// is uncertain) only beyond μ in front of it, as any measurement's free space, so that a ray
+// grazing a surface does not empty the voxels of its band.
 #include <cstdint>
 #include <functional>
 #include <vector>
@@ -19,6 +22,10 @@
 #include "inhand/volume/tsdf_volume.h"
 
 namespace inhand {
+
+// The values of a carve-only mask (0: a measurement).
+constexpr uint8_t kCarveToSurface = 1;
+constexpr uint8_t kCarveBeyondBand = 2;
 
 struct IntegrationStats {
   int64_t visited = 0;  // voxels whose centre projected onto a pixel with a depth
@@ -41,9 +48,12 @@ std::vector<float> measurementSigma(const DepthImage& depth, const CameraIntrins
                                     const PixelRect* region = nullptr,
                                     const std::vector<uint8_t>* carve_only = nullptr);
 
-// The pixels measurementSigma marks as at a depth discontinuity (1): a 4-neighbour with no return
-// or farther or nearer by more than `jump_m`. Their return may come from either side of the edge
-// (a mixed pixel, lateral noise); only pixels with a depth are marked, only in `region` if given.
+// The pixels on the near side of a silhouette (1): a 4-neighbour farther by more than `jump_m`, or
+// a gap of no return after which, within 8 pixels in that direction, the first return is farther
+// by more than `jump_m` or there is none (a projector shadow beside an edge, the background out of
+// range). Their return may come from across the edge (lateral noise, a mixed pixel). A shadow on
+// the pixel's own surface, or a nearer edge, does not mark it. Only pixels with a depth are
+// marked, only in `region` if given.
 std::vector<uint8_t> depthDiscontinuities(const DepthImage& depth, double jump_m,
                                           const PixelRect* region = nullptr);
 
