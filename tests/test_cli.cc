@@ -300,9 +300,13 @@ TEST(Cli, ScaleResizesTheObjectAndRefusesNonsense) {
   EXPECT_EQ(readJsonFile(out / "summary.json").at("object_scale").get<double>(), 0.5);
 }
 
+// A scan with the colour camera on: its report in headless Chromium draws the model, the curves,
+// the candidates, and the textured model.glb as three.js's glTF loader reads it.
 TEST(Cli, ScanReportOpensInHeadlessChromium) {
   test::TempDir dir;
-  writeTextAtomically(dir.path() / "quick.json", kQuickConfig);
+  Json quick = Json::parse(kQuickConfig);
+  quick["sim"]["colour"]["enabled"] = true;
+  writeTextAtomically(dir.path() / "quick.json", quick.dump());
   const fs::path out = dir.path() / "scan";
   Result r = run("scan --object builtin:cracker_box --max-views 1 --max-grasps 2 --config " +
                      (dir.path() / "quick.json").string() + " --out " + out.string(),
@@ -361,6 +365,12 @@ TEST(Cli, ScanReportOpensInHeadlessChromium) {
   // The second grasp's candidates drawn, one thumbnail each.
   EXPECT_EQ(t["thumbnails"].get<size_t>(), s["grasps"][1]["ranked"].size());
   EXPECT_GT(t["thumbnails"].get<size_t>(), 0u);
+  // model.glb: loaded by three.js, every triangle of model.ply, its texture, drawn.
+  ASSERT_TRUE(t["glb"].is_object()) << t.dump();
+  ASSERT_FALSE(t["glb"].contains("error")) << t["glb"].dump();
+  EXPECT_EQ(t["glb"]["triangles"].get<size_t>(), readPly(out / "model.ply").mesh.triangles.size());
+  EXPECT_TRUE(t["glb"]["textured"].get<bool>());
+  EXPECT_GT(t["glb"]["nonBackground"].get<double>(), 0.01);
 }
 
 TEST(Cli, BaselinePlannerStillRegraspsOnEq9Ranking) {

@@ -1,5 +1,8 @@
 // Colour: images, textured meshes, colour in the volume, and a scan that gets an object's colours.
+#include <assimp/postprocess.h>
+#include <assimp/scene.h>
 #include <gtest/gtest.h>
+#include <assimp/Importer.hpp>
 
 #include <cmath>
 #include <fstream>
@@ -10,6 +13,7 @@
 #include "inhand/geometry/builtin_objects.h"
 #include "inhand/geometry/mesh_io.h"
 #include "inhand/geometry/primitives.h"
+#include "inhand/geometry/texture_atlas.h"
 #include "inhand/sensor/frame_set.h"
 #include "inhand/volume/colour_volume.h"
 #include "test_util.h"
@@ -196,6 +200,70 @@ TEST(ColourVolume, APlaneTakesTheColourTheColourCameraSeesItIn) {
 }
 
 // A whole scan with the colour camera: the checkerboard box's colours against the truth.
+// The colour camera's pose in the depth camera's frame is honoured: a checkerboard plane (2 cm
+// squares) 0.8 m away, tilted 30°, imaged by a colour camera 3.5 cm beside the depth camera; fused
+// telling the volume that pose, the plane's colours are right; telling it the default 2.5 cm (the
+// camera moved 1 cm without the volume knowing), they are smeared a centimetre across the squares.
+TEST(ColourVolume, TheColourCamerasPoseIsHonoured) {
+  DepthCameraOptions told;
+  told.colour.enabled = true;
+  DepthCameraOptions truth = told;
+  truth.colour.T_D_RGB = Iso3(Eigen::Translation3d(0.035, 0.0, 0.0));
+  // The plane through (0, 0, 0.8) with normal n (tilted about y); checker on its (x, y).
+  const Vec3 n = Vec3(std::sin(M_PI / 6), 0, -std::cos(M_PI / 6));
+  const Vec3 o(0, 0, 0.8);
+  auto onPlane = [&](const Vec3& centre, const Vec3& ray) {
+    return Vec3(centre + ray * ((o - centre).dot(n) / ray.dot(n)));
+  };
+  auto checker = [](const Vec3& p) {
+    const bool a = (int(std::floor(p.x() / 0.02)) + int(std::floor(p.y() / 0.02))) % 2 == 0;
+    return a ? rgb(200, 40, 40) : rgb(235, 225, 190);
+  };
+  const CameraIntrinsics& K = told.intrinsics;
+  DepthImage depth(K.width, K.height);
+  for (int v = 0; v < K.height; ++v)
+    for (int u = 0; u < K.width; ++u)
+      depth.at(u, v) =
+          float(onPlane(Vec3::Zero(), Vec3((u - K.cx) / K.fx, (v - K.cy) / K.fy, 1)).z());
+  const CameraIntrinsics& Kc = truth.colour.intrinsics;
+  RgbImage colour(Kc.width, Kc.height);
+  const Vec3 c_D = truth.colour.T_D_RGB.translation();
+  for (int v = 0; v < Kc.height; ++v)
+    for (int u = 0; u < Kc.width; ++u) {
+      const Vec3 ray =
+          truth.colour.T_D_RGB.linear() * Vec3((u - Kc.cx) / Kc.fx, (v - Kc.cy) / Kc.fy, 1);
+      const Vec3f c = checker(onPlane(c_D, ray));
+      for (int ch = 0; ch < 3; ++ch) colour.at(u, v)[ch] = uint8_t(c[ch]);
+    }
+  VolumeOptions vo;
+  vo.voxel_size_m = 0.002;
+  Aabb box;
+  box.extend(Vec3(-0.12, -0.1, 0.65));
+  box.extend(Vec3(0.12, 0.1, 0.95));
+  TsdfVolume volume(box, vo);
+  const std::vector<float> sigma(depth.depth_m.size(), 0.002f);
+  auto meanDeltaE = [&](const DepthCameraOptions& cam) {
+    ColourVolume cv(volume);
+    integrateColour(depth, colour, Iso3::Identity(), cam, sigma, &cv, nullptr);
+    double sum = 0;
+    int n = 0;
+    for (double x = -0.08; x <= 0.08; x += 0.0013)
+      for (double y = -0.06; y <= 0.06; y += 0.0017) {
+        const Vec3 p = onPlane(Vec3::Zero(), Vec3(x, y, 0.8).normalized());
+        Vec3f c;
+        if (!cv.at(p, &c)) continue;
+        sum += deltaE76(c, checker(p));
+        ++n;
+      }
+    EXPECT_GT(n, 5000);
+    return sum / std::max(n, 1);
+  };
+  const double right = meanDeltaE(truth), wrong = meanDeltaE(told);
+  std::printf("mean dE76: pose told %.1f, 1 cm off %.1f\n", right, wrong);
+  EXPECT_LT(right, 12.0);
+  EXPECT_GT(wrong, 2.5 * right);
+}
+
 TEST(Colour, AScanGetsTheCheckerBoxsColours) {
   ScanConfig config = test::quickScanConfig(2);
   config.sim.colour.enabled = true;
@@ -259,6 +327,11 @@ TEST(Colour, RealKinectFramesFuseWithTheirColours) {
   size_t coloured = 0;
   for (float a : P.at("alpha")) coloured += a == 255;
   EXPECT_GT(double(coloured), 0.9 * double(ply.mesh.vertices.size()));  // 96.2 % measured
+  // Beside the PLY, the textured forms: the glb as assimp reads it has the PLY's surface area
+  // (its node turns it y-up; the area does not change).
+  for (const char* f : {"scene.glb", "scene.obj", "scene.mtl", "scene_texture.png"})
+    EXPECT_TRUE(fs::exists(dir.path() / f)) << f;
+  EXPECT_NEAR(importMesh(dir.path() / "scene.glb").area(), ply.mesh.area(), 1e-3 * ply.mesh.area());
   std::vector<double> de, shifted;
   for (const FrameRecord& h : held) {
     const DepthImage depth = readDepthPng(h.file, 0.001, 640, 480);
@@ -286,6 +359,147 @@ TEST(Colour, RealKinectFramesFuseWithTheirColours) {
               median(de), median(shifted));
   EXPECT_LT(median(de), 13.0);  // 10.3 measured
   EXPECT_GT(median(shifted), 2 * median(de));
+}
+
+namespace {
+// A sphere whose vertices carry a colour linear in their position, alpha 0 on its top cap.
+std::vector<std::array<uint8_t, 4>> linearColours(const TriangleMesh& mesh) {
+  std::vector<std::array<uint8_t, 4>> rgba;
+  for (const Vec3f& v : mesh.vertices)
+    rgba.push_back({uint8_t(std::lround(128 + 1200 * v.x())),
+                    uint8_t(std::lround(128 + 1200 * v.y())),
+                    uint8_t(std::lround(128 + 1200 * v.z())), uint8_t(v.z() > 0.04f ? 0 : 255)});
+  return rgba;
+}
+Vec4 interpolated(const std::vector<std::array<uint8_t, 4>>& rgba, const Tri& f, double b1,
+                  double b2) {
+  Vec4 c = Vec4::Zero();
+  const double w[3] = {1 - b1 - b2, b1, b2};
+  for (int k = 0; k < 3; ++k)
+    for (int ch = 0; ch < 4; ++ch) c[ch] += w[k] * rgba[size_t(f[k])][size_t(ch)];
+  return c;
+}
+// Bilinear sample of an RGBA atlas at (u, v) (v down, texel centres at (i + ½) / width).
+Vec4 sampleAtlas(const TextureAtlas& a, double u, double v) {
+  const double x = u * a.width - 0.5, y = v * a.height - 0.5;
+  const int i = int(std::floor(x)), j = int(std::floor(y));
+  const double fx = x - i, fy = y - j;
+  Vec4 c = Vec4::Zero();
+  for (int dj = 0; dj < 2; ++dj)
+    for (int di = 0; di < 2; ++di) {
+      const int ii = std::clamp(i + di, 0, a.width - 1), jj = std::clamp(j + dj, 0, a.height - 1);
+      const double w = (di ? fx : 1 - fx) * (dj ? fy : 1 - fy);
+      for (int ch = 0; ch < 4; ++ch)
+        c[ch] += w * a.rgba[(size_t(jj) * size_t(a.width) + size_t(ii)) * 4 + size_t(ch)];
+    }
+  return c;
+}
+}  // namespace
+
+// Per-vertex colours baked into an atlas come back from it anywhere on each triangle (bilinear,
+// as a renderer samples it), from the written OBJ through inhand's own OBJ reader, and from the
+// written glb through assimp's glTF 2.0 importer (an independent reader), whose node turns the
+// z-up model y-up.
+TEST(TextureAtlas, VertexColoursComeBackFromTheAtlasTheObjAndAssimpsGlb) {
+  const TriangleMesh sphere = makeSphere(0.05, 3);
+  const auto rgba = linearColours(sphere);
+  const TextureAtlas atlas = bakeVertexColours(sphere, rgba, 0.001);
+  ASSERT_EQ(atlas.uv.size(), sphere.triangles.size() * 3);
+  EXPECT_DOUBLE_EQ(atlas.texel_m, 0.001);
+  const double points[4][2] = {{1 / 3., 1 / 3.}, {0.1, 0.1}, {0.75, 0.15}, {0.15, 0.75}};
+  double worst = 0;
+  for (size_t t = 0; t < sphere.triangles.size(); ++t)
+    for (const auto& b : points) {
+      const Vec2f uv = (1 - b[0] - b[1]) * atlas.uv[3 * t] + float(b[0]) * atlas.uv[3 * t + 1] +
+                       float(b[1]) * atlas.uv[3 * t + 2];
+      const Vec4 want = interpolated(rgba, sphere.triangles[t], b[0], b[1]);
+      const Vec4 got = sampleAtlas(atlas, uv.x(), uv.y());
+      worst = std::max(worst, (want.head<3>() - got.head<3>()).cwiseAbs().maxCoeff());
+      if (want[3] == 255 || want[3] == 0) {
+        EXPECT_NEAR(got[3], want[3], 1.0) << t;
+      }
+    }
+  EXPECT_LT(worst, 2.5);
+  // A texel size the atlas cannot hold in 256 × 256 texels is doubled until it fits.
+  const TextureAtlas coarse = bakeVertexColours(sphere, rgba, 0.0001, 256);
+  EXPECT_LE(std::max(coarse.width, coarse.height), 256);
+  EXPECT_GE(coarse.texel_m, 0.0001 * 8);
+  EXPECT_THROW(bakeVertexColours(sphere, rgba, 0.0), Error);
+  EXPECT_THROW(bakeVertexColours(sphere, {}, 0.001), Error);
+
+  test::TempDir dir;
+  writeTexturedObj(dir.path() / "m.obj", sphere, atlas);
+  writeGlb(dir.path() / "m.glb", sphere, atlas);
+  for (const char* f : {"m.obj", "m.mtl", "m_texture.png", "m.glb"})
+    EXPECT_TRUE(fs::exists(dir.path() / f)) << f;
+  EXPECT_EQ(std::distance(fs::directory_iterator(dir.path()), fs::directory_iterator()), 4);
+
+  // inhand's OBJ reader: the same triangles, the same colours at their centres.
+  const TexturedMesh obj = importTexturedMesh(dir.path() / "m.obj");
+  ASSERT_EQ(obj.mesh.triangles.size(), sphere.triangles.size());
+  double objWorst = 0;
+  for (size_t t = 0; t < sphere.triangles.size(); ++t) {
+    for (int k = 0; k < 3; ++k)
+      ASSERT_LT((obj.mesh.vertices[size_t(obj.mesh.triangles[t][k])] -
+                 sphere.vertices[size_t(sphere.triangles[t][k])])
+                    .norm(),
+                1e-6f);
+    const Vec3f got = obj.colours.at(obj.mesh, int(t), 1 / 3.f, 1 / 3.f);
+    const Vec4 want = interpolated(rgba, sphere.triangles[t], 1 / 3., 1 / 3.);
+    objWorst = std::max(objWorst, (want.head<3>() - got.cast<double>()).cwiseAbs().maxCoeff());
+  }
+  EXPECT_LT(objWorst, 2.5);
+
+  // assimp's glTF 2.0 importer: one mesh of the same triangles under a node that turns z up to
+  // y up, one material whose base colour is the embedded PNG, the same colours at their centres.
+  Assimp::Importer importer;
+  const aiScene* scene = importer.ReadFile((dir.path() / "m.glb").string(), 0);
+  ASSERT_TRUE(scene) << importer.GetErrorString();
+  ASSERT_EQ(scene->mNumMeshes, 1u);
+  const aiMesh* mesh = scene->mMeshes[0];
+  ASSERT_EQ(mesh->mNumFaces, sphere.triangles.size());
+  ASSERT_TRUE(mesh->HasTextureCoords(0));
+  ASSERT_TRUE(mesh->HasNormals());
+  aiMatrix4x4 world;
+  const aiNode* node = scene->mRootNode;
+  while (node && node->mNumMeshes == 0 && node->mNumChildren > 0) {
+    world = world * node->mTransformation;
+    node = node->mChildren[0];
+  }
+  ASSERT_TRUE(node && node->mNumMeshes == 1);
+  world = world * node->mTransformation;
+  aiString texPath;
+  const aiMaterial* mat = scene->mMaterials[mesh->mMaterialIndex];
+  ASSERT_EQ(mat->GetTexture(aiTextureType_DIFFUSE, 0, &texPath), aiReturn_SUCCESS);
+  const aiTexture* tex = scene->GetEmbeddedTexture(texPath.C_Str());
+  ASSERT_TRUE(tex);
+  ASSERT_EQ(tex->mHeight, 0u);  // compressed: the PNG's bytes
+  {
+    std::ofstream out(dir.path() / "embedded.png", std::ios::binary);
+    out.write(reinterpret_cast<const char*>(tex->pcData), std::streamsize(tex->mWidth));
+  }
+  const RgbImage image = readRgbPng(dir.path() / "embedded.png");
+  ASSERT_EQ(image.width, atlas.width);
+  ASSERT_EQ(image.height, atlas.height);
+  double glbWorst = 0, placed = 0;
+  for (unsigned f = 0; f < mesh->mNumFaces; ++f) {
+    ASSERT_EQ(mesh->mFaces[f].mNumIndices, 3u);
+    aiVector3D uv(0, 0, 0);
+    for (int k = 0; k < 3; ++k) {
+      const unsigned i = mesh->mFaces[f].mIndices[k];
+      uv += mesh->mTextureCoords[0][i] / 3.f;
+      const aiVector3D p = world * mesh->mVertices[i];
+      const Vec3f& q = sphere.vertices[size_t(sphere.triangles[f][k])];
+      placed =
+          std::max(placed, double((Vec3f(p.x, p.y, p.z) - Vec3f(q.x(), q.z(), -q.y())).norm()));
+    }
+    // assimp gives texture coordinates with v up (it flips glTF's).
+    const Vec3f got = image.bilinear(uv.x * image.width - 0.5, (1 - uv.y) * image.height - 0.5);
+    const Vec4 want = interpolated(rgba, sphere.triangles[f], 1 / 3., 1 / 3.);
+    glbWorst = std::max(glbWorst, (want.head<3>() - got.cast<double>()).cwiseAbs().maxCoeff());
+  }
+  EXPECT_LT(placed, 1e-6);
+  EXPECT_LT(glbWorst, 2.5);
 }
 
 // PSNR: a model with the truth's own colours renders as the truth does; a grey one does not.

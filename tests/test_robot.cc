@@ -670,6 +670,15 @@ TEST(RobotConfig, ErrorsNameTheField) {
   c["colour"] = "red";
   expectError(c, "unknown field \"colour\"");
   c = base;
+  c["camera"]["colour"]["intrinsics"]["fx"] = -1;
+  expectError(c, "camera.colour.intrinsics");
+  c = base;
+  c["camera"]["colour"]["T_depth_colour"][0] = 2;
+  expectError(c, "camera.colour.T_depth_colour: not a rigid transform");
+  c = base;
+  c["camera"]["colour"]["offset"] = 1;
+  expectError(c, "camera.colour: unknown field \"offset\"");
+  c = base;
   c["urdf"] = (dir.path() / "missing.urdf").string();
   expectError(c, "missing.urdf");
   std::ofstream(dir.path() / "bad.urdf")
@@ -677,6 +686,30 @@ TEST(RobotConfig, ErrorsNameTheField) {
   c = base;
   c["urdf"] = (dir.path() / "bad.urdf").string();
   expectError(c, "malformed URDF");
+}
+
+// The colour camera comes from the robot config: the shipped WAM's Kinect-class camera, and
+// another's intrinsics and offset as given.
+TEST(RobotConfig, ColourCameraFromTheConfig) {
+  const ColourCameraOptions& shipped = wam().camera().colour;
+  EXPECT_EQ(shipped.intrinsics.width, 640);
+  EXPECT_DOUBLE_EQ(shipped.intrinsics.fx, 530.0);
+  EXPECT_LT((shipped.T_D_RGB.translation() - Vec3(0.025, 0, 0)).norm(), 1e-12);
+  EXPECT_FALSE(shipped.enabled);  // the scan turns it on (sim.colour.enabled)
+  test::TempDir dir;
+  Json c = readJsonFile(kWam);
+  c["urdf"] = (fs::path(INHAND_SOURCE_DIR) / "data/robots/wam_barretthand.urdf").string();
+  c["camera"]["colour"] = {
+      {"intrinsics",
+       {{"width", 1280}, {"height", 720}, {"fx", 910}, {"fy", 905}, {"cx", 640}, {"cy", 360}}},
+      {"T_depth_colour", {0, -1, 0, -0.015, 1, 0, 0, 0.002, 0, 0, 1, 0.001, 0, 0, 0, 1}}};
+  writeTextAtomically(dir.path() / "r.json", c.dump());
+  const ColourCameraOptions got = RobotModel::load(dir.path() / "r.json").camera().colour;
+  EXPECT_EQ(got.intrinsics.width, 1280);
+  EXPECT_EQ(got.intrinsics.height, 720);
+  EXPECT_DOUBLE_EQ(got.intrinsics.fy, 905.0);
+  EXPECT_LT((got.T_D_RGB.translation() - Vec3(-0.015, 0.002, 0.001)).norm(), 1e-12);
+  EXPECT_LT((got.T_D_RGB.linear() * Vec3::UnitX() - Vec3::UnitY()).norm(), 1e-12);
 }
 
 namespace {

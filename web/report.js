@@ -2,6 +2,7 @@
 // per-view curves and the ranked grasp candidates. Data: window.INHAND_DATA (see html_report.cc).
 import * as THREE from 'three';
 import { OrbitControls } from 'three/addons/OrbitControls.js';
+import { GLTFLoader } from 'three/addons/GLTFLoader.js';
 
 const D = window.INHAND_DATA;
 const S = D.summary;
@@ -164,6 +165,7 @@ const handBox = el('input', { type: 'checkbox', checked: '', onchange: () => sho
 // Scanned colour or confidence, on every model that has both.
 const colourBox = el('input', { type: 'checkbox', checked: '', onchange: () => {
   for (const m of models) {
+    if (!m.mesh.geometry) continue;  // the textured model keeps its texture
     const u = m.mesh.geometry.userData;
     if (u.scanColour) m.mesh.geometry.setAttribute('color', colourBox.checked ? u.scanColour : u.confidenceColour);
   }
@@ -303,7 +305,44 @@ state.ready = true;
 // #only-ID shows just that section under the header (for screenshots of one part).
 if (location.hash.startsWith('#only-')) {
   for (const sec of document.querySelectorAll('main > section'))
-    if (sec.id !== location.hash.slice(6)) sec.style.display = 'none';
+    if (sec.id !== location.hash.slice(6).replace(/-glb$/, '')) sec.style.display = 'none';
+}
+// The textured model (model.glb, which scans with colour write), read by three.js's glTF loader:
+// one more entry under 'Show'. #glb (or #only-model-glb) shows it first.
+async function texturedModel() {
+  if (!D.model_glb) return null;
+  const loader = new GLTFLoader();
+  // Images through an <img> element (three's TextureLoader) rather than createImageBitmap: a
+  // headless browser waits for those, and they decode this atlas several times faster there.
+  loader.register((parser) => {
+    parser.textureLoader = new THREE.TextureLoader(parser.options.manager);
+    return { name: 'inhand_image_element' };
+  });
+  const gltf = await loader.parseAsync(decode(D.model_glb, Uint8Array).buffer, '');
+  const group = new THREE.Group();
+  group.rotation.x = Math.PI / 2;  // glTF is y-up; the scan's frame (and this viewer) z-up
+  group.add(gltf.scene);
+  let triangles = 0, textured = false;
+  gltf.scene.traverse((o) => {
+    if (!o.isMesh) return;
+    triangles += o.geometry.attributes.position.count / 3;
+    textured = textured || !!(o.material.map && o.material.map.image);
+  });
+  return { group, triangles, textured };
+}
+let glbTest = null;
+try {
+  const glb = await texturedModel();
+  if (glb) {
+    const before = current;
+    models.push({ label: 'textured model (model.glb)', mesh: glb.group, hand: null });
+    select.append(el('option', { value: models.length - 1 }, 'textured model (model.glb)'));
+    show(models[models.length - 1]);
+    glbTest = { triangles: glb.triangles, textured: glb.textured, nonBackground: state.nonBackgroundFraction() };
+    if (location.hash.includes('glb')) select.value = models.length - 1; else show(before);
+  }
+} catch (e) {
+  glbTest = { error: String(e) };
 }
 window.inhandSelfTest({ nonBackground: state.nonBackgroundFraction(), charts: state.charts, views: state.views,
-                        thumbnails: document.querySelectorAll('.thumb canvas').length });
+                        thumbnails: document.querySelectorAll('.thumb canvas').length, glb: glbTest });

@@ -19,6 +19,7 @@
 #include "inhand/geometry/mesh_io.h"
 #include "inhand/geometry/primitives.h"
 #include "inhand/geometry/ray_scene.h"
+#include "inhand/geometry/texture_atlas.h"
 #include "inhand/mesh/extract.h"
 #include "inhand/report/snapshot.h"
 #include "inhand/robot/collision.h"
@@ -99,6 +100,22 @@ int runRender(const RenderArgs& args) {
   return 0;
 }
 
+std::vector<fs::path> writeTexturedModel(const fs::path& ply, const ObjectModel& model) {
+  if (model.rgba.empty() || model.mesh.empty()) return {};
+  std::vector<float> edges;
+  edges.reserve(model.mesh.triangles.size());
+  for (const Tri& f : model.mesh.triangles)
+    edges.push_back((model.mesh.vertices[size_t(f[0])] - model.mesh.vertices[size_t(f[1])]).norm());
+  std::nth_element(edges.begin(), edges.begin() + long(edges.size() / 2), edges.end());
+  const double texel = std::max(1e-5, 0.5 * double(edges[edges.size() / 2]));
+  const TextureAtlas atlas = bakeVertexColours(model.mesh, model.rgba, texel);
+  const fs::path base = ply.parent_path() / ply.stem();
+  const fs::path glb = base.string() + ".glb", obj = base.string() + ".obj";
+  writeGlb(glb, model.mesh, atlas);
+  writeTexturedObj(obj, model.mesh, atlas);
+  return {glb, obj, base.string() + ".mtl", base.string() + "_texture.png"};
+}
+
 namespace {
 
 // Bounds of the measured points in the object frame (0.1 / 99.9 percentiles, so a few stray
@@ -143,15 +160,21 @@ void addModelFigures(const ObjectModel& model, const std::string& surface, Json*
   s["hole_area_m2"] = model.holeArea();
 }
 
-// Writes the model and its summary; neither stays when the other cannot be written.
+// Writes the model (and its textured forms) and its summary; none stays when another cannot be
+// written.
 void writeFusedModel(const fs::path& outPath, const fs::path& summaryPath, const ObjectModel& model,
                      const Json& summary) {
   writePly(outPath, model.mesh, &model.variance, model.rgba.empty() ? nullptr : &model.rgba);
+  std::vector<fs::path> written = {outPath};
   try {
+    for (const fs::path& f : writeTexturedModel(outPath, model)) written.push_back(f);
     writeTextAtomically(summaryPath, summary.dump(2) + "\n");
   } catch (...) {
     std::error_code ec;
-    fs::remove(outPath, ec);  // no half-finished result
+    for (const fs::path& f : written) fs::remove(f, ec);  // no half-finished result
+    const fs::path base = outPath.parent_path() / outPath.stem();
+    for (const char* ext : {".glb", ".obj", ".mtl", "_texture.png"})
+      fs::remove(fs::path(base.string() + ext), ec);
     throw;
   }
 }

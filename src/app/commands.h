@@ -2,14 +2,22 @@
 // The `inhand` subcommands, apart from the CLI parsing (kept in main.cc: CLI11 is slow to compile).
 #include <array>
 #include <cstdint>
+#include <filesystem>
 #include <optional>
 #include <string>
 #include <vector>
 
 #include "inhand/asset/asset.h"
+#include "inhand/mesh/extract.h"
 #include "inhand/robot/robot_model.h"
 
 namespace inhand::app {
+
+// A model scanned with colour (model.rgba) as a textured mesh beside `ply`: <stem>.glb and
+// <stem>.obj with <stem>.mtl and <stem>_texture.png, the per-vertex colours baked into an atlas
+// whose texel is half the mesh's median edge. Nothing without colour. Returns the files written.
+std::vector<std::filesystem::path> writeTexturedModel(const std::filesystem::path& ply,
+                                                      const ObjectModel& model);
 
 struct RenderArgs {
   std::string object;    // builtin:NAME or a mesh file

@@ -102,7 +102,8 @@ void writeModels(const fs::path& dir, const RobotModel& model, const TriangleMes
   const ScanResult& r = mr.scan;
   writePly(dir / "model.ply", r.model.mesh, &r.model.variance,
            r.model.rgba.empty() ? nullptr : &r.model.rgba);
-  writePly(dir / "truth.ply", object);  // the simulated object, frame O
+  writeTexturedModel(dir / "model.ply", r.model);  // with colour: model.glb, model.obj
+  writePly(dir / "truth.ply", object);             // the simulated object, frame O
   // Per grasp: the model after its views, the hand as it held the object, the best candidates.
   fs::create_directories(dir / "grasps");
   for (size_t g = 0; g < mr.grasps.size(); ++g) {

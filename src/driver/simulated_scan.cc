@@ -114,6 +114,7 @@ SimulatedScan runSimulatedScan(const RobotModel& model, const TriangleMesh& mesh
                                const SurfaceColours& colours) {
   const TriangleMesh object = simulatedSolid(mesh, o, progress);
   SimulatedScan out;
+  out.camera.colour = model.camera().colour;  // the robot's colour camera, on when the scan asks
   out.camera.colour.enabled = o.sim.colour.enabled;
   const DepthCameraOptions& camera = out.camera;
   NoiseModelOptions noise;

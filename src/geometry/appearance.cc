@@ -11,6 +11,7 @@
 
 #include "inhand/core/error.h"
 #include "inhand/core/file_util.h"
+#include "inhand/geometry/texture_atlas.h"
 
 namespace inhand {
 
@@ -37,18 +38,22 @@ RgbImage readRgbPng(const std::filesystem::path& path) {
   image.version = PNG_IMAGE_VERSION;
   if (!png_image_begin_read_from_file(&image, path.c_str()))
     throw Error(path.string() + ": not a readable PNG (" + image.message + ")");
-  image.format = PNG_FORMAT_RGB;
+  // Read with alpha and drop it: libpng would composite transparent pixels onto black, and a
+  // texture's colour under alpha 0 is its colour all the same.
+  image.format = PNG_FORMAT_RGBA;
   if (image.width == 0 || image.height == 0 || image.width > 32768 || image.height > 32768) {
     png_image_free(&image);
     throw Error(path.string() + ": PNG of " + std::to_string(image.width) + "x" +
                 std::to_string(image.height) + " pixels (at most 32768 on a side)");
   }
   RgbImage out(int(image.width), int(image.height));
-  if (!png_image_finish_read(&image, nullptr, out.rgb.data(), 0, nullptr)) {
+  std::vector<uint8_t> rgba(size_t(image.width) * size_t(image.height) * 4);
+  if (!png_image_finish_read(&image, nullptr, rgba.data(), 0, nullptr)) {
     const std::string why = image.message;
     png_image_free(&image);
     throw Error(path.string() + ": corrupt or truncated PNG (" + why + ")");
   }
+  for (size_t i = 0, n = rgba.size() / 4; i < n; ++i) std::memcpy(&out.rgb[3 * i], &rgba[4 * i], 3);
   return out;
 }
 
@@ -114,27 +119,14 @@ RgbImage readRgbImage(const std::filesystem::path& path) {
 }
 
 void writeRgbPng(const std::filesystem::path& path, const RgbImage& image) {
+  if (image.empty()) throw Error(path.string() + ": an empty image cannot be written");
+  const std::vector<uint8_t> png = encodePng(image.rgb.data(), image.width, image.height, 3);
   writeFileAtomically(path, [&](const std::filesystem::path& tmp) {
     FILE* fp = std::fopen(tmp.c_str(), "wb");
     if (!fp) throw Error(path.string() + ": cannot open for writing");
-    png_structp png = png_create_write_struct(PNG_LIBPNG_VER_STRING, nullptr, nullptr, nullptr);
-    png_infop info = png ? png_create_info_struct(png) : nullptr;
-    bool ok = png && info;
-    if (ok && setjmp(png_jmpbuf(png)))
-      ok = false;
-    else if (ok) {
-      png_init_io(png, fp);
-      png_set_IHDR(png, info, png_uint_32(image.width), png_uint_32(image.height), 8,
-                   PNG_COLOR_TYPE_RGB, PNG_INTERLACE_NONE, PNG_COMPRESSION_TYPE_DEFAULT,
-                   PNG_FILTER_TYPE_DEFAULT);
-      png_write_info(png, info);
-      for (int v = 0; v < image.height; ++v)
-        png_write_row(png, &image.rgb[size_t(v) * image.width * 3]);
-      png_write_end(png, nullptr);
-    }
-    png_destroy_write_struct(&png, &info);
-    bool closed = std::fclose(fp) == 0;
-    if (!ok || !closed) throw Error(path.string() + ": PNG write failed");
+    const bool written = std::fwrite(png.data(), 1, png.size(), fp) == png.size();
+    const bool closed = std::fclose(fp) == 0;
+    if (!written || !closed) throw Error(path.string() + ": PNG write failed");
   });
 }
 

@@ -117,10 +117,16 @@ std::string buildPage(const fs::path& web, const std::string& title, const Json&
        at = three.find("\"./three.core.min.js\"", at))
     three.replace(at, 21, "\"three/core\"");
   const std::string orbit = readText(nm / "three/examples/jsm/controls/OrbitControls.js");
+  // The glTF loader imports a helper by a relative path: a bare specifier here too.
+  std::string gltf = readText(nm / "three/examples/jsm/loaders/GLTFLoader.js");
+  replaceOnce(&gltf, "'../utils/BufferGeometryUtils.js'", "'three/addons/BufferGeometryUtils.js'");
+  const std::string utils = readText(nm / "three/examples/jsm/utils/BufferGeometryUtils.js");
   const Json importMap = {{"imports",
                            {{"three", dataUrl(three)},
                             {"three/core", dataUrl(core)},
-                            {"three/addons/OrbitControls.js", dataUrl(orbit)}}}};
+                            {"three/addons/OrbitControls.js", dataUrl(orbit)},
+                            {"three/addons/GLTFLoader.js", dataUrl(gltf)},
+                            {"three/addons/BufferGeometryUtils.js", dataUrl(utils)}}}};
   replaceOnce(&page, "{{TITLE}}", title);
   replaceOnce(&page, "/*{{IMPORTMAP}}*/", importMap.dump());
   replaceOnce(&page, "/*{{CHARTJS}}*/",
@@ -136,6 +142,7 @@ fs::path webDirectory() {
   fs::path dir = resourceDirectory("web", INHAND_WEB_DIR);
   if (const char* env = std::getenv("INHAND_WEB_DIR"); env && *env) dir = env;
   for (const char* f : {"node_modules/three/build/three.module.min.js",
+                        "node_modules/three/examples/jsm/loaders/GLTFLoader.js",
                         "node_modules/chart.js/dist/chart.umd.min.js", "template.html"})
     if (!fs::exists(dir / f))
       throw Error("report: " + (dir / f).string() +
@@ -180,6 +187,10 @@ void writeScanReport(const fs::path& dir, const fs::path& web) {
   parallelFor(0, int(plys.size()), [&](int i) { meshes[size_t(i)] = meshJson(plys[size_t(i)]); });
   Json data = {{"summary", summary}};
   data["model"] = std::move(meshes[0]);
+  if (fs::exists(dir / "model.glb")) {  // a scan with colour: its textured model, as written
+    const std::string glb = readText(dir / "model.glb");
+    data["model_glb"] = base64(glb.data(), glb.size());
+  }
   if (truth) data["truth"] = std::move(meshes[1]);
   Json grasps = Json::array();
   for (const GraspPlys& g : graspPlys) {

@@ -16,6 +16,7 @@
 #include "inhand/core/pose.h"
 #include "inhand/geometry/mesh_io.h"
 #include "inhand/geometry/primitives.h"
+#include "inhand/sensor/frame_set.h"
 
 namespace inhand {
 
@@ -472,6 +473,31 @@ struct RobotModelLoader {
     }
   }
 
+  // camera.colour: {"intrinsics": {width, height, fx, fy, cx, cy}, "T_depth_colour": 16 row-major
+  // numbers, the colour camera's optical frame in the depth camera's}; either may be left out.
+  void colourCamera(const Json& c, const std::string& where) {
+    if (!c.is_object()) throw Error(where + ": expected an object (intrinsics, T_depth_colour)");
+    for (const auto& [key, value] : c.items())
+      if (key != "intrinsics" && key != "T_depth_colour")
+        throw Error(where + ": unknown field \"" + key + "\"");
+    if (c.contains("intrinsics"))
+      m.camera_.colour.intrinsics = readIntrinsics(c["intrinsics"], where + ".intrinsics");
+    if (!c.contains("T_depth_colour")) return;
+    const Json& T = c["T_depth_colour"];
+    if (!T.is_array() || T.size() != 16)
+      throw Error(where + ".T_depth_colour: expected 16 numbers (a row-major 4 x 4 pose)");
+    std::array<double, 16> a{};
+    for (size_t k = 0; k < 16; ++k) {
+      if (!T[k].is_number())
+        throw Error(where + ".T_depth_colour[" + std::to_string(k) + "]: not a number");
+      a[k] = T[k].get<double>();
+    }
+    std::string why;
+    const std::optional<Iso3> pose = poseFromRowMajor(a, &why, 1e-3);
+    if (!pose) throw Error(where + ".T_depth_colour: not a rigid transform: " + why);
+    m.camera_.colour.T_D_RGB = *pose;
+  }
+
   // Where the robot stands: the camera's pan-tilt mount, the table, links next to the base.
   void workcell() {
     const Json& cam = requireField(cfg, "camera", cfgName);
@@ -484,6 +510,7 @@ struct RobotModelLoader {
         readRangeDeg(cam, "tilt_range_deg", camw, {-M_PI / 2, M_PI / 2});
     if (!m.camera_.aimAt(m.camera_.lookAt_B))
       throw Error(camw + ".look_at_xyz: outside the pan/tilt range of the camera");
+    if (cam.contains("colour")) colourCamera(cam["colour"], camw + ".colour");
     const Json& table = requireField(cfg, "table", cfgName);
     m.table_.center_B = readVec3(table, "center_xyz", cfgName + ": table");
     m.table_.size = readVec3(table, "size_xyz", cfgName + ": table");

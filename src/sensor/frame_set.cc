@@ -19,19 +19,6 @@ Json intrinsicsJson(const CameraIntrinsics& c) {
           {"fy", c.fy},       {"cx", c.cx},         {"cy", c.cy}};
 }
 
-// A pinhole camera's intrinsics (width, height, fx, fy, cx, cy), checked; errors name `where`.
-CameraIntrinsics readIntrinsics(const Json& K, const std::string& where) {
-  CameraIntrinsics c;
-  c.width = requireInt(K, "width", where);
-  c.height = requireInt(K, "height", where);
-  c.fx = requireNumber(K, "fx", where);
-  c.fy = requireNumber(K, "fy", where);
-  c.cx = requireNumber(K, "cx", where);
-  c.cy = requireNumber(K, "cy", where);
-  if (std::string problem = c.validate(); !problem.empty()) throw Error(where + "." + problem);
-  return c;
-}
-
 Iso3 readPose(const Json& T, const std::string& where, FrameSet* set) {
   if (!T.is_array() || T.size() != 16)
     throw Error(where + ": expected an array of 16 numbers (row-major 4x4)");
@@ -52,6 +39,18 @@ Iso3 readPose(const Json& T, const std::string& where, FrameSet* set) {
 }
 
 }  // namespace
+
+CameraIntrinsics readIntrinsics(const Json& K, const std::string& where) {
+  CameraIntrinsics c;
+  c.width = requireInt(K, "width", where);
+  c.height = requireInt(K, "height", where);
+  c.fx = requireNumber(K, "fx", where);
+  c.fy = requireNumber(K, "fy", where);
+  c.cx = requireNumber(K, "cx", where);
+  c.cy = requireNumber(K, "cy", where);
+  if (std::string problem = c.validate(); !problem.empty()) throw Error(where + "." + problem);
+  return c;
+}
 
 FrameSet readFrameSet(const fs::path& dir) {
   std::error_code ec;

@@ -28,7 +28,7 @@ struct RgbImage {
 };
 
 // Reads an 8- or 16-bit PNG (grey, grey + alpha, RGB, RGBA or palette) as 8-bit RGB (alpha
-// dropped). Throws Error naming the file when it is missing, not a PNG or corrupt.
+// dropped, not composited). Throws Error naming the file when it is missing, not a PNG or corrupt.
 RgbImage readRgbPng(const std::filesystem::path& path);
 // Reads a baseline or progressive JPEG (grey or colour) as 8-bit RGB; throws Error naming the file.
 RgbImage readRgbJpeg(const std::filesystem::path& path);

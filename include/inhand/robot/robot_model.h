@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "inhand/geometry/triangle_mesh.h"
+#include "inhand/sensor/depth_camera.h"
 
 namespace KDL {
 class Chain;
@@ -65,6 +66,10 @@ struct CameraMount {
   Vec3 panTilt_B = Vec3::Zero();  // pan-tilt unit centre in the base frame, m
   double panMin = -M_PI, panMax = M_PI, tiltMin = -M_PI / 2, tiltMax = M_PI / 2;  // rad
   Vec3 lookAt_B = Vec3(0.6, 0, 0.5);  // nominal point where objects are presented, m
+  // The colour camera beside the depth camera: its intrinsics and its pose in the depth camera's
+  // optical frame (config camera.colour; a Kinect-class default). Whether it is on is the
+  // scan's choice (sim.colour.enabled), not the robot's.
+  ColourCameraOptions colour;
   // Camera pose looking at `target_B` (optical frame), or nullopt when pan/tilt cannot aim there.
   std::optional<Iso3> aimAt(const Vec3& target_B) const;
 };

@@ -23,6 +23,7 @@
 #include <utility>
 #include <vector>
 
+#include "inhand/core/json_util.h"
 #include "inhand/geometry/appearance.h"
 #include "inhand/geometry/triangle_mesh.h"
 #include "inhand/sensor/depth_camera.h"
@@ -64,6 +65,10 @@ struct FrameSet {
 // re-orthonormalised; every PNG must exist).
 // Throws Error naming the file and field.
 FrameSet readFrameSet(const std::filesystem::path& dir);
+
+// A pinhole camera's intrinsics from {width, height, fx, fy, cx, cy}, checked; errors name
+// `where` (frames.json's intrinsics, a robot config's colour camera).
+CameraIntrinsics readIntrinsics(const Json& K, const std::string& where);
 // Loads frame i's depth image, checking its size against the intrinsics.
 DepthImage loadFrameDepth(const std::filesystem::path& dir, const FrameSet& set, size_t i);
 // Loads frame i's colour image (empty when it has none), checking its size against the colour
