@@ -315,6 +315,33 @@ TEST(Fusion, CarveOnlyPixelsAddNoSurface) {
 // wall; not the wall beside the block (the nearer edge), not the neighbours of a hole in the wall
 // (a shadow on its own surface), not a 5 mm step; a return followed by no return up to the image
 // border is a silhouette.
+// nearestAround: a flagged pixel takes the nearest depth within the radius (itself included);
+// pixels not flagged, and flagged ones with nothing nearer around, keep theirs.
+TEST(Fusion, NearestAroundPullsFlaggedPixelsToTheNearestDepthBesideThem) {
+  DepthImage d(8, 6);
+  for (int v = 0; v < 6; ++v)
+    for (int u = 0; u < 8; ++u) d.at(u, v) = u < 3 ? 0.80f : 1.50f;  // an edge at u = 3
+  d.at(3, 2) = 1.20f;                                                // a return between the two
+  d.at(6, 5) = 0.0f;                                                 // no return
+  std::vector<uint8_t> mask(48, 0);
+  auto flag = [&](int u, int v) { mask[size_t(v) * 8 + size_t(u)] = 1; };
+  flag(3, 2);  // beside the edge: 0.80 two pixels left
+  flag(5, 2);  // three pixels from the edge: nothing nearer within 2
+  flag(6, 5);  // no return of its own: the nearest around it
+  flag(0, 0);  // on the near side already
+  const DepthImage r = nearestAround(d, mask, 2);
+  EXPECT_FLOAT_EQ(r.at(3, 2), 0.80f);
+  EXPECT_FLOAT_EQ(r.at(5, 2), 1.20f);  // the mixed return two pixels left is nearer
+  EXPECT_FLOAT_EQ(r.at(6, 5), 1.50f);
+  EXPECT_FLOAT_EQ(r.at(0, 0), 0.80f);
+  EXPECT_FLOAT_EQ(r.at(4, 2), 1.50f);  // not flagged
+  EXPECT_FLOAT_EQ(r.at(6, 4), 1.50f);
+  int changed = 0;
+  for (size_t i = 0; i < 48; ++i) changed += r.depth_m[i] != d.depth_m[i];
+  EXPECT_EQ(changed, 3);
+  EXPECT_THROW(nearestAround(d, std::vector<uint8_t>(3, 0), 2), Error);
+}
+
 TEST(Fusion, DepthDiscontinuitiesAreTheNearSideOfSilhouettes) {
   DepthImage d;
   d.width = 20;

@@ -545,13 +545,20 @@ FrameReport ScanSession::fuse(const DepthImage& input, const JointVector& q, con
   }
   // Silhouette pixels only carve beyond the band (ScanOptions::discontinuities_carve_only), found
   // after the in-hand trim: the pixels beside those it dropped are silhouettes too.
+  // A silhouette pixel's depth may lie behind the object's edge (a return from beside the
+  // pixel's own ray): it carves only in front of the nearest depth around it (5 × 5), not into
+  // the edge of a thin object.
+  DepthImage pulled;
   if (s.options.discontinuities_carve_only) {
-    const std::vector<uint8_t> edges =
-        depthDiscontinuities(depth, s.noise.discontinuity_jump_m, &rect);
+    std::vector<uint8_t> edges = depthDiscontinuities(depth, s.noise.discontinuity_jump_m, &rect);
     if (carve.empty()) carve.assign(depth.depth_m.size(), 0);
-    for (size_t i = 0; i < carve.size(); ++i)
-      if (edges[i] && !carve[i]) carve[i] = kCarveBeyondBand;
+    for (size_t i = 0; i < carve.size(); ++i) {
+      if (edges[i] && carve[i]) edges[i] = 0;  // the robot's pixels carve as they did
+      if (edges[i]) carve[i] = kCarveBeyondBand;
+    }
+    pulled = nearestAround(depth, edges, 2);
   }
+  const DepthImage& fused = pulled.width > 0 ? pulled : depth;
   // In the hand: measurements that land where the model knows space is empty (seen through
   // before) are not the object (a stripe of wrong depth, a reflection): a frame with many of
   // them is not fused.
@@ -567,7 +574,7 @@ FrameReport ScanSession::fuse(const DepthImage& input, const JointVector& q, con
   // σ only where voxels can project, and not for pixels that only carve (integrate reads neither).
   const std::vector<float> sigma =
       measurementSigma(depth, K, s.noise, &rect, carve.empty() ? nullptr : &carve);
-  integrate(depth, T_O_C, K, sigma, &s.volume, carve.empty() ? nullptr : &carve);
+  integrate(fused, T_O_C, K, sigma, &s.volume, carve.empty() ? nullptr : &carve);
   if (s.camera.colour.enabled && !colour.empty()) {
     const auto tc = Clock::now();
     if (!s.colour) s.colour = std::make_unique<ColourVolume>(s.volume);

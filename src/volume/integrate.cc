@@ -121,6 +121,28 @@ std::vector<float> measurementSigma(const DepthImage& depth, const CameraIntrins
   return sigma;
 }
 
+DepthImage nearestAround(const DepthImage& depth, const std::vector<uint8_t>& mask, int radius) {
+  if (mask.size() != depth.depth_m.size())
+    throw Error("nearestAround: " + std::to_string(mask.size()) + " mask values for " +
+                std::to_string(depth.depth_m.size()) + " pixels");
+  DepthImage out = depth;
+  const int W = depth.width, H = depth.height;
+  parallelFor(0, H, [&](int v) {
+    for (int u = 0; u < W; ++u) {
+      const size_t i = size_t(v) * size_t(W) + size_t(u);
+      if (!mask[i]) continue;
+      float nearest = depth.depth_m[i] > 0 ? depth.depth_m[i] : std::numeric_limits<float>::max();
+      for (int vv = std::max(0, v - radius); vv <= std::min(H - 1, v + radius); ++vv)
+        for (int uu = std::max(0, u - radius); uu <= std::min(W - 1, u + radius); ++uu) {
+          const float z = depth.depth_m[size_t(vv) * size_t(W) + size_t(uu)];
+          if (z > 0 && z < nearest) nearest = z;
+        }
+      if (nearest < std::numeric_limits<float>::max()) out.depth_m[i] = nearest;
+    }
+  });
+  return out;
+}
+
 std::vector<uint8_t> depthDiscontinuities(const DepthImage& depth, double jump_m,
                                           const PixelRect* region) {
   constexpr int kGapPx = 8;

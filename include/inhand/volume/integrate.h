@@ -57,6 +57,11 @@ std::vector<float> measurementSigma(const DepthImage& depth, const CameraIntrins
 std::vector<uint8_t> depthDiscontinuities(const DepthImage& depth, double jump_m,
                                           const PixelRect* region = nullptr);
 
+// `depth` with each pixel flagged in `mask` set to the nearest depth (the smallest > 0) within
+// `radius` pixels of it, itself included: a silhouette pixel's return may come from behind the
+// object's edge, and what it carves in front of itself must stop before the edge.
+DepthImage nearestAround(const DepthImage& depth, const std::vector<uint8_t>& mask, int radius);
+
 // Pixel (u, v)'s surface with the noise smoothed out: a least-squares plane through the depths of
 // its (2·kSmoothingRadius + 1)² neighbourhood that lie within `max_jump` of its own (the same
 // surface), evaluated at the pixel, and the cosine between that plane's normal and the pixel's ray
