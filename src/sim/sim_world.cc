@@ -390,8 +390,16 @@ RgbImage SimWorld::renderColour() {
   const int tableScene = int(robot.size());  // the table is the last occluder (geometry id)
   RgbImage out(K.width, K.height);
   parallelFor(0, K.height, [&](int v) {
+    // The row's noise in one batch (gaussianPairsF: the bits gaussianAtF gives, eight at a time).
+    const size_t W = size_t(K.width), row = size_t(v) * W;
+    std::vector<uint64_t> index(3 * W);
+    std::vector<float> noise(3 * W, 0.f);
+    if (o.noise_sigma > 0) {
+      for (size_t k = 0; k < 3 * W; ++k) index[k] = 3 * row + k + 1;
+      gaussianPairsF(seed, index.data(), 3 * W, noise.data(), nullptr);
+    }
     for (int u = 0; u < K.width; ++u) {
-      const size_t i = size_t(v) * size_t(K.width) + size_t(u);
+      const size_t i = row + size_t(u);
       const Hit& h = hits[i];
       Vec3f albedo;
       float shade = 1;
@@ -411,8 +419,8 @@ RgbImage SimWorld::renderColour() {
       }
       uint8_t* px = out.at(u, v);
       for (int c = 0; c < 3; ++c) {
-        const float noise = float(o.noise_sigma) * gaussianAtF(seed, 3 * i + size_t(c) + 1);
-        px[c] = uint8_t(std::clamp(std::lround(albedo[c] * shade * exposure + noise), 0L, 255L));
+        const float n = float(o.noise_sigma) * noise[3 * size_t(u) + size_t(c)];
+        px[c] = uint8_t(std::clamp(std::lround(albedo[c] * shade * exposure + n), 0L, 255L));
       }
     }
   });
