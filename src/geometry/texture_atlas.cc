@@ -192,40 +192,57 @@ TextureAtlas bakeVertexColours(const TriangleMesh& mesh,
       texel_m, max_side);
 }
 
-void writeGlb(const std::filesystem::path& path, const TriangleMesh& mesh,
-              const TextureAtlas& atlas) {
-  if (mesh.empty() || atlas.empty() || atlas.uv.size() != mesh.triangles.size() * 3)
-    throw Error(path.string() + ": no textured mesh to write");
-  const std::vector<Vec3f> normals = vertexNormals(mesh);
-  const size_t corners = mesh.triangles.size() * 3;
-  std::vector<float> pos, nor, uv;
-  pos.reserve(corners * 3);
-  nor.reserve(corners * 3);
-  uv.reserve(corners * 2);
+namespace {
+
+// The glb's binary chunk: positions, normals and texture coordinates per triangle corner, then
+// the PNG, each at a 4-byte offset; where each starts, and the positions' bounds.
+struct GlbBuffer {
+  std::vector<uint8_t> bin;
+  size_t norAt = 0, uvAt = 0, pngAt = 0, pngBytes = 0, corners = 0;
   Vec3f lo = Vec3f::Constant(std::numeric_limits<float>::infinity()), hi = -lo;
+};
+GlbBuffer glbBuffer(const TriangleMesh& mesh, const TextureAtlas& atlas) {
+  const std::vector<Vec3f> normals = vertexNormals(mesh);
+  GlbBuffer g;
+  g.corners = mesh.triangles.size() * 3;
+  std::vector<float> pos, nor, uv;
+  pos.reserve(g.corners * 3);
+  nor.reserve(g.corners * 3);
+  uv.reserve(g.corners * 2);
   for (size_t t = 0; t < mesh.triangles.size(); ++t)
     for (int k = 0; k < 3; ++k) {
       const size_t v = size_t(mesh.triangles[t][k]);
       const Vec3f& p = mesh.vertices[v];
-      lo = lo.cwiseMin(p);
-      hi = hi.cwiseMax(p);
+      g.lo = g.lo.cwiseMin(p);
+      g.hi = g.hi.cwiseMax(p);
       pos.insert(pos.end(), {p.x(), p.y(), p.z()});
       nor.insert(nor.end(), {normals[v].x(), normals[v].y(), normals[v].z()});
       const Vec2f& q = atlas.uv[t * 3 + size_t(k)];
       uv.insert(uv.end(), {q.x(), q.y()});
     }
   const std::vector<uint8_t> png = encodePng(atlas.rgba.data(), atlas.width, atlas.height, 4);
-  // One buffer: positions, normals, texture coordinates, the PNG (each at a 4-byte offset).
-  std::vector<uint8_t> bin;
-  const size_t posAt = 0;
-  appendRaw(&bin, pos.data(), pos.size());
-  const size_t norAt = bin.size();
-  appendRaw(&bin, nor.data(), nor.size());
-  const size_t uvAt = bin.size();
-  appendRaw(&bin, uv.data(), uv.size());
-  const size_t pngAt = bin.size();
-  bin.insert(bin.end(), png.begin(), png.end());
-  while (bin.size() % 4) bin.push_back(0);
+  appendRaw(&g.bin, pos.data(), pos.size());
+  g.norAt = g.bin.size();
+  appendRaw(&g.bin, nor.data(), nor.size());
+  g.uvAt = g.bin.size();
+  appendRaw(&g.bin, uv.data(), uv.size());
+  g.pngAt = g.bin.size();
+  g.pngBytes = png.size();
+  g.bin.insert(g.bin.end(), png.begin(), png.end());
+  while (g.bin.size() % 4) g.bin.push_back(0);
+  return g;
+}
+
+}  // namespace
+
+void writeGlb(const std::filesystem::path& path, const TriangleMesh& mesh,
+              const TextureAtlas& atlas) {
+  if (mesh.empty() || atlas.empty() || atlas.uv.size() != mesh.triangles.size() * 3)
+    throw Error(path.string() + ": no textured mesh to write");
+  const GlbBuffer g = glbBuffer(mesh, atlas);
+  const std::vector<uint8_t>& bin = g.bin;
+  const size_t corners = g.corners, posAt = 0, norAt = g.norAt, uvAt = g.uvAt, pngAt = g.pngAt;
+  const Vec3f lo = g.lo, hi = g.hi;
   const double s = std::sqrt(0.5);
   Json gltf = {
       {"asset", {{"version", "2.0"}, {"generator", "inhand"}}},
@@ -253,10 +270,10 @@ void writeGlb(const std::filesystem::path& path, const TriangleMesh& mesh,
       {"images", {{{"bufferView", 3}, {"mimeType", "image/png"}}}},
       {"buffers", {{{"byteLength", bin.size()}}}},
       {"bufferViews",
-       {{{"buffer", 0}, {"byteOffset", posAt}, {"byteLength", pos.size() * 4}, {"target", 34962}},
-        {{"buffer", 0}, {"byteOffset", norAt}, {"byteLength", nor.size() * 4}, {"target", 34962}},
-        {{"buffer", 0}, {"byteOffset", uvAt}, {"byteLength", uv.size() * 4}, {"target", 34962}},
-        {{"buffer", 0}, {"byteOffset", pngAt}, {"byteLength", png.size()}}}},
+       {{{"buffer", 0}, {"byteOffset", posAt}, {"byteLength", corners * 12}, {"target", 34962}},
+        {{"buffer", 0}, {"byteOffset", norAt}, {"byteLength", corners * 12}, {"target", 34962}},
+        {{"buffer", 0}, {"byteOffset", uvAt}, {"byteLength", corners * 8}, {"target", 34962}},
+        {{"buffer", 0}, {"byteOffset", pngAt}, {"byteLength", g.pngBytes}}}},
       {"accessors",
        {{{"bufferView", 0},
          {"componentType", 5126},

@@ -509,6 +509,39 @@ void ScanSession::emptyInsideRobot(const JointVector& q, const Iso3& T_O_B) {
   }
 }
 
+namespace {
+// The frame's pixels with a return, and of those the ones that only carve, into r.
+void countPixels(const DepthImage& depth, const std::vector<uint8_t>& carve, FrameReport* r) {
+  std::vector<int> rowPixels(size_t(depth.height), 0), rowCarve(size_t(depth.height), 0);
+  parallelFor(0, depth.height, [&](int v) {
+    for (size_t i = size_t(v) * depth.width; i < size_t(v + 1) * depth.width; ++i)
+      if (depth.depth_m[i] > 0) {
+        ++rowPixels[size_t(v)];
+        if (!carve.empty() && carve[i]) ++rowCarve[size_t(v)];
+      }
+  });
+  for (int v = 0; v < depth.height; ++v) {
+    r->pixels += rowPixels[size_t(v)];
+    r->carve_pixels += rowCarve[size_t(v)];
+  }
+}
+
+// The silhouette pixels of `depth` (depthDiscontinuities) that are not the robot's get
+// kCarveBeyondBand in `carve`: they only carve. A silhouette pixel's return may come from beside
+// its ray, behind the object's edge: the depths to fuse (returned) carve in front of the nearest
+// depth within 2 pixels of it (5 × 5), not into the edge of a thin object.
+DepthImage silhouettesOnlyCarve(const DepthImage& depth, double jump_m, const PixelRect& rect,
+                                std::vector<uint8_t>* carve) {
+  std::vector<uint8_t> edges = depthDiscontinuities(depth, jump_m, &rect);
+  if (carve->empty()) carve->assign(depth.depth_m.size(), 0);
+  for (size_t i = 0; i < carve->size(); ++i) {
+    if (edges[i] && (*carve)[i]) edges[i] = 0;  // the robot's pixels carve as they did
+    if (edges[i]) (*carve)[i] = kCarveBeyondBand;
+  }
+  return nearestAround(depth, edges, 2);
+}
+}  // namespace
+
 FrameReport ScanSession::fuse(const DepthImage& input, const JointVector& q, const Iso3& T_B_C,
                               const Iso3& T_O_B, const std::vector<uint8_t>* extraCarve,
                               bool inHand, bool maskRobot, const RgbImage& colour) {
@@ -545,19 +578,10 @@ FrameReport ScanSession::fuse(const DepthImage& input, const JointVector& q, con
   }
   // Silhouette pixels only carve beyond the band (ScanOptions::discontinuities_carve_only), found
   // after the in-hand trim: the pixels beside those it dropped are silhouettes too.
-  // A silhouette pixel's depth may lie behind the object's edge (a return from beside the
-  // pixel's own ray): it carves only in front of the nearest depth around it (5 × 5), not into
-  // the edge of a thin object.
-  DepthImage pulled;
-  if (s.options.discontinuities_carve_only) {
-    std::vector<uint8_t> edges = depthDiscontinuities(depth, s.noise.discontinuity_jump_m, &rect);
-    if (carve.empty()) carve.assign(depth.depth_m.size(), 0);
-    for (size_t i = 0; i < carve.size(); ++i) {
-      if (edges[i] && carve[i]) edges[i] = 0;  // the robot's pixels carve as they did
-      if (edges[i]) carve[i] = kCarveBeyondBand;
-    }
-    pulled = nearestAround(depth, edges, 2);
-  }
+  const DepthImage pulled =
+      s.options.discontinuities_carve_only
+          ? silhouettesOnlyCarve(depth, s.noise.discontinuity_jump_m, rect, &carve)
+          : DepthImage();
   const DepthImage& fused = pulled.width > 0 ? pulled : depth;
   // In the hand: measurements that land where the model knows space is empty (seen through
   // before) are not the object (a stripe of wrong depth, a reflection): a frame with many of
@@ -587,18 +611,7 @@ FrameReport ScanSession::fuse(const DepthImage& input, const JointVector& q, con
   if (inHand && s.options.hand_mode == HandMode::kCarveAndEmpty) emptyInsideRobot(q, T_O_B);
   FrameReport r;
   r.T_B_C = T_B_C;
-  std::vector<int> rowPixels(size_t(depth.height), 0), rowCarve(size_t(depth.height), 0);
-  parallelFor(0, depth.height, [&](int v) {
-    for (size_t i = size_t(v) * depth.width; i < size_t(v + 1) * depth.width; ++i)
-      if (depth.depth_m[i] > 0) {
-        ++rowPixels[size_t(v)];
-        if (!carve.empty() && carve[i]) ++rowCarve[size_t(v)];
-      }
-  });
-  for (int v = 0; v < depth.height; ++v) {
-    r.pixels += rowPixels[size_t(v)];
-    r.carve_pixels += rowCarve[size_t(v)];
-  }
+  countPixels(depth, carve, &r);
   ++s.summary.frames;
   if (s.viewOpen) ++s.views.back().frames;
   r.seconds = secondsSince(t0);
