@@ -165,13 +165,13 @@ void addModelFigures(const ObjectModel& model, const std::string& surface, Json*
 void writeFusedModel(const fs::path& outPath, const fs::path& summaryPath, const ObjectModel& model,
                      const Json& summary) {
   writePly(outPath, model.mesh, &model.variance, model.rgba.empty() ? nullptr : &model.rgba);
-  std::vector<fs::path> written = {outPath};
   try {
-    for (const fs::path& f : writeTexturedModel(outPath, model)) written.push_back(f);
+    writeTexturedModel(outPath, model);
     writeTextAtomically(summaryPath, summary.dump(2) + "\n");
   } catch (...) {
+    // No half-finished result: the PLY and whichever textured files were written before.
     std::error_code ec;
-    for (const fs::path& f : written) fs::remove(f, ec);  // no half-finished result
+    fs::remove(outPath, ec);
     const fs::path base = outPath.parent_path() / outPath.stem();
     for (const char* ext : {".glb", ".obj", ".mtl", "_texture.png"})
       fs::remove(fs::path(base.string() + ext), ec);
