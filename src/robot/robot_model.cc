@@ -482,20 +482,9 @@ struct RobotModelLoader {
         throw Error(where + ": unknown field \"" + key + "\"");
     if (c.contains("intrinsics"))
       m.camera_.colour.intrinsics = readIntrinsics(c["intrinsics"], where + ".intrinsics");
-    if (!c.contains("T_depth_colour")) return;
-    const Json& T = c["T_depth_colour"];
-    if (!T.is_array() || T.size() != 16)
-      throw Error(where + ".T_depth_colour: expected 16 numbers (a row-major 4 x 4 pose)");
-    std::array<double, 16> a{};
-    for (size_t k = 0; k < 16; ++k) {
-      if (!T[k].is_number())
-        throw Error(where + ".T_depth_colour[" + std::to_string(k) + "]: not a number");
-      a[k] = T[k].get<double>();
-    }
-    std::string why;
-    const std::optional<Iso3> pose = poseFromRowMajor(a, &why, 1e-3);
-    if (!pose) throw Error(where + ".T_depth_colour: not a rigid transform: " + why);
-    m.camera_.colour.T_D_RGB = *pose;
+    if (c.contains("T_depth_colour"))
+      m.camera_.colour.T_D_RGB =
+          readRowMajorPose(c["T_depth_colour"], where + ".T_depth_colour", 1e-3);
   }
 
   // Where the robot stands: the camera's pan-tilt mount, the table, links next to the base.

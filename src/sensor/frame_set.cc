@@ -20,6 +20,18 @@ Json intrinsicsJson(const CameraIntrinsics& c) {
 }
 
 Iso3 readPose(const Json& T, const std::string& where, FrameSet* set) {
+  double deviation = 0;
+  const Iso3 pose = readRowMajorPose(T, where, 1e-2, &deviation);
+  if (deviation > 1e-9) {
+    ++set->reorthonormalised;
+    set->max_rotation_deviation = std::max(set->max_rotation_deviation, deviation);
+  }
+  return pose;
+}
+
+}  // namespace
+
+Iso3 readRowMajorPose(const Json& T, const std::string& where, double tol, double* deviation) {
   if (!T.is_array() || T.size() != 16)
     throw Error(where + ": expected an array of 16 numbers (row-major 4x4)");
   std::array<double, 16> m{};
@@ -28,17 +40,10 @@ Iso3 readPose(const Json& T, const std::string& where, FrameSet* set) {
     m[k] = T[k].get<double>();
   }
   std::string why;
-  double deviation = 0;
-  auto pose = poseFromRowMajor(m, &why, 1e-2, &deviation);
+  const std::optional<Iso3> pose = poseFromRowMajor(m, &why, tol, deviation);
   if (!pose) throw Error(where + ": not a rigid transform: " + why);
-  if (deviation > 1e-9) {
-    ++set->reorthonormalised;
-    set->max_rotation_deviation = std::max(set->max_rotation_deviation, deviation);
-  }
   return *pose;
 }
-
-}  // namespace
 
 CameraIntrinsics readIntrinsics(const Json& K, const std::string& where) {
   CameraIntrinsics c;

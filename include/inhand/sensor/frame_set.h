@@ -69,6 +69,10 @@ FrameSet readFrameSet(const std::filesystem::path& dir);
 // A pinhole camera's intrinsics from {width, height, fx, fy, cx, cy}, checked; errors name
 // `where` (frames.json's intrinsics, a robot config's colour camera).
 CameraIntrinsics readIntrinsics(const Json& K, const std::string& where);
+// A rigid transform from a JSON array of 16 row-major numbers (core/pose.h poseFromRowMajor,
+// rotation within `tol` of orthonormal; *deviation as there); errors name `where`.
+Iso3 readRowMajorPose(const Json& T, const std::string& where, double tol = 1e-2,
+                      double* deviation = nullptr);
 // Loads frame i's depth image, checking its size against the intrinsics.
 DepthImage loadFrameDepth(const std::filesystem::path& dir, const FrameSet& set, size_t i);
 // Loads frame i's colour image (empty when it has none), checking its size against the colour
