@@ -180,8 +180,10 @@ TEST(Baselines, UnknownAreaIsTheVisibleHoleFilledArea) {
   const double behind = vq.quality(cameraPoseInObject(Vec3::Zero(), Vec3(-1, 0, 0), 0.7, 0));
   EXPECT_NEAR(facing, 0.01, 0.0003);  // the face's 0.01 m²
   EXPECT_DOUBLE_EQ(behind, 0.0);
+  // The optimised and reference integrators sum in float in different orders (and the AVX2 paths
+  // may be off): they agree to float precision, not bit for bit.
   EXPECT_NEAR(vq.qualityReference(cameraPoseInObject(Vec3::Zero(), Vec3(1, 0, 0), 0.7, 0)), facing,
-              1e-9);
+              1e-5 * facing);
 }
 
 namespace {
