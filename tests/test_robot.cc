@@ -695,7 +695,8 @@ TEST(RobotConfig, ColourCameraFromTheConfig) {
   EXPECT_EQ(shipped.intrinsics.width, 640);
   EXPECT_DOUBLE_EQ(shipped.intrinsics.fx, 530.0);
   EXPECT_LT((shipped.T_D_RGB.translation() - Vec3(0.025, 0, 0)).norm(), 1e-12);
-  EXPECT_FALSE(shipped.enabled);  // the scan turns it on (sim.colour.enabled)
+  EXPECT_FALSE(shipped.enabled);         // the scan turns it on (sim.colour.enabled)
+  EXPECT_TRUE(shipped.light_at_camera);  // as the simulator's lamp
   test::TempDir dir;
   Json c = readJsonFile(kWam);
   c["urdf"] = (fs::path(INHAND_SOURCE_DIR) / "data/robots/wam_barretthand.urdf").string();
@@ -710,6 +711,16 @@ TEST(RobotConfig, ColourCameraFromTheConfig) {
   EXPECT_DOUBLE_EQ(got.intrinsics.fy, 905.0);
   EXPECT_LT((got.T_D_RGB.translation() - Vec3(-0.015, 0.002, 0.001)).norm(), 1e-12);
   EXPECT_LT((got.T_D_RGB.linear() * Vec3::UnitX() - Vec3::UnitY()).norm(), 1e-12);
+  EXPECT_FALSE(got.light_at_camera);  // left out: the room's light alone
+  c["camera"]["colour"]["light_at_camera"] = "yes";
+  writeTextAtomically(dir.path() / "r.json", c.dump());
+  try {
+    RobotModel::load(dir.path() / "r.json");
+    ADD_FAILURE() << "a light_at_camera that is not a bool was accepted";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("camera.colour.light_at_camera"), std::string::npos)
+        << e.what();
+  }
 }
 
 namespace {

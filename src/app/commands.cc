@@ -260,9 +260,9 @@ struct FuseFigures {
 };
 
 // Every frame of the set (plain poses, T_O_C) fused into `volume`, and its colour image, where
-// it has one, into `colour` (the camera as frames.json gives it).
+// it has one, into `colour` and `frames` (the camera as frames.json gives it).
 FuseFigures integrateFrames(const fs::path& dir, const FrameSet& set, TsdfVolume* volume,
-                            ColourVolume* colour) {
+                            ColourVolume* colour, ColourFrames* frames) {
   FuseFigures f;
   const NoiseModelOptions noise;
   const auto t0 = Clock::now();
@@ -282,6 +282,7 @@ FuseFigures integrateFrames(const fs::path& dir, const FrameSet& set, TsdfVolume
       auto tc = Clock::now();
       f.colour_pixels +=
           integrateColour(depth, rgb, set.frames[i].T_O_C, camera, sigma, colour).pixels;
+      frames->add(depth, rgb, set.frames[i].T_O_C, camera, sigma);
       f.colour_s += secondsSince(tc);
     }
     progress("fuse: frames", i + 1, set.frames.size());
@@ -291,12 +292,16 @@ FuseFigures integrateFrames(const fs::path& dir, const FrameSet& set, TsdfVolume
 }
 
 // Colour fusion's figures (fuse's summary "colour").
-Json fuseColourJson(const ObjectModel& model, const ColourVolume& colour, int64_t pixels) {
+Json fuseColourJson(const ObjectModel& model, const ColourVolume& colour,
+                    const ColourFrames& frames, double falloff, int64_t pixels) {
   size_t coloured = 0;
   for (const auto& c : model.rgba) coloured += c[3] == 255;
   return {{"pixels_fused", pixels},
           {"voxels", colour.voxels()},
           {"memory_mb", double(colour.bytes()) / (1 << 20)},
+          {"frames_kept", frames.frames()},
+          {"frames_mb", double(frames.bytes()) / (1 << 20)},
+          {"shading_falloff", falloff},
           {"vertices_with_colour", coloured}};
 }
 
@@ -470,11 +475,15 @@ int runFuse(const FuseArgs& args) {
                volume.dims().x(), volume.dims().y(), volume.dims().z(), vo.voxel_size_m * 1000,
                TsdfVolume::megabytesFor(volume.dims()));
   ColourVolume colour(volume);
-  const FuseFigures ff = integrateFrames(dir, set, &volume, &colour);
+  ColourFrames colourFrames(size_t(ScanOptions{}.colour_frames_mb * 1024 * 1024));
+  const FuseFigures ff = integrateFrames(dir, set, &volume, &colour, &colourFrames);
   auto tMesh = Clock::now();
   ObjectModel model = extractModel(volume, mo);
   if (args.surface == "observed") model = model.observedSurface();
-  if (set.colour.enabled) model.rgba = vertexColours(colour, model.mesh);
+  double falloff = 0;
+  if (set.colour.enabled)
+    model.rgba =
+        vertexColours(colourFrames, colour, model.mesh, set.colour.light_at_camera, &falloff);
   double meshS = secondsSince(tMesh);
   if (model.mesh.empty())
     throw Error(dir.string() +
@@ -486,7 +495,8 @@ int runFuse(const FuseArgs& args) {
   summary["frames"] = set.frames.size();
   addModelFigures(model, args.surface, &summary);
   summary["volume"] = volumeJson(volume, ff.updated);
-  if (set.colour.enabled) summary["colour"] = fuseColourJson(model, colour, ff.colour_pixels);
+  if (set.colour.enabled)
+    summary["colour"] = fuseColourJson(model, colour, colourFrames, falloff, ff.colour_pixels);
   summary["timing_s"] = {{"integrate", ff.integrate_s},
                          {"colour", ff.colour_s},
                          {"load_and_integrate", ff.load_and_integrate_s},

@@ -327,7 +327,10 @@ Json colourJson(const SimulatedScan& sim) {
           {"psnr_db_8_views", sim.colour.psnr_db},
           {"pixels_fused", r.colour_pixels},
           {"fusion_s", r.colour_s},
-          {"fusion_ms_per_frame", r.frames > 0 ? 1000 * r.colour_s / r.frames : 0.0}};
+          {"fusion_ms_per_frame", r.frames > 0 ? 1000 * r.colour_s / r.frames : 0.0},
+          {"frames_kept", r.colour_frames_kept},
+          {"frames_mb", r.colour_frames_mb},
+          {"shading_falloff", r.colour_shading_falloff}};
 }
 
 // summary.json of a simulated scan (docs/commands.md), less the options and the resume line.

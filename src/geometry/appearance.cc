@@ -195,11 +195,17 @@ SurfaceColours checkerColours(const TriangleMesh& mesh, double square_m, std::ar
   return out;
 }
 
-namespace {
 double srgbToLinear(double c) {
   c /= 255.0;
   return c <= 0.04045 ? c / 12.92 : std::pow((c + 0.055) / 1.055, 2.4);
 }
+
+double linearToSrgb(double l) {
+  const double c = l <= 0.0031308 ? 12.92 * l : 1.055 * std::pow(std::max(l, 0.0), 1 / 2.4) - 0.055;
+  return std::clamp(255 * c, 0.0, 255.0);
+}
+
+namespace {
 double labF(double t) {
   constexpr double d = 6.0 / 29.0;
   return t > d * d * d ? std::cbrt(t) : t / (3 * d * d) + 4.0 / 29.0;

@@ -83,19 +83,6 @@ std::pair<int, int> packCells(const TriangleMesh& mesh, double texel_m, std::vec
   return {width, y + rowHeight};
 }
 
-// Area-weighted vertex normals (unit; +z where every triangle around is degenerate).
-std::vector<Vec3f> vertexNormals(const TriangleMesh& mesh) {
-  std::vector<Vec3f> n(mesh.vertices.size(), Vec3f::Zero());
-  for (const Tri& f : mesh.triangles) {
-    const Vec3f a = mesh.vertices[size_t(f[0])], b = mesh.vertices[size_t(f[1])],
-                c = mesh.vertices[size_t(f[2])];
-    const Vec3f w = (b - a).cross(c - a);  // length: twice the area
-    for (int k = 0; k < 3; ++k) n[size_t(f[k])] += w;
-  }
-  for (Vec3f& v : n) v = v.norm() > 0 ? Vec3f(v.normalized()) : Vec3f(0, 0, 1);
-  return n;
-}
-
 void padTo4(std::string* s, char fill) {
   while (s->size() % 4) s->push_back(fill);
 }

@@ -409,4 +409,16 @@ TriangleMesh subdivided(const TriangleMesh& mesh, double max_edge_m, std::vector
   return out;
 }
 
+std::vector<Vec3f> vertexNormals(const TriangleMesh& mesh) {
+  std::vector<Vec3f> n(mesh.vertices.size(), Vec3f::Zero());
+  for (const Tri& f : mesh.triangles) {
+    const Vec3f a = mesh.vertices[size_t(f[0])], b = mesh.vertices[size_t(f[1])],
+                c = mesh.vertices[size_t(f[2])];
+    const Vec3f w = (b - a).cross(c - a);  // length: twice the area
+    for (int k = 0; k < 3; ++k) n[size_t(f[k])] += w;
+  }
+  for (Vec3f& v : n) v = v.norm() > 0 ? Vec3f(v.normalized()) : Vec3f(0, 0, 1);
+  return n;
+}
+
 }  // namespace inhand

@@ -474,12 +474,18 @@ struct RobotModelLoader {
   }
 
   // camera.colour: {"intrinsics": {width, height, fx, fy, cx, cy}, "T_depth_colour": 16 row-major
-  // numbers, the colour camera's optical frame in the depth camera's}; either may be left out.
+  // numbers, the colour camera's optical frame in the depth camera's, "light_at_camera": bool};
+  // any may be left out.
   void colourCamera(const Json& c, const std::string& where) {
     if (!c.is_object()) throw Error(where + ": expected an object (intrinsics, T_depth_colour)");
     for (const auto& [key, value] : c.items())
-      if (key != "intrinsics" && key != "T_depth_colour")
+      if (key != "intrinsics" && key != "T_depth_colour" && key != "light_at_camera")
         throw Error(where + ": unknown field \"" + key + "\"");
+    if (c.contains("light_at_camera")) {
+      if (!c["light_at_camera"].is_boolean())
+        throw Error(where + ".light_at_camera: expected true or false");
+      m.camera_.colour.light_at_camera = c["light_at_camera"].get<bool>();
+    }
     if (c.contains("intrinsics"))
       m.camera_.colour.intrinsics = readIntrinsics(c["intrinsics"], where + ".intrinsics");
     if (c.contains("T_depth_colour"))

@@ -87,6 +87,9 @@ struct ScanSession::State {
   TsdfVolume volume;
   // Colour (camera.colour): the grid's colours once a frame had them; the next frame's image.
   std::unique_ptr<ColourVolume> colour;
+  // … and the colour frames kept for model()'s colours (options.colour_frames_mb; not in
+  // checkpoints: after a resume, what they did not see takes the volume's colour).
+  std::unique_ptr<ColourFrames> colourFrames;
   RgbImage nextColour;
   ViewPlanner planner, ranker;
   RobotOccluders scenes;
@@ -604,6 +607,12 @@ FrameReport ScanSession::fuse(const DepthImage& input, const JointVector& q, con
     if (!s.colour) s.colour = std::make_unique<ColourVolume>(s.volume);
     const ColourIntegrationStats cs = integrateColour(
         depth, colour, T_O_C, s.camera, sigma, s.colour.get(), carve.empty() ? nullptr : &carve);
+    if (s.options.colour_frames_mb > 0) {
+      if (!s.colourFrames)
+        s.colourFrames =
+            std::make_unique<ColourFrames>(size_t(s.options.colour_frames_mb * 1024 * 1024));
+      s.colourFrames->add(depth, colour, T_O_C, s.camera, sigma, carve.empty() ? nullptr : &carve);
+    }
     s.summary.colour_pixels += cs.pixels;
     s.summary.colour_s += secondsSince(tc);
   }
@@ -1254,7 +1263,19 @@ std::optional<GraspCandidate> ScanSession::nextGrasp(const Iso3& T_B_O_rest,
   return plan.candidates.front();
 }
 
-ObjectModel ScanSession::model() const { return s_->extracted(s_->full, s_->options.mesh); }
+ObjectModel ScanSession::model() const {
+  ObjectModel m = s_->extracted(s_->full, s_->options.mesh);
+  // The volume's colours serve the scan between views; the model handed out takes its colours
+  // from the frames kept, where they saw it.
+  if (s_->colour && s_->colourFrames && !s_->colourFrames->empty()) {
+    Summary& sum = s_->summary;
+    m.rgba = vertexColours(*s_->colourFrames, *s_->colour, m.mesh,
+                           s_->camera.colour.light_at_camera, &sum.colour_shading_falloff);
+    sum.colour_frames_kept = int(s_->colourFrames->frames());
+    sum.colour_frames_mb = double(s_->colourFrames->bytes()) / (1 << 20);
+  }
+  return m;
+}
 
 ObjectModel ScanSession::planningModel() const {
   MeshOptions planningMesh = s_->options.mesh;
@@ -1292,6 +1313,9 @@ void ScanSession::Summary::copyTo(ScanResult* r) const {
   r->tracking_s = tracking_s;
   r->colour_pixels = colour_pixels;
   r->colour_s = colour_s;
+  r->colour_frames_kept = colour_frames_kept;
+  r->colour_frames_mb = colour_frames_mb;
+  r->colour_shading_falloff = colour_shading_falloff;
   r->frames = frames;
   r->frames_rejected = frames_rejected;
   r->frames_dropped = frames_dropped;
@@ -1351,7 +1375,10 @@ Json checkpointSummaryJson(const ScanSession::Summary& m) {
           {"planning_s", m.planning_s},
           {"fusion_s", m.fusion_s},
           {"colour_pixels", m.colour_pixels},
-          {"colour_s", m.colour_s}};
+          {"colour_s", m.colour_s},
+          {"colour_frames_kept", m.colour_frames_kept},
+          {"colour_frames_mb", m.colour_frames_mb},
+          {"colour_shading_falloff", m.colour_shading_falloff}};
 }
 }  // namespace
 
@@ -1398,6 +1425,7 @@ void ScanSession::save(const std::filesystem::path& path, const Json& extra) con
   std::sort(colours.begin(), colours.end(),
             [](const auto& a, const auto& b) { return a.first < b.first; });
   if (s.colour) h["colour_voxels"] = colours.size();
+  if (s.colourFrames) h["colour_frames"] = s.colourFrames->frames();
   const std::string header = h.dump();
   writeFileAtomically(path, [&](const fs::path& tmp) {
     std::ofstream f(tmp, std::ios::binary);
@@ -1409,6 +1437,7 @@ void ScanSession::save(const std::filesystem::path& path, const Json& extra) con
       f.write(reinterpret_cast<const char*>(&index), sizeof index);
       f.write(reinterpret_cast<const char*>(sums), sizeof sums);
     }
+    if (s.colourFrames) s.colourFrames->write(f);
     if (!f) throw Error(path.string() + ": cannot write the checkpoint");
   });
 }
@@ -1484,6 +1513,9 @@ void readSummaryCounts(const Json& m, ScanSession::Summary* sum) {
   sum->fusion_s = m.at("fusion_s").get<double>();
   sum->colour_pixels = m.value("colour_pixels", 0L);
   sum->colour_s = m.value("colour_s", 0.0);
+  sum->colour_frames_kept = m.value("colour_frames_kept", 0);
+  sum->colour_frames_mb = m.value("colour_frames_mb", 0.0);
+  sum->colour_shading_falloff = m.value("colour_shading_falloff", 0.0);
 }
 
 }  // namespace
@@ -1542,6 +1574,11 @@ ScanSession ScanSession::load(const std::filesystem::path& path, const RobotMode
     ++s.revision;
     checkVolumeMatches(path, vj, dims, v);
     readVolumeData(f, h, v, &s.colour, bad);
+    if (h.contains("colour_frames")) {
+      s.colourFrames =
+          std::make_unique<ColourFrames>(size_t(s.options.colour_frames_mb * 1024 * 1024));
+      if (std::string problem = s.colourFrames->read(f); !problem.empty()) throw bad(problem);
+    }
     s.holding = h.at("holding").get<bool>();
     s.grasp = h.at("grasp").get<int>();
     s.T_O_palm = isoFrom(h.at("T_O_palm"));

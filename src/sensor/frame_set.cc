@@ -93,6 +93,11 @@ FrameSet readFrameSet(const fs::path& dir) {
   if (j.contains("colour_intrinsics"))
     set.colour.intrinsics = readIntrinsics(j["colour_intrinsics"], name + ": colour_intrinsics");
   if (j.contains("T_D_RGB")) set.colour.T_D_RGB = readPose(j["T_D_RGB"], name + ": T_D_RGB", &set);
+  if (j.contains("colour_light_at_camera")) {
+    if (!j["colour_light_at_camera"].is_boolean())
+      throw Error(name + ": colour_light_at_camera: expected true or false");
+    set.colour.light_at_camera = j["colour_light_at_camera"].get<bool>();
+  }
   const Json& frames = requireField(j, "frames", name);
   if (!frames.is_array()) throw Error(name + ": frames: expected an array");
   if (frames.empty()) throw Error(name + ": frames: the array is empty");
@@ -175,6 +180,7 @@ void writeFrameSet(const fs::path& dir, const FrameSet& set) {
   if (set.colour.enabled) {
     j["colour_intrinsics"] = intrinsicsJson(set.colour.intrinsics);
     j["T_D_RGB"] = isoJson(set.colour.T_D_RGB);
+    if (set.colour.light_at_camera) j["colour_light_at_camera"] = true;
   }
   if (set.bounds_O)
     j["bounds_O"] = {

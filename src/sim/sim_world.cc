@@ -1,6 +1,7 @@
 #include "inhand/sim/sim_world.h"
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 
@@ -358,6 +359,30 @@ DepthImage SimWorld::render() {
   return d;
 }
 
+namespace {
+// sRGB (0–255) to linear intensity and back through tables, linearly interpolated (the colour
+// render's per-pixel loop; within 0.05 of a level of srgbToLinear / linearToSrgb).
+struct SrgbTables {
+  std::array<float, 1025> lin;  // srgbToLinear at 255 i / 1024
+  std::array<float, 4097> enc;  // linearToSrgb at i / 4096
+  SrgbTables() {
+    for (size_t i = 0; i < lin.size(); ++i) lin[i] = float(srgbToLinear(255.0 * double(i) / 1024));
+    for (size_t i = 0; i < enc.size(); ++i) enc[i] = float(linearToSrgb(double(i) / 4096));
+  }
+  static float lookup(const float* t, int n, float x) {
+    x = std::clamp(x, 0.f, float(n));
+    const int i = std::min(int(x), n - 1);
+    return t[i] + (t[i + 1] - t[i]) * (x - float(i));
+  }
+  float toLinear(float c255) const { return lookup(lin.data(), 1024, c255 * (1024.f / 255)); }
+  float toSrgb(float l) const { return lookup(enc.data(), 4096, l * 4096); }
+};
+const SrgbTables& srgbTables() {
+  static const SrgbTables t;
+  return t;
+}
+}  // namespace
+
 RgbImage SimWorld::renderColour() {
   const ColourCameraOptions& cc = camera_.colour;
   if (!cc.enabled) return {};
@@ -389,6 +414,7 @@ RgbImage SimWorld::renderColour() {
   const float exposure = float(1 + o.exposure_sigma * gaussianAt(seed, 0));
   const int tableScene = int(robot.size());  // the table is the last occluder (geometry id)
   RgbImage out(K.width, K.height);
+  const SrgbTables& tables = srgbTables();
   parallelFor(0, K.height, [&](int v) {
     // The row's noise in one batch (gaussianPairsF: the bits gaussianAtF gives, eight at a time).
     const size_t W = size_t(K.width), row = size_t(v) * W;
@@ -420,7 +446,9 @@ RgbImage SimWorld::renderColour() {
       uint8_t* px = out.at(u, v);
       for (int c = 0; c < 3; ++c) {
         const float n = float(o.noise_sigma) * noise[3 * size_t(u) + size_t(c)];
-        px[c] = uint8_t(std::clamp(std::lround(albedo[c] * shade * exposure + n), 0L, 255L));
+        // Light adds in linear intensity; the camera encodes it as sRGB.
+        const float c255 = tables.toSrgb(tables.toLinear(albedo[c]) * shade * exposure);
+        px[c] = uint8_t(std::clamp(std::lround(c255 + n), 0L, 255L));
       }
     }
   });

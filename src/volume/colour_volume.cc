@@ -2,7 +2,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <istream>
 #include <limits>
+#include <ostream>
 
 #include "inhand/core/internal/parallel.h"
 
@@ -221,6 +223,352 @@ std::vector<std::array<uint8_t, 4>> vertexColours(const ColourVolume& volume,
       out[i][size_t(k)] = uint8_t(std::clamp(std::lround(c[k]), 0L, 255L));
     out[i][3] = 255;
   }
+  return out;
+}
+
+}  // namespace inhand
+
+namespace inhand {
+
+ColourFrames::ColourFrames(size_t budget_bytes) : budget_(budget_bytes) {}
+
+namespace {
+// What the colour camera saw of one frame, at its own pixels: the nearest fused point's depth
+// (infinity: none), the nearest other point's (the robot, the table; infinity: none) and whether
+// a fused point there lies at a depth edge.
+struct ColourCameraView {
+  std::vector<float> object, other;
+  std::vector<uint8_t> edge;
+  int umin, vmin, umax, vmax;  // the box of pixels with a fused point (umax < umin: none)
+};
+
+ColourCameraView viewOfFrame(const DepthImage& depth, const CameraIntrinsics& K,
+                             const CameraIntrinsics& Kc, const Iso3& T_RGB_D,
+                             const std::vector<float>& sigma_m,
+                             const std::vector<uint8_t>* carve_only) {
+  const size_t n = size_t(Kc.width) * size_t(Kc.height);
+  const float inf = std::numeric_limits<float>::infinity();
+  ColourCameraView c{std::vector<float>(n, inf),
+                     std::vector<float>(n, inf),
+                     std::vector<uint8_t>(n, 0),
+                     Kc.width,
+                     Kc.height,
+                     -1,
+                     -1};
+  const int W = depth.width, H = depth.height;
+  auto carve = [&](int u, int v) {
+    return carve_only && (*carve_only)[size_t(v) * size_t(W) + size_t(u)] != 0;
+  };
+  // Each depth pixel's colour pixel, depth there and kind, on both cores; then the z-buffers in
+  // pixel order.
+  struct Point {
+    int32_t i = -1;  // colour pixel; −1: none
+    float z = 0;
+    uint8_t kind = 0;  // 0 not fused, 1 fused, 2 fused at an edge
+  };
+  std::vector<Point> points(size_t(W) * size_t(H));
+  parallelFor(0, H, [&](int v) {
+    for (int u = 0; u < W; ++u) {
+      if (!validDepth(depth, u, v)) continue;
+      const float d = depth.at(u, v);
+      const Vec3 q = T_RGB_D * (K.rayZ1(u, v) * double(d));
+      if (q.z() <= 0) continue;
+      const Vec2 px = Kc.project(q);
+      const long cu = std::lround(px.x()), cv = std::lround(px.y());
+      if (cu < 0 || cv < 0 || cu >= Kc.width || cv >= Kc.height) continue;
+      Point& p = points[size_t(v) * size_t(W) + size_t(u)];
+      p.i = int32_t(cv * Kc.width + cu);
+      p.z = float(q.z());
+      if (carve(u, v) || !(sigma_m[size_t(v) * size_t(W) + size_t(u)] > 0)) continue;
+      bool edge = false;
+      for (int dv = -kEdge; dv <= kEdge && !edge; ++dv)
+        for (int du = -kEdge; du <= kEdge && !edge; ++du) {
+          const int uu = u + du, vv = v + dv;
+          if (uu < 0 || vv < 0 || uu >= W || vv >= H) continue;
+          edge =
+              !validDepth(depth, uu, vv) || carve(uu, vv) || std::abs(depth.at(uu, vv) - d) > kJump;
+        }
+      p.kind = edge ? 2 : 1;
+    }
+  });
+  for (const Point& p : points) {
+    if (p.i < 0) continue;
+    const size_t i = size_t(p.i);
+    if (p.kind == 0) {
+      c.other[i] = std::min(c.other[i], p.z);
+      continue;
+    }
+    if (p.z < c.object[i]) {
+      c.object[i] = p.z;
+      c.edge[i] = p.kind == 2;
+    }
+    const int cu = p.i % Kc.width, cv = p.i / Kc.width;
+    c.umin = std::min(c.umin, cu);
+    c.vmin = std::min(c.vmin, cv);
+    c.umax = std::max(c.umax, cu);
+    c.vmax = std::max(c.vmax, cv);
+  }
+  return c;
+}
+}  // namespace
+
+void ColourFrames::add(const DepthImage& depth, const RgbImage& colour, const Iso3& T_O_C,
+                       const DepthCameraOptions& camera, const std::vector<float>& sigma_m,
+                       const std::vector<uint8_t>* carve_only) {
+  const CameraIntrinsics& K = camera.intrinsics;
+  const CameraIntrinsics& Kc = camera.colour.intrinsics;
+  if (colour.width != Kc.width || colour.height != Kc.height || depth.width != K.width ||
+      depth.height != K.height || sigma_m.size() != depth.depth_m.size())
+    return;
+  const int index = added_++;
+  if (index % stride_ != 0) return;
+  const Iso3 T_RGB_D = camera.colour.T_D_RGB.inverse();
+  const ColourCameraView c = viewOfFrame(depth, K, Kc, T_RGB_D, sigma_m, carve_only);
+  if (c.umax < c.umin) return;
+  Frame f;
+  f.index = index;
+  f.T_RGB_O = T_RGB_D * T_O_C.inverse();
+  f.K = Kc;
+  f.u0 = std::max(0, c.umin - 2);
+  f.v0 = std::max(0, c.vmin - 2);
+  const int u1 = std::min(Kc.width - 1, c.umax + 2), v1 = std::min(Kc.height - 1, c.vmax + 2);
+  const int w = u1 - f.u0 + 1, h = v1 - f.v0 + 1;
+  f.rgb = RgbImage(w, h);
+  f.z.assign(size_t(w) * size_t(h), 0.f);
+  f.edge.assign(size_t(w) * size_t(h), 0);
+  for (int v = 0; v < h; ++v) {
+    std::copy_n(colour.at(f.u0, f.v0 + v), size_t(w) * 3, f.rgb.at(0, v));
+    for (int u = 0; u < w; ++u) {
+      const size_t i = size_t(f.v0 + v) * size_t(Kc.width) + size_t(f.u0 + u);
+      const size_t j = size_t(v) * size_t(w) + size_t(u);
+      const float zo = c.object[i], zr = c.other[i];
+      // Something that is not the object nearer than it (or alone there): its depth, negated.
+      if (std::isfinite(zr) && !(zo <= zr + kJump))
+        f.z[j] = -zr;
+      else if (std::isfinite(zo))
+        f.z[j] = zo;
+      f.edge[j] = c.edge[i];
+    }
+  }
+  bytes_ += f.bytes();
+  frames_.push_back(std::move(f));
+  // Over the budget: every other frame kept goes, and from now on every other one is kept.
+  while (bytes_ > budget_ && frames_.size() > 1 && stride_ < (1 << 20)) {
+    stride_ *= 2;
+    std::vector<Frame> kept;
+    bytes_ = 0;
+    for (Frame& k : frames_)
+      if (k.index % stride_ == 0) {
+        bytes_ += k.bytes();
+        kept.push_back(std::move(k));
+      }
+    frames_ = std::move(kept);
+  }
+}
+
+namespace {
+template <class T>
+void put(std::ostream& out, const T& x) {
+  out.write(reinterpret_cast<const char*>(&x), sizeof x);
+}
+template <class T>
+bool get(std::istream& in, T* x) {
+  return bool(in.read(reinterpret_cast<char*>(x), sizeof *x));
+}
+}  // namespace
+
+void ColourFrames::write(std::ostream& out) const {
+  put(out, uint64_t(frames_.size()));
+  put(out, int64_t(stride_));
+  put(out, int64_t(added_));
+  for (const Frame& f : frames_) {
+    put(out, int64_t(f.index));
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 4; ++c) put(out, f.T_RGB_O.matrix()(r, c));
+    for (double x : {f.K.fx, f.K.fy, f.K.cx, f.K.cy}) put(out, x);
+    for (int x : {f.K.width, f.K.height, f.u0, f.v0, f.rgb.width, f.rgb.height})
+      put(out, int32_t(x));
+    out.write(reinterpret_cast<const char*>(f.rgb.rgb.data()), std::streamsize(f.rgb.rgb.size()));
+    out.write(reinterpret_cast<const char*>(f.z.data()),
+              std::streamsize(f.z.size() * sizeof(float)));
+    out.write(reinterpret_cast<const char*>(f.edge.data()), std::streamsize(f.edge.size()));
+  }
+}
+
+std::string ColourFrames::read(std::istream& in) {
+  frames_.clear();
+  bytes_ = 0;
+  stride_ = 1;
+  added_ = 0;
+  uint64_t n = 0;
+  int64_t stride = 0, added = 0;
+  if (!get(in, &n) || !get(in, &stride) || !get(in, &added)) return "colour frames cut short";
+  if (stride < 1 || stride > (1 << 20) || added < 0 || n > uint64_t(added))
+    return "colour frames: bad counts";
+  std::vector<Frame> frames;
+  size_t bytes = 0;
+  for (uint64_t k = 0; k < n; ++k) {
+    Frame f;
+    int64_t index = 0;
+    double m[12], K[4];
+    int32_t sizes[6];
+    if (!get(in, &index)) return "colour frames cut short";
+    for (double& x : m)
+      if (!get(in, &x)) return "colour frames cut short";
+    for (double& x : K)
+      if (!get(in, &x)) return "colour frames cut short";
+    for (int32_t& x : sizes)
+      if (!get(in, &x)) return "colour frames cut short";
+    for (double x : m)
+      if (!std::isfinite(x)) return "colour frames: a pose is not finite";
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 4; ++c) f.T_RGB_O.matrix()(r, c) = m[4 * r + c];
+    f.K.fx = K[0], f.K.fy = K[1], f.K.cx = K[2], f.K.cy = K[3];
+    f.K.width = sizes[0], f.K.height = sizes[1];
+    f.u0 = sizes[2], f.v0 = sizes[3];
+    const int w = sizes[4], h = sizes[5];
+    if (!f.K.validate().empty() || index < 0 || index >= added || f.u0 < 0 || f.v0 < 0 || w < 1 ||
+        h < 1 || f.u0 + w > f.K.width || f.v0 + h > f.K.height)
+      return "colour frames: bad frame " + std::to_string(k);
+    f.index = int(index);
+    f.rgb = RgbImage(w, h);
+    f.z.resize(size_t(w) * size_t(h));
+    f.edge.resize(size_t(w) * size_t(h));
+    if (!in.read(reinterpret_cast<char*>(f.rgb.rgb.data()), std::streamsize(f.rgb.rgb.size())) ||
+        !in.read(reinterpret_cast<char*>(f.z.data()),
+                 std::streamsize(f.z.size() * sizeof(float))) ||
+        !in.read(reinterpret_cast<char*>(f.edge.data()), std::streamsize(f.edge.size())))
+      return "colour frames cut short";
+    for (float z : f.z)
+      if (!std::isfinite(z)) return "colour frames: a depth is not finite";
+    bytes += f.bytes();
+    frames.push_back(std::move(f));
+  }
+  frames_ = std::move(frames);
+  bytes_ = bytes;
+  stride_ = int(stride);
+  added_ = int(added);
+  return {};
+}
+
+template <class Fn>
+void ColourFrames::sights(const Vec3& p_O, const Vec3& n_O, Fn&& fn) const {
+  constexpr double kMinCos = 0.342;  // cos 70°
+  for (const Frame& f : frames_) {
+    const Vec3 q = f.T_RGB_O * p_O;
+    if (!(q.z() > 0)) continue;
+    const double cosine = -(f.T_RGB_O.linear() * n_O).dot(q.normalized());
+    if (!(cosine > kMinCos)) continue;
+    const Vec2 px = f.K.project(q);
+    const double x = px.x() - f.u0, y = px.y() - f.v0;
+    const int W = f.rgb.width, H = f.rgb.height;
+    if (!(x >= 0 && y >= 0 && x <= W - 1 && y <= H - 1)) continue;
+    const int cu = int(std::lround(x)), cv = int(std::lround(y));
+    bool hidden = false, seen = false, edge = false;
+    for (int dv = -1; dv <= 1 && !hidden; ++dv)
+      for (int du = -1; du <= 1; ++du) {
+        const int uu = cu + du, vv = cv + dv;
+        if (uu < 0 || vv < 0 || uu >= W || vv >= H) continue;
+        const size_t j = size_t(vv) * size_t(W) + size_t(uu);
+        const float z = f.z[j];
+        if (z == 0) continue;
+        if (std::abs(z) < q.z() - kJump) {  // the object's own surface or another nearer
+          hidden = true;
+          break;
+        }
+        if (z > 0 && std::abs(z - q.z()) <= kJump) {
+          seen = true;
+          edge = edge || f.edge[j];
+        }
+      }
+    if (hidden || !seen) continue;
+    fn(cosine, f.rgb.bilinear(x, y), edge);
+  }
+}
+
+bool ColourFrames::at(const Vec3& p_O, const Vec3& n_O, Vec3f* rgb, double falloff) const {
+  double w = 0;
+  Vec3 sum = Vec3::Zero();  // linear intensity, the shading divided out
+  sights(p_O, n_O, [&](double cosine, const Vec3f& c, bool edge) {
+    const double wf = std::exp(kAngleSharpness * (cosine - 1)) * (edge ? 0.1 : 1.0);
+    const double shade = 1 - falloff * (1 - cosine);
+    for (int k = 0; k < 3; ++k) sum[k] += wf * srgbToLinear(c[k]) / shade;
+    w += wf;
+  });
+  if (!(w > 0)) return false;
+  for (int k = 0; k < 3; ++k) (*rgb)[k] = float(linearToSrgb(sum[k] / w));
+  return true;
+}
+
+double ColourFrames::shadingFalloff(const TriangleMesh& mesh,
+                                    const std::vector<Vec3f>& normals) const {
+  // Every 8th vertex's sightings away from edges: cos θ and the linear luminance seen.
+  struct Sight {
+    float cosine, luminance;
+  };
+  const int n = int(mesh.vertices.size() + 7) / 8;
+  std::vector<std::vector<Sight>> seen(size_t(std::max(n, 0)));
+  parallelFor(
+      0, n,
+      [&](int i) {
+        const size_t v = size_t(i) * 8;
+        std::vector<Sight>& out = seen[size_t(i)];
+        sights(mesh.vertices[v].cast<double>(), normals[v].cast<double>(),
+               [&](double cosine, const Vec3f& c, bool edge) {
+                 const double Y = 0.2126 * srgbToLinear(c[0]) + 0.7152 * srgbToLinear(c[1]) +
+                                  0.0722 * srgbToLinear(c[2]);
+                 if (!edge && Y > 0.01 && Y < 0.95) out.push_back({float(cosine), float(Y)});
+               });
+        // A vertex seen over too narrow a range of angles says nothing about the fall-off.
+        float lo = 1, hi = 0;
+        for (const Sight& s : out) lo = std::min(lo, s.cosine), hi = std::max(hi, s.cosine);
+        if (out.size() < 3 || hi - lo < 0.1f) out.clear();
+      },
+      64);
+  // The spread of each vertex's log luminance, the fall-off divided out, summed over vertices
+  // (each capped, so that a vertex on a colour edge cannot outweigh the rest).
+  auto spread = [&](double k) {
+    double total = 0;
+    for (const std::vector<Sight>& obs : seen) {
+      if (obs.empty()) continue;
+      double m = 0, m2 = 0;
+      for (const Sight& s : obs) {
+        const double l = std::log(s.luminance / (1 - k * (1 - s.cosine)));
+        m += l;
+        m2 += l * l;
+      }
+      m /= double(obs.size());
+      total += std::min(m2 / double(obs.size()) - m * m, 0.05);
+    }
+    return total;
+  };
+  double best = 0, bestSpread = spread(0);
+  for (int step = 1; step <= 90; ++step) {
+    const double k = 0.01 * step, s = spread(k);
+    if (s < bestSpread) best = k, bestSpread = s;
+  }
+  return best;
+}
+
+std::vector<std::array<uint8_t, 4>> vertexColours(const ColourFrames& frames,
+                                                  const ColourVolume& volume,
+                                                  const TriangleMesh& mesh, bool light_at_camera,
+                                                  double* falloff) {
+  std::vector<std::array<uint8_t, 4>> out(mesh.vertices.size(), {128, 128, 128, 0});
+  const std::vector<Vec3f> normals = vertexNormals(mesh);
+  const double k = light_at_camera ? frames.shadingFalloff(mesh, normals) : 0.0;
+  if (falloff) *falloff = k;
+  parallelFor(
+      0, int(mesh.vertices.size()),
+      [&](int i) {
+        const Vec3 p = mesh.vertices[size_t(i)].cast<double>();
+        Vec3f c;
+        if (!frames.at(p, normals[size_t(i)].cast<double>(), &c, k) && !volume.at(p, &c)) return;
+        for (int k = 0; k < 3; ++k)
+          out[size_t(i)][size_t(k)] = uint8_t(std::clamp(std::lround(c[k]), 0L, 255L));
+        out[size_t(i)][3] = 255;
+      },
+      256);
   return out;
 }
 

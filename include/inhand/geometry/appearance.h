@@ -78,6 +78,9 @@ SurfaceColours checkerColours(const TriangleMesh& mesh, double square_m,
 // The built-in objects' checker square when the colour camera is on (2 cm).
 constexpr double kBuiltinCheckerSquare_m = 0.02;
 
+// An sRGB value (0–255) as linear intensity (0–1), and back (clamped to 0–255, not rounded).
+double srgbToLinear(double c255);
+double linearToSrgb(double linear);
 // CIELAB (D65 white) of an sRGB colour given as 0–255 per channel.
 Vec3 srgbToLab(const Vec3f& rgb255);
 // ΔE76: the Euclidean distance between two colours in CIELAB.

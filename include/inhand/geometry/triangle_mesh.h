@@ -57,6 +57,9 @@ struct TriangleMesh {
 
 TriangleMesh transformed(const TriangleMesh& mesh, const Iso3& T);
 
+// Area-weighted vertex normals (unit; +z where every triangle around is degenerate).
+std::vector<Vec3f> vertexNormals(const TriangleMesh& mesh);
+
 // Merges vertices with identical coordinates (after rounding to `tolerance_m`), drops triangles
 // that become degenerate. STL files come unwelded; this makes them indexed. `kept_triangles`
 // receives the old index of each triangle kept, `vertex_remap` each old vertex's new index.

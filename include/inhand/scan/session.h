@@ -106,6 +106,10 @@ class ScanSession {
     // Colour (camera.colour): pixels whose colour was fused, and the time it took (in fusion_s).
     long colour_pixels = 0;
     double colour_s = 0;
+    // … the colour frames kept (ColourFrames) and the shading fall-off fitted to them, as of the
+    // last model() with colour.
+    int colour_frames_kept = 0;
+    double colour_frames_mb = 0, colour_shading_falloff = 0;
     std::optional<PayloadEstimate> payload;  // from addJointTorques' readings (O frame)
     std::string brief() const;               // one line
     // Copies every count and time of this summary into `result` (the one place that does, so

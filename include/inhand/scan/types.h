@@ -126,6 +126,10 @@ struct ScanOptions {
   // head-on. Off by default: on thin objects (a 12 mm pen) the slip check then finds slips that
   // did not happen (docs/volume.md). false: fused with that larger σ.
   bool discontinuities_carve_only = false;
+  // With a colour camera: memory for the colour frames kept (ColourFrames), from which the
+  // model's colours come where they saw it (at the colour camera's resolution, head-on views
+  // first); 0: colours from the volume's voxels only. MiB
+  double colour_frames_mb = 64;
   HandMode hand_mode = HandMode::kCarveAndEmpty;
   int initial_views = 4;    // the simple initial trajectory: this many directions
   int max_views = 20;       // Alg. 1 views per grasp at most (after the initial ones)
@@ -183,6 +187,10 @@ struct ScanOptions {
               "silhouette pixels (a 4-neighbour, or the first return across a gap of no return, "
               "farther by more than the sensor's discontinuity_jump_m) only carve, in every "
               "frame: their return may come from across the edge");
+    v.num("colour_frames_mb", o.colour_frames_mb,
+          "with a colour camera: memory for the colour frames the model's colours come from "
+          "(head-on views first, at the camera's resolution); 0: from the voxels only, MiB",
+          Range::closed(0, 65536));
     v.choice("hand_mode", o.hand_mode, kHandModeNames,
              "the robot's own measurements (Fig. 3 a, b, c)");
     v.integer("initial_views", o.initial_views, "directions of the initial trajectory",
@@ -308,6 +316,10 @@ struct ScanResult {
   double tracking_s = 0;   // aligning in-hand frames (ScanOptions::tracking), apart from fusion_s
   long colour_pixels = 0;  // pixels whose colour was fused (camera.colour)
   double colour_s = 0;     // … the time that took (part of fusion_s)
+  // The colour frames kept for the model's colours and the shading fall-off fitted to them
+  // (ColourFrames).
+  int colour_frames_kept = 0;
+  double colour_frames_mb = 0, colour_shading_falloff = 0;
   // The object's weight from the arm's joint torques at rest (its centre of mass in O), when
   // the robot reports torques (ScanSession::addJointTorques).
   std::optional<PayloadEstimate> payload;

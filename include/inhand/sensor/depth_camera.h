@@ -32,6 +32,10 @@ struct ColourCameraOptions {
   bool enabled = false;
   CameraIntrinsics intrinsics{640, 480, 530.0, 530.0, 318.5, 242.5};
   Iso3 T_D_RGB = Iso3(Eigen::Translation3d(0.025, 0.0, 0.0));
+  // A lamp at the camera lights what it sees (as the simulator's does, sim.colour.ambient): the
+  // model's colours then divide out the shading it casts, its share fitted to the frames
+  // (ColourFrames::shadingFalloff). false: the room's light alone, the colours as seen.
+  bool light_at_camera = false;
 };
 
 struct DepthCameraOptions {

@@ -5,6 +5,8 @@
 // sparsely (only voxels a measured surface point lies beside), in the volume's grid.
 #include <array>
 #include <cstdint>
+#include <iosfwd>
+#include <string>
 #include <unordered_map>
 #include <vector>
 
@@ -68,5 +70,91 @@ ColourIntegrationStats integrateColour(const DepthImage& depth, const RgbImage& 
 // no colour was seen.
 std::vector<std::array<uint8_t, 4>> vertexColours(const ColourVolume& volume,
                                                   const TriangleMesh& mesh);
+
+// The colour frames kept for the model's colours: of every frame added, the part of its colour
+// image that saw the object (the box around the colour pixels that the frame's fused depth pixels
+// project to, 2 pixels wider), with the depth of the object's surface at each of those pixels
+// (the colour camera's z-buffer of the frame's fused points; marked where a point that is not
+// fused, the robot's or the table's, lies nearer, or where none projects) and whether the pixel
+// lies at a depth edge (within 2 pixels of no depth, a depth jump over 1 cm or a pixel that is not
+// fused, as integrateColour), and the colour camera's pose in the object's frame. A point of the
+// model then takes its colour from the frames that saw it head-on, at the colour camera's own
+// resolution, rather than from the voxels' means (which blur a colour edge over a voxel on each
+// side and average in the oblique views' shading).
+//
+// Memory: a frame takes 8 bytes per pixel of its box. While the frames kept take more than
+// `budget_bytes`, every other one is dropped (the 1st, 3rd, … kept) and from then on only every
+// 2nd (4th, …) frame added is kept: the frames stay spread over the whole scan.
+class ColourFrames {
+ public:
+  explicit ColourFrames(size_t budget_bytes);
+
+  // Keeps frame `depth` (in the depth camera; T_O_C its pose in the object's frame) with its
+  // colour image (camera.colour: intrinsics, T_D_RGB). `carve_only` flags pixels that are not
+  // fused (the robot, the table); `sigma_m` pixels without a positive σ are not fused either.
+  // Nothing is kept where no fused pixel projects into the colour image, or when the images'
+  // sizes are not the cameras'.
+  void add(const DepthImage& depth, const RgbImage& colour, const Iso3& T_O_C,
+           const DepthCameraOptions& camera, const std::vector<float>& sigma_m,
+           const std::vector<uint8_t>* carve_only = nullptr);
+
+  // The colour (0–255) at p_O on a surface whose outward unit normal is n_O: the mean of the
+  // frames that saw p_O (its depth in the frame within 1 cm of the surface's there, nothing
+  // nearer at its colour pixel or beside it), each frame's colour there (bilinear, as linear
+  // intensity divided by the shading 1 − falloff · (1 − cos θ)) weighted by
+  // exp(kAngleSharpness · (cos θ − 1)), θ between n_O and the direction to the colour camera (at
+  // most 70°), a tenth at a depth edge: the head-on views decide. False where no frame saw it.
+  bool at(const Vec3& p_O, const Vec3& n_O, Vec3f* rgb, double falloff = 0) const;
+
+  // The share of the light that falls off with the angle between the surface and the camera's
+  // ray (a light at the camera beside the room's: shading 1 − k · (1 − cos θ), 1 head-on), in
+  // 0–0.9, fitted to the frames: the k that makes the luminance each vertex shows (every 8th
+  // vertex seen over a range of angles, away from depth edges) vary least from frame to frame.
+  // 0 when the frames show no such fall-off (the room's light alone).
+  double shadingFalloff(const TriangleMesh& mesh, const std::vector<Vec3f>& normals) const;
+
+  // e^-1 of the weight 15° off head-on, e^-6 at 35°.
+  static constexpr double kAngleSharpness = 30;
+
+  // The frames kept and the keeping's state, binary (checkpoints); read() replaces them and
+  // returns what is wrong with the data (empty: nothing), leaving them empty then.
+  void write(std::ostream& out) const;
+  std::string read(std::istream& in);
+
+  size_t frames() const { return frames_.size(); }  // frames kept
+  size_t bytes() const { return bytes_; }
+  int stride() const { return stride_; }  // every stride-th frame added is kept
+  bool empty() const { return frames_.empty(); }
+
+ private:
+  struct Frame {
+    int index = 0;              // the frame's number among those added
+    Iso3 T_RGB_O;               // the object's frame in the colour camera's
+    CameraIntrinsics K;         // the colour camera's
+    int u0 = 0, v0 = 0;         // the box's first pixel in the colour image
+    RgbImage rgb;               // the box
+    std::vector<float> z;       // per pixel of the box: the surface's depth (m); 0: none, < 0:
+                                // something that is not the object nearer
+    std::vector<uint8_t> edge;  // per pixel of the box: 1 at a depth edge
+    size_t bytes() const { return rgb.rgb.size() + z.size() * sizeof(float) + edge.size(); }
+  };
+  // Calls fn(cos θ, colour, at an edge) for every frame that saw p_O (as at()).
+  template <class Fn>
+  void sights(const Vec3& p_O, const Vec3& n_O, Fn&& fn) const;
+
+  std::vector<Frame> frames_;
+  size_t budget_ = 0, bytes_ = 0;
+  int stride_ = 1, added_ = 0;
+};
+
+// Per vertex: its colour from the frames (ColourFrames::at, the mesh's area-weighted vertex
+// normals; with `light_at_camera`, the shading fall-off shadingFalloff fits divided out) where
+// they saw it, else from `volume` (ColourVolume::at), alpha 255; mid grey with alpha 0 where
+// neither has colour. `falloff` (optional) receives the fall-off used (0 without
+// light_at_camera). Both cores.
+std::vector<std::array<uint8_t, 4>> vertexColours(const ColourFrames& frames,
+                                                  const ColourVolume& volume,
+                                                  const TriangleMesh& mesh, bool light_at_camera,
+                                                  double* falloff = nullptr);
 
 }  // namespace inhand
