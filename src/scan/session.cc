@@ -91,6 +91,21 @@ struct ScanSession::State {
   // checkpoints: after a resume, what they did not see takes the volume's colour).
   std::unique_ptr<ColourFrames> colourFrames;
   RgbImage nextColour;
+  // A fused frame's colours into `colour` and `colourFrames` (made at the first).
+  void fuseColour(const DepthImage& depth, const RgbImage& image, const Iso3& T_O_C,
+                  const std::vector<float>& sigma, const std::vector<uint8_t>* carve) {
+    const auto tc = Clock::now();
+    if (!colour) colour = std::make_unique<ColourVolume>(volume);
+    summary.colour_pixels +=
+        integrateColour(depth, image, T_O_C, camera, sigma, colour.get(), carve).pixels;
+    if (options.colour_frames_mb > 0) {
+      if (!colourFrames)
+        colourFrames =
+            std::make_unique<ColourFrames>(size_t(options.colour_frames_mb * 1024 * 1024));
+      colourFrames->add(depth, image, T_O_C, camera, sigma, carve);
+    }
+    summary.colour_s += secondsSince(tc);
+  }
   ViewPlanner planner, ranker;
   RobotOccluders scenes;
   std::vector<Aabb> linkBox;  // each link's collision primitives' box, link frame
@@ -602,20 +617,8 @@ FrameReport ScanSession::fuse(const DepthImage& input, const JointVector& q, con
   const std::vector<float> sigma =
       measurementSigma(depth, K, s.noise, &rect, carve.empty() ? nullptr : &carve);
   integrate(fused, T_O_C, K, sigma, &s.volume, carve.empty() ? nullptr : &carve);
-  if (s.camera.colour.enabled && !colour.empty()) {
-    const auto tc = Clock::now();
-    if (!s.colour) s.colour = std::make_unique<ColourVolume>(s.volume);
-    const ColourIntegrationStats cs = integrateColour(
-        depth, colour, T_O_C, s.camera, sigma, s.colour.get(), carve.empty() ? nullptr : &carve);
-    if (s.options.colour_frames_mb > 0) {
-      if (!s.colourFrames)
-        s.colourFrames =
-            std::make_unique<ColourFrames>(size_t(s.options.colour_frames_mb * 1024 * 1024));
-      s.colourFrames->add(depth, colour, T_O_C, s.camera, sigma, carve.empty() ? nullptr : &carve);
-    }
-    s.summary.colour_pixels += cs.pixels;
-    s.summary.colour_s += secondsSince(tc);
-  }
+  if (s.camera.colour.enabled && !colour.empty())
+    s.fuseColour(depth, colour, T_O_C, sigma, carve.empty() ? nullptr : &carve);
   ++s.revision;
   if (inHand && s.options.hand_mode == HandMode::kCarveAndEmpty) emptyInsideRobot(q, T_O_B);
   FrameReport r;
@@ -1458,6 +1461,14 @@ void checkVolumeMatches(const std::filesystem::path& path, const Json& vj, const
                 " m)");
 }
 
+// A checkpoint's colour frames (after the colour sums), kept within the options' budget.
+std::unique_ptr<ColourFrames> readColourFrames(
+    std::istream& f, const ScanOptions& o, const std::function<Error(const std::string&)>& bad) {
+  auto frames = std::make_unique<ColourFrames>(size_t(o.colour_frames_mb * 1024 * 1024));
+  if (std::string problem = frames->read(f); !problem.empty()) throw bad(problem);
+  return frames;
+}
+
 // A checkpoint's voxel data after its header `h` (save's layout): the volume's, then the colour
 // sums of the voxels that have them.
 void readVolumeData(std::istream& f, const Json& h, TsdfVolume& v,
@@ -1574,11 +1585,7 @@ ScanSession ScanSession::load(const std::filesystem::path& path, const RobotMode
     ++s.revision;
     checkVolumeMatches(path, vj, dims, v);
     readVolumeData(f, h, v, &s.colour, bad);
-    if (h.contains("colour_frames")) {
-      s.colourFrames =
-          std::make_unique<ColourFrames>(size_t(s.options.colour_frames_mb * 1024 * 1024));
-      if (std::string problem = s.colourFrames->read(f); !problem.empty()) throw bad(problem);
-    }
+    if (h.contains("colour_frames")) s.colourFrames = readColourFrames(f, s.options, bad);
     s.holding = h.at("holding").get<bool>();
     s.grasp = h.at("grasp").get<int>();
     s.T_O_palm = isoFrom(h.at("T_O_palm"));

@@ -57,6 +57,24 @@ CameraIntrinsics readIntrinsics(const Json& K, const std::string& where) {
   return c;
 }
 
+namespace {
+// frames.json's colour camera: its intrinsics (default the depth camera's), its pose in the
+// depth camera's frame (default the identity: a registered image) and whether a lamp at the
+// camera lit the frames.
+void readColourCamera(const Json& j, const std::string& name, FrameSet* set) {
+  set->colour.intrinsics = set->intrinsics;
+  set->colour.T_D_RGB = Iso3::Identity();
+  if (j.contains("colour_intrinsics"))
+    set->colour.intrinsics = readIntrinsics(j["colour_intrinsics"], name + ": colour_intrinsics");
+  if (j.contains("T_D_RGB")) set->colour.T_D_RGB = readPose(j["T_D_RGB"], name + ": T_D_RGB", set);
+  if (j.contains("colour_light_at_camera")) {
+    if (!j["colour_light_at_camera"].is_boolean())
+      throw Error(name + ": colour_light_at_camera: expected true or false");
+    set->colour.light_at_camera = j["colour_light_at_camera"].get<bool>();
+  }
+}
+}  // namespace
+
 FrameSet readFrameSet(const fs::path& dir) {
   std::error_code ec;
   if (!fs::is_directory(dir, ec)) throw Error(dir.string() + ": no such frames directory");
@@ -88,16 +106,7 @@ FrameSet readFrameSet(const fs::path& dir) {
     set.bounds_O = box;
   }
   if (j.contains("T_O_palm")) set.T_O_palm = readPose(j["T_O_palm"], name + ": T_O_palm", &set);
-  set.colour.intrinsics = set.intrinsics;
-  set.colour.T_D_RGB = Iso3::Identity();
-  if (j.contains("colour_intrinsics"))
-    set.colour.intrinsics = readIntrinsics(j["colour_intrinsics"], name + ": colour_intrinsics");
-  if (j.contains("T_D_RGB")) set.colour.T_D_RGB = readPose(j["T_D_RGB"], name + ": T_D_RGB", &set);
-  if (j.contains("colour_light_at_camera")) {
-    if (!j["colour_light_at_camera"].is_boolean())
-      throw Error(name + ": colour_light_at_camera: expected true or false");
-    set.colour.light_at_camera = j["colour_light_at_camera"].get<bool>();
-  }
+  readColourCamera(j, name, &set);
   const Json& frames = requireField(j, "frames", name);
   if (!frames.is_array()) throw Error(name + ": frames: expected an array");
   if (frames.empty()) throw Error(name + ": frames: the array is empty");
