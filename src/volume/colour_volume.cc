@@ -105,6 +105,23 @@ bool validDepth(const DepthImage& depth, int u, int v) {
   return d > 0 && std::isfinite(d);
 }
 
+// Pixel (u, v) lies within kEdge pixels of one with no depth, a depth jump over kJump or a pixel
+// flagged in `carve_only` (colour and depth disagree most there).
+bool atDepthEdge(const DepthImage& depth, int u, int v, const std::vector<uint8_t>* carve_only) {
+  const int W = depth.width, H = depth.height;
+  const float d = depth.at(u, v);
+  for (int dv = -kEdge; dv <= kEdge; ++dv)
+    for (int du = -kEdge; du <= kEdge; ++du) {
+      const int uu = u + du, vv = v + dv;
+      if (uu < 0 || vv < 0 || uu >= W || vv >= H) continue;
+      if (!validDepth(depth, uu, vv) ||
+          (carve_only && (*carve_only)[size_t(vv) * size_t(W) + size_t(uu)]) ||
+          std::abs(depth.at(uu, vv) - d) > kJump)
+        return true;
+    }
+  return false;
+}
+
 // The colour camera's z-buffer of every measured point of the frame (the robot's included).
 std::vector<float> colourCameraDepths(const DepthImage& depth, const CameraIntrinsics& K,
                                       const CameraIntrinsics& Kc, const Iso3& T_RGB_D) {
@@ -187,13 +204,7 @@ ColourIntegrationStats integrateColour(const DepthImage& depth, const RgbImage& 
         ++st.occluded;
         continue;
       }
-      bool edge = false;
-      for (int dv = -kEdge; dv <= kEdge && !edge; ++dv)
-        for (int du = -kEdge; du <= kEdge && !edge; ++du) {
-          const int uu = u + du, vv = v + dv;
-          if (uu < 0 || vv < 0 || uu >= W || vv >= H) continue;
-          edge = !valid(uu, vv) || carve(uu, vv) || std::abs(depth.at(uu, vv) - d) > kJump;
-        }
+      const bool edge = atDepthEdge(depth, u, v, carve_only);
       const double s = sigma_m[i] / 0.001;
       float w = float(cosine * cosine / (s * s));
       if (edge) {
@@ -280,14 +291,7 @@ ColourCameraView viewOfFrame(const DepthImage& depth, const CameraIntrinsics& K,
       p.i = int32_t(cv * Kc.width + cu);
       p.z = float(q.z());
       if (carve(u, v) || !(sigma_m[size_t(v) * size_t(W) + size_t(u)] > 0)) continue;
-      bool edge = false;
-      for (int dv = -kEdge; dv <= kEdge && !edge; ++dv)
-        for (int du = -kEdge; du <= kEdge && !edge; ++du) {
-          const int uu = u + du, vv = v + dv;
-          if (uu < 0 || vv < 0 || uu >= W || vv >= H) continue;
-          edge =
-              !validDepth(depth, uu, vv) || carve(uu, vv) || std::abs(depth.at(uu, vv) - d) > kJump;
-        }
+      const bool edge = atDepthEdge(depth, u, v, carve_only);
       p.kind = edge ? 2 : 1;
     }
   });
