@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# The README's test command: installs what is missing, builds, runs every test.
+# The README's test command: installs what is missing, builds, runs every test (arguments, if
+# any, go to ctest: e.g. `-LE whole_scans`).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/install_deps.sh
@@ -9,4 +10,4 @@ bash scripts/build.sh
 if [ -n "${INHAND_NO_AVX2:-}" ] && [ "${INHAND_NO_AVX2}" != 0 ]; then
   export GLIBC_TUNABLES=glibc.cpu.hwcaps=-AVX2,-FMA,-AVX512F
 fi
-ctest --test-dir build --output-on-failure -j"$(nproc)"
+ctest --test-dir build --output-on-failure -j"$(nproc)" "$@"
