@@ -263,15 +263,24 @@ std::optional<Iso3> SimRobot::grasp(const Iso3& T_O_palm_planned, const JointVec
     // A guarded move along the planned palm axis, from 25 cm short of the planned pose (more
     // than the open hand's reach: a plan made with the palm may have its fingers in the object)
     // to at most 10 cm past it (the plan was made on the model, whose hole-filled parts can lie
-    // well outside the true surface).
+    // well outside the true surface). Where that line starts under the table (a side grasp low
+    // over it, coming in slightly upwards), the hand starts from the farthest point of it that
+    // is clear.
     TriangleMesh obstacles = world_->objectMesh();
-    obstacles.append(tableMeshInObject(m, world_->restPose()));
+    obstacles.append(tableMeshInObject(m, world_->tablePose));
     const FingerCloser closer(m, obstacles), objectOnly(m, world_->objectMesh());
     const Vec3 in = T_O_palm.linear().col(2);  // palm z points into the object
-    Iso3 T = T_O_palm;
-    T.translation() -= 0.25 * in;
-    const std::optional<double> travel = closer.freeTravel(open, T, in, 0.35);
-    if (!travel || *travel >= 0.35) return std::nullopt;  // blocked, or nothing to grasp there
+    double back = 0.25;
+    auto shifted = [&](double s) {
+      Iso3 T = T_O_palm;
+      T.translation() -= s * in;
+      return T;
+    };
+    while (back > 0 && closer.handTouches(open, shifted(back))) back -= 0.005;
+    Iso3 T = shifted(std::max(back, 0.0));
+    const double reach = std::max(back, 0.0) + 0.10;
+    const std::optional<double> travel = closer.freeTravel(open, T, in, reach);
+    if (!travel || *travel >= reach) return std::nullopt;  // blocked, or nothing to grasp there
     T.translation() += *travel * in;
     // The fingers close; one that meets the table short of the object lifts the hand off it.
     auto [closed, Tc] = closeOffTheTable(closer, objectOnly, open, T, 0.005, 0.03, 0.02);
