@@ -47,85 +47,10 @@ void validate(const ScanOptions& options, const MultiGraspOptions& multi) {
   if (!problem.empty()) throw Error("scan options: " + problem);
 }
 
-// Pixels whose point lies below height `below_z` (base frame; the camera at T_B_C) marked.
-void markBelow(const DepthImage& d, const Iso3& T_B_C, const CameraIntrinsics& K, double below_z,
-               std::vector<uint8_t>* marked) {
-  for (int v = 0; v < d.height; ++v)
-    for (int u = 0; u < d.width; ++u) {
-      const size_t i = size_t(v) * size_t(d.width) + size_t(u);
-      const float z = d.depth_m[i];
-      if (z > 0 && (T_B_C * (double(z) * K.rayZ1(u, v))).z() < below_z) (*marked)[i] = 1;
-    }
-}
-
-// Where a held object may have moved to in the hand: its believed pose T_B_O shifted so that the
-// points it would show the camera (`points_O` under T_B_O, the front-most) centre on the
-// frame's points near it that are neither the robot's (`hidden`) nor below the table top + 1 cm:
-// as it lies, and turned 45° each way about the vertical through there. Empty when the frame has
-// fewer than 50 such points.
-std::vector<Iso3> shiftedInHand(const DepthImage& d, const std::vector<uint8_t>& hidden,
-                                const Iso3& T_B_C, const CameraIntrinsics& K, double table_top_z,
-                                const Iso3& T_B_O, const std::vector<Vec3>& points_O) {
-  // Front-most per cell of 8 x 8 pixels (the points are sparser than the pixels).
-  const int cell = 8, cw = (d.width + cell - 1) / cell, ch = (d.height + cell - 1) / cell;
-  std::vector<float> front(size_t(cw) * size_t(ch), std::numeric_limits<float>::infinity());
-  std::vector<std::pair<Vec3, int>> inView;  // camera frame, cell
-  Vec3 centre_B = Vec3::Zero();
-  double radius = 0;
-  for (const Vec3& p : points_O) centre_B += T_B_O * p;
-  centre_B /= double(std::max<size_t>(1, points_O.size()));
-  for (const Vec3& p : points_O) {
-    radius = std::max(radius, (T_B_O * p - centre_B).norm());
-    const Vec3 c = T_B_C.inverse() * (T_B_O * p);
-    if (c.z() <= 0) continue;
-    const Vec2 uv = K.project(c);
-    const int u = int(std::floor(uv.x())), v = int(std::floor(uv.y()));
-    if (u < 0 || v < 0 || u >= d.width || v >= d.height) continue;
-    const int k = (v / cell) * cw + u / cell;
-    inView.emplace_back(c, k);
-    front[size_t(k)] = std::min(front[size_t(k)], float(c.z()));
-  }
-  Vec3 shown = Vec3::Zero();
-  int nShown = 0;
-  for (const auto& [c, k] : inView)
-    if (c.z() <= front[size_t(k)] + 0.01) {
-      shown += T_B_C * c;
-      ++nShown;
-    }
-  Vec3 seen = Vec3::Zero();
-  int nSeen = 0;
-  const double reach = radius + 0.06;  // how far the object may have moved, and its size
-  for (int v = 0; v < d.height; ++v)
-    for (int u = 0; u < d.width; ++u) {
-      const size_t i = size_t(v) * size_t(d.width) + size_t(u);
-      const float z = d.depth_m[i];
-      if (!(z > 0) || (!hidden.empty() && hidden[i])) continue;
-      const Vec3 p = T_B_C * (double(z) * K.rayZ1(u, v));
-      if (p.z() < table_top_z + 0.01 || (p - centre_B).norm() > reach) continue;
-      seen += p;
-      ++nSeen;
-    }
-  if (nSeen < 50 || nShown == 0) return {};
-  seen /= nSeen;
-  shown /= nShown;
-  std::vector<Iso3> starts;
-  for (double turn : {0.0, M_PI / 4, -M_PI / 4}) {
-    Iso3 R = Iso3::Identity();
-    R.linear() = Eigen::AngleAxisd(turn, Vec3::UnitZ()).toRotationMatrix();
-    // Turned about the vertical through the seen points' centre, the shown points' centre there.
-    Iso3 T = T_B_O;
-    T.translation() += seen - shown;
-    Iso3 about = Iso3::Identity();
-    about.translation() = seen;
-    starts.push_back(about * R * about.inverse() * T);
-  }
-  return starts;
-}
-
 // The object lifted but not where the grasp `T_O_palm` says: the model registered to the lift's
 // frame `d` (robot pixels `mask`, camera at T_B_C as tracked, the robot at q) from that grasp,
 // and, where that is not borne out, from where the frame's points near the hand say it moved
-// (shiftedInHand: closing the fingers may push it centimetres). The grasp where it was found
+// (heldObjectStarts: closing the fingers may push it centimetres). The grasp where it was found
 // and the fraction of `points_O` the frame bears out there, when more than half; else nullopt.
 std::optional<std::pair<Iso3, double>> refindInHand(
     ScanSession& session, const DepthImage& d, const std::vector<uint8_t>& mask,
@@ -149,7 +74,7 @@ std::optional<std::pair<Iso3, double>> refindInHand(
     const Iso3 T_B_O = T_B_palm * T_O_palm.inverse();
     for (const auto& [T, r] : session.registerObjectAt(
              d, hidden, T_B_C,
-             shiftedInHand(d, hidden, T_B_C, K, m.table().topZ(), T_B_O, points_O))) {
+             heldObjectStarts(d, hidden, T_B_C, K, m.table().topZ(), T_B_O, points_O))) {
       if (!T) continue;
       const Iso3 T_O_palm_found = T->inverse() * T_B_palm;
       const double s = supportOf(T_O_palm_found);

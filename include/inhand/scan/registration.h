@@ -51,6 +51,21 @@ std::vector<std::pair<std::optional<Iso3>, TrackResult>> registerModelAt(
 double depthSupport(const DepthImage& d, const Iso3& T_B_C, const CameraIntrinsics& K,
                     const std::vector<uint8_t>& hidden, const std::vector<Vec3>& points_B);
 
+// Pixels of `d` whose point lies below height `below_z` (base frame; the camera at T_B_C)
+// marked in `marked` (one per pixel).
+void markBelow(const DepthImage& d, const Iso3& T_B_C, const CameraIntrinsics& K, double below_z,
+               std::vector<uint8_t>* marked);
+
+// Where a held object may have moved to in the hand (closing fingers push it centimetres),
+// as start poses for registerModelAt: its believed pose T_B_O shifted so that the points it would
+// show the camera (`points_O` under T_B_O, the front-most) centre on the frame's points near it
+// (within the object's radius + 6 cm of where it is believed) that are neither `hidden` nor
+// below the table top + 1 cm: as it lies, and turned 45° each way about the vertical through
+// there. Empty when the frame has fewer than 50 such points.
+std::vector<Iso3> heldObjectStarts(const DepthImage& d, const std::vector<uint8_t>& hidden,
+                                   const Iso3& T_B_C, const CameraIntrinsics& K, double table_top_z,
+                                   const Iso3& T_B_O, const std::vector<Vec3>& points_O);
+
 // Every 7th observed vertex of the model (all of them observed when `observed` is empty): enough
 // for depthSupport to tell where it lies.
 std::vector<Vec3> observedVertices(const ObjectModel& model);
