@@ -1,6 +1,7 @@
 #include "inhand/driver/simulated_scan.h"
 
 #include <algorithm>
+#include <cmath>
 
 #include "inhand/core/error.h"
 #include "inhand/geometry/builtin_objects.h"
@@ -48,7 +49,8 @@ void recordWorld(const SimWorld& world, const TriangleMesh& object, SimulatedSca
     out->physics = true;
     out->mass_kg = ph->mass_kg();
     out->pieces = ph->pieces();
-    out->pieces_volume_ratio = ph->piecesVolume_m3() / massProperties(object).volume_m3;
+    // The enclosed volume whichever way the triangles face (inwards: negative, the same solid).
+    out->pieces_volume_ratio = ph->piecesVolume_m3() / std::abs(massProperties(object).volume_m3);
     out->physics_simulated_s = ph->simulated_s();
     out->physics_s = ph->wall_s();
     out->unstable_steps = ph->unstableSteps();

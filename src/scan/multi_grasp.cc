@@ -50,8 +50,9 @@ void validate(const ScanOptions& options, const MultiGraspOptions& multi) {
 // The object lifted but not where the grasp `T_O_palm` says: the model registered to the lift's
 // frame `d` (robot pixels `mask`, camera at T_B_C as tracked, the robot at q) from that grasp,
 // and, where that is not borne out, from where the frame's points near the hand say it moved
-// (heldObjectStarts: closing the fingers may push it centimetres). The grasp where it was found
-// and the fraction of `points_O` the frame bears out there, when more than half; else nullopt.
+// (heldObjectStarts: closing the fingers may push it centimetres); never where the object would
+// still rest on the table. The grasp where it was found and the fraction of `points_O` the frame
+// bears out there, when more than half; else nullopt.
 std::optional<std::pair<Iso3, double>> refindInHand(
     ScanSession& session, const DepthImage& d, const std::vector<uint8_t>& mask,
     const JointVector& q, const Iso3& T_B_C, const Iso3& T_O_palm,
@@ -59,10 +60,19 @@ std::optional<std::pair<Iso3, double>> refindInHand(
     const std::function<void(const std::string&)>& log) {
   const RobotModel& m = session.robot();
   const Iso3 T_B_palm = m.tipPose(q);
+  // How far the frame bears the grasp out; -1 where it would leave the object on the table (its
+  // lowest point within 2 cm of the top, or half the lift if less: the search can find the
+  // object where it still rests beside the hand).
+  const double lifted = std::min(0.02, 0.5 * session.multiOptions().grasp.lift_m);
   auto supportOf = [&](const Iso3& T_O_palm_found) {
     const Iso3 T_B_O = T_B_palm * T_O_palm_found.inverse();
     std::vector<Vec3> held_B;
-    for (const Vec3& p : points_O) held_B.push_back(T_B_O * p);
+    double lowest = std::numeric_limits<double>::infinity();
+    for (const Vec3& p : points_O) {
+      held_B.push_back(T_B_O * p);
+      lowest = std::min(lowest, held_B.back().z());
+    }
+    if (lowest < m.table().topZ() + lifted) return -1.0;
     return depthSupport(d, T_B_C, K, mask, held_B);
   };
   TrackResult reg;
@@ -86,6 +96,10 @@ std::optional<std::pair<Iso3, double>> refindInHand(
   }
   if (!found) {
     log("the object not found in the hand: " + reg.reason);
+    return std::nullopt;
+  }
+  if (support < 0) {
+    log("the object not found in the hand: what fits is still on the table");
     return std::nullopt;
   }
   char line[160];
