@@ -45,6 +45,20 @@ JointVector armGravity(const RobotModel& m, const JointVector& q) {
   return out;
 }
 
+// How far short of T_O_palm along its palm axis a guarded approach starts: `back`, or where the
+// hand (joints q) is not clear of `closer`'s obstacles there, the farthest point of that line
+// (5 mm steps) where it is; 0 when none is.
+double clearStart(const FingerCloser& closer, const JointVector& q, const Iso3& T_O_palm,
+                  double back) {
+  auto touches = [&](double s) {
+    Iso3 T = T_O_palm;
+    T.translation() -= s * T_O_palm.linear().col(2);
+    return closer.handTouches(q, T);
+  };
+  while (back > 0 && touches(back)) back -= 0.005;
+  return std::max(back, 0.0);
+}
+
 }  // namespace
 
 std::vector<JointVector> presentationConfigurations(const RobotModel& m) {
@@ -270,15 +284,10 @@ std::optional<Iso3> SimRobot::grasp(const Iso3& T_O_palm_planned, const JointVec
     obstacles.append(tableMeshInObject(m, world_->tablePose));
     const FingerCloser closer(m, obstacles), objectOnly(m, world_->objectMesh());
     const Vec3 in = T_O_palm.linear().col(2);  // palm z points into the object
-    double back = 0.25;
-    auto shifted = [&](double s) {
-      Iso3 T = T_O_palm;
-      T.translation() -= s * in;
-      return T;
-    };
-    while (back > 0 && closer.handTouches(open, shifted(back))) back -= 0.005;
-    Iso3 T = shifted(std::max(back, 0.0));
-    const double reach = std::max(back, 0.0) + 0.10;
+    const double back = clearStart(closer, open, T_O_palm, 0.25);
+    Iso3 T = T_O_palm;
+    T.translation() -= back * in;
+    const double reach = back + 0.10;
     const std::optional<double> travel = closer.freeTravel(open, T, in, reach);
     if (!travel || *travel >= reach) return std::nullopt;  // blocked, or nothing to grasp there
     T.translation() += *travel * in;
