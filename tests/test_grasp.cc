@@ -554,8 +554,8 @@ TEST(GraspGeneration, FirstContactApproachNeverStartsInsideTheObject) {
 // The simulated approach comes along the palm axis from 25 cm short of the planned pose. A side
 // grasp of a small fruit-like object lies low over the table; planned on a table-top model it
 // may come in slightly upwards, and then 25 cm back the open hand is under the table top: the
-// approach starts from the farthest clear point of its line instead, and reaches the object
-// (the plastic lemon's first candidates were refused as "met nothing there"). Each of the
+// approach starts from the farthest clear point of its line instead, and the hand closes on the
+// object (the plastic lemon's first candidates were refused as "met nothing there"). Each of the
 // planner's side grasps on the true mesh, tilted upwards about the palm's origin by each angle
 // (3° steps, at most 15°) that puts its start under the table while the planned pose stays
 // clear of it, is reached.
@@ -571,6 +571,7 @@ TEST(GraspGeneration, TheSimulatedApproachReachesASideGraspComingInUpwards) {
   const Iso3 rest = world.restPose();
   const GraspGeneration g = generateGrasps(r, lemon, rest, r.home(), GraspOptions{});
   const FingerCloser table(r, tableMeshInObject(r, rest));
+  const std::vector<SurfacePoint> samples = surfaceSamples(lemon, 0.002);
   auto shifted = [](Iso3 T, double back) {
     T.translation() -= back * T.linear().col(2);
     return T;
@@ -590,7 +591,11 @@ TEST(GraspGeneration, TheSimulatedApproachReachesASideGraspComingInUpwards) {
       world.held = false;
       world.tablePose = rest;
       world.q = r.home();
-      reached += robot.pickUp(T, c.q_open).has_value();
+      // Reached: the hand closed on the lemon (two fingers, or a finger and the palm, within
+      // 3 mm of its surface), not on the table or on nothing.
+      if (!robot.pickUp(T, c.q_open)) continue;
+      const HandContacts hc = handContacts(r, world.q, world.T_O_palm, samples, 0.003, 0.01);
+      reached += hc.fingers_touching + int(hc.palm_touching) >= 2;
     }
   }
   std::printf("%d tilted side grasps start under the table, %d reached\n", tried, reached);
