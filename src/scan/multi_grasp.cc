@@ -78,7 +78,9 @@ std::optional<std::pair<Iso3, double>> refindInHand(
   TrackResult reg;
   std::optional<Iso3> found = session.registerHeldObject(d, mask, q, T_B_C, T_O_palm, &reg);
   double support = found ? supportOf(*found) : -1;
+  std::string why = reg.reason;
   if (!(support > 0.5)) {
+    why += found ? "" : "; from the points near the hand: no fit";
     std::vector<uint8_t> hidden = mask;
     markBelow(d, T_B_C, K, m.table().topZ() + 0.005, &hidden);
     const Iso3 T_B_O = T_B_palm * T_O_palm.inverse();
@@ -95,7 +97,7 @@ std::optional<std::pair<Iso3, double>> refindInHand(
     }
   }
   if (!found) {
-    log("the object not found in the hand: " + reg.reason);
+    log("the object not found in the hand: " + why);
     return std::nullopt;
   }
   if (support < 0) {
