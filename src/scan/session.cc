@@ -342,23 +342,29 @@ struct ScanSession::State {
   //    silhouettes) escaped it and was fused as surface. Not carving either: the object's own
   //    surface within t_hand stays unknown (the planner counts it unobservable in this grasp),
   //    and carving a pixel's noisy depth would erode it.
-  //  - A silhouette: a pixel next to one farther by more than edge_jump_m. Its return may come
-  //    from across the edge (the sensor's lateral noise), and fused it grows flakes of surface
-  //    beyond the object's edges that no later view carves away where the hand hides them. (A
-  //    neighbour with no return does not count: a projector shadow beside a finger lies on the
-  //    object's face, and dropping the face's pixels along it left slits at the contacts.)
+  //  - A silhouette: a pixel next to one farther by more than edge_jump_m, or beside a gap of no
+  //    return whose first return across it (within 8 pixels along a row or column) is farther
+  //    by as much, or missing (the background out of range: the usual case in the hand). Its
+  //    return may come from across the edge (the sensor's lateral noise; seen at a grazing
+  //    angle a fraction of a pixel is millimetres of depth), and fused it grows flakes of
+  //    surface beyond the object's edges that no later view carves away (the cracker box's
+  //    bottom edge: a skirt 5-12 mm below it). A gap whose far side is nearer does not count:
+  //    a projector shadow beside a finger lies on the object's face, and dropping the face's
+  //    pixels along it left slits at the contacts (depthDiscontinuities).
   std::vector<uint8_t> unusedInHand(const DepthImage& depth, const std::vector<uint8_t>& carve,
                                     const Iso3& T_O_C, const PixelRect& rect) const {
     const CameraIntrinsics& K = camera.intrinsics;
     const int W = depth.width, H = depth.height;
     const float jump = float(options.edge_jump_m);
+    const std::vector<uint8_t> acrossGap =
+        jump > 0 ? depthDiscontinuities(depth, jump, &rect) : std::vector<uint8_t>();
     std::vector<uint8_t> unused(depth.depth_m.size(), 0);
     parallelFor(rect.v0, rect.v1, [&](int v) {
       for (int u = rect.u0; u < rect.u1; ++u) {
         const size_t i = size_t(v) * W + u;
         const float z = depth.depth_m[i];
         if (!(z > 0) || (!carve.empty() && carve[i])) continue;
-        bool edge = false;
+        bool edge = !acrossGap.empty() && acrossGap[i];
         for (int dv = -1; dv <= 1 && jump > 0 && !edge; ++dv)
           for (int du = -1; du <= 1 && !edge; ++du) {
             const int uu = u + du, vv = v + dv;
