@@ -2,7 +2,9 @@
 # Writes the record that Cli.RecordedFramesReplayToTheRecordedModel replays (tests/data/replay):
 # the in-hand frames of a one-grasp coffee-can scan (every third of them: 10 frames, with the
 # joints, camera poses and grasp the robot reported) and the model `inhand fuse --robot
-# --tracking off` makes of them. Usage: bash tests/record_replay.sh [--model-only] [BUILD_DIR]
+# --tracking off` makes of them, and the view Alg. 1 chooses on that model (planner.json, which
+# ViewSelection.TheRecordedChoiceIsANearTieOnThisCpu checks as a near-tie).
+# Usage: bash tests/record_replay.sh [--model-only] [BUILD_DIR]
 # --model-only keeps the recorded frames and fuses them again (after a change to fusion).
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -11,7 +13,8 @@ if [ "${1:-}" = --model-only ]; then
   model_only=1
   shift
 fi
-inhand="${1:-build}/inhand"
+build="${1:-build}"
+inhand="$build/inhand"
 out=tests/data/replay
 tmp=$(mktemp -d)
 trap 'rm -rf "$tmp"' EXIT
@@ -40,4 +43,6 @@ fi
 "$inhand" fuse --frames "$out" --robot data/robots/wam_barretthand.json --tracking off \
   --voxel 0.004 --out "$tmp/model.ply" > /dev/null 2>&1
 cp "$tmp/model.ply" "$out/model.ply"
+INHAND_WRITE_PLANNER_RECORD=1 "$build/tests/test_planning" \
+  --gtest_filter=ViewSelection.TheRecordedChoiceIsANearTieOnThisCpu > /dev/null
 echo "record written to $out: $(ls "$out" | wc -l) files"

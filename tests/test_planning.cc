@@ -1,12 +1,18 @@
 #include <gtest/gtest.h>
 
+#include <cstdlib>
+
+#include "inhand/core/file_util.h"
+#include "inhand/core/json_util.h"
 #include "inhand/core/pose.h"
 #include "inhand/core/random.h"
 #include "inhand/geometry/builtin_objects.h"
+#include "inhand/geometry/mesh_io.h"
 #include "inhand/geometry/primitives.h"
 #include "inhand/planning/view_quality.h"
 #include "inhand/planning/view_selection.h"
 #include "inhand/robot/collision.h"
+#include "inhand/sensor/frame_set.h"
 #include "test_util.h"
 
 using namespace inhand;
@@ -347,4 +353,74 @@ TEST(ViewSelection, PathFreeReachKeepsTheArmClearOfTheHeldObject) {
   }
   EXPECT_GT(colliding, 0) << "the scenario should have moves through the box";
   EXPECT_GT(found, 0);
+}
+
+namespace {
+
+// Alg. 1 on the replay record's model (tests/data/replay: the model fused from ten in-hand frames
+// of a coffee-can scan, its grasp and joints), every reachable candidate scored in full.
+ViewSelection recordedPlannerPass(const fs::path& record) {
+  const RobotModel& r = wam();
+  const PlyData ply = readPly(record / "model.ply");
+  ObjectModel S_obj;
+  S_obj.mesh = ply.mesh;
+  S_obj.variance = ply.vertexProperties.at("variance");
+  for (float v : S_obj.variance) S_obj.observed.push_back(v < 0.049f * 0.049f);
+  const FrameSet set = readFrameSet(record);
+  const FrameRecord& last = set.frames.back();
+  JointVector q = r.home();
+  for (const auto& [name, value] : last.q) q[r.variableIndex(name)] = value;
+  std::vector<Vec3> used;  // the recorded frames' viewing directions
+  for (const FrameRecord& f : set.frames) used.push_back(f.T_O_C.linear().col(2));
+  ViewPlannerOptions o;
+  o.directions = 60;
+  o.rolls = 4;
+  o.fallback_ranges_m.clear();
+  o.refine = 0;  // every reachable candidate at full resolution: the scores compared are final
+  o.quality.pixel_stride = 2;
+  const ViewPlanner planner(r, DepthCameraOptions{}, NoiseModelOptions{}, o);
+  const GraspState grasp{*last.T_O_palm, q};
+  const HandGeometry hand(r, q, grasp.T_O_palm);
+  return planner.select(
+      S_obj, grasp, used,
+      std::make_shared<NearHandGrid>(hand, o.quality.t_hand_m, o.quality.near_hand_cell_m));
+}
+
+}  // namespace
+
+// A planner choice recorded on another machine (tests/record_replay.sh writes planner.json with
+// INHAND_WRITE_PLANNER_RECORD=1) is checked as a near-tie here, not as the same direction: eq. 9
+// over float rasters, IK and libm may differ by the last bits between CPUs, and where two views
+// score alike either may win. The recorded view must be reachable here and score within 2 % of
+// the best view here; the worst candidate is not (the tolerance tells choices apart).
+TEST(ViewSelection, TheRecordedChoiceIsANearTieOnThisCpu) {
+  const fs::path record = fs::path(INHAND_SOURCE_DIR) / "tests" / "data" / "replay";
+  const ViewSelection sel = recordedPlannerPass(record);
+  ASSERT_TRUE(sel.best.has_value());
+  if (std::getenv("INHAND_WRITE_PLANNER_RECORD")) {
+    Json j;
+    j["direction_O"] = {sel.best->dir_O.x(), sel.best->dir_O.y(), sel.best->dir_O.z()};
+    j["score"] = sel.best->score;
+    j["quality"] = sel.best->quality;
+    writeTextAtomically(record / "planner.json", j.dump(1) + "\n");
+    GTEST_SKIP() << "record written";
+  }
+  const Json j = readJsonFile(record / "planner.json");
+  const Vec3 dir(j["direction_O"][0].get<double>(), j["direction_O"][1].get<double>(),
+                 j["direction_O"][2].get<double>());
+  const double tol = 0.02 * std::abs(sel.best->score);
+  const ViewCandidate* recorded = nullptr;
+  const ViewCandidate* worst = nullptr;
+  for (const ViewCandidate& c : sel.candidates) {
+    EXPECT_EQ(c.pixel_stride, 2);
+    if (c.dir_O.dot(dir) > std::cos(1e-6)) recorded = &c;
+    if (!worst || c.score < worst->score) worst = &c;
+  }
+  ASSERT_NE(recorded, nullptr) << "the recorded direction is not reachable here";
+  EXPECT_GE(recorded->score, sel.best->score - tol)
+      << "recorded " << j["score"].get<double>() << ", here " << recorded->score << ", best here "
+      << sel.best->score;
+  EXPECT_NEAR(recorded->score, j["score"].get<double>(), tol);
+  ASSERT_NE(worst, nullptr);
+  EXPECT_LT(worst->score, sel.best->score - tol);
 }
