@@ -116,8 +116,9 @@ struct ScanOptions {
   int torque_readings = 500;
   double t_hand_m = 0.01;   // measurements this close to the robot only carve (§IV), m
   int carve_radius_px = 2;  // … this close to it in the image, too (lateral noise), pixels
-  // In the hand, a pixel next to one farther by more than this is not fused (a silhouette: its
-  // return may come from across the edge); 0: off. m
+  // In the hand, a pixel next to one farther by more than this, or beside a gap of no return
+  // whose first return across it is that much farther or missing, is not fused (a silhouette:
+  // its return may come from across the edge); 0: off. m
   double edge_jump_m = 0.02;
   // Every frame's silhouette pixels (depthDiscontinuities at the noise model's
   // discontinuity_jump_m) only carve, beyond the band (kCarveBeyondBand): a return there may come
@@ -180,8 +181,9 @@ struct ScanOptions {
     v.integer("carve_radius_px", o.carve_radius_px, "… or this close to it in the image, pixels",
               Range::closed(0, 10));
     v.num("edge_jump_m", o.edge_jump_m,
-          "in the hand, a pixel next to one farther by more than this is not fused (a "
-          "silhouette); 0: off, m",
+          "in the hand, a pixel next to one farther by more than this, or beside a gap of no "
+          "return whose far side is that much farther or missing, is not fused (a silhouette); "
+          "0: off, m",
           Range::closedOpen(0, 1));
     v.boolean("discontinuities_carve_only", o.discontinuities_carve_only,
               "silhouette pixels (a 4-neighbour, or the first return across a gap of no return, "
