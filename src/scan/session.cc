@@ -364,9 +364,9 @@ struct ScanSession::State {
         const size_t i = size_t(v) * W + u;
         const float z = depth.depth_m[i];
         if (!(z > 0) || (!carve.empty() && carve[i])) continue;
-        bool edge = !acrossGap.empty() && acrossGap[i];
-        for (int dv = -1; dv <= 1 && jump > 0 && !edge; ++dv)
-          for (int du = -1; du <= 1 && !edge; ++du) {
+        bool edge = !acrossGap.empty() && acrossGap[i];           // the row and column neighbours
+        for (int dv = -1; dv <= 1 && jump > 0 && !edge; dv += 2)  // … and the diagonal ones
+          for (int du = -1; du <= 1 && !edge; du += 2) {
             const int uu = u + du, vv = v + dv;
             if (uu < 0 || vv < 0 || uu >= W || vv >= H) continue;
             const float zn = depth.depth_m[size_t(vv) * W + uu];
