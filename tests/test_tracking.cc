@@ -7,6 +7,8 @@
 #include "inhand/core/json_util.h"
 #include "inhand/core/pose.h"
 #include "inhand/geometry/builtin_objects.h"
+#include "inhand/geometry/primitives.h"
+#include "inhand/geometry/ray_scene.h"
 #include "inhand/geometry/surface_distance.h"
 #include "inhand/planning/view_selection.h"
 #include "inhand/scan/multi_grasp.h"
@@ -352,6 +354,114 @@ TEST(Tracking, RecoversTheObjectsPoseInTheHand) {
     // outline term, projective pairs alone stop 6-11 mm off here).
     EXPECT_LT(worst, 0.004) << name;
   }
+}
+
+// The arm's error does not jump between frames; a wrong alignment does. With the hand in view
+// and an exact arm, a frame whose reported camera pose is 3 cm off (the alignment finds the palm
+// 3 cm off) is refused as a jump from the last tracked frame; the same offset in the next frame
+// confirms it (fused); coming back at once is a jump again, refused, then confirmed.
+TEST(Tracking, AJumpOfTheArmsErrorIsFusedOnlyWhenTheNextFrameConfirmsIt) {
+  const TriangleMesh box = loadObject("builtin:cracker_box");
+  auto [T_O_palm, q] = defaultGrasp(wam(), box);
+  SimWorld world(wam(), box, T_O_palm, DepthCameraOptions{}, NoiseModelOptions{}, SimOptions{});
+  world.q = q;
+  SimRobot robot(&world);
+  SimSensor sensor(&world, DepthCameraOptions{});
+  ScanOptions o;
+  o.voxel_m = 0.003;
+  o.tracking.enabled = true;
+  o.tracking.slip_check = false;
+  const MultiGraspOptions multi;
+  ScanSession s(wam(), DepthCameraOptions{}, NoiseModelOptions{}, o, multi,
+                T_O_palm * Vec3(0, 0, wam().graspOffset()));
+  s.beginGrasp(T_O_palm, robot.joints());
+  sensor.setPose(s.cameraPose());
+  // The hand shown to the camera: the first view's pose.
+  const std::optional<PlannedView> view = s.nextView(robot.joints());
+  ASSERT_TRUE(view.has_value());
+  robot.execute(view->waypoints, [](const JointVector&) {});
+  Iso3 off = sensor.pose();
+  off.translation() += Vec3(0.03, 0, 0);
+  const JointVector qq = robot.joints();
+  std::vector<FrameReport> r;
+  for (const Iso3& reported : {sensor.pose(), off, off, sensor.pose(), sensor.pose()})
+    r.push_back(s.addFrame(sensor.capture(), qq, reported));
+  EXPECT_TRUE(r[0].fused) << r[0].rejected;
+  EXPECT_FALSE(r[1].fused);
+  EXPECT_EQ(r[1].refusal, FrameRefusal::kTracking);
+  EXPECT_NE(r[1].rejected.find("from the last frame's"), std::string::npos) << r[1].rejected;
+  EXPECT_TRUE(r[2].fused) << r[2].rejected;
+  EXPECT_FALSE(r[3].fused);
+  EXPECT_NE(r[3].rejected.find("from the last frame's"), std::string::npos) << r[3].rejected;
+  EXPECT_TRUE(r[4].fused) << r[4].rejected;
+  // Each fused frame with the camera where it truly was (the alignment's correction).
+  for (int k : {0, 2, 4})
+    EXPECT_LT((r[size_t(k)].T_B_C.translation() - sensor.pose().translation()).norm(), 0.003) << k;
+  // Off: every one fused.
+  o.tracking.max_jump_m = 0;
+  ScanSession all(wam(), DepthCameraOptions{}, NoiseModelOptions{}, o, multi,
+                  T_O_palm * Vec3(0, 0, wam().graspOffset()));
+  all.beginGrasp(T_O_palm, q);
+  ASSERT_TRUE(all.nextView(q).has_value());
+  for (const Iso3& reported : {sensor.pose(), off, off, sensor.pose()})
+    EXPECT_TRUE(all.addFrame(sensor.capture(), qq, reported).fused);
+}
+
+// A pen (12 × 140 mm) seen side on at 60 cm, its right end behind a finger (the robot's pixels,
+// hidden), the body believed 8 mm to the right along its axis: the believed right end projects
+// onto the finger, so the outline term has nothing to pull, and the sides fit anywhere along the
+// axis; only the frame's left end, which the believed body does not cover, says where it is.
+TEST(Tracking, ABodyShortOfTheFramesOutlineIsPulledAlongIt) {
+  const TriangleMesh pen = makeCylinder(0.006, 0.14);  // along its z axis, centred
+  Iso3 trueT_C_P = Iso3::Identity();
+  trueT_C_P.linear() = Eigen::AngleAxisd(M_PI / 2, Vec3::UnitY()).toRotationMatrix();  // z to x
+  trueT_C_P.translation() = Vec3(0, 0, 0.6);
+  RayScene scene;
+  scene.addMesh(pen, trueT_C_P);
+  Iso3 T_C_finger = Iso3::Identity();
+  T_C_finger.translation() = Vec3(0.06, 0, 0.55);
+  const int finger = scene.addMesh(makeBox(Vec3(0.04, 0.04, 0.01)), T_C_finger);
+  scene.commit();
+  DepthCameraOptions camera;
+  RenderOptions ro;
+  ro.noise = false;
+  std::vector<int> geometry;
+  const DepthImage d =
+      renderDepth(scene, Iso3::Identity(), camera, NoiseModelOptions{}, ro, &geometry);
+  std::vector<uint8_t> hidden(geometry.size(), 0);
+  for (size_t i = 0; i < geometry.size(); ++i) hidden[i] = geometry[i] == finger;
+  // A model's points as a scan's are: its surface every 1.5 mm (rings along the axis, discs at
+  // the ends), outward normals; the same points hide what lies behind them.
+  std::vector<SurfacePoint> points;
+  for (double z = -0.07; z <= 0.0701; z += 0.0015)
+    for (int k = 0; k < 25; ++k) {
+      const Vec3 n(std::cos(2 * M_PI * k / 25), std::sin(2 * M_PI * k / 25), 0);
+      points.push_back({0.006 * n + Vec3(0, 0, z), n});
+    }
+  for (double r = 0.0015; r < 0.006; r += 0.0015)
+    for (int k = 0; k < int(2 * M_PI * r / 0.0015); ++k) {
+      const double a = 2 * M_PI * k / int(2 * M_PI * r / 0.0015);
+      for (double end : {-0.07, 0.07})
+        points.push_back(
+            {Vec3(r * std::cos(a), r * std::sin(a), end), Vec3(0, 0, end > 0 ? 1 : -1)});
+    }
+  std::vector<Vec3> occluders;
+  for (const SurfacePoint& sp : points) occluders.push_back(sp.p);
+  Iso3 believed = trueT_C_P;
+  believed.translation().x() += 0.008;
+  TrackingOptions o;
+  const TrackResult r =
+      alignBodyToDepth(d, hidden, camera.intrinsics, points, occluders, believed, 0.001, o);
+  ASSERT_TRUE(r.ok) << r.reason;
+  const Iso3 found = r.correction * believed;
+  const Vec3 off = found.translation() - trueT_C_P.translation();
+  std::printf("along the axis %.2f mm, across %.2f mm\n", 1000 * off.x(),
+              1000 * off.tail<2>().norm());
+  // Within 4 mm along the axis (8.3 mm without the uncovered pixels' pull; the pull stops where
+  // the frame's end pixels lie within 1.5 point spacings of the body's end, 2.25 mm here), and
+  // across it within 0.5 mm.
+  EXPECT_LT(std::abs(off.x()), 0.004);
+  EXPECT_LT(off.tail<2>().norm(), 0.0005);
 }
 
 // The simulated arm's error: none at 0; the palm's median error where objects are presented

@@ -146,6 +146,10 @@ struct ScanSession::State {
   JointVector handPointsQ;
   // The last aligned frame's error in the palm frame: true palm = reported palm · correction.
   Iso3 correction = Iso3::Identity();
+  // The joints of the frame that set it in this grasp (none yet: no jump check), and the last
+  // frame's correction refused as a jump (TrackingOptions::max_jump_m).
+  std::optional<JointVector> correctionQ;
+  std::optional<Iso3> jumpPending;
   // TrackingOptions::filter: the correction's estimate (palm frame: rotation vector, translation),
   // its covariance and the joints of the last tracked frame; started at the grasp's first frame.
   bool filterStarted = false;
@@ -246,6 +250,29 @@ struct ScanSession::State {
         options.t_hand_m == vq.t_hand_m
             ? nearHand
             : std::make_shared<NearHandGrid>(hand, options.t_hand_m, vq.near_hand_cell_m);
+  }
+  // Why a frame's correction (palm frame, at joints q) is taken for a wrong alignment, or "":
+  // it lies farther from the last tracked frame's than TrackingOptions::max_jump_m allows and
+  // the frame before was not refused for a jump to within as much of it. A refused one is
+  // remembered for the next frame.
+  std::string correctionJump(const Iso3& c, const JointVector& q) {
+    const TrackingOptions& o = options.tracking;
+    if (!(o.max_jump_m > 0) || !correctionQ) return {};
+    auto apart = [](const Iso3& a, const Iso3& b) {
+      const Iso3 D = a.inverse() * b;
+      return D.translation().norm() + 0.1 * Eigen::AngleAxisd(D.linear()).angle();
+    };
+    const double bound = o.max_jump_m * (1 + (model->arm(q) - model->arm(*correctionQ)).norm());
+    const double jump = apart(correction, c);
+    const bool confirmed = jumpPending && apart(*jumpPending, c) <= bound;
+    jumpPending.reset();
+    if (jump <= bound || confirmed) return {};
+    jumpPending = c;
+    char why[160];
+    std::snprintf(why, sizeof why,
+                  "the alignment puts the palm %.1f mm from the last frame's (at most %.1f)",
+                  1000 * jump, 1000 * bound);
+    return why;
   }
   // The model alone aligned with an in-hand frame from where the grasp holds it (the palm at
   // T_C_palm; TrackingOptions::slip_check). A slip moves the model farther than slip_m,
@@ -464,6 +491,8 @@ void ScanSession::beginGrasp(const Iso3& T_O_palm, const JointVector& q, const A
   s.used.clear();
   s.alg1Views = 0;
   s.correction = Iso3::Identity();
+  s.correctionQ.reset();
+  s.jumpPending.reset();
   s.filterStarted = false;
   if (modelPointsNeeded(s.options)) refreshTrackingModel();
   s.trackingFromFull = false;
@@ -767,15 +796,19 @@ FrameReport ScanSession::addFrame(const DepthImage& input, const JointVector& q,
   TrackResult track;
   if (s.options.tracking.enabled) {
     const std::optional<Iso3> tracked = trackedCameraPose(depth, q, T_B_C, s.T_O_palm, &track);
+    const Iso3 T_C_palm = T_B_C.inverse() * s.model->tipPose(q);
+    const Iso3 correction = T_C_palm.inverse() * track.correction * T_C_palm;
+    const std::string jump = tracked ? s.correctionJump(correction, q) : "";
     // The object may have moved in the hand (the palm as tracked, or as the last frame had it).
-    const Iso3 T_C_held = tracked ? Iso3(tracked->inverse() * s.model->tipPose(q))
-                                  : Iso3(T_B_C.inverse() * s.model->tipPose(q) * s.correction);
+    const Iso3 T_C_held = tracked && jump.empty() ? Iso3(tracked->inverse() * s.model->tipPose(q))
+                                                  : Iso3(T_C_palm * s.correction);
     if (std::string why = followSlip(depth, q, T_B_C, T_C_held); !why.empty())
       return refuse(FrameRefusal::kObjectMovingInHand, why);
     if (!tracked) return refuse(FrameRefusal::kTracking, track.reason, &track);
+    if (!jump.empty()) return refuse(FrameRefusal::kTracking, jump, &track);
     T_B_C_used = *tracked;
-    const Iso3 T_C_palm = T_B_C.inverse() * s.model->tipPose(q);
-    s.correction = T_C_palm.inverse() * track.correction * T_C_palm;
+    s.correction = correction;
+    s.correctionQ = q;
   }
   // The object must be where the hand holds it.
   if (std::string why = s.notHeldIn(depth, T_B_C_used.inverse() * s.model->tipPose(q));
@@ -818,6 +851,8 @@ void ScanSession::moveGrasp(const DepthImage& depth, const JointVector& q, const
     const Iso3 T_C_palm_hand = T_B_C_hand->inverse() * m.tipPose(q);
     moved = T_C_palm_hand.inverse() * r.correction * T_C_palm;
     s.correction = (T_B_C.inverse() * m.tipPose(q)).inverse() * T_C_palm_hand;
+    s.correctionQ = q;
+    s.jumpPending.reset();
   }
   // Points in the palm frame move with the object, T_O_palm the other way.
   s.T_O_palm = s.T_O_palm * moved.inverse();
@@ -1412,6 +1447,8 @@ void ScanSession::save(const std::filesystem::path& path, const Json& extra) con
   for (const Vec3& d : s.initialDirs) h["initial_dirs"].push_back(vecJson(d));
   h["alg1_views"] = s.alg1Views;
   h["tracking_correction"] = isoJson(s.correction);  // the last frame's arm error (palm frame)
+  if (s.correctionQ) h["tracking_correction_q"] = vectorJson(*s.correctionQ);
+  if (s.jumpPending) h["tracking_jump_pending"] = isoJson(*s.jumpPending);
   if (s.filterStarted) {
     h["tracking_filter"]["x"] = std::vector<double>(s.filterX.data(), s.filterX.data() + 6);
     h["tracking_filter"]["P"] = std::vector<double>(s.filterP.data(), s.filterP.data() + 36);
@@ -1611,6 +1648,15 @@ ScanSession ScanSession::load(const std::filesystem::path& path, const RobotMode
       throw bad("unknown termination " + m.at("termination").get<std::string>());
     readSummaryCounts(m, &s.summary);
     if (h.contains("tracking_correction")) s.correction = isoFrom(h.at("tracking_correction"));
+    if (h.contains("tracking_correction_q")) {
+      const Json& cq = h.at("tracking_correction_q");
+      if (!cq.is_array() || cq.size() != size_t(robot.variableCount()))
+        throw bad("tracking_correction_q must hold one value per joint");
+      JointVector v(Eigen::Index(cq.size()));
+      for (size_t i = 0; i < cq.size(); ++i) v[Eigen::Index(i)] = cq[i].get<double>();
+      s.correctionQ = v;
+    }
+    if (h.contains("tracking_jump_pending")) s.jumpPending = isoFrom(h.at("tracking_jump_pending"));
     s.readTrackingFilter(h, bad);
     const Json& qj = h.at("q_grasp");
     if (s.grasp >= 0 && qj.size() != size_t(robot.variableCount()))

@@ -69,6 +69,10 @@ struct Pairs {
 struct Silhouette {
   int width = 0, height = 0;
   std::vector<float> dist;
+  double near = 0, far = 0;  // the depths at which the frame may show the body, m
+  // How far apart the body's points lie (typicalSpacing; 0: no uncovered pixels); a point covers
+  // the pixels within 1.5 times that.
+  double spacing_m = 0;
   float at(int u, int v) const {
     u = std::clamp(u, 0, width - 1);
     v = std::clamp(v, 0, height - 1);
@@ -81,6 +85,8 @@ Silhouette silhouette(const DepthImage& depth, const std::vector<uint8_t>& hidde
   Silhouette s;
   s.width = depth.width;
   s.height = depth.height;
+  s.near = near;
+  s.far = far;
   const float inf = 1e9f;
   s.dist.assign(depth.depth_m.size(), inf);
   for (size_t i = 0; i < depth.depth_m.size(); ++i) {
@@ -215,6 +221,140 @@ Pairs pairUp(const DepthImage& depth, const CameraIntrinsics& K,
   return P;
 }
 
+// The outline the other way: frame pixels at the body's depths (`body`: hidden pixels zeroed)
+// that no point of the body covers, each pulling the body's nearest point in the image towards
+// it. The outline term alone pulls only points that project past the frame's outline; where the
+// body's far end projects onto hidden pixels (a finger, the table) and its near end falls short
+// of the frame's, nothing pulls it along (a pen held 8 mm off along its axis fits there).
+struct Uncovered {
+  Vec2 pixel;
+  int point;  // index into the body's points, then its occluders
+};
+
+const Vec3& bodyPoint(const std::vector<SurfacePoint>& points, const std::vector<Vec3>& occluders,
+                      int k) {
+  return size_t(k) < points.size() ? points[size_t(k)].p : occluders[size_t(k) - points.size()];
+}
+
+// Every second pixel each way at the body's depths (within the body's image, widened by the
+// gate) that no point of the body (its points and occluders at T) covers (none within 1.5 times
+// their spacing); each with its nearest point, when that lies within the gate (in the image at its
+// depth, and in depth).
+std::vector<Uncovered> findUncovered(const DepthImage& body, const CameraIntrinsics& K,
+                                     const Silhouette& outline,
+                                     const std::vector<SurfacePoint>& points,
+                                     const std::vector<Vec3>& occluders, const Iso3& T,
+                                     double gate) {
+  std::vector<Uncovered> out;
+  const size_t n = points.size() + occluders.size();
+  std::vector<Vec2> uv(n);
+  std::vector<double> z(n);
+  double uMin = 1e9, vMin = 1e9, uMax = -1e9, vMax = -1e9, zMin = 1e9;
+  for (size_t k = 0; k < n; ++k) {
+    const Vec3 x = T * bodyPoint(points, occluders, int(k));
+    z[k] = x.z();
+    if (x.z() <= 0.1) continue;
+    uv[k] = K.project(x);
+    uMin = std::min(uMin, uv[k].x());
+    uMax = std::max(uMax, uv[k].x());
+    vMin = std::min(vMin, uv[k].y());
+    vMax = std::max(vMax, uv[k].y());
+    zMin = std::min(zMin, x.z());
+  }
+  if (zMin > 1e8) return out;
+  const double cover_m = 1.5 * outline.spacing_m;
+  const double margin = std::min(80.0, std::ceil(gate * K.fx / zMin) + 2);
+  const int u0 = std::max(0, int(std::floor(uMin - margin)));
+  const int v0 = std::max(0, int(std::floor(vMin - margin)));
+  const int u1 = std::min(body.width - 1, int(std::ceil(uMax + margin)));
+  const int v1 = std::min(body.height - 1, int(std::ceil(vMax + margin)));
+  if (u1 < u0 || v1 < v0) return out;
+  // The projected points in 8-pixel buckets over that rectangle.
+  const int B = 8, bw = (u1 - u0) / B + 1, bh = (v1 - v0) / B + 1;
+  std::vector<int> first(size_t(bw) * size_t(bh), -1), next(n, -1);
+  for (size_t k = 0; k < n; ++k) {
+    if (z[k] <= 0.1) continue;
+    const int bu = int(std::floor((uv[k].x() - u0) / B)),
+              bv = int(std::floor((uv[k].y() - v0) / B));
+    if (bu < 0 || bv < 0 || bu >= bw || bv >= bh) continue;
+    int& head = first[size_t(bv) * bw + bu];
+    next[k] = head;
+    head = int(k);
+  }
+  // The nearest projected point to q among the buckets within `reach` of its own.
+  auto nearestTo = [&](const Vec2& q, int reach, double* d2) {
+    const int bu = (int(q.x()) - u0) / B, bv = (int(q.y()) - v0) / B;
+    int best = -1;
+    *d2 = std::numeric_limits<double>::infinity();
+    for (int j = std::max(0, bv - reach); j <= std::min(bh - 1, bv + reach); ++j)
+      for (int i = std::max(0, bu - reach); i <= std::min(bw - 1, bu + reach); ++i)
+        for (int k = first[size_t(j) * bw + i]; k >= 0; k = next[size_t(k)])
+          if (const double e = (uv[size_t(k)] - q).squaredNorm(); e < *d2) {
+            *d2 = e;
+            best = k;
+          }
+    return best;
+  };
+  // Whether a projected point lies within √r2 (at most 8 pixels) of q: its own bucket first.
+  auto covered = [&](const Vec2& q, double r2) {
+    const int bu = (int(q.x()) - u0) / B, bv = (int(q.y()) - v0) / B;
+    for (int ring = 0; ring <= 1; ++ring)
+      for (int j = std::max(0, bv - ring); j <= std::min(bh - 1, bv + ring); ++j)
+        for (int i = std::max(0, bu - ring); i <= std::min(bw - 1, bu + ring); ++i) {
+          if (ring == 1 && i != bu - 1 && i != bu + 1 && j != bv - 1 && j != bv + 1) continue;
+          for (int k = first[size_t(j) * bw + i]; k >= 0; k = next[size_t(k)])
+            if ((uv[size_t(k)] - q).squaredNorm() <= r2) return true;
+        }
+    return false;
+  };
+  const int reach = int(std::ceil(margin / B)) + 1;
+  for (int v = v0; v <= v1; v += 2)
+    for (int u = u0; u <= u1; u += 2) {
+      const double d = body.depth_m[size_t(v) * body.width + size_t(u)];
+      if (!(d >= outline.near && d <= outline.far)) continue;
+      const Vec2 q(u, v);
+      const double cover = cover_m * K.fx / d;  // pixels
+      if (covered(q, std::min(cover * cover, 64.0))) continue;
+      double d2 = 0;
+      const int k = nearestTo(q, reach, &d2);
+      if (k < 0 || std::sqrt(d2) * z[size_t(k)] / K.fx > gate + cover_m ||
+          std::abs(d - z[size_t(k)]) > gate)
+        continue;
+      out.push_back({q, k});
+    }
+  return out;
+}
+
+// The uncovered pixels' terms at T: each pixel's point moved towards it in the image until it
+// covers the pixel, every term counting for the four pixels it stands for.
+void addUncovered(const std::vector<Uncovered>& uncovered, const CameraIntrinsics& K,
+                  const Silhouette& outline, const std::vector<SurfacePoint>& points,
+                  const std::vector<Vec3>& occluders, const Iso3& T, double huber, Pairs* P) {
+  const Vec3 c = T.translation();
+  for (const Uncovered& un : uncovered) {
+    const Vec3 x = T * bodyPoint(points, occluders, un.point);
+    if (x.z() <= 0.1) continue;
+    const Vec2 uv = K.project(x);
+    const double scale = x.z() / K.fx;  // metres per pixel
+    const double d = (un.pixel - uv).norm() - 1.5 * outline.spacing_m / scale;
+    if (d <= 0) continue;
+    // The point's image distance to the pixel, d, shrinks as the point moves along g.
+    const Vec2 g = (un.pixel - uv).normalized();
+    Eigen::Matrix<double, 1, 3> dd;  // ∂(g·uv)/∂x, pixels per metre
+    dd << g.x() * K.fx / x.z(), g.y() * K.fy / x.z(),
+        -(g.x() * K.fx * x.x() + g.y() * K.fy * x.y()) / (x.z() * x.z());
+    Eigen::Matrix<double, 3, 6> dx;  // x' = x + ω × (x − c) + t
+    const Vec3 r = x - c;
+    dx.leftCols<3>() << 0, r.z(), -r.y(), -r.z(), 0, r.x(), r.y(), -r.x(), 0;
+    dx.rightCols<3>().setIdentity();
+    const Eigen::Matrix<double, 6, 1> J = scale * (dd * dx).transpose();
+    const double e = scale * d;
+    const double w = 4 * (e < huber ? 1.0 : huber / e);
+    P->A += w * J * J.transpose();
+    P->b += w * J * e;
+  }
+}
+
 TrackResult alignFrom(const DepthImage& depth, const CameraIntrinsics& K,
                       const std::vector<SurfacePoint>& points, size_t handCount,
                       const std::vector<Vec3>& occluders, const Iso3& T_C_palm, const Iso3& initial,
@@ -234,12 +374,18 @@ TrackResult alignFrom(const DepthImage& depth, const CameraIntrinsics& K,
     return x;
   };
   std::vector<int> visible;
+  std::vector<Uncovered> uncovered;
+  const bool withUncovered = outline && outline->spacing_m > 0;
   for (int it = 0; it < iterations; ++it, gate = std::max(o.final_gate_m, gate * shrink)) {
     const Iso3 T = D * T_C_palm;
-    // Visibility changes little between iterations: every 8th.
+    // Visibility and the uncovered pixels change little between iterations: every 8th.
     if (it % 8 == 0) visible = visiblePoints(K, points, occluders, T);
+    if (withUncovered && it % 8 == 0)
+      uncovered = findUncovered(depth, K, *outline, points, occluders, T, gate);
     Pairs P = pairUp(depth, K, points, visible, T, gate, 0.5 * o.final_gate_m, handCount,
                      o.object_weight, outline);
+    if (withUncovered)
+      addUncovered(uncovered, K, *outline, points, occluders, T, 0.5 * o.final_gate_m, &P);
     if (P.pairs < 6) break;
     // A weak prior towards the reported pose: directions the points do not constrain (a flat
     // face seen head-on slides freely) stay where the robot says, the others follow the data
@@ -327,6 +473,27 @@ TrackResult alignToDepth(const DepthImage& depth, const CameraIntrinsics& K,
   return best;
 }
 
+namespace {
+// How far apart the body's points lie (its points and occluders together): the median, over
+// about 32 of them, of the distance to the nearest other point (a point given twice counts
+// once). 0 with fewer than two.
+double typicalSpacing(const std::vector<SurfacePoint>& points, const std::vector<Vec3>& occluders) {
+  const size_t n = points.size() + occluders.size();
+  std::vector<double> nearest;
+  for (size_t k = 0; k < n; k += std::max<size_t>(1, n / 32)) {
+    const Vec3& p = bodyPoint(points, occluders, int(k));
+    double best = std::numeric_limits<double>::infinity();
+    for (size_t j = 0; j < n; ++j)
+      if (const double e = (bodyPoint(points, occluders, int(j)) - p).squaredNorm(); e > 1e-12)
+        best = std::min(best, e);
+    if (std::isfinite(best)) nearest.push_back(std::sqrt(best));
+  }
+  if (nearest.empty()) return 0;
+  std::nth_element(nearest.begin(), nearest.begin() + long(nearest.size() / 2), nearest.end());
+  return nearest[nearest.size() / 2];
+}
+}  // namespace
+
 TrackResult alignBodyToDepth(const DepthImage& depth, const std::vector<uint8_t>& hidden,
                              const CameraIntrinsics& K, const std::vector<SurfacePoint>& points_X,
                              const std::vector<Vec3>& occluders_X, const Iso3& T_C_X,
@@ -344,7 +511,8 @@ TrackResult alignBodyToDepth(const DepthImage& depth, const std::vector<uint8_t>
     near = std::min(near, z);
     far = std::max(far, z);
   }
-  const Silhouette outline = silhouette(depth, hidden, near - 0.05, far + 0.05);
+  Silhouette outline = silhouette(depth, hidden, near - 0.05, far + 0.05);
+  outline.spacing_m = typicalSpacing(points_X, occluders_X);
   return alignFrom(body, K, points_X, 0, occluders_X, T_C_X, Iso3::Identity(), o.iterations,
                    sigma_m, o, &outline);
 }

@@ -27,6 +27,11 @@ struct TrackingOptions {
   // (the residual of a right alignment is the sensor's noise): rejected.
   double max_rms_ratio = 1.2;
   double max_correction_m = 0.12;  // a correction moving the palm farther: rejected, m
+  // A frame whose correction differs from the last tracked frame's of the grasp by more than
+  // this, and as much again per radian the joints moved since (the palm's shift plus 10 cm times
+  // its turn), is not fused, unless the frame before was refused for a jump to within as much of
+  // it (the arm's error does not jump; a wrong alignment does). 0: no check.
+  double max_jump_m = 0.01;
   double prior = 0.002;        // pull towards the reported pose, relative to the data's curvature
   double object_weight = 0.3;  // the model's points against the hand's
   double hand_spacing_m = 0.004;  // spacing of the hand's surface samples, m
@@ -77,6 +82,11 @@ struct TrackingOptions {
           "a final residual above this many sensor σ: the frame is not fused", Range::above(0));
     v.num("max_correction_m", o.max_correction_m,
           "a correction moving the palm farther: the frame is not fused, m", Range::above(0));
+    v.num("max_jump_m", o.max_jump_m,
+          "a correction farther from the last tracked frame's (and as much again per radian "
+          "the joints moved; the palm's shift plus 10 cm times its turn): not fused unless the "
+          "next frame agrees, m; 0: no check",
+          Range::atLeast(0));
     v.num("prior", o.prior, "pull towards the reported pose, relative to the data's curvature",
           Range::closedOpen(0, 1));
     v.num("object_weight", o.object_weight, "the model's points against the hand's",
