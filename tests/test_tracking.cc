@@ -451,7 +451,8 @@ TEST(Tracking, ABodyShortOfTheFramesOutlineIsPulledAlongIt) {
   believed.translation().x() += 0.008;
   TrackingOptions o;
   const TrackResult r =
-      alignBodyToDepth(d, hidden, camera.intrinsics, points, occluders, believed, 0.001, o);
+      alignBodyToDepth(d, hidden, camera.intrinsics, points, occluders, believed, 0.001, o,
+                       /*pull_uncovered=*/true);
   ASSERT_TRUE(r.ok) << r.reason;
   const Iso3 found = r.correction * believed;
   const Vec3 off = found.translation() - trueT_C_P.translation();

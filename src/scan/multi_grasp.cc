@@ -86,7 +86,8 @@ std::optional<std::pair<Iso3, double>> refindInHand(
     const Iso3 T_B_O = T_B_palm * T_O_palm.inverse();
     for (const auto& [T, r] : session.registerObjectAt(
              d, hidden, T_B_C,
-             heldObjectStarts(d, hidden, T_B_C, K, m.table().topZ(), T_B_O, points_O))) {
+             heldObjectStarts(d, hidden, T_B_C, K, m.table().topZ(), T_B_O, points_O),
+             /*in_hand=*/true)) {
       if (!T) continue;
       const Iso3 T_O_palm_found = T->inverse() * T_B_palm;
       const double s = supportOf(T_O_palm_found);

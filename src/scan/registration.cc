@@ -150,7 +150,7 @@ Iso3 coarseAlign(const std::vector<Vec3>& frame_B, const NearestGrid& grid, Iso3
 std::vector<std::pair<std::optional<Iso3>, TrackResult>> registerModelAt(
     const RegistrationModel& model, const DepthImage& depth, const std::vector<uint8_t>& hidden,
     const Iso3& T_B_C, const CameraIntrinsics& K, const NoiseModelOptions& noise,
-    const TrackingOptions& options, const std::vector<Iso3>& starts) {
+    const TrackingOptions& options, const std::vector<Iso3>& starts, bool in_hand) {
   if (hidden.size() != depth.depth_m.size())
     throw Error("registerModelAt: the hidden mask does not match the image");
   // The frame's points near the starts (every other pixel each way, not hidden), for the coarse
@@ -171,8 +171,9 @@ std::vector<std::pair<std::optional<Iso3>, TrackResult>> registerModelAt(
   const NearestGrid grid(model_O);
   parallelFor(0, int(starts.size()), [&](int k) {
     const Iso3 T_C_O = T_B_C.inverse() * coarseAlign(frame_B, grid, starts[size_t(k)]);
-    TrackResult r = alignBodyToDepth(depth, hidden, K, model.points, model.occluders, T_C_O,
-                                     axialSigma(noise, T_C_O.translation().z(), 0), options);
+    TrackResult r =
+        alignBodyToDepth(depth, hidden, K, model.points, model.occluders, T_C_O,
+                         axialSigma(noise, T_C_O.translation().z(), 0), options, in_hand);
     if (r.ok) out[size_t(k)].first = T_B_C * r.correction * T_C_O;
     out[size_t(k)].second = std::move(r);
   });

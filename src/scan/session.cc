@@ -297,7 +297,8 @@ struct ScanSession::State {
     near.gate_m = std::max(o.final_gate_m, gate_m);
     const double sigma = axialSigma(noise, T_C_palm.translation().z(), 0);
     SlipMeasure out;
-    out.r = alignBodyToDepth(depth, hidden, K, slipPoints, objectOccluders, T_C_palm, sigma, near);
+    out.r = alignBodyToDepth(depth, hidden, K, slipPoints, objectOccluders, T_C_palm, sigma, near,
+                             /*pull_uncovered=*/true);
     if (!out.r.ok) return out;
     out.moved = T_C_palm.inverse() * out.r.correction * T_C_palm;  // palm frame
     out.surface_m = surfaceMotion(slipPoints, out.moved);
@@ -307,7 +308,7 @@ struct ScanSession::State {
     TrackingOptions at = near;
     at.iterations = 0;  // the frame against the model where the hand holds it
     const TrackResult held =
-        alignBodyToDepth(depth, hidden, K, slipPoints, objectOccluders, T_C_palm, sigma, at);
+        alignBodyToDepth(depth, hidden, K, slipPoints, objectOccluders, T_C_palm, sigma, at, true);
     const TrackResult& r = out.r;
     out.moving = held.rms_m > 1.5 * r.rms_m || held.inliers < 0.75 * r.inliers ||
                  held.see_through > 2 * r.see_through + r.inliers / 20;
@@ -1053,7 +1054,8 @@ std::optional<Iso3> ScanSession::registerHeldObject(const DepthImage& depth,
   const Iso3 T_C_O = T_C_palm * T_O_palm.inverse();
   const TrackResult r =
       alignBodyToDepth(depth, robot_mask, s.camera.intrinsics, reg.points, reg.occluders, T_C_O,
-                       axialSigma(s.noise, T_C_O.translation().z(), 0), s.options.tracking);
+                       axialSigma(s.noise, T_C_O.translation().z(), 0), s.options.tracking,
+                       /*pull_uncovered=*/true);
   s.summary.tracking_s += secondsSince(t0);
   if (result) *result = r;
   if (!r.ok) return std::nullopt;
@@ -1062,13 +1064,14 @@ std::optional<Iso3> ScanSession::registerHeldObject(const DepthImage& depth,
 
 std::vector<std::pair<std::optional<Iso3>, TrackResult>> ScanSession::registerObjectAt(
     const DepthImage& depth, const std::vector<uint8_t>& hidden, const Iso3& T_B_C,
-    const std::vector<Iso3>& starts) {
+    const std::vector<Iso3>& starts, bool in_hand) {
   State& s = *s_;
   if (hidden.size() != depth.depth_m.size())
     throw Error("registerObjectAt: the hidden mask does not match the image");
   const auto t0 = Clock::now();
-  auto out = registerModelAt(registrationModel(planningModel(), s.options.tracking), depth, hidden,
-                             T_B_C, s.camera.intrinsics, s.noise, s.options.tracking, starts);
+  auto out =
+      registerModelAt(registrationModel(planningModel(), s.options.tracking), depth, hidden, T_B_C,
+                      s.camera.intrinsics, s.noise, s.options.tracking, starts, in_hand);
   s.summary.tracking_s += secondsSince(t0);
   return out;
 }

@@ -381,7 +381,7 @@ TrackResult alignFrom(const DepthImage& depth, const CameraIntrinsics& K,
     // Visibility and the uncovered pixels change little between iterations: every 8th.
     if (it % 8 == 0) visible = visiblePoints(K, points, occluders, T);
     if (withUncovered && it % 8 == 0)
-      uncovered = findUncovered(depth, K, *outline, points, occluders, T, gate);
+      uncovered = findUncovered(depth, K, *outline, points, occluders, T, o.final_gate_m);
     Pairs P = pairUp(depth, K, points, visible, T, gate, 0.5 * o.final_gate_m, handCount,
                      o.object_weight, outline);
     if (withUncovered)
@@ -497,7 +497,7 @@ double typicalSpacing(const std::vector<SurfacePoint>& points, const std::vector
 TrackResult alignBodyToDepth(const DepthImage& depth, const std::vector<uint8_t>& hidden,
                              const CameraIntrinsics& K, const std::vector<SurfacePoint>& points_X,
                              const std::vector<Vec3>& occluders_X, const Iso3& T_C_X,
-                             double sigma_m, const TrackingOptions& options) {
+                             double sigma_m, const TrackingOptions& options, bool pull_uncovered) {
   TrackingOptions o = options;
   o.object_weight = 1;      // no hand: the body's points alone
   DepthImage body = depth;  // hidden pixels pair with nothing
@@ -512,7 +512,7 @@ TrackResult alignBodyToDepth(const DepthImage& depth, const std::vector<uint8_t>
     far = std::max(far, z);
   }
   Silhouette outline = silhouette(depth, hidden, near - 0.05, far + 0.05);
-  outline.spacing_m = typicalSpacing(points_X, occluders_X);
+  if (pull_uncovered) outline.spacing_m = typicalSpacing(points_X, occluders_X);
   return alignFrom(body, K, points_X, 0, occluders_X, T_C_X, Iso3::Identity(), o.iterations,
                    sigma_m, o, &outline);
 }

@@ -37,11 +37,12 @@ RegistrationModel registrationModel(const ObjectModel& m, const TrackingOptions&
 // frame's points within 30 cm of the starts' mean, every other pixel each way, aligned with the
 // model's points by point-to-point ICP (nearest model point within a gate shrinking from 4 to
 // 1 cm, Umeyama's motion, 20 rounds), then alignBodyToDepth with the sensor's axial σ at the
-// model's depth. One result per start, in parallel; the pose (T_B_O) where alignment succeeded.
+// model's depth (`in_hand`: with the uncovered pixels' pull). One result per start, in parallel;
+// the pose (T_B_O) where alignment succeeded.
 std::vector<std::pair<std::optional<Iso3>, TrackResult>> registerModelAt(
     const RegistrationModel& model, const DepthImage& depth, const std::vector<uint8_t>& hidden,
     const Iso3& T_B_C, const CameraIntrinsics& K, const NoiseModelOptions& noise,
-    const TrackingOptions& options, const std::vector<Iso3>& starts);
+    const TrackingOptions& options, const std::vector<Iso3>& starts, bool in_hand = false);
 
 // How far a depth frame bears out object points `points_B`: of those in view whose pixel
 // measured something, the fraction measured within 1 cm of the point's depth, against those

@@ -181,10 +181,12 @@ class ScanSession {
   // The object resting on the table, from a frame of it (camera at T_B_C; `hidden`: pixels that
   // pair with nothing, the robot's and the table's): the model so far (its observed surface)
   // aligned with the frame from each of `starts` (T_B_O), on both cores. Each start's aligned
-  // pose T_B_O (nullopt where the alignment failed its checks) and result, in order.
+  // pose T_B_O (nullopt where the alignment failed its checks) and result, in order. `in_hand`:
+  // the object is held (the frame's pixels the model does not cover pull it too:
+  // alignBodyToDepth).
   std::vector<std::pair<std::optional<Iso3>, TrackResult>> registerObjectAt(
       const DepthImage& depth, const std::vector<uint8_t>& hidden, const Iso3& T_B_C,
-      const std::vector<Iso3>& starts);
+      const std::vector<Iso3>& starts, bool in_hand = false);
 
   // A depth frame of the object lying at T_B_O (not in the hand, e.g. on the table): the robot's
   // pixels and those set in `carve` (same size as the image; may be null) only carve. With

@@ -178,11 +178,18 @@ double correctionSignificance(const TrackResult& r, const Iso3& T_C_X, double pa
 // and checks, every point weighted alike), and an outline term: projective association alone
 // slides a body sideways slowly and stops where a face seen head-on fits (anywhere in its own
 // plane), so a point that projects where the frame shows neither the body (depths within 5 cm
-// of its own) nor a hidden pixel is pulled by its image distance to the nearest one. The
-// correction: T_C_X = correction · T_C_X(given).
+// of its own) nor a hidden pixel is pulled by its image distance to the nearest one.
+// `pull_uncovered` (a held body, its outline against the robot and the background): the outline
+// the other way too, a pixel at the body's depths within the final gate of it that no point of
+// the body covers (none within 1.5 times their spacing) pulls the nearest point towards it (a
+// body whose far end projects onto hidden pixels and whose near end falls short of the frame's
+// has nothing else pulling it along). Not on the table: it broke the re-find of a tipped box
+// (Session.AnObjectThatTippedIsFoundAgainOnTheTable: every start failed). The correction:
+// T_C_X = correction · T_C_X(given).
 TrackResult alignBodyToDepth(const DepthImage& depth, const std::vector<uint8_t>& hidden,
                              const CameraIntrinsics& K, const std::vector<SurfacePoint>& points_X,
                              const std::vector<Vec3>& occluders_X, const Iso3& T_C_X,
-                             double sigma_m, const TrackingOptions& options);
+                             double sigma_m, const TrackingOptions& options,
+                             bool pull_uncovered = false);
 
 }  // namespace inhand
