@@ -241,6 +241,7 @@ struct ScanSession::State {
   // The arm's torque readings from a checkpoint's header (load).
   void readTorques(const Json& h);
   // The tracking filter's state from a checkpoint's header (load).
+  // The tracking state a checkpoint holds: the last correction, the jump check's, the filter's.
   void readTrackingFilter(const Json& h, const std::function<Error(const std::string&)>& bad);
   void buildNearHand(const RobotModel& robot, const JointVector& q, const Iso3& T_O_palm_) {
     const HandGeometry hand(robot, q, T_O_palm_);
@@ -1579,6 +1580,16 @@ void readSummaryCounts(const Json& m, ScanSession::Summary* sum) {
 
 void ScanSession::State::readTrackingFilter(const Json& h,
                                             const std::function<Error(const std::string&)>& bad) {
+  if (h.contains("tracking_correction")) correction = isoFrom(h.at("tracking_correction"));
+  if (h.contains("tracking_correction_q")) {
+    const Json& cq = h.at("tracking_correction_q");
+    if (!cq.is_array() || cq.size() != size_t(model->variableCount()))
+      throw bad("tracking_correction_q must hold one value per joint");
+    JointVector v(Eigen::Index(cq.size()));
+    for (size_t i = 0; i < cq.size(); ++i) v[Eigen::Index(i)] = cq[i].get<double>();
+    correctionQ = v;
+  }
+  if (h.contains("tracking_jump_pending")) jumpPending = isoFrom(h.at("tracking_jump_pending"));
   filterStarted = h.contains("tracking_filter");
   if (filterStarted) {
     const Json& f = h.at("tracking_filter");
@@ -1650,16 +1661,6 @@ ScanSession ScanSession::load(const std::filesystem::path& path, const RobotMode
     if (!parseTermination(m.at("termination").get<std::string>(), &s.summary.termination))
       throw bad("unknown termination " + m.at("termination").get<std::string>());
     readSummaryCounts(m, &s.summary);
-    if (h.contains("tracking_correction")) s.correction = isoFrom(h.at("tracking_correction"));
-    if (h.contains("tracking_correction_q")) {
-      const Json& cq = h.at("tracking_correction_q");
-      if (!cq.is_array() || cq.size() != size_t(robot.variableCount()))
-        throw bad("tracking_correction_q must hold one value per joint");
-      JointVector v(Eigen::Index(cq.size()));
-      for (size_t i = 0; i < cq.size(); ++i) v[Eigen::Index(i)] = cq[i].get<double>();
-      s.correctionQ = v;
-    }
-    if (h.contains("tracking_jump_pending")) s.jumpPending = isoFrom(h.at("tracking_jump_pending"));
     s.readTrackingFilter(h, bad);
     const Json& qj = h.at("q_grasp");
     if (s.grasp >= 0 && qj.size() != size_t(robot.variableCount()))

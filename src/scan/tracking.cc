@@ -236,6 +236,59 @@ const Vec3& bodyPoint(const std::vector<SurfacePoint>& points, const std::vector
   return size_t(k) < points.size() ? points[size_t(k)].p : occluders[size_t(k) - points.size()];
 }
 
+// Projected points (those at z > 0.1) in 8-pixel buckets over the rectangle [u0, u1] × [v0, v1].
+class PointBuckets {
+ public:
+  static constexpr int kSize = 8;
+  PointBuckets(const std::vector<Vec2>& uv, const std::vector<double>& z, int u0, int v0, int u1,
+               int v1)
+      : uv_(uv), u0_(u0), v0_(v0), bw_((u1 - u0) / kSize + 1), bh_((v1 - v0) / kSize + 1) {
+    first_.assign(size_t(bw_) * size_t(bh_), -1);
+    next_.assign(uv.size(), -1);
+    for (size_t k = 0; k < uv.size(); ++k) {
+      if (z[k] <= 0.1) continue;
+      const int bu = int(std::floor((uv[k].x() - u0) / kSize)),
+                bv = int(std::floor((uv[k].y() - v0) / kSize));
+      if (bu < 0 || bv < 0 || bu >= bw_ || bv >= bh_) continue;
+      int& head = first_[size_t(bv) * bw_ + bu];
+      next_[k] = head;
+      head = int(k);
+    }
+  }
+  // The nearest projected point to q (a pixel of the rectangle) among the buckets within
+  // `reach` of its own (-1: none), its squared distance in *d2.
+  int nearest(const Vec2& q, int reach, double* d2) const {
+    const int bu = (int(q.x()) - u0_) / kSize, bv = (int(q.y()) - v0_) / kSize;
+    int best = -1;
+    *d2 = std::numeric_limits<double>::infinity();
+    for (int j = std::max(0, bv - reach); j <= std::min(bh_ - 1, bv + reach); ++j)
+      for (int i = std::max(0, bu - reach); i <= std::min(bw_ - 1, bu + reach); ++i)
+        for (int k = first_[size_t(j) * bw_ + i]; k >= 0; k = next_[size_t(k)])
+          if (const double e = (uv_[size_t(k)] - q).squaredNorm(); e < *d2) {
+            *d2 = e;
+            best = k;
+          }
+    return best;
+  }
+  // Whether a projected point lies within √r2 (at most 8 pixels) of q: its own bucket first.
+  bool covered(const Vec2& q, double r2) const {
+    const int bu = (int(q.x()) - u0_) / kSize, bv = (int(q.y()) - v0_) / kSize;
+    for (int ring = 0; ring <= 1; ++ring)
+      for (int j = std::max(0, bv - ring); j <= std::min(bh_ - 1, bv + ring); ++j)
+        for (int i = std::max(0, bu - ring); i <= std::min(bw_ - 1, bu + ring); ++i) {
+          if (ring == 1 && i != bu - 1 && i != bu + 1 && j != bv - 1 && j != bv + 1) continue;
+          for (int k = first_[size_t(j) * bw_ + i]; k >= 0; k = next_[size_t(k)])
+            if ((uv_[size_t(k)] - q).squaredNorm() <= r2) return true;
+        }
+    return false;
+  }
+
+ private:
+  const std::vector<Vec2>& uv_;
+  int u0_, v0_, bw_, bh_;
+  std::vector<int> first_, next_;
+};
+
 // Every second pixel each way at the body's depths (within the body's image, widened by the
 // gate) that no point of the body (its points and occluders at T) covers (none within 1.5 times
 // their spacing); each with its nearest point, when that lies within the gate (in the image at its
@@ -269,54 +322,17 @@ std::vector<Uncovered> findUncovered(const DepthImage& body, const CameraIntrins
   const int u1 = std::min(body.width - 1, int(std::ceil(uMax + margin)));
   const int v1 = std::min(body.height - 1, int(std::ceil(vMax + margin)));
   if (u1 < u0 || v1 < v0) return out;
-  // The projected points in 8-pixel buckets over that rectangle.
-  const int B = 8, bw = (u1 - u0) / B + 1, bh = (v1 - v0) / B + 1;
-  std::vector<int> first(size_t(bw) * size_t(bh), -1), next(n, -1);
-  for (size_t k = 0; k < n; ++k) {
-    if (z[k] <= 0.1) continue;
-    const int bu = int(std::floor((uv[k].x() - u0) / B)),
-              bv = int(std::floor((uv[k].y() - v0) / B));
-    if (bu < 0 || bv < 0 || bu >= bw || bv >= bh) continue;
-    int& head = first[size_t(bv) * bw + bu];
-    next[k] = head;
-    head = int(k);
-  }
-  // The nearest projected point to q among the buckets within `reach` of its own.
-  auto nearestTo = [&](const Vec2& q, int reach, double* d2) {
-    const int bu = (int(q.x()) - u0) / B, bv = (int(q.y()) - v0) / B;
-    int best = -1;
-    *d2 = std::numeric_limits<double>::infinity();
-    for (int j = std::max(0, bv - reach); j <= std::min(bh - 1, bv + reach); ++j)
-      for (int i = std::max(0, bu - reach); i <= std::min(bw - 1, bu + reach); ++i)
-        for (int k = first[size_t(j) * bw + i]; k >= 0; k = next[size_t(k)])
-          if (const double e = (uv[size_t(k)] - q).squaredNorm(); e < *d2) {
-            *d2 = e;
-            best = k;
-          }
-    return best;
-  };
-  // Whether a projected point lies within √r2 (at most 8 pixels) of q: its own bucket first.
-  auto covered = [&](const Vec2& q, double r2) {
-    const int bu = (int(q.x()) - u0) / B, bv = (int(q.y()) - v0) / B;
-    for (int ring = 0; ring <= 1; ++ring)
-      for (int j = std::max(0, bv - ring); j <= std::min(bh - 1, bv + ring); ++j)
-        for (int i = std::max(0, bu - ring); i <= std::min(bw - 1, bu + ring); ++i) {
-          if (ring == 1 && i != bu - 1 && i != bu + 1 && j != bv - 1 && j != bv + 1) continue;
-          for (int k = first[size_t(j) * bw + i]; k >= 0; k = next[size_t(k)])
-            if ((uv[size_t(k)] - q).squaredNorm() <= r2) return true;
-        }
-    return false;
-  };
-  const int reach = int(std::ceil(margin / B)) + 1;
+  const PointBuckets buckets(uv, z, u0, v0, u1, v1);
+  const int reach = int(std::ceil(margin / PointBuckets::kSize)) + 1;
   for (int v = v0; v <= v1; v += 2)
     for (int u = u0; u <= u1; u += 2) {
       const double d = body.depth_m[size_t(v) * body.width + size_t(u)];
       if (!(d >= outline.near && d <= outline.far)) continue;
       const Vec2 q(u, v);
       const double cover = cover_m * K.fx / d;  // pixels
-      if (covered(q, std::min(cover * cover, 64.0))) continue;
+      if (buckets.covered(q, std::min(cover * cover, 64.0))) continue;
       double d2 = 0;
-      const int k = nearestTo(q, reach, &d2);
+      const int k = buckets.nearest(q, reach, &d2);
       if (k < 0 || std::sqrt(d2) * z[size_t(k)] / K.fx > gate + cover_m ||
           std::abs(d - z[size_t(k)]) > gate)
         continue;
