@@ -240,7 +240,6 @@ struct ScanSession::State {
   std::string notHeldIn(const DepthImage& depth, const Iso3& T_C_palm);
   // The arm's torque readings from a checkpoint's header (load).
   void readTorques(const Json& h);
-  // The tracking filter's state from a checkpoint's header (load).
   // The tracking state a checkpoint holds: the last correction, the jump check's, the filter's.
   void readTrackingFilter(const Json& h, const std::function<Error(const std::string&)>& bad);
   void buildNearHand(const RobotModel& robot, const JointVector& q, const Iso3& T_O_palm_) {
@@ -309,7 +308,7 @@ struct ScanSession::State {
     TrackingOptions at = near;
     at.iterations = 0;  // the frame against the model where the hand holds it
     const TrackResult held =
-        alignBodyToDepth(depth, hidden, K, slipPoints, objectOccluders, T_C_palm, sigma, at, true);
+        alignBodyToDepth(depth, hidden, K, slipPoints, objectOccluders, T_C_palm, sigma, at);
     const TrackResult& r = out.r;
     out.moving = held.rms_m > 1.5 * r.rms_m || held.inliers < 0.75 * r.inliers ||
                  held.see_through > 2 * r.see_through + r.inliers / 20;

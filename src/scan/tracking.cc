@@ -118,6 +118,21 @@ Silhouette silhouette(const DepthImage& depth, const std::vector<uint8_t>& hidde
   return s;
 }
 
+// How a point x (camera frame) moves in the image along direction g (pixels), in metres at its
+// depth, per step of the body's motion about c (x' = x + ω × (x − c) + t; rotation vector,
+// then translation): (x_z / f_x) ∂(g·uv)/∂x · ∂x/∂(ω, t).
+Eigen::Matrix<double, 6, 1> imageJacobian(const CameraIntrinsics& K, const Vec3& x, const Vec3& c,
+                                          const Vec2& g) {
+  Eigen::Matrix<double, 1, 3> dd;  // ∂(g·uv)/∂x, pixels per metre
+  dd << g.x() * K.fx / x.z(), g.y() * K.fy / x.z(),
+      -(g.x() * K.fx * x.x() + g.y() * K.fy * x.y()) / (x.z() * x.z());
+  Eigen::Matrix<double, 3, 6> dx;
+  const Vec3 r = x - c;
+  dx.leftCols<3>() << 0, r.z(), -r.y(), -r.z(), 0, r.x(), r.y(), -r.x(), 0;
+  dx.rightCols<3>().setIdentity();
+  return (x.z() / K.fx) * (dd * dx).transpose();
+}
+
 // The pairs of the points visible at T (palm to camera) within `gate` in depth, and the normal
 // equations of n·(y − x) = (x × n)·ω + n·t (Huber-weighted at half the final gate).
 // Which points are in front of the model's other points (and the occluders) at T.
@@ -169,17 +184,10 @@ Pairs pairUp(const DepthImage& depth, const CameraIntrinsics& K,
         // along the distance's gradient in the image.
         const float d = outline->at(u, v);
         if (d > 0.5f) {
-          const double gu = 0.5 * (outline->at(u + 1, v) - outline->at(u - 1, v));
-          const double gv = 0.5 * (outline->at(u, v + 1) - outline->at(u, v - 1));
+          const Vec2 g(0.5 * (outline->at(u + 1, v) - outline->at(u - 1, v)),
+                       0.5 * (outline->at(u, v + 1) - outline->at(u, v - 1)));
           const double scale = x.z() / K.fx;  // metres per pixel
-          Eigen::Matrix<double, 1, 3> dd;     // ∂d/∂x (pixels per metre)
-          dd << gu * K.fx / x.z(), gv * K.fy / x.z(),
-              -(gu * K.fx * x.x() + gv * K.fy * x.y()) / (x.z() * x.z());
-          Eigen::Matrix<double, 3, 6> dx;  // x' = x + ω × (x − c) + t
-          const Vec3 r = x - c;
-          dx.leftCols<3>() << 0, r.z(), -r.y(), -r.z(), 0, r.x(), r.y(), -r.x(), 0;
-          dx.rightCols<3>().setIdentity();
-          const Eigen::Matrix<double, 6, 1> J = scale * (dd * dx).transpose();
+          const Eigen::Matrix<double, 6, 1> J = imageJacobian(K, x, c, g);
           const double e = -scale * d;
           const double w = std::abs(e) < huber ? 1.0 : huber / std::abs(e);
           P.A += w * J * J.transpose();
@@ -355,15 +363,7 @@ void addUncovered(const std::vector<Uncovered>& uncovered, const CameraIntrinsic
     const double d = (un.pixel - uv).norm() - 1.5 * outline.spacing_m / scale;
     if (d <= 0) continue;
     // The point's image distance to the pixel, d, shrinks as the point moves along g.
-    const Vec2 g = (un.pixel - uv).normalized();
-    Eigen::Matrix<double, 1, 3> dd;  // ∂(g·uv)/∂x, pixels per metre
-    dd << g.x() * K.fx / x.z(), g.y() * K.fy / x.z(),
-        -(g.x() * K.fx * x.x() + g.y() * K.fy * x.y()) / (x.z() * x.z());
-    Eigen::Matrix<double, 3, 6> dx;  // x' = x + ω × (x − c) + t
-    const Vec3 r = x - c;
-    dx.leftCols<3>() << 0, r.z(), -r.y(), -r.z(), 0, r.x(), r.y(), -r.x(), 0;
-    dx.rightCols<3>().setIdentity();
-    const Eigen::Matrix<double, 6, 1> J = scale * (dd * dx).transpose();
+    const Eigen::Matrix<double, 6, 1> J = imageJacobian(K, x, c, (un.pixel - uv).normalized());
     const double e = scale * d;
     const double w = 4 * (e < huber ? 1.0 : huber / e);
     P->A += w * J * J.transpose();
