@@ -1,18 +1,14 @@
 #!/usr/bin/env bash
-# Builds inhand with AddressSanitizer + UndefinedBehaviorSanitizer in ./build-asan and runs the
-# test suite under them (CI runs it after the README's test command). Without arguments: every
+# Builds inhand with AddressSanitizer + UndefinedBehaviorSanitizer in ./build-asan (clang; the
+# fuzzers share the build: scripts/asan_build.sh) and runs the test suite under them (CI runs it
+# after the README's test command). Without arguments: every
 # test but those labelled whole_scans (checkpoints, faults, determinism: a dozen two-grasp scans,
 # about 40 min more under the sanitizers; the ordinary build runs them) and ten long scans (below).
 # Arguments go to ctest instead (e.g. `-L whole_scans`, or `-E NONE` for everything).
 set -euo pipefail
 cd "$(dirname "$0")/.."
-generator=()
-command -v ninja > /dev/null && [ ! -f build-asan/CMakeCache.txt ] && generator=(-G Ninja)
-# Line tables only (-g1): reports keep their file:line, and the build takes about a third less
-# time than with full debug information (measured on src/scan/session.cc: 236 s -> 161 s).
-cmake -S . -B build-asan "${generator[@]}" -DCMAKE_BUILD_TYPE=RelWithDebInfo -DINHAND_SANITIZE=ON \
-  -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O2 -g1 -DNDEBUG" -DCMAKE_C_FLAGS_RELWITHDEBINFO="-O2 -g1 -DNDEBUG" \
-  -DINHAND_BUILD_BENCHMARKS=OFF > /dev/null
+source scripts/asan_build.sh
+asan_configure
 cmake --build build-asan -j"$(nproc)"
 # Debian's urdfdom leaks its partly built tree on a URDF it rejects (fuzz/regressions/urdf):
 # those tests set their own ASAN_OPTIONS; everything else runs with leak checking on.
