@@ -450,9 +450,8 @@ TEST(Tracking, ABodyShortOfTheFramesOutlineIsPulledAlongIt) {
   Iso3 believed = trueT_C_P;
   believed.translation().x() += 0.008;
   TrackingOptions o;
-  const TrackResult r =
-      alignBodyToDepth(d, hidden, camera.intrinsics, points, occluders, believed, 0.001, o,
-                       /*pull_uncovered=*/true);
+  const TrackResult r = alignBodyToDepth(d, hidden, camera.intrinsics, points, occluders, believed,
+                                         0.001, o, UncoveredPull::kAfterConverging);
   ASSERT_TRUE(r.ok) << r.reason;
   const Iso3 found = r.correction * believed;
   const Vec3 off = found.translation() - trueT_C_P.translation();
@@ -510,9 +509,8 @@ TEST(Tracking, AHeldBodyACentimetreOffIsFoundWithTheUncoveredPull) {
   believed.translation() += Vec3(0.012, -0.005, 0.003);
   believed.linear() = Eigen::AngleAxisd(-0.1, Vec3::UnitZ()).toRotationMatrix() * believed.linear();
   TrackingOptions o;
-  const TrackResult r =
-      alignBodyToDepth(d, hidden, camera.intrinsics, points, occluders, believed, 0.001, o,
-                       /*pull_uncovered=*/true);
+  const TrackResult r = alignBodyToDepth(d, hidden, camera.intrinsics, points, occluders, believed,
+                                         0.001, o, UncoveredPull::kAfterConverging);
   ASSERT_TRUE(r.ok) << r.reason;
   const Iso3 found = r.correction * believed;
   const double off = (found.translation() - trueT_C_B.translation()).norm();

@@ -173,7 +173,8 @@ std::vector<std::pair<std::optional<Iso3>, TrackResult>> registerModelAt(
     const Iso3 T_C_O = T_B_C.inverse() * coarseAlign(frame_B, grid, starts[size_t(k)]);
     TrackResult r =
         alignBodyToDepth(depth, hidden, K, model.points, model.occluders, T_C_O,
-                         axialSigma(noise, T_C_O.translation().z(), 0), options, in_hand);
+                         axialSigma(noise, T_C_O.translation().z(), 0), options,
+                         in_hand ? UncoveredPull::kAfterConverging : UncoveredPull::kOff);
     if (r.ok) out[size_t(k)].first = T_B_C * r.correction * T_C_O;
     out[size_t(k)].second = std::move(r);
   });

@@ -298,7 +298,7 @@ struct ScanSession::State {
     const double sigma = axialSigma(noise, T_C_palm.translation().z(), 0);
     SlipMeasure out;
     out.r = alignBodyToDepth(depth, hidden, K, slipPoints, objectOccluders, T_C_palm, sigma, near,
-                             /*pull_uncovered=*/true);
+                             UncoveredPull::kFromStart);
     if (!out.r.ok) return out;
     out.moved = T_C_palm.inverse() * out.r.correction * T_C_palm;  // palm frame
     out.surface_m = surfaceMotion(slipPoints, out.moved);
@@ -1055,7 +1055,7 @@ std::optional<Iso3> ScanSession::registerHeldObject(const DepthImage& depth,
   const TrackResult r =
       alignBodyToDepth(depth, robot_mask, s.camera.intrinsics, reg.points, reg.occluders, T_C_O,
                        axialSigma(s.noise, T_C_O.translation().z(), 0), s.options.tracking,
-                       /*pull_uncovered=*/true);
+                       UncoveredPull::kAfterConverging);
   s.summary.tracking_s += secondsSince(t0);
   if (result) *result = r;
   if (!r.ok) return std::nullopt;

@@ -513,7 +513,7 @@ double typicalSpacing(const std::vector<SurfacePoint>& points, const std::vector
 TrackResult alignBodyToDepth(const DepthImage& depth, const std::vector<uint8_t>& hidden,
                              const CameraIntrinsics& K, const std::vector<SurfacePoint>& points_X,
                              const std::vector<Vec3>& occluders_X, const Iso3& T_C_X,
-                             double sigma_m, const TrackingOptions& options, bool pull_uncovered) {
+                             double sigma_m, const TrackingOptions& options, UncoveredPull pull) {
   TrackingOptions o = options;
   o.object_weight = 1;      // no hand: the body's points alone
   DepthImage body = depth;  // hidden pixels pair with nothing
@@ -528,14 +528,10 @@ TrackResult alignBodyToDepth(const DepthImage& depth, const std::vector<uint8_t>
     far = std::max(far, z);
   }
   Silhouette outline = silhouette(depth, hidden, near - 0.05, far + 0.05);
+  if (pull == UncoveredPull::kFromStart) outline.spacing_m = typicalSpacing(points_X, occluders_X);
   const TrackResult coarse = alignFrom(body, K, points_X, 0, occluders_X, T_C_X, Iso3::Identity(),
                                        o.iterations, sigma_m, o, &outline);
-  if (!pull_uncovered || !coarse.ok) return coarse;
-  // The uncovered pixels' pull refines from where the alignment converged without it: from a
-  // start a centimetre off (an object the closing fingers pushed in the hand), the pixels it
-  // finds uncovered are where the misplaced model should be, the pull drew the points to the
-  // wrong ones, and a flat hammer lifted 9 mm from its planned grasp was not found in the hand
-  // (the camera saw through the aligned model). Kept when it converges.
+  if (pull != UncoveredPull::kAfterConverging || !coarse.ok) return coarse;
   outline.spacing_m = typicalSpacing(points_X, occluders_X);
   const TrackResult fine = alignFrom(body, K, points_X, 0, occluders_X, T_C_X, coarse.correction,
                                      o.iterations, sigma_m, o, &outline);

@@ -171,6 +171,18 @@ TrackResult alignToDepth(const DepthImage& depth, const CameraIntrinsics& K,
 // predicted at T_C_X) under `information` · `pair_information`.
 double correctionSignificance(const TrackResult& r, const Iso3& T_C_X, double pair_information);
 
+// How alignBodyToDepth uses the uncovered pixels' pull (below).
+enum class UncoveredPull {
+  kOff,
+  // In every iteration from the start: the slip check, whose start is where the hand held the
+  // body (the refinement below left the mug of Faults.AnObjectThatSlipsIsFoundAndTheGraspCorrected
+  // 5.7 mm off after its slip, against 1.4 mm).
+  kFromStart,
+  // As a refinement from where the alignment without it converged, kept when it converges: a
+  // body looked for from where the hand planned to hold it, which may be a centimetre off.
+  kAfterConverging,
+};
+
 // Aligns a rigid body's surface points (`points_X`, with outward normals, in its frame X) with
 // the depth frame, from X at T_C_X: the object's model with its pose in the hand unknown after a
 // pick-up. `hidden` (empty, or one per pixel): pixels of something in front that may hide the
@@ -179,20 +191,19 @@ double correctionSignificance(const TrackResult& r, const Iso3& T_C_X, double pa
 // slides a body sideways slowly and stops where a face seen head-on fits (anywhere in its own
 // plane), so a point that projects where the frame shows neither the body (depths within 5 cm
 // of its own) nor a hidden pixel is pulled by its image distance to the nearest one.
-// `pull_uncovered` (a held body, its outline against the robot and the background): the outline
+// `pull` (a held body, its outline against the robot and the background): the outline
 // the other way too, a pixel at the body's depths within the final gate of it that no point of
 // the body covers (none within 1.5 times their spacing) pulls the nearest point towards it (a
 // body whose far end projects onto hidden pixels and whose near end falls short of the frame's
-// has nothing else pulling it along), as a refinement from where the alignment without it
-// converged (from a start a centimetre off, the pixels uncovered there drew the points the wrong
-// way: a flat hammer pushed 9 mm in the hand was not found); kept when it converges. Not on the
-// table: it broke the re-find of a tipped box
+// has nothing else pulling it along); from a start a centimetre off, the pixels uncovered there
+// drew the points the wrong way (UncoveredPull::kAfterConverging: a flat hammer pushed 9 mm in the
+// hand was not found). Not on the table: it broke the re-find of a tipped box
 // (Session.AnObjectThatTippedIsFoundAgainOnTheTable: every start failed). The correction:
 // T_C_X = correction · T_C_X(given).
 TrackResult alignBodyToDepth(const DepthImage& depth, const std::vector<uint8_t>& hidden,
                              const CameraIntrinsics& K, const std::vector<SurfacePoint>& points_X,
                              const std::vector<Vec3>& occluders_X, const Iso3& T_C_X,
                              double sigma_m, const TrackingOptions& options,
-                             bool pull_uncovered = false);
+                             UncoveredPull pull = UncoveredPull::kOff);
 
 }  // namespace inhand
