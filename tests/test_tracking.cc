@@ -407,6 +407,33 @@ TEST(Tracking, AJumpOfTheArmsErrorIsFusedOnlyWhenTheNextFrameConfirmsIt) {
     EXPECT_TRUE(all.addFrame(sensor.capture(), qq, reported).fused);
 }
 
+namespace {
+// A noiseless frame from the camera's origin of `body` at T_C_body and a finger (a box of
+// `finger_size` at finger_at, in the camera frame), the finger's pixels hidden (the robot's).
+struct FingerFrame {
+  DepthImage depth;
+  std::vector<uint8_t> hidden;
+};
+FingerFrame frameWithFinger(const TriangleMesh& body, const Iso3& T_C_body, const Vec3& finger_size,
+                            const Vec3& finger_at) {
+  RayScene scene;
+  scene.addMesh(body, T_C_body);
+  Iso3 T_C_finger = Iso3::Identity();
+  T_C_finger.translation() = finger_at;
+  const int finger = scene.addMesh(makeBox(finger_size), T_C_finger);
+  scene.commit();
+  RenderOptions ro;
+  ro.noise = false;
+  std::vector<int> geometry;
+  FingerFrame f;
+  f.depth = renderDepth(scene, Iso3::Identity(), DepthCameraOptions{}, NoiseModelOptions{}, ro,
+                        &geometry);
+  f.hidden.assign(geometry.size(), 0);
+  for (size_t i = 0; i < geometry.size(); ++i) f.hidden[i] = geometry[i] == finger;
+  return f;
+}
+}  // namespace
+
 // A pen (12 × 140 mm) seen side on at 60 cm, its right end behind a finger (the robot's pixels,
 // hidden), the body believed 8 mm to the right along its axis: the believed right end projects
 // onto the finger, so the outline term has nothing to pull, and the sides fit anywhere along the
@@ -416,20 +443,9 @@ TEST(Tracking, ABodyShortOfTheFramesOutlineIsPulledAlongIt) {
   Iso3 trueT_C_P = Iso3::Identity();
   trueT_C_P.linear() = Eigen::AngleAxisd(M_PI / 2, Vec3::UnitY()).toRotationMatrix();  // z to x
   trueT_C_P.translation() = Vec3(0, 0, 0.6);
-  RayScene scene;
-  scene.addMesh(pen, trueT_C_P);
-  Iso3 T_C_finger = Iso3::Identity();
-  T_C_finger.translation() = Vec3(0.06, 0, 0.55);
-  const int finger = scene.addMesh(makeBox(Vec3(0.04, 0.04, 0.01)), T_C_finger);
-  scene.commit();
-  DepthCameraOptions camera;
-  RenderOptions ro;
-  ro.noise = false;
-  std::vector<int> geometry;
-  const DepthImage d =
-      renderDepth(scene, Iso3::Identity(), camera, NoiseModelOptions{}, ro, &geometry);
-  std::vector<uint8_t> hidden(geometry.size(), 0);
-  for (size_t i = 0; i < geometry.size(); ++i) hidden[i] = geometry[i] == finger;
+  const DepthCameraOptions camera;
+  const auto [d, hidden] =
+      frameWithFinger(pen, trueT_C_P, Vec3(0.04, 0.04, 0.01), Vec3(0.06, 0, 0.55));
   // A model's points as a scan's are: its surface every 1.5 mm (rings along the axis, discs at
   // the ends), outward normals; the same points hide what lies behind them.
   std::vector<SurfacePoint> points;
@@ -473,20 +489,9 @@ TEST(Tracking, AHeldBodyACentimetreOffIsFoundWithTheUncoveredPull) {
   Iso3 trueT_C_B = Iso3::Identity();
   trueT_C_B.linear() = Eigen::AngleAxisd(-0.9, Vec3::UnitX()).toRotationMatrix();
   trueT_C_B.translation() = Vec3(0, 0, 0.6);
-  RayScene scene;
-  scene.addMesh(bar, trueT_C_B);
-  Iso3 T_C_finger = Iso3::Identity();
-  T_C_finger.translation() = Vec3(0.085, 0, 0.56);
-  const int finger = scene.addMesh(makeBox(Vec3(0.04, 0.05, 0.012)), T_C_finger);
-  scene.commit();
-  DepthCameraOptions camera;
-  RenderOptions ro;
-  ro.noise = false;
-  std::vector<int> geometry;
-  const DepthImage d =
-      renderDepth(scene, Iso3::Identity(), camera, NoiseModelOptions{}, ro, &geometry);
-  std::vector<uint8_t> hidden(geometry.size(), 0);
-  for (size_t i = 0; i < geometry.size(); ++i) hidden[i] = geometry[i] == finger;
+  const DepthCameraOptions camera;
+  const auto [d, hidden] =
+      frameWithFinger(bar, trueT_C_B, Vec3(0.04, 0.05, 0.012), Vec3(0.085, 0, 0.56));
   // The box's surface every 1.5 mm, outward normals.
   std::vector<SurfacePoint> points;
   const Vec3 half(0.09, 0.02, 0.0075);
