@@ -1,10 +1,11 @@
 #!/usr/bin/env bash
 # Builds the libFuzzer targets (clang, ASan+UBSan, in build-asan/, the build scripts/sanitize.sh
 # runs the tests in: scripts/asan_build.sh) and fuzzes each for SECONDS (default 60) from its seed
-# corpus (fuzz/corpus/<target>, copied: the repository's corpus is not changed) and its
-# regressions (fuzz/regressions/<target>, read only: inputs that once crashed a loader). Usage: scripts/fuzz.sh [SECONDS] [TARGET...]. A crash stops with a non-zero exit;
-# the input is in build-asan/artifacts/<target>/. Prints a table row per target: executions,
-# corpus size, crashes. FUZZ_SEED=N fixes libFuzzer's seed (CI: 1); unset, each run differs.
+# corpus (fuzz/corpus/<target>, copied: the repository's corpus is not changed) and its regressions
+# (fuzz/regressions/<target>, read only: inputs that once crashed a loader). Usage: scripts/fuzz.sh
+# [SECONDS] [TARGET...]. A crash stops with a non-zero exit; the input is in
+# build-asan/artifacts/<target>/. Prints a table row per target: executions, corpus size, crashes.
+# FUZZ_SEED=N fixes libFuzzer's seed (CI: 1); unset, each run differs.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 seconds="${1:-60}"
@@ -31,8 +32,8 @@ for t in "${targets[@]}"; do
   leaks=1
   [ "$t" = urdf ] && leaks=0
   set +e
-  ASAN_OPTIONS=detect_leaks=$leaks "build-asan/fuzz/fuzz_$t" "$corpus" "${regressions[@]}" -max_total_time="$seconds" \
-    -detect_leaks=$leaks -seed="${FUZZ_SEED:-0}" \
+  ASAN_OPTIONS=detect_leaks=$leaks "build-asan/fuzz/fuzz_$t" "$corpus" "${regressions[@]}" \
+    -max_total_time="$seconds" -detect_leaks=$leaks -seed="${FUZZ_SEED:-0}" \
     -timeout=10 -rss_limit_mb=2048 -malloc_limit_mb=1024 -max_len=65536 -print_final_stats=1 \
     -artifact_prefix="$artifacts" -jobs="$(nproc)" -workers="$(nproc)" > "$log" 2>&1
   rc=$?

@@ -1,10 +1,10 @@
 #!/usr/bin/env bash
 # Builds inhand with AddressSanitizer + UndefinedBehaviorSanitizer in ./build-asan (clang; the
 # fuzzers share the build: scripts/asan_build.sh) and runs the test suite under them (CI runs it
-# after the README's test command). Without arguments: every
-# test but those labelled whole_scans (checkpoints, faults, determinism: a dozen two-grasp scans,
-# about 40 min more under the sanitizers; the ordinary build runs them) and ten long scans (below).
-# Arguments go to ctest instead (e.g. `-L whole_scans`, or `-E NONE` for everything).
+# after the README's test command). Without arguments: every test but those labelled whole_scans
+# (checkpoints, faults, determinism: a dozen two-grasp scans, about 40 min more under the
+# sanitizers; the ordinary build runs them) and ten long scans (below). Arguments go to ctest
+# instead (e.g. `-L whole_scans`, or `-E NONE` for everything).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 source scripts/asan_build.sh

@@ -529,13 +529,14 @@ TrackResult alignBodyToDepth(const DepthImage& depth, const std::vector<uint8_t>
   }
   Silhouette outline = silhouette(depth, hidden, near - 0.05, far + 0.05);
   if (pull == UncoveredPull::kFromStart) outline.spacing_m = typicalSpacing(points_X, occluders_X);
-  const TrackResult coarse = alignFrom(body, K, points_X, 0, occluders_X, T_C_X, Iso3::Identity(),
-                                       o.iterations, sigma_m, o, &outline);
-  if (pull != UncoveredPull::kAfterConverging || !coarse.ok) return coarse;
+  // Without the pull (with it from the start for kFromStart), then the refinement.
+  const TrackResult first = alignFrom(body, K, points_X, 0, occluders_X, T_C_X, Iso3::Identity(),
+                                      o.iterations, sigma_m, o, &outline);
+  if (pull != UncoveredPull::kAfterConverging || !first.ok) return first;
   outline.spacing_m = typicalSpacing(points_X, occluders_X);
-  const TrackResult fine = alignFrom(body, K, points_X, 0, occluders_X, T_C_X, coarse.correction,
+  const TrackResult fine = alignFrom(body, K, points_X, 0, occluders_X, T_C_X, first.correction,
                                      o.iterations, sigma_m, o, &outline);
-  return fine.ok ? fine : coarse;
+  return fine.ok ? fine : first;
 }
 
 }  // namespace inhand
