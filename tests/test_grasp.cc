@@ -8,10 +8,12 @@
 #include "inhand/geometry/builtin_objects.h"
 #include "inhand/geometry/point_cloud.h"
 #include "inhand/geometry/primitives.h"
+#include "inhand/geometry/stable_poses.h"
 #include "inhand/grasp/grasp.h"
 #include "inhand/physics/physics.h"
 #include "inhand/robot/collision.h"
 #include "inhand/scan/multi_grasp.h"
+#include "inhand/scan/table_top.h"
 #include "inhand/sim/sim_world.h"
 #include "test_util.h"
 
@@ -645,4 +647,48 @@ TEST(GraspGeneration, AGraspSetMadeAgainGivesTheSameGrasps) {
   KnownGrasp wrong = set[0];
   wrong.hand = JointVector::Zero(3);
   EXPECT_THROW(graspsFromSet(r, box, T_B_O, r.home(), {wrong}, o), std::runtime_error);
+}
+
+// Where the table-top frames say the object may lie (TableTopOptions::footprint_region) fits an
+// object turned on the table: every corner of the true box is inside the region, and the corners
+// of its axis-aligned box (box_O), which stand out beside a box turned 35° about the vertical,
+// are not. The model of what the
+// camera did not see, closed up to box_O, once stood out there, and a pinch's fingertips that
+// straddled the box landed on it.
+TEST(TableTop, TheRegionWhereTheObjectMayLieFitsAnObjectTurnedOnTheTable) {
+  using test::wam;
+  const TriangleMesh box = loadObject("builtin:cracker_box");
+  SimOptions so;
+  so.R_B_O_rest = Eigen::AngleAxisd(35 * M_PI / 180, Vec3::UnitZ()).toRotationMatrix() *
+                  stablePoses(box).at(0).R_B_O;
+  auto [T_O_palm, q] = defaultGrasp(wam(), box);
+  SimWorld world(wam(), box, T_O_palm, DepthCameraOptions{}, NoiseModelOptions{}, so);
+  world.held = false;
+  world.q = wam().home();
+  SimSensor sensor(&world, DepthCameraOptions{});
+  const Iso3 rest = world.restPose();
+  TableTopOptions to;
+  to.footprint_region = true;
+  const std::optional<Iso3> aim =
+      wam().camera().aimAt(rest.translation() + Vec3(0, 0, to.aim_height_m));
+  ASSERT_TRUE(aim);
+  sensor.setPose(*aim);
+  const DepthImage d = sensor.capture();
+  const TableTopObject o =
+      findObjectOnTable({d}, {std::vector<uint8_t>(d.depth_m.size(), 0)}, *aim,
+                        sensor.camera().intrinsics, rest, wam(), ScanOptions{}, to);
+  ASSERT_EQ(o.problem, Termination::kRunning);
+  ASSERT_GE(o.region_O.size(), 10u);
+  // The box's corners (its extremes), on the table and above it.
+  ASSERT_EQ(box.vertices.size(), 8u);
+  for (const Vec3f& v : box.vertices)
+    EXPECT_TRUE(insideRegion(o.region_O, v.cast<double>())) << v.transpose();
+  for (int c = 0; c < 8; ++c) EXPECT_FALSE(insideRegion(o.region_O, o.box_O.corner(c))) << c;
+  // Off (the default): box_O's faces alone, its corners inside.
+  to.footprint_region = false;
+  const TableTopObject boxOnly =
+      findObjectOnTable({d}, {std::vector<uint8_t>(d.depth_m.size(), 0)}, *aim,
+                        sensor.camera().intrinsics, rest, wam(), ScanOptions{}, to);
+  EXPECT_EQ(boxOnly.region_O.size(), 6u);
+  for (int c = 0; c < 8; ++c) EXPECT_TRUE(insideRegion(boxOnly.region_O, boxOnly.box_O.corner(c)));
 }

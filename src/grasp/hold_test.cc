@@ -34,7 +34,8 @@ std::string HoldTestOptions::validate() const {
 }
 
 std::vector<ConvexPiece> modelPiecesAboveTable(const TriangleMesh& model_O, const Iso3& T_B_O,
-                                               const RobotModel& robot, const Aabb* keep_O,
+                                               const RobotModel& robot,
+                                               const std::vector<Plane>* keep_O,
                                                const ConvexDecompositionOptions& options) {
   // The table top in frame O: n·x ≥ d above it (a millimetre up: the model's surface where it
   // meets the top is a voxel's width of guess).
@@ -43,10 +44,8 @@ std::vector<ConvexPiece> modelPiecesAboveTable(const TriangleMesh& model_O, cons
   std::vector<ConvexPiece> out;
   for (const ConvexPiece& p : convexDecomposition(model_O, options)) {
     std::optional<ConvexPiece> c = clipPiece(p, n, d);
-    for (int k = 0; k < 3 && keep_O && c; ++k) {
-      c = clipPiece(*c, Vec3::Unit(k), keep_O->min[k]);
-      if (c) c = clipPiece(*c, -Vec3::Unit(k), -keep_O->max[k]);
-    }
+    for (size_t k = 0; keep_O && k < keep_O->size() && c; ++k)
+      c = clipPiece(*c, (*keep_O)[k].n, -(*keep_O)[k].d);
     if (c) out.push_back(std::move(*c));
   }
   return out;
@@ -178,7 +177,7 @@ void robustFirst(const RobotModel& robot, const std::vector<ConvexPiece>& pieces
 }  // namespace
 
 double rankByHold(const RobotModel& robot, const TriangleMesh& model_O, const Iso3& T_B_O,
-                  const Aabb* keep_O, double friction, const HoldTestOptions& o,
+                  const std::vector<Plane>* keep_O, double friction, const HoldTestOptions& o,
                   std::vector<GraspCandidate>* candidates) {
   const auto t0 = std::chrono::steady_clock::now();
   if (!o.enabled || candidates->empty() || model_O.empty()) return 0;

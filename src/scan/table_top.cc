@@ -73,6 +73,22 @@ Aabb believedBox(const Aabb& box, const Vec3& centre, const Vec3& onTable, const
   out.max.array() += 0.005;
   return out;
 }
+// TableTopObject::region_O: box_O's faces and, with `footprint`, the sides of the points'
+// upright rectangle (their trimmed extents along `axes`), 5 mm out.
+std::vector<Plane> regionPlanes(const TableTopObject& o, const Vec3& up, bool footprint) {
+  std::vector<Plane> region;
+  for (int k = 0; k < 3; ++k) {
+    region.push_back(Plane{Vec3::Unit(k), -o.box_O.min[k]});
+    region.push_back(Plane{-Vec3::Unit(k), o.box_O.max[k]});
+    const Vec3 a = o.axes.axes.col(k);
+    // The upright axis: box_O's faces bound it.
+    if (!footprint || std::abs(a.dot(up)) > 0.5) continue;
+    const double c = o.axes.centroid.dot(a);
+    region.push_back(Plane{a, -(c + o.axes.min[k] - 0.005)});
+    region.push_back(Plane{-a, c + o.axes.max[k] + 0.005});
+  }
+  return region;
+}
 }  // namespace
 
 TableTopObject findObjectOnTable(const std::vector<DepthImage>& frames,
@@ -145,7 +161,13 @@ TableTopObject findObjectOnTable(const std::vector<DepthImage>& frames,
     return out;
   }
   out.box_O = believedBox(box, out.centre_O, onTable, out.height_m * n);
+  out.region_O = regionPlanes(out, n, to.footprint_region);
   return out;
+}
+
+bool insideRegion(const std::vector<Plane>& region, const Vec3& p) {
+  return std::all_of(region.begin(), region.end(),
+                     [&](const Plane& h) { return h.distance(p) >= 0; });
 }
 
 ScanOptions fitScanVolume(const ScanOptions& options, const TableTopObject& object) {
@@ -176,18 +198,20 @@ GraspGeneration firstGrasps(const ScanSession& session, const TableTopObject& ob
                             const Iso3& T_B_O_rest, const JointVector& q_now) {
   const RobotModel& m = session.robot();
   const ObjectModel seen = session.planningModel();
-  Aabb keepBox = object.box_O;
-  keepBox.min.array() -= 0.02;
-  keepBox.max.array() += 0.02;
+  // The model where the object may lie (region_O; without the footprint's rectangle, 2 cm out):
+  // what the camera did not see is closed up to the volume's bounds.
+  std::vector<Plane> region = object.region_O;
+  if (!session.multiOptions().table_top.footprint_region)
+    for (Plane& h : region) h.d += 0.02;
   TriangleMesh model;
   model.vertices = seen.mesh.vertices;
   for (const Tri& t : seen.mesh.triangles) {
-    bool keep = true;
-    for (int k = 0; k < 3 && keep; ++k) {
+    bool inside = true;
+    for (int k = 0; k < 3 && inside; ++k) {
       const Vec3 p = seen.mesh.vertices[t[k]].cast<double>();
-      keep = object.table_O.distance(p) > 0.003 && keepBox.contains(p);
+      inside = object.table_O.distance(p) > 0.003 && insideRegion(region, p);
     }
-    if (keep) model.triangles.push_back(t);
+    if (inside) model.triangles.push_back(t);
   }
   GraspGeneration first =
       generateGrasps(m, model, T_B_O_rest, q_now, session.multiOptions().grasp, &object.points_O);
@@ -201,7 +225,7 @@ GraspGeneration firstGrasps(const ScanSession& session, const TableTopObject& ob
                    });
   // Those that hold the model in physics first (grasp/hold_test.h).
   const double holdS =
-      rankByHold(m, seen.mesh, T_B_O_rest, &object.box_O, session.multiOptions().grasp.friction,
+      rankByHold(m, seen.mesh, T_B_O_rest, &object.region_O, session.multiOptions().grasp.friction,
                  session.multiOptions().grasp.hold, &first.candidates);
   session.log(holdLine(first.candidates, holdS));
   return first;

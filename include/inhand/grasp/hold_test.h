@@ -13,6 +13,7 @@
 
 #include "inhand/core/options.h"
 #include "inhand/geometry/convex_decomposition.h"
+#include "inhand/geometry/point_cloud.h"
 #include "inhand/physics/physics.h"
 #include "inhand/robot/robot_model.h"
 
@@ -104,9 +105,10 @@ int holdStage(HoldFailure failure);
 
 // The closed model (frame O) resting at T_B_O, as convex pieces of its part above the robot's
 // table top (the unobserved space below the top is not the object) and, when `keep_O` is given,
-// inside that box (where the object may lie).
+// inside those half-spaces (where the object may lie; Plane::distance ≥ 0 inside).
 std::vector<ConvexPiece> modelPiecesAboveTable(const TriangleMesh& model_O, const Iso3& T_B_O,
-                                               const RobotModel& robot, const Aabb* keep_O,
+                                               const RobotModel& robot,
+                                               const std::vector<Plane>* keep_O,
                                                const ConvexDecompositionOptions& options);
 
 // One candidate on the model `world` holds (its object put at T_B_O, the palm at the candidate's
@@ -125,7 +127,7 @@ HoldTrial tryHold(PhysicsWorld& world, const Iso3& T_B_O, const Iso3& T_O_palm,
 // planner assumes.
 // Returns the seconds it took. Nothing happens with options.enabled false.
 double rankByHold(const RobotModel& robot, const TriangleMesh& model_O, const Iso3& T_B_O,
-                  const Aabb* keep_O, double friction, const HoldTestOptions& options,
+                  const std::vector<Plane>* keep_O, double friction, const HoldTestOptions& options,
                   std::vector<GraspCandidate>* candidates);
 
 // "hold test: H of N candidates held the model (S s)" (N: those tested), or "" when none was.

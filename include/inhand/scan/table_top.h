@@ -21,7 +21,18 @@ struct TableTopObject {
   // Where the object may lie: the points' box mirrored about the centre (the camera saw one
   // side), from the table to the top, plus 5 mm.
   Aabb box_O;
+  // The same as half-spaces: box_O's six faces and, with TableTopOptions::footprint_region, the
+  // four sides of the points' rectangle along their upright principal axes (`axes`' extents,
+  // trimmed of stray returns), 5 mm out; a point p lies inside when plane.distance(p) ≥ 0 for
+  // every plane. An object turned on the table fills a
+  // fraction of its axis-aligned box, and stray returns at depth edges widen that box: the model
+  // of what the camera did not see, closed up to the box, stands out beside the object there, and
+  // a pinch's fingertips that straddle the object land on it.
+  std::vector<Plane> region_O;
 };
+
+// Whether p (frame O) lies inside every half-space of `region` (TableTopObject::region_O).
+bool insideRegion(const std::vector<Plane>& region, const Vec3& p);
 
 // Finds the object resting at T_B_O_rest (frame O: the object's frame there) in depth frames
 // taken from T_B_C, the robot's pixels (robot_masks, per frame) left out: RANSAC fits the table

@@ -346,6 +346,9 @@ struct TableTopOptions {
   double cluster_cell_m = 0.01;   // the object is the largest cluster at this linking cell, m
   int min_points = 200;           // fewer object points than this: object_not_found
   PlaneFitOptions plane;          // RANSAC of the table plane
+  // The first grasp's model (candidates and hold test) clipped to the points' upright rectangle
+  // (TableTopObject::region_O); off: to their axis-aligned box (the candidates' 2 cm out).
+  bool footprint_region = false;
 
   template <class V, class S>
   static void fields(V& v, S& o) {
@@ -367,6 +370,9 @@ struct TableTopOptions {
     v.num("plane_max_tilt_deg", o.plane.max_tilt_deg,
           "RANSAC: planes tilted more from the table's normal lose, degrees",
           Range::openClosed(0, 90));
+    v.boolean("footprint_region", o.footprint_region,
+              "the first grasp's model clipped to the points' upright rectangle, 5 mm out (off: "
+              "to their axis-aligned box)");
   }
   std::string validate() const;
 };
