@@ -73,6 +73,7 @@ Aabb believedBox(const Aabb& box, const Vec3& centre, const Vec3& onTable, const
   out.max.array() += 0.005;
   return out;
 }
+
 // TableTopObject::region_O: box_O's faces and, with `footprint`, the sides of the points'
 // upright rectangle (their trimmed extents along `axes`), 5 mm out.
 std::vector<Plane> regionPlanes(const TableTopObject& o, const Vec3& up, bool footprint) {
