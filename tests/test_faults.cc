@@ -2,6 +2,8 @@
 // counters, and the model stays the model of the object (docs/reliability.md has the figures).
 #include <gtest/gtest.h>
 
+#include <cstdio>
+
 #include "inhand/driver/simulated_scan.h"
 #include "inhand/geometry/builtin_objects.h"
 #include "test_util.h"
@@ -141,6 +143,30 @@ TEST(Faults, AnObjectThatSlipsIsFoundAndTheGraspCorrected) {
   EXPECT_LT(s.object_error_median_m, 0.7 * unchecked.object_error_median_m);
   EXPECT_GT(s.metrics.coverage, unchecked.metrics.coverage - 0.03);
   EXPECT_LT(s.metrics.accuracy_mean_mm, 0.7 * unchecked.metrics.accuracy_mean_mm);
+}
+
+// Physics: the pill bottle creeps in the hand under the motions' accelerations, a millimetre or
+// so at a time, too little for a slip (tracking.slip_m). Followed (tracking.creep_m), its frames
+// are fused nearer where it is than with creep not followed (recorded: 3.0 against 5.0 mm, the
+// model's coverage 92 against 78 %).
+TEST(Faults, AnObjectThatCreepsInTheHandIsFollowed) {
+  auto scan = [&](double creep_m) {
+    ScanConfig c = fastConfig();
+    c.sim.physics.enabled = true;
+    c.scan.tracking.creep_m = creep_m;
+    c.multi.max_grasps = 1;
+    return runSimulatedScan(test::wam(), loadObject("builtin:pill_bottle"), c);
+  };
+  const SimulatedScan s = scan(ScanOptions().tracking.creep_m), unfollowed = scan(0);
+  std::printf(
+      "creeps followed %d; object error median %.2f mm (creep not followed: %.2f mm); "
+      "coverage %.3f (%.3f)\n",
+      s.result.scan.creeps_followed, 1000 * s.object_error_median_m,
+      1000 * unfollowed.object_error_median_m, s.metrics.coverage, unfollowed.metrics.coverage);
+  EXPECT_EQ(unfollowed.result.scan.creeps_followed, 0);
+  EXPECT_GE(s.result.scan.creeps_followed, 1);
+  EXPECT_LT(s.object_error_median_m, 0.8 * unfollowed.object_error_median_m);
+  EXPECT_GT(s.metrics.coverage, unfollowed.metrics.coverage - 0.03);
 }
 
 TEST(Faults, RefusedMotionsAreReplannedAndFailedPickUpsTryTheNextCandidate) {

@@ -414,6 +414,7 @@ int fuseWithRobot(const FuseArgs& args, const fs::path& dir, const FrameSet& set
   summary["tracking"] = o.tracking.enabled;
   summary["frames_not_fused"] = framesNotFusedJson(sum);
   summary["slips_found"] = slipsJson(sum.slips);
+  summary["creeps_followed"] = sum.creeps_followed;
   summary["frames_tracked"] = "frames_tracked.json";
   addModelFigures(result, args.surface, &summary);
   summary["timing_s"] = {{"fusion", sum.fusion_s},

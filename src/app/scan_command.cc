@@ -382,6 +382,7 @@ Json scanSummary(const ScanArgs& args, const ScanConfig& o, const SimulatedScan&
   summary["frames_not_fused"] = framesNotFusedJson(r);
   summary["frames_repaired"] = r.frames_repaired;
   summary["slips_found"] = slipsJson(r.slips);
+  summary["creeps_followed"] = r.creeps_followed;
   summary["object_drops"] = sim.drops;
   {
     std::vector<double> mm;  // the model registered where the object rests, per put-down

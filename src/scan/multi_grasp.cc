@@ -535,7 +535,9 @@ void runGrasps(RobotInterface& robot, DepthSensor& sensor, ScanSession& session,
   auto log = [&](const std::string& s) { session.log(s); };
   ScanResult& all = out.scan;
   Iso3 T_O_palm = T_O_palm0;
-  next.T_O_palm = T_O_palm;
+  // A resumed grasp's record keeps the grasp it was picked up with (the session's may have moved
+  // since with a slip or creep).
+  if (!resumed) next.T_O_palm = T_O_palm;
   for (int g = first;; ++g) {
     auto checkpoint = [&] {
       if (progress.checkpoint) progress.checkpoint({&session, &out, g, &next, T_B_O_rest, box_O});

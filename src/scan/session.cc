@@ -52,7 +52,29 @@ struct SlipMeasure {
   double surface_m = 0;           // surfaceMotion of the correction
   bool significant = false;       // beyond the alignment's own uncertainty
   bool moving = false;            // a slip: farther than slip_m, significant, better borne out
+  TrackResult held;               // the frame against the model where the grasp holds it
 };
+
+// Creep (TrackingOptions::creep_m), not a slip: a significant correction moving the surface
+// (`points`) more than creep_m and at most twice slip_m, while no slip goes on, that the frame
+// bears out better than the held pose (a residual 15 % smaller) and does not see through
+// clearly more (the converse of SlipMeasure::moving's test). True when
+// the last frame (`*pending`) showed it alike, within slip_m, as a slip is confirmed; the grasp
+// then follows it. `*pending` keeps this frame's correction for the next.
+bool creepConfirmed(const SlipMeasure& slip, bool slipping, const TrackingOptions& o,
+                    const std::vector<SurfacePoint>& points, std::optional<Iso3>* pending) {
+  const bool creep = !slip.moving && !slipping && o.creep_m > 0 && slip.significant &&
+                     slip.surface_m > o.creep_m && slip.surface_m <= 2 * o.slip_m &&
+                     slip.held.rms_m > 1.15 * slip.r.rms_m &&
+                     slip.r.see_through <= 2 * slip.held.see_through + slip.r.inliers / 20;
+  const bool alike =
+      creep && *pending && surfaceMotion(points, slip.moved * (*pending)->inverse()) < o.slip_m;
+  if (creep && !alike)
+    *pending = slip.moved;
+  else
+    pending->reset();
+  return alike;
+}
 }  // namespace
 
 // A reading of the arm's joint torques at rest, with the grasp it was taken in.
@@ -139,6 +161,7 @@ struct ScanSession::State {
   bool slipping = false;
   Iso3 slipFrom = Iso3::Identity();
   std::optional<Iso3> slipPending;       // the last frame's unconfirmed slip (palm frame)
+  std::optional<Iso3> creepPending;      // the last frame's unconfirmed creep (palm frame)
   std::vector<SurfacePoint> slipPoints;  // the model's observed surface for it (palm frame)
   int slipRefinements = 0;               // frames that refined the grasp after it moved
   SlipRecord slip;
@@ -229,6 +252,7 @@ struct ScanSession::State {
     used.push_back(rec.dir_O);
     viewOpen = true;
     viewPath = path;
+    creepPending.reset();  // creep is borne out by two frames of one view
   }
   // addFrame's checks: the reported joints' distance from the open view's path (the largest
   // joint's, rad); the held object's measured surface points (supportPoints) the frame bears
@@ -304,16 +328,28 @@ struct ScanSession::State {
     out.surface_m = surfaceMotion(slipPoints, out.moved);
     out.significant =
         correctionSignificance(out.r, T_C_palm, o.pair_information) > o.in_hand_significance;
-    if (!(out.surface_m > o.slip_m && out.significant)) return out;
+    const double least = o.creep_m > 0 ? std::min(o.creep_m, o.slip_m) : o.slip_m;
+    if (!(out.surface_m > least && out.significant)) return out;
     TrackingOptions at = near;
     at.iterations = 0;  // the frame against the model where the hand holds it
-    const TrackResult held =
-        alignBodyToDepth(depth, hidden, K, slipPoints, objectOccluders, T_C_palm, sigma, at);
+    out.held = alignBodyToDepth(depth, hidden, K, slipPoints, objectOccluders, T_C_palm, sigma, at);
+    const TrackResult& held = out.held;
     const TrackResult& r = out.r;
+    if (!(out.surface_m > o.slip_m)) return out;
     out.moving = held.rms_m > 1.5 * r.rms_m || held.inliers < 0.75 * r.inliers ||
                  held.see_through > 2 * r.see_through + r.inliers / 20;
     return out;
   }
+  // A slip event begins (unless one goes on): from the grasp as it is, in the current view.
+  void startSlip() {
+    if (slipping) return;
+    slipping = true;
+    slipFrom = T_O_palm;
+    slip = SlipRecord{};
+    slip.grasp = grasp;
+    slip.view = std::max(0, int(views.size()) - 1);
+  }
+
   // Why an in-hand frame (taken from T_O_C) lands where the model knows space is empty, or ""
   // when it does not: more than checks.max_free_space_fraction of its sampled points not in
   // `carve` (every second pixel of every second row, in the volume) lie in empty voxel cells.
@@ -481,6 +517,7 @@ void ScanSession::beginGrasp(const Iso3& T_O_palm, const JointVector& q, const A
   s.summary.termination = Termination::kRunning;
   s.summary.message.clear();
   closeSlip();
+  s.creepPending.reset();
   s.T_O_palm = T_O_palm;
   s.qGrasp = q;
   s.objectBox = object_box_O;
@@ -508,6 +545,7 @@ void ScanSession::endGrasp() {
   if (s_->viewOpen) finishView();
   s_->holding = false;
   closeSlip();
+  s_->creepPending.reset();
 }
 
 void ScanSession::closeSlip(bool settled) {
@@ -906,6 +944,11 @@ std::string ScanSession::followSlip(const DepthImage& depth, const JointVector& 
                   1000 * slip.surface_m);
     return why;
   }
+  // Creep: followed, and the frame fused where it shows the object.
+  if (creepConfirmed(slip, s.slipping, o, s.slipPoints, &s.creepPending)) {
+    moveGrasp(depth, q, T_B_C, T_C_palm, slip.r, slip.moved);
+    ++s.summary.creeps_followed;
+  }
   if (!slip.moving) {
     // At rest where the hand holds it: the event (if any) ends; this frame is fused.
     closeSlip(/*settled=*/true);
@@ -919,13 +962,7 @@ std::string ScanSession::followSlip(const DepthImage& depth, const JointVector& 
     }
     return {};
   }
-  if (!s.slipping) {
-    s.slipping = true;
-    s.slipFrom = s.T_O_palm;
-    s.slip = SlipRecord{};
-    s.slip.grasp = s.grasp;
-    s.slip.view = std::max(0, int(s.views.size()) - 1);
-  }
+  s.startSlip();
   // One frame alone may be a wrong alignment: the grasp moves when the next frame bears the same
   // correction out (the object now rests there in the hand, or goes on moving).
   const bool confirmed =
@@ -1212,6 +1249,7 @@ const ViewRecord& ScanSession::finishView() {
   ViewRecord& rec = s.views.back();
   if (!s.viewOpen) return rec;
   s.viewOpen = false;
+  s.creepPending.reset();
   const ObjectModel after = model();
   if (modelPointsNeeded(s.options)) refreshTrackingModel(&after);
   s.trackingFromFull = true;
@@ -1371,6 +1409,7 @@ void ScanSession::Summary::copyTo(ScanResult* r) const {
   r->frames_repaired = frames_repaired;
   r->frames_in_free_space = frames_in_free_space;
   r->frames_moving = frames_moving;
+  r->creeps_followed = creeps_followed;
   r->slips = slips;
   r->payload = payload;
 }
@@ -1414,6 +1453,7 @@ Json checkpointSummaryJson(const ScanSession::Summary& m) {
           {"frames_unsupported", m.frames_unsupported},
           {"frames_in_free_space", m.frames_in_free_space},
           {"frames_moving", m.frames_moving},
+          {"creeps_followed", m.creeps_followed},
           {"slips", slipsJson(m.slips)},
           {"frames_repaired", m.frames_repaired},
           {"tracking_s", m.tracking_s},
@@ -1561,6 +1601,7 @@ void readSummaryCounts(const Json& m, ScanSession::Summary* sum) {
   sum->frames_unsupported = m.value("frames_unsupported", 0);
   sum->frames_in_free_space = m.value("frames_in_free_space", 0);
   sum->frames_moving = m.value("frames_moving", 0);
+  sum->creeps_followed = m.value("creeps_followed", 0);
   if (m.contains("slips")) sum->slips = slipsFrom(m.at("slips"));
   sum->frames_repaired = m.value("frames_repaired", 0);
   sum->tracking_s = m.value("tracking_s", 0.0);

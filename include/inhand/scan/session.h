@@ -100,6 +100,7 @@ class ScanSession {
     int frames_dropped = 0, frames_off_path = 0, frames_unsupported = 0, frames_repaired = 0;
     int frames_in_free_space = 0;  // depth where the model knows space is empty
     int frames_moving = 0;         // the object moving in the hand (TrackingOptions::slip_check)
+    int creeps_followed = 0;       // grasp corrections for creep (TrackingOptions::creep_m)
     std::vector<SlipRecord> slips;
     int view_evaluations = 0, view_refinements = 0;
     double planning_s = 0, fusion_s = 0, tracking_s = 0;

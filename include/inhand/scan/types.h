@@ -330,7 +330,8 @@ struct ScanResult {
   // empty; joints off the planned path; the object not in the hand. And frames repaired.
   int frames_rejected = 0, frames_dropped = 0, frames_off_path = 0, frames_unsupported = 0,
       frames_repaired = 0, frames_in_free_space = 0;
-  int frames_moving = 0;  // not fused: the object moved in the hand (TrackingOptions::slip_check)
+  int frames_moving = 0;    // not fused: the object moved in the hand (TrackingOptions::slip_check)
+  int creeps_followed = 0;  // grasp corrections for creep (TrackingOptions::creep_m)
   std::vector<SlipRecord> slips;
 };
 
