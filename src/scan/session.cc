@@ -57,10 +57,10 @@ struct SlipMeasure {
 
 // Creep (TrackingOptions::creep_m), not a slip: a significant correction moving the surface
 // (`points`) more than creep_m and at most twice slip_m, while no slip goes on, that the frame
-// bears out better than the held pose (a residual 15 % smaller) and does not see through
-// clearly more (the converse of SlipMeasure::moving's test). True when
-// the last frame (`*pending`) showed it alike, within slip_m, as a slip is confirmed; the grasp
-// then follows it. `*pending` keeps this frame's correction for the next.
+// bears out better than the held pose (a residual 15 % smaller) and does not see through clearly
+// more (the converse of SlipMeasure::moving's test). True when the last frame (`*pending`)
+// showed it alike, within slip_m, as a slip is confirmed; the grasp then follows it. `*pending`
+// keeps this frame's correction for the next.
 bool creepConfirmed(const SlipMeasure& slip, bool slipping, const TrackingOptions& o,
                     const std::vector<SurfacePoint>& points, std::optional<Iso3>* pending) {
   const bool creep = !slip.moving && !slipping && o.creep_m > 0 && slip.significant &&
