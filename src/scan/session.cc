@@ -545,7 +545,6 @@ void ScanSession::endGrasp() {
   if (s_->viewOpen) finishView();
   s_->holding = false;
   closeSlip();
-  s_->creepPending.reset();
 }
 
 void ScanSession::closeSlip(bool settled) {
