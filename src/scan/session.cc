@@ -58,22 +58,37 @@ struct SlipMeasure {
 // Creep (TrackingOptions::creep_m), not a slip: a significant correction moving the surface
 // (`points`) more than creep_m and at most twice slip_m, while no slip goes on, that the frame
 // bears out better than the held pose (a residual 15 % smaller) and does not see through clearly
-// more (the converse of SlipMeasure::moving's test). True when the last frame (`*pending`)
-// showed it alike, within slip_m, as a slip is confirmed; the grasp then follows it. `*pending`
-// keeps this frame's correction for the next.
+// more (the converse of SlipMeasure::moving's test). An alignment with a model that is coarse or
+// seen from few sides slides by as much, but where it slides depends on where the camera looks
+// from; an object that crept sits alike from every side. So the grasp follows a creep when the
+// frames since the first that showed it all showed it alike (within slip_m) and the camera has
+// since turned about the object by creep_turn_deg (`dir`: its optical axis in the palm frame).
+// `*pending` keeps the first frame's correction and axis.
+struct CreepPending {
+  Iso3 moved = Iso3::Identity();
+  Vec3 dir = Vec3::Zero();
+};
 bool creepConfirmed(const SlipMeasure& slip, bool slipping, const TrackingOptions& o,
-                    const std::vector<SurfacePoint>& points, std::optional<Iso3>* pending) {
+                    const std::vector<SurfacePoint>& points, const Vec3& dir,
+                    std::optional<CreepPending>* pending) {
   const bool creep = !slip.moving && !slipping && o.creep_m > 0 && slip.significant &&
                      slip.surface_m > o.creep_m && slip.surface_m <= 2 * o.slip_m &&
                      slip.held.rms_m > 1.15 * slip.r.rms_m &&
                      slip.r.see_through <= 2 * slip.held.see_through + slip.r.inliers / 20;
-  const bool alike =
-      creep && *pending && surfaceMotion(points, slip.moved * (*pending)->inverse()) < o.slip_m;
-  if (creep && !alike)
-    *pending = slip.moved;
-  else
+  if (!creep) {
     pending->reset();
-  return alike;
+    return false;
+  }
+  const bool alike =
+      *pending && surfaceMotion(points, slip.moved * (*pending)->moved.inverse()) < o.slip_m;
+  if (!alike) {
+    *pending = CreepPending{slip.moved, dir};
+    return false;
+  }
+  const double turned = std::acos(std::clamp(dir.dot((*pending)->dir), -1.0, 1.0));
+  if (turned < o.creep_turn_deg * M_PI / 180) return false;
+  pending->reset();
+  return true;
 }
 }  // namespace
 
@@ -160,10 +175,10 @@ struct ScanSession::State {
   // slipFrom), the event's record so far.
   bool slipping = false;
   Iso3 slipFrom = Iso3::Identity();
-  std::optional<Iso3> slipPending;       // the last frame's unconfirmed slip (palm frame)
-  std::optional<Iso3> creepPending;      // the last frame's unconfirmed creep (palm frame)
-  std::vector<SurfacePoint> slipPoints;  // the model's observed surface for it (palm frame)
-  int slipRefinements = 0;               // frames that refined the grasp after it moved
+  std::optional<Iso3> slipPending;           // the last frame's unconfirmed slip (palm frame)
+  std::optional<CreepPending> creepPending;  // an unconfirmed creep (palm frame)
+  std::vector<SurfacePoint> slipPoints;      // the model's observed surface for it (palm frame)
+  int slipRefinements = 0;                   // frames that refined the grasp after it moved
   SlipRecord slip;
   std::vector<std::vector<Vec3>> linkSamples;  // the arm's links' surfaces (link frames)
   JointVector handPointsQ;
@@ -252,7 +267,6 @@ struct ScanSession::State {
     used.push_back(rec.dir_O);
     viewOpen = true;
     viewPath = path;
-    creepPending.reset();  // creep is borne out by two frames of one view
   }
   // addFrame's checks: the reported joints' distance from the open view's path (the largest
   // joint's, rad); the held object's measured surface points (supportPoints) the frame bears
@@ -944,9 +958,14 @@ std::string ScanSession::followSlip(const DepthImage& depth, const JointVector& 
     return why;
   }
   // Creep: followed, and the frame fused where it shows the object.
-  if (creepConfirmed(slip, s.slipping, o, s.slipPoints, &s.creepPending)) {
+  const Vec3 axis = T_C_palm.linear().transpose() * Vec3::UnitZ();  // the camera's, palm frame
+  if (creepConfirmed(slip, s.slipping, o, s.slipPoints, axis, &s.creepPending)) {
     moveGrasp(depth, q, T_B_C, T_C_palm, slip.r, slip.moved);
     ++s.summary.creeps_followed;
+    std::snprintf(why, sizeof why,
+                  "the object crept in the hand (its surface %.1f mm; the grasp follows it)",
+                  1000 * slip.surface_m);
+    log(why);
   }
   if (!slip.moving) {
     // At rest where the hand holds it: the event (if any) ends; this frame is fused.
@@ -1248,7 +1267,6 @@ const ViewRecord& ScanSession::finishView() {
   ViewRecord& rec = s.views.back();
   if (!s.viewOpen) return rec;
   s.viewOpen = false;
-  s.creepPending.reset();
   const ObjectModel after = model();
   if (modelPointsNeeded(s.options)) refreshTrackingModel(&after);
   s.trackingFromFull = true;

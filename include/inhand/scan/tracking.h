@@ -70,13 +70,16 @@ struct TrackingOptions {
   double slip_gate_m = 0.03;  // its first iteration's depth gate, m
   // Creep: a significant correction that moves the model's surface by more than creep_m (and at
   // most twice slip_m) but is not a slip, that the frame bears out better than the held pose (a
-  // residual 15 % smaller, not clearly more seen through), shown alike (within slip_m) by two
-  // frames in a row of one view while no slip goes on, is followed: the grasp is corrected and
-  // the frame fused there. An object that creeps in the hand under a motion's accelerations (a
-  // millimetre or so per view, in physics) otherwise stays where the grasp began while the
-  // frames fused there smear the model along with it, so that a slow creep never adds up to a
-  // slip against that model. 0: not followed.
+  // residual 15 % smaller, not clearly more seen through), shown alike (within slip_m) by every
+  // frame while the camera turns about the object by creep_turn_deg and no slip goes on, is
+  // followed: the grasp is corrected and the frame fused there. An object that creeps in the
+  // hand under a motion's accelerations (a millimetre or so per view, in physics) otherwise stays
+  // where the grasp began while the frames fused there smear the model along with it, so that a
+  // slow creep never adds up to a slip against that model. The turn tells creep from an
+  // alignment that slides on a coarse or one-sided model: that slide changes with where the
+  // camera looks from. 0: not followed.
   double creep_m = 0.0005;
+  double creep_turn_deg = 10;
 
   template <class V, class S>
   static void fields(V& v, S& o) {
@@ -134,8 +137,13 @@ struct TrackingOptions {
     v.num("slip_gate_m", o.slip_gate_m, "its first iteration's depth gate, m", Range::open(0, 1));
     v.num("creep_m", o.creep_m,
           "a significant correction moving the model's surface farther (at most 2 slip_m), not "
-          "a slip, better borne out, in two frames in a row: the grasp follows it, m; 0: off",
+          "a slip, better borne out, alike in every frame while the camera turns by "
+          "creep_turn_deg: the grasp follows it, m; 0: off",
           Range::closedOpen(0, 0.1));
+    v.num("creep_turn_deg", o.creep_turn_deg,
+          "… the camera's turn about the object (in the hand's frame) over which the frames "
+          "show the creep alike, deg",
+          Range::closed(0, 90));
   }
   std::string validate() const;
 };
