@@ -628,6 +628,9 @@ TEST(Cli, ScanOfTheCrackerBoxMeetsItsOutcomeBounds) {
               t == "no_view_above_threshold")
       << t;
   EXPECT_GE(s["coverage"].get<double>(), 0.97);
+  // The kinematic simulator holds the object where the grasp put it: a creep followed is an
+  // alignment that slid (tracking.creep_turn_deg).
+  EXPECT_EQ(s["creeps_followed"].get<int>(), 0);
   const double voxel = 0.003;
   EXPECT_LE(s["accuracy_mm"]["mean"].get<double>(), 1000 * voxel / 3);
   EXPECT_LE(s["accuracy_mm"]["p95"].get<double>(), 1000 * voxel);
