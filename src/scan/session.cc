@@ -62,15 +62,16 @@ struct SlipMeasure {
 // seen from few sides slides by as much, but where it slides depends on where the camera looks
 // from; an object that crept sits alike from every side. So the grasp follows a creep when the
 // frames since the first that showed it all showed it alike (within slip_m) and the camera has
-// since turned about the object by creep_turn_deg (`dir`: its optical axis in the palm frame).
+// since turned about the object by creep_turn_deg (its optical axis in the palm frame).
 // `*pending` keeps the first frame's correction and axis.
 struct CreepPending {
   Iso3 moved = Iso3::Identity();
   Vec3 dir = Vec3::Zero();
 };
 bool creepConfirmed(const SlipMeasure& slip, bool slipping, const TrackingOptions& o,
-                    const std::vector<SurfacePoint>& points, const Vec3& dir,
+                    const std::vector<SurfacePoint>& points, const Iso3& T_C_palm,
                     std::optional<CreepPending>* pending) {
+  const Vec3 dir = T_C_palm.linear().transpose() * Vec3::UnitZ();  // the camera's, palm frame
   const bool creep = !slip.moving && !slipping && o.creep_m > 0 && slip.significant &&
                      slip.surface_m > o.creep_m && slip.surface_m <= 2 * o.slip_m &&
                      slip.held.rms_m > 1.15 * slip.r.rms_m &&
@@ -957,13 +958,10 @@ std::string ScanSession::followSlip(const DepthImage& depth, const JointVector& 
                   1000 * slip.surface_m);
     return why;
   }
-  // Creep: followed, and the frame fused where it shows the object.
-  const Vec3 axis = T_C_palm.linear().transpose() * Vec3::UnitZ();  // the camera's, palm frame
-  if (creepConfirmed(slip, s.slipping, o, s.slipPoints, axis, &s.creepPending)) {
-    moveGrasp(depth, q, T_B_C, T_C_palm, slip.r, slip.moved);
+  if (creepConfirmed(slip, s.slipping, o, s.slipPoints, T_C_palm, &s.creepPending)) {
+    moveGrasp(depth, q, T_B_C, T_C_palm, slip.r, slip.moved);  // the frame fused there
     ++s.summary.creeps_followed;
-    std::snprintf(why, sizeof why,
-                  "the object crept in the hand (its surface %.1f mm; the grasp follows it)",
+    std::snprintf(why, sizeof why, "the object crept in the hand %.1f mm; the grasp follows it",
                   1000 * slip.surface_m);
     log(why);
   }
