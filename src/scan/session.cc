@@ -86,8 +86,7 @@ bool creepConfirmed(const SlipMeasure& slip, bool slipping, const TrackingOption
     *pending = CreepPending{slip.moved, dir};
     return false;
   }
-  const double turned = std::acos(std::clamp(dir.dot((*pending)->dir), -1.0, 1.0));
-  if (turned < o.creep_turn_deg * M_PI / 180) return false;
+  if (dir.dot((*pending)->dir) > std::cos(o.creep_turn_deg * M_PI / 180)) return false;
   pending->reset();
   return true;
 }
