@@ -7,6 +7,7 @@
 #include <cmath>
 #include <fstream>
 #include <functional>
+#include <map>
 #include <sstream>
 
 #include "inhand/core/error.h"
@@ -199,6 +200,56 @@ TEST(ColourVolume, APlaneTakesTheColourTheColourCameraSeesItIn) {
   const std::vector<uint8_t> carve(depth.depth_m.size(), 1);
   EXPECT_EQ(integrateColour(depth, colour, Iso3::Identity(), cam, sigma, &none, &carve).pixels, 0);
   EXPECT_TRUE(none.empty());
+}
+
+// The colour sums, kept in blocks of voxels, against a plain map of the same adds: the same
+// voxels with the same sums, and a volume rebuilt from them (as a checkpoint does) equal.
+TEST(ColourVolume, TheBlockStoreKeepsEveryVoxelsSums) {
+  VolumeOptions vo;
+  vo.voxel_size_m = 0.002;
+  TsdfVolume volume(Aabb{Vec3(-0.05, -0.04, 0.7), Vec3(0.05, 0.05, 0.75)}, vo);
+  ColourVolume cv(volume);
+  std::map<size_t, ColourVolume::Sum> want;
+  const Vec3i dims = volume.dims();
+  for (int k = 0; k < 5000; ++k) {
+    const Vec3 p(-0.05 + 0.1 * std::fmod(0.6180339 * k, 1.0),
+                 -0.04 + 0.09 * std::fmod(0.4142135 * k, 1.0),
+                 0.7 + 0.05 * std::fmod(0.7320508 * k, 1.0));
+    const Vec3f c(float(k % 256), float((3 * k) % 256), float((7 * k) % 256));
+    const float w = 0.5f + float(k % 3);
+    cv.add(p, c, w);
+    // The nearest voxel of the cell p lies in (a cell wholly inside the grid).
+    const Vec3 g = (p - volume.origin()) / volume.voxelSize();
+    const Vec3 fl = g.array().floor().matrix();
+    if ((fl.array() < 0).any() || (fl.array() + 1 >= dims.cast<double>().array()).any()) continue;
+    const Vec3i i =
+        (fl + (g - fl).unaryExpr([](double f) { return f >= 0.5 ? 1.0 : 0.0; })).cast<int>();
+    ColourVolume::Sum& s =
+        want[(size_t(i.z()) * size_t(dims.y()) + size_t(i.y())) * size_t(dims.x()) + size_t(i.x())];
+    s.w += w, s.r += w * c[0], s.g += w * c[1], s.b += w * c[2];
+  }
+  const auto got = cv.entries();
+  ASSERT_EQ(got.size(), want.size());
+  EXPECT_EQ(cv.voxels(), want.size());
+  size_t k = 0;
+  for (const auto& [index, s] : want) {
+    ASSERT_EQ(got[k].first, index);
+    EXPECT_FLOAT_EQ(got[k].second.w, s.w);
+    EXPECT_FLOAT_EQ(got[k].second.r, s.r);
+    EXPECT_FLOAT_EQ(got[k].second.b, s.b);
+    ASSERT_NE(cv.find(index), nullptr);
+    ++k;
+  }
+  ColourVolume copy(volume);
+  for (const auto& [index, s] : got) ASSERT_TRUE(copy.set(index, s));
+  EXPECT_FALSE(copy.set(volume.voxelCount(), got[0].second));
+  EXPECT_EQ(copy.voxels(), cv.voxels());
+  for (double x = -0.04; x < 0.04; x += 0.0013) {
+    Vec3f a, b;
+    const Vec3 p(x, 0.3 * x, 0.72);
+    ASSERT_EQ(cv.at(p, &a), copy.at(p, &b));
+    EXPECT_EQ(a, b);
+  }
 }
 
 // A whole scan with the colour camera: the checkerboard box's colours against the truth.

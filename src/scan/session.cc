@@ -1524,9 +1524,7 @@ void ScanSession::save(const std::filesystem::path& path, const Json& extra) con
   // The colours (camera.colour): after the voxels, one record per coloured voxel in index order
   // (its index, then Σw, Σw·r, Σw·g, Σw·b as floats).
   std::vector<std::pair<size_t, ColourVolume::Sum>> colours;
-  if (s.colour) colours.assign(s.colour->sums().begin(), s.colour->sums().end());
-  std::sort(colours.begin(), colours.end(),
-            [](const auto& a, const auto& b) { return a.first < b.first; });
+  if (s.colour) colours = s.colour->entries();
   if (s.colour) h["colour_voxels"] = colours.size();
   if (s.colourFrames) h["colour_frames"] = s.colourFrames->frames();
   const std::string header = h.dump();
@@ -1598,7 +1596,7 @@ void readVolumeData(std::istream& f, const Json& h, TsdfVolume& v,
           !f.read(reinterpret_cast<char*>(sums), sizeof sums))
         throw bad("colour data cut short");
       if (index >= v.voxelCount()) throw bad("colour voxel index out of the volume");
-      (*colour)->sums()[size_t(index)] = {sums[0], sums[1], sums[2], sums[3]};
+      (*colour)->set(size_t(index), {sums[0], sums[1], sums[2], sums[3]});
     }
   }
 }

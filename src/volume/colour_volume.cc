@@ -11,12 +11,75 @@
 namespace inhand {
 
 ColourVolume::ColourVolume(const TsdfVolume& volume)
-    : dims_(volume.dims()), origin_(volume.origin()), voxel_(volume.voxelSize()) {}
+    : dims_(volume.dims()), origin_(volume.origin()), voxel_(volume.voxelSize()) {
+  for (int k = 0; k < 3; ++k) blockDims_[k] = (std::max(dims_[k], 0) + kBlock - 1) / kBlock;
+  blockOf_.assign(size_t(blockDims_.x()) * size_t(blockDims_.y()) * size_t(blockDims_.z()), -1);
+}
 
 size_t ColourVolume::bytes() const {
-  // A node per entry (key, value, next pointer) plus the bucket array.
-  return sums_.size() * (sizeof(size_t) + sizeof(Sum) + sizeof(void*)) +
-         sums_.bucket_count() * sizeof(void*);
+  return blockOf_.size() * sizeof(int32_t) + blockIndex_.size() * sizeof(int32_t) +
+         sums_.size() * sizeof(Sum);
+}
+
+ColourVolume::Sum& ColourVolume::sumAt(const Vec3i& c) {
+  const size_t b = (size_t(c.z() / kBlock) * size_t(blockDims_.y()) + size_t(c.y() / kBlock)) *
+                       size_t(blockDims_.x()) +
+                   size_t(c.x() / kBlock);
+  int32_t& n = blockOf_[b];
+  if (n < 0) {
+    n = int32_t(blockIndex_.size());
+    blockIndex_.push_back(int32_t(b));
+    sums_.resize(sums_.size() + size_t(kBlock * kBlock * kBlock));
+  }
+  const size_t in =
+      (size_t(c.z() % kBlock) * kBlock + size_t(c.y() % kBlock)) * kBlock + size_t(c.x() % kBlock);
+  return sums_[size_t(n) * size_t(kBlock * kBlock * kBlock) + in];
+}
+
+const ColourVolume::Sum* ColourVolume::find(size_t index) const {
+  const size_t X = size_t(dims_.x()), Y = size_t(dims_.y());
+  if (X == 0 || Y == 0 || index >= X * Y * size_t(dims_.z())) return nullptr;
+  const int x = int(index % X), y = int((index / X) % Y), z = int(index / (X * Y));
+  const size_t b =
+      (size_t(z / kBlock) * size_t(blockDims_.y()) + size_t(y / kBlock)) * size_t(blockDims_.x()) +
+      size_t(x / kBlock);
+  const int32_t n = blockOf_[b];
+  if (n < 0) return nullptr;
+  const Sum& s =
+      sums_[size_t(n) * size_t(kBlock * kBlock * kBlock) +
+            (size_t(z % kBlock) * kBlock + size_t(y % kBlock)) * kBlock + size_t(x % kBlock)];
+  return s.w > 0 ? &s : nullptr;
+}
+
+std::vector<std::pair<size_t, ColourVolume::Sum>> ColourVolume::entries() const {
+  std::vector<std::pair<size_t, Sum>> out;
+  out.reserve(voxels_);
+  constexpr size_t B3 = size_t(kBlock * kBlock * kBlock);
+  for (size_t n = 0; n < blockIndex_.size(); ++n) {
+    const size_t b = size_t(blockIndex_[n]);
+    const int bx = int(b % size_t(blockDims_.x()));
+    const int by = int((b / size_t(blockDims_.x())) % size_t(blockDims_.y()));
+    const int bz = int(b / (size_t(blockDims_.x()) * size_t(blockDims_.y())));
+    for (size_t in = 0; in < B3; ++in) {
+      const Sum& s = sums_[n * B3 + in];
+      if (!(s.w > 0)) continue;
+      const int x = bx * kBlock + int(in % kBlock), y = by * kBlock + int((in / kBlock) % kBlock);
+      const int z = bz * kBlock + int(in / (kBlock * kBlock));
+      out.push_back(
+          {(size_t(z) * size_t(dims_.y()) + size_t(y)) * size_t(dims_.x()) + size_t(x), s});
+    }
+  }
+  std::sort(out.begin(), out.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+  return out;
+}
+
+bool ColourVolume::set(size_t index, const Sum& sum) {
+  const size_t X = size_t(dims_.x()), Y = size_t(dims_.y());
+  if (X == 0 || Y == 0 || index >= X * Y * size_t(dims_.z())) return false;
+  Sum& s = sumAt(Vec3i(int(index % X), int((index / X) % Y), int(index / (X * Y))));
+  voxels_ += (sum.w > 0) - (s.w > 0);
+  s = sum;
+  return true;
 }
 
 namespace {
@@ -41,10 +104,8 @@ void ColourVolume::add(const Vec3& p, const Vec3f& rgb, float w) {
   // blurs a colour edge over two voxels (a 2 cm checkerboard scanned without noise: mean ΔE 5.8
   // against 5.4).
   const int dx = f.x() >= 0.5, dy = f.y() >= 0.5, dz = f.z() >= 0.5;
-  const size_t i =
-      (size_t(c.z() + dz) * size_t(dims_.y()) + size_t(c.y() + dy)) * size_t(dims_.x()) +
-      size_t(c.x() + dx);
-  Sum& s = sums_[i];
+  Sum& s = sumAt(Vec3i(c.x() + dx, c.y() + dy, c.z() + dz));
+  voxels_ += !(s.w > 0);
   s.w += w;
   s.r += w * rgb[0];
   s.g += w * rgb[1];
@@ -61,11 +122,11 @@ bool ColourVolume::at(const Vec3& p, Vec3f* rgb, float* weight) const {
     const size_t i =
         (size_t(c.z() + dz) * size_t(dims_.y()) + size_t(c.y() + dy)) * size_t(dims_.x()) +
         size_t(c.x() + dx);
-    auto it = sums_.find(i);
-    if (it == sums_.end() || !(it->second.w > 0)) continue;
+    const Sum* found = find(i);
+    if (!found) continue;
     const double t = (dx ? f.x() : 1 - f.x()) * (dy ? f.y() : 1 - f.y()) * (dz ? f.z() : 1 - f.z());
     // Each voxel's mean colour, weighted by its trilinear share and its own weight.
-    const Sum& s = it->second;
+    const Sum& s = *found;
     w += t * s.w;
     r += t * s.r;
     g += t * s.g;
@@ -80,13 +141,13 @@ bool ColourVolume::at(const Vec3& p, Vec3f* rgb, float* weight) const {
         for (int x = c.x() - 1; x <= c.x() + 2; ++x) {
           if (x < 0 || y < 0 || z < 0 || x >= dims_.x() || y >= dims_.y() || z >= dims_.z())
             continue;
-          auto it = sums_.find((size_t(z) * size_t(dims_.y()) + size_t(y)) * size_t(dims_.x()) +
-                               size_t(x));
-          if (it == sums_.end()) continue;
-          w += it->second.w;
-          r += it->second.r;
-          g += it->second.g;
-          b += it->second.b;
+          const Sum* s =
+              find((size_t(z) * size_t(dims_.y()) + size_t(y)) * size_t(dims_.x()) + size_t(x));
+          if (!s) continue;
+          w += s->w;
+          r += s->r;
+          g += s->g;
+          b += s->b;
         }
     tw = 64;
     if (!(w > 0)) return false;
@@ -122,22 +183,27 @@ bool atDepthEdge(const DepthImage& depth, int u, int v, const std::vector<uint8_
   return false;
 }
 
-// The colour camera's z-buffer of every measured point of the frame (the robot's included).
+// The colour camera's z-buffer of every measured point of the frame (the robot's included): each
+// pixel's projection on both cores, then the minimum in pixel order.
 std::vector<float> colourCameraDepths(const DepthImage& depth, const CameraIntrinsics& K,
                                       const CameraIntrinsics& Kc, const Iso3& T_RGB_D) {
-  std::vector<float> zbuf(size_t(Kc.width) * size_t(Kc.height),
-                          std::numeric_limits<float>::infinity());
-  for (int v = 0; v < depth.height; ++v)
-    for (int u = 0; u < depth.width; ++u) {
+  const int W = depth.width, H = depth.height;
+  std::vector<std::pair<int32_t, float>> at(size_t(W) * size_t(H), {-1, 0.f});
+  parallelFor(0, H, [&](int v) {
+    for (int u = 0; u < W; ++u) {
       if (!validDepth(depth, u, v)) continue;
       const Vec3 p = T_RGB_D * (K.rayZ1(u, v) * double(depth.at(u, v)));
       if (p.z() <= 0) continue;
       const Vec2 px = Kc.project(p);
       const long cu = std::lround(px.x()), cv = std::lround(px.y());
       if (cu < 0 || cv < 0 || cu >= Kc.width || cv >= Kc.height) continue;
-      float& z = zbuf[size_t(cv) * size_t(Kc.width) + size_t(cu)];
-      z = std::min(z, float(p.z()));
+      at[size_t(v) * size_t(W) + size_t(u)] = {int32_t(cv * Kc.width + cu), float(p.z())};
     }
+  });
+  std::vector<float> zbuf(size_t(Kc.width) * size_t(Kc.height),
+                          std::numeric_limits<float>::infinity());
+  for (const auto& [i, z] : at)
+    if (i >= 0) zbuf[size_t(i)] = std::min(zbuf[size_t(i)], z);
   return zbuf;
 }
 
@@ -291,8 +357,7 @@ ColourCameraView viewOfFrame(const DepthImage& depth, const CameraIntrinsics& K,
       p.i = int32_t(cv * Kc.width + cu);
       p.z = float(q.z());
       if (carve(u, v) || !(sigma_m[size_t(v) * size_t(W) + size_t(u)] > 0)) continue;
-      const bool edge = atDepthEdge(depth, u, v, carve_only);
-      p.kind = edge ? 2 : 1;
+      p.kind = atDepthEdge(depth, u, v, carve_only) ? 2 : 1;
     }
   });
   for (const Point& p : points) {

@@ -7,7 +7,7 @@
 #include <cstdint>
 #include <iosfwd>
 #include <string>
-#include <unordered_map>
+#include <utility>
 #include <vector>
 
 #include "inhand/geometry/appearance.h"
@@ -29,21 +29,32 @@ class ColourVolume {
   // `weight` (optional) receives the interpolated weight.
   bool at(const Vec3& p_O, Vec3f* rgb, float* weight = nullptr) const;
 
-  size_t voxels() const { return sums_.size(); }  // voxels with colour
-  size_t bytes() const;                           // memory the colour takes, roughly
-  bool empty() const { return sums_.empty(); }
+  size_t voxels() const { return voxels_; }  // voxels with colour
+  size_t bytes() const;                      // memory the colour takes, roughly
+  bool empty() const { return voxels_ == 0; }
 
   struct Sum {
     float w = 0, r = 0, g = 0, b = 0;
   };
-  const std::unordered_map<size_t, Sum>& sums() const { return sums_; }
-  std::unordered_map<size_t, Sum>& sums() { return sums_; }
+  // The sums of voxel `index` (the volume's voxel index); null where it has none.
+  const Sum* find(size_t index) const;
+  // Every voxel with colour, by index (checkpoints).
+  std::vector<std::pair<size_t, Sum>> entries() const;
+  // Sets voxel `index`'s sums (checkpoints); false when index lies outside the grid.
+  bool set(size_t index, const Sum& sum);
 
  private:
-  Vec3i dims_;
+  // Stored in blocks of 8 × 8 × 8 voxels, made where a colour first falls: a dense table of
+  // block numbers over the grid's blocks (−1: none) and the blocks' sums.
+  static constexpr int kBlock = 8;
+  Sum& sumAt(const Vec3i& voxel);
+  Vec3i dims_, blockDims_;
   Vec3 origin_;
   double voxel_;
-  std::unordered_map<size_t, Sum> sums_;
+  std::vector<int32_t> blockOf_;
+  std::vector<int32_t> blockIndex_;  // per block made: its index in the table
+  std::vector<Sum> sums_;            // kBlock³ per block made
+  size_t voxels_ = 0;
 };
 
 struct ColourIntegrationStats {
