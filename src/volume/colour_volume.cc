@@ -183,6 +183,15 @@ bool atDepthEdge(const DepthImage& depth, int u, int v, const std::vector<uint8_
   return false;
 }
 
+// The pixel nearest image point px (as std::lround of each coordinate, half away from zero, up to
+// the rounding of px + 0.5), false when it lies outside a W × H image (NaN included).
+bool nearestPixel(const Vec2& px, int W, int H, int* cu, int* cv) {
+  if (!(px.x() > -0.5 && px.x() < W - 0.5 && px.y() > -0.5 && px.y() < H - 0.5)) return false;
+  *cu = int(px.x() + 0.5);  // > 0 here: truncation is floor, and a tie goes up
+  *cv = int(px.y() + 0.5);
+  return true;
+}
+
 // The colour camera's z-buffer of every measured point of the frame (the robot's included): each
 // pixel's projection on both cores, then the minimum in pixel order.
 std::vector<float> colourCameraDepths(const DepthImage& depth, const CameraIntrinsics& K,
@@ -194,9 +203,8 @@ std::vector<float> colourCameraDepths(const DepthImage& depth, const CameraIntri
       if (!validDepth(depth, u, v)) continue;
       const Vec3 p = T_RGB_D * (K.rayZ1(u, v) * double(depth.at(u, v)));
       if (p.z() <= 0) continue;
-      const Vec2 px = Kc.project(p);
-      const long cu = std::lround(px.x()), cv = std::lround(px.y());
-      if (cu < 0 || cv < 0 || cu >= Kc.width || cv >= Kc.height) continue;
+      int cu = 0, cv = 0;
+      if (!nearestPixel(Kc.project(p), Kc.width, Kc.height, &cu, &cv)) continue;
       at[size_t(v) * size_t(W) + size_t(u)] = {int32_t(cv * Kc.width + cu), float(p.z())};
     }
   });
@@ -266,7 +274,8 @@ ColourIntegrationStats integrateColour(const DepthImage& depth, const RgbImage& 
       if (q.z() <= 0) continue;
       const Vec2 px = Kc.project(q);
       if (px.x() < 0 || px.y() < 0 || px.x() > Kc.width - 1 || px.y() > Kc.height - 1) continue;
-      if (hiddenInColour(zbuf, Kc, int(std::lround(px.x())), int(std::lround(px.y())), q.z())) {
+      // px lies in the image: nearest pixel by adding a half and truncating (lround there).
+      if (hiddenInColour(zbuf, Kc, int(px.x() + 0.5), int(px.y() + 0.5), q.z())) {
         ++st.occluded;
         continue;
       }
@@ -350,9 +359,8 @@ ColourCameraView viewOfFrame(const DepthImage& depth, const CameraIntrinsics& K,
       const float d = depth.at(u, v);
       const Vec3 q = T_RGB_D * (K.rayZ1(u, v) * double(d));
       if (q.z() <= 0) continue;
-      const Vec2 px = Kc.project(q);
-      const long cu = std::lround(px.x()), cv = std::lround(px.y());
-      if (cu < 0 || cv < 0 || cu >= Kc.width || cv >= Kc.height) continue;
+      int cu = 0, cv = 0;
+      if (!nearestPixel(Kc.project(q), Kc.width, Kc.height, &cu, &cv)) continue;
       Point& p = points[size_t(v) * size_t(W) + size_t(u)];
       p.i = int32_t(cv * Kc.width + cu);
       p.z = float(q.z());
@@ -532,7 +540,7 @@ void ColourFrames::sights(const Vec3& p_O, const Vec3& n_O, Fn&& fn) const {
     const double x = px.x() - f.u0, y = px.y() - f.v0;
     const int W = f.rgb.width, H = f.rgb.height;
     if (!(x >= 0 && y >= 0 && x <= W - 1 && y <= H - 1)) continue;
-    const int cu = int(std::lround(x)), cv = int(std::lround(y));
+    const int cu = int(x + 0.5), cv = int(y + 0.5);  // x, y ≥ 0: std::lround
     bool hidden = false, seen = false, edge = false;
     for (int dv = -1; dv <= 1 && !hidden; ++dv)
       for (int du = -1; du <= 1; ++du) {
