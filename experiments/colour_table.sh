@@ -23,15 +23,16 @@ try:
 except Exception:
     print("| %s | %s | (failed) |" % (d.split("/")[-1], sys.argv[2])); sys.exit()
 c = s.get("colour", {})
-print("| %s | %s | %.1f | %.2f | %.1f | %.1f | %.1f | %.1f |" % (
+print("| %s | %s | %.1f | %.2f | %.1f | %.1f | %.0f %% | %.1f | %.1f | %.1f | %.1f |" % (
     d.split("/")[-1].rsplit("_", 1)[0], sys.argv[2], 100 * s["coverage"], s["accuracy_mm"]["mean"],
-    c.get("delta_e76_mean", 0), c.get("delta_e76_p95", 0), c.get("psnr_db_8_views", 0),
-    c.get("fusion_ms_per_frame", 0)))
+    c.get("delta_e76_mean", 0), c.get("delta_e76_p95", 0), 100 * c.get("colour_edge_share", 0),
+    c.get("delta_e76_mean_at_edges", 0), c.get("delta_e76_mean_off_edges", 0),
+    c.get("psnr_db_8_views", 0), c.get("fusion_ms_per_frame", 0)))
 PY
 }
 {
-  echo "| object | lighting and noise | coverage % | accuracy mm | ΔE76 mean | ΔE76 p95 | PSNR dB | colour ms/frame |"
-  echo "|---|---|---|---|---|---|---|---|"
+  echo "| object | lighting and noise | coverage % | accuracy mm | ΔE76 mean | ΔE76 p95 | at edges | ΔE76 there | ΔE76 off edges | PSNR dB | colour ms/frame |"
+  echo "|---|---|---|---|---|---|---|---|---|---|---|"
 } > "$out/results.md"
 for o in "${objects[@]}"; do
   if [[ "$o" == builtin:* ]]; then name="${o#builtin:}"; else name="$(basename "$(dirname "$o")")"; fi

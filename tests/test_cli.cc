@@ -974,6 +974,42 @@ TEST(Cli, CompareScoresAModelAgainstTheTrueSurface) {
   EXPECT_NE(r.output.find("nothing.ply"), std::string::npos) << r.output;
 }
 
+// `inhand compare` scores colours where the model and the truth both have them: a sphere whose
+// top half is red and bottom half blue (vertex colours in the truth's PLY) against itself is
+// exact; with the halves swapped, far off; a model without colours gets no colour score.
+TEST(Cli, CompareScoresTheColoursWhereBothHaveThem) {
+  test::TempDir dir;
+  const TriangleMesh sphere = makeSphere(0.05, 4);
+  std::vector<std::array<uint8_t, 4>> truth, swapped;
+  for (const Vec3f& v : sphere.vertices) {
+    const bool top = v.z() > 0;
+    truth.push_back(top ? std::array<uint8_t, 4>{200, 30, 30, 255}
+                        : std::array<uint8_t, 4>{30, 40, 200, 255});
+    swapped.push_back(top ? std::array<uint8_t, 4>{30, 40, 200, 255}
+                          : std::array<uint8_t, 4>{200, 30, 30, 255});
+  }
+  const std::vector<float> variance(sphere.vertices.size(), 0.f);
+  writePly(dir.path() / "truth.ply", sphere, &variance, &truth);
+  writePly(dir.path() / "same.ply", sphere, &variance, &truth);
+  writePly(dir.path() / "swapped.ply", sphere, &variance, &swapped);
+  writePly(dir.path() / "plain.ply", sphere, &variance);
+  const std::string truthArg = " --truth " + (dir.path() / "truth.ply").string() + " --json";
+  Result r = run("compare " + (dir.path() / "same.ply").string() + truthArg, dir);
+  ASSERT_EQ(r.code, 0) << r.output;
+  Json c = Json::parse(r.output).at("colour");
+  EXPECT_EQ(c.at("vertices_compared").get<size_t>(), sphere.vertices.size());
+  EXPECT_LT(c.at("delta_e76_mean").get<double>(), 0.5);
+  EXPECT_GT(c.at("psnr_db_8_views").get<double>(), 30.0);
+  r = run("compare " + (dir.path() / "swapped.ply").string() + truthArg, dir);
+  ASSERT_EQ(r.code, 0) << r.output;
+  c = Json::parse(r.output).at("colour");
+  EXPECT_GT(c.at("delta_e76_mean").get<double>(), 50.0);
+  EXPECT_GT(c.at("delta_e76_mean_off_edges").get<double>(), 50.0);
+  r = run("compare " + (dir.path() / "plain.ply").string() + truthArg, dir);
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_TRUE(Json::parse(r.output).at("colour").is_null()) << r.output;
+}
+
 namespace {
 // Sets an environment variable for the lifetime of the object (unset when `value` is null) and
 // puts back what was there.

@@ -16,6 +16,7 @@
 #include "inhand/geometry/builtin_objects.h"
 #include "inhand/geometry/mesh_io.h"
 #include "inhand/geometry/primitives.h"
+#include "inhand/geometry/surface_distance.h"
 #include "inhand/geometry/texture_atlas.h"
 #include "inhand/sensor/frame_set.h"
 #include "inhand/volume/colour_volume.h"
@@ -561,6 +562,24 @@ TEST(Colour, AScanGetsTheCheckerBoxsColours) {
   // 2 cm squares: the colours come from the frames kept (ColourFrames), blurred within about a
   // pixel of each edge, not from the 4 mm voxels (11.4 from them).
   EXPECT_LT(s.colour.delta_e_mean, 5.0);  // 3.3 measured
+  // The squares' edges lie where they should: more than 1 mm from any true edge (a quarter of
+  // the 4 mm voxels) the colours are right, the error sits within that millimetre.
+  EXPECT_LT(s.colour.delta_e_mean_off_edges, 3.0);
+  EXPECT_GT(s.colour.delta_e_mean_at_edges, s.colour.delta_e_mean_off_edges);
+  // The hand, blue in the colour camera, colours no observed vertex: none lies within ΔE 3 of
+  // its blue, nor nearer to it than to both of the squares' colours (a half-and-half blend).
+  // (12 did when the sights at depth edges counted a tenth: the fingers' rims.)
+  const auto& robotRgb = config.sim.colour.robot;
+  const Vec3f robot(robotRgb[0], robotRgb[1], robotRgb[2]);
+  const Vec3f red(200, 40, 40), cream(235, 225, 190);  // checkerColours' defaults
+  int blue = 0;
+  for (size_t i = 0; i < m.rgba.size(); ++i) {
+    if (m.rgba[i][3] != 255 || !m.observed[i]) continue;
+    const Vec3f c(m.rgba[i][0], m.rgba[i][1], m.rgba[i][2]);
+    const double toRobot = deltaE76(c, robot);
+    if (toRobot < 3 || (toRobot < deltaE76(c, red) && toRobot < deltaE76(c, cream))) ++blue;
+  }
+  EXPECT_EQ(blue, 0);
   // Unlit: no fall-off with the viewing angle is found.
   EXPECT_LT(s.result.scan.colour_shading_falloff, 0.1);
   EXPECT_GT(s.result.scan.colour_frames_kept, 20);
@@ -568,6 +587,61 @@ TEST(Colour, AScanGetsTheCheckerBoxsColours) {
   const SurfaceColours other =
       checkerColours(box, kBuiltinCheckerSquare_m, {20, 120, 20}, {30, 30, 30});
   EXPECT_GT(colourAccuracy(m, box, other).delta_e_mean, 40.0);
+}
+
+// The colour measure's split at the truth's colour edges, against geometry: points 0.5 mm apart on
+// the top face of a box with the 2 cm checkerboard. With their true colours, the share at an edge
+// is that of the points within 1 mm of a square's edge (±0.31 mm, the checker texture's own
+// bilinear blur), and ΔE is 0; with each point coloured as the truth 0.8 mm beside it (a
+// texture misregistered by less than a pixel), the error lies at the edges only.
+TEST(Colour, TheColourMeasureSplitsItsErrorAtTheTruthsEdges) {
+  const TriangleMesh box = makeBox(Vec3(0.2, 0.2, 0.02));
+  const SurfaceColours checker = checkerColours(box, 0.02);
+  const Aabb b = box.bounds();
+  const TriangleDistanceIndex index(box);
+  auto trueColour = [&](const Vec3& p) {
+    int tri = -1;
+    Vec3 q;
+    index.nearest(p, &tri, &q);
+    const Tri& f = box.triangles[size_t(tri)];
+    const Vec3 a = box.vertices[size_t(f[0])].cast<double>();
+    const Vec3 e1 = box.vertices[size_t(f[1])].cast<double>() - a;
+    const Vec3 e2 = box.vertices[size_t(f[2])].cast<double>() - a;
+    const Eigen::Matrix<double, 3, 2> E = (Eigen::Matrix<double, 3, 2>() << e1, e2).finished();
+    const Vec2 bc = E.colPivHouseholderQr().solve(q - a);
+    return checker.at(box, tri, float(bc.x()), float(bc.y()));
+  };
+  for (const double shift : {0.0, 0.0008}) {
+    ObjectModel m;
+    int near = 0;
+    for (double x = b.min.x() + 0.01; x <= b.max.x() - 0.01; x += 0.0005)
+      for (double y = b.min.y() + 0.01; y <= b.max.y() - 0.01; y += 0.0005) {
+        const Vec3 p(x, y, b.max.z());
+        m.mesh.vertices.push_back(p.cast<float>());
+        const Vec3f c = trueColour(p + Vec3(shift, 0, 0));
+        m.rgba.push_back({uint8_t(std::lround(c[0])), uint8_t(std::lround(c[1])),
+                          uint8_t(std::lround(c[2])), 255});
+        // Within 1 mm of a square's edge (x or y a multiple of 2 cm).
+        auto toLine = [](double t) { return std::abs(t / 0.02 - std::round(t / 0.02)) * 0.02; };
+        near += std::min(toLine(x), toLine(y)) < 0.001;
+      }
+    const ColourMetrics cm = colourAccuracy(m, box, checker);
+    ASSERT_EQ(cm.vertices, int(m.mesh.vertices.size()));
+    const double want = double(near) / double(cm.vertices);  // 0.19
+    EXPECT_NEAR(cm.edge_share, want, 0.06) << "shift " << shift;
+    EXPECT_LT(cm.delta_e_mean_off_edges, 0.5) << "shift " << shift;
+    if (shift == 0) {
+      EXPECT_LT(cm.delta_e_mean, 0.5);
+    } else {
+      // Wrong within 0.8 mm of the edges across x (ΔE up to 81), right along y's: 16 measured.
+      EXPECT_GT(cm.delta_e_mean_at_edges, 10.0);
+      EXPECT_GT(cm.delta_e_mean, 2.0);
+      EXPECT_NEAR(cm.delta_e_mean,
+                  cm.edge_share * cm.delta_e_mean_at_edges +
+                      (1 - cm.edge_share) * cm.delta_e_mean_off_edges,
+                  1e-9);
+    }
+  }
 }
 
 // Real Kinect frames (../shared/data/sevenscenes: 50 frames of a 7-Scenes sequence, colour not

@@ -4,6 +4,7 @@
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
+#include <optional>
 
 #include <unistd.h>
 
@@ -14,6 +15,7 @@
 #include "inhand/core/json_util.h"
 #include "inhand/core/pose.h"
 #include "inhand/core/random.h"
+#include "inhand/driver/simulated_scan.h"
 #include "inhand/eval/metrics.h"
 #include "inhand/geometry/builtin_objects.h"
 #include "inhand/geometry/mesh_io.h"
@@ -653,6 +655,16 @@ int runSnapshot(const SnapshotArgs& args) {
   return 0;
 }
 
+Json colourMetricsJson(const ColourMetrics& c) {
+  return {{"vertices_compared", c.vertices},
+          {"delta_e76_mean", c.delta_e_mean},
+          {"delta_e76_p95", c.delta_e_p95},
+          {"colour_edge_share", c.edge_share},
+          {"delta_e76_mean_at_edges", c.delta_e_mean_at_edges},
+          {"delta_e76_mean_off_edges", c.delta_e_mean_off_edges},
+          {"psnr_db_8_views", c.psnr_db}};
+}
+
 int runCompare(const std::string& modelPath, const std::string& truthSpec, double observedVariance,
                bool json) {
   if (!(observedVariance > 0)) throw Error("--observed-variance: must be > 0 (m²)");
@@ -673,6 +685,24 @@ int runCompare(const std::string& modelPath, const std::string& truthSpec, doubl
   if (model.variance.empty()) model.variance.assign(model.mesh.vertices.size(), 0.f);
   const EvalOptions eo;
   const SurfaceMetrics m = GroundTruth(truth, eo).evaluate(model);
+  // The colours, where the model has them (red, green, blue, alpha) and the truth has its own (a
+  // built-in object's checkerboard, a mesh's materials, textures or vertex colours).
+  std::optional<ColourMetrics> colour;
+  const char* rgbaKeys[4] = {"red", "green", "blue", "alpha"};
+  if (std::all_of(rgbaKeys, rgbaKeys + 4,
+                  [&](const char* k) { return ply.vertexProperties.count(k) > 0; })) {
+    const TexturedMesh t = loadSimulatedObject(truthSpec, true);
+    if (!t.colours.empty()) {
+      for (size_t i = 0; i < model.mesh.vertices.size(); ++i) {
+        std::array<uint8_t, 4> c{};
+        for (size_t k = 0; k < 4; ++k)
+          c[k] = uint8_t(std::clamp(ply.vertexProperties[rgbaKeys[k]][i], 0.f, 255.f));
+        model.rgba.push_back(c);
+      }
+      colour = colourAccuracy(model, t.mesh, t.colours);
+      colour->psnr_db = colourPsnr(model, t.mesh, t.colours);
+    }
+  }
   if (json) {
     Json fsj = Json::object();
     for (size_t k = 0; k < m.fscore.size(); ++k) {
@@ -690,7 +720,8 @@ int runCompare(const std::string& modelPath, const std::string& truthSpec, doubl
                               {"fscore", fsj},
                               {"observed_area_m2", m.observed_area_m2},
                               {"detached_area_m2", m.detached_area_m2},
-                              {"detached_pieces", m.detached_pieces}})
+                              {"detached_pieces", m.detached_pieces},
+                              {"colour", colour ? colourMetricsJson(*colour) : Json()}})
                             .dump(2)
                             .c_str());
   } else {
@@ -700,6 +731,13 @@ int runCompare(const std::string& modelPath, const std::string& truthSpec, doubl
         modelPath.c_str(), truthSpec.c_str(), 100 * m.coverage, 1000 * eo.tau_m, m.accuracy_mean_mm,
         m.accuracy_p95_mm, m.fscore.empty() ? 0.0 : m.fscore[0], 1000 * eo.fscore_m[0],
         m.detached_pieces, 1e4 * m.detached_area_m2);
+    if (colour)
+      std::printf(
+          "compare: colour of %d vertices: mean ΔE76 %.2f (p95 %.1f); %.0f%% of them within "
+          "%.0f mm of a colour edge of the truth: %.1f there, %.2f away from edges\n",
+          colour->vertices, colour->delta_e_mean, colour->delta_e_p95, 100 * colour->edge_share,
+          1000 * kColourEdgeRadius_m, colour->delta_e_mean_at_edges,
+          colour->delta_e_mean_off_edges);
   }
   return 0;
 }

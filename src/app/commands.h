@@ -8,10 +8,15 @@
 #include <vector>
 
 #include "inhand/asset/asset.h"
+#include "inhand/core/json_util.h"
+#include "inhand/eval/metrics.h"
 #include "inhand/mesh/extract.h"
 #include "inhand/robot/robot_model.h"
 
 namespace inhand::app {
+
+// A model's colours against the truth's as summary.json and `compare --json` write them.
+Json colourMetricsJson(const ColourMetrics& c);
 
 // A model scanned with colour (model.rgba) as a textured mesh beside `ply`: <stem>.glb and
 // <stem>.obj with <stem>.mtl and <stem>_texture.png, the per-vertex colours baked into an atlas

@@ -321,16 +321,14 @@ Json trackingJson(const ScanConfig& o, const SimulatedScan& sim) {
 // (summary.json "colour").
 Json colourJson(const SimulatedScan& sim) {
   const ScanResult& r = sim.result.scan;
-  return {{"vertices_compared", sim.colour.vertices},
-          {"delta_e76_mean", sim.colour.delta_e_mean},
-          {"delta_e76_p95", sim.colour.delta_e_p95},
-          {"psnr_db_8_views", sim.colour.psnr_db},
-          {"pixels_fused", r.colour_pixels},
-          {"fusion_s", r.colour_s},
-          {"fusion_ms_per_frame", r.frames > 0 ? 1000 * r.colour_s / r.frames : 0.0},
-          {"frames_kept", r.colour_frames_kept},
-          {"frames_mb", r.colour_frames_mb},
-          {"shading_falloff", r.colour_shading_falloff}};
+  Json j = colourMetricsJson(sim.colour);
+  j["pixels_fused"] = r.colour_pixels;
+  j["fusion_s"] = r.colour_s;
+  j["fusion_ms_per_frame"] = r.frames > 0 ? 1000 * r.colour_s / r.frames : 0.0;
+  j["frames_kept"] = r.colour_frames_kept;
+  j["frames_mb"] = r.colour_frames_mb;
+  j["shading_falloff"] = r.colour_shading_falloff;
+  return j;
 }
 
 // summary.json of a simulated scan (docs/commands.md), less the options and the resume line.

@@ -175,18 +175,15 @@ ColourMetrics colourAccuracy(const ObjectModel& model, const TriangleMesh& truth
   for (size_t i = 0; i < model.rgba.size(); ++i)
     if (model.rgba[i][3] == 255 && (model.observed.empty() || model.observed[i]))
       which.push_back(i);
-  std::vector<double> de(which.size());
-  parallelFor(0, int(which.size()), [&](int k) {
-    const size_t i = which[size_t(k)];
-    int tri = -1;
-    Vec3 q;
-    index.nearest(model.mesh.vertices[i].cast<double>(), &tri, &q);
+  // The true albedo at the point of the true surface nearest p (its triangle in *tri).
+  auto truthAt = [&](const Vec3& p, int* tri, Vec3* q) {
+    index.nearest(p, tri, q);
     // q's barycentrics in its triangle.
-    const Tri& f = truth.triangles[size_t(tri)];
+    const Tri& f = truth.triangles[size_t(*tri)];
     const Vec3 a = truth.vertices[size_t(f[0])].cast<double>();
     const Vec3 e1 = truth.vertices[size_t(f[1])].cast<double>() - a;
     const Vec3 e2 = truth.vertices[size_t(f[2])].cast<double>() - a;
-    const Vec3 d = q - a;
+    const Vec3 d = *q - a;
     const double d11 = e1.dot(e1), d12 = e1.dot(e2), d22 = e2.dot(e2);
     const double det = d11 * d22 - d12 * d12;
     double b1 = 0, b2 = 0;
@@ -194,15 +191,43 @@ ColourMetrics colourAccuracy(const ObjectModel& model, const TriangleMesh& truth
       b1 = (d22 * e1.dot(d) - d12 * e2.dot(d)) / det;
       b2 = (d11 * e2.dot(d) - d12 * e1.dot(d)) / det;
     }
-    const Vec3f want = truth_colours.at(truth, tri, float(b1), float(b2));
+    return truth_colours.at(truth, *tri, float(b1), float(b2));
+  };
+  std::vector<double> de(which.size());
+  std::vector<uint8_t> atEdge(which.size(), 0);
+  parallelFor(0, int(which.size()), [&](int k) {
+    const size_t i = which[size_t(k)];
+    int tri = -1;
+    Vec3 q;
+    const Vec3f want = truthAt(model.mesh.vertices[i].cast<double>(), &tri, &q);
     const auto& c = model.rgba[i];
     de[size_t(k)] = deltaE76(Vec3f(c[0], c[1], c[2]), want);
+    // A colour edge of the truth within kColourEdgeRadius_m: the albedo 4 ways along the
+    // surface (in the nearest triangle's plane, snapped back onto the surface).
+    const Vec3 n = truth.faceNormal(tri).cast<double>().normalized();
+    const Vec3 t1 = n.unitOrthogonal(), t2 = n.cross(t1);
+    for (const Vec3& t : {t1, Vec3(-t1), t2, Vec3(-t2)}) {
+      int tt = -1;
+      Vec3 qq;
+      if (deltaE76(truthAt(q + kColourEdgeRadius_m * t, &tt, &qq), want) > kColourEdgeDeltaE) {
+        atEdge[size_t(k)] = 1;
+        break;
+      }
+    }
   });
   out.vertices = int(de.size());
   if (de.empty()) return out;
-  double sum = 0;
-  for (double x : de) sum += x;
+  double sum = 0, sumAway = 0, sumEdge = 0;
+  int edges = 0;
+  for (size_t k = 0; k < de.size(); ++k) {
+    sum += de[k];
+    (atEdge[k] ? sumEdge : sumAway) += de[k];
+    edges += atEdge[k];
+  }
   out.delta_e_mean = sum / double(de.size());
+  out.edge_share = double(edges) / double(de.size());
+  if (edges > 0) out.delta_e_mean_at_edges = sumEdge / edges;
+  if (edges < int(de.size())) out.delta_e_mean_off_edges = sumAway / double(int(de.size()) - edges);
   std::vector<double> sorted = de;
   const size_t k95 = std::min(sorted.size() - 1, size_t(std::floor(0.95 * double(sorted.size()))));
   std::nth_element(sorted.begin(), sorted.begin() + long(k95), sorted.end());

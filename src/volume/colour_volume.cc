@@ -564,14 +564,23 @@ void ColourFrames::sights(const Vec3& p_O, const Vec3& n_O, Fn&& fn) const {
 }
 
 bool ColourFrames::at(const Vec3& p_O, const Vec3& n_O, Vec3f* rgb, double falloff) const {
-  double w = 0;
-  Vec3 sum = Vec3::Zero();  // linear intensity, the shading divided out
+  // Linear intensity, the shading divided out: of the sights away from edges, and apart, of those
+  // at an edge. The latter colour a point only where no frame saw it away from one: beside a
+  // finger, a rim of it that the robot's mask missed is fused as the object's
+  // and shows the finger's colour; at the object's outline colour and depth disagree.
+  double w = 0, wEdge = 0;
+  Vec3 sum = Vec3::Zero(), sumEdge = Vec3::Zero();
   sights(p_O, n_O, [&](double cosine, const Vec3f& c, bool edge) {
-    const double wf = std::exp(kAngleSharpness * (cosine - 1)) * (edge ? 0.1 : 1.0);
+    const double wf = std::exp(kAngleSharpness * (cosine - 1));
     const double shade = 1 - falloff * (1 - cosine);
-    for (int k = 0; k < 3; ++k) sum[k] += wf * srgbToLinear(c[k]) / shade;
-    w += wf;
+    Vec3& to = edge ? sumEdge : sum;
+    for (int k = 0; k < 3; ++k) to[k] += wf * srgbToLinear(c[k]) / shade;
+    (edge ? wEdge : w) += wf;
   });
+  if (!(w > 0)) {
+    w = wEdge;
+    sum = sumEdge;
+  }
   if (!(w > 0)) return false;
   for (int k = 0; k < 3; ++k) (*rgb)[k] = float(linearToSrgb(sum[k] / w));
   return true;

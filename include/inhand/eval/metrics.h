@@ -60,8 +60,15 @@ struct SurfaceMetrics {
 struct ColourMetrics {
   int vertices = 0;  // vertices compared
   double delta_e_mean = 0, delta_e_p95 = 0;
+  // The vertices at a colour edge of the truth (its albedo kColourEdgeRadius_m away along the
+  // surface, one of 4 ways, more than kColourEdgeDeltaE from the vertex's): their share, and the
+  // mean ΔE76 at them and off them. A camera pixel (about 1 mm at the scans' range) blurs what
+  // lies within it of an edge, so the mean over a finely patterned texture is mostly its edges'.
+  double edge_share = 0, delta_e_mean_at_edges = 0, delta_e_mean_off_edges = 0;
   double psnr_db = 0;  // colourPsnr over 8 views
 };
+constexpr double kColourEdgeRadius_m = 0.001;
+constexpr double kColourEdgeDeltaE = 10;
 ColourMetrics colourAccuracy(const ObjectModel& model, const TriangleMesh& truth,
                              const SurfaceColours& truth_colours);
 

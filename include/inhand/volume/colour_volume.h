@@ -114,7 +114,10 @@ class ColourFrames {
   // nearer at its colour pixel or beside it), each frame's colour there (bilinear, as linear
   // intensity divided by the shading 1 − falloff · (1 − cos θ)) weighted by
   // exp(kAngleSharpness · (cos θ − 1)), θ between n_O and the direction to the colour camera (at
-  // most 70°), a tenth at a depth edge: the head-on views decide. False where no frame saw it.
+  // most 70°): the head-on views decide. Sights at a depth edge (within 2 pixels of no depth, a
+  // jump over 1 cm, the robot's or the table's pixels) count only where no frame saw p_O away
+  // from one (a finger's rim the robot's mask missed shows the finger's colour there). False
+  // where no frame saw it.
   bool at(const Vec3& p_O, const Vec3& n_O, Vec3f* rgb, double falloff = 0) const;
 
   // The share of the light that falls off with the angle between the surface and the camera's
