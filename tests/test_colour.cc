@@ -561,10 +561,10 @@ TEST(Colour, AScanGetsTheCheckerBoxsColours) {
   EXPECT_GT(s.colour.vertices, int(0.8 * double(m.mesh.vertices.size())));
   // 2 cm squares: the colours come from the frames kept (ColourFrames), blurred within about a
   // pixel of each edge, not from the 4 mm voxels (11.4 from them).
-  EXPECT_LT(s.colour.delta_e_mean, 5.0);  // 3.3 measured
+  EXPECT_LT(s.colour.delta_e_mean, 5.0);  // 2.9 measured
   // The squares' edges lie where they should: more than 1 mm from any true edge (a quarter of
   // the 4 mm voxels) the colours are right, the error sits within that millimetre.
-  EXPECT_LT(s.colour.delta_e_mean_off_edges, 3.0);
+  EXPECT_LT(s.colour.delta_e_mean_off_edges, 3.0);  // 1.5 measured (9.9 at edges)
   EXPECT_GT(s.colour.delta_e_mean_at_edges, s.colour.delta_e_mean_off_edges);
   // The hand, blue in the colour camera, colours no observed vertex: none lies within ΔE 3 of
   // its blue, nor nearer to it than to both of the squares' colours (a half-and-half blend).
@@ -718,7 +718,7 @@ TEST(Colour, RealKinectFramesFuseWithTheirColours) {
   };
   std::printf("held-out frames: %zu vertex views, median dE76 %.1f (shifted %.1f)\n", de.size(),
               median(de), median(shifted));
-  EXPECT_LT(median(de), 13.0);  // 11.3 measured
+  EXPECT_LT(median(de), 13.0);  // 11.5 measured
   EXPECT_GT(median(shifted), 2 * median(de));
 }
 
