@@ -32,6 +32,7 @@
 #include "inhand/core/internal/parallel.h"
 #include "inhand/core/pose.h"
 #include "inhand/core/random.h"
+#include "inhand/eval/metrics.h"
 #include "inhand/geometry/appearance.h"
 #include "inhand/geometry/builtin_objects.h"
 #include "inhand/geometry/ray_scene.h"
@@ -66,19 +67,37 @@ struct Row {
   double open3d_ms, inhand_fuse_ms, inhand_integrate_ms, inhand_defaults_ms;
 };
 
+// One cube of `edge` around `centre` for both libraries: Open3D's resolution and origin, the
+// camera, and inhand's volume options and box (inhand samples at origin + i·voxel, i = 0..n-1:
+// the same n as Open3D's voxel centres).
+struct Setup {
+  Setup(const DepthCameraOptions& cam, const Vec3& centre, double edge, double voxel, double mu)
+      : resolution(int(std::lround(edge / voxel))),
+        origin(centre - Vec3::Constant(0.5 * edge)),
+        intr(cam.intrinsics.width, cam.intrinsics.height, cam.intrinsics.fx, cam.intrinsics.fy,
+             cam.intrinsics.cx, cam.intrinsics.cy),
+        box{origin + Vec3::Constant(0.5 * voxel),
+            origin + Vec3::Constant(0.5 * voxel + (resolution - 1) * voxel)} {
+    vo.voxel_size_m = voxel;
+    vo.truncation_m = mu;
+  }
+  int resolution;
+  Vec3 origin;
+  open3d::camera::PinholeCameraIntrinsic intr;
+  Aabb box;
+  VolumeOptions vo;
+};
+
 Row compare(const std::vector<Frame>& frames, const DepthCameraOptions& cam,
             const NoiseModelOptions& noise, const Vec3& centre, double edge, double voxel,
             double mu) {
-  const int resolution = int(std::lround(edge / voxel));
-  const Vec3 origin = centre - Vec3::Constant(0.5 * edge);
+  const Setup g(cam, centre, edge, voxel, mu);
+  const int resolution = g.resolution;
+  const Vec3& origin = g.origin;
   const CameraIntrinsics& K = cam.intrinsics;
-  const open3d::camera::PinholeCameraIntrinsic intr(K.width, K.height, K.fx, K.fy, K.cx, K.cy);
-  VolumeOptions vo;
-  vo.voxel_size_m = voxel;
-  vo.truncation_m = mu;
-  // inhand samples at origin + i·voxel (i = 0..n-1): the same n as Open3D's voxel centres.
-  const Aabb box{origin + Vec3::Constant(0.5 * voxel),
-                 origin + Vec3::Constant(0.5 * voxel + (resolution - 1) * voxel)};
+  const auto& intr = g.intr;
+  const VolumeOptions& vo = g.vo;
+  const Aabb& box = g.box;
   std::vector<double> o3d, fuse, integ, defaults;
   VolumeOptions vd = vo;
   vd.band_sigmas = 2.0;
@@ -123,24 +142,18 @@ struct ColourRow {
 ColourRow compareColour(const std::vector<Frame>& frames, const DepthCameraOptions& cam,
                         const NoiseModelOptions& noise, const Vec3& centre, double edge,
                         double voxel, double mu) {
-  const int resolution = int(std::lround(edge / voxel));
-  const Vec3 origin = centre - Vec3::Constant(0.5 * edge);
+  const Setup g(cam, centre, edge, voxel, mu);
   const CameraIntrinsics& K = cam.intrinsics;
-  const open3d::camera::PinholeCameraIntrinsic intr(K.width, K.height, K.fx, K.fy, K.cx, K.cy);
-  VolumeOptions vo;
-  vo.voxel_size_m = voxel;
-  vo.truncation_m = mu;
-  const Aabb box{origin + Vec3::Constant(0.5 * voxel),
-                 origin + Vec3::Constant(0.5 * voxel + (resolution - 1) * voxel)};
   std::vector<double> o3d, ours, withFrames;
   for (int round = 0; round < 3; ++round) {
     open3d::pipelines::integration::UniformTSDFVolume v(
-        edge, resolution, mu, open3d::pipelines::integration::TSDFVolumeColorType::RGB8, origin);
+        edge, g.resolution, mu, open3d::pipelines::integration::TSDFVolumeColorType::RGB8,
+        g.origin);
     auto t = Clock::now();
-    for (const Frame& f : frames) v.Integrate(f.rgbd_colour, intr, f.T_O_C.inverse().matrix());
+    for (const Frame& f : frames) v.Integrate(f.rgbd_colour, g.intr, f.T_O_C.inverse().matrix());
     o3d.push_back(msSince(t) / double(frames.size()));
     for (const bool keep : {false, true}) {
-      TsdfVolume a(box, vo);
+      TsdfVolume a(g.box, g.vo);
       ColourVolume colour(a);
       ColourFrames kept(64u << 20);
       t = Clock::now();
@@ -155,29 +168,6 @@ ColourRow compareColour(const std::vector<Frame>& frames, const DepthCameraOptio
     }
   }
   return {median(o3d), median(ours), median(withFrames)};
-}
-
-// `mesh` with `colours` rendered unlit from T_O_C (pinhole K): black where nothing is hit.
-RgbImage renderAlbedo(const RayScene& scene, const TriangleMesh& mesh,
-                      const SurfaceColours& colours, const Iso3& T_O_C, const CameraIntrinsics& K) {
-  const size_t n = size_t(K.width) * size_t(K.height);
-  std::vector<Ray> rays(n);
-  for (int v = 0; v < K.height; ++v)
-    for (int u = 0; u < K.width; ++u) {
-      Ray& r = rays[size_t(v) * size_t(K.width) + size_t(u)];
-      r.origin = T_O_C.translation().cast<float>();
-      r.dir = (T_O_C.linear() * K.rayZ1(u, v)).cast<float>();
-    }
-  std::vector<Hit> hits(n);
-  scene.intersect(rays.data(), hits.data(), n);
-  RgbImage img(K.width, K.height);
-  for (size_t i = 0; i < n; ++i) {
-    if (!hits[i].valid()) continue;
-    const Vec3f c = colours.at(mesh, hits[i].triangle, hits[i].u, hits[i].v);
-    for (int k = 0; k < 3; ++k)
-      img.rgb[3 * i + size_t(k)] = uint8_t(std::clamp(std::lround(c[k]), 0L, 255L));
-  }
-  return img;
 }
 
 }  // namespace
@@ -211,7 +201,7 @@ int main(int argc, char** argv) {
     std::copy(f.depth.depth_m.begin(), f.depth.depth_m.end(), depth.PointerAs<float>());
     color.Prepare(f.depth.width, f.depth.height, 1, 4);  // NoColor volumes do not read it
     f.rgbd = open3d::geometry::RGBDImage(color, depth);
-    f.colour = renderAlbedo(scene, mesh, checker, f.T_O_C, cam.intrinsics);
+    f.colour = renderSurfaceColours(mesh, checker, f.T_O_C, cam.intrinsics);
     open3d::geometry::Image rgb;
     rgb.Prepare(f.colour.width, f.colour.height, 3, 1);
     std::copy(f.colour.rgb.begin(), f.colour.rgb.end(), rgb.data_.begin());

@@ -291,6 +291,17 @@ RgbImage renderVertexColours(const TriangleMesh& mesh,
       [&](int t, float b1, float b2) { return vertexColourAt(mesh, rgba, t, b1, b2); }, &hit);
 }
 
+RgbImage renderSurfaceColours(const TriangleMesh& mesh, const SurfaceColours& colours,
+                              const Iso3& T_O_C, const CameraIntrinsics& K) {
+  RayScene scene;
+  scene.addMesh(mesh);
+  scene.commit();
+  std::vector<uint8_t> hit;
+  return renderUnlit(
+      scene, T_O_C, K, [&](int t, float b1, float b2) { return colours.at(mesh, t, b1, b2); },
+      &hit);
+}
+
 double colourPsnr(const ObjectModel& model, const TriangleMesh& truth,
                   const SurfaceColours& truth_colours, int views, std::vector<RgbImage>* images) {
   if (model.mesh.empty() || truth.empty() || model.rgba.size() != model.mesh.vertices.size())

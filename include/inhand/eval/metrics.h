@@ -78,6 +78,11 @@ RgbImage renderVertexColours(const TriangleMesh& mesh,
                              const std::vector<std::array<uint8_t, 4>>& rgba, const Iso3& T_O_C,
                              const CameraIntrinsics& K);
 
+// `mesh` in its surface colours (its albedo) rendered unlit from the camera at T_O_C (pinhole K)
+// by ray casting: black where the rays meet nothing.
+RgbImage renderSurfaceColours(const TriangleMesh& mesh, const SurfaceColours& colours,
+                              const Iso3& T_O_C, const CameraIntrinsics& K);
+
 // The model with its per-vertex colours (rgba; vertices without colour in mid grey) and the true
 // mesh with its colours, each rendered unlit (albedo only) by ray casting from `views` cameras
 // around the true mesh's box centre (directions spread over the sphere, 3 box diagonals away,
