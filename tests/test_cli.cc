@@ -1008,6 +1008,21 @@ TEST(Cli, CompareScoresTheColoursWhereBothHaveThem) {
   r = run("compare " + (dir.path() / "plain.ply").string() + truthArg, dir);
   ASSERT_EQ(r.code, 0) << r.output;
   EXPECT_TRUE(Json::parse(r.output).at("colour").is_null()) << r.output;
+  // A truth whose colours cannot be read (its mtllib is missing) still scores the shape.
+  {
+    std::ofstream obj(dir.path() / "truth.obj");
+    obj << "mtllib missing.mtl\nusemtl red\n";
+    for (const Vec3f& v : sphere.vertices)
+      obj << "v " << v.x() << " " << v.y() << " " << v.z() << "\n";
+    for (const Tri& t : sphere.triangles)
+      obj << "f " << t[0] + 1 << " " << t[1] + 1 << " " << t[2] + 1 << "\n";
+  }
+  r = run("compare " + (dir.path() / "same.ply").string() + " --truth " +
+              (dir.path() / "truth.obj").string(),
+          dir);
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_NE(r.output.find("no colour score"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("coverage 100.0%"), std::string::npos) << r.output;
 }
 
 namespace {

@@ -691,7 +691,14 @@ int runCompare(const std::string& modelPath, const std::string& truthSpec, doubl
   const char* rgbaKeys[4] = {"red", "green", "blue", "alpha"};
   if (std::all_of(rgbaKeys, rgbaKeys + 4,
                   [&](const char* k) { return ply.vertexProperties.count(k) > 0; })) {
-    const TexturedMesh t = loadSimulatedObject(truthSpec, true);
+    // The truth's colours are read apart from its shape: colours it cannot give (an OBJ whose
+    // mtllib is missing) cost the colour score only, not the shape's.
+    TexturedMesh t;
+    try {
+      t = loadSimulatedObject(truthSpec, true);
+    } catch (const Error& e) {
+      std::fprintf(stderr, "compare: warning: no colour score: %s\n", e.what());
+    }
     if (!t.colours.empty()) {
       for (size_t i = 0; i < model.mesh.vertices.size(); ++i) {
         std::array<uint8_t, 4> c{};
