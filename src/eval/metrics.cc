@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <tuple>
 
 #include "inhand/core/error.h"
@@ -175,9 +176,11 @@ ColourMetrics colourAccuracy(const ObjectModel& model, const TriangleMesh& truth
   for (size_t i = 0; i < model.rgba.size(); ++i)
     if (model.rgba[i][3] == 255 && (model.observed.empty() || model.observed[i]))
       which.push_back(i);
-  // The true albedo at the point of the true surface nearest p (its triangle in *tri).
-  auto truthAt = [&](const Vec3& p, int* tri, Vec3* q) {
-    index.nearest(p, tri, q);
+  // The true albedo at the point of the true surface nearest p (its triangle in *tri); false
+  // where none lies within max_m.
+  auto truthAt = [&](const Vec3& p, int* tri, Vec3* q, Vec3f* albedo,
+                     double max_m = std::numeric_limits<double>::infinity()) {
+    if (!(index.nearest(p, tri, q, max_m) < max_m) || *tri < 0) return false;
     // q's barycentrics in its triangle.
     const Tri& f = truth.triangles[size_t(*tri)];
     const Vec3 a = truth.vertices[size_t(f[0])].cast<double>();
@@ -191,7 +194,8 @@ ColourMetrics colourAccuracy(const ObjectModel& model, const TriangleMesh& truth
       b1 = (d22 * e1.dot(d) - d12 * e2.dot(d)) / det;
       b2 = (d11 * e2.dot(d) - d12 * e1.dot(d)) / det;
     }
-    return truth_colours.at(truth, *tri, float(b1), float(b2));
+    *albedo = truth_colours.at(truth, *tri, float(b1), float(b2));
+    return true;
   };
   std::vector<double> de(which.size());
   std::vector<uint8_t> atEdge(which.size(), 0);
@@ -199,17 +203,21 @@ ColourMetrics colourAccuracy(const ObjectModel& model, const TriangleMesh& truth
     const size_t i = which[size_t(k)];
     int tri = -1;
     Vec3 q;
-    const Vec3f want = truthAt(model.mesh.vertices[i].cast<double>(), &tri, &q);
+    Vec3f want;
+    truthAt(model.mesh.vertices[i].cast<double>(), &tri, &q, &want);
     const auto& c = model.rgba[i];
     de[size_t(k)] = deltaE76(Vec3f(c[0], c[1], c[2]), want);
     // A colour edge of the truth within kColourEdgeRadius_m: the albedo 4 ways along the
-    // surface (in the nearest triangle's plane, snapped back onto the surface).
+    // surface (in the nearest triangle's plane, snapped back onto the surface, which lies within
+    // the radius of each such point).
     const Vec3 n = truth.faceNormal(tri).cast<double>().normalized();
     const Vec3 t1 = n.unitOrthogonal(), t2 = n.cross(t1);
     for (const Vec3& t : {t1, Vec3(-t1), t2, Vec3(-t2)}) {
       int tt = -1;
       Vec3 qq;
-      if (deltaE76(truthAt(q + kColourEdgeRadius_m * t, &tt, &qq), want) > kColourEdgeDeltaE) {
+      Vec3f there;
+      if (truthAt(q + kColourEdgeRadius_m * t, &tt, &qq, &there, 2 * kColourEdgeRadius_m) &&
+          deltaE76(there, want) > kColourEdgeDeltaE) {
         atEdge[size_t(k)] = 1;
         break;
       }
