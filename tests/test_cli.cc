@@ -434,14 +434,21 @@ TEST(Cli, CrackerBoxIsScannedWholeFromTheTable) {
   EXPECT_EQ(s["options"]["sim"]["pick_up"], "first_contact");
   const Aabb b = loadObject("builtin:cracker_box").bounds();
   const PlyData ply = readPly(out / "model.ply");
-  size_t inside = 0;
-  for (const Vec3f& v : ply.mesh.vertices) {
-    const Vec3 p = v.cast<double>();
+  const std::vector<float>& variance = ply.vertexProperties.at("variance");
+  size_t inside = 0, outside = 0;
+  for (size_t i = 0; i < ply.mesh.vertices.size(); ++i) {
+    const Vec3 p = ply.mesh.vertices[i].cast<double>();
     const double depth = std::min((p - b.min).minCoeff(), (b.max - p).minCoeff());
     inside += depth > 0.003;
+    // Measured (σ < 1 cm) and more than 3 mm outside: tufts beside the fingers, where a ray that
+    // grazed the box's edge on the table wrote its band beyond the edge and the finger hid the
+    // face beyond it from every later view (241 such vertices before the robot's pixels pulled
+    // the voxels more than μ in front of them out; 52 after).
+    outside += variance[i] < 1e-4 && (b.min - p).cwiseMax(p - b.max).cwiseMax(0.0).norm() > 0.003;
   }
   EXPECT_LT(double(inside), 1e-3 * double(ply.mesh.vertices.size()))
       << inside << " of " << ply.mesh.vertices.size() << " vertices lie inside the box";
+  EXPECT_LT(outside, 120u) << outside << " measured vertices lie more than 3 mm outside the box";
 }
 
 TEST(Cli, EvalTabulatesEveryRunAndRejectsUnknownPlanners) {

@@ -583,8 +583,9 @@ TEST(Session, DepthEdgesDoNotCarveIntoAThinObject) {
 // a pixel beside such a gap is a silhouette too (unusedInHand), and is not fused. Its return may
 // come from across the edge (lateral noise; at a grazing angle a fraction of a pixel is
 // millimetres of depth). The cracker box held by the default grasp, one grasp's views: fused,
-// those pixels grow flakes several millimetres beyond its edges; not used, fewer than half as
-// many vertices lie more than 4 mm outside the box.
+// those pixels grow flakes several millimetres beyond its edges; not used, a third fewer
+// vertices lie more than 4 mm outside the box (the robot's pixels pull most flakes in front of
+// them out either way: kCarveToSurface).
 TEST(Session, SilhouettesAgainstNoReturnAreNotFusedInTheHand) {
   const TriangleMesh box = loadObject("builtin:cracker_box");
   const Aabb truth = box.bounds();
@@ -611,7 +612,6 @@ TEST(Session, SilhouettesAgainstNoReturnAreNotFusedInTheHand) {
     return outside;
   };
   const int used = flakes(0.0), notUsed = flakes(0.02);
-  EXPECT_LT(notUsed, 400);  // 279 here, most within 12 cm of the palm (at the fingers); 590 when
-                            // only a neighbour farther by 2 cm marked a silhouette
-  EXPECT_GT(used, 1.8 * notUsed);  // 721 here
+  EXPECT_LT(notUsed, 250);  // 186 here; 279 when the robot's pixels emptied unknown voxels only
+  EXPECT_GT(used, 1.4 * notUsed);  // 310 here (721)
 }

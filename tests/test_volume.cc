@@ -269,7 +269,8 @@ TEST(Fusion, SigmaRestrictedToTheVolumeAndUncarvedPixelsFusesTheSame) {
   for (const Iso3& T : test::viewsAround(6, 0.6)) {
     DepthImage d = renderDepth(scene, T, cam, nm, RenderOptions());
     std::vector<uint8_t> carve(d.depth_m.size(), 0);
-    for (size_t i = 0; i < carve.size(); i += 7) carve[i] = 1;
+    for (size_t i = 0; i < carve.size(); i += 7) carve[i] = kCarveBeyondBand;
+    for (size_t i = 3; i < carve.size(); i += 11) carve[i] = kCarveToSurface;
     const PixelRect rect = volumeImageRect(full, T, cam.intrinsics);
     rectsSmaller += (rect.u1 - rect.u0) * (rect.v1 - rect.v0) < d.width * d.height / 2;
     const std::vector<float> all = measurementSigma(d, cam.intrinsics, nm);
@@ -278,7 +279,9 @@ TEST(Fusion, SigmaRestrictedToTheVolumeAndUncarvedPixelsFusesTheSame) {
       for (int u = 0; u < d.width; ++u) {
         const size_t i = size_t(v) * d.width + u;
         const bool inside = u >= rect.u0 && u < rect.u1 && v >= rect.v0 && v < rect.v1;
-        ASSERT_EQ(some[i], inside && !carve[i] ? all[i] : 0.f) << u << " " << v;
+        // A known surface's carve-only pixels keep their σ (the weight of their free space).
+        const bool weighed = !carve[i] || carve[i] == kCarveToSurface;
+        ASSERT_EQ(some[i], inside && weighed ? all[i] : 0.f) << u << " " << v;
       }
     integrate(d, T, cam.intrinsics, all, &full, &carve);
     integrate(d, T, cam.intrinsics, some, &part, &carve);
@@ -308,6 +311,73 @@ TEST(Fusion, CarveOnlyPixelsAddNoSurface) {
   integrate(d, T, cam.intrinsics, measurementSigma(d, cam.intrinsics, nm), &vol, &carve);
   EXPECT_EQ(vol.countState(VoxelState::kObserved), 0u);
   EXPECT_GT(vol.countState(VoxelState::kEmpty), 50000u);
+}
+
+// A known surface's pixel (the robot's, kCarveToSurface) says the space more than μ in front of it
+// is free, as any measurement does: an observed voxel there gets +μ with the pixel's weight (a band
+// that a ray grazing an edge wrote beyond the object is pulled out where the hand hid the face
+// from every later view). At a depth edge (kCarveUnknownToSurface) it changes unknown voxels only.
+// Both empty the unknown voxels up to μ/4 in front of it.
+TEST(Fusion, AKnownSurfacesPixelsPullObservedVoxelsInFrontOfThemOut) {
+  VolumeOptions vo;
+  Aabb box;
+  box.extend(Vec3(-0.08, -0.08, 0.56));
+  box.extend(Vec3(0.08, 0.08, 0.80));
+  TriangleMesh cubeMesh = makeBox(Vec3(0.1, 0.1, 0.1));
+  TriangleMesh placed = transformed(cubeMesh, Iso3(Eigen::Translation3d(0, 0, 0.70)));
+  DepthCameraOptions cam;
+  NoiseModelOptions nm;
+  const CameraIntrinsics& K = cam.intrinsics;
+  for (uint8_t flag : {kCarveToSurface, kCarveUnknownToSurface}) {
+    TsdfVolume vol(box, vo);
+    test::renderAndFuse(placed, {Iso3::Identity()}, false, &vol);  // the face at z = 0.65
+    const double mu = vol.truncation();
+    // A flat surface 3μ behind the face, every pixel carve-only.
+    const double D2 = 0.65 + 3 * mu;
+    DepthImage far(K.width, K.height);
+    std::fill(far.depth_m.begin(), far.depth_m.end(), float(D2));
+    std::vector<uint8_t> carve(far.depth_m.size(), flag);
+    const std::vector<float> sigma = measurementSigma(far, K, nm, nullptr, &carve);
+    // The voxels on the optical axis read the pixel at (cx, cy) rounded: (320, 240).
+    const float s2 = sigma[240 * size_t(K.width) + 320];
+    if (flag == kCarveToSurface) {
+      EXPECT_NEAR(s2, axialSigma(nm, D2, 0), 1e-6);
+    } else {
+      EXPECT_EQ(s2, 0.f);
+    }
+    std::vector<VoxelState> state0;
+    std::vector<float> sumW0, sumWD0;
+    for (int z = 0; z < vol.dims().z(); ++z) {
+      const size_t i = vol.index(40, 40, z);
+      state0.push_back(vol.state(i));
+      sumW0.push_back(vol.sumW()[i]);
+      sumWD0.push_back(vol.sumWD()[i]);
+    }
+    integrate(far, Iso3::Identity(), K, sigma, &vol, &carve);
+    int pulled = 0, emptied = 0;
+    for (int z = 0; z < vol.dims().z(); ++z) {
+      const size_t i = vol.index(40, 40, z);
+      const double pz = vol.point(40, 40, z).z(), d = D2 - pz;
+      if (std::abs(d - mu) < 1e-4 || std::abs(d - mu / 4) < 1e-4) continue;  // rounding at limits
+      const VoxelState st = state0[size_t(z)];
+      if (st == VoxelState::kObserved && d > mu && flag == kCarveToSurface) {
+        const double w2 = 1.0 / (double(s2) * s2);
+        EXPECT_EQ(vol.state(i), VoxelState::kObserved);
+        EXPECT_NEAR(vol.distance(i), (sumWD0[size_t(z)] + w2 * mu) / (sumW0[size_t(z)] + w2), 1e-5)
+            << pz;
+        pulled += vol.distance(i) > sumWD0[size_t(z)] / sumW0[size_t(z)] + 1e-4;
+      } else if (st == VoxelState::kUnknown && d > mu / 4) {
+        EXPECT_EQ(vol.state(i), VoxelState::kEmpty) << pz;
+        ++emptied;
+      } else {
+        EXPECT_EQ(vol.state(i), st) << pz;
+        EXPECT_EQ(vol.sumW()[i], sumW0[size_t(z)]) << pz;
+        EXPECT_EQ(vol.sumWD()[i], sumWD0[size_t(z)]) << pz;
+      }
+    }
+    EXPECT_EQ(pulled > 0, flag == kCarveToSurface);
+    EXPECT_GT(emptied, 0);
+  }
 }
 
 // depthDiscontinuities marks the near side of silhouettes: the outer ring of a 5×5 block 10 cm in

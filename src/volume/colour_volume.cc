@@ -183,6 +183,16 @@ bool atDepthEdge(const DepthImage& depth, int u, int v, const std::vector<uint8_
   return false;
 }
 
+// Pixel (u, v) lies within kEdge pixels of one flagged in `carve_only`.
+bool nearCarveOnly(const DepthImage& depth, int u, int v, const std::vector<uint8_t>* carve_only) {
+  if (!carve_only) return false;
+  const int W = depth.width, H = depth.height;
+  for (int vv = std::max(0, v - kEdge); vv <= std::min(H - 1, v + kEdge); ++vv)
+    for (int uu = std::max(0, u - kEdge); uu <= std::min(W - 1, u + kEdge); ++uu)
+      if ((*carve_only)[size_t(vv) * size_t(W) + size_t(uu)]) return true;
+  return false;
+}
+
 // The pixel nearest image point px (as std::lround of each coordinate, half away from zero, up to
 // the rounding of px + 0.5), false when it lies outside a W × H image (NaN included).
 bool nearestPixel(const Vec2& px, int W, int H, int* cu, int* cv) {
@@ -365,6 +375,9 @@ ColourCameraView viewOfFrame(const DepthImage& depth, const CameraIntrinsics& K,
       p.i = int32_t(cv * Kc.width + cu);
       p.z = float(q.z());
       if (carve(u, v) || !(sigma_m[size_t(v) * size_t(W) + size_t(u)] > 0)) continue;
+      // Beside a carve-only pixel (the fingers' rims, the object next to the hand) not used: the
+      // colour camera, 2.5 cm aside, may see the finger there.
+      if (nearCarveOnly(depth, u, v, carve_only)) continue;
       p.kind = atDepthEdge(depth, u, v, carve_only) ? 2 : 1;
     }
   });

@@ -81,7 +81,10 @@ std::vector<float> measurementSigma(const DepthImage& depth, const CameraIntrins
       if (u >= uEnd) break;
       const double D = row[u];
       if (!(D > 0)) continue;
-      if (carve_only && (*carve_only)[size_t(v) * w + u]) continue;
+      if (carve_only) {
+        const uint8_t c = (*carve_only)[size_t(v) * w + u];
+        if (c && c != kCarveToSurface) continue;
+      }
       const double x = xs[size_t(u)];
       const Vec3 P(x * D, y * D, 1.0 * D);
       bool edge = false;
@@ -469,12 +472,20 @@ namespace {
 // the surface. Returns whether the voxel changed.
 inline bool updateVoxel(float d, float mu, float weight, uint8_t carve, float* sumWD, float* sumW,
                         uint8_t* state) {
-  // A carve-only pixel empties unknown voxels only: in front of a known surface (the robot's own)
-  // right up to it, in front of a depth edge's return only beyond the band (kCarveBeyondBand).
+  // A carve-only pixel empties unknown voxels: in front of a known surface (the robot's own, the
+  // table) right up to it, in front of a depth edge's return only beyond the band
+  // (kCarveBeyondBand). A known surface's pixel away from depth edges also pulls an observed
+  // voxel more than μ in front of it out of the surface, as any measurement does.
   if (carve) {
-    if (d > (carve == kCarveBeyondBand ? mu : 0.25f * mu) &&
-        *state == uint8_t(VoxelState::kUnknown)) {
-      *state = uint8_t(VoxelState::kEmpty);
+    if (*state == uint8_t(VoxelState::kUnknown)) {
+      if (d > (carve == kCarveBeyondBand ? mu : 0.25f * mu)) {
+        *state = uint8_t(VoxelState::kEmpty);
+        return true;
+      }
+    } else if (carve == kCarveToSurface && d > mu && weight > 0 &&
+               *state == uint8_t(VoxelState::kObserved)) {
+      *sumWD += weight * mu;
+      *sumW += weight;
       return true;
     }
     return false;
@@ -715,8 +726,8 @@ constexpr int kBrick = 8;      // voxels per brick edge
 constexpr int kDepthTile = 8;  // pixels per depth tile edge
 
 // The nearest and farthest depth returned in each kDepthTile² tile of the image's `rect`
-// (+inf / −inf where the tile has none), and whether any of its depths is a measurement (not
-// carve-only).
+// (+inf / −inf where the tile has none), and whether any of its depths can change an observed
+// voxel (a measurement, or a known surface's carve-only pixel: kCarveToSurface).
 class DepthTiles {
  public:
   DepthTiles(const DepthImage& depth, const PixelRect& rect, const uint8_t* carve) : rect_(rect) {
@@ -741,14 +752,15 @@ class DepthTiles {
           const int t = (u - rect.u0) / kDepthTile;
           lo[t] = std::min(lo[t], D);
           hi[t] = std::max(hi[t], D);
-          measured[t] |= !(carve && carve[row0 + size_t(u)]);
+          // A known surface's pixel (kCarveToSurface) changes observed voxels too.
+          measured[t] |= !carve || carve[row0 + size_t(u)] <= kCarveToSurface;
         }
       }
     });
   }
   // The depth range over pixels [u0, u1] × [v0, v1] (inclusive, clipped to the rect); false when
   // none of them has a depth.
-  // *measured: whether any of those depths is a measurement (not carve-only).
+  // *measured: whether any of those depths can change an observed voxel.
   bool range(int u0, int v0, int u1, int v1, float* lo, float* hi, bool* measured) const {
     u0 = std::max(u0, rect_.u0);
     v0 = std::max(v0, rect_.v0);
@@ -779,8 +791,9 @@ class DepthTiles {
 // none of its voxels projects onto a pixel with a depth; or all lie more than μ behind every depth
 // their pixels can hold (d < −μ ≤ −band: no update); or all lie more than μ in front of them and
 // every voxel is already empty (d > μ changes only unknown and observed voxels, and carve-only
-// pixels only unknown ones); or every depth their pixels can hold is carve-only (the robot's) and
-// no voxel is unknown. The margin covers the kernel's single-precision depth and pixel.
+// pixels only unknown ones); or every depth their pixels can hold is a carve-only one that changes
+// unknown voxels only (depth edges) and no voxel is unknown. The margin covers the kernel's
+// single-precision depth and pixel.
 struct BrickCull {
   const TsdfVolume& volume;
   const Iso3& T_C_O;
@@ -818,7 +831,7 @@ struct BrickCull {
     if (zMin - double(dHi) > double(mu) + margin) return true;  // all behind the band
     if (double(dLo) - zMax > double(mu) + margin)
       return none(lo, hi, VoxelState::kUnknown, VoxelState::kObserved);              // all in front
-    if (!measured) return none(lo, hi, VoxelState::kUnknown, VoxelState::kUnknown);  // robot only
+    if (!measured) return none(lo, hi, VoxelState::kUnknown, VoxelState::kUnknown);  // edges only
     return false;
   }
   // Whether no voxel of the brick is in state a or b.

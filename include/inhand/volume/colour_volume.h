@@ -87,8 +87,10 @@ std::vector<std::array<uint8_t, 4>> vertexColours(const ColourVolume& volume,
 // project to, 2 pixels wider), with the depth of the object's surface at each of those pixels
 // (the colour camera's z-buffer of the frame's fused points; marked where a point that is not
 // fused, the robot's or the table's, lies nearer, or where none projects) and whether the pixel
-// lies at a depth edge (within 2 pixels of no depth, a depth jump over 1 cm or a pixel that is not
-// fused, as integrateColour), and the colour camera's pose in the object's frame. A point of the
+// lies at a depth edge (within 2 pixels of no depth or a depth jump over 1 cm), and the colour
+// camera's pose in the object's frame. A fused pixel within 2 pixels of one that is not fused
+// (the robot's, the table's, the object's beside the hand) is not used at all: the colour
+// camera, 2.5 cm aside, may see a finger there. A point of the
 // model then takes its colour from the frames that saw it head-on, at the colour camera's own
 // resolution, rather than from the voxels' means (which blur a colour edge over a voxel on each
 // side and average in the oblique views' shading).

@@ -7,11 +7,19 @@
 //                later corrects flying pixels;
 //   |d| ≤ μ      Σw·d += w·d, Σw += w with w = 1/σ² of the pixel; the voxel becomes observed;
 //   d < −μ       behind the band: unchanged (stays unknown if never seen).
-// Pixels flagged carve-only only mark unknown voxels empty: kCarveToSurface (measurements of the
-// robot's own hand, §IV; the table) up to μ/4 in front of the measured surface (it is a known
-// surface, not the object's); kCarveBeyondBand (a return at a depth edge, whose side of the edge
-// is uncertain) only beyond μ in front of it, as any measurement's free space, so that a ray
-// grazing a surface does not empty the voxels of its band.
+// Pixels flagged carve-only are not the object's surface; what they say of the space in front of
+// them depends on the flag:
+//  - kCarveToSurface (measurements of the robot's own hand, §IV; the table): unknown voxels up to
+//    μ/4 in front of the measured surface become empty (it is a known surface, not the object's),
+//    and an observed voxel more than μ in front of it gets +μ as from any measurement, with the
+//    pixel's weight: the ray passed through it. Without that, a band that a ray grazing an edge
+//    wrote beyond the object (behind the edge, where it is not) stayed wherever the hand hid the
+//    face beyond the edge from every later view, a fin of surface millimetres off the object.
+//  - kCarveUnknownToSurface (such a pixel at a depth edge, whose depth may be of either side):
+//    unknown voxels only, up to μ/4 in front.
+//  - kCarveBeyondBand (a return at a depth edge, whose side of the edge is uncertain): unknown
+//    voxels only, beyond μ in front of it, as any measurement's free space, so that a ray grazing
+//    a surface does not empty the voxels of its band.
 #include <cstdint>
 #include <functional>
 #include <vector>
@@ -26,6 +34,7 @@ namespace inhand {
 // The values of a carve-only mask (0: a measurement).
 constexpr uint8_t kCarveToSurface = 1;
 constexpr uint8_t kCarveBeyondBand = 2;
+constexpr uint8_t kCarveUnknownToSurface = 3;
 
 struct IntegrationStats {
   int64_t visited = 0;  // voxels whose centre projected onto a pixel with a depth
@@ -41,8 +50,9 @@ PixelRect volumeImageRect(const TsdfVolume& volume, const Iso3& T_O_C, const Cam
 // incidence angle (normal estimated from neighbouring pixels), multiplied by
 // noise.discontinuity_factor next to depth discontinuities and missing returns. 0 where no depth.
 // With `region`, only its pixels get a σ (0 elsewhere); with `carve_only`, pixels flagged there
-// get none either (integrate() uses no σ of a carve-only pixel). Both leave the σ of every other
-// pixel as it would be without them.
+// get none either, but for kCarveToSurface (integrate() weighs the free space in front of those
+// by their σ, and uses no σ of another carve-only pixel). Both leave the σ of every other pixel
+// as it would be without them.
 std::vector<float> measurementSigma(const DepthImage& depth, const CameraIntrinsics& K,
                                     const NoiseModelOptions& noise,
                                     const PixelRect* region = nullptr,
