@@ -147,8 +147,9 @@ TEST(Faults, AnObjectThatSlipsIsFoundAndTheGraspCorrected) {
 
 // Physics: the pill bottle creeps in the hand under the motions' accelerations, a millimetre or
 // so at a time, too little for a slip (tracking.slip_m). Followed (tracking.creep_m), its frames
-// are fused nearer where it is than with creep not followed (recorded: 3.0 against 5.0 mm, the
-// model's coverage 92 against 78 %).
+// are fused nearer where it is than with creep not followed (recorded: 2.5 against 3.0 mm, the
+// model's coverage 95 against 70 %; 3.0 against 5.0 mm before the robot's pixels pulled the
+// smeared surface in front of them out, which leaves less to gain).
 TEST(Faults, AnObjectThatCreepsInTheHandIsFollowed) {
   auto scan = [&](double creep_m) {
     ScanConfig c = fastConfig();
@@ -165,7 +166,7 @@ TEST(Faults, AnObjectThatCreepsInTheHandIsFollowed) {
       1000 * unfollowed.object_error_median_m, s.metrics.coverage, unfollowed.metrics.coverage);
   EXPECT_EQ(unfollowed.result.scan.creeps_followed, 0);
   EXPECT_GE(s.result.scan.creeps_followed, 1);
-  EXPECT_LT(s.object_error_median_m, 0.8 * unfollowed.object_error_median_m);
+  EXPECT_LT(s.object_error_median_m, 0.95 * unfollowed.object_error_median_m);
   EXPECT_GT(s.metrics.coverage, unfollowed.metrics.coverage - 0.03);
 }
 
