@@ -790,10 +790,9 @@ class DepthTiles {
 // Whether a brick of voxels is certain to be left unchanged by the frame, from its corners alone:
 // none of its voxels projects onto a pixel with a depth; or all lie more than μ behind every depth
 // their pixels can hold (d < −μ ≤ −band: no update); or all lie more than μ in front of them and
-// every voxel is already empty (d > μ changes only unknown and observed voxels, and carve-only
-// pixels only unknown ones); or every depth their pixels can hold is a carve-only one that changes
-// unknown voxels only (depth edges) and no voxel is unknown. The margin covers the kernel's
-// single-precision depth and pixel.
+// every voxel is already empty (d > μ changes only unknown and observed voxels); or every depth
+// their pixels can hold is a carve-only one that changes unknown voxels only (depth edges) and no
+// voxel is unknown. The margin covers the kernel's single-precision depth and pixel.
 struct BrickCull {
   const TsdfVolume& volume;
   const Iso3& T_C_O;
