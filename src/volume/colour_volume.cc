@@ -166,31 +166,21 @@ bool validDepth(const DepthImage& depth, int u, int v) {
   return d > 0 && std::isfinite(d);
 }
 
-// Pixel (u, v) lies within kEdge pixels of one with no depth, a depth jump over kJump or a pixel
-// flagged in `carve_only` (colour and depth disagree most there).
-bool atDepthEdge(const DepthImage& depth, int u, int v, const std::vector<uint8_t>* carve_only) {
+// What lies within kEdge pixels of pixel (u, v): kBesideCarveOnly when a pixel flagged in
+// `carve_only` does (the robot, the table, the object beside the hand), else kAtDepthEdge when a
+// pixel with no depth or a depth jump over kJump does (colour and depth disagree most there),
+// else kAwayFromEdges.
+enum EdgeKind : uint8_t { kAwayFromEdges = 0, kAtDepthEdge = 1, kBesideCarveOnly = 2 };
+EdgeKind edgeKind(const DepthImage& depth, int u, int v, const std::vector<uint8_t>* carve_only) {
   const int W = depth.width, H = depth.height;
   const float d = depth.at(u, v);
-  for (int dv = -kEdge; dv <= kEdge; ++dv)
-    for (int du = -kEdge; du <= kEdge; ++du) {
-      const int uu = u + du, vv = v + dv;
-      if (uu < 0 || vv < 0 || uu >= W || vv >= H) continue;
-      if (!validDepth(depth, uu, vv) ||
-          (carve_only && (*carve_only)[size_t(vv) * size_t(W) + size_t(uu)]) ||
-          std::abs(depth.at(uu, vv) - d) > kJump)
-        return true;
-    }
-  return false;
-}
-
-// Pixel (u, v) lies within kEdge pixels of one flagged in `carve_only`.
-bool nearCarveOnly(const DepthImage& depth, int u, int v, const std::vector<uint8_t>* carve_only) {
-  if (!carve_only) return false;
-  const int W = depth.width, H = depth.height;
+  bool edge = false;
   for (int vv = std::max(0, v - kEdge); vv <= std::min(H - 1, v + kEdge); ++vv)
-    for (int uu = std::max(0, u - kEdge); uu <= std::min(W - 1, u + kEdge); ++uu)
-      if ((*carve_only)[size_t(vv) * size_t(W) + size_t(uu)]) return true;
-  return false;
+    for (int uu = std::max(0, u - kEdge); uu <= std::min(W - 1, u + kEdge); ++uu) {
+      if (carve_only && (*carve_only)[size_t(vv) * size_t(W) + size_t(uu)]) return kBesideCarveOnly;
+      edge = edge || !validDepth(depth, uu, vv) || std::abs(depth.at(uu, vv) - d) > kJump;
+    }
+  return edge ? kAtDepthEdge : kAwayFromEdges;
 }
 
 // The pixel nearest image point px (as std::lround of each coordinate, half away from zero, up to
@@ -289,7 +279,7 @@ ColourIntegrationStats integrateColour(const DepthImage& depth, const RgbImage& 
         ++st.occluded;
         continue;
       }
-      const bool edge = atDepthEdge(depth, u, v, carve_only);
+      const bool edge = edgeKind(depth, u, v, carve_only) != kAwayFromEdges;
       const double s = sigma_m[i] / 0.001;
       float w = float(cosine * cosine / (s * s));
       if (edge) {
@@ -377,8 +367,9 @@ ColourCameraView viewOfFrame(const DepthImage& depth, const CameraIntrinsics& K,
       if (carve(u, v) || !(sigma_m[size_t(v) * size_t(W) + size_t(u)] > 0)) continue;
       // Beside a carve-only pixel (the fingers' rims, the object next to the hand) not used: the
       // colour camera, 2.5 cm aside, may see the finger there.
-      if (nearCarveOnly(depth, u, v, carve_only)) continue;
-      p.kind = atDepthEdge(depth, u, v, carve_only) ? 2 : 1;
+      const EdgeKind e = edgeKind(depth, u, v, carve_only);
+      if (e == kBesideCarveOnly) continue;
+      p.kind = e == kAtDepthEdge ? 2 : 1;
     }
   });
   for (const Point& p : points) {
