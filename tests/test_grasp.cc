@@ -367,8 +367,9 @@ TEST(GraspGeneration, PartPinchesLiftAFlatHammerByItsHandleOrHead) {
 // A marker lying on the table (a 19 mm cylinder, 130 mm long, turned 30° about the vertical):
 // two-finger pinches across it, the third finger left open, the fingertips at the table. In
 // MuJoCo (the table sweep on, 300 kg/m³) every one of them lifts it (the hold test's stage 3 or
-// better: held, or slipped in the quarter turn), while every three-finger pinch of it drops in
-// the lift or does not touch it (their inclined distal links meet it above its middle).
+// better: held, or slipped in the quarter turn). The three-finger pinches (their inclined distal
+// links meet it above its middle) lift it too with MuJoCo's no-slip pass (moved 0.6-2.6 mm);
+// without it the soft contacts let the marker creep out of them in the lift.
 TEST(GraspGeneration, TwoFingerPinchesLiftAMarkerLyingOnTheTable) {
   const RobotModel& r = test::wam();
   const TriangleMesh marker = makeCylinder(0.0095, 0.13);
@@ -390,7 +391,7 @@ TEST(GraspGeneration, TwoFingerPinchesLiftAMarkerLyingOnTheTable) {
                 pose.preshape, t.held ? "held" : holdFailureName(t.failure), 1000 * t.slip_m);
     if (!pose.two_finger) {
       ++three;
-      EXPECT_LE(holdStage(t.failure), 1);
+      EXPECT_GE(holdStage(t.held ? HoldFailure::kNone : t.failure), 3);
       continue;
     }
     ++two;

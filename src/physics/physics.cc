@@ -407,7 +407,8 @@ void PhysicsWorld::build(const RobotModel& model, std::vector<ConvexPiece> piece
   x << "<mujoco model=\"inhand\"><compiler angle=\"radian\"/><size nconmax=\"2000\" "
     << "njmax=\"6000\"/>"
     << "<option timestep=\"" << num(options.timestep_s)
-    << "\" gravity=\"0 0 -9.81\" cone=\"elliptic\" impratio=\"10\"/>"
+    << "\" gravity=\"0 0 -9.81\" cone=\"elliptic\" impratio=\"10\" noslip_iterations=\""
+    << options.noslip_iterations << "\"/>"
     << "<default><geom friction=\"" << num(friction)
     << " 0.002 0.0001\" condim=\"4\" solref=\"0.005 1\"/></default>"
     << "<asset>" << assets << hand.assets()

@@ -46,6 +46,9 @@ struct PhysicsOptions {
   double ramp_s = 0.3;
   // After a put-down or a drop the object settles for at most this long (s).
   double settle_s = 2.0;
+  // MuJoCo's no-slip solver passes per step (opt.noslip_iterations): soft contacts let a body
+  // resting in static friction creep; this pass removes that drift. 0: off.
+  int noslip_iterations = 10;
   ConvexDecompositionOptions decomposition;
 
   template <class V, class S>
@@ -78,6 +81,9 @@ struct PhysicsOptions {
           Range::closed(0, 2));
     v.num("settle_s", o.settle_s, "longest wait for the object to come to rest, s",
           Range::closed(0, 20));
+    v.integer("noslip_iterations", o.noslip_iterations,
+              "MuJoCo's no-slip solver passes per step (0: off; soft contacts creep)",
+              Range::closed(0, 100));
     ConvexDecompositionOptions::fields(v, o.decomposition, "decomposition_");
   }
   std::string validate() const;
