@@ -187,9 +187,7 @@ double rankByHold(const RobotModel& robot, const TriangleMesh& model_O, const Is
   if (pieces.empty()) return 0;
   PhysicsOptions po;
   po.density_kg_m3 = o.density_kg_m3;
-  // The trials as they were measured (docs/physics.md): without MuJoCo's no-slip pass, so a grasp
-  // in which the model creeps more than max_slip_m in the trial's 2.3 s counts as not holding.
-  po.noslip_iterations = 0;
+  po.noslip_iterations = o.noslip_iterations;
   // Batches of max_candidates in their order until one holds (or max_tested are tried). One
   // world per core, each trying every other candidate of the batch from a fresh reset.
   const int total = std::min(o.max_tested, int(candidates->size()));

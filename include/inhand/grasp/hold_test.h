@@ -48,6 +48,9 @@ struct HoldTestOptions {
   // The model's pieces (at most 64; coarser hulls bulge beside thin and flat models, where a pinch
   // then starts inside them and closes over the model).
   ConvexDecompositionOptions decomposition{64, 64, 0.02};
+  // MuJoCo's no-slip pass in the trials (PhysicsOptions::noslip_iterations). 0: soft contacts, a
+  // model that creeps more than max_slip_m in the trial counts as not holding.
+  int noslip_iterations = 0;
 
   template <class V, class S>
   static void fields(V& v, S& o) {
@@ -79,6 +82,9 @@ struct HoldTestOptions {
     v.integer("robust_checked", o.robust_checked, "… at most this many of them, in their order",
               Range::atLeast(1));
     ConvexDecompositionOptions::fields(v, o.decomposition, "decomposition_");
+    v.integer("noslip_iterations", o.noslip_iterations,
+              "MuJoCo's no-slip passes per step in the trials (0: off; soft contacts creep)",
+              Range::closed(0, 100));
   }
   std::string validate() const;
 };
