@@ -163,6 +163,7 @@ TableTopObject findObjectOnTable(const std::vector<DepthImage>& frames,
   }
   out.box_O = believedBox(box, out.centre_O, onTable, out.height_m * n);
   out.region_O = regionPlanes(out, n, to.footprint_region);
+  out.hold_region_O = regionPlanes(out, n, to.footprint_region || to.footprint_hold_test);
   return out;
 }
 
@@ -225,9 +226,9 @@ GraspGeneration firstGrasps(const ScanSession& session, const TableTopObject& ob
                      return ea != eb ? ea > eb : a.score < b.score;
                    });
   // Those that hold the model in physics first (grasp/hold_test.h).
-  const double holdS =
-      rankByHold(m, seen.mesh, T_B_O_rest, &object.region_O, session.multiOptions().grasp.friction,
-                 session.multiOptions().grasp.hold, &first.candidates);
+  const double holdS = rankByHold(m, seen.mesh, T_B_O_rest, &object.hold_region_O,
+                                  session.multiOptions().grasp.friction,
+                                  session.multiOptions().grasp.hold, &first.candidates);
   session.log(holdLine(first.candidates, holdS));
   return first;
 }

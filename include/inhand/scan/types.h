@@ -350,6 +350,10 @@ struct TableTopOptions {
   // The first grasp's model (candidates and hold test) clipped to the points' upright rectangle
   // (TableTopObject::region_O); off: to their axis-aligned box (the candidates' 2 cm out).
   bool footprint_region = false;
+  // The hold test alone takes the model clipped to that rectangle (the candidates as
+  // footprint_region says): the model's filled-in space beside the far faces slopes down to the
+  // table, and a finger closing on that slope presses the model into the table.
+  bool footprint_hold_test = false;
 
   template <class V, class S>
   static void fields(V& v, S& o) {
@@ -374,6 +378,9 @@ struct TableTopOptions {
     v.boolean("footprint_region", o.footprint_region,
               "the first grasp's model clipped to the points' upright rectangle, 5 mm out (off: "
               "to their axis-aligned box)");
+    v.boolean("footprint_hold_test", o.footprint_hold_test,
+              "the hold test alone takes the first grasp's model clipped to the points' upright "
+              "rectangle, 5 mm out");
   }
   std::string validate() const;
 };
