@@ -9,6 +9,7 @@
 #include <cstdlib>
 #include <filesystem>
 
+#include "bench_world.h"
 #include "inhand/core/clock.h"
 #include "inhand/geometry/builtin_objects.h"
 #include "inhand/geometry/stable_poses.h"
@@ -24,22 +25,17 @@ int main(int argc, char** argv) {
     return 2;
   }
   try {
-    const RobotModel m = RobotModel::load(std::filesystem::path(INHAND_SOURCE_DIR) /
-                                          "data/robots/wam_barretthand.json");
+    const RobotModel m = bench::wamBarrettHand();
     const TriangleMesh object = loadObject(argv[1]);
     const int pose = argc > 2 ? std::atoi(argv[2]) : 0;
-    SimOptions so;
-    so.physics.enabled = true;
+    SimOptions so = bench::restingWithPhysics(object, pose);
     if (argc > 3) so.physics.noslip_iterations = std::atoi(argv[3]);
-    so.R_B_O_rest = stablePoses(object).at(size_t(pose)).R_B_O;
     SimWorld world(m, object, Iso3::Identity(), DepthCameraOptions{}, NoiseModelOptions{}, so);
     world.held = false;
     SimRobot robot(&world);
     const Iso3 T_B_O = world.restPose();
-    GraspOptions go;
-    GraspGeneration gen = generateGrasps(m, object, T_B_O, m.home(), go);
-    HoldTestOptions ho;
-    rankByHold(m, object, T_B_O, nullptr, go.friction, ho, &gen.candidates);
+    const GraspGeneration gen =
+        bench::rankedOnTrueMesh(m, object, T_B_O, HoldTestOptions().max_candidates);
     const Json start = world.state();
     PhysicsWorld& P = *world.physics();
     for (size_t k = 0; k < gen.candidates.size() && k < 12; ++k) {

@@ -10,6 +10,7 @@
 #include <cstdlib>
 #include <filesystem>
 
+#include "bench_world.h"
 #include "inhand/config/scan_config.h"
 #include "inhand/core/error.h"
 #include "inhand/geometry/builtin_objects.h"
@@ -93,15 +94,13 @@ int main(int argc, char** argv) {
     return 2;
   }
   try {
-    const RobotModel m = RobotModel::load(std::filesystem::path(INHAND_SOURCE_DIR) /
-                                          "data/robots/wam_barretthand.json");
+    const RobotModel m = bench::wamBarrettHand();
     const TriangleMesh object = loadObject(argv[1]);
     const int pose = argc > 2 ? std::atoi(argv[2]) : 0;
     const int n = argc > 3 ? std::atoi(argv[3]) : 24;
     ScanConfig c;
     if (argc > 4) readScanConfigFile(argv[4], &c);
-    c.sim.physics.enabled = true;
-    c.sim.R_B_O_rest = stablePoses(object).at(size_t(pose)).R_B_O;
+    c.sim = bench::restingWithPhysics(object, pose, c.sim);
     c.multi.grasp.max_failed_pick_ups = n;
     c.multi.max_grasps = 1;
     const DepthCameraOptions camera;

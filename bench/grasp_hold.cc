@@ -8,6 +8,7 @@
 #include <cstdlib>
 #include <filesystem>
 
+#include "bench_world.h"
 #include "inhand/geometry/builtin_objects.h"
 #include "inhand/geometry/stable_poses.h"
 #include "inhand/grasp/grasp.h"
@@ -23,24 +24,18 @@ int main(int argc, char** argv) {
     return 2;
   }
   try {
-    const RobotModel m = RobotModel::load(std::filesystem::path(INHAND_SOURCE_DIR) /
-                                          "data/robots/wam_barretthand.json");
+    const RobotModel m = bench::wamBarrettHand();
     const TriangleMesh object = loadObject(argv[1]);
     const int pose = argc > 2 ? std::atoi(argv[2]) : 0;
     const int n = argc > 3 ? std::atoi(argv[3]) : 12;
-    SimOptions so;
-    so.physics.enabled = true;
+    SimOptions so = bench::restingWithPhysics(object, pose);
     if (argc > 4) so.physics.mass_kg = std::atof(argv[4]);
-    so.R_B_O_rest = stablePoses(object).at(size_t(pose)).R_B_O;
     SimWorld world(m, object, Iso3::Identity(), DepthCameraOptions{}, NoiseModelOptions{}, so);
     world.held = false;
     SimRobot robot(&world);
     const Iso3 T_B_O = world.restPose();
-    GraspOptions go;
-    GraspGeneration gen = generateGrasps(m, object, T_B_O, m.home(), go);
-    HoldTestOptions ho;
-    ho.max_candidates = n;
-    const double predS = rankByHold(m, object, T_B_O, nullptr, go.friction, ho, &gen.candidates);
+    double predS = 0;
+    const GraspGeneration gen = bench::rankedOnTrueMesh(m, object, T_B_O, n, &predS);
     std::printf("hold test on the true mesh: %.2f s\n", predS);
     const Json start = world.state();
     std::printf("mass_kg %.3f candidates %zu\n", world.physics()->mass_kg(), gen.candidates.size());
