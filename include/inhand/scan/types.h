@@ -351,8 +351,9 @@ struct TableTopOptions {
   // (TableTopObject::region_O); off: to their axis-aligned box (the candidates' 2 cm out).
   bool footprint_region = false;
   // The hold test alone takes the model clipped to that rectangle (the candidates as
-  // footprint_region says): the model's filled-in space beside the far faces slopes down to the
-  // table, and a finger closing on that slope presses the model into the table.
+  // footprint_region says). The model's filled-in space beside the far faces slopes down to the
+  // table, and a finger closing on that slope presses the model into the table; the rectangle,
+  // 5 mm out, cuts part of that slope, not all of it (docs/physics.md).
   bool footprint_hold_test = false;
 
   template <class V, class S>
