@@ -163,7 +163,6 @@ TableTopObject findObjectOnTable(const std::vector<DepthImage>& frames,
   }
   out.box_O = believedBox(box, out.centre_O, onTable, out.height_m * n);
   out.region_O = regionPlanes(out, n, to.footprint_region);
-  out.hold_region_O = regionPlanes(out, n, to.footprint_region || to.footprint_hold_test);
   return out;
 }
 
@@ -225,10 +224,15 @@ GraspGeneration firstGrasps(const ScanSession& session, const TableTopObject& ob
                      const double eb = std::floor(std::log(std::max(b.epsilon, 1e-9)) / 0.1);
                      return ea != eb ? ea > eb : a.score < b.score;
                    });
-  // Those that hold the model in physics first (grasp/hold_test.h).
-  const double holdS = rankByHold(m, seen.mesh, T_B_O_rest, &object.hold_region_O,
-                                  session.multiOptions().grasp.friction,
-                                  session.multiOptions().grasp.hold, &first.candidates);
+  // Those that hold the model in physics first (grasp/hold_test.h), the model clipped to region_O
+  // or, with footprint_hold_test, to the points' rectangle.
+  const TableTopOptions& to = session.multiOptions().table_top;
+  const std::vector<Plane> holdRegion = to.footprint_hold_test && !to.footprint_region
+                                            ? regionPlanes(object, object.table_O.n, true)
+                                            : object.region_O;
+  const double holdS =
+      rankByHold(m, seen.mesh, T_B_O_rest, &holdRegion, session.multiOptions().grasp.friction,
+                 session.multiOptions().grasp.hold, &first.candidates);
   session.log(holdLine(first.candidates, holdS));
   return first;
 }

@@ -29,9 +29,6 @@ struct TableTopObject {
   // up to the box, stands out beside the object there, and a pinch's fingertips that straddle the
   // object land on it.
   std::vector<Plane> region_O;
-  // The first grasp's hold test's region: region_O, or with
-  // TableTopOptions::footprint_hold_test the points' rectangle as footprint_region gives it.
-  std::vector<Plane> hold_region_O;
 };
 
 // Whether p (frame O) lies inside every half-space of `region` (TableTopObject::region_O).
