@@ -53,11 +53,13 @@ struct SlipMeasure {
   bool significant = false;       // beyond the alignment's own uncertainty
   bool moving = false;            // a slip: farther than slip_m, significant, better borne out
   TrackResult held;               // the frame against the model where the grasp holds it
+  double sigma_m = 0;             // the sensor's axial σ at the palm's depth
 };
 
 // Creep (TrackingOptions::creep_m), not a slip: a significant correction moving the surface
 // (`points`) more than creep_m and at most twice slip_m, while no slip goes on, that the frame
-// bears out better than the held pose (a residual 15 % smaller) and does not see through clearly
+// bears out better than the held pose (a residual 15 % smaller, of residuals above half the
+// sensor's σ: below it they tell nothing apart) and does not see through clearly
 // more (the converse of SlipMeasure::moving's test). An alignment with a model that is coarse or
 // seen from few sides slides by as much, but where it slides depends on where the camera looks
 // from; an object that crept sits alike from every side. So the grasp follows a creep when the
@@ -74,7 +76,7 @@ bool creepConfirmed(const SlipMeasure& slip, bool slipping, const TrackingOption
   const Vec3 dir = T_C_palm.linear().transpose() * Vec3::UnitZ();  // the camera's, palm frame
   const bool creep = !slip.moving && !slipping && o.creep_m > 0 && slip.significant &&
                      slip.surface_m > o.creep_m && slip.surface_m <= 2 * o.slip_m &&
-                     slip.held.rms_m > 1.15 * slip.r.rms_m &&
+                     slip.held.rms_m > 1.15 * std::max(slip.r.rms_m, 0.5 * slip.sigma_m) &&
                      slip.r.see_through <= 2 * slip.held.see_through + slip.r.inliers / 20;
   if (!creep) {
     pending->reset();
@@ -317,7 +319,9 @@ struct ScanSession::State {
   // significantly for the alignment's own uncertainty, and the frame bears the moved model out
   // clearly better than the held one (a residual a half larger there, a quarter fewer points
   // aligned, or more seen through): an alignment that slid along what the frame leaves free
-  // fits no better than where it began.
+  // fits no better than where it began. Residuals are compared above half the sensor's σ (its
+  // information's floor): below it, with a frame less noisy than the sensor model says, the
+  // ratio of two small residuals found slips where nothing moved.
   SlipMeasure measureSlip(const DepthImage& depth, const JointVector& q, const Iso3& T_B_C,
                           const Iso3& T_C_palm, double gate_m) const {
     const TrackingOptions& o = options.tracking;
@@ -335,6 +339,7 @@ struct ScanSession::State {
     near.gate_m = std::max(o.final_gate_m, gate_m);
     const double sigma = axialSigma(noise, T_C_palm.translation().z(), 0);
     SlipMeasure out;
+    out.sigma_m = sigma;
     out.r = alignBodyToDepth(depth, hidden, K, slipPoints, objectOccluders, T_C_palm, sigma, near,
                              UncoveredPull::kFromStart);
     if (!out.r.ok) return out;
@@ -350,7 +355,9 @@ struct ScanSession::State {
     const TrackResult& held = out.held;
     const TrackResult& r = out.r;
     if (!(out.surface_m > o.slip_m)) return out;
-    out.moving = held.rms_m > 1.5 * r.rms_m || held.inliers < 0.75 * r.inliers ||
+    // Residuals below half the sensor's σ (its information's floor) tell nothing apart.
+    out.moving = held.rms_m > 1.5 * std::max(r.rms_m, 0.5 * sigma) ||
+                 held.inliers < 0.75 * r.inliers ||
                  held.see_through > 2 * r.see_through + r.inliers / 20;
     return out;
   }
