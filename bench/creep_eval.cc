@@ -7,12 +7,10 @@
 // Usage: creep_eval OBJECT [REST_POSE] [NOSLIP_ITERATIONS] [TURN_S]
 #include <cstdio>
 #include <cstdlib>
-#include <filesystem>
 
 #include "bench_world.h"
 #include "inhand/core/clock.h"
 #include "inhand/geometry/builtin_objects.h"
-#include "inhand/geometry/stable_poses.h"
 #include "inhand/grasp/grasp.h"
 #include "inhand/physics/physics.h"
 #include "inhand/sim/sim_world.h"

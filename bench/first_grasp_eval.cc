@@ -8,13 +8,11 @@
 // Usage: first_grasp_eval OBJECT [REST_POSE] [CANDIDATES] [CONFIG.json]
 #include <cstdio>
 #include <cstdlib>
-#include <filesystem>
 
 #include "bench_world.h"
 #include "inhand/config/scan_config.h"
 #include "inhand/core/error.h"
 #include "inhand/geometry/builtin_objects.h"
-#include "inhand/geometry/stable_poses.h"
 #include "inhand/physics/physics.h"
 #include "inhand/scan/multi_grasp.h"
 #include "inhand/sim/sim_world.h"

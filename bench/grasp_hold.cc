@@ -6,11 +6,9 @@
 // Usage: grasp_hold OBJECT [REST_POSE] [CANDIDATES] [MASS_KG]
 #include <cstdio>
 #include <cstdlib>
-#include <filesystem>
 
 #include "bench_world.h"
 #include "inhand/geometry/builtin_objects.h"
-#include "inhand/geometry/stable_poses.h"
 #include "inhand/grasp/grasp.h"
 #include "inhand/physics/physics.h"
 #include "inhand/robot/collision.h"
