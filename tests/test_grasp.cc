@@ -691,3 +691,34 @@ TEST(TableTop, TheRegionWhereTheObjectMayLieFitsAnObjectTurnedOnTheTable) {
                         sensor.camera().intrinsics, rest, wam(), ScanOptions{}, to);
   EXPECT_EQ(boxOnly.region_O.size(), 6u);
 }
+
+// The unknown space beneath measured surface (TableTopOptions::under_measured_only): in a volume
+// of unknown voxels with an observed layer over part of it, exactly the unknown voxels under
+// that layer along the up direction are kept: straight down for a vertical up, along the slant
+// for a tilted one; the empty and observed voxels and those above or beside the layer are not.
+TEST(TableTop, TheUnknownSpaceBeneathMeasuredSurfaceIsWhatLiesUnderIt) {
+  VolumeOptions vo;
+  vo.voxel_size_m = 0.01;
+  TsdfVolume volume(Aabb(Vec3::Zero(), Vec3::Constant(0.19)), vo);
+  ASSERT_EQ(volume.dims(), Vec3i(20, 20, 20));
+  auto at = [&](int x, int y, int z) -> uint8_t& { return volume.states()[volume.index(x, y, z)]; };
+  for (int y = 5; y < 10; ++y)
+    for (int x = 5; x < 10; ++x) at(x, y, 15) = uint8_t(VoxelState::kObserved);
+  at(7, 7, 3) = uint8_t(VoxelState::kEmpty);
+  const std::vector<uint8_t> up = unknownUnderMeasured(volume, Vec3::UnitZ());
+  for (int z = 0; z < 20; ++z)
+    for (int y = 0; y < 20; ++y)
+      for (int x = 0; x < 20; ++x) {
+        const bool under =
+            x >= 5 && x < 10 && y >= 5 && y < 10 && z < 15 && !(x == 7 && y == 7 && z == 3);
+        ASSERT_EQ(up[volume.index(x, y, z)], under ? 1 : 0) << x << " " << y << " " << z;
+      }
+  // Up tilted 45° towards +x: a voxel (x, y, z) reaches the layer at x + (15 − z).
+  const std::vector<uint8_t> slant = unknownUnderMeasured(volume, Vec3(1, 0, 1));
+  for (int z = 0; z < 15; ++z)
+    for (int x = 0; x < 20; ++x) {
+      const int xl = x + (15 - z);
+      EXPECT_EQ(slant[volume.index(x, 7, z)], xl >= 5 && xl < 10 && !(x == 7 && z == 3) ? 1 : 0)
+          << x << " " << z;
+    }
+}

@@ -6,6 +6,7 @@
 #include <limits>
 
 #include "inhand/core/error.h"
+#include "inhand/core/internal/parallel.h"
 #include "inhand/geometry/stable_poses.h"
 #include "inhand/robot/collision.h"
 
@@ -195,10 +196,56 @@ std::vector<uint8_t> tablePixels(const DepthImage& d, const Iso3& T_O_C, const C
   return table;
 }
 
+std::vector<uint8_t> unknownUnderMeasured(const TsdfVolume& volume, const Vec3& up_O) {
+  const Vec3i n = volume.dims();
+  std::vector<uint8_t> keep(size_t(n.prod()), 0);
+  const double h = volume.voxelSize();
+  // Steps of at most half a voxel along each axis: no voxel of the column is stepped over.
+  const Vec3 step = up_O.normalized() * (0.5 * h);
+  parallelFor(0, n.z(), [&](int z) {
+    for (int y = 0; y < n.y(); ++y)
+      for (int x = 0; x < n.x(); ++x) {
+        const size_t i = volume.index(x, y, z);
+        if (volume.state(i) != VoxelState::kUnknown) continue;
+        Vec3 p(x, y, z);
+        const Vec3 s = step / h;
+        for (;;) {
+          p += s;
+          const int px = int(std::lround(p.x())), py = int(std::lround(p.y())),
+                    pz = int(std::lround(p.z()));
+          if (px < 0 || py < 0 || pz < 0 || px >= n.x() || py >= n.y() || pz >= n.z()) break;
+          if (volume.state(volume.index(px, py, pz)) == VoxelState::kObserved) {
+            keep[i] = 1;
+            break;
+          }
+        }
+      }
+  });
+  return keep;
+}
+
+namespace {
+// The session's planning model with the unknown space that is not beneath measured surface
+// counted as empty (TableTopOptions::under_measured_only).
+ObjectModel modelUnderMeasured(const ScanSession& session, const Plane& table_O) {
+  TsdfVolume volume = session.volume();
+  const std::vector<uint8_t> keep = unknownUnderMeasured(volume, table_O.n);
+  for (size_t i = 0; i < keep.size(); ++i)
+    if (volume.state(i) == VoxelState::kUnknown && !keep[i])
+      volume.states()[i] = uint8_t(VoxelState::kEmpty);
+  MeshOptions mesh = session.options().mesh;
+  mesh.stride = session.options().planning_stride;
+  mesh.method = session.options().planning_method;
+  return extractModel(volume, mesh);
+}
+}  // namespace
+
 GraspGeneration firstGrasps(const ScanSession& session, const TableTopObject& object,
                             const Iso3& T_B_O_rest, const JointVector& q_now) {
   const RobotModel& m = session.robot();
-  const ObjectModel seen = session.planningModel();
+  const ObjectModel seen = session.multiOptions().table_top.under_measured_only
+                               ? modelUnderMeasured(session, object.table_O)
+                               : session.planningModel();
   // The model where the object may lie (region_O; without the footprint's rectangle, 2 cm out):
   // what the camera did not see is closed up to the volume's bounds.
   std::vector<Plane> region = object.region_O;

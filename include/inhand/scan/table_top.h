@@ -58,8 +58,14 @@ ScanOptions fitScanVolume(const ScanOptions& options, const TableTopObject& obje
 std::vector<uint8_t> tablePixels(const DepthImage& depth, const Iso3& T_O_C,
                                  const CameraIntrinsics& K, const Plane& table_O, double above_m);
 
+// Per voxel of `volume`, 1 where it is unknown and an observed voxel lies above it along up_O
+// (the ray from its centre in half-voxel steps, to the volume's bounds), else 0: the unknown
+// space beneath measured surface (TableTopOptions::under_measured_only).
+std::vector<uint8_t> unknownUnderMeasured(const TsdfVolume& volume, const Vec3& up_O);
+
 // First-grasp candidates on what the table-top frames fused into `session` show (its planning
-// model: the observed surface closed over what it hides, up to the table; the table cut off 3 mm
+// model: the observed surface closed over what it hides, up to the table, or with
+// TableTopOptions::under_measured_only only beneath measured surface; the table cut off 3 mm
 // above its plane, and anything beyond 2 cm of object.box_O), the hand stopping at that model and
 // at the table (generateGrasps); most stable first (ε to 10 %), then the cheaper arm motion from
 // q_now.

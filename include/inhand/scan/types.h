@@ -355,6 +355,11 @@ struct TableTopOptions {
   // table, and a finger closing on that slope presses the model into the table; the rectangle,
   // 5 mm out, cuts part of that slope, not all of it (docs/physics.md).
   bool footprint_hold_test = false;
+  // The first grasp's model (candidates and hold test) keeps the space the camera did not see
+  // only beneath measured surface, along the table's normal: the far faces stand straight down
+  // from the edges seen from above, where by default the filled-in space slopes from them to the
+  // table (the camera's shadow) and fingers close on that slope.
+  bool under_measured_only = false;
 
   template <class V, class S>
   static void fields(V& v, S& o) {
@@ -382,6 +387,10 @@ struct TableTopOptions {
     v.boolean("footprint_hold_test", o.footprint_hold_test,
               "the hold test alone takes the first grasp's model clipped to the points' upright "
               "rectangle, 5 mm out");
+    v.boolean("under_measured_only", o.under_measured_only,
+              "the first grasp's model keeps unseen space only beneath measured surface (along "
+              "the table's normal): far faces straight down from the edges seen from above, not "
+              "sloping to the table");
   }
   std::string validate() const;
 };
