@@ -199,18 +199,16 @@ std::vector<uint8_t> tablePixels(const DepthImage& d, const Iso3& T_O_C, const C
 std::vector<uint8_t> unknownUnderMeasured(const TsdfVolume& volume, const Vec3& up_O) {
   const Vec3i n = volume.dims();
   std::vector<uint8_t> keep(size_t(n.prod()), 0);
-  const double h = volume.voxelSize();
-  // Steps of at most half a voxel along each axis: no voxel of the column is stepped over.
-  const Vec3 step = up_O.normalized() * (0.5 * h);
+  // In voxel units, steps of at most half a voxel along each axis: no voxel is stepped over.
+  const Vec3 step = up_O.normalized() * 0.5;
   parallelFor(0, n.z(), [&](int z) {
     for (int y = 0; y < n.y(); ++y)
       for (int x = 0; x < n.x(); ++x) {
         const size_t i = volume.index(x, y, z);
         if (volume.state(i) != VoxelState::kUnknown) continue;
         Vec3 p(x, y, z);
-        const Vec3 s = step / h;
         for (;;) {
-          p += s;
+          p += step;
           const int px = int(std::lround(p.x())), py = int(std::lround(p.y())),
                     pz = int(std::lround(p.z()));
           if (px < 0 || py < 0 || pz < 0 || px >= n.x() || py >= n.y() || pz >= n.z()) break;
