@@ -699,7 +699,7 @@ TEST(TableTop, TheRegionWhereTheObjectMayLieFitsAnObjectTurnedOnTheTable) {
 TEST(TableTop, TheUnknownSpaceBeneathMeasuredSurfaceIsWhatLiesUnderIt) {
   VolumeOptions vo;
   vo.voxel_size_m = 0.01;
-  TsdfVolume volume(Aabb(Vec3::Zero(), Vec3::Constant(0.19)), vo);
+  TsdfVolume volume(Aabb{Vec3::Zero(), Vec3::Constant(0.19)}, vo);
   ASSERT_EQ(volume.dims(), Vec3i(20, 20, 20));
   auto at = [&](int x, int y, int z) -> uint8_t& { return volume.states()[volume.index(x, y, z)]; };
   for (int y = 5; y < 10; ++y)
