@@ -121,6 +121,11 @@ TEST(Faults, AnObjectThatSlipsIsFoundAndTheGraspCorrected) {
     c.sim.faults = faults;
     c.scan.tracking.slip_check = check;
     c.multi.max_grasps = 1;
+    // The grasp this scenario was built on: the first candidate of the table-top model closed
+    // down to the table behind the mug. With under_measured_only the kinematic simulator drops
+    // the first candidate, the second holds by the body, and the 8 mm slip moves the mug's
+    // surface by 2.7 mm as the frames see it: not found.
+    c.multi.table_top.under_measured_only = false;
     return runSimulatedScan(test::wam(), loadObject("builtin:mug"), c);
   };
   const SimulatedScan s = scan(f, true), unchecked = scan(f, false), still = scan({}, true);
@@ -173,6 +178,10 @@ TEST(Faults, AnObjectThatCreepsInTheHandIsFollowed) {
     c.sim.physics.noslip_iterations = 0;
     c.scan.tracking.creep_m = creep_m;
     c.multi.max_grasps = 1;
+    // The grasp this scenario was built on (see the slip test above); with under_measured_only's
+    // grasp the bottle creeps too, one creep is followed, and the frames land as far off
+    // (3.9 mm median either way).
+    c.multi.table_top.under_measured_only = false;
     return runSimulatedScan(test::wam(), loadObject("builtin:pill_bottle"), c);
   };
   const SimulatedScan s = scan(ScanOptions().tracking.creep_m), unfollowed = scan(0);

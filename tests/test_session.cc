@@ -471,11 +471,13 @@ TEST(Session, AnObjectPushedInTheHandIsFoundFromThePointsNearTheHand) {
 
 namespace {
 // An object in its most probable rest on the table, seen from eight headings (the sensor's
-// noise), fused at 2 mm with or without ScanOptions::discontinuities_carve_only; the table's own
-// pixels only carve. The model in the object's frame, and whether a point of O is above the table.
+// noise), fused at 2 mm with or without ScanOptions::discontinuities_carve_only_on_table; the
+// table's own pixels only carve. The model in the object's frame (and the model of the session's
+// tableTopVolume, which fuses the silhouettes), and whether a point of O is above the table.
 struct EightHeadings {
   ObjectModel model;
   std::function<bool(const Vec3&)> aboveTable;
+  ObjectModel tableTopModel;
 };
 EightHeadings fuseFromEightHeadings(const TriangleMesh& object, bool carveOnly, double lift_m = 0) {
   const Aabb truth = object.bounds();
@@ -489,7 +491,8 @@ EightHeadings fuseFromEightHeadings(const TriangleMesh& object, bool carveOnly, 
   const double table = wam().table().topZ();
   ScanOptions o = fastOptions();
   o.voxel_m = 0.002;
-  o.discontinuities_carve_only = carveOnly;
+  o.discontinuities_carve_only = false;
+  o.discontinuities_carve_only_on_table = carveOnly;
   ScanSession session(wam(), sensor.camera(), NoiseModelOptions{}, o, MultiGraspOptions{},
                       truth.center());
   for (int k = 0; k < 8; ++k) {
@@ -502,7 +505,7 @@ EightHeadings fuseFromEightHeadings(const TriangleMesh& object, bool carveOnly, 
     world.tablePose = T;
     const std::optional<Iso3> aim = wam().camera().aimAt(T * truth.center());
     EXPECT_TRUE(aim);
-    if (!aim) return {ObjectModel{}, [](const Vec3&) { return false; }};
+    if (!aim) return {ObjectModel{}, [](const Vec3&) { return false; }, ObjectModel{}};
     sensor.setPose(*aim);
     const DepthImage d = world.render();
     std::vector<uint8_t> tablePixels(d.depth_m.size(), 0);  // the table only carves
@@ -517,7 +520,8 @@ EightHeadings fuseFromEightHeadings(const TriangleMesh& object, bool carveOnly, 
   }
   const Iso3 last = world.tablePose;
   return {extractModel(session.volume(), o.mesh),
-          [last, table](const Vec3& p_O) { return (last * p_O).z() > table + 0.003; }};
+          [last, table](const Vec3& p_O) { return (last * p_O).z() > table + 0.003; },
+          extractModel(session.tableTopVolume(), o.mesh)};
 }
 
 // Of a model's vertices measured to a centimetre, how many, and how many of them lie more than
@@ -536,24 +540,33 @@ std::pair<int, int> measuredAndOutside(const ObjectModel& m, const Aabb& truth, 
 }
 }  // namespace
 
-// Depth edges only carve (ScanOptions::discontinuities_carve_only): the cracker box on the table,
-// seen from eight headings with the sensor's noise, grows flakes beyond its edges when the edge
-// pixels are fused (with their larger σ), and almost none when they only carve; the faces stay
-// observed either way. (Counted above the table top: the test's table pixels only carve, so the
-// table's plane stays unknown and its hole-filled surface is no flake.)
+// Depth edges only carve (ScanOptions::discontinuities_carve_only_on_table, on by default; the
+// same as discontinuities_carve_only for these frames): the cracker box on the table, seen from
+// eight headings with the sensor's noise, grows flakes beyond its edges when the edge pixels are
+// fused (with their larger σ), and almost none when they only carve; the faces stay observed
+// either way. The session's tableTopVolume (the first grasp's model) fuses them as with the
+// option off. (Counted above the table top: the test's table pixels only carve, so the table's
+// plane stays unknown and its hole-filled surface is no flake.)
 TEST(Session, DepthEdgesOnlyCarveAndGrowNoFlakesBeyondTheObjectsEdges) {
   const TriangleMesh box = loadObject("builtin:cracker_box");
   const Aabb truth = box.bounds();
-  auto flakes = [&](bool carveOnly) {
-    const EightHeadings f = fuseFromEightHeadings(box, carveOnly);
-    return measuredAndOutside(f.model, truth, 0.002, f.aboveTable);
-  };
-  const auto [fusedObserved, fusedOutside] = flakes(false);
-  const auto [carvedObserved, carvedOutside] = flakes(true);
+  const EightHeadings fused = fuseFromEightHeadings(box, false);
+  const EightHeadings carved = fuseFromEightHeadings(box, true);
+  const auto [fusedObserved, fusedOutside] =
+      measuredAndOutside(fused.model, truth, 0.002, fused.aboveTable);
+  const auto [carvedObserved, carvedOutside] =
+      measuredAndOutside(carved.model, truth, 0.002, carved.aboveTable);
   EXPECT_GT(carvedObserved, 0.9 * fusedObserved);
   EXPECT_GT(fusedOutside, 100) << "the scene no longer grows flakes: the test tests nothing";
   EXPECT_LT(carvedOutside, fusedOutside / 4) << fusedOutside;
   EXPECT_LT(carvedOutside, 0.005 * carvedObserved) << carvedObserved;
+  // The table-top volume: the frames whole, with or without the option.
+  const auto [keptObserved, keptOutside] =
+      measuredAndOutside(carved.tableTopModel, truth, 0.002, carved.aboveTable);
+  EXPECT_EQ(keptObserved, fusedObserved);
+  EXPECT_EQ(keptOutside, fusedOutside);
+  EXPECT_EQ(measuredAndOutside(fused.tableTopModel, truth, 0.002, fused.aboveTable).second,
+            fusedOutside);
 }
 
 // ... and they do not carve into a thin object: a silhouette pixel's return can come from beside

@@ -124,6 +124,10 @@ struct ScanSession::State {
   MultiGraspOptions multi;
   Vec3 centre;
   TsdfVolume volume;
+  // The frames of the object not held fused with their silhouettes, where `volume` only carves
+  // them (ScanOptions::discontinuities_carve_only_on_table): the first grasp's model
+  // (tableTopVolume). Not in checkpoints.
+  std::optional<TsdfVolume> tableVolume;
   // Colour (camera.colour): the grid's colours once a frame had them; the next frame's image.
   std::unique_ptr<ColourVolume> colour;
   // … and the colour frames kept for model()'s colours (options.colour_frames_mb; not in
@@ -132,7 +136,8 @@ struct ScanSession::State {
   RgbImage nextColour;
   // A fused frame's colours into `colour` and `colourFrames` (made at the first).
   void fuseColour(const DepthImage& depth, const RgbImage& image, const Iso3& T_O_C,
-                  const std::vector<float>& sigma, const std::vector<uint8_t>* carve) {
+                  const std::vector<float>& sigma, const std::vector<uint8_t>* carve,
+                  const JointVector& q, const Iso3& T_B_C) {
     const auto tc = Clock::now();
     if (!colour) colour = std::make_unique<ColourVolume>(volume);
     summary.colour_pixels +=
@@ -141,7 +146,15 @@ struct ScanSession::State {
       if (!colourFrames)
         colourFrames =
             std::make_unique<ColourFrames>(size_t(options.colour_frames_mb * 1024 * 1024));
-      colourFrames->add(depth, image, T_O_C, camera, sigma, carve);
+      // The robot as the colour camera sees it, over the volume's pixels there.
+      const Iso3 T_B_RGB = T_B_C * camera.colour.T_D_RGB;
+      DepthCameraOptions inColour = camera;
+      inColour.intrinsics = camera.colour.intrinsics;
+      const PixelRect rect =
+          volumeImageRect(volume, T_O_C * camera.colour.T_D_RGB, inColour.intrinsics);
+      const DepthImage robotThere =
+          robotDepthImage(scenes, q, T_B_RGB, inColour, /*with_table=*/false, rect);
+      colourFrames->add(depth, image, T_O_C, camera, sigma, carve, &robotThere);
     }
     summary.colour_s += secondsSince(tc);
   }
@@ -274,10 +287,12 @@ struct ScanSession::State {
   // joint's, rad); the held object's measured surface points (supportPoints) the frame bears
   // out and those it sees past (the palm at T_C_palm).
   double offPath(const JointVector& q) const;
-  std::pair<int, int> supportIn(const DepthImage& depth, const Iso3& T_C_palm) const;
+  std::pair<int, int> supportIn(const DepthImage& depth, const Iso3& T_C_palm,
+                                const std::vector<uint8_t>* robot = nullptr) const;
   // Why the frame does not show the object where the hand holds it (FrameChecks::min_support;
   // too few of those points borne out), or "" (the streak of such frames then ends).
-  std::string notHeldIn(const DepthImage& depth, const Iso3& T_C_palm);
+  std::string notHeldIn(const DepthImage& depth, const Iso3& T_C_palm, const JointVector& q,
+                        const Iso3& T_B_C);
   // The arm's torque readings from a checkpoint's header (load).
   void readTorques(const Json& h);
   // The tracking state a checkpoint holds: the last correction, the jump check's, the filter's.
@@ -499,6 +514,9 @@ const Iso3& ScanSession::graspPose() const { return s_->T_O_palm; }
 const std::vector<ViewRecord>& ScanSession::views() const { return s_->views; }
 const std::vector<int>& ScanSession::viewGrasps() const { return s_->viewGrasp; }
 const TsdfVolume& ScanSession::volume() const { return s_->volume; }
+const TsdfVolume& ScanSession::tableTopVolume() const {
+  return s_->tableVolume ? *s_->tableVolume : s_->volume;
+}
 TsdfVolume& ScanSession::volume() {
   ++s_->revision;  // the caller may change it
   return s_->volume;
@@ -547,6 +565,7 @@ void ScanSession::beginGrasp(const Iso3& T_O_palm, const JointVector& q, const A
     s.objectBox.extend(s.centre + Vec3::Constant(0.05));
   }
   s.buildNearHand(*s.model, q, T_O_palm);
+  s.tableVolume.reset();  // a grasp began: re-grasps are planned on the whole model
   s.used.clear();
   s.alg1Views = 0;
   s.correction = Iso3::Identity();
@@ -729,10 +748,14 @@ FrameReport ScanSession::fuse(const DepthImage& input, const JointVector& q, con
   // more than μ in front of them).
   if (!carve.empty())
     farSideOfSilhouettesOnlyCarvesUnknown(depth, float(s.volume.truncation() / 2), rect, &carve);
-  // Silhouette pixels only carve beyond the band (ScanOptions::discontinuities_carve_only), found
-  // after the in-hand trim: the pixels beside those it dropped are silhouettes too.
+  // Silhouette pixels only carve beyond the band (ScanOptions::discontinuities_carve_only, and
+  // ..._on_table for an object not held), found after the in-hand trim: the pixels beside those
+  // it dropped are silhouettes too. On the table the frame also goes whole into tableVolume.
+  const bool onTable = !inHand && s.options.discontinuities_carve_only_on_table &&
+                       !s.options.discontinuities_carve_only;
+  const std::vector<uint8_t> carveWhole = onTable ? carve : std::vector<uint8_t>();
   const DepthImage pulled =
-      s.options.discontinuities_carve_only
+      s.options.discontinuities_carve_only || onTable
           ? silhouettesOnlyCarve(depth, s.noise.discontinuity_jump_m, rect, &carve)
           : DepthImage();
   const DepthImage& fused = pulled.width > 0 ? pulled : depth;
@@ -752,8 +775,15 @@ FrameReport ScanSession::fuse(const DepthImage& input, const JointVector& q, con
   const std::vector<float> sigma =
       measurementSigma(depth, K, s.noise, &rect, carve.empty() ? nullptr : &carve);
   integrate(fused, T_O_C, K, sigma, &s.volume, carve.empty() ? nullptr : &carve);
+  if (onTable) {
+    if (!s.tableVolume) s.tableVolume.emplace(makeScanVolume(s.centre, s.options));
+    const std::vector<float> sigmaWhole =
+        measurementSigma(depth, K, s.noise, &rect, carveWhole.empty() ? nullptr : &carveWhole);
+    integrate(depth, T_O_C, K, sigmaWhole, &*s.tableVolume,
+              carveWhole.empty() ? nullptr : &carveWhole);
+  }
   if (s.camera.colour.enabled && !colour.empty())
-    s.fuseColour(depth, colour, T_O_C, sigma, carve.empty() ? nullptr : &carve);
+    s.fuseColour(depth, colour, T_O_C, sigma, carve.empty() ? nullptr : &carve, q, T_B_C);
   ++s.revision;
   if (inHand && s.options.hand_mode == HandMode::kCarveAndEmpty) emptyInsideRobot(q, T_O_B);
   FrameReport r;
@@ -793,12 +823,26 @@ double ScanSession::State::offPath(const JointVector& q) const {
   return best;
 }
 
-std::string ScanSession::State::notHeldIn(const DepthImage& depth, const Iso3& T_C_palm) {
+std::string ScanSession::State::notHeldIn(const DepthImage& depth, const Iso3& T_C_palm,
+                                          const JointVector& q, const Iso3& T_B_C) {
   const FrameChecks& fc = options.checks;
   if (!(fc.min_support > 0) || supportPoints.empty()) return "";
-  const auto [support, against] = supportIn(depth, T_C_palm);
+  int support = 0, against = 0;
+  std::tie(support, against) = supportIn(depth, T_C_palm);
+  auto unsupported = [&] {
+    const int counted = support + against;
+    return counted >= fc.min_points && support < fc.min_support * counted;
+  };
+  if (unsupported()) {
+    // Counted again with a point against only where nothing but the robot lies within 1 cm of it
+    // (a face seen edge-on projects past its own silhouette when the pose is a pixel or two off;
+    // the fingers stay where the object was when it falls).
+    const std::vector<uint8_t> robot =
+        robotPixelMask(depth, T_B_C, q, scenes, camera, options.t_hand_m, options.carve_radius_px);
+    std::tie(support, against) = supportIn(depth, T_C_palm, &robot);
+  }
   const int counted = support + against;
-  if (counted >= fc.min_points && support < fc.min_support * counted) {
+  if (unsupported()) {
     char why[200];
     std::snprintf(why, sizeof why,
                   "the object is not where the hand holds it (%d of %d known surface points "
@@ -810,8 +854,27 @@ std::string ScanSession::State::notHeldIn(const DepthImage& depth, const Iso3& T
   return "";
 }
 
-std::pair<int, int> ScanSession::State::supportIn(const DepthImage& depth,
-                                                  const Iso3& T_C_palm) const {
+namespace {
+// Whether a pixel within 1 cm (at depth z) of (u, v), not the robot's, sees something no more
+// than 2 cm behind z: a point of a face seen at a grazing angle projects beside the face's
+// silhouette when the pose is a pixel or two off, and is not evidence that the object is gone.
+bool surfaceBeside(const DepthImage& depth, const std::vector<uint8_t>& robot, int u, int v,
+                   double z, const CameraIntrinsics& K) {
+  const int r = int(std::ceil(0.01 * std::max(K.fx, K.fy) / z));
+  const int u0 = std::max(0, u - r), u1 = std::min(depth.width - 1, u + r);
+  const int v0 = std::max(0, v - r), v1 = std::min(depth.height - 1, v + r);
+  for (int vv = v0; vv <= v1; ++vv)
+    for (int uu = u0; uu <= u1; ++uu) {
+      const float zz = depth.at(uu, vv);
+      if (zz > 0 && zz < z + 0.02 && !robot[size_t(vv) * size_t(depth.width) + size_t(uu)])
+        return true;
+    }
+  return false;
+}
+}  // namespace
+
+std::pair<int, int> ScanSession::State::supportIn(const DepthImage& depth, const Iso3& T_C_palm,
+                                                  const std::vector<uint8_t>* robot) const {
   const CameraIntrinsics& K = camera.intrinsics;
   int support = 0, against = 0;
   for (const Vec3& p_palm : supportPoints) {
@@ -826,7 +889,7 @@ std::pair<int, int> ScanSession::State::supportIn(const DepthImage& depth,
     if (!(z > 0)) continue;
     if (std::abs(z - p.z()) < 0.02)
       ++support;
-    else if (z > p.z() + 0.03)
+    else if (z > p.z() + 0.03 && !(robot && surfaceBeside(depth, *robot, u, v, p.z(), K)))
       ++against;
   }
   return {support, against};
@@ -911,7 +974,8 @@ FrameReport ScanSession::addFrame(const DepthImage& input, const JointVector& q,
     s.correctionQ = q;
   }
   // The object must be where the hand holds it.
-  if (std::string why = s.notHeldIn(depth, T_B_C_used.inverse() * s.model->tipPose(q));
+  if (std::string why =
+          s.notHeldIn(depth, T_B_C_used.inverse() * s.model->tipPose(q), q, T_B_C_used);
       !why.empty()) {
     if (++s.unsupportedStreak >= fc.lost_after)
       finish(Termination::kObjectLost, "in-hand frames stopped showing the object");

@@ -223,14 +223,17 @@ std::vector<uint8_t> unknownUnderMeasured(const TsdfVolume& volume, const Vec3& 
 }
 
 namespace {
-// The session's planning model with the unknown space that is not beneath measured surface
-// counted as empty (TableTopOptions::under_measured_only).
-ObjectModel modelUnderMeasured(const ScanSession& session, const Plane& table_O) {
-  TsdfVolume volume = session.volume();
-  const std::vector<uint8_t> keep = unknownUnderMeasured(volume, table_O.n);
-  for (size_t i = 0; i < keep.size(); ++i)
-    if (volume.state(i) == VoxelState::kUnknown && !keep[i])
-      volume.states()[i] = uint8_t(VoxelState::kEmpty);
+// The first grasp's model at the planning stride: from the table-top frames with their
+// silhouettes (ScanSession::tableTopVolume), with the unknown space that is not beneath measured
+// surface counted as empty (TableTopOptions::under_measured_only).
+ObjectModel tableTopModel(const ScanSession& session, const Plane& table_O) {
+  TsdfVolume volume = session.tableTopVolume();
+  if (session.multiOptions().table_top.under_measured_only) {
+    const std::vector<uint8_t> keep = unknownUnderMeasured(volume, table_O.n);
+    for (size_t i = 0; i < keep.size(); ++i)
+      if (volume.state(i) == VoxelState::kUnknown && !keep[i])
+        volume.states()[i] = uint8_t(VoxelState::kEmpty);
+  }
   MeshOptions mesh = session.options().mesh;
   mesh.stride = session.options().planning_stride;
   mesh.method = session.options().planning_method;
@@ -241,8 +244,9 @@ ObjectModel modelUnderMeasured(const ScanSession& session, const Plane& table_O)
 GraspGeneration firstGrasps(const ScanSession& session, const TableTopObject& object,
                             const Iso3& T_B_O_rest, const JointVector& q_now) {
   const RobotModel& m = session.robot();
-  const ObjectModel seen = session.multiOptions().table_top.under_measured_only
-                               ? modelUnderMeasured(session, object.table_O)
+  const ObjectModel seen = session.multiOptions().table_top.under_measured_only ||
+                                   &session.tableTopVolume() != &session.volume()
+                               ? tableTopModel(session, object.table_O)
                                : session.planningModel();
   // The model where the object may lie (region_O; without the footprint's rectangle, 2 cm out):
   // what the camera did not see is closed up to the volume's bounds.

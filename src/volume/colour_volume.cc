@@ -395,12 +395,15 @@ ColourCameraView viewOfFrame(const DepthImage& depth, const CameraIntrinsics& K,
 
 void ColourFrames::add(const DepthImage& depth, const RgbImage& colour, const Iso3& T_O_C,
                        const DepthCameraOptions& camera, const std::vector<float>& sigma_m,
-                       const std::vector<uint8_t>* carve_only) {
+                       const std::vector<uint8_t>* carve_only, const DepthImage* robot_in_colour) {
   const CameraIntrinsics& K = camera.intrinsics;
   const CameraIntrinsics& Kc = camera.colour.intrinsics;
   if (colour.width != Kc.width || colour.height != Kc.height || depth.width != K.width ||
       depth.height != K.height || sigma_m.size() != depth.depth_m.size())
     return;
+  if (robot_in_colour &&
+      (robot_in_colour->width != Kc.width || robot_in_colour->height != Kc.height))
+    robot_in_colour = nullptr;
   const int index = added_++;
   if (index % stride_ != 0) return;
   const Iso3 T_RGB_D = camera.colour.T_D_RGB.inverse();
@@ -422,13 +425,20 @@ void ColourFrames::add(const DepthImage& depth, const RgbImage& colour, const Is
     for (int u = 0; u < w; ++u) {
       const size_t i = size_t(f.v0 + v) * size_t(Kc.width) + size_t(f.u0 + u);
       const size_t j = size_t(v) * size_t(w) + size_t(u);
-      const float zo = c.object[i], zr = c.other[i];
+      const float zo = c.object[i];
+      float zr = c.other[i];
+      // The robot in front of the object or touching it: the robot's.
+      const float zRobot = robot_in_colour ? robot_in_colour->depth_m[i] : 0.f;
+      const bool robotThere = zRobot > 0 && !(zRobot >= zo + kJump);
+      if (robotThere) zr = std::min(zr, zRobot);
       // Something that is not the object nearer than it (or alone there): its depth, negated.
-      if (std::isfinite(zr) && !(zo <= zr + kJump))
+      if (std::isfinite(zr) && (robotThere || !(zo <= zr + kJump)))
         f.z[j] = -zr;
       else if (std::isfinite(zo))
         f.z[j] = zo;
-      f.edge[j] = c.edge[i];
+      // Bit 0: a fused point at a depth edge; bit 1: the robot there at any depth (its colour
+      // blends into a sample beside it).
+      f.edge[j] = uint8_t((c.edge[i] ? 1 : 0) | (zRobot > 0 ? 2 : 0));
     }
   }
   bytes_ += f.bytes();
@@ -552,14 +562,16 @@ void ColourFrames::sights(const Vec3& p_O, const Vec3& n_O, Fn&& fn) const {
         if (uu < 0 || vv < 0 || uu >= W || vv >= H) continue;
         const size_t j = size_t(vv) * size_t(W) + size_t(uu);
         const float z = f.z[j];
-        if (z == 0) continue;
-        if (std::abs(z) < q.z() - kJump) {  // the object's own surface or another nearer
+        // The robot beside it at any depth (its colour blends in), the object's own surface
+        // nearer, or something else (the robot, the table) in front of the point or touching it.
+        if ((f.edge[j] & 2) || (z != 0 && (z > 0 ? z < q.z() - kJump : -z < q.z() + kJump))) {
           hidden = true;
           break;
         }
+        if (z == 0) continue;
         if (z > 0 && std::abs(z - q.z()) <= kJump) {
           seen = true;
-          edge = edge || f.edge[j];
+          edge = edge || (f.edge[j] & 1);
         }
       }
     if (hidden || !seen) continue;

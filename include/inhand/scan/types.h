@@ -127,6 +127,11 @@ struct ScanOptions {
   // head-on. Off by default: on thin objects (a 12 mm pen) the slip check then finds slips that
   // did not happen (docs/volume.md). false: fused with that larger σ.
   bool discontinuities_carve_only = false;
+  // The same for the frames of an object that is not held (addFrameOfObjectAt: the table-top
+  // frames). The camera looks down on it from about a metre and grazes its sides: returns at its
+  // silhouette lie millimetres beyond its edges, and where the hand later covers an edge in
+  // every view (a grasp on it) nothing measures it head-on and they stay as flakes.
+  bool discontinuities_carve_only_on_table = true;
   // With a colour camera: memory for the colour frames kept (ColourFrames), from which the
   // model's colours come where they saw it (at the colour camera's resolution, head-on views
   // first); 0: colours from the volume's voxels only. MiB
@@ -189,6 +194,9 @@ struct ScanOptions {
               "silhouette pixels (a 4-neighbour, or the first return across a gap of no return, "
               "farther by more than the sensor's discontinuity_jump_m) only carve, in every "
               "frame: their return may come from across the edge");
+    v.boolean("discontinuities_carve_only_on_table", o.discontinuities_carve_only_on_table,
+              "… in the frames of the object not held (on the table): seen from afar, its sides "
+              "graze, and an edge the hand covers later is never measured head-on");
     v.num("colour_frames_mb", o.colour_frames_mb,
           "with a colour camera: memory for the colour frames the model's colours come from "
           "(head-on views first, at the camera's resolution); 0: from the voxels only, MiB",
@@ -359,7 +367,7 @@ struct TableTopOptions {
   // only beneath measured surface, along the table's normal: the far faces stand straight down
   // from the edges seen from above, where by default the filled-in space slopes from them to the
   // table (the camera's shadow) and fingers close on that slope.
-  bool under_measured_only = false;
+  bool under_measured_only = true;
 
   template <class V, class S>
   static void fields(V& v, S& o) {

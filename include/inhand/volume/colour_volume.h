@@ -106,10 +106,15 @@ class ColourFrames {
   // colour image (camera.colour: intrinsics, T_D_RGB). `carve_only` flags pixels that are not
   // fused (the robot, the table); `sigma_m` pixels without a positive σ are not fused either.
   // Nothing is kept where no fused pixel projects into the colour image, or when the images'
-  // sizes are not the cameras'.
+  // sizes are not the cameras'. `robot_in_colour` (may be null): the robot's own depth as the
+  // colour camera sees it (robotDepthImage from the colour camera's pose; 0 where it is not);
+  // where it lies in front of the object's surface or touches it (less than 1 cm behind), the
+  // colour is the robot's: a finger on the object covers it in the colour camera at its depth,
+  // where the depth camera, 2.5 cm aside, may see the surface beside it.
   void add(const DepthImage& depth, const RgbImage& colour, const Iso3& T_O_C,
            const DepthCameraOptions& camera, const std::vector<float>& sigma_m,
-           const std::vector<uint8_t>* carve_only = nullptr);
+           const std::vector<uint8_t>* carve_only = nullptr,
+           const DepthImage* robot_in_colour = nullptr);
 
   // The colour (0–255) at p_O on a surface whose outward unit normal is n_O: the mean of the
   // frames that saw p_O (its depth in the frame within 1 cm of the surface's there, nothing
