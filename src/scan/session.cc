@@ -134,6 +134,14 @@ struct ScanSession::State {
   // checkpoints: after a resume, what they did not see takes the volume's colour).
   std::unique_ptr<ColourFrames> colourFrames;
   RgbImage nextColour;
+  // A frame of the object not held, its silhouettes fused, into tableVolume (made at the first).
+  void fuseIntoTableVolume(const DepthImage& depth, const Iso3& T_O_C, const PixelRect& rect,
+                           const std::vector<uint8_t>& carve) {
+    if (!tableVolume) tableVolume.emplace(makeScanVolume(centre, options));
+    const std::vector<uint8_t>* c = carve.empty() ? nullptr : &carve;
+    const std::vector<float> sigma = measurementSigma(depth, camera.intrinsics, noise, &rect, c);
+    integrate(depth, T_O_C, camera.intrinsics, sigma, &*tableVolume, c);
+  }
   // A fused frame's colours into `colour` and `colourFrames` (made at the first).
   void fuseColour(const DepthImage& depth, const RgbImage& image, const Iso3& T_O_C,
                   const std::vector<float>& sigma, const std::vector<uint8_t>* carve,
@@ -708,6 +716,17 @@ DepthImage silhouettesOnlyCarve(const DepthImage& depth, double jump_m, const Pi
 }
 }  // namespace
 
+namespace {
+// `depth` with the flagged pixels' depths set to 0 (no return); an empty image when none is.
+DepthImage withPixelsDropped(const DepthImage& depth, const std::vector<uint8_t>& drop) {
+  if (std::find(drop.begin(), drop.end(), 1) == drop.end()) return DepthImage();
+  DepthImage out = depth;
+  for (size_t i = 0; i < drop.size(); ++i)
+    if (drop[i]) out.depth_m[i] = 0;
+  return out;
+}
+}  // namespace
+
 FrameReport ScanSession::fuse(const DepthImage& input, const JointVector& q, const Iso3& T_B_C,
                               const Iso3& T_O_B, const std::vector<uint8_t>* extraCarve,
                               bool inHand, bool maskRobot, const RgbImage& colour) {
@@ -729,14 +748,8 @@ FrameReport ScanSession::fuse(const DepthImage& input, const JointVector& q, con
                            s.options.carve_radius_px, /*with_table=*/inHand, &rect);
   // In the hand, pixels that are not used at all (neither fused nor carving): see unusedInHand.
   DepthImage trimmed;
-  if (inHand && maskRobot && s.fuseNearHand) {
-    const std::vector<uint8_t> unused = s.unusedInHand(input, carve, T_O_C, rect);
-    if (std::find(unused.begin(), unused.end(), 1) != unused.end()) {
-      trimmed = input;
-      for (size_t i = 0; i < unused.size(); ++i)
-        if (unused[i]) trimmed.depth_m[i] = 0;
-    }
-  }
+  if (inHand && maskRobot && s.fuseNearHand)
+    trimmed = withPixelsDropped(input, s.unusedInHand(input, carve, T_O_C, rect));
   const DepthImage& depth = trimmed.width > 0 ? trimmed : input;
   if (extraCarve) {
     if (carve.empty()) carve.assign(depth.depth_m.size(), 0);
@@ -775,13 +788,7 @@ FrameReport ScanSession::fuse(const DepthImage& input, const JointVector& q, con
   const std::vector<float> sigma =
       measurementSigma(depth, K, s.noise, &rect, carve.empty() ? nullptr : &carve);
   integrate(fused, T_O_C, K, sigma, &s.volume, carve.empty() ? nullptr : &carve);
-  if (onTable) {
-    if (!s.tableVolume) s.tableVolume.emplace(makeScanVolume(s.centre, s.options));
-    const std::vector<float> sigmaWhole =
-        measurementSigma(depth, K, s.noise, &rect, carveWhole.empty() ? nullptr : &carveWhole);
-    integrate(depth, T_O_C, K, sigmaWhole, &*s.tableVolume,
-              carveWhole.empty() ? nullptr : &carveWhole);
-  }
+  if (onTable) s.fuseIntoTableVolume(depth, T_O_C, rect, carveWhole);
   if (s.camera.colour.enabled && !colour.empty())
     s.fuseColour(depth, colour, T_O_C, sigma, carve.empty() ? nullptr : &carve, q, T_B_C);
   ++s.revision;
