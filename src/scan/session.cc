@@ -714,9 +714,7 @@ DepthImage silhouettesOnlyCarve(const DepthImage& depth, double jump_m, const Pi
   }
   return nearestAround(depth, edges, 2);
 }
-}  // namespace
 
-namespace {
 // `depth` with the flagged pixels' depths set to 0 (no return); an empty image when none is.
 DepthImage withPixelsDropped(const DepthImage& depth, const std::vector<uint8_t>& drop) {
   if (std::find(drop.begin(), drop.end(), 1) == drop.end()) return DepthImage();

@@ -226,7 +226,7 @@ class ScanSession {
   // The frames of the object not held (addFrameOfObjectAt) fused with their silhouettes, which
   // volume() only carves (ScanOptions::discontinuities_carve_only_on_table): the first grasp's
   // model reaches the edges seen from above. volume() when there is none (the option off, no
-  // such frame, a resumed session).
+  // such frame, a resumed session, or once a grasp began).
   const TsdfVolume& tableTopVolume() const;
   // Writable access counts as a change of the volume: the kept models are extracted again.
   // Writes through a reference kept across a model() call are not seen by it: call volume()
