@@ -161,7 +161,9 @@ struct ScanSession::State {
       const PixelRect rect =
           volumeImageRect(volume, T_O_C * camera.colour.T_D_RGB, inColour.intrinsics);
       const DepthImage robotThere =
-          robotDepthImage(scenes, q, T_B_RGB, inColour, /*with_table=*/false, rect);
+          colourFrames->keepsNext()
+              ? robotDepthImage(scenes, q, T_B_RGB, inColour, /*with_table=*/false, rect)
+              : DepthImage();
       colourFrames->add(depth, image, T_O_C, camera, sigma, carve, &robotThere);
     }
     summary.colour_s += secondsSince(tc);

@@ -111,6 +111,8 @@ class ColourFrames {
   // where it lies in front of the object's surface or touches it (less than 1 cm behind), the
   // colour is the robot's: a finger on the object covers it in the colour camera at its depth,
   // where the depth camera, 2.5 cm aside, may see the surface beside it.
+  // Whether the next frame added (of the cameras' sizes) is kept: every stride()-th one is.
+  bool keepsNext() const { return added_ % stride_ == 0; }
   void add(const DepthImage& depth, const RgbImage& colour, const Iso3& T_O_C,
            const DepthCameraOptions& camera, const std::vector<float>& sigma_m,
            const std::vector<uint8_t>* carve_only = nullptr,
