@@ -722,3 +722,41 @@ TEST(TableTop, TheUnknownSpaceBeneathMeasuredSurfaceIsWhatLiesUnderIt) {
           << x << " " << z;
     }
 }
+
+// unknownUnderMeasured follows a ray only across the observed voxels' bounds: on volumes of
+// random states (observed voxels in a few blobs, the rest unknown or empty) and up directions
+// straight, slanted and nearly along an axis, it keeps exactly the voxels the reference keeps.
+TEST(TableTop, TheUnknownSpaceBeneathMeasuredSurfaceMatchesItsReference) {
+  VolumeOptions vo;
+  vo.voxel_size_m = 0.01;
+  std::mt19937 rng(7);
+  for (int trial = 0; trial < 4; ++trial) {
+    TsdfVolume volume(Aabb{Vec3::Zero(), Vec3(0.31, 0.27, 0.23)}, vo);
+    const Vec3i n = volume.dims();
+    std::uniform_int_distribution<int> state(0, 2);
+    for (size_t i = 0; i < size_t(n.prod()); ++i)
+      volume.states()[i] = uint8_t(state(rng) == 0 ? VoxelState::kEmpty : VoxelState::kUnknown);
+    std::uniform_int_distribution<int> cx(3, n.x() - 4), cy(3, n.y() - 4), cz(3, n.z() - 4);
+    for (int blob = 0; blob < 3; ++blob) {
+      const Vec3i c(cx(rng), cy(rng), cz(rng));
+      for (int z = c.z() - 2; z <= c.z() + 2; ++z)
+        for (int y = c.y() - 3; y <= c.y() + 3; ++y)
+          for (int x = c.x() - 3; x <= c.x() + 3; ++x)
+            if ((x + y + z) % 3 != 0)
+              volume.states()[volume.index(x, y, z)] = uint8_t(VoxelState::kObserved);
+    }
+    for (const Vec3& up : {Vec3(0, 0, 1), Vec3(0.3, -0.2, 1), Vec3(-1, 0.5, 0.2), Vec3(1e-7, 0, 1),
+                           Vec3(0, 1, 0), Vec3(0.577, 0.577, -0.577)}) {
+      const std::vector<uint8_t> fast = unknownUnderMeasured(volume, up);
+      const std::vector<uint8_t> reference = unknownUnderMeasuredReference(volume, up);
+      ASSERT_EQ(fast.size(), reference.size());
+      size_t differ = 0, kept = 0;
+      for (size_t i = 0; i < fast.size(); ++i) {
+        differ += fast[i] != reference[i];
+        kept += reference[i];
+      }
+      EXPECT_EQ(differ, 0u) << "trial " << trial << " up " << up.transpose();
+      EXPECT_GT(kept, 0u) << "trial " << trial << " up " << up.transpose();
+    }
+  }
+}

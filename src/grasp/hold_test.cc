@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -197,9 +198,13 @@ double rankByHold(const RobotModel& robot, const TriangleMesh& model_O, const Is
     const int begin = n, end = std::min(total, n + o.max_candidates);
     const int workers = std::max(1, std::min(threadCount(), end - begin));
     std::vector<HoldTrial> trials(size_t(end - begin), HoldTrial{});
-    parallelFor(0, workers, [&](int w) {
+    // Each core takes the next candidate not yet taken (a trial that drops the model early is
+    // short); a trial's outcome does not depend on the world that ran it (reset restores all
+    // that a trial changes).
+    std::atomic<int> next{begin};
+    parallelForThreads(0, workers, [&](int) {
       PhysicsWorld world(robot, pieces, friction, po);
-      for (int i = begin + w; i < end; i += workers) {
+      for (int i = next++; i < end; i = next++) {
         const GraspCandidate& c = (*candidates)[size_t(i)];
         trials[size_t(i - begin)] = tryHold(world, T_B_O, c.T_O_palm, c.q_open, c.q, o);
       }
@@ -229,9 +234,10 @@ double rankByHold(const RobotModel& robot, const TriangleMesh& model_O, const Is
     heavy.density_kg_m3 *= o.margin_mass;
     std::vector<uint8_t> margin(size_t(h), 0);
     const int workers = std::max(1, std::min(threadCount(), h));
-    parallelFor(0, workers, [&](int w) {
+    std::atomic<int> next{0};
+    parallelForThreads(0, workers, [&](int) {
       PhysicsWorld world(robot, pieces, friction * o.margin_friction, heavy);
-      for (int i = w; i < h; i += workers) {
+      for (int i = next++; i < h; i = next++) {
         const GraspCandidate& c = (*candidates)[size_t(i)];
         margin[size_t(i)] = tryHold(world, T_B_O, c.T_O_palm, c.q_open, c.q, o).held;
       }

@@ -196,12 +196,12 @@ std::vector<uint8_t> tablePixels(const DepthImage& d, const Iso3& T_O_C, const C
   return table;
 }
 
-std::vector<uint8_t> unknownUnderMeasured(const TsdfVolume& volume, const Vec3& up_O) {
+std::vector<uint8_t> unknownUnderMeasuredReference(const TsdfVolume& volume, const Vec3& up_O) {
   const Vec3i n = volume.dims();
   std::vector<uint8_t> keep(size_t(n.prod()), 0);
   // In voxel units, steps of at most half a voxel along each axis: no voxel is stepped over.
   const Vec3 step = up_O.normalized() * 0.5;
-  parallelFor(0, n.z(), [&](int z) {
+  for (int z = 0; z < n.z(); ++z)
     for (int y = 0; y < n.y(); ++y)
       for (int x = 0; x < n.x(); ++x) {
         const size_t i = volume.index(x, y, z);
@@ -212,6 +212,62 @@ std::vector<uint8_t> unknownUnderMeasured(const TsdfVolume& volume, const Vec3& 
           const int px = int(std::lround(p.x())), py = int(std::lround(p.y())),
                     pz = int(std::lround(p.z()));
           if (px < 0 || py < 0 || pz < 0 || px >= n.x() || py >= n.y() || pz >= n.z()) break;
+          if (volume.state(volume.index(px, py, pz)) == VoxelState::kObserved) {
+            keep[i] = 1;
+            break;
+          }
+        }
+      }
+  return keep;
+}
+
+std::vector<uint8_t> unknownUnderMeasured(const TsdfVolume& volume, const Vec3& up_O) {
+  const Vec3i n = volume.dims();
+  std::vector<uint8_t> keep(size_t(n.prod()), 0);
+  // The observed voxels' bounds, widened by the half voxel that rounding reaches and a margin:
+  // a ray that misses them reaches no observed voxel, and one is followed only across them.
+  Vec3 lo = Vec3::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
+  for (int z = 0; z < n.z(); ++z)
+    for (int y = 0; y < n.y(); ++y)
+      for (int x = 0; x < n.x(); ++x)
+        if (volume.state(volume.index(x, y, z)) == VoxelState::kObserved) {
+          lo = lo.cwiseMin(Vec3(x, y, z));
+          hi = hi.cwiseMax(Vec3(x, y, z));
+        }
+  if (!(lo.x() <= hi.x())) return keep;
+  lo.array() -= 0.51;
+  hi.array() += 0.51;
+  // In voxel units, steps of at most half a voxel along each axis: no voxel is stepped over.
+  const Vec3 step = up_O.normalized() * 0.5;
+  parallelFor(0, n.z(), [&](int z) {
+    for (int y = 0; y < n.y(); ++y)
+      for (int x = 0; x < n.x(); ++x) {
+        const size_t i = volume.index(x, y, z);
+        if (volume.state(i) != VoxelState::kUnknown) continue;
+        // The steps k in [k0, k1] at which the ray is within the bounds (slabs).
+        const Vec3 start(x, y, z);
+        double k0 = 0, k1 = std::numeric_limits<double>::infinity();
+        for (int a = 0; a < 3 && k0 <= k1; ++a) {
+          if (std::abs(step[a]) < 1e-12) {
+            if (start[a] < lo[a] || start[a] > hi[a]) k1 = -1;
+            continue;
+          }
+          double ka = (lo[a] - start[a]) / step[a], kb = (hi[a] - start[a]) / step[a];
+          if (ka > kb) std::swap(ka, kb);
+          k0 = std::max(k0, ka);
+          k1 = std::min(k1, kb);
+        }
+        if (k0 > k1) continue;
+        // The same half-voxel steps as the reference (the same sums, rounded alike: lround of a
+        // value above −½ is floor(v + ½)), rounded only within the bounds.
+        Vec3 p = start;
+        for (int k = 1; double(k) <= k1 + 1; ++k) {
+          p += step;
+          if (double(k) < k0 - 1) continue;
+          if (p.x() <= -0.5 || p.y() <= -0.5 || p.z() <= -0.5 || p.x() >= n.x() - 0.5 ||
+              p.y() >= n.y() - 0.5 || p.z() >= n.z() - 0.5)
+            break;
+          const int px = int(p.x() + 0.5), py = int(p.y() + 0.5), pz = int(p.z() + 0.5);
           if (volume.state(volume.index(px, py, pz)) == VoxelState::kObserved) {
             keep[i] = 1;
             break;

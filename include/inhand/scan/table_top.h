@@ -62,6 +62,9 @@ std::vector<uint8_t> tablePixels(const DepthImage& depth, const Iso3& T_O_C,
 // (the ray from its centre in half-voxel steps, to the volume's bounds), else 0: the unknown
 // space beneath measured surface (TableTopOptions::under_measured_only).
 std::vector<uint8_t> unknownUnderMeasured(const TsdfVolume& volume, const Vec3& up_O);
+// The same, each ray followed step by step to the volume's bounds (what the test compares
+// unknownUnderMeasured with; it follows a ray only across the observed voxels' bounds).
+std::vector<uint8_t> unknownUnderMeasuredReference(const TsdfVolume& volume, const Vec3& up_O);
 
 // First-grasp candidates on what the table-top frames fused into `session` show (its planning
 // model: the observed surface closed over what it hides, up to the table, or with
