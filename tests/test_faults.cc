@@ -2,6 +2,7 @@
 // counters, and the model stays the model of the object (docs/reliability.md has the figures).
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cstdio>
 
 #include "inhand/driver/simulated_scan.h"
@@ -93,6 +94,34 @@ TEST(Faults, AnObjectDroppedDuringAViewEndsTheGraspAndIsPickedUpAgain) {
   EXPECT_EQ(s.result.grasps[0].termination, Termination::kObjectLost);
   EXPECT_GT(s.result.scan.frames_unsupported, 0);
   expectNearTheCleanModel(s);  // the frames without the object were not fused
+}
+
+// Physics: the object falls out of the hand during the third motion with it in the hand, lands
+// beneath the hand and settles there, away from where it rested before the grasp. The scan
+// notices (the frames stop showing it), looks for it beneath where the hand held it first, finds
+// it there (the box bounces and tips over: 17 cm from beneath the hand, 24 cm from where it
+// rested) and picks it up again, with no pick-up that met nothing.
+TEST(Faults, AnObjectThatFallsFromTheHandIsFoundBeneathIt) {
+  ScanConfig c = fastConfig();
+  c.sim.physics.enabled = true;
+  c.sim.faults.drop_in_motion = 2;
+  c.multi.max_grasps = 2;
+  std::vector<std::string> lines;
+  ScanProgress progress;
+  progress.log = [&](const std::string& line) { lines.push_back(line); };
+  const SimulatedScan s =
+      runSimulatedScan(test::wam(), loadObject("builtin:cracker_box"), c, progress);
+  EXPECT_EQ(s.faults.object_drops, 1);
+  ASSERT_GE(s.result.grasps.size(), 2u);
+  EXPECT_EQ(s.result.grasps[0].termination, Termination::kObjectLost);
+  // Found at the first place it was looked for: beneath the hand.
+  const auto lost = std::find_if(lines.begin(), lines.end(),
+                                 [](const std::string& l) { return l.rfind("grasp 1:", 0) == 0; });
+  ASSERT_NE(lost, lines.end());
+  ASSERT_NE(lost + 1, lines.end());
+  EXPECT_EQ((lost + 1)->rfind("the object found on the table", 0), 0u) << *(lost + 1);
+  for (const GraspRecord& g : s.result.grasps)
+    EXPECT_EQ(countOutcome(g.attempts, PickOutcome::kNoContact), 0);
 }
 
 TEST(Faults, AnObjectDroppedWithNoRegraspLeftEndsAsObjectLost) {

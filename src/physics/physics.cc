@@ -706,6 +706,18 @@ bool PhysicsWorld::objectTouchesTable() const {
   return false;
 }
 
+bool PhysicsWorld::handTouchesTable() const {
+  const Impl& I = *impl_;
+  for (int c = 0; c < I.d->ncon; ++c) {
+    const mjContact& k = I.d->contact[c];
+    const int b1 = I.m->geom_bodyid[k.geom1], b2 = I.m->geom_bodyid[k.geom2];
+    if ((k.geom1 == I.tableGeom && I.handBody[size_t(b2)]) ||
+        (k.geom2 == I.tableGeom && I.handBody[size_t(b1)]))
+      return true;
+  }
+  return false;
+}
+
 std::vector<PhysicsWorld::Contact> PhysicsWorld::objectContacts() const {
   const Impl& I = *impl_;
   std::vector<Contact> out;

@@ -221,6 +221,32 @@ Refound refindOnTable(ScanSession& session, RobotInterface& robot, DepthSensor& 
   return out;
 }
 
+// The object looked for where it is believed to lie, then at each further guess while not
+// found there (beneath where the hand held it: it may have fallen from the hand, or been knocked
+// there by a pick-up that failed), each miss logged.
+Refound refindAt(ScanSession& session, RobotInterface& robot, DepthSensor& sensor,
+                 const std::vector<Iso3>& guesses, const ScanOptions& options,
+                 const std::function<void(const std::string&)>& log) {
+  Refound found;
+  for (size_t k = 0; k < guesses.size() && !found.T_B_O; ++k) {
+    found = refindOnTable(session, robot, sensor, guesses[k], options, log);
+    if (!found.T_B_O && k + 1 < guesses.size())
+      log("the object not found " + std::string(k == 0 ? "there" : "at that guess") + ": " +
+          found.reason + "; looking elsewhere");
+  }
+  return found;
+}
+
+// The rest pose T_B_O_rest moved beneath where the hand at q holds the object (T_O_palm), its
+// centre (of `c_O`) under the held one's: where an object that fell from the hand is looked for.
+Iso3 beneathHand(const RobotModel& m, const JointVector& q, const Iso3& T_O_palm,
+                 const Iso3& T_B_O_rest, const Vec3& c_O) {
+  const Iso3 T_B_O_held = m.tipPose(q) * T_O_palm.inverse();
+  Vec3 shift = T_B_O_held * c_O - T_B_O_rest * c_O;
+  shift.z() = 0;
+  return Eigen::Translation3d(shift) * T_B_O_rest;
+}
+
 // Picks the object up with the first candidate (in order) that the robot
 // closes on, lifts, and by what it then observes holds. Fingers all closed to their limit mean
 // an empty hand. After the lift the camera looks at the hand: the object's points (`points_O`,
@@ -369,8 +395,10 @@ PickUp pickAndVerify(ScanSession& session, RobotInterface& robot, DepthSensor& s
   PickUp out;
   const int budget = session.multiOptions().grasp.max_failed_pick_ups;
   // After a failed attempt that touched the object: is it still where it rested?
-  auto stillThere = [&] {
-    const Refound f = refindOnTable(session, robot, sensor, T_B_O_rest, options, log);
+  auto stillThere = [&](const Iso3& T_O_palm_tried) {
+    const Iso3 beneath = beneathHand(m, robot.joints(), T_O_palm_tried, T_B_O_rest,
+                                     session.planningModel().mesh.bounds().center());
+    const Refound f = refindAt(session, robot, sensor, {T_B_O_rest, beneath}, options, log);
     if (!f.T_B_O) {
       log("the object not found on the table: " + f.reason);
       out.lost = true;
@@ -405,7 +433,7 @@ PickUp pickAndVerify(ScanSession& session, RobotInterface& robot, DepthSensor& s
       robot.putDown();
       record(PickOutcome::kEmptyHand);
       log("the fingers closed on nothing; trying the next candidate");
-      if (!stillThere()) break;
+      if (!stillThere(c.T_O_palm)) break;
       continue;
     }
     robot.execute({robot.joints(), m.withArm(robot.joints(), m.arm(c.q_lift))},
@@ -423,7 +451,8 @@ PickUp pickAndVerify(ScanSession& session, RobotInterface& robot, DepthSensor& s
       robot.putDown();
       record(PickOutcome::kDropped);
       log("the grasp did not hold; trying the next candidate");
-      if (!(onTable > 0.5) && !stillThere()) break;  // not seen where it rested: where is it?
+      // Not seen where it rested: where is it?
+      if (!(onTable > 0.5) && !stillThere(*achieved)) break;
       continue;
     }
     record(PickOutcome::kPicked);
@@ -432,6 +461,17 @@ PickUp pickAndVerify(ScanSession& session, RobotInterface& robot, DepthSensor& s
     break;
   }
   return out;
+}
+
+// Where to look for the object after a grasp's put-down: where it rested, then beneath where
+// the hand was when a frame last showed the object in it (it may have fallen unnoticed during
+// the last frames); lost from the hand during the views, beneath the hand first.
+std::vector<Iso3> placesToLook(const ScanSession& session, const RobotInterface& robot,
+                               const Iso3& T_B_O_rest, bool lost) {
+  const Iso3 beneath =
+      beneathHand(robot.model(), session.lastSeenHeld().value_or(robot.joints()),
+                  session.graspPose(), T_B_O_rest, session.planningModel().mesh.bounds().center());
+  return lost ? std::vector<Iso3>{beneath, T_B_O_rest} : std::vector<Iso3>{T_B_O_rest, beneath};
 }
 
 // A grasp's record once its views ended: the model then (at the planning stride: a quarter of
@@ -470,13 +510,15 @@ GraspRecord graspPicked(const GraspPlan& plan, const PickUp& pick,
 // the best candidate the robot manages to pick up and hold. Picked up: `next` describes the new
 // grasp and nullopt is returned; else how the scan ends.
 std::optional<Termination> regrasp(ScanSession& session, RobotInterface& robot, DepthSensor& sensor,
-                                   Iso3& T_B_O_rest, MultiGraspResult& out, GraspRecord& next,
+                                   Iso3& T_B_O_rest, const std::vector<Iso3>& look_at,
+                                   MultiGraspResult& out, GraspRecord& next,
                                    const std::function<void(const std::string&)>& log) {
   const ScanProgress& progress = session.progress();
   const ScanResult& all = out.scan;
   // Where the object came to rest (it may have tipped, or fallen during the views): the model
-  // registered to a frame of the table, before any re-grasp is planned.
-  const Refound found = refindOnTable(session, robot, sensor, T_B_O_rest, session.options(), log);
+  // registered to a frame of the table, before any re-grasp is planned, looked for at each of
+  // `look_at` in turn.
+  const Refound found = refindAt(session, robot, sensor, look_at, session.options(), log);
   if (!found.T_B_O) {
     log("the object not found on the table: " + found.reason);
     return Termination::kObjectLost;
@@ -584,6 +626,8 @@ void runGrasps(RobotInterface& robot, DepthSensor& sensor, ScanSession& session,
       all.termination = multi.max_grasps == 1 ? ended : Termination::kMaxGrasps;
       break;
     }
+    const std::vector<Iso3> lookAt =
+        placesToLook(session, robot, T_B_O_rest, ended == Termination::kObjectLost);
     // Put down, then candidates on the model so far, ranked by eq. 9 with the hand there.
     if (!robot.putDown()) {
       all.termination = Termination::kRegraspUnsupported;
@@ -591,7 +635,7 @@ void runGrasps(RobotInterface& robot, DepthSensor& sensor, ScanSession& session,
     }
     session.endGrasp();
     if (const std::optional<Termination> end =
-            regrasp(session, robot, sensor, T_B_O_rest, out, next, log)) {
+            regrasp(session, robot, sensor, T_B_O_rest, lookAt, out, next, log)) {
       all.termination = *end;
       break;
     }

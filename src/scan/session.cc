@@ -212,6 +212,9 @@ struct ScanSession::State {
   // The joints of the frame that set it in this grasp (none yet: no jump check), and the last
   // frame's correction refused as a jump (TrackingOptions::max_jump_m).
   std::optional<JointVector> correctionQ;
+  // The joints of this grasp's last in-hand frame that showed the object where the hand holds
+  // it (lastSeenHeld).
+  std::optional<JointVector> lastHeldQ;
   std::optional<Iso3> jumpPending;
   // TrackingOptions::filter: the correction's estimate (palm frame: rotation vector, translation),
   // its covariance and the joints of the last tracked frame; started at the grasp's first frame.
@@ -521,6 +524,7 @@ const ScanProgress& ScanSession::progress() const { return s_->progress; }
 bool ScanSession::holding() const { return s_->holding; }
 int ScanSession::graspIndex() const { return s_->grasp; }
 const Iso3& ScanSession::graspPose() const { return s_->T_O_palm; }
+const std::optional<JointVector>& ScanSession::lastSeenHeld() const { return s_->lastHeldQ; }
 const std::vector<ViewRecord>& ScanSession::views() const { return s_->views; }
 const std::vector<int>& ScanSession::viewGrasps() const { return s_->viewGrasp; }
 const TsdfVolume& ScanSession::volume() const { return s_->volume; }
@@ -567,6 +571,7 @@ void ScanSession::beginGrasp(const Iso3& T_O_palm, const JointVector& q, const A
   s.summary.message.clear();
   closeSlip();
   s.creepPending.reset();
+  s.lastHeldQ.reset();
   s.T_O_palm = T_O_palm;
   s.qGrasp = q;
   s.objectBox = object_box_O;
@@ -988,6 +993,7 @@ FrameReport ScanSession::addFrame(const DepthImage& input, const JointVector& q,
       finish(Termination::kObjectLost, "in-hand frames stopped showing the object");
     return refuse(FrameRefusal::kObjectNotInHand, why);
   }
+  s.lastHeldQ = q;
   // With tracking, the robot as the frame shows it: the joint offsets that put the palm where
   // the frame says (armOffsetsFromPalmError) place the other links too, for the robot's pixels
   // and the space inside it (Fig. 3 c); the camera where it reported itself, the palm as

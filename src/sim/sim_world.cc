@@ -216,17 +216,38 @@ bool SimRobot::putDown() {
   SimWorld& w = *world_;
   PhysicsWorld* ph = w.physics();
   if (ph && w.held) {
-    // The hand carries the object (as it holds it now) to 5 mm above where it rested, from
-    // 10 cm above that, opens, backs off 10 cm along its axis; the object settles.
+    // The hand carries the object (as it holds it now) to 10 cm above where it rested when this
+    // grasp picked it up, lowers it to 5 mm above that in 5 mm steps, stopping where the object
+    // or the hand touches the table (a grasp that moved in the hand may put the fingers lower
+    // than the object), opens, backs off 10 cm along its axis; the object settles.
     const Iso3 T_O_palmPhys = ph->objectPose().inverse() * ph->palmPose();
-    Iso3 place = w.restPose();
+    Iso3 place = w.tablePose;
     place.translation().z() += 0.005;
-    const Iso3 down = place * T_O_palmPhys;
+    Iso3 down = place * T_O_palmPhys;
     Iso3 above = down;
     above.translation().z() += 0.10;
     const PhysicsOptions& po = w.options().physics;
-    ph->movePalm(above, 1.5);
-    ph->movePalm(down, 0.5);
+    // On the way there the palm first rises, then moves and turns at a height where no point of
+    // the object or the hand can reach the table, whatever the turn (the motion is the hand's
+    // alone, in straight lines).
+    double reach = 0.25;  // the hand's own, about its palm
+    for (const Vec3f& v : w.objectMesh().vertices)
+      reach = std::max(reach, (T_O_palmPhys.inverse() * v.cast<double>()).norm());
+    const double safeZ = std::max({ph->palmPose().translation().z(), above.translation().z(),
+                                   w.model().table().topZ() + reach + 0.02});
+    Iso3 up = ph->palmPose(), over = above;
+    up.translation().z() = safeZ;
+    over.translation().z() = safeZ;
+    ph->movePalm(up, 0.5);
+    ph->movePalm(over, 1.5);
+    ph->movePalm(above, 0.5);
+    for (int k = 1; k <= 20; ++k) {
+      Iso3 T = above;
+      T.translation().z() -= 0.005 * k;
+      ph->movePalm(T, 0.025);
+      down = T;
+      if (ph->objectTouchesTable() || ph->handTouchesTable()) break;
+    }
     ph->openHand();
     Iso3 away = down;
     away.translation() -= 0.10 * down.linear().col(2);
@@ -587,6 +608,13 @@ void SimRobot::execute(const std::vector<JointVector>& waypoints,
       ++w.faults.slips;
     }
     if (i == dropAt && w.held) {  // the object falls out of the hand
+      if (ph) {
+        // With physics it falls from where the hand holds it and settles on the table (the
+        // fingers let go in the simulated world only: the robot reports them as they were).
+        ph->openHand();
+        ph->settle(o.physics.settle_s);
+        w.tablePose = ph->objectPose();
+      }
       w.held = false;
       ++w.drops;
       ++w.faults.object_drops;

@@ -131,6 +131,7 @@ class PhysicsWorld {
   double objectSpeed() const;  // m/s of its centre of mass
   bool objectTouchesHand() const;
   bool objectTouchesTable() const;
+  bool handTouchesTable() const;  // any hand link
   // The object's contacts now: where (base frame), the normal pointing into the object, and what
   // it touches (a hand link's index into RobotModel::links(), or -1 for the table).
   struct Contact {

@@ -151,6 +151,10 @@ class ScanSession {
   bool holding() const;
   int graspIndex() const;  // 0-based index of the current (or last) grasp, -1 before any
   const Iso3& graspPose() const;
+  // The joints of the current (or last) grasp's last in-hand frame whose depths showed the object
+  // where the hand holds it (checks.min_support); none before one did. Where an object that fell
+  // unnoticed was last seen in the hand.
+  const std::optional<JointVector>& lastSeenHeld() const;
 
   // A depth frame taken from T_B_C (camera in the robot base frame) with the robot at q, the
   // object in the hand: fused with T_O_C = T_O_palm · T_palm_B(q) · T_B_C; the robot's own
