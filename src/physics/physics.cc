@@ -170,6 +170,13 @@ struct PhysicsWorld::Impl {
             .toRotationMatrix();
     return T;
   }
+  // The body contact c touches the table with; -1 when it is not a contact with the table.
+  int tableContactBody(int c) const {
+    const mjContact& k = d->contact[c];
+    if (k.geom1 == tableGeom) return m->geom_bodyid[k.geom2];
+    if (k.geom2 == tableGeom) return m->geom_bodyid[k.geom1];
+    return -1;
+  }
   // Contact c is between the object and a hand link.
   bool handObjectContact(int c) const {
     const int b1 = m->geom_bodyid[d->contact[c].geom1], b2 = m->geom_bodyid[d->contact[c].geom2];
@@ -696,25 +703,15 @@ bool PhysicsWorld::objectTouchesHand() const {
 
 bool PhysicsWorld::objectTouchesTable() const {
   const Impl& I = *impl_;
-  for (int c = 0; c < I.d->ncon; ++c) {
-    const mjContact& k = I.d->contact[c];
-    const int b1 = I.m->geom_bodyid[k.geom1], b2 = I.m->geom_bodyid[k.geom2];
-    if ((k.geom1 == I.tableGeom && b2 == I.objectBody) ||
-        (k.geom2 == I.tableGeom && b1 == I.objectBody))
-      return true;
-  }
+  for (int c = 0; c < I.d->ncon; ++c)
+    if (I.tableContactBody(c) == I.objectBody) return true;
   return false;
 }
 
 bool PhysicsWorld::handTouchesTable() const {
   const Impl& I = *impl_;
-  for (int c = 0; c < I.d->ncon; ++c) {
-    const mjContact& k = I.d->contact[c];
-    const int b1 = I.m->geom_bodyid[k.geom1], b2 = I.m->geom_bodyid[k.geom2];
-    if ((k.geom1 == I.tableGeom && I.handBody[size_t(b2)]) ||
-        (k.geom2 == I.tableGeom && I.handBody[size_t(b1)]))
-      return true;
-  }
+  for (int c = 0; c < I.d->ncon; ++c)
+    if (const int b = I.tableContactBody(c); b >= 0 && I.handBody[size_t(b)]) return true;
   return false;
 }
 
