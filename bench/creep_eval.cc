@@ -4,7 +4,8 @@
 // then turned 60° each way about its x, y and z axes (TURN_S seconds a turn, 1.5 by default).
 // Prints the object's pose in the palm's frame after each second and each turn against its pose
 // after the lift (mm, degrees), and the physics computation time.
-// Usage: creep_eval OBJECT [REST_POSE] [NOSLIP_ITERATIONS] [TURN_S]
+// Usage: creep_eval OBJECT [REST_POSE] [NOSLIP_ITERATIONS] [TURN_S] [TIMESTEP_S
+// CONTACT_TIMECONST_S] (the simulator's defaults where not given: PhysicsOptions)
 #include <cstdio>
 #include <cstdlib>
 
@@ -19,7 +20,9 @@ using namespace inhand;
 
 int main(int argc, char** argv) {
   if (argc < 2) {
-    std::fprintf(stderr, "usage: creep_eval OBJECT [REST_POSE] [NOSLIP_ITERATIONS] [TURN_S]\n");
+    std::fprintf(stderr,
+                 "usage: creep_eval OBJECT [REST_POSE] [NOSLIP_ITERATIONS] [TURN_S] "
+                 "[TIMESTEP_S CONTACT_TIMECONST_S]\n");
     return 2;
   }
   try {
@@ -28,6 +31,10 @@ int main(int argc, char** argv) {
     const int pose = argc > 2 ? std::atoi(argv[2]) : 0;
     SimOptions so = bench::restingWithPhysics(object, pose);
     if (argc > 3) so.physics.noslip_iterations = std::atoi(argv[3]);
+    if (argc > 6) {
+      so.physics.timestep_s = std::atof(argv[5]);
+      so.physics.contact_timeconst_s = std::atof(argv[6]);
+    }
     SimWorld world(m, object, Iso3::Identity(), DepthCameraOptions{}, NoiseModelOptions{}, so);
     world.held = false;
     SimRobot robot(&world);

@@ -85,6 +85,16 @@ TEST(Config, ErrorsNameTheKey) {
   ScanConfig c;
   readScanConfig(Json::parse(R"({"voxel_m": -1})"), "cfg", &c);
   EXPECT_EQ(c.validate(), "option voxel_m must be in (0, 0.05) (is -1)");
+  // A contact time constant under MuJoCo's floor (twice the step) would be raised silently.
+  ScanConfig p;
+  readScanConfig(
+      Json::parse(R"({"sim": {"physics": {"timestep_s": 0.002, "contact_timeconst_s": 0.003}}})"),
+      "cfg", &p);
+  EXPECT_NE(p.validate().find("contact_timeconst_s must be at least twice timestep_s"),
+            std::string::npos)
+      << p.validate();
+  p.sim.physics.contact_timeconst_s = 0.004;
+  EXPECT_EQ(p.validate(), "");
 }
 
 TEST(Config, RangesHaveOpenAndClosedEnds) {

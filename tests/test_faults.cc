@@ -111,8 +111,10 @@ TEST(Faults, AnObjectThatFallsFromTheHandIsFoundBeneathIt) {
   progress.log = [&](const std::string& line) { lines.push_back(line); };
   const SimulatedScan s =
       runSimulatedScan(test::wam(), loadObject("builtin:cracker_box"), c, progress);
+  std::string log;
+  for (const std::string& l : lines) log += l + "\n";
   EXPECT_EQ(s.faults.object_drops, 1);
-  ASSERT_GE(s.result.grasps.size(), 2u);
+  ASSERT_GE(s.result.grasps.size(), 1u) << log;
   EXPECT_EQ(s.result.grasps[0].termination, Termination::kObjectLost);
   // Found at the first place it was looked for: beneath the hand.
   const auto lost = std::find_if(lines.begin(), lines.end(),
@@ -120,8 +122,14 @@ TEST(Faults, AnObjectThatFallsFromTheHandIsFoundBeneathIt) {
   ASSERT_NE(lost, lines.end());
   ASSERT_NE(lost + 1, lines.end());
   EXPECT_EQ((lost + 1)->rfind("the object found on the table", 0), 0u) << *(lost + 1);
-  for (const GraspRecord& g : s.result.grasps)
-    EXPECT_EQ(countOutcome(g.attempts, PickOutcome::kNoContact), 0);
+  // Picked up again where it was found: every re-grasp pick-up reached it (none met nothing),
+  // whether or not its grasp held (the box lands lying, which the hand may fail to lift).
+  std::vector<PickAttempt> regrasps = s.result.failed_regrasp_attempts;
+  for (size_t g = 1; g < s.result.grasps.size(); ++g)
+    regrasps.insert(regrasps.end(), s.result.grasps[g].attempts.begin(),
+                    s.result.grasps[g].attempts.end());
+  ASSERT_FALSE(regrasps.empty()) << log;
+  EXPECT_EQ(countOutcome(regrasps, PickOutcome::kNoContact), 0) << log;
 }
 
 TEST(Faults, AnObjectDroppedWithNoRegraspLeftEndsAsObjectLost) {
@@ -204,7 +212,11 @@ TEST(Faults, AnObjectThatCreepsInTheHandIsFollowed) {
   auto scan = [&](double creep_m) {
     ScanConfig c = fastConfig();
     c.sim.physics.enabled = true;
+    // Soft contacts without the no-slip pass (the simulator's contacts before they were made
+    // stiff, docs/physics.md): the bottle creeps in the hand.
     c.sim.physics.noslip_iterations = 0;
+    c.sim.physics.timestep_s = 0.002;
+    c.sim.physics.contact_timeconst_s = 0.005;
     c.scan.tracking.creep_m = creep_m;
     c.multi.max_grasps = 1;
     // The grasp this scenario was built on (see the slip test above); with under_measured_only's

@@ -23,6 +23,8 @@ namespace inhand {
 std::string PhysicsOptions::validate() const {
   if (std::string p = checkOptionRanges(*this); !p.empty()) return p;
   if (!(touch_force_n <= finger_force_n)) return "touch_force_n must be at most finger_force_n";
+  if (!(contact_timeconst_s >= 2 * timestep_s - 1e-12))
+    return "contact_timeconst_s must be at least twice timestep_s (MuJoCo's floor)";
   return {};
 }
 
@@ -416,8 +418,8 @@ void PhysicsWorld::build(const RobotModel& model, std::vector<ConvexPiece> piece
     << "<option timestep=\"" << num(options.timestep_s)
     << "\" gravity=\"0 0 -9.81\" cone=\"elliptic\" impratio=\"10\" noslip_iterations=\""
     << options.noslip_iterations << "\"/>"
-    << "<default><geom friction=\"" << num(friction)
-    << " 0.002 0.0001\" condim=\"4\" solref=\"0.005 1\"/></default>"
+    << "<default><geom friction=\"" << num(friction) << " 0.002 0.0001\" condim=\"4\" solref=\""
+    << num(options.contact_timeconst_s) << " 1\"/></default>"
     << "<asset>" << assets << hand.assets()
     << "</asset><worldbody>"
     // The table top as a plane (MuJoCo 2.2 gives a convex mesh one contact against a box, several

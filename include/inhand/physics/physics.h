@@ -22,7 +22,12 @@ struct PhysicsOptions {
   bool enabled = false;
   double density_kg_m3 = 300;  // the object's density (of the solid its closed mesh encloses)
   double mass_kg = 0;          // > 0: the object's mass, whatever its volume
-  double timestep_s = 0.002;   // MuJoCo's step
+  // MuJoCo's step, and the time constant of every contact's soft constraint (solref; at least
+  // twice the step, MuJoCo's floor). A held object walks along the fingers' contacts as the load
+  // on them turns, well inside the friction cone, by an amount that shrinks with the time
+  // constant (docs/physics.md: 2.1 mm over nine turns of the palm at 5 ms, 0.7 mm at 2 ms).
+  double timestep_s = 0.001;
+  double contact_timeconst_s = 0.002;
   // The hand (BarrettHand BH8-280 figures, Barrett's support wiki): each finger pushes with at
   // most this force at its tip (load limit 2 kg per finger); open to closed in this time
   // (finger_close_time_s); worm-driven joints that do not backdrive: a closed finger holds its
@@ -60,6 +65,9 @@ struct PhysicsOptions {
     v.num("mass_kg", o.mass_kg, "the object's mass (0: from the density), kg",
           Range::closed(0, 100));
     v.num("timestep_s", o.timestep_s, "MuJoCo's time step, s", Range::closed(1e-4, 0.01));
+    v.num("contact_timeconst_s", o.contact_timeconst_s,
+          "contacts' soft-constraint time constant (at least 2 timestep_s; stiffer: less creep), s",
+          Range::closed(2e-4, 0.1));
     v.num("finger_force_n", o.finger_force_n, "each finger's force limit at its tip, N",
           Range::openClosed(0, 1000));
     v.num("touch_force_n", o.touch_force_n,
