@@ -193,6 +193,7 @@ double rankByHold(const RobotModel& robot, const TriangleMesh& model_O, const Is
   // measured with: docs/physics.md).
   po.timestep_s = 0.002;
   po.contact_timeconst_s = 0.005;
+  po.table_contact_timeconst_s = 0.005;
   // Batches of max_candidates in their order until one holds (or max_tested are tried). One
   // world per core, each trying every other candidate of the batch from a fresh reset.
   const int total = std::min(o.max_tested, int(candidates->size()));

@@ -25,6 +25,8 @@ std::string PhysicsOptions::validate() const {
   if (!(touch_force_n <= finger_force_n)) return "touch_force_n must be at most finger_force_n";
   if (!(contact_timeconst_s >= 2 * timestep_s - 1e-12))
     return "contact_timeconst_s must be at least twice timestep_s (MuJoCo's floor)";
+  if (!(table_contact_timeconst_s >= 2 * timestep_s - 1e-12))
+    return "table_contact_timeconst_s must be at least twice timestep_s (MuJoCo's floor)";
   return {};
 }
 
@@ -427,7 +429,10 @@ void PhysicsWorld::build(const RobotModel& model, std::vector<ConvexPiece> piece
     << "<geom name=\"table\" type=\"plane\" pos=\""
     << vec(Vec3(table.center_B.x(), table.center_B.y(), table.topZ())) << "\" size=\""
     << vec(Vec3(0.5 * table.size.x(), 0.5 * table.size.y(), 0.01))
-    << "\" contype=\"1\" conaffinity=\"1\"/>" << object << "<body name=\"target\" mocap=\"true\"/>"
+    // Its solmix outweighs every other geom's: a contact with the table takes the table's solref.
+    << "\" contype=\"1\" conaffinity=\"1\" solmix=\"1000\" solref=\""
+    << num(options.table_contact_timeconst_s) << " 1\"/>" << object
+    << "<body name=\"target\" mocap=\"true\"/>"
     << "<body name=\"palm\"><freejoint name=\"palm\"/>"
     << inertial(palmMass, palmLink.com, Mat3::Identity() * palmMass * 2e-3) << palm << "</body>"
     << "</worldbody><equality><weld body1=\"palm\" body2=\"target\" solref=\"0.004 1\"/>"
