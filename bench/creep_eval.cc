@@ -34,6 +34,7 @@ int main(int argc, char** argv) {
     if (argc > 6) {
       so.physics.timestep_s = std::atof(argv[5]);
       so.physics.contact_timeconst_s = std::atof(argv[6]);
+      so.physics.table_contact_timeconst_s = so.physics.contact_timeconst_s;
     }
     SimWorld world(m, object, Iso3::Identity(), DepthCameraOptions{}, NoiseModelOptions{}, so);
     world.held = false;

@@ -94,6 +94,7 @@ TEST(Config, ErrorsNameTheKey) {
             std::string::npos)
       << p.validate();
   p.sim.physics.contact_timeconst_s = 0.004;
+  p.sim.physics.table_contact_timeconst_s = 0.004;
   EXPECT_EQ(p.validate(), "");
 }
 

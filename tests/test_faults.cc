@@ -217,6 +217,7 @@ TEST(Faults, AnObjectThatCreepsInTheHandIsFollowed) {
     c.sim.physics.noslip_iterations = 0;
     c.sim.physics.timestep_s = 0.002;
     c.sim.physics.contact_timeconst_s = 0.005;
+    c.sim.physics.table_contact_timeconst_s = 0.005;
     c.scan.tracking.creep_m = creep_m;
     c.multi.max_grasps = 1;
     // The grasp this scenario was built on (see the slip test above); with under_measured_only's
