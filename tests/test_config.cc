@@ -94,6 +94,9 @@ TEST(Config, ErrorsNameTheKey) {
             std::string::npos)
       << p.validate();
   p.sim.physics.contact_timeconst_s = 0.004;
+  EXPECT_NE(p.validate().find("table_contact_timeconst_s must be at least twice timestep_s"),
+            std::string::npos)
+      << p.validate();
   p.sim.physics.table_contact_timeconst_s = 0.004;
   EXPECT_EQ(p.validate(), "");
 }
