@@ -186,3 +186,21 @@ TEST(Config, TheReferenceInDocsIsGeneratedFromTheTables) {
                           "`sim.pick_up`", "`table_top.plane_max_tilt_deg`"})
     EXPECT_NE(reference.find(key), std::string::npos) << key;
 }
+
+// A config that turns physics on turns the in-hand registration after each pick-up on (the
+// closing fingers move the object), unless it sets it; without physics it stays off.
+TEST(Config, PhysicsTurnsTheInHandRegistrationOnUnlessTheConfigSetsIt) {
+  auto inHand = [](const std::string& json) {
+    ScanConfig c;
+    readScanConfig(Json::parse(json), "cfg", &c);
+    return c.scan.tracking.in_hand;
+  };
+  const ScanConfig defaults;
+  EXPECT_FALSE(defaults.scan.tracking.in_hand);
+  EXPECT_FALSE(inHand("{}"));
+  EXPECT_TRUE(inHand(R"({"sim": {"physics": {"enabled": true}}})"));
+  EXPECT_FALSE(inHand(R"({"sim": {"physics": {"enabled": false}}})"));
+  EXPECT_FALSE(
+      inHand(R"({"sim": {"physics": {"enabled": true}}, "tracking": {"in_hand": false}})"));
+  EXPECT_TRUE(inHand(R"({"tracking": {"in_hand": true}})"));
+}

@@ -197,6 +197,16 @@ void readScanConfig(const Json& j, const std::string& where, ScanConfig* config)
   Reader r(j, where);
   visitConfig(r, *config);
   r.finish();
+  // Physics turned on here: closing the fingers moves the object in the hand (millimetres to
+  // centimetres), so the object's pose in the hand comes from the lift's frame
+  // (tracking.in_hand) unless this config says otherwise. The kinematic simulator's hand grasps
+  // exactly as planned, where a registration with one frame would only add the model's error.
+  auto given = [&](const char* a, const char* b) {
+    return j.contains(a) && j[a].is_object() && j[a].contains(b);
+  };
+  const bool physicsOn = given("sim", "physics") && j["sim"]["physics"].is_object() &&
+                         j["sim"]["physics"].value("enabled", false);
+  if (physicsOn && !given("tracking", "in_hand")) config->scan.tracking.in_hand = true;
 }
 
 void readScanConfigFile(const std::filesystem::path& file, ScanConfig* config) {

@@ -34,7 +34,9 @@ struct ScanConfigRow {
 };
 
 // Reads the keys present in `j` over `config` (the others keep their values). `where` names the
-// source in errors ("FILE.planner.t_q: expected a number"). Throws Error.
+// source in errors ("FILE.planner.t_q: expected a number"). Throws Error. A `j` that turns
+// sim.physics on and does not set tracking.in_hand turns that on too (with physics the closing
+// fingers move the object in the hand).
 void readScanConfig(const Json& j, const std::string& where, ScanConfig* config);
 // The same from a JSON file (the error names the file).
 void readScanConfigFile(const std::filesystem::path& file, ScanConfig* config);
