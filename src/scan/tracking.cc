@@ -63,11 +63,9 @@ struct Pairs {
   double sq = 0;
 };
 
-// Where the body may be seen in the frame (its depths, the pixels something else hides, and
-// those without depth: a depth camera returns none at grazing incidence and in its projector's
-// shadow, both at an object's edges, so such a pixel says nothing of where the body is) and each
-// pixel's distance to the nearest such pixel (pixels; chamfer 1/√2): a point of the body that
-// projects outside it lies past the body's true outline and is pulled back across it.
+// Where the body may be seen in the frame (its depths and the pixels something else hides) and
+// each pixel's distance to the nearest such pixel (pixels; chamfer 1/√2): a point of the body
+// that projects outside it lies past the body's true outline and is pulled back across it.
 struct Silhouette {
   int width = 0, height = 0;
   std::vector<float> dist;
@@ -93,7 +91,7 @@ Silhouette silhouette(const DepthImage& depth, const std::vector<uint8_t>& hidde
   s.dist.assign(depth.depth_m.size(), inf);
   for (size_t i = 0; i < depth.depth_m.size(); ++i) {
     const float z = depth.depth_m[i];
-    if ((!hidden.empty() && hidden[i]) || !(z > 0) || (z >= near && z <= far)) s.dist[i] = 0;
+    if ((!hidden.empty() && hidden[i]) || (z >= near && z <= far)) s.dist[i] = 0;
   }
   const float d1 = 1.0f, d2 = 1.41421356f;
   const int w = s.width, h = s.height;
@@ -522,8 +520,7 @@ TrackResult alignBodyToDepth(const DepthImage& depth, const std::vector<uint8_t>
   if (!hidden.empty())
     for (size_t i = 0; i < hidden.size() && i < body.depth_m.size(); ++i)
       if (hidden[i]) body.depth_m[i] = 0;
-  // The outline: pixels within 5 cm of the body's depths as given, the hidden ones and those
-  // without depth.
+  // The outline: pixels within 5 cm of the body's depths as given, and the hidden ones.
   double near = std::numeric_limits<double>::infinity(), far = 0;
   for (const SurfacePoint& sp : points_X) {
     const double z = (T_C_X * sp.p).z();

@@ -213,9 +213,7 @@ enum class UncoveredPull {
 // and checks, every point weighted alike), and an outline term: projective association alone
 // slides a body sideways slowly and stops where a face seen head-on fits (anywhere in its own
 // plane), so a point that projects where the frame shows neither the body (depths within 5 cm
-// of its own) nor a hidden pixel nor a pixel without depth (none at grazing incidence or in the
-// projector's shadow: Tracking.PixelsWithoutDepthDoNotPullTheOutline) is pulled by its image
-// distance to the nearest one.
+// of its own) nor a hidden pixel is pulled by its image distance to the nearest one.
 // `pull` (a held body, its outline against the robot and the background): the outline
 // the other way too, a pixel at the body's depths within the final gate of it that no point of
 // the body covers (none within 1.5 times their spacing) pulls the nearest point towards it (a
