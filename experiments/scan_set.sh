@@ -7,6 +7,7 @@
 # (first grasp made, grasps, views, coverage, accuracy, seconds, termination) as runs finish.
 # Usage: experiments/scan_set.sh [OUT]   (default out/scan_set; the build must exist)
 # SCAN_CONFIG=FILE adds `--config FILE` to every scan (e.g. physics on: docs/physics.md).
+# SCAN_SEED=N adds `--seed N` (the noise and IK seed; 1 by default).
 # SCAN_EXPORT=mjcf,urdf adds `--export mjcf,urdf` (each run's asset; experiments/asset_table.py OUT
 # tabulates them: docs/asset.md).
 set -uo pipefail
@@ -17,6 +18,7 @@ mkdir -p "$out/runs" "$out/bin"
 cp build/inhand "$out/bin/inhand"  # the build may change while this runs
 config=()
 [ -n "${SCAN_CONFIG:-}" ] && config=(--config "$SCAN_CONFIG")
+[ -n "${SCAN_SEED:-}" ] && config+=(--seed "$SCAN_SEED")
 [ -n "${SCAN_EXPORT:-}" ] && config+=(--export "$SCAN_EXPORT")
 /usr/bin/python3 experiments/make_test_objects.py "$out/objects"
 objects=()

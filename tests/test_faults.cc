@@ -202,40 +202,60 @@ TEST(Faults, AFrameLessNoisyThanTheSensorModelShowsNoSlip) {
   EXPECT_EQ(s.result.scan.frames_moving, 0);
 }
 
-// Physics: the pill bottle creeps in the hand under the motions' accelerations, a millimetre or
-// so at a time, too little for a slip (tracking.slip_m); here MuJoCo's soft contacts without the
-// no-slip pass (physics.noslip_iterations 0) make it creep more, steadily. Followed
-// (tracking.creep_m), its frames are fused nearer where it is than with creep not followed
-// (recorded: 2.5 against 3.0 mm, the model's coverage 95 against 70 %; 3.0 against 5.0 mm before
-// the robot's pixels pulled the smeared surface in front of them out, which leaves less to gain).
+// Physics: a held object creeps in the hand under the motions' accelerations, a millimetre or
+// so at a time, too little for a slip (tracking.slip_m). Followed (tracking.creep_m), each creep
+// moves the scan's grasp: nearer where the object truly sits in the hand, over three scans where
+// it creeps (the pill bottle with MuJoCo's soft contacts without the no-slip pass, as the
+// simulator's contacts were before they were made stiff, docs/physics.md; the cracker box with
+// those and with the simulator's own). Recorded: 7 creeps, the grasp's error 18.8 mm summed
+// before them and 11.8 mm after, 6 of 7 nearer. The grasp is compared, not two whole scans: once
+// a grasp moves, the rest of the scan takes another path, and two scans' medians differ by a
+// millimetre either way (the pill bottle's: 3.2 mm with creep followed, 2.3 without). Not
+// every creep followed is right: an alignment with a coarse model is biased by millimetres along
+// what the frame constrains least (a 2.5 mm slip injected in the kinematic simulator, below the
+// slip threshold, was followed to 4.1 mm off); the physics test set with creep_m 0 scanned worse
+// (coverage >= 97 % on 19 of 33 against 22; docs/test_set_physics.md).
 TEST(Faults, AnObjectThatCreepsInTheHandIsFollowed) {
-  auto scan = [&](double creep_m) {
+  struct Case {
+    const char* object;
+    bool soft;
+  };
+  int creeps = 0, nearer = 0;
+  double before = 0, after = 0;
+  for (const Case& k : {Case{"builtin:pill_bottle", true}, Case{"builtin:cracker_box", true},
+                        Case{"builtin:cracker_box", false}}) {
     ScanConfig c = fastConfig();
     c.sim.physics.enabled = true;
-    // Soft contacts without the no-slip pass (the simulator's contacts before they were made
-    // stiff, docs/physics.md): the bottle creeps in the hand.
-    c.sim.physics.noslip_iterations = 0;
-    c.sim.physics.timestep_s = 0.002;
-    c.sim.physics.contact_timeconst_s = 0.005;
-    c.sim.physics.table_contact_timeconst_s = 0.005;
-    c.scan.tracking.creep_m = creep_m;
+    if (k.soft) {
+      c.sim.physics.noslip_iterations = 0;
+      c.sim.physics.timestep_s = 0.002;
+      c.sim.physics.contact_timeconst_s = 0.005;
+      c.sim.physics.table_contact_timeconst_s = 0.005;
+      c.multi.table_top.under_measured_only = false;  // the grasp the scenario was built on
+    }
     c.multi.max_grasps = 1;
-    // The grasp this scenario was built on (see the slip test above); with under_measured_only's
-    // grasp the bottle creeps too, one creep is followed, and the frames land as far off
-    // (3.9 mm median either way).
-    c.multi.table_top.under_measured_only = false;
-    return runSimulatedScan(test::wam(), loadObject("builtin:pill_bottle"), c);
-  };
-  const SimulatedScan s = scan(ScanOptions().tracking.creep_m), unfollowed = scan(0);
-  std::printf(
-      "creeps followed %d; object error median %.2f mm (creep not followed: %.2f mm); "
-      "coverage %.3f (%.3f)\n",
-      s.result.scan.creeps_followed, 1000 * s.object_error_median_m,
-      1000 * unfollowed.object_error_median_m, s.metrics.coverage, unfollowed.metrics.coverage);
-  EXPECT_EQ(unfollowed.result.scan.creeps_followed, 0);
-  EXPECT_GE(s.result.scan.creeps_followed, 1);
-  EXPECT_LT(s.object_error_median_m, 0.95 * unfollowed.object_error_median_m);
-  EXPECT_GT(s.metrics.coverage, unfollowed.metrics.coverage - 0.03);
+    const SimulatedScan s = runSimulatedScan(test::wam(), loadObject(k.object), c);
+    EXPECT_LE(int(s.creep_grasp_error_m.size()), s.result.scan.creeps_followed) << k.object;
+    for (const auto& [b, a] : s.creep_grasp_error_m) {
+      std::printf("%s%s: a creep followed, the grasp %.2f -> %.2f mm off\n", k.object,
+                  k.soft ? " (soft contacts)" : "", 1000 * b, 1000 * a);
+      ++creeps;
+      nearer += a < b;
+      before += b;
+      after += a;
+    }
+  }
+  EXPECT_GE(creeps, 4);
+  EXPECT_GE(nearer, (3 * creeps + 3) / 4);  // three in four at least
+  EXPECT_LT(after, 0.8 * before);
+  // Off (creep_m 0), none is followed.
+  ScanConfig c = fastConfig();
+  c.sim.physics.enabled = true;
+  c.scan.tracking.creep_m = 0;
+  c.multi.max_grasps = 1;
+  EXPECT_EQ(runSimulatedScan(test::wam(), loadObject("builtin:cracker_box"), c)
+                .result.scan.creeps_followed,
+            0);
 }
 
 TEST(Faults, RefusedMotionsAreReplannedAndFailedPickUpsTryTheNextCandidate) {

@@ -69,6 +69,8 @@ struct FrameErrors {
   Vec3 centre_O;
   std::vector<double> palm, object;
   int rejected = 0;
+  int creeps = 0;                                      // creeps followed so far
+  std::vector<std::pair<double, double>> creepErrors;  // SimulatedScan::creep_grasp_error_m
   Iso3 scanGrasp;  // the grasp as the scan knows it (ScanSession::graspPose)
 
   FrameErrors(const SimWorld& w, const Vec3& centre) : world(&w), centre_O(centre) {
@@ -78,6 +80,11 @@ struct FrameErrors {
     const auto userInput = progress.frame_input;
     progress.frame_input = [this, userInput](const ScanSession& s, const DepthImage& d,
                                              const JointVector& q, const Iso3& T_B_C) {
+      // The frame before followed a creep: the grasp's error before and after it.
+      if (const int n = s.summary().creeps_followed; n > creeps) {
+        creeps = n;
+        creepErrors.push_back({graspError(scanGrasp), graspError(s.graspPose())});
+      }
       scanGrasp = s.graspPose();
       if (userInput) userInput(s, d, q, T_B_C);
     };
@@ -90,6 +97,12 @@ struct FrameErrors {
       else
         ++rejected;
     };
+  }
+  // How far grasp T_O_palm puts the object's centre in the palm frame from where it is.
+  double graspError(const Iso3& T_O_palm) const {
+    const Iso3 trueT_palm_O =
+        world->model().tipPose(world->trueJoints()).inverse() * world->objectPose();
+    return (T_O_palm.inverse() * centre_O - trueT_palm_O * centre_O).norm();
   }
   void add(const FrameReport& r, const JointVector& q, const Iso3& T_B_C) {
     const RobotModel& model = world->model();
@@ -184,6 +197,7 @@ SimulatedScan runSimulatedScan(const RobotModel& model, const TriangleMesh& mesh
   }
   recordWorld(world, object, &out);
   out.frames_rejected = rejected;
+  out.creep_grasp_error_m = errors.creepErrors;
   out.frames_fused_in_hand = int(palmError.size());
   medianP95(palmError, &out.palm_error_median_m, &out.palm_error_p95_m);
   medianP95(objectError, &out.object_error_median_m, &out.object_error_p95_m);

@@ -174,7 +174,8 @@ std::vector<std::pair<std::optional<Iso3>, TrackResult>> registerModelAt(
     TrackResult r =
         alignBodyToDepth(depth, hidden, K, model.points, model.occluders, T_C_O,
                          axialSigma(noise, T_C_O.translation().z(), 0), options,
-                         in_hand ? UncoveredPull::kAfterConverging : UncoveredPull::kOff);
+                         in_hand ? UncoveredPull::kAfterConverging : UncoveredPull::kOff,
+                         in_hand ? NoDepthPixels::kUnknown : NoDepthPixels::kOutside);
     if (r.ok) out[size_t(k)].first = T_B_C * r.correction * T_C_O;
     out[size_t(k)].second = std::move(r);
   });

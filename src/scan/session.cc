@@ -1232,7 +1232,7 @@ std::optional<Iso3> ScanSession::registerHeldObject(const DepthImage& depth,
   const TrackResult r =
       alignBodyToDepth(depth, robot_mask, s.camera.intrinsics, reg.points, reg.occluders, T_C_O,
                        axialSigma(s.noise, T_C_O.translation().z(), 0), s.options.tracking,
-                       UncoveredPull::kAfterConverging);
+                       UncoveredPull::kAfterConverging, NoDepthPixels::kUnknown);
   s.summary.tracking_s += secondsSince(t0);
   if (result) *result = r;
   if (!r.ok) return std::nullopt;

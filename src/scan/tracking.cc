@@ -63,7 +63,8 @@ struct Pairs {
   double sq = 0;
 };
 
-// Where the body may be seen in the frame (its depths and the pixels something else hides) and
+// Where the body may be seen in the frame (its depths, the pixels something else hides, and with
+// NoDepthPixels::kUnknown those without depth) and
 // each pixel's distance to the nearest such pixel (pixels; chamfer 1/√2): a point of the body
 // that projects outside it lies past the body's true outline and is pulled back across it.
 struct Silhouette {
@@ -81,7 +82,7 @@ struct Silhouette {
 };
 
 Silhouette silhouette(const DepthImage& depth, const std::vector<uint8_t>& hidden, double near,
-                      double far) {
+                      double far, NoDepthPixels no_depth) {
   Silhouette s;
   s.width = depth.width;
   s.height = depth.height;
@@ -91,7 +92,9 @@ Silhouette silhouette(const DepthImage& depth, const std::vector<uint8_t>& hidde
   s.dist.assign(depth.depth_m.size(), inf);
   for (size_t i = 0; i < depth.depth_m.size(); ++i) {
     const float z = depth.depth_m[i];
-    if ((!hidden.empty() && hidden[i]) || (z >= near && z <= far)) s.dist[i] = 0;
+    if ((!hidden.empty() && hidden[i]) || (z >= near && z <= far) ||
+        (no_depth == NoDepthPixels::kUnknown && !(z > 0)))
+      s.dist[i] = 0;
   }
   const float d1 = 1.0f, d2 = 1.41421356f;
   const int w = s.width, h = s.height;
@@ -513,21 +516,23 @@ double typicalSpacing(const std::vector<SurfacePoint>& points, const std::vector
 TrackResult alignBodyToDepth(const DepthImage& depth, const std::vector<uint8_t>& hidden,
                              const CameraIntrinsics& K, const std::vector<SurfacePoint>& points_X,
                              const std::vector<Vec3>& occluders_X, const Iso3& T_C_X,
-                             double sigma_m, const TrackingOptions& options, UncoveredPull pull) {
+                             double sigma_m, const TrackingOptions& options, UncoveredPull pull,
+                             NoDepthPixels no_depth) {
   TrackingOptions o = options;
   o.object_weight = 1;      // no hand: the body's points alone
   DepthImage body = depth;  // hidden pixels pair with nothing
   if (!hidden.empty())
     for (size_t i = 0; i < hidden.size() && i < body.depth_m.size(); ++i)
       if (hidden[i]) body.depth_m[i] = 0;
-  // The outline: pixels within 5 cm of the body's depths as given, and the hidden ones.
+  // The outline: pixels within 5 cm of the body's depths as given, the hidden ones (and with
+  // kUnknown those without depth).
   double near = std::numeric_limits<double>::infinity(), far = 0;
   for (const SurfacePoint& sp : points_X) {
     const double z = (T_C_X * sp.p).z();
     near = std::min(near, z);
     far = std::max(far, z);
   }
-  Silhouette outline = silhouette(depth, hidden, near - 0.05, far + 0.05);
+  Silhouette outline = silhouette(depth, hidden, near - 0.05, far + 0.05, no_depth);
   if (pull == UncoveredPull::kFromStart) outline.spacing_m = typicalSpacing(points_X, occluders_X);
   // Without the pull (with it from the start for kFromStart), then the refinement.
   const TrackResult first = alignFrom(body, K, points_X, 0, occluders_X, T_C_X, Iso3::Identity(),

@@ -37,7 +37,8 @@ RegistrationModel registrationModel(const ObjectModel& m, const TrackingOptions&
 // frame's points within 30 cm of the starts' mean, every other pixel each way, aligned with the
 // model's points by point-to-point ICP (nearest model point within a gate shrinking from 4 to
 // 1 cm, Umeyama's motion, 20 rounds), then alignBodyToDepth with the sensor's axial σ at the
-// model's depth (`in_hand`: with the uncovered pixels' pull). One result per start, in parallel;
+// model's depth (`in_hand`: with the uncovered pixels' pull, and pixels without depth inside the
+// outline: NoDepthPixels::kUnknown). One result per start, in parallel;
 // the pose (T_B_O) where alignment succeeded.
 std::vector<std::pair<std::optional<Iso3>, TrackResult>> registerModelAt(
     const RegistrationModel& model, const DepthImage& depth, const std::vector<uint8_t>& hidden,

@@ -206,6 +206,20 @@ enum class UncoveredPull {
   kAfterConverging,
 };
 
+// What alignBodyToDepth's outline makes of a pixel without depth (below).
+enum class NoDepthPixels {
+  // Not the body: the body on the table, whose outline against an empty background is where
+  // depth ends (Session.AnObjectThatTippedIsFoundAgainOnTheTable), and the slip check, which
+  // compares frames of the same held body with each other.
+  kOutside,
+  // Unknown, inside the outline: a held body registered from where the hand planned to hold it.
+  // A depth camera returns nothing at grazing incidence and in its projector's shadow, both at
+  // the body's edges (a standing can's top face seen edge-on), and counted as outside such
+  // pixels pulled the points out of them: the body slid along what the frame left free
+  // (Tracking.PixelsWithoutDepthDoNotPullAHeldBodysOutline).
+  kUnknown,
+};
+
 // Aligns a rigid body's surface points (`points_X`, with outward normals, in its frame X) with
 // the depth frame, from X at T_C_X: the object's model with its pose in the hand unknown after a
 // pick-up. `hidden` (empty, or one per pixel): pixels of something in front that may hide the
@@ -213,7 +227,8 @@ enum class UncoveredPull {
 // and checks, every point weighted alike), and an outline term: projective association alone
 // slides a body sideways slowly and stops where a face seen head-on fits (anywhere in its own
 // plane), so a point that projects where the frame shows neither the body (depths within 5 cm
-// of its own) nor a hidden pixel is pulled by its image distance to the nearest one.
+// of its own) nor a hidden pixel (nor, with `no_depth` kUnknown, a pixel without depth) is pulled
+// by its image distance to the nearest one.
 // `pull` (a held body, its outline against the robot and the background): the outline
 // the other way too, a pixel at the body's depths within the final gate of it that no point of
 // the body covers (none within 1.5 times their spacing) pulls the nearest point towards it (a
@@ -227,6 +242,7 @@ TrackResult alignBodyToDepth(const DepthImage& depth, const std::vector<uint8_t>
                              const CameraIntrinsics& K, const std::vector<SurfacePoint>& points_X,
                              const std::vector<Vec3>& occluders_X, const Iso3& T_C_X,
                              double sigma_m, const TrackingOptions& options,
-                             UncoveredPull pull = UncoveredPull::kOff);
+                             UncoveredPull pull = UncoveredPull::kOff,
+                             NoDepthPixels no_depth = NoDepthPixels::kOutside);
 
 }  // namespace inhand
