@@ -69,7 +69,7 @@ struct FrameErrors {
   Vec3 centre_O;
   std::vector<double> palm, object;
   int rejected = 0;
-  int creeps = 0;                                      // creeps followed so far
+  int creeps = -1;  // creeps followed by the last frame seen (-1: none seen yet)
   std::vector<std::pair<double, double>> creepErrors;  // SimulatedScan::creep_grasp_error_m
   Iso3 scanGrasp;  // the grasp as the scan knows it (ScanSession::graspPose)
 
@@ -80,11 +80,12 @@ struct FrameErrors {
     const auto userInput = progress.frame_input;
     progress.frame_input = [this, userInput](const ScanSession& s, const DepthImage& d,
                                              const JointVector& q, const Iso3& T_B_C) {
-      // The frame before followed a creep: the grasp's error before and after it.
-      if (const int n = s.summary().creeps_followed; n > creeps) {
-        creeps = n;
+      // The frame before followed a creep: the grasp's error before and after it (counted from
+      // the first frame this run sees: a resumed scan's earlier creeps are not its own).
+      const int n = s.summary().creeps_followed;
+      if (creeps >= 0 && n > creeps)
         creepErrors.push_back({graspError(scanGrasp), graspError(s.graspPose())});
-      }
+      creeps = n;
       scanGrasp = s.graspPose();
       if (userInput) userInput(s, d, q, T_B_C);
     };

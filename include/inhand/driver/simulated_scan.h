@@ -19,8 +19,8 @@ struct SimulatedScan {
   // simulator's truth), m.
   double object_error_median_m = 0, object_error_p95_m = 0;
   int frames_fused_in_hand = 0, frames_rejected = 0;  // rejected: not fused, for any reason
-  // Each creep the scan followed (ScanResult::creeps_followed; one in a grasp's last frame is not
-  // recorded, nor any across a resume): how far the scan's grasp put the object's centre in the
+  // Each creep the scan followed (ScanResult::creeps_followed; not one in a grasp's last frame,
+  // and after a resume only those since): how far the scan's grasp put the object's centre in the
   // palm frame from where it truly was, before and after the correction, m.
   std::vector<std::pair<double, double>> creep_grasp_error_m;
   int drops = 0;        // how often the simulated object fell
