@@ -2,10 +2,14 @@
 // the model they give, candidates, the planner's hold test on that model) in the simulator with
 // physics, an object resting in its N-th most probable stable pose; each candidate the scan would
 // try, in its order, picked up from the same start in MuJoCo, lifted 10 cm and turned a quarter
-// turn (as the views turn it), then the world put back as it was. Prints one row per candidate
-// (rank, the hold test's verdict, ε, outcome, how far it moved in the hand, where it failed the
-// hold test, whether a pinch pose) and the hold rates by verdict.
-// Usage: first_grasp_eval OBJECT [REST_POSE] [CANDIDATES] [CONFIG.json]
+// turn (as the views turn it; each motion 1 s with the simulated arm's speed ramps), then the
+// world put back as it was. The hold test's trial of each on the true object, where the guarded
+// move put the palm, is printed beside it (with the hold test's physics and the simulator's).
+// Prints one row per candidate (rank, the hold test's verdict, ε, outcome, how far it moved in the
+// hand, where it failed the hold test, whether a pinch pose) and the hold rates by verdict. Usage:
+// first_grasp_eval OBJECT [REST_POSE] [CANDIDATES] [CONFIG.json]
+#include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 
@@ -13,6 +17,7 @@
 #include "inhand/config/scan_config.h"
 #include "inhand/core/error.h"
 #include "inhand/geometry/builtin_objects.h"
+#include "inhand/grasp/hold_test.h"
 #include "inhand/physics/physics.h"
 #include "inhand/scan/multi_grasp.h"
 #include "inhand/sim/sim_world.h"
@@ -24,7 +29,7 @@ namespace {
 // candidate fail to reach the object (no_contact) and goes on to the next.
 class ProbeRobot : public RobotInterface {
  public:
-  explicit ProbeRobot(SimWorld* w) : world_(w), robot_(w) {}
+  ProbeRobot(SimWorld* w, const ScanConfig& c) : world_(w), robot_(w), config_(c) {}
   const RobotModel& model() const override { return robot_.model(); }
   JointVector joints() const override { return robot_.joints(); }
   void execute(const std::vector<JointVector>& w,
@@ -41,6 +46,9 @@ class ProbeRobot : public RobotInterface {
   struct Outcome {
     std::string what;  // held, dropped_in_lift, dropped_in_turn, slipped, no_contact
     double moved_mm = 0;
+    // The hold test's trial on the true object (where the guarded move put the palm, closing to
+    // where physics closed the fingers): with the hold test's physics, and with the simulator's.
+    std::string true_trial = "-", true_trial_sim = "-";
   };
   std::vector<Outcome> outcomes;
 
@@ -52,14 +60,45 @@ class ProbeRobot : public RobotInterface {
       return o;
     }
     PhysicsWorld& ph = *world_->physics();
+    {
+      const RobotModel& m = world_->model();
+      const Iso3 T_B_O = world_->tablePose, T_B_palm = ph.palmPose();
+      const HoldTestOptions& ho = config_.multi.grasp.hold;
+      const std::vector<ConvexPiece> pieces =
+          modelPiecesAboveTable(world_->objectMesh(), T_B_O, m, nullptr, ho.decomposition);
+      PhysicsWorld trial(m, pieces, config_.multi.grasp.friction, holdTrialPhysics(ho));
+      const HoldTrial t = tryHold(trial, T_B_O, T_B_O.inverse() * T_B_palm, q, world_->q, ho);
+      o.true_trial = t.held ? "held" : holdFailureName(t.failure);
+      PhysicsWorld trialSim(m, world_->objectMesh(), config_.sim.friction, config_.sim.physics);
+      const HoldTrial u = tryHold(trialSim, T_B_O, T_B_O.inverse() * T_B_palm, q, world_->q, ho);
+      o.true_trial_sim = u.held ? "held" : holdFailureName(u.failure);
+    }
     const Iso3 grip = ph.palmPose().inverse() * ph.objectPose();
     auto moved = [&] {
       return 1000 * ((ph.palmPose().inverse() * ph.objectPose()).translation() - grip.translation())
                         .norm();
     };
-    Iso3 up = ph.palmPose();
+    // The lift and the turn as the simulated arm moves (SimRobot::execute): each over 1 s plus
+    // the speed ramps at both ends (PhysicsOptions::ramp_s), the palm placed at every frame time.
+    const double ramp = config_.sim.physics.ramp_s, total = 1.0 + ramp;
+    const double dt = 1.0 / config_.sim.frame_rate_hz;
+    const int steps = std::max(1, int(std::ceil(total / dt)));
+    auto along = [&](int k) {  // the fraction covered at step k (MotionSteps::fraction)
+      const double t = total * k / steps, v = 1.0;
+      if (k >= steps) return 1.0;
+      if (ramp <= 0) return double(k) / steps;
+      if (t < ramp) return 0.5 * v * t * t / ramp;
+      if (t > total - ramp) return 1 - 0.5 * v * (total - t) * (total - t) / ramp;
+      return v * (t - 0.5 * ramp);
+    };
+    const Iso3 start = ph.palmPose();
+    Iso3 up = start;
     up.translation().z() += 0.10;
-    ph.movePalm(up, 1.0);
+    for (int k = 1; k <= steps; ++k) {
+      Iso3 T = start;
+      T.translation().z() += 0.10 * along(k);
+      ph.movePalm(T, total / steps);
+    }
     if (!ph.objectTouchesHand()) {
       o.what = "dropped_in_lift";
       o.moved_mm = moved();
@@ -69,12 +108,12 @@ class ProbeRobot : public RobotInterface {
     if (axis.norm() < 1e-6) axis = up.linear().col(0);
     axis.normalize();
     const Vec3 pivot = ph.objectPose().translation();
-    for (int k = 1; k <= 50; ++k) {
-      const Mat3 R = Eigen::AngleAxisd(k / 50.0 * M_PI / 2, axis).toRotationMatrix();
+    for (int k = 1; k <= steps; ++k) {
+      const Mat3 R = Eigen::AngleAxisd(along(k) * M_PI / 2, axis).toRotationMatrix();
       Iso3 T = up;
       T.linear() = R * up.linear();
       T.translation() = pivot + R * (up.translation() - pivot);
-      ph.movePalm(T, 0.02);
+      ph.movePalm(T, total / steps);
     }
     ph.movePalm(ph.palmPose(), 0.3);
     o.moved_mm = moved();
@@ -83,6 +122,7 @@ class ProbeRobot : public RobotInterface {
   }
   SimWorld* world_;
   SimRobot robot_;
+  ScanConfig config_;
 };
 }  // namespace
 
@@ -107,21 +147,24 @@ int main(int argc, char** argv) {
     SimWorld world(m, object, T_O_palm, camera, noise, c.sim);
     world.held = false;
     world.q = m.home();
-    ProbeRobot robot(&world);
+    ProbeRobot robot(&world, c);
     SimSensor sensor(&world, camera);
     const MultiGraspResult r =
         scanFromTable(robot, sensor, world.restPose(), c.scan, c.multi, noise, ScanProgress{});
     if (!r.table_top) throw Error("no table-top stage");
     const std::vector<PickAttempt>& a = r.table_top->attempts;
-    std::printf("rank,hold_test,epsilon,kind,outcome,moved_mm,hold_failure,pinch,two_finger\n");
+    std::printf(
+        "rank,hold_test,epsilon,kind,outcome,moved_mm,hold_failure,pinch,two_finger,true_trial,"
+        "true_trial_sim\n");
     int held[2] = {0, 0}, tested[2] = {0, 0};
     for (size_t k = 0; k < a.size() && k < robot.outcomes.size(); ++k) {
       const auto& o = robot.outcomes[k];
       const bool pinch = a[k].pose >= 0 && r.table_top->poses[size_t(a[k].pose)].pinch;
       const bool two = a[k].pose >= 0 && r.table_top->poses[size_t(a[k].pose)].two_finger;
-      std::printf("%d,%d,%.3f,%s,%s,%.1f,%s,%d,%d\n", a[k].rank, a[k].hold_test, a[k].epsilon,
+      std::printf("%d,%d,%.3f,%s,%s,%.1f,%s,%d,%d,%s,%s\n", a[k].rank, a[k].hold_test, a[k].epsilon,
                   a[k].palm_contact ? "enveloping" : "fingertips", o.what.c_str(), o.moved_mm,
-                  holdFailureName(a[k].hold_failure), int(pinch), int(two));
+                  holdFailureName(a[k].hold_failure), int(pinch), int(two), o.true_trial.c_str(),
+                  o.true_trial_sim.c_str());
       const int v = a[k].hold_test == 1;
       held[v] += o.what == "held";
       ++tested[v];

@@ -204,3 +204,18 @@ TEST(Config, PhysicsTurnsTheInHandRegistrationOnUnlessTheConfigSetsIt) {
       inHand(R"({"sim": {"physics": {"enabled": true}}, "tracking": {"in_hand": false}})"));
   EXPECT_TRUE(inHand(R"({"tracking": {"in_hand": true}})"));
 }
+
+// … and the second look after the lift (an object may slide out of the hand): 0.5 s, unless the
+// config sets it.
+TEST(Config, PhysicsTurnsTheSecondLookAfterTheLiftOnUnlessTheConfigSetsIt) {
+  auto settle = [](const std::string& json) {
+    ScanConfig c;
+    readScanConfig(Json::parse(json), "cfg", &c);
+    return c.multi.grasp.settle_s;
+  };
+  EXPECT_EQ(ScanConfig().multi.grasp.settle_s, 0.0);
+  EXPECT_EQ(settle("{}"), 0.0);
+  EXPECT_EQ(settle(R"({"sim": {"physics": {"enabled": true}}})"), GraspOptions::kSettleSeconds);
+  EXPECT_EQ(settle(R"({"sim": {"physics": {"enabled": true}}, "grasp": {"settle_s": 0}})"), 0.0);
+  EXPECT_EQ(settle(R"({"grasp": {"settle_s": 1.5}})"), 1.5);
+}

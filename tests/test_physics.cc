@@ -664,5 +664,47 @@ TEST(Physics, AnObjectPutDownRestsWhereItWasPickedUp) {
   EXPECT_GT((rest.translation() - first.translation()).norm(), 0.05);
 }
 
+// Holding still (RobotInterface::holdStill) lets physics go on: a box lifted in a grasp that
+// holds stays in the hand, within 1 mm, over 0.5 s of simulated time; without physics nothing
+// changes.
+TEST(Physics, HoldingStillStepsPhysicsWithTheArmStill) {
+  const RobotModel& r = test::wam();
+  const TriangleMesh box = makeBox(Vec3(0.06, 0.09, 0.14));
+  for (const bool physics : {true, false}) {
+    SimOptions so;
+    so.physics.enabled = physics;
+    SimWorld world(r, box, Iso3::Identity(), DepthCameraOptions{}, NoiseModelOptions{}, so);
+    SimRobot robot(&world);
+    world.held = false;
+    world.q = r.home();
+    const GraspGeneration g = generateGrasps(r, box, world.restPose(), r.home(), GraspOptions{});
+    bool lifted = false;
+    for (const GraspCandidate& c : g.candidates) {
+      if (!robot.pickUp(c.T_O_palm, c.q_open)) continue;
+      robot.execute({robot.joints(), r.withArm(robot.joints(), r.arm(c.q_lift))},
+                    [](const JointVector&) {});
+      if (world.held) {
+        lifted = true;
+        break;
+      }
+      robot.putDown();
+      world.q = r.home();
+    }
+    ASSERT_TRUE(lifted);
+    const JointVector q = world.q;
+    const Iso3 grip = world.T_O_palm;
+    const double t0 = physics ? world.physics()->simulated_s() : 0;
+    const Json before = world.state();
+    robot.holdStill(0.5);
+    EXPECT_TRUE(world.held);
+    EXPECT_TRUE(r.arm(world.q).isApprox(r.arm(q), 0));  // the fingers as physics has them
+    EXPECT_LT((world.T_O_palm.translation() - grip.translation()).norm(), 0.001);
+    if (physics)
+      EXPECT_NEAR(world.physics()->simulated_s() - t0, 0.5, 0.04);
+    else
+      EXPECT_EQ(world.state().dump(), before.dump());
+  }
+}
+
 }  // namespace
 }  // namespace inhand

@@ -19,7 +19,8 @@ namespace {
 
 // The grasps a scan tried (summary.json), each with what became of it: held (it was lifted and
 // the scan went on with it), lost_in_hand (lifted, then lost during the scan), dropped (it fell in
-// the lift), empty_hand (the fingers closed on nothing), no_contact (the hand met nothing).
+// the lift), slid (it moved in the hand while the hand held still after the lift), empty_hand (the
+// fingers closed on nothing), no_contact (the hand met nothing).
 // Attempts recorded without their pose (older scans) are left out.
 Json triedGrasps(const Json& summary, const std::string& where) {
   Json out = Json::array();

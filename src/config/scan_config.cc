@@ -207,6 +207,10 @@ void readScanConfig(const Json& j, const std::string& where, ScanConfig* config)
   const bool physicsOn = given("sim", "physics") && j["sim"]["physics"].is_object() &&
                          j["sim"]["physics"].value("enabled", false);
   if (physicsOn && !given("tracking", "in_hand")) config->scan.tracking.in_hand = true;
+  // … and an object may slide out of the hand after the lift: the hand holds still and the
+  // camera looks again (grasp.settle_s).
+  if (physicsOn && !given("grasp", "settle_s"))
+    config->multi.grasp.settle_s = GraspOptions::kSettleSeconds;
 }
 
 void readScanConfigFile(const std::filesystem::path& file, ScanConfig* config) {

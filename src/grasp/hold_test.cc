@@ -99,6 +99,16 @@ bool movePalmHolding(PhysicsWorld& w, const Iso3& from, const Vec3& lift,
 }
 }  // namespace
 
+PhysicsOptions holdTrialPhysics(const HoldTestOptions& o) {
+  PhysicsOptions po;
+  po.density_kg_m3 = o.density_kg_m3;
+  po.noslip_iterations = o.noslip_iterations;
+  po.timestep_s = 0.002;
+  po.contact_timeconst_s = 0.005;
+  po.table_contact_timeconst_s = 0.005;
+  return po;
+}
+
 HoldTrial tryHold(PhysicsWorld& world, const Iso3& T_B_O, const Iso3& T_O_palm,
                   const JointVector& q_open, const JointVector& q_closed,
                   const HoldTestOptions& o) {
@@ -186,14 +196,7 @@ double rankByHold(const RobotModel& robot, const TriangleMesh& model_O, const Is
   const std::vector<ConvexPiece> pieces =
       modelPiecesAboveTable(model_O, T_B_O, robot, keep_O, o.decomposition);
   if (pieces.empty()) return 0;
-  PhysicsOptions po;
-  po.density_kg_m3 = o.density_kg_m3;
-  po.noslip_iterations = o.noslip_iterations;
-  // The trials keep a coarser step than the simulator's (twice as fast; what their verdicts were
-  // measured with: docs/physics.md).
-  po.timestep_s = 0.002;
-  po.contact_timeconst_s = 0.005;
-  po.table_contact_timeconst_s = 0.005;
+  const PhysicsOptions po = holdTrialPhysics(o);
   // Batches of max_candidates in their order until one holds (or max_tested are tried). One
   // world per core, each trying every other candidate of the batch from a fresh reset.
   const int total = std::min(o.max_tested, int(candidates->size()));

@@ -294,11 +294,44 @@ Iso3 graspInHand(ScanSession& session, const RobotModel& m, const JointVector& q
   return grasp;
 }
 
+// A frame of the object held (its points `held_B` where the hand holds it): the camera aimed at
+// them, the frame's camera pose as tracked (nullopt: tracking refused the frame, `track` says
+// why) and the robot's pixels (seen from the tracked pose, else from the aim). No frame: nothing.
+struct HeldFrame {
+  DepthImage d;
+  Iso3 aim;
+  std::optional<Iso3> tracked;
+  TrackResult track;
+  std::vector<uint8_t> mask;
+};
+std::optional<HeldFrame> frameOfTheHeld(ScanSession& session, RobotInterface& robot,
+                                        DepthSensor& sensor, const std::vector<Vec3>& held_B,
+                                        const Iso3& T_O_palm, const ScanOptions& options,
+                                        const RobotOccluders& scenes) {
+  Aabb heldBox;
+  for (const Vec3& p : held_B) heldBox.extend(p);
+  const std::optional<Iso3> aim = robot.model().camera().aimAt(heldBox.center());
+  if (!aim) return std::nullopt;
+  sensor.setPose(*aim);
+  std::optional<DepthImage> frame = captureUsable(sensor, options.checks);
+  if (!frame) return std::nullopt;
+  HeldFrame f{std::move(*frame), *aim, std::nullopt, {}, {}};
+  // The camera pose relative to where the hand really is (options.tracking; the pose as
+  // reported without it): the held points and the robot's pixels are seen from there.
+  f.tracked = session.trackedCameraPose(f.d, robot.joints(), f.aim, T_O_palm, &f.track);
+  f.mask = robotPixelMask(f.d, f.tracked ? *f.tracked : f.aim, robot.joints(), scenes,
+                          sensor.camera(), options.t_hand_m, options.carve_radius_px,
+                          /*with_table=*/false);
+  return f;
+}
+
 // After the lift: how much of the object's points `points_O` the lift's frame bears out where the
 // grasp holds it (`*achieved`, moved to where the frame shows it in the hand) and where it rested
 // (T_B_O_rest); -1 where none is in view.
 struct LiftCheck {
   double inHand = -1, onTable = -1;
+  std::optional<HeldFrame> frame;  // the lift's frame
+  Aabb heldBox;                    // the object's points where the frame shows it in the hand
 };
 LiftCheck checkAfterLift(ScanSession& session, RobotInterface& robot, DepthSensor& sensor,
                          const GraspCandidate& c, const Iso3& T_B_O_rest,
@@ -319,46 +352,95 @@ LiftCheck checkAfterLift(ScanSession& session, RobotInterface& robot, DepthSenso
     if (r.z() > tableTop + 0.015) rest_B_points.push_back(r);
   }
   LiftCheck out;
-  Aabb heldBox;
-  for (const Vec3& p : held_B) heldBox.extend(p);
-  const std::optional<Iso3> aim = m.camera().aimAt(heldBox.center());
-  std::optional<DepthImage> frame;
-  if (aim) {
-    sensor.setPose(*aim);
-    frame = captureUsable(sensor, options.checks);
+  const std::optional<HeldFrame> f =
+      frameOfTheHeld(session, robot, sensor, held_B, **achieved, options, scenes);
+  if (!f) return out;
+  const DepthImage& d = f->d;
+  const CameraIntrinsics& K = sensor.camera().intrinsics;
+  const std::optional<Iso3>& tracked = f->tracked;
+  if (!tracked) log("tracking refused the lift's frame: " + f->track.reason);
+  if (tracked && options.tracking.enabled && options.tracking.in_hand) {
+    const JointVector q = robot.joints();
+    *achieved = graspInHand(session, m, q, d, f->mask, f->aim, *tracked, f->track, c, **achieved,
+                            options.tracking, log);
+    const Iso3 T_B_O = m.tipPose(q) * (*achieved)->inverse();
+    for (size_t k = 0; k < points_O.size(); ++k) held_B[k] = T_B_O * points_O[k];
   }
-  if (aim && frame) {
-    const DepthImage& d = *frame;
-    const CameraIntrinsics& K = sensor.camera().intrinsics;
-    // The camera pose relative to where the hand really is (options.tracking; the pose as
-    // reported without it): the held points and the robot's pixels are seen from there.
-    TrackResult liftTrack;
-    const std::optional<Iso3> tracked =
-        session.trackedCameraPose(d, robot.joints(), *aim, **achieved, &liftTrack);
-    if (!tracked) log("tracking refused the lift's frame: " + liftTrack.reason);
-    const std::vector<uint8_t> mask =
-        robotPixelMask(d, tracked ? *tracked : *aim, robot.joints(), scenes, sensor.camera(),
-                       options.t_hand_m, options.carve_radius_px, /*with_table=*/false);
-    if (tracked && options.tracking.enabled && options.tracking.in_hand) {
-      const JointVector q = robot.joints();
-      *achieved = graspInHand(session, m, q, d, mask, *aim, *tracked, liftTrack, c, **achieved,
-                              options.tracking, log);
-      const Iso3 T_B_O = m.tipPose(q) * (*achieved)->inverse();
-      for (size_t k = 0; k < points_O.size(); ++k) held_B[k] = T_B_O * points_O[k];
+  if (tracked) out.inHand = depthSupport(d, *tracked, K, f->mask, held_B);
+  out.onTable = depthSupport(d, f->aim, K, f->mask, rest_B_points);
+  // Not all where the grasp says, and not where it rested: closing the fingers may have
+  // moved it in the hand. Registered from the grasp, kept where the frame bears out more.
+  if (tracked && !(out.inHand > 0.9) && !(out.onTable > 0.5))
+    if (const auto found = refindInHand(session, d, f->mask, robot.joints(), *tracked, **achieved,
+                                        points_O, K, log);
+        found && found->second > out.inHand) {
+      *achieved = found->first;
+      out.inHand = found->second;
     }
-    if (tracked) out.inHand = depthSupport(d, *tracked, K, mask, held_B);
-    out.onTable = depthSupport(d, *aim, K, mask, rest_B_points);
-    // Not all where the grasp says, and not where it rested: closing the fingers may have
-    // moved it in the hand. Registered from the grasp, kept where the frame bears out more.
-    if (tracked && !(out.inHand > 0.9) && !(out.onTable > 0.5))
-      if (const auto found = refindInHand(session, d, mask, robot.joints(), *tracked, **achieved,
-                                          points_O, K, log);
-          found && found->second > out.inHand) {
-        *achieved = found->first;
-        out.inHand = found->second;
-      }
-  }
+  const Iso3 T_B_O = m.tipPose(robot.joints()) * (*achieved)->inverse();
+  for (const Vec3& p : points_O) out.heldBox.extend(T_B_O * p);
+  out.frame = f;
   return out;
+}
+
+// After the lift's check passed: the hand holds still (GraspOptions::settle_s) and the camera
+// takes a second frame from where it took the lift's. The pixels that showed the object then
+// (not the robot's, their points within 1 cm of the object's box in the hand, above the table)
+// show it now at the same depth, within 3 mm and three times the sensor's noise for two frames,
+// unless it moved in the hand (pixels at the lift frame's depth edges left out). More than
+// settle_changed of them changed: it is sliding out of a grasp that does not hold (false). Pixels
+// without depth in either frame do not count. No registration: the frames are compared as they are
+// (a registration's own scatter is 1–2 mm, and degrees about a symmetric object's axis).
+bool stayedInHand(ScanSession& session, RobotInterface& robot, DepthSensor& sensor,
+                  const LiftCheck& lift, const ScanOptions& options,
+                  const std::function<void(const std::string&)>& log) {
+  const GraspOptions& g = session.multiOptions().grasp;
+  robot.holdStill(g.settle_s);
+  if (!lift.frame) return true;
+  const HeldFrame& f = *lift.frame;
+  sensor.setPose(f.aim);
+  const std::optional<DepthImage> again = captureUsable(sensor, options.checks);
+  if (!again || again->width != f.d.width || again->height != f.d.height) {
+    log("after holding still: no usable frame to look again; the lift's frame stands");
+    return true;
+  }
+  const CameraIntrinsics& K = sensor.camera().intrinsics;
+  const Iso3 T_B_C = f.tracked ? *f.tracked : f.aim;
+  Aabb box = lift.heldBox;
+  box.min -= Vec3::Constant(0.01);
+  box.max += Vec3::Constant(0.01);
+  box.min.z() = std::max(box.min.z(), robot.model().table().topZ() + 0.01);
+  // A pixel at a depth edge of the lift's frame (a neighbour 1 cm nearer or farther, or without
+  // depth) mixes two surfaces and flips between them with the noise: not counted.
+  auto edge = [&](int u, int v) {
+    const float d = f.d.at(u, v);
+    for (const auto& [du, dv] : {std::pair{1, 0}, {-1, 0}, {0, 1}, {0, -1}}) {
+      const int x = u + du, y = v + dv;
+      if (x < 0 || y < 0 || x >= f.d.width || y >= f.d.height) return true;
+      const float n = f.d.at(x, y);
+      if (!(n > 0) || std::abs(n - d) > 0.01f) return true;
+    }
+    return false;
+  };
+  int object = 0, changed = 0;
+  for (int v = 0; v < f.d.height; ++v)
+    for (int u = 0; u < f.d.width; ++u) {
+      const size_t i = size_t(v) * size_t(f.d.width) + size_t(u);
+      const double d1 = f.d.depth_m[i], d2 = again->depth_m[i];
+      if (f.mask[i] || !(d1 > 0) || !(d2 > 0) || edge(u, v)) continue;
+      if (!box.contains(T_B_C * (K.rayZ1(u, v) * d1))) continue;
+      ++object;
+      const double tol = 0.003 + 3 * std::sqrt(2.0) * axialSigma(session.noise(), d1, 0);
+      changed += std::abs(d2 - d1) > tol;
+    }
+  const double fraction = object > 0 ? double(changed) / object : 0.0;
+  char line[200];
+  std::snprintf(line, sizeof line,
+                "after holding still %.1f s: %d of %d pixels of the object in the hand changed "
+                "depth (%d %%)",
+                g.settle_s, changed, object, int(std::lround(100 * fraction)));
+  log(line);
+  return !(fraction > g.settle_changed);
 }
 
 // The record of trying candidate c, the rank-th of its ranking (its outcome still to come).
@@ -447,10 +529,14 @@ PickUp pickAndVerify(ScanSession& session, RobotInterface& robot, DepthSensor& s
     log("after the lift: the object's points borne out in the hand " + percent(inHand) +
         ", where it rested " + percent(onTable));
     if (inHand > 0.5) attempt.shift_m = (achieved->translation() - c.T_O_palm.translation()).norm();
-    if (!(inHand > 0.5) || onTable > 0.5) {
+    const bool dropped = !(inHand > 0.5) || onTable > 0.5;
+    if (dropped || (session.multiOptions().grasp.settle_s > 0 &&
+                    !stayedInHand(session, robot, sensor, lift, options, log))) {
       robot.putDown();
-      record(PickOutcome::kDropped);
-      log("the grasp did not hold; trying the next candidate");
+      record(dropped ? PickOutcome::kDropped : PickOutcome::kSlid);
+      log(std::string(dropped ? "the grasp did not hold"
+                              : "the object is sliding out of the grasp") +
+          "; trying the next candidate");
       // Not seen where it rested: where is it?
       if (!(onTable > 0.5) && !stillThere(*achieved)) break;
       continue;
@@ -723,10 +809,11 @@ std::vector<PickAttempt> attemptsFrom(const Json& j) {
 }
 
 namespace {
-const EnumNames<PickOutcome, 4> kPickOutcomes = {{PickOutcome::kPicked, "picked"},
+const EnumNames<PickOutcome, 5> kPickOutcomes = {{PickOutcome::kPicked, "picked"},
                                                  {PickOutcome::kNoContact, "no_contact"},
                                                  {PickOutcome::kEmptyHand, "empty_hand"},
-                                                 {PickOutcome::kDropped, "dropped"}};
+                                                 {PickOutcome::kDropped, "dropped"},
+                                                 {PickOutcome::kSlid, "slid"}};
 }  // namespace
 
 const char* pickOutcomeName(PickOutcome o) { return enumName(kPickOutcomes, o); }

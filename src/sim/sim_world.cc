@@ -635,6 +635,15 @@ void SimRobot::execute(const std::vector<JointVector>& waypoints,
   }
 }
 
+void SimRobot::holdStill(double seconds) {
+  SimWorld& w = *world_;
+  if (!w.physics() || !w.held || !(seconds > 0)) return;
+  const double dt = 1.0 / w.options().frame_rate_hz;
+  double untouched_s = 0;
+  for (int i = 0, n = int(std::ceil(seconds / dt - 1e-9)); i < n && w.held; ++i)
+    w.stepPhysics(dt, &untouched_s);
+}
+
 std::pair<Iso3, JointVector> defaultGrasp(const RobotModel& model, const TriangleMesh& object) {
   const Aabb b = object.bounds();
   const Vec3 size = b.size();

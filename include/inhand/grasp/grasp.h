@@ -96,6 +96,14 @@ struct GraspOptions {
   int max_candidates = 50;  // ranked at most (the most stable first)
   HoldTestOptions hold;     // the candidates tried in physics on the model (grasp/hold_test.h)
   double lift_m = 0.15;     // the object is lifted this far after the pick
+  // After the lift the hand holds still settle_s and the camera looks again from where it took
+  // the lift's frame: more than settle_changed of the object's pixels at another depth, it is
+  // sliding out of a grasp that does not hold (0 s: no second look). Off by default, as
+  // TrackingOptions::in_hand is: the kinematic simulator's grasps hold where they close; a
+  // config that turns physics on turns it on (kSettleSeconds), and a real robot wants it.
+  static constexpr double kSettleSeconds = 0.5;
+  double settle_s = 0;
+  double settle_changed = 0.2;
   // The approach's search for the nearest model sample in the hand's footprint four samples at a
   // time in AVX2 where the CPU has it (false: one at a time). The same candidates either way.
   bool vectorised = true;
@@ -137,6 +145,14 @@ struct GraspOptions {
               Range::atLeast(1));
     v.num("lift_m", o.lift_m, "the object is lifted this far after the pick, m",
           Range::closedOpen(0, 1));
+    v.num("settle_s", o.settle_s,
+          "after the lift the hand holds still this long and a second frame looks again (0: "
+          "no second look; a config with physics on: 0.5 unless given), s",
+          Range::closed(0, 10));
+    v.num("settle_changed", o.settle_changed,
+          "… more than this fraction of the object's pixels at another depth: it is sliding out, "
+          "the grasp did not hold",
+          Range::open(0, 1));
     v.object("hold", "the hold test: candidates closed, lifted and turned on the model in physics",
              [&](auto& h) { HoldTestOptions::fields(h, o.hold); });
   }

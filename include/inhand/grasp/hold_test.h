@@ -117,6 +117,11 @@ std::vector<ConvexPiece> modelPiecesAboveTable(const TriangleMesh& model_O, cons
                                                const std::vector<Plane>* keep_O,
                                                const ConvexDecompositionOptions& options);
 
+// The physics the trials run in: the model's mass at options.density_kg_m3, its no-slip passes
+// options.noslip_iterations, a 2 ms step and 5 ms contacts (a coarser step than the simulator's,
+// twice as fast; what the trials' verdicts were measured with: docs/physics.md).
+PhysicsOptions holdTrialPhysics(const HoldTestOptions& options);
+
 // One candidate on the model `world` holds (its object put at T_B_O, the palm at the candidate's
 // pose, the fingers open as they come in): closed, lifted, turned.
 HoldTrial tryHold(PhysicsWorld& world, const Iso3& T_B_O, const Iso3& T_O_palm,

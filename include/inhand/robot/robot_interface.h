@@ -1,8 +1,10 @@
 #pragma once
 // What the scan needs from a robot arm, real or simulated. A driver for a real arm implements this
 // (joint states from the controller, trajectory execution); `sim` implements it for the simulator.
+#include <chrono>
 #include <functional>
 #include <optional>
+#include <thread>
 #include <vector>
 
 #include "inhand/robot/robot_model.h"
@@ -35,6 +37,13 @@ class RobotInterface {
   // a WAM's come at 500 Hz); a scan reads ScanOptions::torque_readings of them at each rest.
   // nullopt for a robot that reports none.
   virtual std::optional<JointVector> jointTorques() { return std::nullopt; }
+  // Holds still for `seconds`, the arm and the hand as they are: after a lift the scan waits so
+  // and looks again, to see whether the object stays where the hand holds it. A real arm's
+  // controller holds its position while the time passes (the default sleeps); the simulator
+  // steps its physics.
+  virtual void holdStill(double seconds) {
+    if (seconds > 0) std::this_thread::sleep_for(std::chrono::duration<double>(seconds));
+  }
   virtual std::optional<Iso3> pickUp(const Iso3& /*T_O_palm*/, const JointVector& /*q*/) {
     return std::nullopt;
   }

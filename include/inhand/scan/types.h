@@ -405,9 +405,10 @@ struct TableTopOptions {
 
 // What became of a pick-up attempt: it held after the lift (picked), the hand met nothing
 // (no_contact), the fingers closed on nothing (empty_hand), the lift's frame did not show it in
-// the hand (dropped).
-enum class PickOutcome { kPicked, kNoContact, kEmptyHand, kDropped };
-// "picked", "no_contact", "empty_hand", "dropped" (summary.json's and checkpoints' names).
+// the hand (dropped), a second frame after the hand held still showed it moving in the hand or
+// gone (slid: GraspOptions::settle_s).
+enum class PickOutcome { kPicked, kNoContact, kEmptyHand, kDropped, kSlid };
+// "picked", "no_contact", "empty_hand", "dropped", "slid" (summary.json's and checkpoints' names).
 const char* pickOutcomeName(PickOutcome o);
 bool parsePickOutcome(const std::string& name, PickOutcome* out);  // false: not one of them
 
@@ -444,7 +445,7 @@ struct TableTopRecord {
   PrincipalAxes axes;     // of the object points, frame O
   // First-grasp candidates (generateGrasps on the table-top model): poses tried, those whose
   // closed hand touches with two links or more, of those force closure, clear of the table, and
-  // reachable; then the pick-up attempts in order (picked, no_contact, empty_hand, dropped).
+  // reachable; then the pick-up attempts in order (picked, no_contact, empty_hand, dropped, slid).
   int tried = 0, touching = 0, stable = 0, table_free = 0, reachable = 0;
   std::vector<GraspPoseRecord> poses;     // every pose tried and what became of it
   double volume_size_m = 0, voxel_m = 0;  // the volume as fitted to the object

@@ -321,6 +321,9 @@ class SimRobot : public RobotInterface {
   // hand that far from where the robot believes.
   std::optional<Iso3> pickUp(const Iso3& T_O_palm, const JointVector& q) override;
   std::optional<JointVector> jointTorques() override { return world_->jointTorques(); }
+  // With physics and the object in the hand, `seconds` of physics with the arm still (the object
+  // may slide or fall meanwhile); otherwise nothing changes and no time passes.
+  void holdStill(double seconds) override;
 
  private:
   std::optional<Iso3> grasp(const Iso3& T_O_palm, const JointVector& q);
