@@ -83,13 +83,8 @@ class ProbeRobot : public RobotInterface {
     const double ramp = config_.sim.physics.ramp_s, total = 1.0 + ramp;
     const double dt = 1.0 / config_.sim.frame_rate_hz;
     const int steps = std::max(1, int(std::ceil(total / dt)));
-    auto along = [&](int k) {  // the fraction covered at step k (MotionSteps::fraction)
-      const double t = total * k / steps, v = 1.0;
-      if (k >= steps) return 1.0;
-      if (ramp <= 0) return double(k) / steps;
-      if (t < ramp) return 0.5 * v * t * t / ramp;
-      if (t > total - ramp) return 1 - 0.5 * v * (total - t) * (total - t) / ramp;
-      return v * (t - 0.5 * ramp);
+    auto along = [&](int k) {
+      return k >= steps ? 1.0 : rampedFraction(total * k / steps, 1.0, ramp);
     };
     const Iso3 start = ph.palmPose();
     Iso3 up = start;

@@ -664,6 +664,23 @@ TEST(Physics, AnObjectPutDownRestsWhereItWasPickedUp) {
   EXPECT_GT((rest.translation() - first.translation()).norm(), 0.05);
 }
 
+// The simulated arm's speed profile along a segment of T = 1.2 s at its limits with 0.3 s ramps:
+// from 0 to 1 over 1.5 s, symmetric (f(t) + f(1.5 − t) = 1), at the full speed 1/T between the
+// ramps, continuous where they meet, and without a ramp a constant speed.
+TEST(Sim, TheArmsSpeedRampsAreATrapezoid) {
+  const double T = 1.2, r = 0.3, total = T + r;
+  EXPECT_EQ(rampedFraction(0, T, r), 0.0);
+  EXPECT_EQ(rampedFraction(total, T, r), 1.0);
+  for (double t = 0; t <= total; t += 0.01)
+    EXPECT_NEAR(rampedFraction(t, T, r) + rampedFraction(total - t, T, r), 1.0, 1e-12) << t;
+  const double h = 1e-6;
+  EXPECT_NEAR((rampedFraction(0.75 + h, T, r) - rampedFraction(0.75 - h, T, r)) / (2 * h), 1 / T,
+              1e-6);
+  EXPECT_NEAR(rampedFraction(r - 1e-9, T, r), rampedFraction(r + 1e-9, T, r), 1e-8);
+  EXPECT_NEAR(rampedFraction(r, T, r), 0.5 * r / T, 1e-12);  // half the ramp at full speed
+  EXPECT_NEAR(rampedFraction(0.3, T, 0), 0.25, 1e-12);
+}
+
 // Holding still (RobotInterface::holdStill) lets physics go on: a box lifted in a grasp that
 // holds stays in the hand, within 1 mm, over 0.5 s of simulated time; without physics nothing
 // changes.

@@ -361,7 +361,7 @@ LiftCheck checkAfterLift(ScanSession& session, RobotInterface& robot, DepthSenso
     if (r.z() > tableTop + 0.015) rest_B_points.push_back(r);
   }
   LiftCheck out;
-  const std::optional<HeldFrame> f =
+  std::optional<HeldFrame> f =
       frameOfTheHeld(session, robot, sensor, held_B, **achieved, options, scenes);
   if (!f) return out;
   const DepthImage& d = f->d;
@@ -388,7 +388,7 @@ LiftCheck checkAfterLift(ScanSession& session, RobotInterface& robot, DepthSenso
     }
   const Iso3 T_B_O = m.tipPose(robot.joints()) * (*achieved)->inverse();
   for (const Vec3& p : points_O) out.heldBox.extend(T_B_O * p);
-  out.frame = f;
+  out.frame = std::move(f);
   return out;
 }
 

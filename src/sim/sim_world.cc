@@ -519,6 +519,16 @@ double SimWorld::faultDraw(int kind) {
   return double(h >> 11) * 0x1.0p-53;
 }
 
+double rampedFraction(double t, double T, double ramp) {
+  const double total = T + ramp;
+  if (t >= total) return 1.0;
+  if (ramp <= 0 || T <= 0) return t / total;
+  const double v = 1 / T;
+  if (t < ramp) return 0.5 * v * t * t / ramp;
+  if (t > total - ramp) return 1 - 0.5 * v * (total - t) * (total - t) / ramp;
+  return v * (t - 0.5 * ramp);
+}
+
 namespace {
 // A motion through joint-space waypoints as the sensor's frames see it: each segment's steps at
 // the frame rate, at the joints' speed limits (trajectoryTime). With `ramp_s` > 0 each segment
@@ -546,10 +556,7 @@ struct MotionSteps {
     if (s >= segmentSteps[k]) return 1.0;
     const double ramp = segmentRamp[k], T = segmentTime[k];
     if (ramp <= 0 || T <= 0) return double(s) / segmentSteps[k];
-    const double total = T + ramp, t = total * double(s) / segmentSteps[k], v = 1 / T;
-    if (t < ramp) return 0.5 * v * t * t / ramp;
-    if (t > total - ramp) return 1 - 0.5 * v * (total - t) * (total - t) / ramp;
-    return v * (t - 0.5 * ramp);
+    return rampedFraction((T + ramp) * double(s) / segmentSteps[k], T, ramp);
   }
 };
 }  // namespace

@@ -201,6 +201,11 @@ struct SimOptions {
   std::string validate() const;
 };
 
+// How far along a motion segment the simulated arm is at time t (0 at the start, 1 at its end,
+// T + ramp seconds in): T seconds at its speed limits, speeding up over `ramp` at the start and
+// slowing down over it at the end (a trapezoidal speed profile; with PhysicsOptions::ramp_s).
+double rampedFraction(double t, double T, double ramp);
+
 // Arm configurations presenting an object at the camera's nominal point (CameraMount::lookAt_B):
 // the palm graspOffset() short of it along its axis, from 24 directions around it; those IK
 // reaches from home. SimOptions::arm_error_m is the palm's median error over these.
