@@ -232,6 +232,108 @@ TEST(Scan, AnObjectThatSlidesAfterTheLiftIsPutDownAndTheNextCandidateTried) {
   EXPECT_EQ(pastTheLift(still), std::vector<PickOutcome>{PickOutcome::kPicked});
 }
 
+// The first `hidden` lift frames (the first capture after a pick-up) show a wall 25 cm before
+// the camera, as the hand's own links hiding the object would: none of the object in view, in the
+// hand or where it rested. The robot's torques: as simulated, none, or an empty hand's.
+class HiddenLift : public SimSensor {
+ public:
+  HiddenLift(SimWorld* w, int hidden)
+      : SimSensor(w, DepthCameraOptions{}), w_(w), hidden_(hidden) {}
+  DepthImage capture() override {
+    DepthImage d = SimSensor::capture();
+    if (afterPick && hidden_ > 0 && w_->held) {
+      --hidden_;
+      walledPick = picks;
+      std::fill(d.depth_m.begin(), d.depth_m.end(), 0.25f);
+    }
+    afterPick = false;
+    return d;
+  }
+  bool afterPick = false;
+  int picks = 0;        // pick-ups so far
+  int walledPick = -1;  // the one whose lift frame showed the wall (0-based)
+
+ private:
+  SimWorld* w_;
+  int hidden_;
+};
+enum class Torques { kSimulated, kNone, kEmptyHand };
+class HiddenLiftRobot : public SimRobot {
+ public:
+  HiddenLiftRobot(SimWorld* w, HiddenLift* sensor, Torques torques)
+      : SimRobot(w), w_(w), sensor_(sensor), torques_(torques) {}
+  std::optional<Iso3> pickUp(const Iso3& T_O_palm, const JointVector& q) override {
+    sensor_->afterPick = true;
+    ++sensor_->picks;
+    return SimRobot::pickUp(T_O_palm, q);
+  }
+  std::optional<JointVector> jointTorques() override {
+    if (torques_ == Torques::kNone) return std::nullopt;
+    std::optional<JointVector> tau = SimRobot::jointTorques();
+    if (torques_ == Torques::kEmptyHand) *tau = model().gravityTorques(w_->trueJoints());
+    return tau;
+  }
+  void execute(const std::vector<JointVector>& waypoints,
+               const std::function<void(const JointVector&)>& on_state) override {
+    ++motions;
+    SimRobot::execute(waypoints, on_state);
+  }
+  int motions = 0;
+
+ private:
+  SimWorld* w_;
+  HiddenLift* sensor_;
+  Torques torques_;
+};
+
+struct HiddenRun {
+  std::vector<PickOutcome> outcomes;
+  int walled = -1;  // the attempt whose lift frame showed the wall
+  int motions = 0;
+  bool heldAtTheEnd = false;
+  PickOutcome walledOutcome() const {
+    return walled >= 0 && walled < int(outcomes.size()) ? outcomes[size_t(walled)]
+                                                        : PickOutcome::kNoContact;
+  }
+};
+HiddenRun pickUpHidden(Torques torques) {
+  BoxOnTable b{SimOptions{}};
+  HiddenLift sensor(&b.world, 1);
+  HiddenLiftRobot robot(&b.world, &sensor, torques);
+  b.multi.grasp.max_failed_pick_ups = 4;
+  const MultiGraspResult r =
+      scanFromTable(robot, sensor, b.world.restPose(), b.o, b.multi, NoiseModelOptions{});
+  HiddenRun out;
+  if (r.table_top)
+    for (const PickAttempt& a : r.table_top->attempts) out.outcomes.push_back(a.outcome);
+  out.walled = sensor.walledPick - 1;
+  out.motions = robot.motions;
+  out.heldAtTheEnd = b.world.held;
+  return out;
+}
+
+// A lift's frame that shows none of the object (the hand hides it) does not decide: the arm's
+// torques weigh it (the box's 0.2 kg: held) and the arm shows it to the camera from beyond the
+// palm, where a second frame bears the grasp out: the first candidate is picked. Without torques
+// the second frame decides alone (picked). Torques of an empty hand: not held, put down, and the
+// next candidate picked (before, a lift's frame that saw nothing counted as a drop).
+TEST(Scan, ALiftFrameThatCannotSeeTheObjectIsDecidedByItsWeightAndASecondLook) {
+  const HiddenRun weighed = pickUpHidden(Torques::kSimulated);
+  ASSERT_GE(weighed.walled, 0);
+  EXPECT_EQ(weighed.walledOutcome(), PickOutcome::kPicked);
+  EXPECT_EQ(weighed.walled + 1, int(weighed.outcomes.size()));
+  EXPECT_TRUE(weighed.heldAtTheEnd);
+  const HiddenRun shown = pickUpHidden(Torques::kNone);
+  EXPECT_EQ(shown.walled, weighed.walled);
+  EXPECT_EQ(shown.walledOutcome(), PickOutcome::kPicked);
+  EXPECT_EQ(shown.motions, weighed.motions);  // the lifts, the look beyond the palm, the views
+  const HiddenRun empty = pickUpHidden(Torques::kEmptyHand);
+  EXPECT_EQ(empty.walled, weighed.walled);
+  EXPECT_EQ(empty.walledOutcome(), PickOutcome::kDropped);
+  EXPECT_GT(empty.outcomes.size(), weighed.outcomes.size());
+  EXPECT_EQ(empty.outcomes.back(), PickOutcome::kPicked);
+}
+
 // A one-grasp scan reports every frame it did not fuse: a quarter of the frames dropped by the
 // sensor reach ScanResult (scanSingleGrasp once left these counts at 0), and the counts add up.
 TEST(Scan, SingleGraspScanReportsTheFramesItRejected) {

@@ -31,6 +31,25 @@ std::optional<TorqueSamples> torquesAtRest(RobotInterface& robot, int readings) 
   return rest;
 }
 
+std::optional<Weighing> weighAt(const RobotModel& model, const JointVector& q,
+                                const TorqueSamples& rest, const Vec3& c_B) {
+  if (rest.count() == 0 || rest.mean().size() != q.size()) return std::nullopt;
+  const JointVector unit = model.pointForceTorques(q, model.tipLink(), c_B, Vec3(0, 0, -9.81));
+  const JointVector load = rest.mean() - model.gravityTorques(q);
+  double num = 0, den = 0;
+  for (int v : model.armVariables()) {
+    num += unit[v] * load[v];
+    den += unit[v] * unit[v];
+  }
+  if (!(den > 0)) return std::nullopt;
+  // One reading's variance per joint, from the scatter about the means; the means' is 1/count of
+  // it, and the projection's 1/den of theirs.
+  const double joints = double(model.armVariables().size());
+  const double n = double(rest.count());
+  const double perReading = n > 1 ? rest.scatter_nm2() / ((n - 1) * joints) : 0.0;
+  return Weighing{num / den, std::sqrt(perReading / n / den)};
+}
+
 void PayloadEstimator::add(const JointVector& q, const JointVector& tau, const Iso3& T_palm_F) {
   add(q, tau, T_palm_F, 1, 0.0);
 }

@@ -336,22 +336,14 @@ void checkLift(RobotInterface& robot, DepthSensor& sensor, const ObjectModel& mo
   out.on_table = depthSupport(*d, *aim, sensor.camera().intrinsics, mask, rest_B);
 }
 
-// The load the joint torques `tau` show at q with the object held at T_O_palm, its centre of mass
-// at com_O: the torques less the links' own weight, projected on those of a unit mass there (least
-// squares in one unknown). −1 without torques.
-double weighAt(const RobotModel& m, const JointVector& q, const std::optional<TorqueSamples>& rest,
+// The object's weight the arm's torques at rest show, held at T_O_palm with its centre of mass
+// at com_O (weighAt, not below 0); −1 without torques.
+double weighed(const RobotModel& m, const JointVector& q, const std::optional<TorqueSamples>& rest,
                const Iso3& T_O_palm, const Vec3& com_O) {
-  if (!rest || rest->mean().size() != q.size()) return -1;
-  const JointVector* tau = &rest->mean();
-  const Vec3 c_B = m.tipPose(q) * (T_O_palm.inverse() * com_O);
-  const JointVector unit = m.pointForceTorques(q, m.tipLink(), c_B, Vec3(0, 0, -9.81));
-  const JointVector load = *tau - m.gravityTorques(q);
-  double num = 0, den = 0;
-  for (int v : m.armVariables()) {
-    num += unit[v] * load[v];
-    den += unit[v] * unit[v];
-  }
-  return den > 0 ? std::max(0.0, num / den) : -1;
+  if (!rest) return -1;
+  const std::optional<Weighing> w =
+      weighAt(m, q, *rest, m.tipPose(q) * (T_O_palm.inverse() * com_O));
+  return w ? std::max(0.0, w->kg) : -1;
 }
 }  // namespace
 
@@ -412,7 +404,7 @@ RegraspResult pickUpKnownObject(RobotInterface& robot, DepthSensor& sensor,
     robot.execute({robot.joints(), m.withArm(robot.joints(), m.arm(c.q_lift))},
                   [](const JointVector&) {});
     checkLift(robot, sensor, dense, *achieved, *out.T_B_O, options, out);
-    out.weighed_kg = weighAt(m, robot.joints(), torquesAtRest(robot, options.scan.torque_readings),
+    out.weighed_kg = weighed(m, robot.joints(), torquesAtRest(robot, options.scan.torque_readings),
                              *achieved, object.com_O);
     // The weight decides when it can be the object's (less than half its mass: not in the hand;
     // more than twice: the torques' noise on a light object, or something else, and the frame

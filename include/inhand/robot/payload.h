@@ -42,6 +42,17 @@ class RobotInterface;
 // robot holding still; nullopt for a robot that reports none.
 std::optional<TorqueSamples> torquesAtRest(RobotInterface& robot, int readings);
 
+// The load one rest's torques show at q, as a point mass at c_B (base frame): the mean torques
+// less the links' own weight, projected on those of a unit mass there (least squares in one
+// unknown), and the standard deviation of that from the readings' scatter. kg may be negative (the
+// noise, or a model that misses the links' weight); nullopt where no arm torque depends on c_B.
+struct Weighing {
+  double kg = 0;
+  double sigma_kg = 0;
+};
+std::optional<Weighing> weighAt(const RobotModel& model, const JointVector& q,
+                                const TorqueSamples& rest, const Vec3& c_B);
+
 class PayloadEstimator {
  public:
   explicit PayloadEstimator(const RobotModel& model, const Vec3& g_B = Vec3(0, 0, -9.81));
