@@ -12,7 +12,6 @@
 #include "inhand/core/pose.h"
 #include "inhand/geometry/stable_poses.h"
 #include "inhand/robot/collision.h"
-#include "inhand/robot/payload.h"
 #include "inhand/scan/checkpoint.h"
 #include "inhand/scan/registration.h"
 #include "inhand/scan/session.h"
@@ -376,17 +375,13 @@ LiftCheck checkAfterLift(ScanSession& session, RobotInterface& robot, DepthSenso
     const Iso3 T_B_O = m.tipPose(q) * (*achieved)->inverse();
     for (size_t k = 0; k < points_O.size(); ++k) held_B[k] = T_B_O * points_O[k];
   }
-  // The camera where tracking puts it; where tracking refused the frame (it tracks the hand with
-  // the object where the grasp says: an object pushed centimetres while the fingers closed can
-  // make it refuse), where it was aimed.
-  const Iso3 T_B_C = tracked ? *tracked : f->aim;
-  out.inHand = depthSupport(d, T_B_C, K, f->mask, held_B);
+  if (tracked) out.inHand = depthSupport(d, *tracked, K, f->mask, held_B);
   out.onTable = depthSupport(d, f->aim, K, f->mask, rest_B_points);
   // Not all where the grasp says, and not where it rested: closing the fingers may have
   // moved it in the hand. Registered from the grasp, kept where the frame bears out more.
-  if (!(out.inHand > 0.9) && !(out.onTable > 0.5))
-    if (const auto found =
-            refindInHand(session, d, f->mask, robot.joints(), T_B_C, **achieved, points_O, K, log);
+  if (tracked && !(out.inHand > 0.9) && !(out.onTable > 0.5))
+    if (const auto found = refindInHand(session, d, f->mask, robot.joints(), *tracked, **achieved,
+                                        points_O, K, log);
         found && found->second > out.inHand) {
       *achieved = found->first;
       out.inHand = found->second;
@@ -455,68 +450,6 @@ bool stayedInHand(ScanSession& session, RobotInterface& robot, DepthSensor& sens
                 g.settle_s, changed, object, int(std::lround(100 * fraction)));
   log(line);
   return !(fraction > g.settle_changed);
-}
-
-// A lift's frame that shows none of the object where the hand holds it, nor where it rested: the
-// arm's torques weigh what the hand holds (GraspOptions::weigh_min_kg), its centre of mass taken at
-// the model's centre. 1 when it weighs as the object may, 0 when not; -1 (undecided, as the frame)
-// for a robot that reports no torques.
-double weighedInHand(ScanSession& session, RobotInterface& robot, const Iso3& T_O_palm,
-                     const ScanOptions& options,
-                     const std::function<void(const std::string&)>& log) {
-  const std::optional<TorqueSamples> rest = torquesAtRest(robot, options.torque_readings);
-  if (!rest) return -1;
-  const RobotModel& m = robot.model();
-  const JointVector q = robot.joints();
-  const Vec3 c_O = session.planningModel().mesh.bounds().center();
-  const std::optional<Weighing> w = weighAt(m, q, *rest, m.tipPose(q) * (T_O_palm.inverse() * c_O));
-  if (!w) return -1;
-  double least = std::max(session.multiOptions().grasp.weigh_min_kg, 5 * w->sigma_kg);
-  const std::optional<PayloadEstimate> before = session.summary().payload;
-  if (before && before->mass_kg > 5 * before->sigma_kg)
-    least = std::max(least, 0.5 * before->mass_kg);
-  const bool held = w->kg > least;
-  char line[240];
-  std::snprintf(line, sizeof line,
-                "the lift's frame shows none of the object; the arm weighs %.3f ± %.3f kg in the "
-                "hand (%s %.3f kg): %s",
-                w->kg, w->sigma_kg, held ? "above" : "not above", least,
-                held ? "held" : "not held");
-  log(line);
-  return held ? 1.0 : 0.0;
-}
-
-// "the object's points borne out in the hand N %, where it rested M %" of a lift's check.
-std::string supportLine(const LiftCheck& lift) {
-  auto percent = [](double f) {
-    return f < 0 ? std::string("none in view") : std::to_string(int(std::lround(100 * f))) + " %";
-  };
-  return "the object's points borne out in the hand " + percent(lift.inHand) +
-         ", where it rested " + percent(lift.onTable);
-}
-
-// The lift's frame showed none of the object: the arm turns it to the camera so that the camera
-// looks from the far side of the object from the palm (the palm's approach axis), and the lift's
-// check is made again there (a frame aimed at the hand). nullopt where the arm reaches no such
-// pose.
-std::optional<LiftCheck> lookBeyondThePalm(ScanSession& session, RobotInterface& robot,
-                                           DepthSensor& sensor, const GraspCandidate& c,
-                                           const Iso3& T_B_O_rest,
-                                           const std::vector<Vec3>& points_O,
-                                           const ScanOptions& options, const RobotOccluders& scenes,
-                                           const std::function<void(const std::string&)>& log,
-                                           std::optional<Iso3>* achieved) {
-  const std::optional<JointVector> q =
-      session.armShowing((*achieved)->linear().col(2), **achieved, robot.joints());
-  if (!q) {
-    log("no pose the arm reaches shows the object from beyond the palm");
-    return std::nullopt;
-  }
-  robot.execute({robot.joints(), *q}, [](const JointVector&) {});
-  LiftCheck again = checkAfterLift(session, robot, sensor, c, T_B_O_rest, points_O, options, scenes,
-                                   log, achieved);
-  log("shown from beyond the palm: " + supportLine(again));
-  return again;
 }
 
 // The record of trying candidate c, the rank-th of its ranking (its outcome still to come).
@@ -596,24 +529,16 @@ PickUp pickAndVerify(ScanSession& session, RobotInterface& robot, DepthSensor& s
     }
     robot.execute({robot.joints(), m.withArm(robot.joints(), m.arm(c.q_lift))},
                   [](const JointVector&) {});
-    LiftCheck lift = checkAfterLift(session, robot, sensor, c, T_B_O_rest, points_O, options,
-                                    scenes, log, &achieved);
-    log("after the lift: " + supportLine(lift));
-    // In view nowhere (the hand hides it): the arm's torques weigh it, and the arm shows it to
-    // the camera from beyond the palm, where the frame decides again.
-    double held = lift.inHand;
-    if (lift.inHand < 0 && !(lift.onTable > 0.5)) {
-      held = weighedInHand(session, robot, *achieved, options, log);
-      if (held != 0)
-        if (std::optional<LiftCheck> shown = lookBeyondThePalm(
-                session, robot, sensor, c, T_B_O_rest, points_O, options, scenes, log, &achieved)) {
-          lift = std::move(*shown);
-          if (lift.inHand >= 0) held = lift.inHand;
-        }
-    }
+    const LiftCheck lift = checkAfterLift(session, robot, sensor, c, T_B_O_rest, points_O, options,
+                                          scenes, log, &achieved);
     const double inHand = lift.inHand, onTable = lift.onTable;
+    auto percent = [](double f) {
+      return f < 0 ? std::string("none in view") : std::to_string(int(std::lround(100 * f))) + " %";
+    };
+    log("after the lift: the object's points borne out in the hand " + percent(inHand) +
+        ", where it rested " + percent(onTable));
     if (inHand > 0.5) attempt.shift_m = (achieved->translation() - c.T_O_palm.translation()).norm();
-    const bool dropped = !(held > 0.5) || onTable > 0.5;
+    const bool dropped = !(inHand > 0.5) || onTable > 0.5;
     if (dropped || (session.multiOptions().grasp.settle_s > 0 &&
                     !stayedInHand(session, robot, sensor, lift, options, log))) {
       robot.putDown();

@@ -1317,16 +1317,6 @@ void ScanSession::setColourOfNextFrame(RgbImage colour) {
   s_->nextColour = std::move(colour);
 }
 
-std::optional<JointVector> ScanSession::armShowing(const Vec3& dir_O, const Iso3& T_O_palm,
-                                                   const JointVector& q_now) const {
-  const State& s = *s_;
-  checkJoints(*s.model, q_now, "armShowing");
-  const std::optional<ViewCandidate> c =
-      s.planner.reach({dir_O.normalized()}, s.centre, s.objectBox, {T_O_palm, q_now}, true)[0];
-  if (!c) return std::nullopt;
-  return s.model->withArm(q_now, c->arm);
-}
-
 std::optional<PlannedView> ScanSession::nextView(const JointVector& q_now) {
   State& s = *s_;
   if (!s.holding) throw Error("nextView: no grasp (beginGrasp first)");

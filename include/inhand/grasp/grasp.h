@@ -104,11 +104,6 @@ struct GraspOptions {
   static constexpr double kSettleSeconds = 0.5;
   double settle_s = 0;
   double settle_changed = 0.2;
-  // A lift's frame that shows none of the object (the hand hides it from the camera) does not
-  // decide: the arm's torques weigh it (robots that report them). Held when the weight exceeds
-  // weigh_min_kg and five times its standard deviation, and half the mass earlier grasps weighed.
-  // A real arm's torque model errs by its links' mass errors: set this above that.
-  double weigh_min_kg = 0.005;
   // The approach's search for the nearest model sample in the hand's footprint four samples at a
   // time in AVX2 where the CPU has it (false: one at a time). The same candidates either way.
   bool vectorised = true;
@@ -158,10 +153,6 @@ struct GraspOptions {
           "… more than this fraction of the object's pixels at another depth: it is sliding out, "
           "the grasp did not hold",
           Range::open(0, 1));
-    v.num("weigh_min_kg", o.weigh_min_kg,
-          "a lift's frame that shows none of the object: the arm's torques weigh it, held above "
-          "this (and 5 sigma, and half of what earlier grasps weighed), kg",
-          Range::atLeast(0));
     v.object("hold", "the hold test: candidates closed, lifted and turned on the model in physics",
              [&](auto& h) { HoldTestOptions::fields(h, o.hold); });
   }

@@ -206,12 +206,6 @@ class ScanSession {
   // done (summary().termination: no_view_above_threshold, max_views or no_reachable_view). Frames
   // added after it count toward it.
   std::optional<PlannedView> nextView(const JointVector& q_now);
-  // The arm's joints (q_now's hand) that show the object held at T_O_palm to the camera from the
-  // direction dir_O (object frame, from its centre towards the camera), reached from q_now without
-  // collision, as a view of the initial trajectory is; nullopt where the arm reaches none. Records
-  // nothing.
-  std::optional<JointVector> armShowing(const Vec3& dir_O, const Iso3& T_O_palm,
-                                        const JointVector& q_now) const;
   // Closes the current view's record with the model's figures after its frames (nextView and
   // planGrasps call it when the caller has not). Returns the record.
   const ViewRecord& finishView();
