@@ -451,6 +451,40 @@ TEST(HoldTest, TestsTheNextBatchWhenNoneOfTheFirstHolds) {
   EXPECT_EQ(first[3].hold, -1);
 }
 
+// Batches are tested until grasp.hold.enough_held candidates hold: the enveloping grasp fourth
+// of six (the rest pinches that fail), in batches of two. With enough_held 1 the first two
+// batches are tested (the second holds), the rest left untested after them; with 2 all three
+// (only one holds): every candidate tested, the one that held first.
+TEST(HoldTest, TestsBatchesUntilEnoughHold) {
+  const RobotModel& m = test::wam();
+  const TriangleMesh box = makeBox(Vec3(0.06, 0.1, 0.2));
+  std::vector<GraspCandidate> candidates = boxCandidates(m, box, 6);
+  std::swap(candidates[5], candidates[3]);  // poses 0 1 2 5 4 3: the enveloping grasp 4th
+  HoldTestOptions o;
+  o.density_kg_m3 = 2.0 / box.signedVolume();
+  o.max_candidates = 2;
+  o.max_tested = 6;
+  auto tested = [](const std::vector<GraspCandidate>& cs) {
+    return int(
+        std::count_if(cs.begin(), cs.end(), [](const GraspCandidate& c) { return c.hold >= 0; }));
+  };
+  o.enough_held = 1;
+  std::vector<GraspCandidate> one = candidates;
+  rankByHold(m, box, boxOnTable(m), nullptr, 0.5, o, &one);
+  EXPECT_EQ(tested(one), 4);
+  EXPECT_EQ(one[0].pose, 5);
+  EXPECT_EQ(one[0].hold, 1);
+  for (size_t k = 1; k < 4; ++k) EXPECT_EQ(one[k].hold, 0) << k;
+  EXPECT_EQ(one[4].hold, -1);
+  EXPECT_EQ(one[5].hold, -1);
+  o.enough_held = 2;
+  std::vector<GraspCandidate> two = candidates;
+  rankByHold(m, box, boxOnTable(m), nullptr, 0.5, o, &two);
+  EXPECT_EQ(tested(two), 6);
+  EXPECT_EQ(two[0].pose, 5);
+  for (size_t k = 1; k < 6; ++k) EXPECT_EQ(two[k].hold, 0) << k;
+}
+
 // The margin (HoldTestOptions::margin_mass, margin_friction): a pinch and an enveloping grasp
 // that both hold the box at its assumed mass (0.25 kg), the pinch first in the candidates' order;
 // tried again twice as heavy with 70 % of the friction, only the enveloping grasp holds, and it

@@ -197,12 +197,12 @@ double rankByHold(const RobotModel& robot, const TriangleMesh& model_O, const Is
       modelPiecesAboveTable(model_O, T_B_O, robot, keep_O, o.decomposition);
   if (pieces.empty()) return 0;
   const PhysicsOptions po = holdTrialPhysics(o);
-  // Batches of max_candidates in their order until one holds (or max_tested are tried). One
-  // world per core, each trying every other candidate of the batch from a fresh reset.
+  // Batches of max_candidates in their order until enough_held hold (or max_tested are tried).
+  // One world per core, each trying every other candidate of the batch from a fresh reset.
   const int total = std::min(o.max_tested, int(candidates->size()));
   int n = 0;  // tested so far
-  bool anyHeld = false;
-  while (n < total && !anyHeld) {
+  int heldCount = 0;
+  while (n < total && heldCount < o.enough_held) {
     const int begin = n, end = std::min(total, n + o.max_candidates);
     const int workers = std::max(1, std::min(threadCount(), end - begin));
     std::vector<HoldTrial> trials(size_t(end - begin), HoldTrial{});
@@ -221,7 +221,7 @@ double rankByHold(const RobotModel& robot, const TriangleMesh& model_O, const Is
       GraspCandidate& c = (*candidates)[size_t(i)];
       c.hold = trials[size_t(i - begin)].held ? 1 : 0;
       c.hold_failure = trials[size_t(i - begin)].failure;
-      anyHeld = anyHeld || c.hold == 1;
+      heldCount += c.hold == 1;
     }
     n = end;
   }
