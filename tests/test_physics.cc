@@ -577,14 +577,27 @@ TEST(Payload, TheArmsJointTorquesWeighTheHeldObject) {
 // box): given as their mean and scatter (TorqueSamples) they fit exactly as each reading added
 // in turn; one reading per rest leaves σ near the object's mass, 500 shrink it by √500 and the
 // weight comes within 10 %.
-TEST(Payload, ReadingsInARowAtEachRestWeighALightObject) {
+// A 12 g marker-like box held in the enveloping grasp, in the simulator.
+struct LightBoxHeld {
   const RobotModel& m = test::wam();
   const TriangleMesh box = makeBox(Vec3(0.02, 0.02, 0.12));
   const Iso3 T_O_palm = boxGrasp(m, box, true);
-  SimOptions so;
-  so.physics.density_kg_m3 = 250;  // 12 g
-  SimWorld world(m, box, T_O_palm, DepthCameraOptions{}, NoiseModelOptions{}, so);
-  SimRobot robot(&world);
+  SimOptions so = lightDensity();
+  SimWorld world{m, box, T_O_palm, DepthCameraOptions{}, NoiseModelOptions{}, so};
+  SimRobot robot{&world};
+  static SimOptions lightDensity() {
+    SimOptions o;
+    o.physics.density_kg_m3 = 250;  // 12 g
+    return o;
+  }
+};
+
+TEST(Payload, ReadingsInARowAtEachRestWeighALightObject) {
+  LightBoxHeld h;
+  const RobotModel& m = h.m;
+  const SimOptions& so = h.so;
+  SimWorld& world = h.world;
+  SimRobot& robot = h.robot;
   world.held = true;
   const double truth = world.objectMass_kg();
   EXPECT_NEAR(truth, 0.012, 1e-9);
@@ -622,13 +635,12 @@ TEST(Payload, ReadingsInARowAtEachRestWeighALightObject) {
 // at every presentation configuration, σ is the torque noise over the readings (20 rests of 500
 // readings scatter as σ says), and an empty hand weighs 0 within 4 σ.
 TEST(Payload, OneRestWeighsTheObjectWithItsStandardDeviation) {
-  const RobotModel& m = test::wam();
-  const TriangleMesh box = makeBox(Vec3(0.02, 0.02, 0.12));
-  const Iso3 T_O_palm = boxGrasp(m, box, true);
-  SimOptions so;
-  so.physics.density_kg_m3 = 250;  // 12 g
-  SimWorld world(m, box, T_O_palm, DepthCameraOptions{}, NoiseModelOptions{}, so);
-  SimRobot robot(&world);
+  LightBoxHeld h;
+  const RobotModel& m = h.m;
+  const TriangleMesh& box = h.box;
+  const Iso3& T_O_palm = h.T_O_palm;
+  SimWorld& world = h.world;
+  SimRobot& robot = h.robot;
   const double truth = world.objectMass_kg();
   const Vec3 com_O = box.bounds().center();
   for (const JointVector& q : presentationConfigurations(m)) {
