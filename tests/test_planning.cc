@@ -355,6 +355,34 @@ TEST(ViewSelection, PathFreeReachKeepsTheArmClearOfTheHeldObject) {
   EXPECT_GT(found, 0);
 }
 
+// An empty box (no model yet) leaves the held object out of reach()'s collision check: the moves
+// are those found with no object held, and FCL is not handed a box of −∞ size (it printed
+// "eigen: too many iterations in Jacobi transform" and checked nothing).
+TEST(ViewSelection, ReachWithAnEmptyBoxChecksNoHeldObject) {
+  const RobotModel& r = wam();
+  Iso3 T_O_palm = Iso3::Identity();
+  T_O_palm.translation() = Vec3(0, 0, -0.12);
+  const JointVector q = r.openHand(0.0);
+  const ViewPlanner planner(r, DepthCameraOptions{}, NoiseModelOptions{}, ViewPlannerOptions{});
+  const std::vector<Vec3> dirs = fibonacciSphere(12);
+  Aabb tiny;  // a held object too small to meet the arm: the same moves as none held
+  tiny.extend(Vec3::Constant(-1e-4));
+  tiny.extend(Vec3::Constant(1e-4));
+  testing::internal::CaptureStderr();
+  const auto none = planner.reach(dirs, Vec3::Zero(), Aabb(), GraspState{T_O_palm, q}, true);
+  EXPECT_EQ(testing::internal::GetCapturedStderr(), "");
+  const auto small = planner.reach(dirs, Vec3::Zero(), tiny, GraspState{T_O_palm, q}, true);
+  int found = 0;
+  for (size_t k = 0; k < dirs.size(); ++k) {
+    ASSERT_EQ(none[k].has_value(), small[k].has_value()) << k;
+    if (!none[k]) continue;
+    ++found;
+    EXPECT_TRUE(none[k]->arm.allFinite());
+    EXPECT_NEAR((none[k]->arm - small[k]->arm).norm(), 0, 1e-9) << k;
+  }
+  EXPECT_GT(found, 0);
+}
+
 namespace {
 
 // Alg. 1 on the replay record's model (tests/data/replay: the model fused from ten in-hand frames

@@ -20,7 +20,9 @@ namespace {
 CollisionChecker heldObjectChecker(const RobotModel& model, const Aabb& box_O, const Iso3& T_O_palm,
                                    bool enabled) {
   CollisionChecker checker(model);
-  if (enabled)
+  // An empty box (no model yet) holds nothing to check: its size would be −∞ and FCL's bounding
+  // volumes NaN.
+  if (enabled && !box_O.empty())
     checker.setHeldObject(
         transformed(makeBox(box_O.size()), Iso3(Eigen::Translation3d(box_O.center()))),
         T_O_palm.inverse());
