@@ -573,10 +573,6 @@ TEST(Payload, TheArmsJointTorquesWeighTheHeldObject) {
   }
 }
 
-// A rest's readings taken in a row (torquesAtRest) weigh a light object (a 12 g marker-like
-// box): given as their mean and scatter (TorqueSamples) they fit exactly as each reading added
-// in turn; one reading per rest leaves σ near the object's mass, 500 shrink it by √500 and the
-// weight comes within 10 %.
 // A 12 g marker-like box held in the enveloping grasp, in the simulator.
 struct LightBoxHeld {
   const RobotModel& m = test::wam();
@@ -592,6 +588,10 @@ struct LightBoxHeld {
   }
 };
 
+// A rest's readings taken in a row (torquesAtRest) weigh a light object (a 12 g marker-like
+// box): given as their mean and scatter (TorqueSamples) they fit exactly as each reading added
+// in turn; one reading per rest leaves σ near the object's mass, 500 shrink it by √500 and the
+// weight comes within 10 %.
 TEST(Payload, ReadingsInARowAtEachRestWeighALightObject) {
   LightBoxHeld h;
   const RobotModel& m = h.m;
