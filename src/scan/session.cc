@@ -1389,7 +1389,9 @@ const ViewRecord& ScanSession::finishView() {
   ViewRecord& rec = s.views.back();
   if (!s.viewOpen) return rec;
   s.viewOpen = false;
-  const ObjectModel after = model();
+  // The volume's colours: the frames' (model()) are for the model handed out, not for these
+  // figures.
+  const ObjectModel after = s.extracted(s.full, s.options.mesh);
   if (modelPointsNeeded(s.options)) refreshTrackingModel(&after);
   s.trackingFromFull = true;
   rec.mean_entropy = after.meanEntropy();

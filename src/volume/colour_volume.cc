@@ -545,7 +545,8 @@ std::string ColourFrames::read(std::istream& in) {
 template <class Fn>
 void ColourFrames::sights(const Vec3& p_O, const Vec3& n_O, Fn&& fn) const {
   constexpr double kMinCos = 0.342;  // cos 70°
-  for (const Frame& f : frames_) {
+  for (size_t k = 0; k < frames_.size(); ++k) {
+    const Frame& f = frames_[k];
     const Vec3 q = f.T_RGB_O * p_O;
     if (!(q.z() > 0)) continue;
     const double cosine = -(f.T_RGB_O.linear() * n_O).dot(q.normalized());
@@ -575,30 +576,70 @@ void ColourFrames::sights(const Vec3& p_O, const Vec3& n_O, Fn&& fn) const {
         }
       }
     if (hidden || !seen) continue;
-    fn(cosine, f.rgb.bilinear(x, y), edge);
+    fn(k, cosine, x, y, edge);
   }
 }
 
-bool ColourFrames::at(const Vec3& p_O, const Vec3& n_O, Vec3f* rgb, double falloff) const {
-  // Linear intensity, the shading divided out: of the sights away from edges, and apart, of those
-  // at an edge. The latter colour a point only where no frame saw it away from one: beside a
-  // finger, a rim of it that the robot's mask missed is fused as the object's
-  // and shows the finger's colour; at the object's outline colour and depth disagree.
-  double w = 0, wEdge = 0;
-  Vec3 sum = Vec3::Zero(), sumEdge = Vec3::Zero();
-  sights(p_O, n_O, [&](double cosine, const Vec3f& c, bool edge) {
-    const double wf = std::exp(kAngleSharpness * (cosine - 1));
-    const double shade = 1 - falloff * (1 - cosine);
-    Vec3& to = edge ? sumEdge : sum;
-    for (int k = 0; k < 3; ++k) to[k] += wf * srgbToLinear(c[k]) / shade;
-    (edge ? wEdge : w) += wf;
-  });
-  if (!(w > 0)) {
-    w = wEdge;
-    sum = sumEdge;
+namespace {
+// One frame's colour at a point: its weight and its linear intensity, the shading divided out.
+struct ColourSight {
+  double w;
+  Vec3 c;
+};
+
+// The weighted median of each channel of `sights`, then the weighted mean of those within
+// `agree` sRGB levels of it in every channel. False where there are none.
+bool robustColour(const std::vector<ColourSight>& sights, double agree, Vec3* out) {
+  double total = 0;
+  for (const ColourSight& s : sights) total += s.w;
+  if (!(total > 0)) return false;
+  std::vector<std::pair<double, double>> channel;  // (value, weight)
+  channel.reserve(sights.size());
+  Vec3 median;
+  for (int k = 0; k < 3; ++k) {
+    channel.clear();
+    for (const ColourSight& s : sights) channel.emplace_back(s.c[k], s.w);
+    std::sort(channel.begin(), channel.end());
+    double sum = 0;
+    median[k] = channel.back().first;
+    for (const auto& [value, w] : channel)
+      if ((sum += w) >= 0.5 * total) {
+        median[k] = value;
+        break;
+      }
   }
-  if (!(w > 0)) return false;
-  for (int k = 0; k < 3; ++k) (*rgb)[k] = float(linearToSrgb(sum[k] / w));
+  Vec3 lo, hi;
+  for (int k = 0; k < 3; ++k) {
+    const double m = linearToSrgb(median[k]);
+    lo[k] = srgbToLinear(std::max(m - agree, 0.0));
+    hi[k] = srgbToLinear(std::min(m + agree, 255.0));
+  }
+  double w = 0;
+  Vec3 sum = Vec3::Zero();
+  for (const ColourSight& s : sights)
+    if ((s.c.array() >= lo.array()).all() && (s.c.array() <= hi.array()).all())
+      w += s.w, sum += s.w * s.c;
+  *out = w > 0 ? Vec3(sum / w) : median;
+  return true;
+}
+}  // namespace
+
+bool ColourFrames::at(const Vec3& p_O, const Vec3& n_O, Vec3f* rgb, double falloff) const {
+  std::vector<ColourSight> plain, atEdge;
+  sights(p_O, n_O, [&](size_t k, double cosine, double x, double y, bool edge) {
+    const RgbImage& im = frames_[k].rgb;
+    // The pixel the point falls in: a measured colour, not a blend of the pixels around it.
+    const uint8_t* px = im.at(std::min(int(x + 0.5), im.width - 1),
+                              std::min(int(y + 0.5), im.height - 1));  // x, y ≥ 0
+    const double shade = 1 - falloff * (1 - cosine);
+    (edge ? atEdge : plain)
+        .push_back({std::exp(kAngleSharpness * (cosine - 1)),
+                    Vec3(srgbToLinear(px[0]), srgbToLinear(px[1]), srgbToLinear(px[2])) / shade});
+  });
+  const std::vector<ColourSight>& use = plain.empty() ? atEdge : plain;
+  Vec3 c;
+  if (use.empty() || !robustColour(use, kAgreeLevels, &c)) return false;
+  for (int k = 0; k < 3; ++k) (*rgb)[k] = float(linearToSrgb(c[k]));
   return true;
 }
 
@@ -616,7 +657,8 @@ double ColourFrames::shadingFalloff(const TriangleMesh& mesh,
         const size_t v = size_t(i) * 8;
         std::vector<Sight>& out = seen[size_t(i)];
         sights(mesh.vertices[v].cast<double>(), normals[v].cast<double>(),
-               [&](double cosine, const Vec3f& c, bool edge) {
+               [&](size_t k, double cosine, double x, double y, bool edge) {
+                 const Vec3f c = frames_[k].rgb.bilinear(x, y);
                  const double Y = 0.2126 * srgbToLinear(c[0]) + 0.7152 * srgbToLinear(c[1]) +
                                   0.0722 * srgbToLinear(c[2]);
                  if (!edge && Y > 0.01 && Y < 0.95) out.push_back({float(cosine), float(Y)});

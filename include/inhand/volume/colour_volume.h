@@ -118,15 +118,18 @@ class ColourFrames {
            const std::vector<uint8_t>* carve_only = nullptr,
            const DepthImage* robot_in_colour = nullptr);
 
-  // The colour (0–255) at p_O on a surface whose outward unit normal is n_O: the mean of the
-  // frames that saw p_O (its depth in the frame within 1 cm of the surface's there, nothing
-  // nearer at its colour pixel or beside it), each frame's colour there (bilinear, as linear
-  // intensity divided by the shading 1 − falloff · (1 − cos θ)) weighted by
-  // exp(kAngleSharpness · (cos θ − 1)), θ between n_O and the direction to the colour camera (at
-  // most 70°): the head-on views decide. Sights at a depth edge (within 2 pixels of no depth, a
-  // jump over 1 cm, the robot's or the table's pixels) count only where no frame saw p_O away
-  // from one (a finger's rim the robot's mask missed shows the finger's colour there). False
-  // where no frame saw it.
+  // The colour (0–255) at p_O on a surface whose outward unit normal is n_O, from the frames
+  // that saw p_O (its depth in the frame within 1 cm of the surface's there, nothing nearer at
+  // its colour pixel or beside it): each frame's colour at the pixel p_O falls in (a measured
+  // colour, not a blend of pixels), as linear intensity divided by the shading
+  // 1 − falloff · (1 − cos θ), weighted by exp(kAngleSharpness · (cos θ − 1)), θ between n_O and
+  // the direction to the colour camera (at most 70°). Of these, the weighted median of each
+  // channel, then the weighted mean of the sights within kAgreeLevels of it in every channel: near
+  // a colour edge the sights that fell across it (a pose a little off, a pixel half over the edge)
+  // are left out, not blended in. Sights at a depth edge (within 2 pixels of no depth, a jump over
+  // 1 cm, the robot's or the table's pixels) count only where no frame saw p_O away from one (a
+  // finger's rim the robot's mask missed shows the finger's colour there). False where no frame saw
+  // it.
   bool at(const Vec3& p_O, const Vec3& n_O, Vec3f* rgb, double falloff = 0) const;
 
   // The share of the light that falls off with the angle between the surface and the camera's
@@ -136,8 +139,10 @@ class ColourFrames {
   // 0 when the frames show no such fall-off (the room's light alone).
   double shadingFalloff(const TriangleMesh& mesh, const std::vector<Vec3f>& normals) const;
 
-  // e^-1 of the weight 15° off head-on, e^-6 at 35°.
-  static constexpr double kAngleSharpness = 30;
+  // e^-1 of the weight 37° off head-on, e^-2.5 at 60°: the median has several frames to choose
+  // among, the head-on ones weigh most.
+  static constexpr double kAngleSharpness = 5;
+  static constexpr double kAgreeLevels = 12;  // sRGB levels (0-255)
 
   // The frames kept and the keeping's state, binary (checkpoints); read() replaces them and
   // returns what is wrong with the data (empty: nothing), leaving them empty then.
@@ -161,7 +166,7 @@ class ColourFrames {
     std::vector<uint8_t> edge;  // per pixel of the box: 1 at a depth edge
     size_t bytes() const { return rgb.rgb.size() + z.size() * sizeof(float) + edge.size(); }
   };
-  // Calls fn(cos θ, colour, at an edge) for every frame that saw p_O (as at()).
+  // Calls fn(frame, cos θ, x, y, at an edge) for every frame that saw p_O (as at()).
   template <class Fn>
   void sights(const Vec3& p_O, const Vec3& n_O, Fn&& fn) const;
 
