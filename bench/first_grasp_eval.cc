@@ -6,12 +6,16 @@
 // world put back as it was. The hold test's trial of each on the true object, where the guarded
 // move put the palm, is printed beside it (with the hold test's physics and the simulator's).
 // Prints one row per candidate (rank, the hold test's verdict, ε, outcome, how far it moved in the
-// hand, where it failed the hold test, whether a pinch pose) and the hold rates by verdict. Usage:
-// first_grasp_eval OBJECT [REST_POSE] [CANDIDATES] [CONFIG.json]
+// hand, where it failed the hold test, whether a pinch pose, the trials on the true mesh, whether
+// it held the hold test's margin) and the hold rates by verdict. With `regrasp` last, the same for
+// the second grasp's candidates: the first grasp is picked up, scanned and put down as in a scan,
+// and the re-grasp's candidates are tried on the object where it then rests. Usage:
+// first_grasp_eval OBJECT [REST_POSE] [CANDIDATES] [CONFIG.json] [regrasp]
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <string>
 
 #include "bench_world.h"
 #include "inhand/config/scan_config.h"
@@ -36,8 +40,12 @@ class ProbeRobot : public RobotInterface {
                const std::function<void(const JointVector&)>& f) override {
     robot_.execute(w, f);
   }
-  bool putDown() override { return robot_.putDown(); }
+  bool putDown() override {
+    ++put_downs;
+    return robot_.putDown();
+  }
   std::optional<Iso3> pickUp(const Iso3& T_O_palm, const JointVector& q) override {
+    if (put_downs < probe_after_put_downs) return robot_.pickUp(T_O_palm, q);
     const Json start = world_->state();
     outcomes.push_back(tryOne(T_O_palm, q));
     world_->setState(start);
@@ -49,12 +57,27 @@ class ProbeRobot : public RobotInterface {
     // The hold test's trial on the true object (where the guarded move put the palm, closing to
     // where physics closed the fingers): with the hold test's physics, and with the simulator's.
     std::string true_trial = "-", true_trial_sim = "-";
+    // … and with the palm where the plan put it on the object as it truly lies (the plan's pose
+    // of the object exact, no guarded move).
+    std::string true_trial_planned = "-";
   };
   std::vector<Outcome> outcomes;
+  int put_downs = 0;
+  int probe_after_put_downs = 0;  // pick-ups before this many put-downs are real
 
  private:
   Outcome tryOne(const Iso3& T_O_palm, const JointVector& q) {
     Outcome o;
+    {
+      const RobotModel& m = world_->model();
+      const HoldTestOptions& ho = config_.multi.grasp.hold;
+      const Iso3 T_B_O = world_->tablePose;
+      const std::vector<ConvexPiece> pieces =
+          modelPiecesAboveTable(world_->objectMesh(), T_B_O, m, nullptr, ho.decomposition);
+      PhysicsWorld trial(m, pieces, config_.multi.grasp.friction, holdTrialPhysics(ho));
+      const HoldTrial t = tryHold(trial, T_B_O, T_O_palm, q, q, ho);
+      o.true_trial_planned = t.held ? "held" : holdFailureName(t.failure);
+    }
     if (!robot_.pickUp(T_O_palm, q)) {
       o.what = "no_contact";
       return o;
@@ -99,8 +122,13 @@ class ProbeRobot : public RobotInterface {
       o.moved_mm = moved();
       return o;
     }
-    Vec3 axis = Vec3::UnitZ().cross(up.linear().col(2));
-    if (axis.norm() < 1e-6) axis = up.linear().col(0);
+    // The turn's axis as the hold test's trial takes it (tryHold): across the palm's approach, or
+    // for a palm within 3° of vertical its own x made horizontal.
+    Vec3 axis = Vec3::UnitZ().cross(ph.palmPose().linear().col(2));
+    if (axis.norm() < std::sin(3 * M_PI / 180)) {
+      axis = ph.palmPose().linear().col(0);
+      axis.z() = 0;
+    }
     axis.normalize();
     const Vec3 pivot = ph.objectPose().translation();
     for (int k = 1; k <= steps; ++k) {
@@ -123,7 +151,8 @@ class ProbeRobot : public RobotInterface {
 
 int main(int argc, char** argv) {
   if (argc < 2) {
-    std::fprintf(stderr, "usage: first_grasp_eval OBJECT [REST_POSE] [CANDIDATES] [CONFIG]\n");
+    std::fprintf(stderr,
+                 "usage: first_grasp_eval OBJECT [REST_POSE] [CANDIDATES] [CONFIG] [regrasp]\n");
     return 2;
   }
   try {
@@ -132,10 +161,11 @@ int main(int argc, char** argv) {
     const int pose = argc > 2 ? std::atoi(argv[2]) : 0;
     const int n = argc > 3 ? std::atoi(argv[3]) : 24;
     ScanConfig c;
-    if (argc > 4) readScanConfigFile(argv[4], &c);
+    if (argc > 4 && std::string(argv[4]) != "-") readScanConfigFile(argv[4], &c);
+    const bool regrasp = argc > 5 && std::string(argv[5]) == "regrasp";
     c.sim = bench::restingWithPhysics(object, pose, c.sim);
     c.multi.grasp.max_failed_pick_ups = n;
-    c.multi.max_grasps = 1;
+    c.multi.max_grasps = regrasp ? 2 : 1;
     const DepthCameraOptions camera;
     const NoiseModelOptions noise;
     auto [T_O_palm, q] = defaultGrasp(m, object);
@@ -143,23 +173,28 @@ int main(int argc, char** argv) {
     world.held = false;
     world.q = m.home();
     ProbeRobot robot(&world, c);
+    robot.probe_after_put_downs = regrasp ? 1 : 0;
     SimSensor sensor(&world, camera);
     const MultiGraspResult r =
         scanFromTable(robot, sensor, world.restPose(), c.scan, c.multi, noise, ScanProgress{});
     if (!r.table_top) throw Error("no table-top stage");
-    const std::vector<PickAttempt>& a = r.table_top->attempts;
+    if (regrasp && r.grasps.empty()) throw Error("the first grasp was not picked up");
+    const std::vector<PickAttempt>& a = regrasp ? r.failed_regrasp_attempts : r.table_top->attempts;
     std::printf(
         "rank,hold_test,epsilon,kind,outcome,moved_mm,hold_failure,pinch,two_finger,true_trial,"
-        "true_trial_sim\n");
+        "true_trial_sim,true_trial_planned,margin\n");
     int held[2] = {0, 0}, tested[2] = {0, 0};
+    // Every attempt recorded is a probe (each ends no_contact); a re-grasp's poses are not kept.
     for (size_t k = 0; k < a.size() && k < robot.outcomes.size(); ++k) {
       const auto& o = robot.outcomes[k];
-      const bool pinch = a[k].pose >= 0 && r.table_top->poses[size_t(a[k].pose)].pinch;
-      const bool two = a[k].pose >= 0 && r.table_top->poses[size_t(a[k].pose)].two_finger;
-      std::printf("%d,%d,%.3f,%s,%s,%.1f,%s,%d,%d,%s,%s\n", a[k].rank, a[k].hold_test, a[k].epsilon,
-                  a[k].palm_contact ? "enveloping" : "fingertips", o.what.c_str(), o.moved_mm,
-                  holdFailureName(a[k].hold_failure), int(pinch), int(two), o.true_trial.c_str(),
-                  o.true_trial_sim.c_str());
+      const bool pinch = a[k].pinch;
+      const bool two =
+          !regrasp && a[k].pose >= 0 && r.table_top->poses[size_t(a[k].pose)].two_finger;
+      std::printf("%d,%d,%.3f,%s,%s,%.1f,%s,%d,%d,%s,%s,%s,%d\n", a[k].rank, a[k].hold_test,
+                  a[k].epsilon, a[k].palm_contact ? "enveloping" : "fingertips", o.what.c_str(),
+                  o.moved_mm, holdFailureName(a[k].hold_failure), int(pinch), int(two),
+                  o.true_trial.c_str(), o.true_trial_sim.c_str(), o.true_trial_planned.c_str(),
+                  a[k].hold_margin);
       const int v = a[k].hold_test == 1;
       held[v] += o.what == "held";
       ++tested[v];

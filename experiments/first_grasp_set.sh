@@ -5,7 +5,8 @@
 # lifts and turns it (docs/physics.md). Writes OUT/runs/NAME.csv per object and prints the sums:
 # the first candidate held, and the hold rates by the hold test's verdict.
 # Usage: experiments/first_grasp_set.sh [OUT] [CANDIDATES]   (default out/first_grasp_set, 12)
-# GRASP_CONFIG=FILE: a config over physics on; FIRST_GRASP_EVAL=BINARY: another build of the bench.
+# GRASP_CONFIG=FILE: a config over physics on; FIRST_GRASP_EVAL=BINARY: another build of the bench;
+# REGRASP=1: the second grasp's candidates instead (the first grasp scanned and put down first).
 set -uo pipefail
 cd "$(dirname "$0")/.."
 out="${1:-out/first_grasp_set}"
@@ -37,7 +38,8 @@ for entry in "${objects[@]}"; do
   pose="${entry##*:}"
   name="$(basename "$mesh" .obj)_pose$pose"
   [ -f "$out/runs/$name.csv" ] && continue
-  "$out/bin/first_grasp_eval" "$mesh" "$pose" "$candidates" "$config" > "$out/runs/$name.tmp" \
+  "$out/bin/first_grasp_eval" "$mesh" "$pose" "$candidates" "$config" \
+    ${REGRASP:+regrasp} > "$out/runs/$name.tmp" \
     2> "$out/runs/$name.log" && mv "$out/runs/$name.tmp" "$out/runs/$name.csv"
   tail -n 1 "$out/runs/$name.csv" 2> /dev/null || echo "$name: failed (see $out/runs/$name.log)"
 done

@@ -581,6 +581,7 @@ class PoseCloser {
     c.q = closed.q;
     c.q_open = q;
     c.pose = pose;
+    c.pinch = ps.pinch;
     // Contacts: model surface samples near the closed hand (a finger stopped by the table
     // touches nothing).
     HandContacts hc = handContacts(robot_, c.q, Tc, grid_, o_.contact_m, o_.contact_cell_m);

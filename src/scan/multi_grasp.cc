@@ -465,6 +465,7 @@ PickAttempt attemptOf(const GraspCandidate& c, int rank, const RobotModel& m) {
   a.hold_failure = c.hold_failure;
   a.palm_contact = c.palm_contact;
   a.epsilon = c.epsilon;
+  a.pinch = c.pinch;
   return a;
 }
 

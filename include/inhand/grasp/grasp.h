@@ -164,6 +164,7 @@ struct GraspCandidate {
   JointVector q;              // hand joints closed to contact (arm part: the pick IK solution)
   JointVector q_open;         // the hand as it comes in (preshape; arm part as q)
   int pose = -1;              // its index in GraspGeneration::poses
+  bool pinch = false;         // a pinch pose (GraspPoseRecord::pinch)
   JointVector q_lift;         // the same grasp with the object lifted `lift_m` off the table
   int links_in_contact = 0;   // fingers touching, plus one when the palm touches
   bool palm_contact = false;  // the palm touches (an enveloping grasp; else fingertips only)

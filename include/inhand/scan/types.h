@@ -423,6 +423,7 @@ struct PickAttempt {
   HoldFailure hold_failure = HoldFailure::kNone;
   bool palm_contact = false;  // enveloping (the palm touches) or fingertips only
   double epsilon = 0;         // its force-closure ε
+  bool pinch = false;         // a pinch pose (GraspCandidate::pinch)
   // After the lift: how far the object sat in the hand from the planned grasp (−1: not seen).
   double shift_m = -1;
   // The grasp: the palm in the object's frame, and the hand's joints (by URDF name) as it came
