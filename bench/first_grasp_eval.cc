@@ -38,14 +38,18 @@ class ProbeRobot : public RobotInterface {
   JointVector joints() const override { return robot_.joints(); }
   void execute(const std::vector<JointVector>& w,
                const std::function<void(const JointVector&)>& f) override {
+    ++motions_;
     robot_.execute(w, f);
   }
+  // A put-down after more motions than the lift ends a grasp that was scanned (a pick-up that
+  // failed is put down after the lift alone).
   bool putDown() override {
-    ++put_downs;
+    if (motions_ > 1) ++grasps_scanned;
     return robot_.putDown();
   }
   std::optional<Iso3> pickUp(const Iso3& T_O_palm, const JointVector& q) override {
-    if (put_downs < probe_after_put_downs) return robot_.pickUp(T_O_palm, q);
+    motions_ = 0;
+    if (grasps_scanned < probe_after_grasps) return robot_.pickUp(T_O_palm, q);
     const Json start = world_->state();
     outcomes.push_back(tryOne(T_O_palm, q));
     world_->setState(start);
@@ -62,8 +66,8 @@ class ProbeRobot : public RobotInterface {
     std::string true_trial_planned = "-";
   };
   std::vector<Outcome> outcomes;
-  int put_downs = 0;
-  int probe_after_put_downs = 0;  // pick-ups before this many put-downs are real
+  int grasps_scanned = 0;
+  int probe_after_grasps = 0;  // pick-ups before this many grasps were scanned are real
 
  private:
   Outcome tryOne(const Iso3& T_O_palm, const JointVector& q) {
@@ -145,6 +149,7 @@ class ProbeRobot : public RobotInterface {
   }
   SimWorld* world_;
   SimRobot robot_;
+  int motions_ = 0;  // since the last pick-up
   ScanConfig config_;
 };
 }  // namespace
@@ -173,7 +178,7 @@ int main(int argc, char** argv) {
     world.held = false;
     world.q = m.home();
     ProbeRobot robot(&world, c);
-    robot.probe_after_put_downs = regrasp ? 1 : 0;
+    robot.probe_after_grasps = regrasp ? 1 : 0;
     SimSensor sensor(&world, camera);
     const MultiGraspResult r =
         scanFromTable(robot, sensor, world.restPose(), c.scan, c.multi, noise, ScanProgress{});
