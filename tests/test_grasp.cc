@@ -317,6 +317,7 @@ TEST(GraspGeneration, PinchPosesPickUpFlatObjectsLyingOnTheTable) {
     PhysicsWorld world(r, box, GraspOptions{}.friction, PhysicsOptions{});
     int pinches = 0, held = 0;
     for (const GraspCandidate& c : g.candidates) {
+      EXPECT_EQ(c.pinch, g.poses[size_t(c.pose)].pinch);  // the candidate carries its pose's kind
       if (!g.poses[size_t(c.pose)].pinch || g.poses[size_t(c.pose)].two_finger) continue;
       ++pinches;
       EXPECT_EQ(c.links_in_contact, 3);
