@@ -72,33 +72,26 @@ class ProbeRobot : public RobotInterface {
  private:
   Outcome tryOne(const Iso3& T_O_palm, const JointVector& q) {
     Outcome o;
-    {
-      const RobotModel& m = world_->model();
-      const HoldTestOptions& ho = config_.multi.grasp.hold;
-      const Iso3 T_B_O = world_->tablePose;
-      const std::vector<ConvexPiece> pieces =
-          modelPiecesAboveTable(world_->objectMesh(), T_B_O, m, nullptr, ho.decomposition);
-      PhysicsWorld trial(m, pieces, config_.multi.grasp.friction, holdTrialPhysics(ho));
-      const HoldTrial t = tryHold(trial, T_B_O, T_O_palm, q, q, ho);
-      o.true_trial_planned = t.held ? "held" : holdFailureName(t.failure);
-    }
+    // The true mesh as the hold test sees a model (its pieces above the table), resting where it
+    // lies; a pick-up does not move world_->tablePose.
+    const RobotModel& m = world_->model();
+    const HoldTestOptions& ho = config_.multi.grasp.hold;
+    const Iso3 T_B_O = world_->tablePose;
+    PhysicsWorld trial(
+        m, modelPiecesAboveTable(world_->objectMesh(), T_B_O, m, nullptr, ho.decomposition),
+        config_.multi.grasp.friction, holdTrialPhysics(ho));
+    auto verdict = [](const HoldTrial& t) { return t.held ? "held" : holdFailureName(t.failure); };
+    o.true_trial_planned = verdict(tryHold(trial, T_B_O, T_O_palm, q, q, ho));
     if (!robot_.pickUp(T_O_palm, q)) {
       o.what = "no_contact";
       return o;
     }
     PhysicsWorld& ph = *world_->physics();
     {
-      const RobotModel& m = world_->model();
-      const Iso3 T_B_O = world_->tablePose, T_B_palm = ph.palmPose();
-      const HoldTestOptions& ho = config_.multi.grasp.hold;
-      const std::vector<ConvexPiece> pieces =
-          modelPiecesAboveTable(world_->objectMesh(), T_B_O, m, nullptr, ho.decomposition);
-      PhysicsWorld trial(m, pieces, config_.multi.grasp.friction, holdTrialPhysics(ho));
-      const HoldTrial t = tryHold(trial, T_B_O, T_B_O.inverse() * T_B_palm, q, world_->q, ho);
-      o.true_trial = t.held ? "held" : holdFailureName(t.failure);
+      const Iso3 T_O_palmNow = T_B_O.inverse() * ph.palmPose();
+      o.true_trial = verdict(tryHold(trial, T_B_O, T_O_palmNow, q, world_->q, ho));
       PhysicsWorld trialSim(m, world_->objectMesh(), config_.sim.friction, config_.sim.physics);
-      const HoldTrial u = tryHold(trialSim, T_B_O, T_B_O.inverse() * T_B_palm, q, world_->q, ho);
-      o.true_trial_sim = u.held ? "held" : holdFailureName(u.failure);
+      o.true_trial_sim = verdict(tryHold(trialSim, T_B_O, T_O_palmNow, q, world_->q, ho));
     }
     const Iso3 grip = ph.palmPose().inverse() * ph.objectPose();
     auto moved = [&] {
@@ -126,14 +119,8 @@ class ProbeRobot : public RobotInterface {
       o.moved_mm = moved();
       return o;
     }
-    // The turn's axis as the hold test's trial takes it (tryHold): across the palm's approach, or
-    // for a palm within 3° of vertical its own x made horizontal.
-    Vec3 axis = Vec3::UnitZ().cross(ph.palmPose().linear().col(2));
-    if (axis.norm() < std::sin(3 * M_PI / 180)) {
-      axis = ph.palmPose().linear().col(0);
-      axis.z() = 0;
-    }
-    axis.normalize();
+    // The turn's axis as the hold test's trial takes it.
+    const Vec3 axis = holdTurnAxis(ph.palmPose());
     const Vec3 pivot = ph.objectPose().translation();
     for (int k = 1; k <= steps; ++k) {
       const Mat3 R = Eigen::AngleAxisd(along(k) * M_PI / 2, axis).toRotationMatrix();

@@ -99,6 +99,15 @@ bool movePalmHolding(PhysicsWorld& w, const Iso3& from, const Vec3& lift,
 }
 }  // namespace
 
+Vec3 holdTurnAxis(const Iso3& T_B_palm) {
+  Vec3 axis = Vec3::UnitZ().cross(T_B_palm.linear().col(2));
+  if (axis.norm() < std::sin(3 * M_PI / 180)) {
+    axis = T_B_palm.linear().col(0);
+    axis.z() = 0;
+  }
+  return axis.normalized();
+}
+
 PhysicsOptions holdTrialPhysics(const HoldTestOptions& o) {
   PhysicsOptions po;
   po.density_kg_m3 = o.density_kg_m3;
@@ -133,18 +142,10 @@ HoldTrial tryHold(PhysicsWorld& world, const Iso3& T_B_O, const Iso3& T_O_palm,
     t.slip_m = slip();
     return t;
   }
-  // The turn: about the horizontal axis across the palm's approach (gravity then pulls along the
-  // approach or across it), through the object's centre.
-  // A palm within 3° of vertical (a grasp from above, tilted a little by the close) turns about
-  // its own x made horizontal: the axis does not swing with a tilt of a fraction of a degree.
-  Vec3 axis = Vec3::UnitZ().cross(world.palmPose().linear().col(2));
-  if (axis.norm() < std::sin(3 * M_PI / 180)) {
-    axis = world.palmPose().linear().col(0);
-    axis.z() = 0;
-  }
+  // The turn (gravity then pulls along the approach or across it), through the object's centre.
   const Iso3 lifted = world.palmPose();
   if (!movePalmHolding(world, lifted, Vec3::Zero(),
-                       Eigen::AngleAxisd(o.turn_rad, axis.normalized()),
+                       Eigen::AngleAxisd(o.turn_rad, holdTurnAxis(lifted)),
                        world.objectPose().translation(), o.turn_s)) {
     t.failure = HoldFailure::kDroppedInTurn;
     t.slip_m = slip();

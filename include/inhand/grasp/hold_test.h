@@ -127,6 +127,11 @@ std::vector<ConvexPiece> modelPiecesAboveTable(const TriangleMesh& model_O, cons
 // twice as fast; what the trials' verdicts were measured with: docs/physics.md).
 PhysicsOptions holdTrialPhysics(const HoldTestOptions& options);
 
+// The axis the trial turns a lifted grasp about (base frame, unit): horizontal, across the palm's
+// approach; for a palm within 3° of vertical (a grasp from above, tilted a little by the close),
+// its own x made horizontal, so that the axis does not swing with a fraction of a degree's tilt.
+Vec3 holdTurnAxis(const Iso3& T_B_palm);
+
 // One candidate on the model `world` holds (its object put at T_B_O, the palm at the candidate's
 // pose, the fingers open as they come in): closed, lifted, turned.
 HoldTrial tryHold(PhysicsWorld& world, const Iso3& T_B_O, const Iso3& T_O_palm,
