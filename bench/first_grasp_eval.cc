@@ -10,7 +10,7 @@
 // it held the hold test's margin) and the hold rates by verdict. With `regrasp` last, the same for
 // the second grasp's candidates: the first grasp is picked up, scanned and put down as in a scan,
 // and the re-grasp's candidates are tried on the object where it then rests. Usage:
-// first_grasp_eval OBJECT [REST_POSE] [CANDIDATES] [CONFIG.json] [regrasp]
+// [SEED=N] first_grasp_eval OBJECT [REST_POSE] [CANDIDATES] [CONFIG.json] [regrasp]
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -155,6 +155,11 @@ int main(int argc, char** argv) {
     ScanConfig c;
     if (argc > 4 && std::string(argv[4]) != "-") readScanConfigFile(argv[4], &c);
     const bool regrasp = argc > 5 && std::string(argv[5]) == "regrasp";
+    // SEED: the noise and IK seed, as `inhand scan --seed` (1 by default).
+    if (const char* seed = std::getenv("SEED")) {
+      c.sim.seed = std::strtoull(seed, nullptr, 10);
+      c.scan.planner.seed = c.sim.seed;
+    }
     c.sim = bench::restingWithPhysics(object, pose, c.sim);
     c.multi.grasp.max_failed_pick_ups = n;
     c.multi.max_grasps = regrasp ? 2 : 1;

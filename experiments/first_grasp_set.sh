@@ -7,6 +7,7 @@
 # Usage: experiments/first_grasp_set.sh [OUT] [CANDIDATES]   (default out/first_grasp_set, 12)
 # GRASP_CONFIG=FILE: a config over physics on; FIRST_GRASP_EVAL=BINARY: another build of the bench;
 # REGRASP=1: the second grasp's candidates instead (the first grasp scanned and put down first).
+# SEED=N: the noise and IK seed (as SCAN_SEED for scan_set.sh; 1 by default).
 set -uo pipefail
 cd "$(dirname "$0")/.."
 out="${1:-out/first_grasp_set}"
