@@ -329,6 +329,43 @@ TEST(GraspGeneration, PinchPosesPickUpFlatObjectsLyingOnTheTable) {
   }
 }
 
+// The lift's arm pose (GraspOptions::lift_in_view): where the first IK solution puts an arm link
+// on the line from the camera to the held object, it is solved again. A 20 × 8 × 12 cm box at
+// several places and headings on the table: with the option no more lifts hide the held object
+// than without (fewer where any did), and every lift still puts the palm lift_m straight above
+// the pick's (1 mm, 0.01 rad).
+TEST(GraspGeneration, LiftsKeepTheHeldObjectInViewOfTheCamera) {
+  const RobotModel& r = test::wam();
+  const TriangleMesh box = makeBox(Vec3(0.20, 0.08, 0.12));
+  int hiddenOff = 0, hiddenOn = 0, lifts = 0;
+  for (const double dx : {-0.15, 0.0, 0.15})
+    for (const double yaw : {0.0, M_PI / 3, 2 * M_PI / 3}) {
+      Iso3 T_B_O = Iso3::Identity();
+      T_B_O.linear() = Eigen::AngleAxisd(yaw, Vec3::UnitZ()).toRotationMatrix();
+      T_B_O.translation() =
+          Vec3(r.camera().lookAt_B.x() + dx, r.camera().lookAt_B.y(), r.table().topZ() + 0.06);
+      GraspOptions off, on;
+      on.lift_in_view = true;
+      for (const GraspCandidate& c : generateGrasps(r, box, T_B_O, r.home(), off).candidates)
+        hiddenOff += !heldInView(r, c.q_lift);
+      for (const GraspCandidate& c : generateGrasps(r, box, T_B_O, r.home(), on).candidates) {
+        ++lifts;
+        hiddenOn += !heldInView(r, c.q_lift);
+        const Iso3 want = Eigen::Translation3d(0, 0, GraspOptions{}.lift_m) * r.tipPose(c.q);
+        const Iso3 got = r.tipPose(c.q_lift);
+        EXPECT_LT((got.translation() - want.translation()).norm(), 1e-3);
+        EXPECT_LT(Eigen::AngleAxisd(got.linear() * want.linear().transpose()).angle(), 0.01);
+      }
+    }
+  std::printf("lifts hiding the held object: %d without the option, %d with it, of %d\n", hiddenOff,
+              hiddenOn, lifts);
+  EXPECT_GT(lifts, 0);
+  EXPECT_LE(hiddenOn, hiddenOff);
+  if (hiddenOff > 0) {
+    EXPECT_LT(hiddenOn, hiddenOff);
+  }
+}
+
 // A flat hammer lying on the table (a 180 × 18 × 12 mm handle, its middle 5 mm above the table,
 // and a 22 × 80 × 22 mm head): the pinch across the whole footprint spans 80 mm where the handle
 // is 18 mm wide. The pinches on the footprint's narrow parts (the handle, the head across its

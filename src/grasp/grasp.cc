@@ -34,10 +34,31 @@ std::string GraspOptions::validate() const {
   return {};
 }
 
+bool heldInView(const RobotModel& robot, const JointVector& q) {
+  const std::vector<Iso3> L = robot.linkPoses(q);
+  const Vec3 target = robot.tipPose(q) * Vec3(0, 0, robot.graspOffset());
+  const Vec3 cam = robot.camera().panTilt_B;
+  const double len = (target - cam).norm();
+  const Vec3 dir = (target - cam) / std::max(len, 1e-9);
+  for (double t = 0.05; t < len - 0.15; t += 0.01) {
+    const Vec3 p = cam + t * dir;
+    for (size_t i = 0; i < L.size(); ++i) {
+      const Vec3 p_link = L[i].inverse() * p;
+      for (const Primitive& prim : robot.links()[i].collision)
+        if (prim.contains(p_link)) return false;
+    }
+  }
+  return true;
+}
+
 namespace {
+
 // Pick and lift configurations for palm poses T_B_palm[k] with the hand joints hands[k]: IK to
 // the pick pose (seeded from q_now, `restarts` random restarts), then to the same pose lift_m
-// higher, seeded from the pick; both free of table and base. nullopt where either fails.
+// higher, seeded from the pick; both free of table and base. nullopt where either fails. With
+// `inView` a lift that hides the held object from the camera (heldInView) is solved again from
+// up to 12 seeds near the pick's (σ 0.4 rad per joint), the first in view whose joints lie
+// within 1 rad of the pick's kept (else the first).
 struct PickLift {
   JointVector q, q_lift;
 };
@@ -45,7 +66,7 @@ std::vector<std::optional<PickLift>> pickAndLift(const RobotModel& robot,
                                                  const std::vector<Iso3>& T_B_palm,
                                                  const std::vector<JointVector>& hands,
                                                  const JointVector& q_now, double lift_m,
-                                                 int restarts, uint64_t seed) {
+                                                 bool inView, int restarts, uint64_t seed) {
   IkOptions ik;
   ik.random_restarts = restarts;
   const auto sols = solveIkBatch(robot, T_B_palm, robot.arm(q_now), seed, ik);
@@ -62,6 +83,19 @@ std::vector<std::optional<PickLift>> pickAndLift(const RobotModel& robot,
     if (!lifted) continue;
     JointVector ql = robot.withArm(hands[k], *lifted);
     if (checker.inCollision(ql)) continue;
+    if (inView && !heldInView(robot, ql)) {
+      std::normal_distribution<double> jitter(0.0, 0.4);
+      for (int t = 0; t < 12; ++t) {
+        Eigen::VectorXd start = *sols[k];
+        for (int j = 0; j < start.size(); ++j) start[j] += jitter(rng);
+        const auto other = lift.solve(up * T_B_palm[k], start, &rng);
+        if (!other || (*other - *sols[k]).cwiseAbs().maxCoeff() > 1.0) continue;
+        const JointVector qo = robot.withArm(hands[k], *other);
+        if (checker.inCollision(qo) || !heldInView(robot, qo)) continue;
+        ql = qo;
+        break;
+      }
+    }
     out[k] = PickLift{q, ql};
   }
   return out;
@@ -727,7 +761,7 @@ std::vector<GraspCandidate> closeAndKeep(const RobotModel& robot, const Triangle
     targets.push_back(T_B_O * c.T_O_palm);
     hands.push_back(c.q);
   }
-  const auto reach = pickAndLift(robot, targets, hands, q_now, o.lift_m, 2, 7);
+  const auto reach = pickAndLift(robot, targets, hands, q_now, o.lift_m, o.lift_in_view, 2, 7);
   std::vector<GraspCandidate> candidates;
   for (size_t k = 0; k < kept.size(); ++k) {
     if (!reach[k]) {

@@ -96,6 +96,13 @@ struct GraspOptions {
   int max_candidates = 50;  // ranked at most (the most stable first)
   HoldTestOptions hold;     // the candidates tried in physics on the model (grasp/hold_test.h)
   double lift_m = 0.15;     // the object is lifted this far after the pick
+  // The lift's arm pose re-solved (up to 12 seeds near the pick's, every joint within 1 rad of
+  // it) where an arm link lies on the line from the camera to the held object: the 7-DOF arm's
+  // elbow is free, and a forearm in front of the hand (inside the sensor's minimum range it
+  // returns no depth) hides the object that the check after the lift looks for. Off by
+  // default (the kinematic test set was measured without it); a config with physics on turns it
+  // on unless it says otherwise.
+  bool lift_in_view = false;
   // After the lift the hand holds still settle_s and the camera looks again from where it took
   // the lift's frame: more than settle_changed of the object's pixels at another depth, it is
   // sliding out of a grasp that does not hold (0 s: no second look). Off by default, as
@@ -145,6 +152,9 @@ struct GraspOptions {
               Range::atLeast(1));
     v.num("lift_m", o.lift_m, "the object is lifted this far after the pick, m",
           Range::closedOpen(0, 1));
+    v.boolean("lift_in_view", o.lift_in_view,
+              "the lift's arm pose re-solved where an arm link hides the held object from the "
+              "camera (a config with physics on: true unless given)");
     v.num("settle_s", o.settle_s,
           "after the lift the hand holds still this long and a second frame looks again (0: "
           "no second look; a config with physics on: 0.5 unless given), s",
@@ -194,6 +204,11 @@ struct GraspPoseRecord {
   // and finger joints from another preshape)
   std::string result;
 };
+
+// Whether no link of the arm (the hand's links aside: those within 15 cm of the held object)
+// lies on the line from the camera's pan-tilt centre to the held object (graspOffset in front of
+// the palm) at q, sampled every centimetre from 5 cm out (GraspOptions::lift_in_view).
+bool heldInView(const RobotModel& robot, const JointVector& q);
 
 struct GraspGeneration {
   std::vector<GraspCandidate> candidates;  // stable, table-free, reachable; best ε first
