@@ -219,19 +219,3 @@ TEST(Config, PhysicsTurnsTheSecondLookAfterTheLiftOnUnlessTheConfigSetsIt) {
   EXPECT_EQ(settle(R"({"sim": {"physics": {"enabled": true}}, "grasp": {"settle_s": 0}})"), 0.0);
   EXPECT_EQ(settle(R"({"grasp": {"settle_s": 1.5}})"), 1.5);
 }
-
-// … and lift poses re-solved where the arm hides the held object from the camera, unless the
-// config sets it.
-TEST(Config, PhysicsTurnsLiftsInViewOnUnlessTheConfigSetsIt) {
-  auto inView = [](const std::string& json) {
-    ScanConfig c;
-    readScanConfig(Json::parse(json), "cfg", &c);
-    return c.multi.grasp.lift_in_view;
-  };
-  EXPECT_FALSE(ScanConfig().multi.grasp.lift_in_view);
-  EXPECT_FALSE(inView("{}"));
-  EXPECT_TRUE(inView(R"({"sim": {"physics": {"enabled": true}}})"));
-  EXPECT_FALSE(
-      inView(R"({"sim": {"physics": {"enabled": true}}, "grasp": {"lift_in_view": false}})"));
-  EXPECT_TRUE(inView(R"({"grasp": {"lift_in_view": true}})"));
-}

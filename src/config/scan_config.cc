@@ -211,9 +211,6 @@ void readScanConfig(const Json& j, const std::string& where, ScanConfig* config)
   // camera looks again (grasp.settle_s).
   if (physicsOn && !given("grasp", "settle_s"))
     config->multi.grasp.settle_s = GraspOptions::kSettleSeconds;
-  // … and a lift that the arm's own links hide from the camera tells the check after it nothing
-  // (grasp.lift_in_view; measured with physics: docs/test_set_physics.md).
-  if (physicsOn && !given("grasp", "lift_in_view")) config->multi.grasp.lift_in_view = true;
 }
 
 void readScanConfigFile(const std::filesystem::path& file, ScanConfig* config) {

@@ -99,9 +99,9 @@ struct GraspOptions {
   // The lift's arm pose re-solved (up to 12 seeds near the pick's, every joint within 1 rad of
   // it) where an arm link lies on the line from the camera to the held object: the 7-DOF arm's
   // elbow is free, and a forearm in front of the hand (inside the sensor's minimum range it
-  // returns no depth) hides the object that the check after the lift looks for. Off by
-  // default (the kinematic test set was measured without it); a config with physics on turns it
-  // on unless it says otherwise.
+  // returns no depth) hides the object that the check after the lift looks for. Off: the
+  // re-solved lift's joint-space move from the pick is not yet checked to rise straight (with
+  // physics it lost the standing tomato soup can: docs/test_set_physics.md).
   bool lift_in_view = false;
   // After the lift the hand holds still settle_s and the camera looks again from where it took
   // the lift's frame: more than settle_changed of the object's pixels at another depth, it is
@@ -154,7 +154,7 @@ struct GraspOptions {
           Range::closedOpen(0, 1));
     v.boolean("lift_in_view", o.lift_in_view,
               "the lift's arm pose re-solved where an arm link hides the held object from the "
-              "camera (a config with physics on: true unless given)");
+              "camera");
     v.num("settle_s", o.settle_s,
           "after the lift the hand holds still this long and a second frame looks again (0: "
           "no second look; a config with physics on: 0.5 unless given), s",
