@@ -205,9 +205,9 @@ struct GraspPoseRecord {
   std::string result;
 };
 
-// Whether no robot link lies on the line from the camera's pan-tilt centre to the held object (graspOffset in front of
-// the palm) at q, sampled every centimetre from 5 cm out to 15 cm short of the object (the hand
-// holding it is not counted) (GraspOptions::lift_in_view).
+// Whether no robot link lies on the line from the camera's pan-tilt centre to the held object
+// (graspOffset in front of the palm) at q, sampled every centimetre from 5 cm out to 15 cm short of
+// the object (the hand holding it is not counted) (GraspOptions::lift_in_view).
 bool heldInView(const RobotModel& robot, const JointVector& q);
 
 struct GraspGeneration {
