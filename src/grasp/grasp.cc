@@ -51,39 +51,74 @@ bool heldInView(const RobotModel& robot, const JointVector& q) {
   return true;
 }
 
+double liftPathDeviation(const RobotModel& robot, const JointVector& q, const JointVector& q_lift) {
+  const Vec3 offset(0, 0, robot.graspOffset());
+  const Iso3 start = robot.tipPose(q);
+  const Vec3 a = start * offset, b = robot.tipPose(q_lift) * offset;
+  const Vec3 ab = b - a;
+  const double len2 = std::max(ab.squaredNorm(), 1e-12);
+  double worst = 0;
+  for (int s = 1; s <= 20; ++s) {
+    const Iso3 T = robot.tipPose(q + (q_lift - q) * (s / 20.0));
+    const Vec3 p = T * offset;
+    const double t = std::clamp((p - a).dot(ab) / len2, 0.0, 1.0);
+    const double turn = Eigen::AngleAxisd(T.linear() * start.linear().transpose()).angle();
+    worst = std::max(worst, (p - (a + t * ab)).norm() + 0.1 * turn);
+  }
+  return worst;
+}
+
 namespace {
 
 // Pick and lift configurations for palm poses T_B_palm[k] with the hand joints hands[k]: IK to
 // the pick pose (seeded from q_now, `restarts` random restarts), then to the same pose lift_m
 // higher, seeded from the pick; both free of table and base. nullopt where either fails. With
-// `inView` a lift that hides the held object from the camera (heldInView) is solved again from
-// up to 12 seeds near the pick's (σ 0.4 rad per joint), the first in view whose joints lie
-// within 1 rad of the pick's kept (else the first).
+// `straight` the lift is solved in five steps up, each seeded from the last, and kept only where
+// the move to it rises straight (liftPathDeviation). With `inView` a lift that hides the held
+// object from the camera (heldInView) is solved again from up to 12 seeds near the pick's (σ 0.4
+// rad per joint), the first in view, rising straight, whose joints lie within 1 rad of the pick's
+// kept (else the first).
 struct PickLift {
   JointVector q, q_lift;
+};
+struct LiftRule {
+  double lift_m = 0;
+  bool straight = false, inView = false;
 };
 std::vector<std::optional<PickLift>> pickAndLift(const RobotModel& robot,
                                                  const std::vector<Iso3>& T_B_palm,
                                                  const std::vector<JointVector>& hands,
-                                                 const JointVector& q_now, double lift_m,
-                                                 bool inView, int restarts, uint64_t seed) {
+                                                 const JointVector& q_now, const LiftRule& rule,
+                                                 int restarts, uint64_t seed) {
   IkOptions ik;
   ik.random_restarts = restarts;
   const auto sols = solveIkBatch(robot, T_B_palm, robot.arm(q_now), seed, ik);
   CollisionChecker checker(robot);
   IkSolver lift(robot, ik);
+  IkOptions local = ik;
+  local.random_restarts = 0;
+  IkSolver stepper(robot, local);
   Rng rng = makeRng(seed + 4);
-  const Iso3 up(Eigen::Translation3d(0, 0, lift_m));
+  const Iso3 up(Eigen::Translation3d(0, 0, rule.lift_m));
+  auto rises = [&](const JointVector& q, const JointVector& ql) {
+    return !rule.straight || liftPathDeviation(robot, q, ql) <= GraspOptions::kMaxLiftDeviation;
+  };
   std::vector<std::optional<PickLift>> out(T_B_palm.size());
   for (size_t k = 0; k < T_B_palm.size(); ++k) {
     if (!sols[k]) continue;
     JointVector q = robot.withArm(hands[k], *sols[k]);
     if (checker.inCollision(q)) continue;
-    auto lifted = lift.solve(up * T_B_palm[k], *sols[k], &rng);
+    std::optional<Eigen::VectorXd> lifted = *sols[k];
+    if (rule.straight) {
+      for (int s = 1; s <= 5 && lifted; ++s)
+        lifted = stepper.solve(Eigen::Translation3d(0, 0, rule.lift_m * s / 5) * T_B_palm[k],
+                               *lifted, nullptr);
+    }
+    if (!rule.straight || !lifted) lifted = lift.solve(up * T_B_palm[k], *sols[k], &rng);
     if (!lifted) continue;
     JointVector ql = robot.withArm(hands[k], *lifted);
-    if (checker.inCollision(ql)) continue;
-    if (inView && !heldInView(robot, ql)) {
+    if (checker.inCollision(ql) || !rises(q, ql)) continue;
+    if (rule.inView && !heldInView(robot, ql)) {
       std::normal_distribution<double> jitter(0.0, 0.4);
       for (int t = 0; t < 12; ++t) {
         Eigen::VectorXd start = *sols[k];
@@ -91,7 +126,9 @@ std::vector<std::optional<PickLift>> pickAndLift(const RobotModel& robot,
         const auto other = lift.solve(up * T_B_palm[k], start, &rng);
         if (!other || (*other - *sols[k]).cwiseAbs().maxCoeff() > 1.0) continue;
         const JointVector qo = robot.withArm(hands[k], *other);
-        if (checker.inCollision(qo) || !heldInView(robot, qo)) continue;
+        if (checker.inCollision(qo) || !heldInView(robot, qo) ||
+            liftPathDeviation(robot, q, qo) > GraspOptions::kMaxLiftDeviation)
+          continue;
         ql = qo;
         break;
       }
@@ -761,7 +798,8 @@ std::vector<GraspCandidate> closeAndKeep(const RobotModel& robot, const Triangle
     targets.push_back(T_B_O * c.T_O_palm);
     hands.push_back(c.q);
   }
-  const auto reach = pickAndLift(robot, targets, hands, q_now, o.lift_m, o.lift_in_view, 2, 7);
+  const auto reach =
+      pickAndLift(robot, targets, hands, q_now, {o.lift_m, o.lift_straight, o.lift_in_view}, 2, 7);
   std::vector<GraspCandidate> candidates;
   for (size_t k = 0; k < kept.size(); ++k) {
     if (!reach[k]) {
