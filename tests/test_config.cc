@@ -219,3 +219,22 @@ TEST(Config, PhysicsTurnsTheSecondLookAfterTheLiftOnUnlessTheConfigSetsIt) {
   EXPECT_EQ(settle(R"({"sim": {"physics": {"enabled": true}}, "grasp": {"settle_s": 0}})"), 0.0);
   EXPECT_EQ(settle(R"({"grasp": {"settle_s": 1.5}})"), 1.5);
 }
+
+// … and the lift's rules (the held object feels the arm's move): straight and in view, unless
+// the config sets them.
+TEST(Config, PhysicsTurnsTheStraightLiftInViewOnUnlessTheConfigSetsIt) {
+  auto lift = [](const std::string& json) {
+    ScanConfig c;
+    readScanConfig(Json::parse(json), "cfg", &c);
+    return std::make_pair(c.multi.grasp.lift_straight, c.multi.grasp.lift_in_view);
+  };
+  const auto both = [](bool a, bool b) { return std::make_pair(a, b); };
+  EXPECT_EQ(lift("{}"), both(false, false));
+  EXPECT_EQ(lift(R"({"sim": {"physics": {"enabled": true}}})"), both(true, true));
+  EXPECT_EQ(lift(R"({"sim": {"physics": {"enabled": false}}})"), both(false, false));
+  EXPECT_EQ(lift(R"({"sim": {"physics": {"enabled": true}}, "grasp": {"lift_in_view": false}})"),
+            both(true, false));
+  EXPECT_EQ(lift(R"({"sim": {"physics": {"enabled": true}}, "grasp": {"lift_straight": false}})"),
+            both(false, true));
+  EXPECT_EQ(lift(R"({"grasp": {"lift_straight": true}})"), both(true, false));
+}

@@ -338,9 +338,9 @@ TEST(GraspGeneration, PinchPosesPickUpFlatObjectsLyingOnTheTable) {
 TEST(GraspGeneration, LiftsRiseStraightAndKeepTheHeldObjectInViewOfTheCamera) {
   const RobotModel& r = test::wam();
   const TriangleMesh box = makeBox(Vec3(0.20, 0.08, 0.12));
-  GraspOptions plain, straight, inView;  // inView: the defaults
-  plain.lift_straight = plain.lift_in_view = false;
-  straight.lift_in_view = false;
+  GraspOptions plain, straight, inView;
+  straight.lift_straight = true;
+  inView.lift_straight = inView.lift_in_view = true;
   int strayPlain = 0, strayStraight = 0, hiddenStraight = 0, hiddenInView = 0, lifts = 0;
   for (const double dx : {-0.15, 0.0, 0.15})
     for (const double yaw : {0.0, M_PI / 3, 2 * M_PI / 3}) {

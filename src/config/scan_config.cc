@@ -211,6 +211,10 @@ void readScanConfig(const Json& j, const std::string& where, ScanConfig* config)
   // camera looks again (grasp.settle_s).
   if (physicsOn && !given("grasp", "settle_s"))
     config->multi.grasp.settle_s = GraspOptions::kSettleSeconds;
+  // … and the held object feels the arm's move from the pick to the lift: the lift rises
+  // straight (grasp.lift_straight) and keeps the object in the camera's view (lift_in_view).
+  if (physicsOn && !given("grasp", "lift_straight")) config->multi.grasp.lift_straight = true;
+  if (physicsOn && !given("grasp", "lift_in_view")) config->multi.grasp.lift_in_view = true;
 }
 
 void readScanConfigFile(const std::filesystem::path& file, ScanConfig* config) {
