@@ -35,15 +35,16 @@ std::string GraspOptions::validate() const {
 }
 
 bool heldInView(const RobotModel& robot, const JointVector& q) {
-  const std::vector<Iso3> L = robot.linkPoses(q);
+  std::vector<Iso3> L_inv = robot.linkPoses(q);  // base to each link
+  for (Iso3& T : L_inv) T = T.inverse();
   const Vec3 target = robot.tipPose(q) * Vec3(0, 0, robot.graspOffset());
   const Vec3 cam = robot.camera().panTilt_B;
   const double len = (target - cam).norm();
   const Vec3 dir = (target - cam) / std::max(len, 1e-9);
   for (double t = 0.05; t < len - 0.15; t += 0.01) {
     const Vec3 p = cam + t * dir;
-    for (size_t i = 0; i < L.size(); ++i) {
-      const Vec3 p_link = L[i].inverse() * p;
+    for (size_t i = 0; i < L_inv.size(); ++i) {
+      const Vec3 p_link = L_inv[i] * p;
       for (const Primitive& prim : robot.links()[i].collision)
         if (prim.contains(p_link)) return false;
     }
