@@ -809,3 +809,17 @@ TEST(TableTop, TheUnknownSpaceBeneathMeasuredSurfaceMatchesItsReference) {
     }
   }
 }
+
+// liftPathDeviation against answers worked out by hand: no move strays 0; turning the last arm
+// joint (the wrist's roll, whose axis is the palm's z through the held point) turns the palm by
+// the joint's change and leaves the held point where it is, so it strays 0.1 m × the turn.
+TEST(GraspGeneration, LiftPathDeviationOfAWristRollIsTheTurnAtTenCentimetres) {
+  const RobotModel& r = test::wam();
+  const JointVector q = r.home();
+  EXPECT_NEAR(liftPathDeviation(r, q, q), 0.0, 1e-12);
+  JointVector rolled = q;
+  rolled[r.armVariables().back()] += 0.5;
+  const Vec3 held(0, 0, r.graspOffset());
+  ASSERT_LT((r.tipPose(rolled) * held - r.tipPose(q) * held).norm(), 1e-9);  // the premise
+  EXPECT_NEAR(liftPathDeviation(r, q, rolled), 0.1 * 0.5, 1e-6);
+}
