@@ -179,7 +179,7 @@ int main(int argc, char** argv) {
     const std::vector<PickAttempt>& a = regrasp ? r.failed_regrasp_attempts : r.table_top->attempts;
     std::printf(
         "rank,hold_test,epsilon,kind,outcome,moved_mm,hold_failure,pinch,two_finger,true_trial,"
-        "true_trial_sim,true_trial_planned,margin\n");
+        "true_trial_sim,true_trial_planned,margin,close_mm\n");
     int held[2] = {0, 0}, tested[2] = {0, 0};
     // Every attempt recorded is a probe (each ends no_contact); a re-grasp's poses are not kept.
     for (size_t k = 0; k < a.size() && k < robot.outcomes.size(); ++k) {
@@ -187,11 +187,11 @@ int main(int argc, char** argv) {
       const bool pinch = a[k].pinch;
       const bool two =
           !regrasp && a[k].pose >= 0 && r.table_top->poses[size_t(a[k].pose)].two_finger;
-      std::printf("%d,%d,%.3f,%s,%s,%.1f,%s,%d,%d,%s,%s,%s,%d\n", a[k].rank, a[k].hold_test,
+      std::printf("%d,%d,%.3f,%s,%s,%.1f,%s,%d,%d,%s,%s,%s,%d,%.1f\n", a[k].rank, a[k].hold_test,
                   a[k].epsilon, a[k].palm_contact ? "enveloping" : "fingertips", o.what.c_str(),
                   o.moved_mm, holdFailureName(a[k].hold_failure), int(pinch), int(two),
                   o.true_trial.c_str(), o.true_trial_sim.c_str(), o.true_trial_planned.c_str(),
-                  a[k].hold_margin);
+                  a[k].hold_margin, 1000 * a[k].hold_close_m);
       const int v = a[k].hold_test == 1;
       held[v] += o.what == "held";
       ++tested[v];

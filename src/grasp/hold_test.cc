@@ -125,11 +125,14 @@ HoldTrial tryHold(PhysicsWorld& world, const Iso3& T_B_O, const Iso3& T_O_palm,
   t.lift_kg = world.mass_kg();
   const Iso3 T_B_palm = T_B_O * T_O_palm;
   world.reset(T_B_O, T_B_palm, q_open);
+  const Vec3 rested = world.objectPose().translation();
   world.closeHand(q_closed);
+  t.close_moved_m = (world.objectPose().translation() - rested).norm();
   if (!world.objectTouchesHand()) {
     t.failure = HoldFailure::kNotTouching;
     return t;
   }
+  t.T_O_palm_closed = world.objectPose().inverse() * world.palmPose();
   const Iso3 grip = world.palmPose().inverse() * world.objectPose();
   auto slip = [&] {
     const Iso3 now = world.palmPose().inverse() * world.objectPose();
@@ -222,6 +225,8 @@ double rankByHold(const RobotModel& robot, const TriangleMesh& model_O, const Is
       GraspCandidate& c = (*candidates)[size_t(i)];
       c.hold = trials[size_t(i - begin)].held ? 1 : 0;
       c.hold_failure = trials[size_t(i - begin)].failure;
+      c.hold_close_m = trials[size_t(i - begin)].close_moved_m;
+      c.T_O_palm_closed = trials[size_t(i - begin)].T_O_palm_closed;
       heldCount += c.hold == 1;
     }
     n = end;

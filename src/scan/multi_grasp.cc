@@ -11,6 +11,7 @@
 #include "inhand/core/error.h"
 #include "inhand/core/pose.h"
 #include "inhand/geometry/stable_poses.h"
+#include "inhand/geometry/surface_distance.h"
 #include "inhand/robot/collision.h"
 #include "inhand/scan/checkpoint.h"
 #include "inhand/scan/registration.h"
@@ -135,14 +136,23 @@ struct Refound {
   std::string reason;  // why not found
 };
 
+// The model at a registration whose surface lies no farther than this from the belief's is
+// where the object was believed to be (the registration slid along what the frame cannot tell).
+constexpr double kSameSurfaceM = 0.002;
+
 // Of the registrations (each with the support the frame gives it), the one nearest where the
 // object was believed to lie among those within 2 % of the most borne out (a symmetric object
 // fits turned poses as well: the belief decides between them); found if borne out over 60 %.
-// When the frame bears out the belief itself as well (`believed_support` within 2 %), the
-// object did not move (a registration also slides along what the frame cannot tell apart, such
-// as a can's turn about its axis), and the belief, which the fused model was built in, stays.
+// When the frame bears out the belief itself as well (`believed_support` within 2 %) and the
+// chosen registration puts the model's surface where the belief does (`gapFromBelief` ≤
+// kSameSurfaceM), the object did not move (a registration also slides along what the frame
+// cannot tell apart, such as a can's turn about its axis), and the belief, which the fused model
+// was built in, stays. The support alone does not tell: points hidden behind what the camera
+// sees do not count, so a belief centimetres off can be borne out by the few points it has in
+// view.
 Refound nearestOfTheBest(const std::vector<Refound>& fits, const Iso3& T_B_O_guess,
-                         double believed_support) {
+                         double believed_support,
+                         const std::function<double(const Iso3&)>& gapFromBelief) {
   double most = -1;
   for (const Refound& f : fits) most = std::max(most, f.support);
   auto away = [&](const Iso3& T) {
@@ -156,7 +166,10 @@ Refound nearestOfTheBest(const std::vector<Refound>& fits, const Iso3& T_B_O_gue
   if (!best) return out;
   out.support = best->support;
   out.rms_m = best->rms_m;
-  if (best->support > 0.6) out.T_B_O = believed_support >= most - 0.02 ? T_B_O_guess : *best->T_B_O;
+  if (best->support > 0.6)
+    out.T_B_O = believed_support >= most - 0.02 && gapFromBelief(*best->T_B_O) <= kSameSurfaceM
+                    ? T_B_O_guess
+                    : *best->T_B_O;
   return out;
 }
 
@@ -214,7 +227,10 @@ Refound refindOnTable(ScanSession& session, RobotInterface& robot, DepthSensor& 
   std::vector<Refound> fits;
   for (const auto& [T, r] : session.registerObjectAt(d, hidden, *aim, starts))
     if (T) fits.push_back({*T, supportAt(*T), r.rms_m, ""});
-  out = nearestOfTheBest(fits, T_B_O_guess, supportAt(T_B_O_guess));
+  const TriangleDistanceIndex surface_O(model.mesh);
+  out = nearestOfTheBest(fits, T_B_O_guess, supportAt(T_B_O_guess), [&](const Iso3& T) {
+    return surfaceGap(surface_O, known_O, T_B_O_guess, T);
+  });
   if (!out.T_B_O) {
     out.reason = "the model does not fit what the camera sees there";
     return out;
@@ -269,7 +285,7 @@ Iso3 graspInHand(ScanSession& session, const RobotModel& m, const JointVector& q
                  const DepthImage& d, const std::vector<uint8_t>& mask, const Iso3& aim,
                  const Iso3& tracked, const TrackResult& liftTrack, const GraspCandidate& c,
                  const Iso3& achieved, const TrackingOptions& options,
-                 const std::function<void(const std::string&)>& log) {
+                 const std::function<void(const std::string&)>& log, bool* registered) {
   // Where the object sits in the hand: the arm's error where it grasped moved it from
   // where the joints say. The palm's error that tracking sees in the lift's frame, as
   // joint offsets (armOffsetsFromPalmError), gives the palm's error at the pick (the palm
@@ -293,6 +309,7 @@ Iso3 graspInHand(ScanSession& session, const RobotModel& m, const JointVector& q
   TrackResult reg;
   if (const std::optional<Iso3> T = session.registerHeldObject(d, mask, q, tracked, carried, &reg))
     grasp = *T;
+  *registered = reg.ok;
   char line[240];
   std::snprintf(line, sizeof line,
                 "the object in the hand: %.1f mm from where the joints put it by the arm's "
@@ -334,13 +351,65 @@ std::optional<HeldFrame> frameOfTheHeld(ScanSession& session, RobotInterface& ro
   return f;
 }
 
+// The lift's frame `f` (taken for the grasp `*achieved`, whose points are `held_B`) tracked with
+// the grasp `pushed` instead: where the frame bears the object's points out more there, the frame's
+// tracking, robot pixels, grasp and points become those of `pushed` (only where the frame bears
+// `*achieved` out at most 90 %, and `pushed` at least 5 points more). Whether it was taken.
+bool pushedIfBorneOut(ScanSession& session, RobotInterface& robot, DepthSensor& sensor,
+                      const Iso3& pushed, const std::vector<Vec3>& points_O,
+                      const ScanOptions& options, const RobotOccluders& scenes,
+                      const std::function<void(const std::string&)>& log, HeldFrame* f,
+                      std::optional<Iso3>* achieved, std::vector<Vec3>* held_B) {
+  const RobotModel& m = robot.model();
+  const CameraIntrinsics& K = sensor.camera().intrinsics;
+  const JointVector q = robot.joints();
+  const double planned = f->tracked ? depthSupport(f->d, *f->tracked, K, f->mask, *held_B) : -1;
+  if (planned > 0.9) return false;  // the grasp as the hand achieved it is borne out
+  TrackResult track;
+  const std::optional<Iso3> tracked = session.trackedCameraPose(f->d, q, f->aim, pushed, &track);
+  if (!tracked) return false;
+  std::vector<uint8_t> mask =
+      robotPixelMask(f->d, *tracked, q, scenes, sensor.camera(), options.t_hand_m,
+                     options.carve_radius_px, /*with_table=*/false);
+  const Iso3 T_B_O = m.tipPose(q) * pushed.inverse();
+  std::vector<Vec3> at_B;
+  for (const Vec3& p : points_O) at_B.push_back(T_B_O * p);
+  const double support = depthSupport(f->d, *tracked, K, mask, at_B);
+  if (!(support > planned + 0.05)) return false;  // not clearly more
+  char line[200];
+  std::snprintf(
+      line, sizeof line,
+      "the object where the hold test's close pushed it, %.1f mm from the grasp: %d %% "
+      "borne out (%s there)",
+      1000 * (pushed.translation() - (*achieved)->translation()).norm(),
+      int(std::lround(100 * support)),
+      planned < 0 ? "none" : (std::to_string(int(std::lround(100 * planned))) + " %").c_str());
+  log(line);
+  *achieved = pushed;
+  f->tracked = tracked;
+  f->track = track;
+  f->mask = std::move(mask);
+  *held_B = std::move(at_B);
+  return true;
+}
+
 // After the lift: how much of the object's points `points_O` the lift's frame bears out where the
 // grasp holds it (`*achieved`, moved to where the frame shows it in the hand) and where it rested
-// (T_B_O_rest); -1 where none is in view.
+// (T_B_O_rest); -1 where none is in view. The grasp where the hold test's close left the model
+// (closing the fingers may push the object centimetres) is taken instead of `*achieved` where
+// the frame bears it out more (pushedIfBorneOut).
 struct LiftCheck {
   double inHand = -1, onTable = -1;
   std::optional<HeldFrame> frame;  // the lift's frame
   Aabb heldBox;                    // the object's points where the frame shows it in the hand
+  bool registered = false;         // the grasp registered with the lift's frame
+  bool pushed = false;             // the grasp where the hold test's close pushed the model
+  // Taken where the hold test's close pushed the model (a prediction good to millimetres) and
+  // not registered with the lift's frame (too few of its points in view there): the grasp's
+  // first frames are to register it (ScanSession::confirmGraspOnNextFrames). A grasp as the hand
+  // achieved it is not: registering the model so far, which lacks the faces the camera sees in
+  // the hand, pulls it towards them (the remote's grasp, right, moved 5.7 mm).
+  bool toConfirm() const { return pushed && !registered; }
 };
 LiftCheck checkAfterLift(ScanSession& session, RobotInterface& robot, DepthSensor& sensor,
                          const GraspCandidate& c, const Iso3& T_B_O_rest,
@@ -366,12 +435,19 @@ LiftCheck checkAfterLift(ScanSession& session, RobotInterface& robot, DepthSenso
   if (!f) return out;
   const DepthImage& d = f->d;
   const CameraIntrinsics& K = sensor.camera().intrinsics;
+  // Where the hold test's close left the model, carried onto the grasp the hand achieved.
+  std::optional<Iso3> pushed;
+  if (c.T_O_palm_closed && c.hold_close_m > 0.002)
+    pushed = **achieved * c.T_O_palm.inverse() * *c.T_O_palm_closed;
+  if (pushed)
+    out.pushed = pushedIfBorneOut(session, robot, sensor, *pushed, points_O, options, scenes, log,
+                                  &*f, achieved, &held_B);
   const std::optional<Iso3>& tracked = f->tracked;
   if (!tracked) log("tracking refused the lift's frame: " + f->track.reason);
   if (tracked && options.tracking.enabled && options.tracking.in_hand) {
     const JointVector q = robot.joints();
     *achieved = graspInHand(session, m, q, d, f->mask, f->aim, *tracked, f->track, c, **achieved,
-                            options.tracking, log);
+                            options.tracking, log, &out.registered);
     const Iso3 T_B_O = m.tipPose(q) * (*achieved)->inverse();
     for (size_t k = 0; k < points_O.size(); ++k) held_B[k] = T_B_O * points_O[k];
   }
@@ -385,6 +461,7 @@ LiftCheck checkAfterLift(ScanSession& session, RobotInterface& robot, DepthSenso
         found && found->second > out.inHand) {
       *achieved = found->first;
       out.inHand = found->second;
+      out.registered = true;
     }
   const Iso3 T_B_O = m.tipPose(robot.joints()) * (*achieved)->inverse();
   for (const Vec3& p : points_O) out.heldBox.extend(T_B_O * p);
@@ -462,12 +539,21 @@ PickAttempt attemptOf(const GraspCandidate& c, int rank, const RobotModel& m) {
   a.pose = c.pose;
   a.hold_test = c.hold;
   a.hold_margin = c.hold_margin;
+  a.hold_close_m = c.hold_close_m;
   a.hold_failure = c.hold_failure;
   a.palm_contact = c.palm_contact;
   a.epsilon = c.epsilon;
   a.pinch = c.pinch;
   return a;
 }
+
+// A fraction borne out as a percentage; "none in view" when negative.
+std::string percent(double f) {
+  return f < 0 ? std::string("none in view") : std::to_string(int(std::lround(100 * f))) + " %";
+}
+
+// In-hand frames that try to register a grasp the lift's frame did not.
+constexpr int kConfirmFrames = 10;
 
 struct PickUp {
   std::optional<Iso3> achieved;
@@ -533,9 +619,6 @@ PickUp pickAndVerify(ScanSession& session, RobotInterface& robot, DepthSensor& s
     const LiftCheck lift = checkAfterLift(session, robot, sensor, c, T_B_O_rest, points_O, options,
                                           scenes, log, &achieved);
     const double inHand = lift.inHand, onTable = lift.onTable;
-    auto percent = [](double f) {
-      return f < 0 ? std::string("none in view") : std::to_string(int(std::lround(100 * f))) + " %";
-    };
     log("after the lift: the object's points borne out in the hand " + percent(inHand) +
         ", where it rested " + percent(onTable));
     if (inHand > 0.5) attempt.shift_m = (achieved->translation() - c.T_O_palm.translation()).norm();
@@ -552,6 +635,8 @@ PickUp pickAndVerify(ScanSession& session, RobotInterface& robot, DepthSensor& s
       continue;
     }
     record(PickOutcome::kPicked);
+    if (lift.toConfirm() && options.tracking.enabled && options.tracking.in_hand)
+      session.confirmGraspOnNextFrames(kConfirmFrames);
     out.achieved = achieved;
     out.picked = c;
     break;
@@ -766,6 +851,7 @@ Json attemptsJson(const std::vector<PickAttempt>& attempts) {
              {"pose", a.pose},
              {"hold_test", a.hold_test < 0 ? Json() : Json(a.hold_test == 1)},
              {"hold_margin", a.hold_margin < 0 ? Json() : Json(a.hold_margin == 1)},
+             {"hold_close_push_mm", a.hold_close_m < 0 ? Json() : Json(1000 * a.hold_close_m)},
              {"hold_failure", a.hold_test == 0 ? Json(holdFailureName(a.hold_failure)) : Json()},
              {"kind", a.palm_contact ? "enveloping" : "fingertips"},
              {"epsilon", a.epsilon},
@@ -799,6 +885,8 @@ std::vector<PickAttempt> attemptsFrom(const Json& j) {
       a.hold_test = e.at("hold_test").is_null() ? -1 : int(e.at("hold_test").get<bool>());
       const Json margin = e.value("hold_margin", Json());  // absent before the margin
       a.hold_margin = margin.is_null() ? -1 : int(margin.get<bool>());
+      const Json push = e.value("hold_close_push_mm", Json());  // absent before it was recorded
+      a.hold_close_m = push.is_number() ? push.get<double>() / 1000 : -1;
       const Json failure = e.value("hold_failure", Json());  // absent before it was recorded
       if (failure.is_string() && !parseHoldFailure(failure.get<std::string>(), &a.hold_failure))
         throw Error("pick-up attempts: unknown hold_failure \"" + failure.get<std::string>() +

@@ -182,6 +182,18 @@ std::vector<std::pair<std::optional<Iso3>, TrackResult>> registerModelAt(
   return out;
 }
 
+double surfaceGap(const TriangleDistanceIndex& surface_O, const std::vector<Vec3>& points_O,
+                  const Iso3& T_a, const Iso3& T_b) {
+  if (points_O.empty() || surface_O.empty()) return 0;
+  const Iso3 T_ab = T_a.inverse() * T_b;
+  const size_t stride = std::max<size_t>(1, points_O.size() / 1000);
+  double sum = 0;
+  int n = 0;
+  for (size_t i = 0; i < points_O.size(); i += stride, ++n)
+    sum += surface_O.distance(T_ab * points_O[i]);
+  return sum / n;
+}
+
 // How far a depth frame bears out object points `points_B`: of those in view whose pixel
 // measured something, the fraction measured within 1 cm of the point's depth, against those
 // measured more than 1 cm behind it (the camera sees through where the point should be). Points

@@ -196,6 +196,7 @@ struct ScanSession::State {
   std::vector<Vec3> supportPoints;    // measured model surface, palm frame (FrameChecks)
   std::vector<JointVector> viewPath;  // the open view's waypoints (FrameChecks)
   int unsupportedStreak = 0;          // frames in a row not showing the object in the hand
+  int confirmFrames = 0;              // confirmGraspOnNextFrames: frames left to try
   // TrackingOptions::slip_check: the object is moving in the hand (since the grasp was at
   // slipFrom), the event's record so far.
   bool slipping = false;
@@ -596,9 +597,49 @@ void ScanSession::beginGrasp(const Iso3& T_O_palm, const JointVector& q, const A
     s.initialDirs = fibonacciSphere(s.options.initial_views);
 }
 
+void ScanSession::confirmGraspOnNextFrames(int frames) {
+  if (frames < 0) throw Error("confirmGraspOnNextFrames: frames must be >= 0");
+  s_->confirmFrames = frames;
+}
+
+void ScanSession::confirmGrasp(const DepthImage& depth, const JointVector& q, const Iso3& T_B_C) {
+  State& s = *s_;
+  const RobotModel& m = *s.model;
+  --s.confirmFrames;
+  // The camera relative to the palm as tracking has it (reported where it refuses the frame).
+  TrackResult handOnly;
+  const std::optional<Iso3> T_B_C_hand = trackedCameraPose(depth, q, T_B_C, s.T_O_palm, &handOnly);
+  const Iso3 T_B_C_used = T_B_C_hand ? *T_B_C_hand : T_B_C;
+  const std::vector<uint8_t> mask =
+      robotPixelMask(depth, T_B_C_used, q, s.scenes, s.camera, s.options.t_hand_m,
+                     s.options.carve_radius_px, /*with_table=*/false);
+  TrackResult r;
+  const std::optional<Iso3> grasp = registerHeldObject(depth, mask, q, T_B_C_used, s.T_O_palm, &r);
+  if (!grasp) return;
+  const Iso3 moved = grasp->inverse() * s.T_O_palm;  // in the palm frame
+  char line[160];
+  std::snprintf(line, sizeof line,
+                "the grasp confirmed by registration: the object %.1f mm and %.1f° from where the "
+                "grasp had it",
+                1000 * moved.translation().norm(),
+                180 / M_PI * Eigen::AngleAxisd(moved.linear()).angle());
+  log(line);
+  s.confirmFrames = 0;
+  s.T_O_palm = *grasp;
+  for (std::vector<SurfacePoint>* set : {&s.objectPoints, &s.slipPoints})
+    for (SurfacePoint& p : *set) {
+      p.p = moved * p.p;
+      p.n = moved.linear() * p.n;
+    }
+  for (Vec3& p : s.objectOccluders) p = moved * p;
+  for (Vec3& p : s.supportPoints) p = moved * p;
+  s.buildNearHand(m, s.qGrasp, s.T_O_palm);
+}
+
 void ScanSession::endGrasp() {
   if (s_->viewOpen) finishView();
   s_->holding = false;
+  s_->confirmFrames = 0;
   closeSlip();
 }
 
@@ -970,6 +1011,7 @@ FrameReport ScanSession::addFrame(const DepthImage& input, const JointVector& q,
   Iso3 T_B_C_used = T_B_C;
   TrackResult track;
   if (s.options.tracking.enabled) {
+    if (s.confirmFrames > 0) confirmGrasp(depth, q, T_B_C);
     const std::optional<Iso3> tracked = trackedCameraPose(depth, q, T_B_C, s.T_O_palm, &track);
     const Iso3 T_C_palm = T_B_C.inverse() * s.model->tipPose(q);
     const Iso3 correction = T_C_palm.inverse() * track.correction * T_C_palm;
@@ -994,10 +1036,9 @@ FrameReport ScanSession::addFrame(const DepthImage& input, const JointVector& q,
     return refuse(FrameRefusal::kObjectNotInHand, why);
   }
   s.lastHeldQ = q;
-  // With tracking, the robot as the frame shows it: the joint offsets that put the palm where
-  // the frame says (armOffsetsFromPalmError) place the other links too, for the robot's pixels
-  // and the space inside it (Fig. 3 c); the camera where it reported itself, the palm as
-  // tracked. Without, the reported joints.
+  // With tracking, the robot as the frame shows it: the joint offsets that put the palm where the
+  // frame says (armOffsetsFromPalmError) place the other links too (robot pixels, the space inside
+  // it: Fig. 3 c); the camera where it reported itself, the palm as tracked. Without, as reported.
   const bool tracking = s.options.tracking.enabled;
   const JointVector qSeen =
       tracking ? JointVector(q + armOffsetsFromPalmError(*s.model, q, s.correction)) : q;

@@ -24,6 +24,7 @@
 //
 // Stability: robot/wrench.h (Ferrari–Canny ε on the model's surface samples near the closed
 // hand, Coulomb friction μ); ε > 0 means force closure.
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -197,8 +198,11 @@ struct GraspCandidate {
   int reachable_views = 0;  // views Alg. 1 could reach with this grasp
   int hold = -1;            // the hold test: 1 held, 0 did not, -1 not tested
   HoldFailure hold_failure = HoldFailure::kNone;  // why it did not (HoldTrial::failure)
-  int hold_margin = -1;  // held also with the test's margin (1), not (0), not tried (-1)
-  int hold_robust = -1;  // held also with the model moved by the pose tolerance (1), not (0)
+  int hold_margin = -1;      // held also with the test's margin (1), not (0), not tried (-1)
+  int hold_robust = -1;      // held also with the model moved by the pose tolerance (1), not (0)
+  double hold_close_m = -1;  // the hold test: how far its close pushed the model (-1 untested)
+  // … and the grasp where its close left the model (HoldTrial::T_O_palm_closed).
+  std::optional<Iso3> T_O_palm_closed;
 };
 
 // What became of one candidate pose.

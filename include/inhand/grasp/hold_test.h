@@ -8,6 +8,7 @@
 // density), lifts it as the arm lifts, turns it, and sees whether the model stays in the hand.
 // The model is what the scan knows (the observed surface, closed over what it hides), never the
 // true object.
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -104,9 +105,12 @@ const char* holdFailureName(HoldFailure f);
 bool parseHoldFailure(const std::string& name, HoldFailure* out);
 
 struct HoldTrial {
-  bool held = false;   // still in the hand, moved at most max_slip_m
-  double slip_m = 0;   // how far the model moved in the hand (its centre, from the close)
-  double lift_kg = 0;  // the model's mass
+  bool held = false;         // still in the hand, moved at most max_slip_m
+  double slip_m = 0;         // how far the model moved in the hand (its centre, from the close)
+  double lift_kg = 0;        // the model's mass
+  double close_moved_m = 0;  // how far the close pushed the model (its centre)
+  // The grasp (the palm in the model's frame) where the close left it, when it touched.
+  std::optional<Iso3> T_O_palm_closed;
   HoldFailure failure = HoldFailure::kNone;
 };
 

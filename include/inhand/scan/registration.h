@@ -8,6 +8,7 @@
 #include <utility>
 #include <vector>
 
+#include "inhand/geometry/surface_distance.h"
 #include "inhand/mesh/extract.h"
 #include "inhand/robot/robot_model.h"
 #include "inhand/scan/tracking.h"
@@ -44,6 +45,13 @@ std::vector<std::pair<std::optional<Iso3>, TrackResult>> registerModelAt(
     const RegistrationModel& model, const DepthImage& depth, const std::vector<uint8_t>& hidden,
     const Iso3& T_B_C, const CameraIntrinsics& K, const NoiseModelOptions& noise,
     const TrackingOptions& options, const std::vector<Iso3>& starts, bool in_hand = false);
+
+// How far apart poses T_a and T_b put a model's surface: the mean distance of its points
+// `points_O` (at most 1000 of them, evenly strided) placed at T_b from its surface `surface_O`
+// placed at T_a. About the registration's noise where a frame cannot tell the two apart (a can
+// turned about its axis); near the shift where the object really moved. 0 when either is empty.
+double surfaceGap(const TriangleDistanceIndex& surface_O, const std::vector<Vec3>& points_O,
+                  const Iso3& T_a, const Iso3& T_b);
 
 // How far a depth frame bears out object points `points_B`: of those in view whose pixel
 // measured something, the fraction measured within 1 cm of the point's depth, against those

@@ -146,6 +146,12 @@ class ScanSession {
   // trajectory (empty: a 10 cm cube around the centre). The first grasp of a session starts with
   // the initial trajectory (options.initial_views directions); later grasps go to Alg. 1 at once.
   void beginGrasp(const Iso3& T_O_palm, const JointVector& q, const Aabb& object_box_O = Aabb());
+  // The next grasp (or the one just begun) is not confirmed (no frame registered the object in
+  // the hand: too few of its points in view after the lift): with tracking on, each of the next
+  // `frames` in-hand frames first registers the model so far with the frame from the grasp
+  // (registerHeldObject, the robot's pixels hidden), and the first that aligns moves the grasp
+  // there before anything is fused. 0 stops it; endGrasp too.
+  void confirmGraspOnNextFrames(int frames);
   // The object has left the hand (put down): frames are no longer fused until the next grasp.
   void endGrasp();
   bool holding() const;
@@ -271,6 +277,8 @@ class ScanSession {
   // T_C_palm: the palm again from the hand alone, then T_O_palm and the palm-frame points.
   void moveGrasp(const DepthImage& depth, const JointVector& q, const Iso3& T_B_C,
                  const Iso3& T_C_palm, const TrackResult& r, Iso3 moved);
+  // confirmGraspOnNextFrames' registration on one frame (camera reported at T_B_C).
+  void confirmGrasp(const DepthImage& depth, const JointVector& q, const Iso3& T_B_C);
   // A slip under way ends, at rest in the hand (`settled`) or with the grasp's views; its record
   // is kept when it moved the grasp.
   void closeSlip(bool settled = false);
