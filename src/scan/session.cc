@@ -311,6 +311,19 @@ struct ScanSession::State {
   void readTorques(const Json& h);
   // The tracking state a checkpoint holds: the last correction, the jump check's, the filter's.
   void readTrackingFilter(const Json& h, const std::function<Error(const std::string&)>& bad);
+  // The object moved in the hand by `moved` (palm frame): the model's points in the palm frame
+  // move with it, T_O_palm the other way.
+  void moveHeldModel(const RobotModel& robot, const Iso3& moved) {
+    T_O_palm = T_O_palm * moved.inverse();
+    for (std::vector<SurfacePoint>* set : {&objectPoints, &slipPoints})
+      for (SurfacePoint& p : *set) {
+        p.p = moved * p.p;
+        p.n = moved.linear() * p.n;
+      }
+    for (Vec3& p : objectOccluders) p = moved * p;
+    for (Vec3& p : supportPoints) p = moved * p;
+    buildNearHand(robot, qGrasp, T_O_palm);
+  }
   void buildNearHand(const RobotModel& robot, const JointVector& q, const Iso3& T_O_palm_) {
     const HandGeometry hand(robot, q, T_O_palm_);
     const ViewQualityOptions& vq = options.planner.quality;
@@ -625,15 +638,7 @@ void ScanSession::confirmGrasp(const DepthImage& depth, const JointVector& q, co
                 180 / M_PI * Eigen::AngleAxisd(moved.linear()).angle());
   log(line);
   s.confirmFrames = 0;
-  s.T_O_palm = *grasp;
-  for (std::vector<SurfacePoint>* set : {&s.objectPoints, &s.slipPoints})
-    for (SurfacePoint& p : *set) {
-      p.p = moved * p.p;
-      p.n = moved.linear() * p.n;
-    }
-  for (Vec3& p : s.objectOccluders) p = moved * p;
-  for (Vec3& p : s.supportPoints) p = moved * p;
-  s.buildNearHand(m, s.qGrasp, s.T_O_palm);
+  s.moveHeldModel(m, moved);
 }
 
 void ScanSession::endGrasp() {
@@ -1072,16 +1077,7 @@ void ScanSession::moveGrasp(const DepthImage& depth, const JointVector& q, const
     s.correctionQ = q;
     s.jumpPending.reset();
   }
-  // Points in the palm frame move with the object, T_O_palm the other way.
-  s.T_O_palm = s.T_O_palm * moved.inverse();
-  for (std::vector<SurfacePoint>* set : {&s.objectPoints, &s.slipPoints})
-    for (SurfacePoint& p : *set) {
-      p.p = moved * p.p;
-      p.n = moved.linear() * p.n;
-    }
-  for (Vec3& p : s.objectOccluders) p = moved * p;
-  for (Vec3& p : s.supportPoints) p = moved * p;
-  s.buildNearHand(m, s.qGrasp, s.T_O_palm);
+  s.moveHeldModel(m, moved);
 }
 
 std::string ScanSession::followSlip(const DepthImage& depth, const JointVector& q,
