@@ -39,6 +39,26 @@ ScanOptions fastOptions() {
   return o;
 }
 
+// The planner's first grasp of `mesh` resting in `world`, picked up and lifted as a scan does:
+// the candidate, the robot's joints at the lift, and the object's true pose there.
+struct Lifted {
+  GraspCandidate c;
+  JointVector q;
+  Iso3 truth;
+};
+std::optional<Lifted> liftByFirstGrasp(SimWorld& world, const TriangleMesh& mesh) {
+  const GraspGeneration g =
+      generateGrasps(wam(), mesh, world.restPose(), wam().home(), GraspOptions{});
+  if (g.candidates.empty()) return std::nullopt;
+  Lifted l{g.candidates.front(), JointVector(), Iso3::Identity()};
+  l.q = wam().withArm(l.c.q, wam().arm(l.c.q_lift));
+  world.held = true;
+  world.T_O_palm = l.c.T_O_palm;
+  world.q = l.q;
+  l.truth = wam().tipPose(l.q) * l.c.T_O_palm.inverse();
+  return l;
+}
+
 // The coffee can held by the default grasp in a fresh simulator.
 struct Sim {
   TriangleMesh can = loadObject("builtin:coffee_can");
@@ -435,14 +455,11 @@ TEST(Session, AnObjectPushedInTheHandIsFoundFromThePointsNearTheHand) {
     session.addFrameOfObjectAt(d, world.q, *aim, rest, &table);
   }
   // Picked up from the table by the planner's first grasp and lifted, as a scan does.
-  const GraspGeneration g = generateGrasps(wam(), can, rest, wam().home(), GraspOptions{});
-  ASSERT_FALSE(g.candidates.empty());
-  const GraspCandidate& c = g.candidates.front();
-  const JointVector q = wam().withArm(c.q, wam().arm(c.q_lift));
-  world.held = true;
-  world.T_O_palm = c.T_O_palm;
-  world.q = q;
-  const Iso3 truth = wam().tipPose(q) * c.T_O_palm.inverse();
+  const std::optional<Lifted> lifted = liftByFirstGrasp(world, can);
+  ASSERT_TRUE(lifted);
+  const GraspCandidate& c = lifted->c;
+  const JointVector& q = lifted->q;
+  const Iso3& truth = lifted->truth;
   const std::optional<Iso3> aim =
       wam().camera().aimAt(truth * can.bounds().center().cast<double>());
   ASSERT_TRUE(aim);
@@ -513,16 +530,12 @@ TEST(Session, AGraspNotConfirmedAfterTheLiftIsRegisteredOnItsFirstFrame) {
     o.tracking.in_hand = true;
     ScanSession session(wam(), sensor.camera(), NoiseModelOptions{}, o, MultiGraspOptions{},
                         Vec3::Zero());
-    const GraspGeneration g =
-        generateGrasps(wam(), box, world.restPose(), wam().home(), GraspOptions{});
-    EXPECT_FALSE(g.candidates.empty());
-    if (g.candidates.empty()) return Iso3::Identity();
-    const GraspCandidate& c = g.candidates.front();
-    const JointVector q = wam().withArm(c.q, wam().arm(c.q_lift));
-    world.held = true;
-    world.T_O_palm = c.T_O_palm;
-    world.q = q;
-    const Iso3 truth = wam().tipPose(q) * c.T_O_palm.inverse();
+    const std::optional<Lifted> lifted = liftByFirstGrasp(world, box);
+    EXPECT_TRUE(lifted);
+    if (!lifted) return Iso3::Identity();
+    const GraspCandidate& c = lifted->c;
+    const JointVector& q = lifted->q;
+    const Iso3& truth = lifted->truth;
     const std::optional<Iso3> aim =
         wam().camera().aimAt(truth * box.bounds().center().cast<double>());
     EXPECT_TRUE(aim);
