@@ -406,6 +406,33 @@ TEST(Session, AnObjectThatTippedIsFoundAgainOnTheTable) {
 // near where it looks; from heldObjectStarts (the believed pose moved onto the frame's points
 // near the hand) the best-supported registration puts the can's axis within 5 mm and 5° of the
 // truth, borne out by the frame as much as the true pose is (to 5 %).
+// depthSupportCounts against hand-counted answers, a wall 0.5 m from the camera: points on it are
+// borne out, points in front of it seen through, points behind it or at hidden pixels and points
+// out of view not counted; depthSupport is the share borne out of those counted. A pose that hides
+// most of its points gets a high share of a few: the pushed grasp must also win in number.
+TEST(Session, DepthSupportCountsThePointsBorneOutAndSeenThroughAndNotTheRest) {
+  const CameraIntrinsics K = DepthCameraOptions{}.intrinsics;
+  DepthImage d(K.width, K.height);
+  for (float& z : d.depth_m) z = 0.5f;
+  std::vector<uint8_t> hidden(d.depth_m.size(), 0);
+  for (int u = 0; u < 100; ++u) hidden[size_t(240) * size_t(K.width) + size_t(u)] = 1;
+  std::vector<Vec3> points;
+  auto at = [&](double u, double v, double z) { points.push_back(z * K.rayZ1(u, v)); };
+  for (int k = 0; k < 10; ++k) at(300 + 5 * k, 100, 0.5 + 0.0009 * (k - 5));  // on the wall
+  for (int k = 0; k < 5; ++k) at(300 + 5 * k, 200, 0.47);                     // 3 cm in front
+  for (int k = 0; k < 7; ++k) at(300 + 5 * k, 300, 0.55);                     // 5 cm behind
+  for (int k = 0; k < 3; ++k) at(10 + 20 * k, 240, 0.5);                      // hidden pixels
+  for (int k = 0; k < 2; ++k) at(-50 - 10 * k, 240, 0.5);                     // out of view
+  const Iso3 T_B_C = Iso3(Eigen::Translation3d(0.1, -0.2, 0.3));
+  for (Vec3& p : points) p = T_B_C * p;
+  const SupportCounts c = depthSupportCounts(d, T_B_C, K, hidden, points);
+  EXPECT_EQ(c.support, 10);
+  EXPECT_EQ(c.against, 5);
+  EXPECT_DOUBLE_EQ(depthSupport(d, T_B_C, K, hidden, points), 10.0 / 15.0);
+  // Nothing counted: -1.
+  EXPECT_EQ(depthSupport(d, T_B_C, K, hidden, {T_B_C * Vec3(0, 0, 0.6)}), -1.0);
+}
+
 // surfaceGap against hand-worked answers: a can turned about its own axis puts its surface where
 // it was (a frame cannot tell the two apart); a box's top face lifted 5 mm is 5 mm off its top.
 TEST(Session, SurfaceGapIsZeroForATurnThatKeepsTheSurfaceAndTheShiftOtherwise) {

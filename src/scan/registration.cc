@@ -198,8 +198,9 @@ double surfaceGap(const TriangleDistanceIndex& surface_O, const std::vector<Vec3
 // measured something, the fraction measured within 1 cm of the point's depth, against those
 // measured more than 1 cm behind it (the camera sees through where the point should be). Points
 // in front of their measurement (occluded) and robot pixels do not count. -1: none counted.
-double depthSupport(const DepthImage& d, const Iso3& T_B_C, const CameraIntrinsics& K,
-                    const std::vector<uint8_t>& hidden, const std::vector<Vec3>& points_B) {
+SupportCounts depthSupportCounts(const DepthImage& d, const Iso3& T_B_C, const CameraIntrinsics& K,
+                                 const std::vector<uint8_t>& hidden,
+                                 const std::vector<Vec3>& points_B) {
   const Iso3 T_C_B = T_B_C.inverse();
   int support = 0, against = 0;
   for (const Vec3& p_B : points_B) {
@@ -216,7 +217,13 @@ double depthSupport(const DepthImage& d, const Iso3& T_B_C, const CameraIntrinsi
     else if (z > p.z() + 0.01)
       ++against;
   }
-  return support + against == 0 ? -1.0 : double(support) / (support + against);
+  return {support, against};
+}
+
+double depthSupport(const DepthImage& d, const Iso3& T_B_C, const CameraIntrinsics& K,
+                    const std::vector<uint8_t>& hidden, const std::vector<Vec3>& points_B) {
+  const SupportCounts c = depthSupportCounts(d, T_B_C, K, hidden, points_B);
+  return c.support + c.against == 0 ? -1.0 : double(c.support) / (c.support + c.against);
 }
 
 // A frame from the sensor that can be used: one that arrived (the camera's size) with depth in

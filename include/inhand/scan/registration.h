@@ -60,6 +60,13 @@ double surfaceGap(const TriangleDistanceIndex& surface_O, const std::vector<Vec3
 // -1: none counted.
 double depthSupport(const DepthImage& d, const Iso3& T_B_C, const CameraIntrinsics& K,
                     const std::vector<uint8_t>& hidden, const std::vector<Vec3>& points_B);
+// The counts behind depthSupport: the points borne out, and those the camera sees through.
+struct SupportCounts {
+  int support = 0, against = 0;
+};
+SupportCounts depthSupportCounts(const DepthImage& d, const Iso3& T_B_C, const CameraIntrinsics& K,
+                                 const std::vector<uint8_t>& hidden,
+                                 const std::vector<Vec3>& points_B);
 
 // Pixels of `d` whose point lies below height `below_z` (base frame; the camera at T_B_C)
 // marked in `marked` (one per pixel).
