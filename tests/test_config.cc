@@ -238,3 +238,22 @@ TEST(Config, PhysicsTurnsTheStraightLiftInViewOnUnlessTheConfigSetsIt) {
             both(false, true));
   EXPECT_EQ(lift(R"({"grasp": {"lift_straight": true}})"), both(true, false));
 }
+
+// What physics implies, for a command that turns physics on itself (`inhand regrasp-test`): with
+// no config, every one of the four; a config that sets one keeps its value.
+TEST(Config, PhysicsImpliedOptionsAreSetWhereTheConfigIsSilent) {
+  ScanConfig none;
+  setPhysicsImplied(Json(), &none);
+  EXPECT_TRUE(none.scan.tracking.in_hand);
+  EXPECT_EQ(none.multi.grasp.settle_s, GraspOptions::kSettleSeconds);
+  EXPECT_TRUE(none.multi.grasp.lift_straight);
+  EXPECT_TRUE(none.multi.grasp.lift_in_view);
+  const Json j = Json::parse(R"({"tracking": {"in_hand": false}, "grasp": {"settle_s": 0}})");
+  ScanConfig some;
+  readScanConfig(j, "cfg", &some);
+  setPhysicsImplied(j, &some);
+  EXPECT_FALSE(some.scan.tracking.in_hand);
+  EXPECT_EQ(some.multi.grasp.settle_s, 0.0);
+  EXPECT_TRUE(some.multi.grasp.lift_straight);
+  EXPECT_TRUE(some.multi.grasp.lift_in_view);
+}

@@ -10,6 +10,7 @@
 #include "inhand/config/scan_config.h"
 #include "inhand/core/error.h"
 #include "inhand/core/file_util.h"
+#include "inhand/core/json_util.h"
 #include "inhand/core/pose.h"
 #include "inhand/driver/simulated_scan.h"
 #include "inhand/geometry/stable_poses.h"
@@ -94,11 +95,14 @@ PoseError poseError(const TriangleMesh& object, const Iso3& truth, const Iso3& f
 // command line checked.
 ScanConfig regraspConfig(const RegraspArgs& args) {
   ScanConfig o;
-  if (!args.config.empty()) readScanConfigFile(args.config, &o);
+  const Json config = args.config.empty() ? Json() : readJsonFile(args.config);
+  if (!args.config.empty()) readScanConfig(config, args.config, &o);
   if (!args.robot.empty()) o.robot = args.robot;
   if (o.robot.empty()) o.robot = defaultRobotConfig();
   o.sim.seed = args.seed;
-  o.sim.physics.enabled = true;  // the pick-up and the lift in physics
+  // The pick-up and the lift in physics, with what physics implies where the config is silent.
+  o.sim.physics.enabled = true;
+  setPhysicsImplied(config, &o);
   if (std::string p = o.validate(); !p.empty()) throw Error(p);
   if (!(std::isfinite(args.heading_deg) && std::abs(args.heading_deg) <= 360))
     throw Error("--heading: must be degrees in [-360, 360]");

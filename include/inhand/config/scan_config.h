@@ -35,9 +35,12 @@ struct ScanConfigRow {
 
 // Reads the keys present in `j` over `config` (the others keep their values). `where` names the
 // source in errors ("FILE.planner.t_q: expected a number"). Throws Error. A `j` that turns
-// sim.physics on and does not set tracking.in_hand turns that on too (with physics the closing
-// fingers move the object in the hand).
+// sim.physics on also sets what physics implies (setPhysicsImplied).
 void readScanConfig(const Json& j, const std::string& where, ScanConfig* config);
+// What a hand that moves the object needs, for a scan with physics on: tracking.in_hand,
+// grasp.settle_s (GraspOptions::kSettleSeconds), grasp.lift_straight and grasp.lift_in_view, each
+// turned on unless the config `j` (an object, or null: none) sets it.
+void setPhysicsImplied(const Json& j, ScanConfig* config);
 // The same from a JSON file (the error names the file).
 void readScanConfigFile(const std::filesystem::path& file, ScanConfig* config);
 // Every option with its value.
