@@ -63,6 +63,10 @@ void expectSameScan(const SimulatedScan& a, const SimulatedScan& b) {
   if (x.table_top && y.table_top) {
     EXPECT_EQ(attemptsJson(x.table_top->attempts), attemptsJson(y.table_top->attempts));
     EXPECT_EQ(x.table_top->poses.size(), y.table_top->poses.size());
+    // The model aligned again with the table-top frame the checkpoint carries, as it was.
+    EXPECT_EQ(tableTopRecordJson(*x.table_top).at("reanchor"),
+              tableTopRecordJson(*y.table_top).at("reanchor"));
+    EXPECT_TRUE(x.table_top->reanchor.found);
   }
 }
 
@@ -242,4 +246,17 @@ TEST(Records, RoundTripAndReadTheNamesOlderCheckpointsUsed) {
   EXPECT_EQ(h.ranked[0].epsilon, 0.1);
   k["pick_up_attempts"] = Json::array({{{"outcome", "fell"}}});
   EXPECT_THROW(graspRecordFrom(k), std::exception);  // an outcome with no name
+
+  TableTopRecord t;  // the model aligned again with the table-top frame
+  t.reanchor.tried = t.reanchor.found = t.reanchor.applied = true;
+  t.reanchor.gap_m = 0.0012;
+  t.reanchor.shift_m = 0.0005;
+  t.reanchor.turn_rad = 0.1;
+  const TableTopRecord u = tableTopRecordFrom(tableTopRecordJson(t));
+  EXPECT_TRUE(u.reanchor.applied);
+  EXPECT_EQ(u.reanchor.gap_m, 0.0012);
+  EXPECT_NEAR(u.reanchor.turn_rad, 0.1, 1e-12);
+  Json old = tableTopRecordJson(t);  // a record written before it had one
+  old.erase("reanchor");
+  EXPECT_FALSE(tableTopRecordFrom(old).reanchor.tried);
 }

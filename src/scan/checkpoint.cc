@@ -48,6 +48,45 @@ ObjectModel modelFrom(const Json& j) {
   return m;
 }
 
+// The table-top anchor: its depths (floats round-trip exactly) and its hidden pixels as run
+// lengths, alternating from a run of pixels not hidden.
+Json anchorJson(const TableAnchor& a) {
+  Json runs = Json::array();
+  uint8_t state = 0;
+  size_t run = 0;
+  for (uint8_t h : a.hidden) {
+    if (uint8_t(h != 0) != state) {
+      runs.push_back(run);
+      state ^= 1;
+      run = 0;
+    }
+    ++run;
+  }
+  runs.push_back(run);
+  return {{"width", a.depth.width}, {"height", a.depth.height},  {"depth_m", a.depth.depth_m},
+          {"hidden_runs", runs},    {"T_B_C", isoJson(a.T_B_C)}, {"T_B_O", isoJson(a.T_B_O)}};
+}
+TableAnchor anchorFrom(const Json& j) {
+  TableAnchor a;
+  a.depth.width = j.at("width").get<int>();
+  a.depth.height = j.at("height").get<int>();
+  a.depth.depth_m = j.at("depth_m").get<std::vector<float>>();
+  const size_t n = a.depth.depth_m.size();
+  if (a.depth.width <= 0 || a.depth.height <= 0 || n != size_t(a.depth.width) * a.depth.height)
+    throw Error("table anchor: depth size differs from width × height");
+  uint8_t state = 0;
+  for (const Json& r : j.at("hidden_runs")) {
+    const size_t run = r.get<size_t>();
+    if (run > n - a.hidden.size()) throw Error("table anchor: hidden runs exceed the image");
+    a.hidden.insert(a.hidden.end(), run, state);
+    state ^= 1;
+  }
+  if (a.hidden.size() != n) throw Error("table anchor: hidden runs fall short of the image");
+  a.T_B_C = isoFrom(j.at("T_B_C"));
+  a.T_B_O = isoFrom(j.at("T_B_O"));
+  return a;
+}
+
 // A grasp's record and its model.
 Json graspJson(const GraspRecord& g) {
   Json j = graspRecordJson(g);
@@ -107,6 +146,7 @@ void saveScanCheckpoint(const std::filesystem::path& path, const ScanCheckpoint&
   if (!c.object_box_O.empty())
     scan["object_box_O"] = {vecJson(c.object_box_O.min), vecJson(c.object_box_O.max)};
   if (c.sofar->table_top) scan["table_top"] = tableTopRecordJson(*c.sofar->table_top);
+  if (c.anchor) scan["table_anchor"] = anchorJson(*c.anchor);
   c.session->save(path, scan);
 }
 
@@ -142,6 +182,7 @@ LoadedCheckpoint loadScanCheckpoint(const std::filesystem::path& path, const Rob
       out.object_box_O.extend(vecFrom(scan["object_box_O"].at(1)));
     }
     if (scan.contains("table_top")) out.sofar.table_top = tableTopRecordFrom(scan["table_top"]);
+    if (scan.contains("table_anchor")) out.anchor = anchorFrom(scan["table_anchor"]);
     out.extra = scan.at("extra");
   } catch (const Json::exception& e) {
     throw bad(e.what());

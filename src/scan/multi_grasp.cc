@@ -763,7 +763,8 @@ std::optional<Termination> regrasp(ScanSession& session, RobotInterface& robot, 
 // checkpoint), its views go on.
 void runGrasps(RobotInterface& robot, DepthSensor& sensor, ScanSession& session,
                const Iso3& T_O_palm0, const Iso3& T_B_O_start, GraspRecord next,
-               MultiGraspResult& out, const Aabb& box_O, int first = 0, bool resumed = false) {
+               MultiGraspResult& out, const Aabb& box_O, const TableAnchor* anchor = nullptr,
+               int first = 0, bool resumed = false) {
   Iso3 T_B_O_rest =
       T_B_O_start;  // where the object rests on the table (re-found after each put-down)
   const MultiGraspOptions& multi = session.multiOptions();
@@ -776,7 +777,8 @@ void runGrasps(RobotInterface& robot, DepthSensor& sensor, ScanSession& session,
   if (!resumed) next.T_O_palm = T_O_palm;
   for (int g = first;; ++g) {
     auto checkpoint = [&] {
-      if (progress.checkpoint) progress.checkpoint({&session, &out, g, &next, T_B_O_rest, box_O});
+      if (progress.checkpoint)
+        progress.checkpoint({&session, &out, g, &next, T_B_O_rest, box_O, anchor});
     };
     if (progress.stopRequested()) {
       all.termination = Termination::kInterrupted;
@@ -1081,6 +1083,11 @@ MultiGraspResult scanFromTable(RobotInterface& robot, DepthSensor& sensor, const
   tt.voxel_m = fitted.voxel_m;
   ScanSession session(m, sensor.camera(), noise, fitted, multi, object.centre_O);
   session.setProgress(progress);
+  std::optional<TableAnchor> anchor;
+  if (to.reanchor) {
+    anchor = TableAnchor{table.depth[0], table.robotMask[0], *aim, T_B_O_rest};
+    markBelow(anchor->depth, *aim, K, m.table().topZ() + 0.005, &anchor->hidden);
+  }
   fuseOnTable(session, table, q, *aim, T_B_O_rest, object.table_O, to.above_table_m);
   all.frames = session.summary().frames;
   all.fusion_s = session.summary().fusion_s;
@@ -1112,9 +1119,42 @@ MultiGraspResult scanFromTable(RobotInterface& robot, DepthSensor& sensor, const
   rec.candidates = tt.reachable;
   rec.tried = tt.tried;
   rec.generation_s = tt.seconds;
-  runGrasps(robot, sensor, session, *pick.achieved, T_B_O_now, rec, out, object.box_O);
+  runGrasps(robot, sensor, session, *pick.achieved, T_B_O_now, rec, out, object.box_O,
+            anchor ? &*anchor : nullptr);
+  if (anchor) reanchorModel(session, *anchor, to.reanchor_gap_m, &out);
   all.total_s = std::chrono::duration<double>(Clock::now() - t0).count();
   return out;
+}
+
+void reanchorModel(ScanSession& session, const TableAnchor& a, double gap_m,
+                   MultiGraspResult* out) {
+  ObjectModel& model = out->scan.model;
+  if (!out->table_top || model.mesh.empty() || session.progress().stopRequested()) return;
+  TableTopRecord::Reanchor& rec = out->table_top->reanchor;
+  rec = TableTopRecord::Reanchor{};
+  rec.tried = true;
+  const auto fit = session.registerObjectAt(a.depth, a.hidden, a.T_B_C, {a.T_B_O}).front();
+  if (!fit.first) {
+    rec.reason = fit.second.reason;
+    session.log("the model not aligned again with the table-top frame: " + rec.reason);
+    return;
+  }
+  rec.found = true;
+  const Iso3 fix = a.T_B_O.inverse() * *fit.first;  // frame O as the frame shows it
+  rec.shift_m = fix.translation().norm();
+  rec.turn_rad = rotationBetween(a.T_B_O, *fit.first);
+  rec.gap_m =
+      surfaceGap(TriangleDistanceIndex(model.mesh), observedVertices(model), a.T_B_O, *fit.first);
+  rec.applied = rec.gap_m > gap_m;
+  if (rec.applied)
+    for (Vec3f& v : model.mesh.vertices) v = (fix * v.cast<double>()).cast<float>();
+  char line[240];
+  std::snprintf(line, sizeof line,
+                "the model aligned again with the table-top frame: its surface %.2f mm off on "
+                "average (%.2f mm, %.2f°); %s",
+                1000 * rec.gap_m, 1000 * rec.shift_m, 180 / M_PI * rec.turn_rad,
+                rec.applied ? "moved there" : "kept where it was");
+  session.log(line);
 }
 
 MultiGraspResult resumeScan(RobotInterface& robot, DepthSensor& sensor, LoadedCheckpoint c,
@@ -1126,7 +1166,9 @@ MultiGraspResult resumeScan(RobotInterface& robot, DepthSensor& sensor, LoadedCh
   MultiGraspResult out = std::move(c.sofar);
   const double before = out.scan.total_s;
   runGrasps(robot, sensor, session, session.graspPose(), c.T_B_O_rest, c.current, out,
-            c.object_box_O, c.grasp, /*resumed=*/true);
+            c.object_box_O, c.anchor ? &*c.anchor : nullptr, c.grasp, /*resumed=*/true);
+  if (c.anchor)
+    reanchorModel(session, *c.anchor, session.multiOptions().table_top.reanchor_gap_m, &out);
   out.scan.total_s = before + std::chrono::duration<double>(Clock::now() - t0).count();
   return out;
 }

@@ -148,6 +148,14 @@ Json tableTopRecordJson(const TableTopRecord& t) {
           {"pick_up_attempts", attemptsJson(t.attempts)},
           {"grasp_poses", poses},
           {"volume", {{"size_m", t.volume_size_m}, {"voxel_m", t.voxel_m}}},
+          {"reanchor",
+           {{"tried", t.reanchor.tried},
+            {"found", t.reanchor.found},
+            {"applied", t.reanchor.applied},
+            {"gap_m", t.reanchor.gap_m},
+            {"shift_m", t.reanchor.shift_m},
+            {"turn_deg", t.reanchor.turn_rad * 180 / M_PI},
+            {"reason", t.reanchor.reason}}},
           {"seconds", t.seconds}};
 }
 
@@ -217,6 +225,16 @@ TableTopRecord tableTopRecordFrom(const Json& j) {
   }
   t.attempts = attemptsFrom(field(j, "pick_up_attempts", "attempts"));
   t.seconds = j.at("seconds").get<double>();
+  if (j.contains("reanchor")) {
+    const Json& r = j["reanchor"];
+    t.reanchor.tried = r.at("tried").get<bool>();
+    t.reanchor.found = r.at("found").get<bool>();
+    t.reanchor.applied = r.at("applied").get<bool>();
+    t.reanchor.gap_m = r.at("gap_m").get<double>();
+    t.reanchor.shift_m = r.at("shift_m").get<double>();
+    t.reanchor.turn_rad = r.at("turn_deg").get<double>() * M_PI / 180;
+    t.reanchor.reason = r.at("reason").get<std::string>();
+  }
   return t;
 }
 

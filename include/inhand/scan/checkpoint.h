@@ -10,6 +10,7 @@
 // under way, a re-grasp) is done again.
 #include <filesystem>
 #include <memory>
+#include <optional>
 
 #include "inhand/core/json_util.h"
 #include "inhand/scan/multi_grasp.h"
@@ -33,7 +34,8 @@ struct LoadedCheckpoint {
   GraspRecord current;
   Iso3 T_B_O_rest = Iso3::Identity();
   Aabb object_box_O;
-  Json extra;  // what the caller saved beside it
+  std::optional<TableAnchor> anchor;  // the table-top frame the model is anchored to
+  Json extra;                         // what the caller saved beside it
 };
 
 // Reads a checkpoint written by saveScanCheckpoint with the same robot, camera, noise and

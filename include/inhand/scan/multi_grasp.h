@@ -29,4 +29,14 @@ MultiGraspResult scanFromTable(RobotInterface& robot, DepthSensor& sensor, const
                                const ScanOptions& options, const MultiGraspOptions& multi,
                                const NoiseModelOptions& noise, const ScanProgress& progress = {});
 
+// The finished model (out->scan.model, frame O) aligned with `anchor`, a frame of the object
+// where it rested before the first pick-up (frame O is its pose there): a grasp's pose taken a
+// few degrees off turns every later frame, and so the model as a whole. The model is moved by
+// that alignment where it moves its surface more than gap_m on average (surfaceGap); below, the
+// alignment is not told from the frame's noise and bias. What was found and done:
+// out->table_top->reanchor (nothing without a table-top record or after a stop request).
+// scanFromTable and resumeScan call it last (TableTopOptions::reanchor).
+void reanchorModel(ScanSession& session, const TableAnchor& anchor, double gap_m,
+                   MultiGraspResult* out);
+
 }  // namespace inhand

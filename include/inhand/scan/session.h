@@ -31,6 +31,15 @@ namespace inhand {
 class ScanSession;
 
 // What a driver hands to ScanProgress::checkpoint.
+// A frame of the object resting on the table before the first pick-up (frame O is its pose
+// there, T_B_O), the camera at T_B_C; `hidden` pixels (the robot's, the table's) pair with
+// nothing. The finished model is aligned with it again (TableTopOptions::reanchor).
+struct TableAnchor {
+  DepthImage depth;
+  std::vector<uint8_t> hidden;
+  Iso3 T_B_C = Iso3::Identity(), T_B_O = Iso3::Identity();
+};
+
 struct ScanCheckpoint {
   const ScanSession* session = nullptr;     // the model, views and counters
   const MultiGraspResult* sofar = nullptr;  // the grasps finished, the table-top record
@@ -38,6 +47,7 @@ struct ScanCheckpoint {
   const GraspRecord* current = nullptr;     // its record so far
   Iso3 T_B_O_rest = Iso3::Identity();       // where the object rests between grasps
   Aabb object_box_O;                        // the first grasp's object box (initial trajectory)
+  const TableAnchor* anchor = nullptr;      // the table-top frame the model is anchored to
 };
 
 // What the caller follows of a scan: log lines, ground truth, each frame, stop requests,

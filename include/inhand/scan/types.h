@@ -368,6 +368,13 @@ struct TableTopOptions {
   // from the edges seen from above, where by default the filled-in space slopes from them to the
   // table (the camera's shadow) and fingers close on that slope.
   bool under_measured_only = true;
+  // The finished model aligned once more with the first frame of the object where it rested
+  // (frame O is that pose; the in-hand frames may have turned the model as a whole, where a
+  // grasp's pose was taken a few degrees off), and moved by the result where that moves its
+  // surface more than reanchor_gap_m on average (surfaceGap); below it, the alignment is not
+  // told from the frame's noise and bias.
+  bool reanchor = true;
+  double reanchor_gap_m = 0.001;
 
   template <class V, class S>
   static void fields(V& v, S& o) {
@@ -399,6 +406,12 @@ struct TableTopOptions {
               "the first grasp's model keeps unseen space only beneath measured surface (along "
               "the table's normal): far faces straight down from the edges seen from above, not "
               "sloping to the table");
+    v.boolean("reanchor", o.reanchor,
+              "the finished model aligned again with the first frame of the object where it "
+              "rested");
+    v.num("reanchor_gap_m", o.reanchor_gap_m,
+          "… and moved by that alignment where it moves its surface more than this on average, m",
+          Range::closed(0, 0.05));
   }
   std::string validate() const;
 };
@@ -453,6 +466,14 @@ struct TableTopRecord {
   double volume_size_m = 0, voxel_m = 0;  // the volume as fitted to the object
   std::vector<PickAttempt> attempts;
   double seconds = 0;
+  // The finished model aligned with the first table-top frame (TableTopOptions::reanchor): found
+  // (the alignment passed its checks; `reason` where not), how far it moved the model's surface
+  // (surfaceGap) and the motion (shift of frame O's origin, turn), applied or not.
+  struct Reanchor {
+    bool tried = false, found = false, applied = false;
+    double gap_m = 0, shift_m = 0, turn_rad = 0;
+    std::string reason;
+  } reanchor;
 };
 
 struct MultiGraspOptions {
