@@ -300,6 +300,20 @@ TEST(Session, TerminationNamesRoundTrip) {
   EXPECT_FALSE(parseTermination("done", &t));
 }
 
+namespace {
+// The mesh resting on the table over (x, y) on its stable pose `rest`, turned `yaw` about the
+// vertical.
+Iso3 restingOnTable(const TriangleMesh& mesh, const StablePose& rest, double yaw, double x,
+                    double y) {
+  Iso3 T = Iso3::Identity();
+  T.linear() = Eigen::AngleAxisd(yaw, Vec3::UnitZ()).toRotationMatrix() * rest.R_B_O;
+  Aabb b;
+  for (const Vec3f& v : mesh.vertices) b.extend(T.linear() * v.cast<double>());
+  T.translation() = Vec3(x - b.center().x(), y - b.center().y(), wam().table().topZ() - b.min.z());
+  return T;
+}
+}  // namespace
+
 // After a put-down the object may tip: the session finds it on the table again from one frame.
 // The cracker box's model is fused from frames of it resting on two of its faces at four headings
 // each (as the views of a grasp see most of it); it is then put on a third face, 35° turned and
@@ -316,16 +330,8 @@ TEST(Session, AnObjectThatTippedIsFoundAgainOnTheTable) {
   SimSensor sensor(&world, DepthCameraOptions{});
   const std::vector<StablePose> rests = stablePoses(box);
   ASSERT_GE(rests.size(), 3u);
-  // Resting on the table over (x, y), heading yaw, on its pose-th face.
   auto resting = [&](int pose, double yaw, double x, double y) {
-    Iso3 T = Iso3::Identity();
-    T.linear() =
-        Eigen::AngleAxisd(yaw, Vec3::UnitZ()).toRotationMatrix() * rests[size_t(pose)].R_B_O;
-    Aabb b;
-    for (const Vec3f& v : box.vertices) b.extend(T.linear() * v.cast<double>());
-    T.translation() =
-        Vec3(x - b.center().x(), y - b.center().y(), wam().table().topZ() - b.min.z());
-    return T;
+    return restingOnTable(box, rests[size_t(pose)], yaw, x, y);
   };
   const Vec3 at = wam().camera().lookAt_B;
   ScanSession session(wam(), sensor.camera(), NoiseModelOptions{}, fastOptions(),
@@ -769,14 +775,7 @@ TEST(Session, TheFinishedModelIsAlignedAgainWithTheTableTopFrame) {
   ASSERT_GE(rests.size(), 2u);
   const Vec3 at = wam().camera().lookAt_B;
   auto resting = [&](int pose, double yaw) {
-    Iso3 T = Iso3::Identity();
-    T.linear() =
-        Eigen::AngleAxisd(yaw, Vec3::UnitZ()).toRotationMatrix() * rests[size_t(pose)].R_B_O;
-    Aabb b;
-    for (const Vec3f& v : box.vertices) b.extend(T.linear() * v.cast<double>());
-    T.translation() =
-        Vec3(at.x() - b.center().x(), at.y() - b.center().y(), wam().table().topZ() - b.min.z());
-    return T;
+    return restingOnTable(box, rests[size_t(pose)], yaw, at.x(), at.y());
   };
   // The model turned as a whole: each frame fused as if the box lay at its pose times delta.
   Iso3 delta = Iso3::Identity();

@@ -765,8 +765,7 @@ void runGrasps(RobotInterface& robot, DepthSensor& sensor, ScanSession& session,
                const Iso3& T_O_palm0, const Iso3& T_B_O_start, GraspRecord next,
                MultiGraspResult& out, const Aabb& box_O, const TableAnchor* anchor = nullptr,
                int first = 0, bool resumed = false) {
-  Iso3 T_B_O_rest =
-      T_B_O_start;  // where the object rests on the table (re-found after each put-down)
+  Iso3 T_B_O_rest = T_B_O_start;  // where it rests on the table (re-found after each put-down)
   const MultiGraspOptions& multi = session.multiOptions();
   const ScanProgress& progress = session.progress();
   auto log = [&](const std::string& s) { session.log(s); };
@@ -982,6 +981,26 @@ TableFrames captureOnTable(DepthSensor& sensor, const RobotModel& m, const Iso3&
   return out;
 }
 
+// The first grasp's record as the pick-up from the table left it (candidate `picked`).
+GraspRecord firstGraspRecord(const GraspCandidate& picked, const TableTopRecord& tt) {
+  GraspRecord rec;
+  rec.epsilon = picked.epsilon;
+  rec.attempts = tt.attempts;
+  rec.candidates = tt.reachable;
+  rec.tried = tt.tried;
+  rec.generation_s = tt.seconds;
+  return rec;
+}
+
+// The first frame as the model's anchor: the robot's pixels and the table's (at most 5 mm above
+// its top) pair with nothing.
+TableAnchor tableAnchor(const TableFrames& table, const Iso3& T_B_C, const CameraIntrinsics& K,
+                        const Iso3& T_B_O, double table_top_z) {
+  TableAnchor a{table.depth[0], table.robotMask[0], T_B_C, T_B_O};
+  markBelow(a.depth, T_B_C, K, table_top_z + 0.005, &a.hidden);
+  return a;
+}
+
 // The frames fused (the camera at T_B_C, the object at T_B_O): table pixels (on or below the
 // plane table_O, up to above_table_m over it) and robot pixels only carve.
 void fuseOnTable(ScanSession& session, TableFrames& table, const JointVector& q, const Iso3& T_B_C,
@@ -1083,11 +1102,9 @@ MultiGraspResult scanFromTable(RobotInterface& robot, DepthSensor& sensor, const
   tt.voxel_m = fitted.voxel_m;
   ScanSession session(m, sensor.camera(), noise, fitted, multi, object.centre_O);
   session.setProgress(progress);
-  std::optional<TableAnchor> anchor;
-  if (to.reanchor) {
-    anchor = TableAnchor{table.depth[0], table.robotMask[0], *aim, T_B_O_rest};
-    markBelow(anchor->depth, *aim, K, m.table().topZ() + 0.005, &anchor->hidden);
-  }
+  const std::optional<TableAnchor> anchor =
+      to.reanchor ? std::optional(tableAnchor(table, *aim, K, T_B_O_rest, m.table().topZ()))
+                  : std::nullopt;
   fuseOnTable(session, table, q, *aim, T_B_O_rest, object.table_O, to.above_table_m);
   all.frames = session.summary().frames;
   all.fusion_s = session.summary().fusion_s;
@@ -1113,14 +1130,8 @@ MultiGraspResult scanFromTable(RobotInterface& robot, DepthSensor& sensor, const
     return finish(progress.stopRequested() ? Termination::kInterrupted
                                            : Termination::kPickUpFailed);
   }
-  GraspRecord rec;
-  rec.epsilon = pick.picked->epsilon;
-  rec.attempts = tt.attempts;
-  rec.candidates = tt.reachable;
-  rec.tried = tt.tried;
-  rec.generation_s = tt.seconds;
-  runGrasps(robot, sensor, session, *pick.achieved, T_B_O_now, rec, out, object.box_O,
-            anchor ? &*anchor : nullptr);
+  runGrasps(robot, sensor, session, *pick.achieved, T_B_O_now, firstGraspRecord(*pick.picked, tt),
+            out, object.box_O, anchor ? &*anchor : nullptr);
   if (anchor) reanchorModel(session, *anchor, to.reanchor_gap_m, &out);
   all.total_s = std::chrono::duration<double>(Clock::now() - t0).count();
   return out;
