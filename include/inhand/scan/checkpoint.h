@@ -2,12 +2,13 @@
 // Resuming a multi-grasp scan (scanMultiGrasp, scanFromTable). The drivers call
 // ScanProgress::checkpoint at every point they can resume from: when a grasp's views begin (the
 // robot holds the object) and after each view. saveScanCheckpoint writes that state to one file
-// atomically (the session's volume and views, the grasps finished, the table-top record, the
-// grasp under way) with the caller's own state beside it (e.g. the simulator's); resumeScan goes
-// on from it. With the robot back in the state it was in at the checkpoint (the object in the
-// hand as then), the resumed scan is the scan that was not interrupted: the same views, frames
-// and model, voxel for voxel (tests/test_checkpoint.cc). Work done after the checkpoint (a view
-// under way, a re-grasp) is done again.
+// atomically (the session's volume and views, the grasps finished, the table-top record and
+// the first table-top frame the model is anchored to, the grasp under way) with the caller's own
+// state beside it (e.g. the simulator's); resumeScan goes on from it. With the robot back in the
+// state it was in at the checkpoint (the object in the hand as then), the resumed scan is the scan
+// that was not interrupted: the same views, frames and model, voxel for voxel
+// (tests/test_checkpoint.cc). Work done after the checkpoint (a view under way, a re-grasp) is done
+// again.
 #include <filesystem>
 #include <memory>
 #include <optional>

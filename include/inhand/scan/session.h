@@ -30,7 +30,6 @@ namespace inhand {
 
 class ScanSession;
 
-// What a driver hands to ScanProgress::checkpoint.
 // A frame of the object resting on the table before the first pick-up (frame O is its pose
 // there, T_B_O), the camera at T_B_C; `hidden` pixels (the robot's, the table's) pair with
 // nothing. The finished model is aligned with it again (TableTopOptions::reanchor).
@@ -40,6 +39,7 @@ struct TableAnchor {
   Iso3 T_B_C = Iso3::Identity(), T_B_O = Iso3::Identity();
 };
 
+// What a driver hands to ScanProgress::checkpoint.
 struct ScanCheckpoint {
   const ScanSession* session = nullptr;     // the model, views and counters
   const MultiGraspResult* sofar = nullptr;  // the grasps finished, the table-top record
