@@ -116,7 +116,9 @@ struct Simulator {
     grasp_q = q;
     world = std::make_unique<SimWorld>(*this->model, mesh, T, camera, NoiseModelOptions{}, c.sim);
     if (start == "held") {
-      world->q = q;
+      world->holdAt(q);
+      grasp_T_O_palm = world->T_O_palm;  // where the squeeze left it (physics)
+      grasp_q = world->q;
     } else if (start == "table") {
       world->held = false;
       world->q = this->model->home();

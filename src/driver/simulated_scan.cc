@@ -140,7 +140,10 @@ SimulatedScan runSimulatedScan(const RobotModel& model, const TriangleMesh& mesh
   SimWorld world(model, object, T_O_palm, camera, noise, o.sim);
   world.setObjectColours(colours);  // its triangles first, then those closing its holes
   if (o.start == "held") {
-    world.q = qGrasp;
+    // With physics the squeeze moves the object in the hand (millimetres): the scan is told the
+    // grasp where it left it, as it is told the exact grasp without physics.
+    world.holdAt(qGrasp);
+    T_O_palm = world.T_O_palm;
   } else {
     world.held = false;
     world.q = model.home();

@@ -174,6 +174,18 @@ void SimWorld::syncFromPhysics() {
   q = physics_->handJoints(q);
 }
 
+void SimWorld::holdAt(const JointVector& qHeld) {
+  q = qHeld;
+  held = true;
+  if (!physics_) return;
+  // The fingers start where they touch the object (an open hand would let it fall while they
+  // close).
+  const Iso3 T_B_tip = model_->tipPose(trueJoints());
+  physics_->reset(T_B_tip * T_O_palm.inverse(), T_B_tip * T_tip_palm, q);
+  q = physics_->closeHand(q);
+  syncFromPhysics();
+}
+
 void SimWorld::stepPhysics(double dt_s, double* untouched_s) {
   // The palm follows the arm; the object moves as physics moves it. It has fallen when it has
   // touched no part of the hand for a tenth of a second, and then settles where it lands.

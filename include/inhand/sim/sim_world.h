@@ -268,6 +268,10 @@ class SimWorld {
   const PhysicsWorld* physics() const { return physics_.get(); }
   // With physics: the object's grasp (T_O_palm) and the hand's joints as physics has them.
   void syncFromPhysics();
+  // The robot holds the object (a scan's start "held"): the joints at q, the object at T_O_palm;
+  // with physics the fingers, touching it at q's hand joints, squeeze it under their force
+  // limits (PhysicsWorld::closeHand) and physics has it where they leave it.
+  void holdAt(const JointVector& q);
   // With physics and the object in the hand: dt_s of the palm following the arm at q;
   // `untouched_s` counts how long the object has touched no hand link (a tenth of a second: it
   // fell, and is left on the table where it settles).
