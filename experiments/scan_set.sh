@@ -6,7 +6,7 @@
 # each scanned from the table with default options. Writes OUT/results.md and OUT/results.csv
 # (first grasp made, grasps, views, coverage, accuracy, seconds, termination) as runs finish.
 # Usage: experiments/scan_set.sh [OUT]   (default out/scan_set; the build must exist)
-# SCAN_CONFIG=FILE adds `--config FILE` to every scan (e.g. physics on: docs/physics.md).
+# SCAN_CONFIG=FILE adds `--config FILE` to every scan (e.g. physics off: docs/test_set.md).
 # SCAN_SEED=N adds `--seed N` (the noise and IK seed; 1 by default).
 # SCAN_EXPORT=mjcf,urdf adds `--export mjcf,urdf` (each run's asset; experiments/asset_table.py OUT
 # tabulates them: docs/asset.md).

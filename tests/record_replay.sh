@@ -24,7 +24,7 @@ cat > "$tmp/quick.json" <<'JSON'
  "planner": {"directions": 40, "rolls": 4, "fallback_ranges_m": []},
  "grasp": {"approaches": 16, "rolls": 2, "max_candidates": 6,
            "ranking": {"directions": 24, "rolls": 2}},
- "sim": {"frame_subsample": 10}, "eval": {"samples": 4000}}
+ "sim": {"frame_subsample": 10, "physics": {"enabled": false}}, "eval": {"samples": 4000}}
 JSON
 "$inhand" scan --object builtin:coffee_can --max-grasps 1 --max-views 2 --save-frames \
   --config "$tmp/quick.json" --seed 5 --out "$tmp/scan" > /dev/null 2>&1

@@ -110,6 +110,9 @@ TEST(Cli, BadInputIsNamedAndLeavesNoOutput) {
       "scan --object builtin:coffee_can --tracking maybe --out " + (dir.path() / "a").string(),
       "--tracking: must be on or off");
   expectError(
+      "scan --object builtin:coffee_can --physics maybe --out " + (dir.path() / "a").string(),
+      "--physics: must be on or off");
+  expectError(
       "scan --object builtin:coffee_can --arm-error 0.5 --out " + (dir.path() / "a").string(),
       "arm_error_m must be in [0, 0.2] (is 0.5)");
   expectError(
@@ -190,9 +193,11 @@ TEST(Cli, ScanWritesModelAndSummaryAndRejectsBadConfig) {
           "grasp": {"approaches": 16, "rolls": 2, "max_candidates": 6,
                     "ranking": {"directions": 24, "rolls": 2}}})");
   fs::path out = dir.path() / "scan";
-  Result r = run("scan --object builtin:cracker_box --max-views 1 --max-grasps 2 --config " +
-                     (dir.path() / "fast.json").string() + " --out " + out.string(),
-                 dir);
+  Result r =
+      run("scan --object builtin:cracker_box --max-views 1 --max-grasps 2 --physics off "
+          "--config " +
+              (dir.path() / "fast.json").string() + " --out " + out.string(),
+          dir);
   ASSERT_EQ(r.code, 0) << r.output;
   Json s = readJsonFile(out / "summary.json");
   for (const char* key :
@@ -203,6 +208,10 @@ TEST(Cli, ScanWritesModelAndSummaryAndRejectsBadConfig) {
   for (const char* key : {"quality", "cost_s", "score", "mean_entropy"})
     EXPECT_TRUE(s["views"][0].contains(key)) << key;
   EXPECT_EQ(s["options"]["planner"]["directions"].get<int>(), 40);
+  // --physics off: the kinematic simulator, with none of what physics implies.
+  EXPECT_FALSE(s["options"]["sim"]["physics"]["enabled"].get<bool>());
+  EXPECT_FALSE(s["options"]["tracking"]["in_hand"].get<bool>());
+  EXPECT_EQ(s["options"]["grasp"]["settle_s"].get<double>(), 0.0);
   // Two grasps: the second chosen among ranked candidates, with its quality and stability.
   ASSERT_EQ(s["grasps"].size(), 2u) << s.dump(2);
   EXPECT_EQ(s["termination"], "max_grasps");
@@ -277,7 +286,8 @@ const char* const kQuickConfig = test::quickConfigJson();
 TEST(Cli, ScaleResizesTheObjectAndRefusesNonsense) {
   test::TempDir dir;
   writeTextAtomically(dir.path() / "held.json", R"({"start": "held", "voxel_m": 0.004,
-    "initial_views": 1, "sim": {"frame_subsample": 10}, "eval": {"samples": 2000}})");
+    "initial_views": 1, "sim": {"frame_subsample": 10, "physics": {"enabled": false}},
+    "eval": {"samples": 2000}})");
   for (const char* bad : {"0", "-1", "nan"}) {
     const fs::path out = dir.path() / (std::string("bad") + bad);
     Result r = run(
@@ -397,7 +407,8 @@ TEST(Cli, ShortObjectIsPickedFromTheTableAndScannedAlmostWhole) {
   test::TempDir dir;
   writeTextAtomically(dir.path() / "c.json",
                       R"({"voxel_m": 0.003, "planner": {"directions": 150, "rolls": 4},
-          "grasp": {"approaches": 32, "rolls": 2, "ranking": {"directions": 32, "rolls": 2}}})");
+          "grasp": {"approaches": 32, "rolls": 2, "ranking": {"directions": 32, "rolls": 2}},
+          "sim": {"physics": {"enabled": false}}})");
   const fs::path out = dir.path() / "scan";
   Result r = run("scan --object builtin:pill_bottle --config " + (dir.path() / "c.json").string() +
                      " --out " + out.string(),
@@ -417,9 +428,10 @@ TEST(Cli, ShortObjectIsPickedFromTheTableAndScannedAlmostWhole) {
   EXPECT_GT(s["views"].back()["observed_fraction"].get<double>(), 0.95);
 }
 
-// The demonstration, with every default: the cracker box is picked from the table with a grasp
-// that holds, at most 3 grasps cover it (99 % of the true surface), and since no finger ever
-// starts inside the object nor the arm swings through it, the model has no surface inside it.
+// The demonstration, with every default (physics on: MuJoCo simulates every pick-up, hold and
+// put-down): the cracker box is picked from the table with a grasp that holds, at most 3 grasps
+// cover it (99 % of the true surface), and since no finger ever starts inside the object nor the
+// arm swings through it, the model has no surface inside it.
 TEST(Cli, CrackerBoxIsScannedWholeFromTheTable) {
   test::TempDir dir;
   const fs::path out = dir.path() / "scan";
@@ -432,6 +444,8 @@ TEST(Cli, CrackerBoxIsScannedWholeFromTheTable) {
   EXPECT_EQ(s["table_top"]["pick_up_attempts"].back()["outcome"], "picked");
   EXPECT_EQ(s["options"]["grasp"]["approach"], "first_contact");
   EXPECT_EQ(s["options"]["sim"]["pick_up"], "first_contact");
+  EXPECT_TRUE(s["options"]["sim"]["physics"]["enabled"].get<bool>());  // MuJoCo by default
+  EXPECT_GT(s["physics"]["simulated_s"].get<double>(), 1.0);
   const Aabb b = loadObject("builtin:cracker_box").bounds();
   const PlyData ply = readPly(out / "model.ply");
   const std::vector<float>& variance = ply.vertexProperties.at("variance");
@@ -501,7 +515,8 @@ TEST(Cli, AGraspThatDoesNotHoldDropsTheObjectAndTheScanTriesTheNext) {
   test::TempDir dir;
   // The table-top model closed down to the table behind the box (under_measured_only off): its
   // first candidate drops at this friction; with the option's model the first holds.
-  writeTextAtomically(dir.path() / "c.json", R"({"sim": {"friction": 0.05}, "max_views": 3,
+  writeTextAtomically(dir.path() / "c.json",
+                      R"({"sim": {"friction": 0.05, "physics": {"enabled": false}}, "max_views": 3,
     "table_top": {"under_measured_only": false}})");
   const fs::path out = dir.path() / "scan";
   Result r = run("scan --object builtin:cracker_box --max-grasps 1 --config " +
@@ -527,7 +542,7 @@ TEST(Cli, AGraspThatDoesNotHoldDropsTheObjectAndTheScanTriesTheNext) {
 TEST(Cli, FailedPickUpsStopAtTheBudget) {
   test::TempDir dir;
   writeTextAtomically(dir.path() / "c.json", R"({"grasp": {"max_failed_pick_ups": 2},
-    "sim": {"faults": {"failed_pickups": 1.0}}})");
+    "sim": {"faults": {"failed_pickups": 1.0}, "physics": {"enabled": false}}})");
   const fs::path out = dir.path() / "scan";
   const Result r = run("scan --object builtin:coffee_can --config " +
                            (dir.path() / "c.json").string() + " --out " + out.string(),
@@ -546,7 +561,7 @@ TEST(Cli, AnObjectLostAfterTheFirstGraspExitsZeroWithTheModel) {
   test::TempDir dir;
   writeTextAtomically(dir.path() / "c.json",
                       R"({"voxel_m": 0.003, "planner": {"directions": 40, "rolls": 4},
-    "start": "held", "sim": {"faults": {"drop_in_motion": 2}}})");
+    "start": "held", "sim": {"faults": {"drop_in_motion": 2}, "physics": {"enabled": false}}})");
   const fs::path out = dir.path() / "scan";
   const Result r = run("scan --object builtin:coffee_can --max-grasps 1 --config " +
                            (dir.path() / "c.json").string() + " --out " + out.string(),
@@ -626,7 +641,7 @@ TEST(Cli, ScanOfTheCrackerBoxMeetsItsOutcomeBounds) {
   test::TempDir dir;
   const fs::path config = dir.path() / "fast.json";
   writeTextAtomically(config, R"({"voxel_m": 0.003, "planner": {"directions": 80, "rolls": 4},
-    "max_views": 3, "grasp": {"approaches": 32}})");
+    "max_views": 3, "grasp": {"approaches": 32}, "sim": {"physics": {"enabled": false}}})");
   const fs::path out = dir.path() / "scan";
   const Result r = run("scan --object builtin:cracker_box --max-grasps 2 --seed 3 --config " +
                            config.string() + " --export mjcf,urdf --out " + out.string(),

@@ -187,8 +187,9 @@ TEST(Config, TheReferenceInDocsIsGeneratedFromTheTables) {
     EXPECT_NE(reference.find(key), std::string::npos) << key;
 }
 
-// A config that turns physics on turns the in-hand registration after each pick-up on (the
-// closing fingers move the object), unless it sets it; without physics it stays off.
+// Physics is on by default, and with it the in-hand registration after each pick-up (the
+// closing fingers move the object); a config that turns physics off turns it off, unless it sets
+// it.
 TEST(Config, PhysicsTurnsTheInHandRegistrationOnUnlessTheConfigSetsIt) {
   auto inHand = [](const std::string& json) {
     ScanConfig c;
@@ -196,28 +197,32 @@ TEST(Config, PhysicsTurnsTheInHandRegistrationOnUnlessTheConfigSetsIt) {
     return c.scan.tracking.in_hand;
   };
   const ScanConfig defaults;
-  EXPECT_FALSE(defaults.scan.tracking.in_hand);
-  EXPECT_FALSE(inHand("{}"));
+  EXPECT_TRUE(defaults.sim.physics.enabled);
+  EXPECT_TRUE(defaults.scan.tracking.in_hand);
+  EXPECT_FALSE(TrackingOptions().in_hand);  // the library's struct: the kinematic default
+  EXPECT_TRUE(inHand("{}"));
   EXPECT_TRUE(inHand(R"({"sim": {"physics": {"enabled": true}}})"));
   EXPECT_FALSE(inHand(R"({"sim": {"physics": {"enabled": false}}})"));
   EXPECT_FALSE(
       inHand(R"({"sim": {"physics": {"enabled": true}}, "tracking": {"in_hand": false}})"));
-  EXPECT_TRUE(inHand(R"({"tracking": {"in_hand": true}})"));
+  EXPECT_TRUE(inHand(R"({"sim": {"physics": {"enabled": false}}, "tracking": {"in_hand": true}})"));
+  EXPECT_FALSE(inHand(R"({"tracking": {"in_hand": false}})"));
 }
 
 // … and the second look after the lift (an object may slide out of the hand): 0.5 s, unless the
-// config sets it.
+// config sets it; none without physics.
 TEST(Config, PhysicsTurnsTheSecondLookAfterTheLiftOnUnlessTheConfigSetsIt) {
   auto settle = [](const std::string& json) {
     ScanConfig c;
     readScanConfig(Json::parse(json), "cfg", &c);
     return c.multi.grasp.settle_s;
   };
-  EXPECT_EQ(ScanConfig().multi.grasp.settle_s, 0.0);
-  EXPECT_EQ(settle("{}"), 0.0);
-  EXPECT_EQ(settle(R"({"sim": {"physics": {"enabled": true}}})"), GraspOptions::kSettleSeconds);
+  EXPECT_EQ(ScanConfig().multi.grasp.settle_s, GraspOptions::kSettleSeconds);
+  EXPECT_EQ(GraspOptions().settle_s, 0.0);
+  EXPECT_EQ(settle("{}"), GraspOptions::kSettleSeconds);
+  EXPECT_EQ(settle(R"({"sim": {"physics": {"enabled": false}}})"), 0.0);
   EXPECT_EQ(settle(R"({"sim": {"physics": {"enabled": true}}, "grasp": {"settle_s": 0}})"), 0.0);
-  EXPECT_EQ(settle(R"({"grasp": {"settle_s": 1.5}})"), 1.5);
+  EXPECT_EQ(settle(R"({"sim": {"physics": {"enabled": false}}, "grasp": {"settle_s": 1.5}})"), 1.5);
 }
 
 // … and the lift's rules (the held object feels the arm's move): straight and in view, unless
@@ -229,29 +234,37 @@ TEST(Config, PhysicsTurnsTheStraightLiftInViewOnUnlessTheConfigSetsIt) {
     return std::make_pair(c.multi.grasp.lift_straight, c.multi.grasp.lift_in_view);
   };
   const auto both = [](bool a, bool b) { return std::make_pair(a, b); };
-  EXPECT_EQ(lift("{}"), both(false, false));
+  EXPECT_EQ(lift("{}"), both(true, true));
   EXPECT_EQ(lift(R"({"sim": {"physics": {"enabled": true}}})"), both(true, true));
   EXPECT_EQ(lift(R"({"sim": {"physics": {"enabled": false}}})"), both(false, false));
-  EXPECT_EQ(lift(R"({"sim": {"physics": {"enabled": true}}, "grasp": {"lift_in_view": false}})"),
-            both(true, false));
+  EXPECT_EQ(lift(R"({"grasp": {"lift_in_view": false}})"), both(true, false));
   EXPECT_EQ(lift(R"({"sim": {"physics": {"enabled": true}}, "grasp": {"lift_straight": false}})"),
             both(false, true));
-  EXPECT_EQ(lift(R"({"grasp": {"lift_straight": true}})"), both(true, false));
+  EXPECT_EQ(lift(R"({"sim": {"physics": {"enabled": false}}, "grasp": {"lift_straight": true}})"),
+            both(true, false));
 }
 
-// What physics implies, for a command that turns physics on itself (`inhand regrasp-test`): with
-// no config, every one of the four; a config that sets one keeps its value.
+// Physics set on or off by a command (`inhand scan --physics`, `inhand regrasp-test`): every
+// implied option follows it; one the config sets keeps its value.
 TEST(Config, PhysicsImpliedOptionsAreSetWhereTheConfigIsSilent) {
-  ScanConfig none;
-  setPhysicsImplied(Json(), &none);
-  EXPECT_TRUE(none.scan.tracking.in_hand);
-  EXPECT_EQ(none.multi.grasp.settle_s, GraspOptions::kSettleSeconds);
-  EXPECT_TRUE(none.multi.grasp.lift_straight);
-  EXPECT_TRUE(none.multi.grasp.lift_in_view);
+  ScanConfig off;
+  setPhysics(false, Json(), &off);
+  EXPECT_FALSE(off.sim.physics.enabled);
+  EXPECT_FALSE(off.scan.tracking.in_hand);
+  EXPECT_EQ(off.multi.grasp.settle_s, 0.0);
+  EXPECT_FALSE(off.multi.grasp.lift_straight);
+  EXPECT_FALSE(off.multi.grasp.lift_in_view);
+  ScanConfig on = off;
+  setPhysics(true, Json(), &on);
+  EXPECT_TRUE(on.sim.physics.enabled);
+  EXPECT_TRUE(on.scan.tracking.in_hand);
+  EXPECT_EQ(on.multi.grasp.settle_s, GraspOptions::kSettleSeconds);
+  EXPECT_TRUE(on.multi.grasp.lift_straight);
+  EXPECT_TRUE(on.multi.grasp.lift_in_view);
   const Json j = Json::parse(R"({"tracking": {"in_hand": false}, "grasp": {"settle_s": 0}})");
   ScanConfig some;
   readScanConfig(j, "cfg", &some);
-  setPhysicsImplied(j, &some);
+  setPhysics(true, j, &some);
   EXPECT_FALSE(some.scan.tracking.in_hand);
   EXPECT_EQ(some.multi.grasp.settle_s, 0.0);
   EXPECT_TRUE(some.multi.grasp.lift_straight);

@@ -192,7 +192,8 @@ TEST(Faults, AnObjectThatSlipsIsFoundAndTheGraspCorrected) {
 // residuals without the sensor's σ as a floor, two residuals of a few tenths of a millimetre
 // told a "slip" from the held pose (recorded: 3 creeps followed, 2 frames not fused as moving).
 TEST(Faults, AFrameLessNoisyThanTheSensorModelShowsNoSlip) {
-  ScanConfig c;  // every default (the quick scan's 4 mm voxels showed no such slip)
+  ScanConfig c;  // every default (the quick scan's 4 mm voxels showed no such slip) …
+  setPhysics(false, Json(), &c);  // … but the kinematic simulator's hand
   c.eval.samples = 6000;
   c.sim.noise = false;
   c.multi.max_grasps = 2;

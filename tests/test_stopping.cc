@@ -28,6 +28,7 @@ TriangleMesh scaled(const TriangleMesh& mesh, double s) {
 
 ScanConfig stoppingConfig(StopRule rule, const std::string& start, double scale) {
   ScanConfig c;
+  setPhysics(false, Json(), &c);  // the kinematic simulator
   c.start = start;
   c.scan.voxel_m = 0.003;
   c.scan.volume_size_m = 0.34 * std::max(1.0, scale);

@@ -87,6 +87,7 @@ ObjectModel unweldedModel(const TriangleMesh& mesh,
 
 ScanConfig quickScanConfig(int max_views) {
   ScanConfig c;
+  setPhysics(false, Json(), &c);  // the kinematic simulator: these scans test other things
   c.scan.voxel_m = 0.004;
   c.scan.planner.directions = 60;
   c.scan.planner.rolls = 4;
@@ -102,7 +103,7 @@ const char* quickConfigJson() {
     "planner": {"directions": 40, "rolls": 4, "fallback_ranges_m": []},
     "grasp": {"approaches": 16, "rolls": 2, "max_candidates": 6,
               "ranking": {"directions": 24, "rolls": 2}},
-    "sim": {"frame_subsample": 10}, "eval": {"samples": 4000}})";
+    "sim": {"frame_subsample": 10, "physics": {"enabled": false}}, "eval": {"samples": 4000}})";
 }
 
 CommandResult runInhand(const std::string& args, const TempDir& dir) {

@@ -58,11 +58,13 @@ ObjectModel unweldedModel(const TriangleMesh& mesh,
 const RobotModel& wam();
 
 // A quick scan config for command-line tests (`inhand scan --config`): 4 mm voxels, 40
-// directions × 4 rolls, two initial views, few grasp candidates, every 10th frame.
+// directions × 4 rolls, two initial views, few grasp candidates, every 10th frame, the kinematic
+// simulator (physics off).
 const char* quickConfigJson();
 
 // A short whole scan from the table for tests: 4 mm voxels, 60 directions × 4 rolls, two
-// initial views, `max_views` Alg. 1 views per grasp, two grasps, every 8th frame fused.
+// initial views, `max_views` Alg. 1 views per grasp, two grasps, every 8th frame fused, the
+// kinematic simulator (physics off).
 ScanConfig quickScanConfig(int max_views = 2);
 
 }  // namespace inhand::test

@@ -8,8 +8,9 @@ import pytest
 import inhand
 
 BINARY = os.environ.get("INHAND_BINARY", "inhand")
+# The kinematic simulator (physics off): these tests are of the bindings, not of the hand.
 FAST = {"voxel_m": 0.003, "max_views": 2, "planner": {"directions": 80, "rolls": 4},
-        "sim": {"frame_subsample": 8}}
+        "sim": {"frame_subsample": 8, "physics": {"enabled": False}}}
 
 
 def read_ply_vertices(path):

@@ -90,6 +90,7 @@ struct ScanArgs {
   double scale = 1.0;               // the mesh's coordinates times this (e.g. 0.001 for mm)
   double arm_error_m = -1;          // overrides sim.arm_error_m when >= 0
   std::string tracking;             // on | off: overrides tracking.enabled when set
+  std::string physics;              // on | off: overrides sim.physics.enabled when set
   std::string resume;               // a scan's output directory with checkpoint.inhand: go on
   bool save_frames = false;         // OUT/frames: the in-hand frames as the robot gave them
   std::string export_formats;       // non-empty: OUT/asset in these formats (inhand export)

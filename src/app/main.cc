@@ -161,6 +161,11 @@ CLI::App* addScan(CLI::App& app, ScanArgs& scan) {
       sc->add_option("--tracking", scan.tracking,
                      "on | off: align each in-hand frame with the hand and the model before fusing "
                      "(default on; overrides the config's tracking.enabled)"));
+  scanOptions.push_back(sc->add_option(
+      "--physics", scan.physics,
+      "on | off: MuJoCo for every pick-up, hold and put-down, or the kinematic simulator (the "
+      "object moves rigidly with the hand; faster) (default on; overrides the config's "
+      "sim.physics.enabled, with what it implies where the config is silent)"));
   scanOptions.push_back(sc->add_flag(
       "--save-frames", scan.save_frames,
       "write the in-hand depth frames with the joints and camera poses the robot reported to "

@@ -101,8 +101,7 @@ ScanConfig regraspConfig(const RegraspArgs& args) {
   if (o.robot.empty()) o.robot = defaultRobotConfig();
   o.sim.seed = args.seed;
   // The pick-up and the lift in physics, with what physics implies where the config is silent.
-  o.sim.physics.enabled = true;
-  setPhysicsImplied(config, &o);
+  setPhysics(true, config, &o);
   if (std::string p = o.validate(); !p.empty()) throw Error(p);
   if (!(std::isfinite(args.heading_deg) && std::abs(args.heading_deg) <= 360))
     throw Error("--heading: must be degrees in [-360, 360]");

@@ -46,6 +46,11 @@ ScanConfig scanConfigFor(const ScanArgs& args) {
     throw Error("--planner: unknown planner \"" + args.planner + "\" (known: " + names + ")");
   }
   if (!args.config.empty()) readScanConfigFile(args.config, &o);
+  if (!args.physics.empty()) {
+    if (args.physics != "on" && args.physics != "off")
+      throw Error("--physics: must be on or off, not \"" + args.physics + "\"");
+    setPhysics(args.physics == "on", args.config.empty() ? Json() : readJsonFile(args.config), &o);
+  }
   if (!args.robot.empty()) o.robot = args.robot;
   if (o.robot.empty()) o.robot = defaultRobotConfig();
   if (args.max_views >= 0) o.scan.max_views = args.max_views;

@@ -193,32 +193,39 @@ std::string ScanConfig::validate() const {
   return {};
 }
 
+ScanConfig::ScanConfig() { setPhysics(true, Json(), this); }
+
 void readScanConfig(const Json& j, const std::string& where, ScanConfig* config) {
   Reader r(j, where);
   visitConfig(r, *config);
   r.finish();
-  const bool physicsOn = j.contains("sim") && j["sim"].is_object() &&
-                         j["sim"].contains("physics") && j["sim"]["physics"].is_object() &&
-                         j["sim"]["physics"].value("enabled", false);
-  if (physicsOn) setPhysicsImplied(j, config);
+  const bool physicsGiven = j.contains("sim") && j["sim"].is_object() &&
+                            j["sim"].contains("physics") && j["sim"]["physics"].is_object() &&
+                            j["sim"]["physics"].contains("enabled");
+  if (physicsGiven) setPhysics(config->sim.physics.enabled, j, config);
 }
 
-void setPhysicsImplied(const Json& j, ScanConfig* config) {
+void setPhysics(bool on, const Json& j, ScanConfig* config) {
   auto given = [&](const char* a, const char* b) {
     return j.is_object() && j.contains(a) && j[a].is_object() && j[a].contains(b);
   };
+  config->sim.physics.enabled = on;
+  const TrackingOptions tracking;
+  const GraspOptions grasp;
   // Closing the fingers moves the object in the hand (millimetres to centimetres), so the
   // object's pose in the hand comes from the lift's frame (tracking.in_hand). The kinematic
   // simulator's hand grasps exactly as planned, where a registration with one frame would only
   // add the model's error.
-  if (!given("tracking", "in_hand")) config->scan.tracking.in_hand = true;
+  if (!given("tracking", "in_hand")) config->scan.tracking.in_hand = on || tracking.in_hand;
   // … and an object may slide out of the hand after the lift: the hand holds still and the
   // camera looks again (grasp.settle_s).
-  if (!given("grasp", "settle_s")) config->multi.grasp.settle_s = GraspOptions::kSettleSeconds;
+  if (!given("grasp", "settle_s"))
+    config->multi.grasp.settle_s = on ? GraspOptions::kSettleSeconds : grasp.settle_s;
   // … and the held object feels the arm's move from the pick to the lift: the lift rises
   // straight (grasp.lift_straight) and keeps the object in the camera's view (lift_in_view).
-  if (!given("grasp", "lift_straight")) config->multi.grasp.lift_straight = true;
-  if (!given("grasp", "lift_in_view")) config->multi.grasp.lift_in_view = true;
+  if (!given("grasp", "lift_straight"))
+    config->multi.grasp.lift_straight = on || grasp.lift_straight;
+  if (!given("grasp", "lift_in_view")) config->multi.grasp.lift_in_view = on || grasp.lift_in_view;
 }
 
 void readScanConfigFile(const std::filesystem::path& file, ScanConfig* config) {

@@ -15,6 +15,8 @@
 namespace inhand {
 
 struct ScanConfig {
+  // Physics on (sim.physics.enabled) with what it implies (setPhysics).
+  ScanConfig();
   std::string robot;            // robot config JSON; empty: the WAM with BarrettHand in data/
   std::string start = "table";  // table: the whole scan from the table top; held: given grasp
   ScanOptions scan;
@@ -34,13 +36,15 @@ struct ScanConfigRow {
 };
 
 // Reads the keys present in `j` over `config` (the others keep their values). `where` names the
-// source in errors ("FILE.planner.t_q: expected a number"). Throws Error. A `j` that turns
-// sim.physics on also sets what physics implies (setPhysicsImplied).
+// source in errors ("FILE.planner.t_q: expected a number"). Throws Error. A `j` that sets
+// sim.physics.enabled also sets what that implies (setPhysics).
 void readScanConfig(const Json& j, const std::string& where, ScanConfig* config);
-// What a hand that moves the object needs, for a scan with physics on: tracking.in_hand,
-// grasp.settle_s (GraspOptions::kSettleSeconds), grasp.lift_straight and grasp.lift_in_view, each
-// turned on unless the config `j` (an object, or null: none) sets it.
-void setPhysicsImplied(const Json& j, ScanConfig* config);
+// Physics on or off, with the options that follow from it unless the config `j` (an object, or
+// null: none) sets them. With physics on, what a hand that moves the object needs:
+// tracking.in_hand, grasp.settle_s (GraspOptions::kSettleSeconds), grasp.lift_straight and
+// grasp.lift_in_view, each on. With physics off (the kinematic simulator: the object moves rigidly
+// with the hand) each keeps the default of its own struct (off, 0).
+void setPhysics(bool on, const Json& j, ScanConfig* config);
 // The same from a JSON file (the error names the file).
 void readScanConfigFile(const std::filesystem::path& file, ScanConfig* config);
 // Every option with its value.

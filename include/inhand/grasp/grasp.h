@@ -103,21 +103,21 @@ struct GraspOptions {
   // lift is one IK solve seeded from the pick, whose random restarts may put the arm on another
   // branch: the move there swings the held object up to a metre (on a 20 × 8 × 12 cm box's
   // lifts, 32 of 449 stray more than 2 cm), which the kinematic simulator's held object does
-  // not feel and physics does. Off by default; a config that turns physics on turns it on.
+  // not feel and physics does. Off in this struct; a scan's config turns it on with sim.physics.
   bool lift_straight = false;
   static constexpr double kMaxLiftDeviation = 0.02;
   // The lift's arm pose re-solved (up to 12 seeds near the pick's, every joint within 1 rad of
   // it) where an arm link lies on the line from the camera to the held object: the 7-DOF arm's
   // elbow is free, and a forearm in front of the hand (inside the sensor's minimum range it
   // returns no depth) hides the object that the check after the lift looks for. A re-solved
-  // lift is kept only where its move rises straight (as for lift_straight). Off by default; a
-  // config that turns physics on turns it on.
+  // lift is kept only where its move rises straight (as for lift_straight). Off in this struct;
+  // a scan's config turns it on with sim.physics.
   bool lift_in_view = false;
   // After the lift the hand holds still settle_s and the camera looks again from where it took
   // the lift's frame: more than settle_changed of the object's pixels at another depth, it is
-  // sliding out of a grasp that does not hold (0 s: no second look). Off by default, as
+  // sliding out of a grasp that does not hold (0 s: no second look). Off in this struct, as
   // TrackingOptions::in_hand is: the kinematic simulator's grasps hold where they close; a
-  // config that turns physics on turns it on (kSettleSeconds), and a real robot wants it.
+  // scan's config turns it on with sim.physics (kSettleSeconds), and a real robot wants it.
   static constexpr double kSettleSeconds = 0.5;
   double settle_s = 0;
   double settle_changed = 0.2;
@@ -164,13 +164,13 @@ struct GraspOptions {
           Range::closedOpen(0, 1));
     v.boolean("lift_straight", o.lift_straight,
               "the lift solved in steps up from the pick and kept only where the arm's move "
-              "rises straight (a config with physics on: true unless given)");
+              "rises straight (default: as sim.physics.enabled, unless given)");
     v.boolean("lift_in_view", o.lift_in_view,
               "the lift's arm pose re-solved where an arm link hides the held object from the "
-              "camera (a config with physics on: true unless given)");
+              "camera (default: as sim.physics.enabled, unless given)");
     v.num("settle_s", o.settle_s,
           "after the lift the hand holds still this long and a second frame looks again (0: "
-          "no second look; a config with physics on: 0.5 unless given), s",
+          "no second look; default: 0.5 with sim.physics on, 0 with it off, unless given), s",
           Range::closed(0, 10));
     v.num("settle_changed", o.settle_changed,
           "… more than this fraction of the object's pixels at another depth: it is sliding out, "

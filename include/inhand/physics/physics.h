@@ -18,7 +18,8 @@ namespace inhand {
 struct PhysicsOptions {
   // true: every pick-up, motion with the object in the hand and put-down is simulated (MuJoCo);
   // false: the kinematic simulator (the object moves rigidly with the hand; whether a grasp
-  // holds is SimOptions::check_hold's static test).
+  // holds is SimOptions::check_hold's static test). Off in this struct; on in a scan's config
+  // (ScanConfig), so that `inhand scan` simulates physics unless told otherwise.
   bool enabled = false;
   double density_kg_m3 = 300;  // the object's density (of the solid its closed mesh encloses)
   double mass_kg = 0;          // > 0: the object's mass, whatever its volume
@@ -62,7 +63,8 @@ struct PhysicsOptions {
   template <class V, class S>
   static void fields(V& v, S& o) {
     v.boolean("enabled", o.enabled,
-              "simulate every manipulation (off: the object moves rigidly with the hand)");
+              "simulate every manipulation in MuJoCo (off: the kinematic simulator, the object "
+              "moves rigidly with the hand; `inhand scan --physics`)");
     v.num("density_kg_m3", o.density_kg_m3, "the object's density, kg/m³",
           Range::openClosed(0, 30000));
     v.num("mass_kg", o.mass_kg, "the object's mass (0: from the density), kg",

@@ -49,8 +49,8 @@ struct TrackingOptions {
   double pair_information = 0.1;
   // After each pick-up, the object's pose in the hand from the first frame of it held
   // (ScanSession::registerHeldObject): the model so far aligned with the frame; false: the grasp
-  // as the robot reports it. A config file that turns sim.physics on turns this on unless it
-  // sets it (readScanConfig).
+  // as the robot reports it. Off in this struct; a scan's config (ScanConfig, physics on by
+  // default) turns it on with sim.physics unless it sets it (setPhysics).
   bool in_hand = false;
   // What a pick-up's frame must show before the palm's error there is carried to the pick: the
   // correction's squared Mahalanobis distance under its alignment's information (times
@@ -120,8 +120,8 @@ struct TrackingOptions {
           Range::openClosed(0, 1));
     v.boolean("in_hand", o.in_hand,
               "after each pick-up the object's pose in the hand from a frame (the model aligned "
-              "with it); off: as the robot reports it (a config that turns sim.physics on turns "
-              "this on unless it sets it)");
+              "with it); off: as the robot reports it (default: as sim.physics.enabled, unless "
+              "given)");
     v.num("in_hand_significance", o.in_hand_significance,
           "a pick-up's palm error is carried to the grasp only when its squared Mahalanobis "
           "distance exceeds this (χ²(6) at 99 %)",
