@@ -8,8 +8,9 @@ cd "$(dirname "$0")/.."
 out="${1:-out/colour}"
 mkdir -p "$out/runs"
 cp build/inhand "$out/inhand"
-echo '{"sim": {"colour": {"enabled": true}}}' > "$out/on.json"
-echo '{"sim": {"noise": false, "colour": {"enabled": true, "ambient": 1, "noise_sigma": 0, "exposure_sigma": 0}}}' > "$out/flat.json"
+# The kinematic simulator (physics off), which docs/colour.md was measured with.
+echo '{"sim": {"physics": {"enabled": false}, "colour": {"enabled": true}}}' > "$out/on.json"
+echo '{"sim": {"physics": {"enabled": false}, "noise": false, "colour": {"enabled": true, "ambient": 1, "noise_sigma": 0, "exposure_sigma": 0}}}' > "$out/flat.json"
 objects=(builtin:cracker_box builtin:coffee_can builtin:juice_bottle)
 if [ -d ../shared/objects/textured ]; then
   for f in ../shared/objects/textured/*/textured.obj; do objects+=("$f"); done

@@ -23,8 +23,9 @@ declare -A faults=(
 order=(clean dropped_frames corrupted_frames pose_jumps stopped_short slip_3mm slip_8mm object_dropped
   refused_motions failed_pickups)
 for name in "${order[@]}"; do
-  # Every third sensor frame (SUBSAMPLE): the setting docs/reliability_faults.md was measured with.
-  printf '{"sim": {"faults": %s, "frame_subsample": %s}}\n' "${faults[$name]}" "${SUBSAMPLE:-3}" \
+  # Every third sensor frame (SUBSAMPLE) and the kinematic simulator (physics off): the settings
+  # docs/reliability_faults.md was measured with.
+  printf '{"sim": {"faults": %s, "frame_subsample": %s, "physics": {"enabled": false}}}\n' "${faults[$name]}" "${SUBSAMPLE:-3}" \
     > "$out/$name.json"
   for object in cracker_box coffee_can; do
     for seed in 1 2; do

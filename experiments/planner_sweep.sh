@@ -16,8 +16,9 @@ mkdir -p "$out/bin"
 cp build/inhand "$out/bin/inhand"
 # The simulated sensor delivers every frame (what `inhand scan` does); SUBSAMPLE=n every n-th.
 sub="${SUBSAMPLE:-1}"
-echo "{\"sim\": {\"frame_subsample\": $sub}}" > "$out/default.json"
-echo "{\"initial_views\": 1, \"sim\": {\"frame_subsample\": $sub}}" > "$out/initial1.json"
+# The kinematic simulator (physics off), which docs/planner_eval.md was measured with.
+echo "{\"sim\": {\"frame_subsample\": $sub, \"physics\": {\"enabled\": false}}}" > "$out/default.json"
+echo "{\"initial_views\": 1, \"sim\": {\"frame_subsample\": $sub, \"physics\": {\"enabled\": false}}}" > "$out/initial1.json"
 for config in ${CONFIGS:-initial1 default}; do
   dir="$out/$config"
   if [ -f "$dir/results.csv" ]; then continue; fi

@@ -16,7 +16,7 @@ for o in $objects; do
       [ -f "$d/summary.json" ] && continue
       rm -rf "$d"
       size=$(awk -v s="$s" 'BEGIN { print (s > 1 ? 0.34 * s : 0.34) }')
-      printf '{"start": "held", "volume_size_m": %s, "planner": {"stop": "%s"}, "grasp": {"ranking": {"stop": "%s"}}}\n' \
+      printf '{"start": "held", "sim": {"physics": {"enabled": false}}, "volume_size_m": %s, "planner": {"stop": "%s"}, "grasp": {"ranking": {"stop": "%s"}}}\n' \
         "$size" "$rule" "$rule" > "$d.json"
       ./build/inhand scan --object "builtin:$o" --scale "$s" --max-grasps 1 --config "$d.json" \
         --out "$d" > "$d.log" 2>&1 || { echo "scale_table: $d failed (see $d.log)"; exit 1; }
