@@ -120,6 +120,15 @@ struct PhysicsWorld::Impl {
 
   int unstable = 0;  // steps MuJoCo found unstable (bad accelerations), undone
   std::vector<mjtNum> saved;
+  // MuJoCo 2.2 sizes its buffers once, from the model's nconmax and njmax (its A·R matrix alone
+  // holds njmax² numbers). They begin at PhysicsOptions::constraint_rows and double whenever a
+  // step fills them (grow): the step is taken again with room, so a full buffer never drops a
+  // contact.
+  std::string xml;                  // the model's MJCF with "@SIZE@" for its size element
+  int rows = 0;                     // njmax (nconmax: a quarter)
+  int grown = 0;                    // times the buffers doubled
+  std::vector<mjtNum> savedMotion;  // qvel, qacc_warmstart and act before the step
+  void grow();
   // Steps n times. A step MuJoCo finds unstable resets its whole state (the object at the
   // world's origin, the servos' commands and the palm's target zeroed): it is undone, the
   // positions, commands and target as before it, at rest.
@@ -133,8 +142,20 @@ struct PhysicsWorld::Impl {
       std::copy(d->mocap_pos, d->mocap_pos + 3 * nm, saved.begin() + long(nq + nu));
       std::copy(d->mocap_quat, d->mocap_quat + 4 * nm, saved.begin() + long(nq + nu + 3 * nm));
       const int bad = d->warning[mjWARN_BADQACC].number;
+      const int full = d->warning[mjWARN_CONTACTFULL].number + d->warning[mjWARN_CNSTRFULL].number;
       const double time = d->time;
+      const size_t nv = size_t(m->nv), na = size_t(m->na);
+      savedMotion.resize(2 * nv + na);
+      std::copy(d->qvel, d->qvel + nv, savedMotion.begin());
+      std::copy(d->qacc_warmstart, d->qacc_warmstart + nv, savedMotion.begin() + long(nv));
+      std::copy(d->act, d->act + na, savedMotion.begin() + long(2 * nv));
       mj_step(m, d);
+      if (d->warning[mjWARN_CONTACTFULL].number + d->warning[mjWARN_CNSTRFULL].number > full) {
+        grow();  // the state as before the step, with room: the step again
+        d->time = time;
+        --i;
+        continue;
+      }
       if (d->warning[mjWARN_BADQACC].number == bad && d->time > time) continue;
       std::copy(saved.begin(), saved.begin() + long(nq), d->qpos);
       std::copy(saved.begin() + long(nq), saved.begin() + long(nq + nu), d->ctrl);
@@ -357,7 +378,43 @@ mjModel* compileXml(const std::string& xml) {
   return m;
 }
 
+// The model's MJCF with buffers for `rows` constraint rows and a quarter as many contacts.
+std::string sizedXml(const std::string& xml, int rows) {
+  std::string text = xml;
+  text.replace(text.find("@SIZE@"), 6,
+               "<size nconmax=\"" + std::to_string(std::max(1, rows / 4)) + "\" njmax=\"" +
+                   std::to_string(rows) + "\"/>");
+  return text;
+}
+
 }  // namespace
+
+void PhysicsWorld::Impl::grow() {
+  rows *= 2;
+  mjModel* bigger = compileXml(sizedXml(xml, rows));
+  mjData* fresh = mj_makeData(bigger);
+  // The state as it was before the step (saved by step()): positions, servo commands, the
+  // palm's target, velocities, warm start, activations, time.
+  const size_t nq = size_t(m->nq), nu = size_t(m->nu), nm = size_t(m->nmocap);
+  const size_t nv = size_t(m->nv);
+  std::copy(saved.begin(), saved.begin() + long(nq), fresh->qpos);
+  std::copy(saved.begin() + long(nq), saved.begin() + long(nq + nu), fresh->ctrl);
+  std::copy(saved.begin() + long(nq + nu), saved.begin() + long(nq + nu + 3 * nm),
+            fresh->mocap_pos);
+  std::copy(saved.begin() + long(nq + nu + 3 * nm), saved.end(), fresh->mocap_quat);
+  std::copy(savedMotion.begin(), savedMotion.begin() + long(nv), fresh->qvel);
+  std::copy(savedMotion.begin() + long(nv), savedMotion.begin() + long(2 * nv),
+            fresh->qacc_warmstart);
+  std::copy(savedMotion.begin() + long(2 * nv), savedMotion.end(), fresh->act);
+  // The warnings carry over, so that a step compares with the counts before it.
+  std::copy(d->warning, d->warning + mjNWARNING, fresh->warning);
+  mj_deleteData(d);
+  mj_deleteModel(m);
+  m = bigger;
+  d = fresh;
+  mj_forward(m, d);
+  ++grown;
+}
 
 PhysicsWorld::PhysicsWorld(const RobotModel& model, const TriangleMesh& object_O, double friction,
                            const PhysicsOptions& options)
@@ -414,9 +471,8 @@ void PhysicsWorld::build(const RobotModel& model, std::vector<ConvexPiece> piece
   const TableInfo& table = model.table();
   std::ostringstream x;
   // Contacts: every convex piece may touch the table plane at a few points (MuJoCo 2.2's default
-  // buffer of 100 fills with a many-piece object on it).
-  x << "<mujoco model=\"inhand\"><compiler angle=\"radian\"/><size nconmax=\"2000\" "
-    << "njmax=\"6000\"/>"
+  // buffer of 100 fills with a many-piece object on it): @SIZE@ is sizedXml's, which grows.
+  x << "<mujoco model=\"inhand\"><compiler angle=\"radian\"/>@SIZE@"
     << "<option timestep=\"" << num(options.timestep_s)
     << "\" gravity=\"0 0 -9.81\" cone=\"elliptic\" impratio=\"10\" noslip_iterations=\""
     << options.noslip_iterations << "\"/>"
@@ -437,7 +493,9 @@ void PhysicsWorld::build(const RobotModel& model, std::vector<ConvexPiece> piece
     << inertial(palmMass, palmLink.com, Mat3::Identity() * palmMass * 2e-3) << palm << "</body>"
     << "</worldbody><equality><weld body1=\"palm\" body2=\"target\" solref=\"0.004 1\"/>"
     << "</equality><actuator>" << hand.actuators() << "</actuator></mujoco>";
-  I.m = compileXml(x.str());
+  I.xml = x.str();
+  I.rows = options.constraint_rows;
+  I.m = compileXml(sizedXml(I.xml, I.rows));
   I.d = mj_makeData(I.m);
   I.bind();
 }
@@ -445,6 +503,7 @@ void PhysicsWorld::build(const RobotModel& model, std::vector<ConvexPiece> piece
 PhysicsWorld::~PhysicsWorld() = default;
 
 double PhysicsWorld::mass_kg() const { return impl_->mass; }
+int PhysicsWorld::buffersGrown() const { return impl_->grown; }
 int PhysicsWorld::pieces() const { return int(impl_->pieces.size()); }
 double PhysicsWorld::piecesVolume_m3() const { return impl_->piecesVolume; }
 const std::vector<ConvexPiece>& PhysicsWorld::decomposition() const { return impl_->pieces; }

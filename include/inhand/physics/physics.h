@@ -58,6 +58,12 @@ struct PhysicsOptions {
   // MuJoCo's no-slip solver passes per step (opt.noslip_iterations): soft contacts let a body
   // resting in static friction creep; this pass removes that drift. 0: off.
   int noslip_iterations = 10;
+  // Rows of MuJoCo's constraint buffer to begin with (njmax; contacts: a quarter as many). MuJoCo
+  // 2.2 sizes its buffers once, and its A·R matrix holds rows² numbers (6000 rows: 288 MB,
+  // zeroed when a world starts); a step that fills them doubles both and is taken again, so a
+  // full buffer never drops a contact. The test set's objects use at most 703 (a ring on the
+  // table, 174 contacts).
+  int constraint_rows = 1024;
   ConvexDecompositionOptions decomposition;
 
   template <class V, class S>
@@ -100,6 +106,10 @@ struct PhysicsOptions {
     v.integer("noslip_iterations", o.noslip_iterations,
               "MuJoCo's no-slip solver passes per step (0: off; soft contacts creep)",
               Range::closed(0, 100));
+    v.integer("constraint_rows", o.constraint_rows,
+              "rows of MuJoCo's constraint buffer to begin with (contacts: a quarter; both "
+              "double whenever a step fills them)",
+              Range::closed(16, 100000));
     ConvexDecompositionOptions::fields(v, o.decomposition, "decomposition_");
   }
   std::string validate() const;
@@ -116,6 +126,9 @@ class PhysicsWorld {
   PhysicsWorld(const RobotModel& model, std::vector<ConvexPiece> pieces, double friction,
                const PhysicsOptions& options);
   ~PhysicsWorld();
+  // How often a step filled MuJoCo's buffers and they were doubled (PhysicsOptions::
+  // constraint_rows).
+  int buffersGrown() const;
   PhysicsWorld(const PhysicsWorld&) = delete;
   PhysicsWorld& operator=(const PhysicsWorld&) = delete;
 
