@@ -61,6 +61,45 @@ std::vector<SurfacePoint> handPoints(const JointVector& q) {
 }
 }  // namespace
 
+// The chamfer distance over a window is the whole image's wherever it is shorter than the
+// window's margin around the pixel (an independent answer: the brute-force chamfer distance, the
+// least of max(|du|, |dv|) + (√2 − 1) min(|du|, |dv|) over the image's zeros).
+TEST(Tracking, ChamferDistanceInAWindowIsTheImagesNearItsPixels) {
+  const int w = 120, h = 90;
+  std::vector<uint8_t> zero(size_t(w * h), 0);
+  uint32_t state = 7;
+  for (uint8_t& z : zero) {
+    state = state * 1664525u + 1013904223u;
+    z = (state >> 24) < 3;  // about 1 % of the pixels
+  }
+  const std::vector<float> whole = chamferDistance(zero, w, PixelRect{0, 0, w, h});
+  const PixelRect window{30, 20, 95, 70};
+  const std::vector<float> part = chamferDistance(zero, w, window);
+  int compared = 0;
+  for (int v = 0; v < h; ++v)
+    for (int u = 0; u < w; ++u) {
+      double best = 1e9;
+      for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x)
+          if (zero[size_t(y * w + x)]) {
+            const int a = std::abs(x - u), b = std::abs(y - v);
+            best = std::min(best, std::max(a, b) + (std::sqrt(2.0) - 1) * std::min(a, b));
+          }
+      ASSERT_NEAR(whole[size_t(v * w + u)], best, 1e-4) << u << " " << v;
+      if (u < window.u0 || u >= window.u1 || v < window.v0 || v >= window.v1) continue;
+      const int margin =
+          std::min({u - window.u0, window.u1 - 1 - u, v - window.v0, window.v1 - 1 - v});
+      const float d = part[size_t((v - window.v0) * (window.u1 - window.u0) + (u - window.u0))];
+      if (best < margin) {
+        EXPECT_FLOAT_EQ(d, whole[size_t(v * w + u)]) << u << " " << v;
+        ++compared;
+      } else {
+        EXPECT_GE(d, whole[size_t(v * w + u)] - 1e-4) << u << " " << v;  // never shorter
+      }
+    }
+  EXPECT_GT(compared, 1000);
+}
+
 TEST(Tracking, RecoversTheArmErrorFromTheHandInTheFrame) {
   for (double error : {0.0, 0.01, 0.02, 0.03}) {
     Scene s(error, 3);

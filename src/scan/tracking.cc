@@ -68,58 +68,76 @@ struct Pairs {
 // each pixel's distance to the nearest such pixel (pixels; chamfer 1/√2): a point of the body
 // that projects outside it lies past the body's true outline and is pulled back across it.
 struct Silhouette {
-  int width = 0, height = 0;
+  PixelRect window;  // where dist is known: the body's image widened by the alignment's reach
   std::vector<float> dist;
   double near = 0, far = 0;  // the depths at which the frame may show the body, m
   // How far apart the body's points lie (typicalSpacing; 0: no uncovered pixels); a point covers
   // the pixels within 1.5 times that.
   double spacing_m = 0;
+  // The distance at a pixel; one outside the window takes its nearest window pixel's.
   float at(int u, int v) const {
-    u = std::clamp(u, 0, width - 1);
-    v = std::clamp(v, 0, height - 1);
-    return dist[size_t(v) * width + u];
+    const int w = window.u1 - window.u0;
+    u = std::clamp(u - window.u0, 0, w - 1);
+    v = std::clamp(v - window.v0, 0, window.v1 - window.v0 - 1);
+    return dist[size_t(v) * w + u];
   }
 };
 
+// The frame's pixels at the body's depths (near to far), the hidden ones and, with kUnknown,
+// those without depth; their distance within `window` (not empty).
 Silhouette silhouette(const DepthImage& depth, const std::vector<uint8_t>& hidden, double near,
-                      double far, NoDepthPixels no_depth) {
+                      double far, NoDepthPixels no_depth, const PixelRect& window) {
   Silhouette s;
-  s.width = depth.width;
-  s.height = depth.height;
+  s.window = window;
   s.near = near;
   s.far = far;
-  const float inf = 1e9f;
-  s.dist.assign(depth.depth_m.size(), inf);
-  for (size_t i = 0; i < depth.depth_m.size(); ++i) {
-    const float z = depth.depth_m[i];
-    if ((!hidden.empty() && hidden[i]) || (z >= near && z <= far) ||
-        (no_depth == NoDepthPixels::kUnknown && !(z > 0)))
-      s.dist[i] = 0;
-  }
+  std::vector<uint8_t> zero(depth.depth_m.size(), 0);
+  for (int v = window.v0; v < window.v1; ++v)
+    for (int u = window.u0; u < window.u1; ++u) {
+      const size_t i = size_t(v) * depth.width + size_t(u);
+      const float z = depth.depth_m[i];
+      zero[i] = (!hidden.empty() && hidden[i]) || (z >= near && z <= far) ||
+                (no_depth == NoDepthPixels::kUnknown && !(z > 0));
+    }
+  s.dist = chamferDistance(zero, depth.width, window);
+  return s;
+}
+
+}  // namespace
+
+std::vector<float> chamferDistance(const std::vector<uint8_t>& zero, int width,
+                                   const PixelRect& window) {
+  const int w = window.u1 - window.u0, h = window.v1 - window.v0;
+  std::vector<float> dist(size_t(std::max(0, w)) * size_t(std::max(0, h)), 1e9f);
+  if (w <= 0 || h <= 0) return dist;
+  for (int v = 0; v < h; ++v)
+    for (int u = 0; u < w; ++u)
+      if (zero[size_t(v + window.v0) * width + size_t(u + window.u0)]) dist[size_t(v) * w + u] = 0;
   const float d1 = 1.0f, d2 = 1.41421356f;
-  const int w = s.width, h = s.height;
   for (int v = 0; v < h; ++v)
     for (int u = 0; u < w; ++u) {
-      float& d = s.dist[size_t(v) * w + u];
-      if (u > 0) d = std::min(d, s.dist[size_t(v) * w + u - 1] + d1);
+      float& d = dist[size_t(v) * w + u];
+      if (u > 0) d = std::min(d, dist[size_t(v) * w + u - 1] + d1);
       if (v > 0) {
-        d = std::min(d, s.dist[size_t(v - 1) * w + u] + d1);
-        if (u > 0) d = std::min(d, s.dist[size_t(v - 1) * w + u - 1] + d2);
-        if (u + 1 < w) d = std::min(d, s.dist[size_t(v - 1) * w + u + 1] + d2);
+        d = std::min(d, dist[size_t(v - 1) * w + u] + d1);
+        if (u > 0) d = std::min(d, dist[size_t(v - 1) * w + u - 1] + d2);
+        if (u + 1 < w) d = std::min(d, dist[size_t(v - 1) * w + u + 1] + d2);
       }
     }
   for (int v = h - 1; v >= 0; --v)
     for (int u = w - 1; u >= 0; --u) {
-      float& d = s.dist[size_t(v) * w + u];
-      if (u + 1 < w) d = std::min(d, s.dist[size_t(v) * w + u + 1] + d1);
+      float& d = dist[size_t(v) * w + u];
+      if (u + 1 < w) d = std::min(d, dist[size_t(v) * w + u + 1] + d1);
       if (v + 1 < h) {
-        d = std::min(d, s.dist[size_t(v + 1) * w + u] + d1);
-        if (u + 1 < w) d = std::min(d, s.dist[size_t(v + 1) * w + u + 1] + d2);
-        if (u > 0) d = std::min(d, s.dist[size_t(v + 1) * w + u - 1] + d2);
+        d = std::min(d, dist[size_t(v + 1) * w + u] + d1);
+        if (u + 1 < w) d = std::min(d, dist[size_t(v + 1) * w + u + 1] + d2);
+        if (u > 0) d = std::min(d, dist[size_t(v + 1) * w + u - 1] + d2);
       }
     }
-  return s;
+  return dist;
 }
+
+namespace {
 
 // How a point x (camera frame) moves in the image along direction g (pixels), in metres at its
 // depth, per step of the body's motion about c (x' = x + ω × (x − c) + t; rotation vector,
@@ -527,12 +545,28 @@ TrackResult alignBodyToDepth(const DepthImage& depth, const std::vector<uint8_t>
   // The outline: pixels within 5 cm of the body's depths as given, the hidden ones (and with
   // kUnknown those without depth).
   double near = std::numeric_limits<double>::infinity(), far = 0;
+  double uMin = depth.width, vMin = depth.height, uMax = 0, vMax = 0;
   for (const SurfacePoint& sp : points_X) {
-    const double z = (T_C_X * sp.p).z();
-    near = std::min(near, z);
-    far = std::max(far, z);
+    const Vec3 x = T_C_X * sp.p;
+    near = std::min(near, x.z());
+    far = std::max(far, x.z());
+    if (x.z() <= 0.1) continue;
+    const Vec2 uv = K.project(x);
+    uMin = std::min(uMin, uv.x());
+    uMax = std::max(uMax, uv.x());
+    vMin = std::min(vMin, uv.y());
+    vMax = std::max(vMax, uv.y());
   }
-  Silhouette outline = silhouette(depth, hidden, near - 0.05, far + 0.05, no_depth);
+  // Its distances where the body's points project, as it moves within the gate, and 80 pixels
+  // (about 10 cm at 0.7 m) around: a point farther outside the outline is pulled as hard (its
+  // error is past the Huber bound) along the distance's gradient there.
+  const double reach = 80 + std::ceil(o.gate_m * K.fx / std::max(0.1, near));
+  PixelRect window{std::max(0, int(std::floor(uMin - reach))),
+                   std::max(0, int(std::floor(vMin - reach))),
+                   std::min(depth.width, int(std::ceil(uMax + reach)) + 1),
+                   std::min(depth.height, int(std::ceil(vMax + reach)) + 1)};
+  if (window.empty()) window = {0, 0, depth.width, depth.height};
+  Silhouette outline = silhouette(depth, hidden, near - 0.05, far + 0.05, no_depth, window);
   if (pull == UncoveredPull::kFromStart) outline.spacing_m = typicalSpacing(points_X, occluders_X);
   // Without the pull (with it from the start for kFromStart), then the refinement.
   const TrackResult first = alignFrom(body, K, points_X, 0, occluders_X, T_C_X, Iso3::Identity(),

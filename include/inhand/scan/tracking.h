@@ -194,6 +194,14 @@ TrackResult alignToDepth(const DepthImage& depth, const CameraIntrinsics& K,
 // predicted at T_C_X) under `information` · `pair_information`.
 double correctionSignificance(const TrackResult& r, const Iso3& T_C_X, double pair_information);
 
+// The chamfer distance in pixels (a 3×3 mask: 1 along rows and columns, √2 diagonally; two
+// passes) from each pixel of `window` (of an image `width` pixels wide) to the nearest pixel of
+// it where `zero` is set, over paths within the window; 1e9 where it has none. Row-major,
+// window-sized. Within a whole-image window it is the image's distance; within a smaller one, a
+// distance shorter than the window's margin around the pixel is the image's too.
+std::vector<float> chamferDistance(const std::vector<uint8_t>& zero, int width,
+                                   const PixelRect& window);
+
 // How alignBodyToDepth uses the uncovered pixels' pull (below).
 enum class UncoveredPull {
   kOff,
