@@ -135,19 +135,16 @@ SimulatedScan runSimulatedScan(const RobotModel& model, const TriangleMesh& mesh
   const DepthCameraOptions& camera = out.camera;
   NoiseModelOptions noise;
   // start "table": the object rests on the table, the arm at home (the whole scan, §V);
-  // "held": the robot already holds it at the simulator's default side grasp.
+  // "held": the robot already holds it at the simulator's default side grasp. With physics the
+  // squeeze moves the object in the hand (millimetres): the scan is told the grasp where it left
+  // it, as it is told the exact grasp without physics.
   auto [T_O_palm, qGrasp] = defaultGrasp(model, object);
   SimWorld world(model, object, T_O_palm, camera, noise, o.sim);
   world.setObjectColours(colours);  // its triangles first, then those closing its holes
-  if (o.start == "held") {
-    // With physics the squeeze moves the object in the hand (millimetres): the scan is told the
-    // grasp where it left it, as it is told the exact grasp without physics.
-    world.holdAt(qGrasp);
-    T_O_palm = world.T_O_palm;
-  } else {
-    world.held = false;
-    world.q = model.home();
-  }
+  world.held = false;
+  world.q = model.home();
+  if (o.start == "held") world.holdAt(qGrasp);
+  T_O_palm = world.T_O_palm;
   SimRobot robot(&world);
   SimSensor sensor(&world, camera);
   // The simulated object is known: score the model against it after every view (its frame O
