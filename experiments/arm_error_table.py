@@ -164,7 +164,8 @@ def main(out, docs):
               f"every {sub}th sensor frame fused: `\"sim\": {{\"frame_subsample\": {sub}}}`")
     open(os.path.join(docs, "arm_error.md"), "w").write(
         "# Arm error and tracking: the sweep\n\n"
-        f"Whole scans from the table at default settings (3 grasps at most, {frames}), ig planner; "
+        f"Whole scans from the table with the kinematic simulator (physics off) at default settings "
+        f"(3 grasps at most, {frames}), ig planner; "
         "the simulated arm's "
         "joints off the reported ones (fixed offsets drawn per seed, a sag with gravity's torques, slow "
         "drift, per-frame noise: `sim.arm_error_*`) so that where objects are presented the palm is at "
