@@ -45,11 +45,12 @@ ScanConfig scanConfigFor(const ScanArgs& args) {
     for (const std::string& n : plannerNames()) names += (names.empty() ? "" : ", ") + n;
     throw Error("--planner: unknown planner \"" + args.planner + "\" (known: " + names + ")");
   }
-  if (!args.config.empty()) readScanConfigFile(args.config, &o);
+  const Json file = args.config.empty() ? Json() : readJsonFile(args.config);
+  if (!args.config.empty()) readScanConfig(file, args.config, &o);
   if (!args.physics.empty()) {
     if (args.physics != "on" && args.physics != "off")
       throw Error("--physics: must be on or off, not \"" + args.physics + "\"");
-    setPhysics(args.physics == "on", args.config.empty() ? Json() : readJsonFile(args.config), &o);
+    setPhysics(args.physics == "on", file, &o);
   }
   if (!args.robot.empty()) o.robot = args.robot;
   if (o.robot.empty()) o.robot = defaultRobotConfig();

@@ -129,6 +129,14 @@ struct PhysicsWorld::Impl {
   int grown = 0;                    // times the buffers doubled
   std::vector<mjtNum> savedMotion;  // qvel, qacc_warmstart and act before the step
   void grow();
+  // The positions, servo commands and the palm's target saved before the step, into `to`.
+  void restoreSaved(mjData* to) const {
+    const size_t nq = size_t(m->nq), nu = size_t(m->nu), nm = size_t(m->nmocap);
+    std::copy(saved.begin(), saved.begin() + long(nq), to->qpos);
+    std::copy(saved.begin() + long(nq), saved.begin() + long(nq + nu), to->ctrl);
+    std::copy(saved.begin() + long(nq + nu), saved.begin() + long(nq + nu + 3 * nm), to->mocap_pos);
+    std::copy(saved.begin() + long(nq + nu + 3 * nm), saved.end(), to->mocap_quat);
+  }
   // Steps n times. A step MuJoCo finds unstable resets its whole state (the object at the
   // world's origin, the servos' commands and the palm's target zeroed): it is undone, the
   // positions, commands and target as before it, at rest.
@@ -157,11 +165,7 @@ struct PhysicsWorld::Impl {
         continue;
       }
       if (d->warning[mjWARN_BADQACC].number == bad && d->time > time) continue;
-      std::copy(saved.begin(), saved.begin() + long(nq), d->qpos);
-      std::copy(saved.begin() + long(nq), saved.begin() + long(nq + nu), d->ctrl);
-      std::copy(saved.begin() + long(nq + nu), saved.begin() + long(nq + nu + 3 * nm),
-                d->mocap_pos);
-      std::copy(saved.begin() + long(nq + nu + 3 * nm), saved.end(), d->mocap_quat);
+      restoreSaved(d);
       std::fill(d->qvel, d->qvel + m->nv, 0.0);
       std::fill(d->qacc_warmstart, d->qacc_warmstart + m->nv, 0.0);
       d->time = time + m->opt.timestep;
@@ -394,14 +398,9 @@ void PhysicsWorld::Impl::grow() {
   mjModel* bigger = compileXml(sizedXml(xml, rows));
   mjData* fresh = mj_makeData(bigger);
   // The state as it was before the step (saved by step()): positions, servo commands, the
-  // palm's target, velocities, warm start, activations, time.
-  const size_t nq = size_t(m->nq), nu = size_t(m->nu), nm = size_t(m->nmocap);
+  // palm's target, velocities, warm start, activations (step() sets the time).
   const size_t nv = size_t(m->nv);
-  std::copy(saved.begin(), saved.begin() + long(nq), fresh->qpos);
-  std::copy(saved.begin() + long(nq), saved.begin() + long(nq + nu), fresh->ctrl);
-  std::copy(saved.begin() + long(nq + nu), saved.begin() + long(nq + nu + 3 * nm),
-            fresh->mocap_pos);
-  std::copy(saved.begin() + long(nq + nu + 3 * nm), saved.end(), fresh->mocap_quat);
+  restoreSaved(fresh);
   std::copy(savedMotion.begin(), savedMotion.begin() + long(nv), fresh->qvel);
   std::copy(savedMotion.begin() + long(nv), savedMotion.begin() + long(2 * nv),
             fresh->qacc_warmstart);
