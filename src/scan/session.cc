@@ -718,36 +718,6 @@ void countPixels(const DepthImage& depth, const std::vector<uint8_t>& carve, Fra
   }
 }
 
-// The robot's pixels (kCarveToSurface in `carve`) within 2 pixels of a measurement (not the
-// robot's) nearer than them by more than `jump_m` become kCarveUnknownToSurface: the far side of
-// the object's silhouette against the robot (or the table). The voxels of the object's rim read
-// them (a voxel reads its nearest pixel, and the sensor's lateral noise moves returns across
-// silhouettes), and they must not pull those voxels out of the surface: a 12 mm pen held in front
-// of the palm was thinned by 0.3 mm on average, dented 1-2 mm along its sides.
-void farSideOfSilhouettesOnlyCarvesUnknown(const DepthImage& depth, float jump_m,
-                                           const PixelRect& rect, std::vector<uint8_t>* carve) {
-  std::vector<uint8_t>& c = *carve;
-  const int W = depth.width, H = depth.height, R = 2;
-  std::vector<uint8_t> rim(c.size(), 0);
-  parallelFor(rect.v0, rect.v1, [&](int v) {
-    for (int u = rect.u0; u < rect.u1; ++u) {
-      const size_t i = size_t(v) * W + u;
-      if (c[i] != kCarveToSurface) continue;
-      const float z = depth.depth_m[i];
-      bool nearer = false;
-      for (int vv = std::max(0, v - R); vv <= std::min(H - 1, v + R) && !nearer; ++vv)
-        for (int uu = std::max(0, u - R); uu <= std::min(W - 1, u + R) && !nearer; ++uu) {
-          const size_t j = size_t(vv) * W + uu;
-          const float zn = depth.depth_m[j];
-          nearer = zn > 0 && z - zn > jump_m && c[j] == 0;
-        }
-      rim[i] = nearer;
-    }
-  });
-  for (size_t i = 0; i < c.size(); ++i)
-    if (rim[i]) c[i] = kCarveUnknownToSurface;
-}
-
 // The silhouette pixels of `depth` (depthDiscontinuities) that are not the robot's get
 // kCarveBeyondBand in `carve`: they only carve. A silhouette pixel's return may come from beside
 // its ray, behind the object's edge: the depths to fuse (returned) carve in front of the nearest
@@ -811,7 +781,7 @@ FrameReport ScanSession::fuse(const DepthImage& input, const JointVector& q, con
   // unknown voxels (beside a measurement more than μ/2 nearer: a voxel of the object's rim can lie
   // more than μ in front of them).
   if (!carve.empty())
-    farSideOfSilhouettesOnlyCarvesUnknown(depth, float(s.volume.truncation() / 2), rect, &carve);
+    farSideOfSilhouettesOnlyCarveUnknown(depth, float(s.volume.truncation() / 2), rect, &carve);
   // Silhouette pixels only carve beyond the band (ScanOptions::discontinuities_carve_only, and
   // ..._on_table for an object not held), found after the in-hand trim: the pixels beside those
   // it dropped are silhouettes too. On the table the frame also goes whole into tableVolume.

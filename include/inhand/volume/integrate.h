@@ -72,6 +72,16 @@ std::vector<uint8_t> depthDiscontinuities(const DepthImage& depth, double jump_m
 // object's edge, and what it carves in front of itself must stop before the edge.
 DepthImage nearestAround(const DepthImage& depth, const std::vector<uint8_t>& mask, int radius);
 
+// The pixels marked kCarveToSurface in `carve` that lie within 2 pixels (5 × 5) of a pixel not
+// marked at all whose depth is nearer by more than `jump_m` become kCarveUnknownToSurface: the
+// robot's (or the table's) pixels on the far side of the object's silhouette against them. Only
+// pixels in `rect` change. A 5 × 5 minimum filter of the unmarked depths, separable (rows, then
+// columns); farSideOfSilhouettesReference is the direct 25-pixel search, the same to the bit.
+void farSideOfSilhouettesOnlyCarveUnknown(const DepthImage& depth, float jump_m,
+                                          const PixelRect& rect, std::vector<uint8_t>* carve);
+void farSideOfSilhouettesReference(const DepthImage& depth, float jump_m, const PixelRect& rect,
+                                   std::vector<uint8_t>* carve);
+
 // Pixel (u, v)'s surface with the noise smoothed out: a least-squares plane through the depths of
 // its (2·kSmoothingRadius + 1)² neighbourhood that lie within `max_jump` of its own (the same
 // surface), evaluated at the pixel, and the cosine between that plane's normal and the pixel's ray
