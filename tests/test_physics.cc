@@ -486,7 +486,8 @@ TEST(HoldTest, TestsTheNextBatchWhenNoneOfTheFirstHolds) {
 // Batches are tested until grasp.hold.enough_held candidates hold: the enveloping grasp fourth
 // of six (the rest pinches that fail), in batches of two. With enough_held 1 the first two
 // batches are tested (the second holds), the rest left untested after them; with 2 all three
-// (only one holds): every candidate tested, the one that held first.
+// (only one holds): every candidate tested, the one that held first; so too with enough_held 1
+// when no close is under the push limit.
 TEST(HoldTest, TestsBatchesUntilEnoughHold) {
   const RobotModel& m = test::wam();
   const TriangleMesh box = makeBox(Vec3(0.06, 0.1, 0.2));
@@ -515,6 +516,14 @@ TEST(HoldTest, TestsBatchesUntilEnoughHold) {
   EXPECT_EQ(tested(two), 6);
   EXPECT_EQ(two[0].pose, 5);
   for (size_t k = 1; k < 6; ++k) EXPECT_EQ(two[k].hold, 0) << k;
+  // Only a candidate whose close barely pushed the model counts (max_close_push_m): with a
+  // limit nothing meets, every batch is tested.
+  o.enough_held = 1;
+  o.max_close_push_m = 1e-9;
+  std::vector<GraspCandidate> none = candidates;
+  rankByHold(m, box, boxOnTable(m), nullptr, 0.5, o, &none);
+  EXPECT_EQ(tested(none), 6);
+  EXPECT_EQ(none[0].pose, 5);
 }
 
 // The margin (HoldTestOptions::margin_mass, margin_friction): a pinch and an enveloping grasp
@@ -540,6 +549,34 @@ TEST(HoldTest, PutsTheGraspThatHoldsWithAMarginFirst) {
   rankByHold(m, box, boxOnTable(m), nullptr, 0.5, o, &c);
   EXPECT_EQ(c[0].pose, 0);
   EXPECT_EQ(c[0].hold_margin, -1);
+}
+
+// The close's push (HoldTestOptions::max_close_push_m): of two grasps that hold the box (no
+// margin tried), the one whose close pushed the model farther goes after the other when the
+// limit lies between their pushes; with no limit the order stays.
+TEST(HoldTest, PutsTheGraspWhoseCloseBarelyPushesTheModelFirst) {
+  const RobotModel& m = test::wam();
+  const TriangleMesh box = makeBox(Vec3(0.06, 0.1, 0.2));
+  HoldTestOptions o;
+  o.density_kg_m3 = 0.1 / box.signedVolume();  // 0.1 kg: both hold
+  o.margin_mass = 1;
+  o.margin_friction = 1;
+  o.max_close_push_m = 0;
+  std::vector<GraspCandidate> c = boxCandidates(m, box, 2);
+  rankByHold(m, box, boxOnTable(m), nullptr, 0.5, o, &c);
+  ASSERT_EQ(c[0].hold, 1) << holdFailureName(c[0].hold_failure);
+  ASSERT_EQ(c[1].hold, 1) << holdFailureName(c[1].hold_failure);
+  EXPECT_EQ(c[0].pose, 0);  // no limit: as they came
+  const double p0 = c[0].hold_close_m, p1 = c[1].hold_close_m;
+  ASSERT_GT(std::abs(p0 - p1), 1e-4) << p0 << " " << p1;
+  const int less = p0 < p1 ? 0 : 1;
+  std::vector<GraspCandidate> d = boxCandidates(m, box, 2);
+  if (less == 0) std::swap(d[0], d[1]);  // the one that pushes farther first
+  o.max_close_push_m = 0.5 * (p0 + p1);
+  rankByHold(m, box, boxOnTable(m), nullptr, 0.5, o, &d);
+  EXPECT_EQ(d[0].pose, less);
+  EXPECT_LE(d[0].hold_close_m, o.max_close_push_m);
+  EXPECT_GT(d[1].hold_close_m, o.max_close_push_m);
 }
 
 // A piece clipped by a plane keeps exactly the part on its side: a unit cube's hull cut through

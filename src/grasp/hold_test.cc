@@ -227,7 +227,7 @@ double rankByHold(const RobotModel& robot, const TriangleMesh& model_O, const Is
       c.hold_failure = trials[size_t(i - begin)].failure;
       c.hold_close_m = trials[size_t(i - begin)].close_moved_m;
       c.T_O_palm_closed = trials[size_t(i - begin)].T_O_palm_closed;
-      heldCount += c.hold == 1;
+      heldCount += c.hold == 1 && (o.max_close_push_m <= 0 || c.hold_close_m <= o.max_close_push_m);
     }
     n = end;
   }
@@ -257,9 +257,16 @@ double rankByHold(const RobotModel& robot, const TriangleMesh& model_O, const Is
       }
     });
     for (int i = 0; i < h; ++i) (*candidates)[size_t(i)].hold_margin = margin[size_t(i)];
-    std::stable_partition(candidates->begin(), held,
-                          [](const GraspCandidate& c) { return c.hold_margin == 1; });
   }
+  // Held with the margin first; within each group, those whose close pushed the model little.
+  const double push = o.max_close_push_m;
+  std::stable_sort(
+      candidates->begin(), held, [push](const GraspCandidate& a, const GraspCandidate& b) {
+        auto key = [push](const GraspCandidate& c) {
+          return 2 * int(c.hold_margin == 1) + int(push <= 0 || c.hold_close_m <= push);
+        };
+        return key(a) > key(b);
+      });
   if (h > 0 && o.pose_tolerance_m > 0)
     robustFirst(robot, pieces, T_B_O, friction, po, o, candidates, h);
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();

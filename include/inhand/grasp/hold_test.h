@@ -43,6 +43,11 @@ struct HoldTestOptions {
   // with this fraction of the friction; those that hold then too go first (1 and 1: no margin).
   double margin_mass = 2.0;
   double margin_friction = 0.7;
+  // Within each of those groups (held with the margin, held without), the candidates whose close
+  // pushed the model at most this far go first, and only they count toward enough_held: a close
+  // that shoves the object centimetres across the table before the fingers hold it ends where the
+  // unseen surface and the table's friction put it, which the model does not know. 0: not used.
+  double max_close_push_m = 0.02;
   // Where the object lies is known to the registration's error: the candidates that held are
   // tried again, in order, with the model moved this far each way across the table (four trials,
   // the hand where it was); the first that holds in all goes first. At most robust_checked
@@ -81,6 +86,10 @@ struct HoldTestOptions {
           Range::closed(1, 20));
     v.num("margin_friction", o.margin_friction, "… with this fraction of the friction",
           Range::openClosed(0, 1));
+    v.num("max_close_push_m", o.max_close_push_m,
+          "… and in each group, the ones whose close pushed the model at most this far go "
+          "first; only they count toward enough_held (0: not used), m",
+          Range::closedOpen(0, 1));
     v.num("pose_tolerance_m", o.pose_tolerance_m,
           "those that held, tried with the model moved this far each way across the table: the "
           "first that holds in all goes first (0: not tried), m",
