@@ -406,11 +406,6 @@ bool pushedIfBorneOut(ScanSession& session, RobotInterface& robot, DepthSensor& 
   return true;
 }
 
-// A fraction borne out as a percentage; "none in view" when negative.
-std::string percent(double f) {
-  return f < 0 ? std::string("none in view") : std::to_string(int(std::lround(100 * f))) + " %";
-}
-
 // After the lift: how much of the object's points `points_O` the lift's frame bears out where the
 // grasp holds it (`*achieved`, moved to where the frame shows it in the hand) and where it rested
 // (T_B_O_rest); -1 where none is in view. The grasp where the hold test's close left the model
@@ -427,10 +422,7 @@ struct LiftCheck {
   // first frames are to register it (ScanSession::confirmGraspOnNextFrames). A grasp as the hand
   // achieved it is not: registering the model so far, which lacks the faces the camera sees in
   // the hand, pulls it towards them (the remote's grasp, right, moved 5.7 mm).
-  // Tracking refused the lift's frame, and the object's points bore the grasp out from the
-  // camera's reported pose (no registration): its first frames are to register it too.
-  bool untracked = false;
-  bool toConfirm() const { return (pushed || untracked) && !registered; }
+  bool toConfirm() const { return pushed && !registered; }
 };
 LiftCheck checkAfterLift(ScanSession& session, RobotInterface& robot, DepthSensor& sensor,
                          const GraspCandidate& c, const Iso3& T_B_O_rest,
@@ -473,17 +465,6 @@ LiftCheck checkAfterLift(ScanSession& session, RobotInterface& robot, DepthSenso
     for (size_t k = 0; k < points_O.size(); ++k) held_B[k] = T_B_O * points_O[k];
   }
   if (tracked) out.inHand = depthSupport(d, *tracked, K, f->mask, held_B);
-  // Tracking needs the hand's and the arm's surfaces in view too; where too few of them are (a
-  // flat object held up edge-on before the palm), the object's own points are looked for from
-  // where the camera reported itself (the arm's error is millimetres, a dropped object's place
-  // shows the background centimetres away).
-  if (!tracked) {
-    out.inHand = depthSupport(d, f->aim, K, f->mask, held_B);
-    out.untracked = out.inHand >= 0;
-    if (out.inHand >= 0)
-      log("… the object's points from the camera's reported pose: " + percent(out.inHand) +
-          " borne out in the hand");
-  }
   out.onTable = depthSupport(d, f->aim, K, f->mask, rest_B_points);
   // Not all where the grasp says, and not where it rested: closing the fingers may have
   // moved it in the hand. Registered from the grasp, kept where the frame bears out more.
@@ -577,6 +558,11 @@ PickAttempt attemptOf(const GraspCandidate& c, int rank, const RobotModel& m) {
   a.epsilon = c.epsilon;
   a.pinch = c.pinch;
   return a;
+}
+
+// A fraction borne out as a percentage; "none in view" when negative.
+std::string percent(double f) {
+  return f < 0 ? std::string("none in view") : std::to_string(int(std::lround(100 * f))) + " %";
 }
 
 // In-hand frames that try to register a grasp the lift's frame did not.
