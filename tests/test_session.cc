@@ -476,9 +476,7 @@ TEST(Session, SurfaceGapIsZeroForATurnThatKeepsTheSurfaceAndTheShiftOtherwise) {
 // graspInHand refuses a registration.
 TEST(Session, PointsInsideTheHandTellAGraspTheLinksWouldPassThrough) {
   const TriangleMesh can = makeCylinder(0.033, 0.101, 128);
-  const auto grasp = defaultGrasp(wam(), can);
-  const Iso3 T_O_palm = grasp.first;
-  const JointVector q = grasp.second;
+  const auto [T_O_palm, q] = defaultGrasp(wam(), can);
   std::vector<Vec3> points;
   for (const SurfacePoint& sp : evenSurfaceSamples(can, 0.003)) points.push_back(sp.p);
   const int n = int(points.size());

@@ -490,6 +490,16 @@ LiftCheck checkAfterLift(ScanSession& session, RobotInterface& robot, DepthSenso
     for (size_t k = 0; k < points_O.size(); ++k) held_B[k] = T_B_O * points_O[k];
   }
   if (tracked) out.inHand = depthSupport(d, *tracked, K, f->mask, held_B);
+  // Tracking needs the hand's and the arm's surfaces in view too; where too few of them are (a
+  // bowl held up before the palm), the object's own points are looked for from where the camera
+  // reported itself: the arm's error is millimetres, a dropped object's place shows the
+  // background centimetres away (the 1 cm depth band of depthSupport tells them apart).
+  if (!tracked) {
+    out.inHand = depthSupport(d, f->aim, K, f->mask, held_B);
+    if (out.inHand >= 0)
+      log("the object's points from the camera's reported pose: " + percent(out.inHand) +
+          " borne out in the hand");
+  }
   out.onTable = depthSupport(d, f->aim, K, f->mask, rest_B_points);
   // Not all where the grasp says, and not where it rested: closing the fingers may have
   // moved it in the hand. Registered from the grasp, kept where the frame bears out more.
