@@ -63,9 +63,9 @@ struct SlipMeasure {
 // more (the converse of SlipMeasure::moving's test). An alignment with a model that is coarse or
 // seen from few sides slides by as much, but where it slides depends on where the camera looks
 // from; an object that crept sits alike from every side. So the grasp follows a creep when the
-// frames since the first that showed it all showed it alike (below) and the camera has since
-// turned about the object by creep_turn_deg (its optical axis in the palm frame). `*pending`
-// keeps the first frame's correction and axis.
+// frames since the first that showed it all showed it alike (within slip_m) and the camera has
+// since turned about the object by creep_turn_deg (its optical axis in the palm frame).
+// `*pending` keeps the first frame's correction and axis.
 struct CreepPending {
   Iso3 moved = Iso3::Identity();
   Vec3 dir = Vec3::Zero();
@@ -82,15 +82,8 @@ bool creepConfirmed(const SlipMeasure& slip, bool slipping, const TrackingOption
     pending->reset();
     return false;
   }
-  // Alike: the two corrections differ by less than slip_m, and by less than either moves the
-  // surface: the frames agree with each other better than with no motion at all (a kinematic
-  // cracker box's exact grasp was moved 1.9 mm by two frames that showed 0.9 and 1.9 mm, 1.96 mm
-  // apart; the physics creeps of Faults.AnObjectThatCreepsInTheHandIsFollowed differ by 0.4–1.3
-  // mm, each frame's 0.8–2.9 mm).
-  const bool alike = *pending && [&] {
-    const double apart = surfaceMotion(points, slip.moved * (*pending)->moved.inverse());
-    return apart < std::min({o.slip_m, slip.surface_m, surfaceMotion(points, (*pending)->moved)});
-  }();
+  const bool alike =
+      *pending && surfaceMotion(points, slip.moved * (*pending)->moved.inverse()) < o.slip_m;
   if (!alike) {
     *pending = CreepPending{slip.moved, dir};
     return false;

@@ -575,16 +575,7 @@ TrackResult alignBodyToDepth(const DepthImage& depth, const std::vector<uint8_t>
   outline.spacing_m = typicalSpacing(points_X, occluders_X);
   const TrackResult fine = alignFrom(body, K, points_X, 0, occluders_X, T_C_X, first.correction,
                                      o.iterations, sigma_m, o, &outline);
-  // The pull draws points into pixels the body may not fill: the model's observed surface ends
-  // where the scan's frames stopped, and pixels of the body it has not seen (or of the robot the
-  // mask missed) pull it along. Kept only where the frame does not contradict it more than the
-  // alignment without it: no more points seen through (beyond 1 % of the pairs, noise) and no
-  // fewer pairs (a cracker box's partial model pulled 14 mm along its face by its unseen side:
-  // 29 points seen through against 0, 727 pairs against 813).
-  const int slack = std::max(2, first.inliers / 100);
-  const bool contradicts =
-      fine.see_through > first.see_through + slack || fine.inliers + slack < first.inliers;
-  return fine.ok && !contradicts ? fine : first;
+  return fine.ok ? fine : first;
 }
 
 }  // namespace inhand

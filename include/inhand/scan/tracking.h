@@ -209,9 +209,8 @@ enum class UncoveredPull {
   // body (the refinement below left the mug of Faults.AnObjectThatSlipsIsFoundAndTheGraspCorrected
   // 5.7 mm off after its slip, against 1.4 mm).
   kFromStart,
-  // As a refinement from where the alignment without it converged, kept when it converges and
-  // the frame does not contradict it more (more points seen through, fewer paired): a body
-  // looked for from where the hand planned to hold it, which may be a centimetre off.
+  // As a refinement from where the alignment without it converged, kept when it converges: a
+  // body looked for from where the hand planned to hold it, which may be a centimetre off.
   kAfterConverging,
 };
 
