@@ -665,6 +665,37 @@ Json colourMetricsJson(const ColourMetrics& c) {
           {"psnr_db_8_views", c.psnr_db}};
 }
 
+// compare's colour score: the colours, where the model has them (red, green, blue, alpha) and the
+// truth has its own (a built-in object's checkerboard, a mesh's materials, textures or vertex
+// colours); the model's vertices take them (model->rgba). None where either lacks them.
+std::optional<ColourMetrics> compareColours(PlyData& ply, const std::string& truthSpec,
+                                            ObjectModel* model) {
+  std::optional<ColourMetrics> colour;
+  const char* rgbaKeys[4] = {"red", "green", "blue", "alpha"};
+  if (std::all_of(rgbaKeys, rgbaKeys + 4,
+                  [&](const char* k) { return ply.vertexProperties.count(k) > 0; })) {
+    // The truth's colours are read apart from its shape: colours it cannot give (an OBJ whose
+    // mtllib is missing) cost the colour score only, not the shape's.
+    TexturedMesh t;
+    try {
+      t = loadSimulatedObject(truthSpec, true);
+    } catch (const Error& e) {
+      std::fprintf(stderr, "compare: warning: no colour score: %s\n", e.what());
+    }
+    if (!t.colours.empty()) {
+      for (size_t i = 0; i < model->mesh.vertices.size(); ++i) {
+        std::array<uint8_t, 4> c{};
+        for (size_t k = 0; k < 4; ++k)
+          c[k] = uint8_t(std::clamp(ply.vertexProperties[rgbaKeys[k]][i], 0.f, 255.f));
+        model->rgba.push_back(c);
+      }
+      colour = colourAccuracy(*model, t.mesh, t.colours);
+      colour->psnr_db = colourPsnr(*model, t.mesh, t.colours);
+    }
+  }
+  return colour;
+}
+
 int runCompare(const std::string& modelPath, const std::string& truthSpec, double observedVariance,
                bool json) {
   if (!(observedVariance > 0)) throw Error("--observed-variance: must be > 0 (m²)");
@@ -685,31 +716,7 @@ int runCompare(const std::string& modelPath, const std::string& truthSpec, doubl
   if (model.variance.empty()) model.variance.assign(model.mesh.vertices.size(), 0.f);
   const EvalOptions eo;
   const SurfaceMetrics m = GroundTruth(truth, eo).evaluate(model);
-  // The colours, where the model has them (red, green, blue, alpha) and the truth has its own (a
-  // built-in object's checkerboard, a mesh's materials, textures or vertex colours).
-  std::optional<ColourMetrics> colour;
-  const char* rgbaKeys[4] = {"red", "green", "blue", "alpha"};
-  if (std::all_of(rgbaKeys, rgbaKeys + 4,
-                  [&](const char* k) { return ply.vertexProperties.count(k) > 0; })) {
-    // The truth's colours are read apart from its shape: colours it cannot give (an OBJ whose
-    // mtllib is missing) cost the colour score only, not the shape's.
-    TexturedMesh t;
-    try {
-      t = loadSimulatedObject(truthSpec, true);
-    } catch (const Error& e) {
-      std::fprintf(stderr, "compare: warning: no colour score: %s\n", e.what());
-    }
-    if (!t.colours.empty()) {
-      for (size_t i = 0; i < model.mesh.vertices.size(); ++i) {
-        std::array<uint8_t, 4> c{};
-        for (size_t k = 0; k < 4; ++k)
-          c[k] = uint8_t(std::clamp(ply.vertexProperties[rgbaKeys[k]][i], 0.f, 255.f));
-        model.rgba.push_back(c);
-      }
-      colour = colourAccuracy(model, t.mesh, t.colours);
-      colour->psnr_db = colourPsnr(model, t.mesh, t.colours);
-    }
-  }
+  const std::optional<ColourMetrics> colour = compareColours(ply, truthSpec, &model);
   if (json) {
     Json fsj = Json::object();
     for (size_t k = 0; k < m.fscore.size(); ++k) {
