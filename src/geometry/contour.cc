@@ -220,6 +220,63 @@ void cubeTriangles(uint8_t in, const size_t corner[8], const uint32_t* offset, c
     }
   }
 }
+
+// The 12 axis edges of a cube: (corner code, axis), corner bits as in contour().
+constexpr int kEdges[12][2] = {{0, 0}, {2, 0}, {4, 0}, {6, 0}, {0, 1}, {1, 1},
+                               {4, 1}, {5, 1}, {0, 2}, {1, 2}, {2, 2}, {3, 2}};
+
+// The slices' triangles, in slice order, appended to `mesh`.
+void appendSliceTriangles(const std::vector<std::vector<Tri>>& slices, TriangleMesh* mesh) {
+  size_t total = 0;
+  for (const auto& t : slices) total += t.size();
+  mesh->triangles.reserve(mesh->triangles.size() + total);
+  for (const auto& t : slices) mesh->triangles.insert(mesh->triangles.end(), t.begin(), t.end());
+}
+
+// Surface nets' pass 3: a quad per crossing axis edge, around the 4 cubes sharing it
+// (`vertexOf`: each cube's vertex, cubes x fastest); it faces from the inside end of the edge to
+// the outside end. With axes (a, b, c) cyclic, the cubes at (b−1, c−1), (b, c−1), (b, c),
+// (b−1, c) in that order make a quad whose normal is +a. Per z slice of grid points.
+std::vector<std::vector<Tri>> surfaceNetsQuads(const ScalarGrid& grid,
+                                               const std::vector<uint32_t>& vertexOf) {
+  const int nx = grid.dims.x(), ny = grid.dims.y(), nz = grid.dims.z();
+  const int cx = nx - 1, cy = ny - 1;
+  const size_t step[3] = {1, size_t(nx), size_t(nx) * ny};
+  const float* f = grid.values.data();
+  std::vector<std::vector<Tri>> sliceTris(nz);
+  parallelFor(0, nz, [&](int z) {
+    std::vector<Tri>& out = sliceTris[z];
+    for (int y = 0; y < ny; ++y)
+      for (int x = 0; x < nx; ++x) {
+        const int p[3] = {x, y, z};
+        const size_t i = grid.index(x, y, z);
+        for (int a = 0; a < 3; ++a) {
+          const int b = (a + 1) % 3, c = (a + 2) % 3;
+          if (p[a] + 1 >= grid.dims[a] || p[b] < 1 || p[c] < 1 || p[b] >= grid.dims[b] - 1 ||
+              p[c] >= grid.dims[c] - 1)
+            continue;
+          const bool inLow = inside(f[i]);
+          if (inLow == inside(f[i + step[a]])) continue;
+          uint32_t v[4];
+          const int db[4] = {-1, 0, 0, -1}, dc[4] = {-1, -1, 0, 0};
+          for (int k = 0; k < 4; ++k) {
+            int q[3] = {p[0], p[1], p[2]};
+            q[b] += db[k];
+            q[c] += dc[k];
+            v[k] = vertexOf[(size_t(q[2]) * size_t(cy) + size_t(q[1])) * size_t(cx) + size_t(q[0])];
+          }
+          if (inLow) {
+            out.emplace_back(int(v[0]), int(v[1]), int(v[2]));
+            out.emplace_back(int(v[0]), int(v[2]), int(v[3]));
+          } else {
+            out.emplace_back(int(v[0]), int(v[2]), int(v[1]));
+            out.emplace_back(int(v[0]), int(v[3]), int(v[2]));
+          }
+        }
+      }
+  });
+  return sliceTris;
+}
 }  // namespace
 
 ContourResult contour(const ScalarGrid& grid, const ContourOptions& options) {
@@ -270,11 +327,7 @@ ContourResult contour(const ScalarGrid& grid, const ContourOptions& options) {
       }
     }
   });
-  size_t total = 0;
-  for (const auto& s : sliceTris) total += s.size();
-  result.mesh.triangles.reserve(total);
-  for (const auto& s : sliceTris)
-    result.mesh.triangles.insert(result.mesh.triangles.end(), s.begin(), s.end());
+  appendSliceTriangles(sliceTris, &result.mesh);
   result.first.resize(vertexCount + 1);
   for (uint32_t k = 0; k <= vertexCount; ++k) result.first[k] = k;
   return result;
@@ -291,9 +344,6 @@ ContourResult surfaceNets(const ScalarGrid& grid) {
   auto cubeIndex = [&](int x, int y, int z) {
     return (size_t(z) * size_t(cy) + size_t(y)) * size_t(cx) + size_t(x);
   };
-  // The 12 axis edges of a cube: (corner code, axis), corner bits as in contour().
-  static constexpr int kEdges[12][2] = {{0, 0}, {2, 0}, {4, 0}, {6, 0}, {0, 1}, {1, 1},
-                                        {4, 1}, {5, 1}, {0, 2}, {1, 2}, {2, 2}, {3, 2}};
 
   // Pass 1: cubes with mixed corners, counted per slice.
   std::vector<uint32_t> sliceCount(cz, 0);
@@ -358,46 +408,8 @@ ContourResult surfaceNets(const ScalarGrid& grid) {
     std::copy_n(crossings[k].begin(), crossingCount[k], result.sources.begin() + result.first[k]);
   });
 
-  // Pass 3: a quad per crossing axis edge, around the 4 cubes sharing it; it faces from the
-  // inside end of the edge to the outside end. With axes (a, b, c) cyclic, the cubes at
-  // (b−1, c−1), (b, c−1), (b, c), (b−1, c) in that order make a quad whose normal is +a.
-  std::vector<std::vector<Tri>> sliceTris(nz);
-  parallelFor(0, nz, [&](int z) {
-    std::vector<Tri>& out = sliceTris[z];
-    for (int y = 0; y < ny; ++y)
-      for (int x = 0; x < nx; ++x) {
-        const int p[3] = {x, y, z};
-        const size_t i = grid.index(x, y, z);
-        for (int a = 0; a < 3; ++a) {
-          const int b = (a + 1) % 3, c = (a + 2) % 3;
-          if (p[a] + 1 >= grid.dims[a] || p[b] < 1 || p[c] < 1 || p[b] >= grid.dims[b] - 1 ||
-              p[c] >= grid.dims[c] - 1)
-            continue;
-          const bool inLow = inside(f[i]);
-          if (inLow == inside(f[i + step[a]])) continue;
-          uint32_t v[4];
-          const int db[4] = {-1, 0, 0, -1}, dc[4] = {-1, -1, 0, 0};
-          for (int k = 0; k < 4; ++k) {
-            int q[3] = {p[0], p[1], p[2]};
-            q[b] += db[k];
-            q[c] += dc[k];
-            v[k] = vertexOf[cubeIndex(q[0], q[1], q[2])];
-          }
-          if (inLow) {
-            out.emplace_back(int(v[0]), int(v[1]), int(v[2]));
-            out.emplace_back(int(v[0]), int(v[2]), int(v[3]));
-          } else {
-            out.emplace_back(int(v[0]), int(v[2]), int(v[1]));
-            out.emplace_back(int(v[0]), int(v[3]), int(v[2]));
-          }
-        }
-      }
-  });
-  size_t total = 0;
-  for (const auto& s : sliceTris) total += s.size();
-  result.mesh.triangles.reserve(total);
-  for (const auto& s : sliceTris)
-    result.mesh.triangles.insert(result.mesh.triangles.end(), s.begin(), s.end());
+  // Pass 3: a quad per crossing axis edge.
+  appendSliceTriangles(surfaceNetsQuads(grid, vertexOf), &result.mesh);
   return result;
 }
 

@@ -429,6 +429,31 @@ SmoothedSurface smoothedSurface(const DepthImage& depth, const CameraIntrinsics&
   return surfaceFromSums(K, u, v, D, s);
 }
 
+namespace {
+// smoothedSurfaces' sums along one image row (`row`, `w` wide) for columns uMin .. uMax (index 0
+// at uMin): the five depths around each column (invalid as 0) summed, summed weighted by du, their
+// minimum and maximum; minimum 0 where the five do not all lie in the row.
+inline void rowFiveSums(const float* row, int w, int uMin, int uMax, double* s0, double* s1,
+                        float* mn, float* mx) {
+  for (int u = uMin; u <= uMax; ++u) {
+    const size_t j = size_t(u - uMin);
+    if (u < 2 || u + 2 >= w) {
+      mn[j] = 0.f;
+      continue;
+    }
+    float c[5];
+    for (int t = 0; t < 5; ++t) {
+      const float x = row[u - 2 + t];
+      c[t] = x > 0.f ? x : 0.f;
+    }
+    s0[j] = double(c[0]) + double(c[1]) + double(c[2]) + double(c[3]) + double(c[4]);
+    s1[j] = 2.0 * (double(c[4]) - double(c[0])) + (double(c[3]) - double(c[1]));
+    mn[j] = std::min(std::min(std::min(c[0], c[1]), std::min(c[2], c[3])), c[4]);
+    mx[j] = std::max(std::max(std::max(c[0], c[1]), std::max(c[2], c[3])), c[4]);
+  }
+}
+}  // namespace
+
 void smoothedSurfaces(const DepthImage& depth, const CameraIntrinsics& K, const PixelRect& rect,
                       const uint8_t* fit, float max_jump,
                       const std::function<void(size_t, const SmoothedSurface&)>& out) {
@@ -452,9 +477,7 @@ void smoothedSurfaces(const DepthImage& depth, const CameraIntrinsics& K, const 
       uMax = std::max(uMax, last);
     }
     if (uMin > uMax) return;
-    // Per input row v0 - 2 .. v1 + 1 and column uMin .. uMax: the sum of the five depths around
-    // the column, their sum weighted by du, their minimum and maximum (invalid depths as 0; a
-    // column or row whose five do not all lie in the image gets minimum 0).
+    // Per input row v0 - 2 .. v1 + 1 (minimum 0 off the image), rowFiveSums over uMin .. uMax.
     const int span = uMax - uMin + 1, rows = v1 - v0 + 4;
     thread_local std::vector<double> S0, S1;
     thread_local std::vector<float> lo, hi;
@@ -476,23 +499,8 @@ void smoothedSurfaces(const DepthImage& depth, const CameraIntrinsics& K, const 
         std::fill(mn + o, mn + o + span, 0.f);
         continue;
       }
-      const float* row = depth.depth_m.data() + size_t(vv) * w;
-      for (int u = uMin; u <= uMax; ++u) {
-        const size_t j = o + size_t(u - uMin);
-        if (u < 2 || u + 2 >= w) {
-          mn[j] = 0.f;
-          continue;
-        }
-        float c[5];
-        for (int t = 0; t < 5; ++t) {
-          const float x = row[u - 2 + t];
-          c[t] = x > 0.f ? x : 0.f;
-        }
-        s0[j] = double(c[0]) + double(c[1]) + double(c[2]) + double(c[3]) + double(c[4]);
-        s1[j] = 2.0 * (double(c[4]) - double(c[0])) + (double(c[3]) - double(c[1]));
-        mn[j] = std::min(std::min(std::min(c[0], c[1]), std::min(c[2], c[3])), c[4]);
-        mx[j] = std::max(std::max(std::max(c[0], c[1]), std::max(c[2], c[3])), c[4]);
-      }
+      rowFiveSums(depth.depth_m.data() + size_t(vv) * w, w, uMin, uMax, s0 + o, s1 + o, mn + o,
+                  mx + o);
     }
     for (int v = v0; v < v1; ++v)
       for (int u = uMin; u <= uMax; ++u) {
