@@ -63,9 +63,14 @@ std::optional<std::pair<Iso3, double>> refindInHand(
   const Iso3 T_B_palm = m.tipPose(q);
   // How far the frame bears the grasp out; -1 where it would leave the object on the table (its
   // lowest point within 2 cm of the top, or half the lift if less: the search can find the
-  // object where it still rests beside the hand).
+  // object where it still rests beside the hand) or put it into the hand (pointsInsideHand, more
+  // than the grasp it starts from does).
   const double lifted = std::min(0.02, 0.5 * session.multiOptions().grasp.lift_m);
+  const int insideAtStart = pointsInsideHand(m, q, T_O_palm, points_O);
   auto supportOf = [&](const Iso3& T_O_palm_found) {
+    if (pointsInsideHand(m, q, T_O_palm_found, points_O) >
+        insideAtStart + std::max<int>(3, int(points_O.size()) / 100))
+      return -1.0;
     const Iso3 T_B_O = T_B_palm * T_O_palm_found.inverse();
     std::vector<Vec3> held_B;
     double lowest = std::numeric_limits<double>::infinity();
@@ -109,7 +114,7 @@ std::optional<std::pair<Iso3, double>> refindInHand(
     return std::nullopt;
   }
   if (support < 0) {
-    log("the object not found in the hand: what fits is still on the table");
+    log("the object not found in the hand: what fits is still on the table or inside the hand");
     return std::nullopt;
   }
   char line[160];
@@ -284,8 +289,9 @@ Iso3 beneathHand(const RobotModel& m, const JointVector& q, const Iso3& T_O_palm
 Iso3 graspInHand(ScanSession& session, const RobotModel& m, const JointVector& q,
                  const DepthImage& d, const std::vector<uint8_t>& mask, const Iso3& aim,
                  const Iso3& tracked, const TrackResult& liftTrack, const GraspCandidate& c,
-                 const Iso3& achieved, const TrackingOptions& options,
-                 const std::function<void(const std::string&)>& log, bool* registered) {
+                 const Iso3& achieved, const std::vector<Vec3>& points_O,
+                 const TrackingOptions& options, const std::function<void(const std::string&)>& log,
+                 bool* registered) {
   // Where the object sits in the hand: the arm's error where it grasped moved it from
   // where the joints say. The palm's error that tracking sees in the lift's frame, as
   // joint offsets (armOffsetsFromPalmError), gives the palm's error at the pick (the palm
@@ -309,6 +315,20 @@ Iso3 graspInHand(ScanSession& session, const RobotModel& m, const JointVector& q
   TrackResult reg;
   if (const std::optional<Iso3> T = session.registerHeldObject(d, mask, q, tracked, carried, &reg))
     grasp = *T;
+  // The hand's links are where the joints say: a registration that puts the object's measured
+  // surface into them is wrong, however well it fits the frame (a lying soup can's partial model
+  // slid 7 mm into the palm along its axis, 11 % of its points over 3 mm deep, where the joints
+  // had it within 0.6 mm).
+  const int inside = pointsInsideHand(m, q, grasp, points_O);
+  const int insideCarried = pointsInsideHand(m, q, carried, points_O);
+  if (reg.ok && inside > insideCarried + std::max<int>(3, int(points_O.size()) / 100)) {
+    char why[160];
+    std::snprintf(why, sizeof why, "it puts %d of %zu points inside the hand, against %d", inside,
+                  points_O.size(), insideCarried);
+    reg.ok = false;
+    reg.reason = why;
+    grasp = carried;
+  }
   *registered = reg.ok;
   char line[240];
   std::snprintf(line, sizeof line,
@@ -406,6 +426,11 @@ bool pushedIfBorneOut(ScanSession& session, RobotInterface& robot, DepthSensor& 
   return true;
 }
 
+// A fraction borne out as a percentage; "none in view" when negative.
+std::string percent(double f) {
+  return f < 0 ? std::string("none in view") : std::to_string(int(std::lround(100 * f))) + " %";
+}
+
 // After the lift: how much of the object's points `points_O` the lift's frame bears out where the
 // grasp holds it (`*achieved`, moved to where the frame shows it in the hand) and where it rested
 // (T_B_O_rest); -1 where none is in view. The grasp where the hold test's close left the model
@@ -460,7 +485,7 @@ LiftCheck checkAfterLift(ScanSession& session, RobotInterface& robot, DepthSenso
   if (tracked && options.tracking.enabled && options.tracking.in_hand) {
     const JointVector q = robot.joints();
     *achieved = graspInHand(session, m, q, d, f->mask, f->aim, *tracked, f->track, c, **achieved,
-                            options.tracking, log, &out.registered);
+                            points_O, options.tracking, log, &out.registered);
     const Iso3 T_B_O = m.tipPose(q) * (*achieved)->inverse();
     for (size_t k = 0; k < points_O.size(); ++k) held_B[k] = T_B_O * points_O[k];
   }
@@ -558,11 +583,6 @@ PickAttempt attemptOf(const GraspCandidate& c, int rank, const RobotModel& m) {
   a.epsilon = c.epsilon;
   a.pinch = c.pinch;
   return a;
-}
-
-// A fraction borne out as a percentage; "none in view" when negative.
-std::string percent(double f) {
-  return f < 0 ? std::string("none in view") : std::to_string(int(std::lround(100 * f))) + " %";
 }
 
 // In-hand frames that try to register a grasp the lift's frame did not.

@@ -7,6 +7,7 @@
 
 #include "inhand/core/error.h"
 #include "inhand/core/internal/parallel.h"
+#include "inhand/robot/collision.h"
 
 namespace inhand {
 
@@ -253,6 +254,15 @@ bool fingersClosedOnNothing(const RobotModel& robot, const JointVector& q) {
   for (const FingerInfo& f : robot.fingers())
     if (std::abs(q[f.variable] - f.closed) > 1e-3) return false;
   return true;
+}
+
+int pointsInsideHand(const RobotModel& robot, const JointVector& q, const Iso3& T_O_palm,
+                     const std::vector<Vec3>& points_O) {
+  const HandGeometry hand(robot, q, Iso3::Identity());  // the palm frame
+  const Iso3 T_palm_O = T_O_palm.inverse();
+  int n = 0;
+  for (const Vec3& p : points_O) n += hand.distanceWithin(T_palm_O * p, 0.001) < -0.003;
+  return n;
 }
 
 void markBelow(const DepthImage& d, const Iso3& T_B_C, const CameraIntrinsics& K, double below_z,

@@ -90,6 +90,12 @@ std::vector<Vec3> observedVertices(const ObjectModel& model);
 // After a pick-up: every finger closed to its limit, so the hand holds nothing.
 bool fingersClosedOnNothing(const RobotModel& robot, const JointVector& q);
 
+// How many of the object's points `points_O` the grasp T_O_palm puts more than 3 mm inside the
+// hand's links (the hand at q): a model's surface lies within a millimetre or two of the true
+// one, so deeper is a pose the links would pass through (a registration to check).
+int pointsInsideHand(const RobotModel& robot, const JointVector& q, const Iso3& T_O_palm,
+                     const std::vector<Vec3>& points_O);
+
 // A frame from the sensor that can be used: one that arrived (the camera's size) with depth in
 // it (checks.min_valid_fraction), non-finite depths as no return; up to `tries` captures. nullopt
 // when none came.
