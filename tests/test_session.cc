@@ -854,3 +854,28 @@ TEST(Session, TheFinishedModelIsAlignedAgainWithTheTableTopFrame) {
                                 .norm());
   EXPECT_LT(worst, 0.001 + 0.15 * 0.5 * M_PI / 180);
 }
+
+// repeatsAFailedPickUp: a grasp within 1 cm and 15° of a pick-up that failed repeats it, one
+// farther or turned more does not, nor one near a pick-up that held.
+TEST(Session, AGraspNearAFailedPickUpRepeatsIt) {
+  const Iso3 failedAt = Eigen::Translation3d(0.02, -0.01, 0.05) *
+                        Eigen::AngleAxisd(0.4, Vec3(1, 2, 3).normalized()) * Iso3::Identity();
+  const Iso3 heldAt = Eigen::Translation3d(-0.05, 0.0, 0.03) * Iso3::Identity();
+  PickAttempt dropped, held;
+  dropped.outcome = PickOutcome::kDropped;
+  dropped.T_O_palm = failedAt;
+  held.outcome = PickOutcome::kPicked;
+  held.T_O_palm = heldAt;
+  const std::vector<PickAttempt> attempts{dropped, held};
+  auto moved = [](const Iso3& T, const Vec3& t, double deg) {
+    return Eigen::Translation3d(t) * T * Eigen::AngleAxisd(deg * M_PI / 180, Vec3::UnitZ());
+  };
+  EXPECT_TRUE(repeatsAFailedPickUp(failedAt, attempts));
+  EXPECT_TRUE(repeatsAFailedPickUp(moved(failedAt, Vec3(0.006, 0.0, 0.0), 10), attempts));
+  EXPECT_FALSE(repeatsAFailedPickUp(moved(failedAt, Vec3(0.0, 0.012, 0.0), 0), attempts));
+  EXPECT_FALSE(repeatsAFailedPickUp(moved(failedAt, Vec3::Zero(), 20), attempts));
+  EXPECT_FALSE(repeatsAFailedPickUp(heldAt, attempts));
+  PickAttempt unknown;  // a record without its pose (older checkpoints)
+  unknown.outcome = PickOutcome::kSlid;
+  EXPECT_FALSE(repeatsAFailedPickUp(failedAt, {unknown}));
+}

@@ -597,14 +597,31 @@ struct PickUp {
   std::optional<Iso3> moved_to;
   bool lost = false;
 };
+// The candidates in turn, best ranked first, each tried at most once; a candidate that repeats
+// a failed pick-up (those of this grasp before, `earlier`, and this call's) only once every other
+// has been tried. At most grasp.max_failed_pick_ups failures in all, `earlier` included.
 PickUp pickAndVerify(ScanSession& session, RobotInterface& robot, DepthSensor& sensor,
                      const Iso3& T_B_O_rest, const std::vector<Vec3>& points_O,
                      const std::vector<GraspCandidate>& candidates, const ScanOptions& options,
-                     const std::function<void(const std::string&)>& log, int used = 0) {
+                     const std::function<void(const std::string&)>& log,
+                     const std::vector<PickAttempt>& earlier = {}) {
   const RobotModel& m = robot.model();
   const RobotOccluders scenes(m);
   PickUp out;
   const int budget = session.multiOptions().grasp.max_failed_pick_ups;
+  const int used = int(earlier.size());
+  std::vector<bool> done(candidates.size(), false);
+  auto nextRank = [&]() -> std::optional<size_t> {
+    std::vector<PickAttempt> failed = earlier;
+    failed.insert(failed.end(), out.attempts.begin(), out.attempts.end());
+    std::optional<size_t> repeat;
+    for (size_t k = 0; k < candidates.size(); ++k) {
+      if (done[k]) continue;
+      if (!repeatsAFailedPickUp(candidates[k].T_O_palm, failed)) return k;
+      if (!repeat) repeat = k;
+    }
+    return repeat;
+  };
   // After a failed attempt that touched the object: is it still where it rested?
   auto stillThere = [&](const Iso3& T_O_palm_tried) {
     const Iso3 beneath = beneathHand(m, robot.joints(), T_O_palm_tried, T_B_O_rest,
@@ -621,7 +638,9 @@ PickUp pickAndVerify(ScanSession& session, RobotInterface& robot, DepthSensor& s
     out.moved_to = f.T_B_O;
     return false;
   };
-  for (size_t rank = 0; rank < candidates.size(); ++rank) {
+  for (std::optional<size_t> next = nextRank(); next; next = nextRank()) {
+    const size_t rank = *next;
+    done[rank] = true;
     const GraspCandidate& c = candidates[rank];
     if (session.progress().stopRequested()) break;
     if (used + int(out.attempts.size()) >= budget) {
@@ -752,7 +771,7 @@ std::optional<Termination> regrasp(ScanSession& session, RobotInterface& robot, 
     const std::vector<GraspCandidate> usable(plan.candidates.begin(),
                                              plan.candidates.begin() + plan.above_threshold);
     pick = pickAndVerify(session, robot, sensor, T_B_O_rest, known_O, usable, session.options(),
-                         log, int(attempts.size()));
+                         log, attempts);
     attempts.insert(attempts.end(), pick.attempts.begin(), pick.attempts.end());
     if (pick.achieved || !pick.moved_to || progress.stopRequested()) break;
     T_B_O_rest = *pick.moved_to;
@@ -1073,12 +1092,21 @@ PickUp pickFromTable(ScanSession& session, RobotInterface& robot, DepthSensor& s
     log("grasp candidates where it lies now: " + std::to_string(again.candidates.size()));
     if (again.candidates.empty()) break;
     pick = pickAndVerify(session, robot, sensor, T_B_O_now, seen_O, again.candidates, options, log,
-                         int(tt->attempts.size()));
+                         tt->attempts);
     tt->attempts.insert(tt->attempts.end(), pick.attempts.begin(), pick.attempts.end());
   }
   return pick;
 }
 }  // namespace
+
+bool repeatsAFailedPickUp(const Iso3& T_O_palm, const std::vector<PickAttempt>& attempts) {
+  for (const PickAttempt& a : attempts)
+    if (a.outcome != PickOutcome::kPicked && a.T_O_palm &&
+        (a.T_O_palm->translation() - T_O_palm.translation()).norm() < 0.01 &&
+        rotationBetween(*a.T_O_palm, T_O_palm) < 15 * M_PI / 180)
+      return true;
+  return false;
+}
 
 MultiGraspResult scanFromTable(RobotInterface& robot, DepthSensor& sensor, const Iso3& T_B_O_rest,
                                const ScanOptions& options, const MultiGraspOptions& multi,

@@ -29,6 +29,13 @@ MultiGraspResult scanFromTable(RobotInterface& robot, DepthSensor& sensor, const
                                const ScanOptions& options, const MultiGraspOptions& multi,
                                const NoiseModelOptions& noise, const ScanProgress& progress = {});
 
+// Whether a grasp (the palm at T_O_palm in the object's frame) repeats a pick-up of `attempts`
+// that failed: its palm within 1 cm and 15° of the attempt's. The same grasp fails as it did
+// while the object rests as it did (a lying bleach bottle slid out of the same grasp twice, the
+// re-find on the table between them planning it first again); the scan tries such a candidate
+// only once every other has been tried.
+bool repeatsAFailedPickUp(const Iso3& T_O_palm, const std::vector<PickAttempt>& attempts);
+
 // The finished model (out->scan.model, frame O) aligned with `anchor`, a frame of the object
 // where it rested before the first pick-up (frame O is its pose there): a grasp's pose taken a
 // few degrees off turns every later frame, and so the model as a whole. The model is moved by
