@@ -220,6 +220,8 @@ TEST(Records, RoundTripAndReadTheNamesOlderCheckpointsUsed) {
   a.outcome = PickOutcome::kDropped;
   a.hold_test = 0;
   a.hold_failure = HoldFailure::kDroppedInTurn;
+  a.hold_unseen = 0;
+  a.pinch = true;
   g.attempts = {a};
   g.ranked.push_back({Iso3::Identity(), g.q, 0.5, 0.1});
   Json k = graspRecordJson(g);
@@ -242,6 +244,13 @@ TEST(Records, RoundTripAndReadTheNamesOlderCheckpointsUsed) {
   ASSERT_EQ(h.attempts.size(), 1u);
   EXPECT_EQ(h.attempts[0].outcome, PickOutcome::kDropped);
   EXPECT_EQ(h.attempts[0].hold_failure, HoldFailure::kDroppedInTurn);
+  EXPECT_EQ(h.attempts[0].hold_unseen, 0);
+  EXPECT_TRUE(h.attempts[0].pinch);
+  Json older = k.at("attempts");  // written before hold_unseen and pinch were recorded
+  older[0].erase("hold_unseen");
+  older[0].erase("pinch");
+  EXPECT_EQ(attemptsFrom(older)[0].hold_unseen, -1);
+  EXPECT_FALSE(attemptsFrom(older)[0].pinch);
   ASSERT_EQ(h.ranked.size(), 1u);
   EXPECT_EQ(h.ranked[0].epsilon, 0.1);
   k["pick_up_attempts"] = Json::array({{{"outcome", "fell"}}});

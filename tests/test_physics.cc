@@ -551,6 +551,50 @@ TEST(HoldTest, PutsTheGraspThatHoldsWithAMarginFirst) {
   EXPECT_EQ(c[0].hold_margin, -1);
 }
 
+// Where the unseen space stops the hand (preferHoldingUnseen): a pinch from above and an
+// enveloping grasp from the side both hold the box (0.1 kg, no margin), the pinch first. Were the
+// box's top 30 cm higher (the unseen space kept up to there), the pinch's hand would stop far
+// above its plan and its fingers close over nothing; the side grasp's hand stops where planned.
+// So the side grasp goes first, and the pinch is marked. With the unseen space the model itself,
+// nothing moves and no hand stops short.
+TEST(HoldTest, PutsAGraspTheUnseenSpaceWouldStopShortBehindOneItDoesNot) {
+  const RobotModel& m = test::wam();
+  const TriangleMesh box = makeBox(Vec3(0.06, 0.1, 0.2));
+  TriangleMesh taller = makeBox(Vec3(0.06, 0.1, 0.5));
+  for (Vec3f& v : taller.vertices) v.z() += 0.15f;  // the same bottom, the top 30 cm higher
+  HoldTestOptions o;
+  o.density_kg_m3 = 0.1 / box.signedVolume();
+  o.margin_mass = 1;
+  o.margin_friction = 1;
+  const Iso3 T_B_O = boxOnTable(m);
+  const std::vector<ConvexPiece> pieces =
+      modelPiecesAboveTable(box, T_B_O, m, nullptr, o.decomposition);
+  std::vector<GraspCandidate> c = boxCandidates(m, box, 2);
+  rankByHold(m, pieces, T_B_O, 0.5, o, &c);
+  ASSERT_EQ(c[0].hold, 1) << holdFailureName(c[0].hold_failure);
+  ASSERT_EQ(c[1].hold, 1) << holdFailureName(c[1].hold_failure);
+  ASSERT_EQ(c[0].pose, 0);
+  std::vector<GraspCandidate> same = c;
+  EXPECT_GT(preferHoldingUnseen(m, pieces, taller, T_B_O, 0.5, o, 4, &c), 0);
+  EXPECT_EQ(c[0].pose, 1);
+  EXPECT_EQ(c[0].hold_unseen, 1);
+  EXPECT_EQ(c[1].pose, 0);
+  EXPECT_EQ(c[1].hold_unseen, 0);
+  EXPECT_NE(unseenHoldLine(c, 1.0).find("1 of 2 held"), std::string::npos)
+      << unseenHoldLine(c, 1.0);
+  preferHoldingUnseen(m, pieces, box, T_B_O, 0.5, o, 4, &same);
+  EXPECT_EQ(same[0].pose, 0);
+  EXPECT_EQ(same[0].hold_unseen, 1);
+  EXPECT_EQ(same[1].hold_unseen, 1);
+  // Only the first `checked` that held are checked.
+  std::vector<GraspCandidate> one = boxCandidates(m, box, 2);
+  rankByHold(m, pieces, T_B_O, 0.5, o, &one);
+  preferHoldingUnseen(m, pieces, taller, T_B_O, 0.5, o, 1, &one);
+  EXPECT_EQ(one[0].pose, 0);
+  EXPECT_EQ(one[0].hold_unseen, 0);
+  EXPECT_EQ(one[1].hold_unseen, -1);
+}
+
 // The close's push (HoldTestOptions::max_close_push_m): of two grasps that hold the box (no
 // margin tried), the one whose close pushed the model farther goes after the other when the
 // limit lies between their pushes; with no limit the order stays.

@@ -12,6 +12,7 @@
 #include "inhand/core/error.h"
 #include "inhand/core/internal/parallel.h"
 #include "inhand/grasp/grasp.h"
+#include "inhand/robot/collision.h"
 
 namespace inhand {
 
@@ -163,6 +164,12 @@ HoldTrial tryHold(PhysicsWorld& world, const Iso3& T_B_O, const Iso3& T_O_palm,
 }
 
 namespace {
+// preferHoldingUnseen: a hand the unseen space stops less than this short of its plan is where
+// the hold test tried it (the reset's own back-off, a coarse hull's give).
+constexpr double kUnseenStop_m = 0.002;
+// … and the hand comes in from this far back along its approach.
+constexpr double kUnseenFrom_m = 0.15;
+
 // The first of the h candidates that held (in their order, at most o.robust_checked) that holds
 // too with the model moved o.pose_tolerance_m each way across the table, moved to the front.
 void robustFirst(const RobotModel& robot, const std::vector<ConvexPiece>& pieces, const Iso3& T_B_O,
@@ -199,7 +206,16 @@ double rankByHold(const RobotModel& robot, const TriangleMesh& model_O, const Is
   if (std::string p = o.validate(); !p.empty()) throw Error("hold test options: " + p);
   const std::vector<ConvexPiece> pieces =
       modelPiecesAboveTable(model_O, T_B_O, robot, keep_O, o.decomposition);
-  if (pieces.empty()) return 0;
+  const double s = rankByHold(robot, pieces, T_B_O, friction, o, candidates);
+  return s > 0 ? std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() : 0;
+}
+
+double rankByHold(const RobotModel& robot, const std::vector<ConvexPiece>& pieces,
+                  const Iso3& T_B_O, double friction, const HoldTestOptions& o,
+                  std::vector<GraspCandidate>* candidates) {
+  const auto t0 = std::chrono::steady_clock::now();
+  if (!o.enabled || candidates->empty() || pieces.empty()) return 0;
+  if (std::string p = o.validate(); !p.empty()) throw Error("hold test options: " + p);
   const PhysicsOptions po = holdTrialPhysics(o);
   // Batches of max_candidates in their order until enough_held hold (or max_tested are tried).
   // One world per core, each trying every other candidate of the batch from a fresh reset.
@@ -272,6 +288,57 @@ double rankByHold(const RobotModel& robot, const TriangleMesh& model_O, const Is
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 }
 
+double preferHoldingUnseen(const RobotModel& robot, const std::vector<ConvexPiece>& pieces,
+                           const TriangleMesh& unseen_O, const Iso3& T_B_O, double friction,
+                           const HoldTestOptions& o, int checked,
+                           std::vector<GraspCandidate>* candidates) {
+  const auto t0 = std::chrono::steady_clock::now();
+  std::vector<int> tried;  // indices of the first `checked` that held
+  for (int i = 0; i < int(candidates->size()) && int(tried.size()) < checked; ++i)
+    if ((*candidates)[size_t(i)].hold == 1) tried.push_back(i);
+  if (!o.enabled || tried.empty() || unseen_O.empty() || pieces.empty()) return 0;
+  // Where the unseen space stops each hand on its way in: from kUnseenFrom_m back along its
+  // approach, the open hand's free travel toward the plan.
+  const FingerCloser closer(robot, unseen_O);
+  std::vector<double> shortBy(tried.size(), 0);
+  parallelFor(0, int(tried.size()), [&](int k) {
+    const GraspCandidate& c = (*candidates)[size_t(tried[size_t(k)])];
+    const Vec3 a = c.T_O_palm.linear().col(2);
+    Iso3 from = c.T_O_palm;
+    from.translation() -= kUnseenFrom_m * a;
+    const std::optional<double> travel = closer.freeTravel(c.q_open, from, a, kUnseenFrom_m);
+    shortBy[size_t(k)] = travel ? kUnseenFrom_m - *travel : kUnseenFrom_m;
+  });
+  // The hold test's trial from there, on the model (a hand stopped where planned: its verdict
+  // stands).
+  std::vector<uint8_t> held(tried.size(), 1);
+  const PhysicsOptions po = holdTrialPhysics(o);
+  const int workers = std::max(1, std::min(threadCount(), int(tried.size())));
+  std::atomic<int> next{0};
+  parallelForThreads(0, workers, [&](int) {
+    std::optional<PhysicsWorld> world;
+    for (int k = next++; k < int(tried.size()); k = next++) {
+      if (shortBy[size_t(k)] < kUnseenStop_m) continue;
+      const GraspCandidate& c = (*candidates)[size_t(tried[size_t(k)])];
+      Iso3 stopped = c.T_O_palm;
+      stopped.translation() -= shortBy[size_t(k)] * c.T_O_palm.linear().col(2);
+      if (!world) world.emplace(robot, pieces, friction, po);
+      held[size_t(k)] = tryHold(*world, T_B_O, stopped, c.q_open, c.q, o).held;
+    }
+  });
+  for (size_t k = 0; k < tried.size(); ++k) (*candidates)[size_t(tried[k])].hold_unseen = held[k];
+  // Not ahead of a candidate that held with the margin when it did not (a pinch the unseen space
+  // would stop short may well hold the true object, and the margin says more about the weight).
+  const int margin = (*candidates)[size_t(tried[0])].hold_margin;
+  for (size_t k = 0; k < tried.size(); ++k)
+    if (held[k] && (*candidates)[size_t(tried[k])].hold_margin >= margin) {
+      const auto at = candidates->begin() + tried[k];
+      std::rotate(candidates->begin(), at, at + 1);
+      break;
+    }
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
 std::string holdLine(const std::vector<GraspCandidate>& candidates, double seconds) {
   int tested = 0, held = 0;
   for (const GraspCandidate& c : candidates) {
@@ -282,6 +349,20 @@ std::string holdLine(const std::vector<GraspCandidate>& candidates, double secon
   char line[120];
   std::snprintf(line, sizeof line, "hold test: %d of %d candidates held the model (%.2f s)", held,
                 tested, seconds);
+  return line;
+}
+
+std::string unseenHoldLine(const std::vector<GraspCandidate>& candidates, double seconds) {
+  int tried = 0, held = 0;
+  for (const GraspCandidate& c : candidates) {
+    tried += c.hold_unseen >= 0;
+    held += c.hold_unseen == 1;
+  }
+  if (tried == 0) return "";
+  char line[120];
+  std::snprintf(line, sizeof line,
+                "hold test with each hand where the unseen space stops it: %d of %d held (%.2f s)",
+                held, tried, seconds);
   return line;
 }
 

@@ -577,6 +577,7 @@ PickAttempt attemptOf(const GraspCandidate& c, int rank, const RobotModel& m) {
   a.pose = c.pose;
   a.hold_test = c.hold;
   a.hold_margin = c.hold_margin;
+  a.hold_unseen = c.hold_unseen;
   a.hold_close_m = c.hold_close_m;
   a.hold_failure = c.hold_failure;
   a.palm_contact = c.palm_contact;
@@ -904,9 +905,11 @@ Json attemptsJson(const std::vector<PickAttempt>& attempts) {
              {"pose", a.pose},
              {"hold_test", a.hold_test < 0 ? Json() : Json(a.hold_test == 1)},
              {"hold_margin", a.hold_margin < 0 ? Json() : Json(a.hold_margin == 1)},
+             {"hold_unseen", a.hold_unseen < 0 ? Json() : Json(a.hold_unseen == 1)},
              {"hold_close_push_mm", a.hold_close_m < 0 ? Json() : Json(1000 * a.hold_close_m)},
              {"hold_failure", a.hold_test == 0 ? Json(holdFailureName(a.hold_failure)) : Json()},
              {"kind", a.palm_contact ? "enveloping" : "fingertips"},
+             {"pinch", a.pinch},
              {"epsilon", a.epsilon},
              {"shift_in_hand_mm", a.shift_m < 0 ? Json() : Json(1000 * a.shift_m)}});
     if (a.T_O_palm) {
@@ -938,6 +941,8 @@ std::vector<PickAttempt> attemptsFrom(const Json& j) {
       a.hold_test = e.at("hold_test").is_null() ? -1 : int(e.at("hold_test").get<bool>());
       const Json margin = e.value("hold_margin", Json());  // absent before the margin
       a.hold_margin = margin.is_null() ? -1 : int(margin.get<bool>());
+      const Json unseen = e.value("hold_unseen", Json());  // absent before the unseen check
+      a.hold_unseen = unseen.is_null() ? -1 : int(unseen.get<bool>());
       const Json push = e.value("hold_close_push_mm", Json());  // absent before it was recorded
       a.hold_close_m = push.is_number() ? push.get<double>() / 1000 : -1;
       const Json failure = e.value("hold_failure", Json());  // absent before it was recorded
@@ -945,6 +950,7 @@ std::vector<PickAttempt> attemptsFrom(const Json& j) {
         throw Error("pick-up attempts: unknown hold_failure \"" + failure.get<std::string>() +
                     "\"");
       a.palm_contact = e.at("kind").get<std::string>() == "enveloping";
+      a.pinch = e.value("pinch", false);  // absent before it was recorded
       a.epsilon = e.at("epsilon").get<double>();
       a.shift_m =
           e.at("shift_in_hand_mm").is_null() ? -1.0 : e.at("shift_in_hand_mm").get<double>() / 1000;

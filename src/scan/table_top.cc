@@ -1,6 +1,7 @@
 #include "inhand/scan/table_top.h"
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <limits>
@@ -280,11 +281,12 @@ std::vector<uint8_t> unknownUnderMeasured(const TsdfVolume& volume, const Vec3& 
 
 namespace {
 // The first grasp's model at the planning stride: from the table-top frames with their
-// silhouettes (ScanSession::tableTopVolume), with the unknown space that is not beneath measured
-// surface counted as empty (TableTopOptions::under_measured_only).
-ObjectModel tableTopModel(const ScanSession& session, const Plane& table_O) {
+// silhouettes (ScanSession::tableTopVolume), with `under_measured_only` the unknown space that
+// is not beneath measured surface counted as empty (TableTopOptions::under_measured_only).
+ObjectModel tableTopModel(const ScanSession& session, const Plane& table_O,
+                          bool under_measured_only) {
   TsdfVolume volume = session.tableTopVolume();
-  if (session.multiOptions().table_top.under_measured_only) {
+  if (under_measured_only) {
     const std::vector<uint8_t> keep = unknownUnderMeasured(volume, table_O.n);
     for (size_t i = 0; i < keep.size(); ++i)
       if (volume.state(i) == VoxelState::kUnknown && !keep[i])
@@ -300,25 +302,29 @@ ObjectModel tableTopModel(const ScanSession& session, const Plane& table_O) {
 GraspGeneration firstGrasps(const ScanSession& session, const TableTopObject& object,
                             const Iso3& T_B_O_rest, const JointVector& q_now) {
   const RobotModel& m = session.robot();
-  const ObjectModel seen = session.multiOptions().table_top.under_measured_only ||
-                                   &session.tableTopVolume() != &session.volume()
-                               ? tableTopModel(session, object.table_O)
+  const TableTopOptions& to = session.multiOptions().table_top;
+  const ObjectModel seen = to.under_measured_only || &session.tableTopVolume() != &session.volume()
+                               ? tableTopModel(session, object.table_O, to.under_measured_only)
                                : session.planningModel();
   // The model where the object may lie (region_O; without the footprint's rectangle, 2 cm out):
   // what the camera did not see is closed up to the volume's bounds.
   std::vector<Plane> region = object.region_O;
   if (!session.multiOptions().table_top.footprint_region)
     for (Plane& h : region) h.d += 0.02;
-  TriangleMesh model;
-  model.vertices = seen.mesh.vertices;
-  for (const Tri& t : seen.mesh.triangles) {
-    bool inside = true;
-    for (int k = 0; k < 3 && inside; ++k) {
-      const Vec3 p = seen.mesh.vertices[t[k]].cast<double>();
-      inside = object.table_O.distance(p) > 0.003 && insideRegion(region, p);
+  auto clipped = [&](const TriangleMesh& mesh) {
+    TriangleMesh out;
+    out.vertices = mesh.vertices;
+    for (const Tri& t : mesh.triangles) {
+      bool inside = true;
+      for (int k = 0; k < 3 && inside; ++k) {
+        const Vec3 p = mesh.vertices[t[k]].cast<double>();
+        inside = object.table_O.distance(p) > 0.003 && insideRegion(region, p);
+      }
+      if (inside) out.triangles.push_back(t);
     }
-    if (inside) model.triangles.push_back(t);
-  }
+    return out;
+  };
+  const TriangleMesh model = clipped(seen.mesh);
   GraspGeneration first =
       generateGrasps(m, model, T_B_O_rest, q_now, session.multiOptions().grasp, &object.points_O);
   // Most stable first; among equally stable (to 10 %), the cheaper arm motion.
@@ -331,14 +337,26 @@ GraspGeneration firstGrasps(const ScanSession& session, const TableTopObject& ob
                    });
   // Those that hold the model in physics first (grasp/hold_test.h), the model clipped to region_O
   // or, with footprint_hold_test, to the points' rectangle.
-  const TableTopOptions& to = session.multiOptions().table_top;
   const std::vector<Plane> holdRegion = to.footprint_hold_test && !to.footprint_region
                                             ? regionPlanes(object, object.table_O.n, true)
                                             : object.region_O;
-  const double holdS =
-      rankByHold(m, seen.mesh, T_B_O_rest, &holdRegion, session.multiOptions().grasp.friction,
-                 session.multiOptions().grasp.hold, &first.candidates);
+  const GraspOptions& go = session.multiOptions().grasp;
+  const auto t0 = std::chrono::steady_clock::now();
+  const std::vector<ConvexPiece> pieces =
+      go.hold.enabled && !first.candidates.empty() && !seen.mesh.empty()
+          ? modelPiecesAboveTable(seen.mesh, T_B_O_rest, m, &holdRegion, go.hold.decomposition)
+          : std::vector<ConvexPiece>();
+  double holdS = rankByHold(m, pieces, T_B_O_rest, go.friction, go.hold, &first.candidates);
+  if (holdS > 0)
+    holdS = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   session.log(holdLine(first.candidates, holdS));
+  // The hands the unseen space would stop short of their plan, tried from there.
+  if (to.under_measured_only && to.unseen_hold_checked > 0 && holdS > 0) {
+    const TriangleMesh unseen = clipped(tableTopModel(session, object.table_O, false).mesh);
+    const double s = preferHoldingUnseen(m, pieces, unseen, T_B_O_rest, go.friction, go.hold,
+                                         to.unseen_hold_checked, &first.candidates);
+    if (std::string line = unseenHoldLine(first.candidates, s); !line.empty()) session.log(line);
+  }
   return first;
 }
 

@@ -163,8 +163,30 @@ HoldTrial tryHold(PhysicsWorld& world, const Iso3& T_B_O, const Iso3& T_O_palm,
 double rankByHold(const RobotModel& robot, const TriangleMesh& model_O, const Iso3& T_B_O,
                   const std::vector<Plane>* keep_O, double friction, const HoldTestOptions& options,
                   std::vector<GraspCandidate>* candidates);
+// The same on the model's pieces (modelPiecesAboveTable) already made.
+double rankByHold(const RobotModel& robot, const std::vector<ConvexPiece>& pieces,
+                  const Iso3& T_B_O, double friction, const HoldTestOptions& options,
+                  std::vector<GraspCandidate>* candidates);
+
+// The first grasp's model keeps the space the camera did not see only beneath measured surface
+// (TableTopOptions::under_measured_only): where the object bulges past what the camera saw, the
+// true surface lies beyond the model, a finger planned there meets it, and the guarded move stops
+// the hand short of the plan. Of the first `checked` candidates that held (hold == 1, in their
+// order), each is brought in along its approach against `unseen_O` (the model with all the
+// unseen space kept: the camera's shadow, up to the table); one stopped more than 2 mm short of
+// its plan is tried again from there on the model's `pieces` (what rankByHold tested). The first
+// that holds so (or stopped where planned), and held with the margin where the first of them did,
+// is moved to the front; every one checked records GraspCandidate::hold_unseen. Returns the seconds
+// it took (0 with checked 0 or nothing held).
+double preferHoldingUnseen(const RobotModel& robot, const std::vector<ConvexPiece>& pieces,
+                           const TriangleMesh& unseen_O, const Iso3& T_B_O, double friction,
+                           const HoldTestOptions& options, int checked,
+                           std::vector<GraspCandidate>* candidates);
 
 // "hold test: H of N candidates held the model (S s)" (N: those tested), or "" when none was.
 std::string holdLine(const std::vector<GraspCandidate>& candidates, double seconds);
+// "hold test with each hand where the unseen space stops it: H of N held (S s)" (N: those
+// checked), or "" when none was.
+std::string unseenHoldLine(const std::vector<GraspCandidate>& candidates, double seconds);
 
 }  // namespace inhand
