@@ -165,7 +165,7 @@ HoldTrial tryHold(PhysicsWorld& world, const Iso3& T_B_O, const Iso3& T_O_palm,
 
 namespace {
 // preferHoldingUnseen: a hand the unseen space stops less than this short of its plan is where
-// the hold test tried it (the reset's own back-off, a coarse hull's give).
+// the hold test tried it (freeTravel's bisection and the model's own surface are within it).
 constexpr double kUnseenStop_m = 0.002;
 // … and the hand comes in from this far back along its approach.
 constexpr double kUnseenFrom_m = 0.15;

@@ -200,7 +200,7 @@ struct GraspCandidate {
   HoldFailure hold_failure = HoldFailure::kNone;  // why it did not (HoldTrial::failure)
   int hold_margin = -1;      // held also with the test's margin (1), not (0), not tried (-1)
   int hold_robust = -1;      // held also with the model moved by the pose tolerance (1), not (0)
-  int hold_unseen = -1;      // held also on the model with all unseen space kept (1), not (0)
+  int hold_unseen = -1;      // held also from where the unseen space stops the hand (1), not (0)
   double hold_close_m = -1;  // the hold test: how far its close pushed the model (-1 untested)
   // … and the grasp where its close left the model (HoldTrial::T_O_palm_closed).
   std::optional<Iso3> T_O_palm_closed;

@@ -442,7 +442,7 @@ struct PickAttempt {
   int pose = -1;         // its index among the poses generated (GraspCandidate::pose)
   int hold_test = -1;    // the hold test's verdict on the model: 1 held, 0 not, -1 untested
   int hold_margin = -1;  // … and with its margin (GraspCandidate::hold_margin)
-  int hold_unseen = -1;  // … and with the unseen space kept (GraspCandidate::hold_unseen)
+  int hold_unseen = -1;  // … and from where the unseen space stops the hand (GraspCandidate)
   double hold_close_m = -1;  // … how far its close pushed the model (GraspCandidate)
   // Where it failed the hold test (HoldTrial::failure; kNone when it held or was not tested).
   HoldFailure hold_failure = HoldFailure::kNone;
