@@ -575,7 +575,14 @@ TrackResult alignBodyToDepth(const DepthImage& depth, const std::vector<uint8_t>
   outline.spacing_m = typicalSpacing(points_X, occluders_X);
   const TrackResult fine = alignFrom(body, K, points_X, 0, occluders_X, T_C_X, first.correction,
                                      o.iterations, sigma_m, o, &outline);
-  return fine.ok ? fine : first;
+  if (!fine.ok) return first;
+  // The pull pairs the frame's pixels that no point covers with the nearest points: where the
+  // model lacks a part of the body (its far side unseen), the pixels of that part drag the
+  // points over them, and the camera then sees through what was paired before.
+  const int margin = std::max(3, first.inliers / 100);
+  if (fine.see_through > first.see_through + margin || fine.inliers < first.inliers - 5 * margin)
+    return first;
+  return fine;
 }
 
 }  // namespace inhand

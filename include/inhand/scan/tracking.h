@@ -209,8 +209,11 @@ enum class UncoveredPull {
   // body (the refinement below left the mug of Faults.AnObjectThatSlipsIsFoundAndTheGraspCorrected
   // 5.7 mm off after its slip, against 1.4 mm).
   kFromStart,
-  // As a refinement from where the alignment without it converged, kept when it converges: a
-  // body looked for from where the hand planned to hold it, which may be a centimetre off.
+  // As a refinement from where the alignment without it converged, kept when it converges and
+  // the frame does not contradict it more (it sees through more points than that alignment by
+  // over 1 % of its pairs, at least 3, or pairs fewer by over 5 %, at least 15: where the model
+  // lacks a part of the body, that part's pixels drag the points over them): a body looked for
+  // from where the hand planned to hold it, which may be a centimetre off.
   kAfterConverging,
 };
 
