@@ -220,13 +220,13 @@ TEST(Faults, AFrameLessNoisyThanTheSensorModelShowsNoSlip) {
 // 24.3 mm summed before them and 13.9 mm after, 8 of 9 nearer; with AVX2/FMA off
 // (INHAND_NO_AVX2=1) 6 creeps (the soft cracker box followed none), 13.1 -> 7.0 mm, 6 of 6
 // nearer: the count of creeps differs between the two, hence four scans. The grasp is
-// compared, not two whole scans: once
-// a grasp moves, the rest of the scan takes another path, and two scans' medians differ by a
-// millimetre either way (the pill bottle's: 3.2 mm with creep followed, 2.3 without). Not
-// every creep followed is right: an alignment with a coarse model is biased by millimetres along
-// what the frame constrains least (a 2.5 mm slip injected in the kinematic simulator, below the
-// slip threshold, was followed to 4.1 mm off); the physics test set with creep_m 0 scanned worse
-// (coverage >= 97 % on 19 of 33 against 22; docs/test_set_physics.md).
+// compared, not two whole scans: once a grasp moves, the rest of the scan takes another path,
+// and two scans' medians differ by a millimetre either way (the pill bottle's: 3.2 mm with
+// creep followed, 2.3 without). Not every creep followed is right: an alignment with a coarse
+// model is biased by millimetres along what the frame constrains least (a 2.5 mm slip injected in
+// the kinematic simulator, below the slip threshold, was followed to 4.1 mm off); the physics test
+// set with creep_m 0 scanned worse (coverage >= 97 % on 19 of 33 against 22;
+// docs/test_set_physics.md).
 TEST(Faults, AnObjectThatCreepsInTheHandIsFollowed) {
   struct Case {
     const char* object;
