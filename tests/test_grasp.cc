@@ -10,6 +10,7 @@
 #include "inhand/geometry/primitives.h"
 #include "inhand/geometry/stable_poses.h"
 #include "inhand/grasp/grasp.h"
+#include "inhand/grasp/hold_test.h"
 #include "inhand/physics/physics.h"
 #include "inhand/robot/collision.h"
 #include "inhand/scan/multi_grasp.h"
@@ -329,6 +330,23 @@ TEST(GraspGeneration, PinchPosesPickUpFlatObjectsLyingOnTheTable) {
   }
 }
 
+namespace {
+// A 20 × 8 × 12 cm box (centre 6 cm above the table) at nine placements: 15 cm either side of
+// the camera's look-at point and on it, each at headings 0, 60 and 120 degrees.
+std::vector<Iso3> boxPlaces(const RobotModel& r) {
+  std::vector<Iso3> places;
+  for (const double dx : {-0.15, 0.0, 0.15})
+    for (const double yaw : {0.0, M_PI / 3, 2 * M_PI / 3}) {
+      Iso3 T_B_O = Iso3::Identity();
+      T_B_O.linear() = Eigen::AngleAxisd(yaw, Vec3::UnitZ()).toRotationMatrix();
+      T_B_O.translation() =
+          Vec3(r.camera().lookAt_B.x() + dx, r.camera().lookAt_B.y(), r.table().topZ() + 0.06);
+      places.push_back(T_B_O);
+    }
+  return places;
+}
+}  // namespace
+
 // The lift's arm pose (GraspOptions::lift_straight, lift_in_view). A 20 × 8 × 12 cm box at
 // several places and headings on the table. Without the options the lift is one IK solve whose
 // restarts may land on another branch: some joint-space moves there stray more than 2 cm from
@@ -342,28 +360,23 @@ TEST(GraspGeneration, LiftsRiseStraightAndKeepTheHeldObjectInViewOfTheCamera) {
   straight.lift_straight = true;
   inView.lift_straight = inView.lift_in_view = true;
   int strayPlain = 0, strayStraight = 0, hiddenStraight = 0, hiddenInView = 0, lifts = 0;
-  for (const double dx : {-0.15, 0.0, 0.15})
-    for (const double yaw : {0.0, M_PI / 3, 2 * M_PI / 3}) {
-      Iso3 T_B_O = Iso3::Identity();
-      T_B_O.linear() = Eigen::AngleAxisd(yaw, Vec3::UnitZ()).toRotationMatrix();
-      T_B_O.translation() =
-          Vec3(r.camera().lookAt_B.x() + dx, r.camera().lookAt_B.y(), r.table().topZ() + 0.06);
-      for (const GraspCandidate& c : generateGrasps(r, box, T_B_O, r.home(), plain).candidates)
-        strayPlain += liftPathDeviation(r, c.q, c.q_lift) > 0.02;
-      for (const GraspCandidate& c : generateGrasps(r, box, T_B_O, r.home(), straight).candidates) {
-        strayStraight += liftPathDeviation(r, c.q, c.q_lift) > GraspOptions::kMaxLiftDeviation;
-        hiddenStraight += !heldInView(r, c.q_lift);
-      }
-      for (const GraspCandidate& c : generateGrasps(r, box, T_B_O, r.home(), inView).candidates) {
-        ++lifts;
-        hiddenInView += !heldInView(r, c.q_lift);
-        EXPECT_LE(liftPathDeviation(r, c.q, c.q_lift), GraspOptions::kMaxLiftDeviation);
-        const Iso3 want = Eigen::Translation3d(0, 0, GraspOptions{}.lift_m) * r.tipPose(c.q);
-        const Iso3 got = r.tipPose(c.q_lift);
-        EXPECT_LT((got.translation() - want.translation()).norm(), 1e-3);
-        EXPECT_LT(Eigen::AngleAxisd(got.linear() * want.linear().transpose()).angle(), 0.01);
-      }
+  for (const Iso3& T_B_O : boxPlaces(r)) {
+    for (const GraspCandidate& c : generateGrasps(r, box, T_B_O, r.home(), plain).candidates)
+      strayPlain += liftPathDeviation(r, c.q, c.q_lift) > 0.02;
+    for (const GraspCandidate& c : generateGrasps(r, box, T_B_O, r.home(), straight).candidates) {
+      strayStraight += liftPathDeviation(r, c.q, c.q_lift) > GraspOptions::kMaxLiftDeviation;
+      hiddenStraight += !heldInView(r, c.q_lift);
     }
+    for (const GraspCandidate& c : generateGrasps(r, box, T_B_O, r.home(), inView).candidates) {
+      ++lifts;
+      hiddenInView += !heldInView(r, c.q_lift);
+      EXPECT_LE(liftPathDeviation(r, c.q, c.q_lift), GraspOptions::kMaxLiftDeviation);
+      const Iso3 want = Eigen::Translation3d(0, 0, GraspOptions{}.lift_m) * r.tipPose(c.q);
+      const Iso3 got = r.tipPose(c.q_lift);
+      EXPECT_LT((got.translation() - want.translation()).norm(), 1e-3);
+      EXPECT_LT(Eigen::AngleAxisd(got.linear() * want.linear().transpose()).angle(), 0.01);
+    }
+  }
   std::printf(
       "lifts straying > 2 cm: %d plain, %d straight; hiding the held object: %d straight, "
       "%d in view, of %d\n",
@@ -374,6 +387,33 @@ TEST(GraspGeneration, LiftsRiseStraightAndKeepTheHeldObjectInViewOfTheCamera) {
   EXPECT_LE(hiddenInView, hiddenStraight);
   if (hiddenStraight > 0) {
     EXPECT_LT(hiddenInView, hiddenStraight);
+  }
+}
+
+// liftInViewFirst (the first grasp's order among grasps that held alike): the candidates for a
+// 20 × 8 × 12 cm box at several places and headings, their lifts straight up and not solved
+// again for the view, put those whose lift hides the hand or the held object from the camera
+// (liftShowsHand) after those whose lift does not, each group in its order.
+TEST(GraspGeneration, LiftsThatHideTheHandGoAfterThoseThatShowIt) {
+  const RobotModel& r = test::wam();
+  const TriangleMesh box = makeBox(Vec3(0.20, 0.08, 0.12));
+  GraspOptions straight;
+  straight.lift_straight = true;
+  std::vector<GraspCandidate> all;
+  for (const Iso3& T_B_O : boxPlaces(r))
+    for (GraspCandidate& c : generateGrasps(r, box, T_B_O, r.home(), straight).candidates)
+      all.push_back(std::move(c));
+  std::vector<JointVector> shown, hidden;
+  for (const GraspCandidate& c : all)
+    (liftShowsHand(r, c.q_lift) ? shown : hidden).push_back(c.q_lift);
+  std::printf("%zu lifts keep the hand and the object in view, %zu hide them\n", shown.size(),
+              hidden.size());
+  ASSERT_GT(shown.size(), 0u);
+  ASSERT_GT(hidden.size(), 0u);
+  liftInViewFirst(r, all.begin(), all.end());
+  for (size_t i = 0; i < all.size(); ++i) {
+    const JointVector& want = i < shown.size() ? shown[i] : hidden[i - shown.size()];
+    EXPECT_TRUE(all[i].q_lift.isApprox(want, 0)) << i;
   }
 }
 

@@ -210,9 +210,36 @@ double rankByHold(const RobotModel& robot, const TriangleMesh& model_O, const Is
   return s > 0 ? std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() : 0;
 }
 
+bool liftShowsHand(const RobotModel& robot, const JointVector& q) {
+  if (!heldInView(robot, q)) return false;
+  std::vector<Iso3> L_inv = robot.linkPoses(q);  // base to each link
+  for (Iso3& T : L_inv) T = T.inverse();
+  const std::vector<int>& hand = robot.handLinks();
+  const Vec3 cam = robot.camera().panTilt_B;
+  const Vec3 palm = robot.tipPose(q).translation();
+  const double len = (palm - cam).norm();
+  const Vec3 dir = (palm - cam) / std::max(len, 1e-9);
+  for (double t = 0.05; t < len - 0.05; t += 0.01) {
+    const Vec3 p = cam + t * dir;
+    for (size_t i = 0; i < L_inv.size(); ++i) {
+      if (std::find(hand.begin(), hand.end(), int(i)) != hand.end()) continue;
+      for (const Primitive& prim : robot.links()[i].collision)
+        if (prim.contains(L_inv[i] * p)) return false;
+    }
+  }
+  return true;
+}
+
+void liftInViewFirst(const RobotModel& robot, std::vector<GraspCandidate>::iterator first,
+                     std::vector<GraspCandidate>::iterator last) {
+  std::stable_partition(first, last, [&robot](const GraspCandidate& c) {
+    return c.q_lift.size() == 0 || liftShowsHand(robot, c.q_lift);
+  });
+}
+
 double rankByHold(const RobotModel& robot, const std::vector<ConvexPiece>& pieces,
                   const Iso3& T_B_O, double friction, const HoldTestOptions& o,
-                  std::vector<GraspCandidate>* candidates) {
+                  std::vector<GraspCandidate>* candidates, bool lift_in_view_first) {
   const auto t0 = std::chrono::steady_clock::now();
   if (!o.enabled || candidates->empty() || pieces.empty()) return 0;
   if (std::string p = o.validate(); !p.empty()) throw Error("hold test options: " + p);
@@ -276,6 +303,7 @@ double rankByHold(const RobotModel& robot, const std::vector<ConvexPiece>& piece
   }
   // Held with the margin first; within each group, those whose close pushed the model little.
   const double push = o.max_close_push_m;
+  if (lift_in_view_first) liftInViewFirst(robot, candidates->begin(), held);
   std::stable_sort(
       candidates->begin(), held, [push](const GraspCandidate& a, const GraspCandidate& b) {
         auto key = [push](const GraspCandidate& c) {

@@ -297,16 +297,26 @@ struct ScanSession::State {
     viewOpen = true;
     viewPath = path;
   }
-  // addFrame's checks: the reported joints' distance from the open view's path (the largest
-  // joint's, rad); the held object's measured surface points (supportPoints) the frame bears
-  // out and those it sees past (the palm at T_C_palm).
-  double offPath(const JointVector& q) const;
+  // addFrame's checks: why the reported joints lie off the open view's path (the largest
+  // joint's distance from it over FrameChecks::max_path_deviation_rad), or ""; the held
+  // object's measured surface points (supportPoints) the frame bears out and those it sees past
+  // (the palm at T_C_palm).
+  std::string offPath(const JointVector& q) const;
   std::pair<int, int> supportIn(const DepthImage& depth, const Iso3& T_C_palm,
                                 const std::vector<uint8_t>* robot = nullptr) const;
   // Why the frame does not show the object where the hand holds it (FrameChecks::min_support;
   // too few of those points borne out), or "" (the streak of such frames then ends).
   std::string notHeldIn(const DepthImage& depth, const Iso3& T_C_palm, const JointVector& q,
                         const Iso3& T_B_C);
+  // The same for a frame tracking could not align, with the object where the last aligned frame
+  // held it (T_C_held): one that bears it out leaves the streak as it was.
+  std::string notHeldUnaligned(const DepthImage& depth, const Iso3& T_C_held, const JointVector& q,
+                               const Iso3& T_B_C) {
+    const int streak = unsupportedStreak;
+    std::string why = notHeldIn(depth, T_C_held, q, T_B_C);
+    if (why.empty()) unsupportedStreak = streak;
+    return why.empty() ? why : why + ", where the last aligned frame held it";
+  }
   // The arm's torque readings from a checkpoint's header (load).
   void readTorques(const Json& h);
   // The tracking state a checkpoint holds: the last correction, the jump check's, the filter's.
@@ -837,7 +847,9 @@ std::optional<DepthImage> withoutInvalidDepths(const DepthImage& input) {
 }
 }  // namespace
 
-double ScanSession::State::offPath(const JointVector& q) const {
+std::string ScanSession::State::offPath(const JointVector& q) const {
+  const double most = options.checks.max_path_deviation_rad;
+  if (!(most > 0) || !viewOpen || viewPath.size() < 2) return "";
   const RobotModel& m = *model;
   const Eigen::VectorXd a = m.arm(q);
   double best = std::numeric_limits<double>::infinity();
@@ -848,7 +860,10 @@ double ScanSession::State::offPath(const JointVector& q) const {
         d.squaredNorm() > 0 ? std::clamp((a - p).dot(d) / d.squaredNorm(), 0.0, 1.0) : 0.0;
     best = std::min(best, (a - (p + t * d)).cwiseAbs().maxCoeff());
   }
-  return best;
+  if (best <= most) return "";
+  char why[160];
+  std::snprintf(why, sizeof why, "joints %.3f rad off the planned path (a jump)", best);
+  return why;
 }
 
 std::string ScanSession::State::notHeldIn(const DepthImage& depth, const Iso3& T_C_palm,
@@ -960,6 +975,8 @@ FrameReport ScanSession::addFrame(const DepthImage& input, const JointVector& q,
   const FrameChecks& fc = s.options.checks;
   auto refuse = [&](FrameRefusal refusal, const std::string& why,
                     const TrackResult* track = nullptr) {
+    if (refusal == FrameRefusal::kObjectNotInHand && ++s.unsupportedStreak >= fc.lost_after)
+      finish(Termination::kObjectLost, "in-hand frames stopped showing the object");
     ++refusedFrames(s.summary, refusal);
     log("frame not fused: " + why);
     const FrameReport r = refusedFrame(refusal, why, track);
@@ -977,12 +994,7 @@ FrameReport ScanSession::addFrame(const DepthImage& input, const JointVector& q,
     return refuse(FrameRefusal::kDroppedOrEmpty,
                   "an empty frame (" + std::to_string(depth.validCount()) + " depth pixels)");
   // The reported joints must lie on the path the arm was sent along.
-  if (fc.max_path_deviation_rad > 0 && s.viewOpen && s.viewPath.size() >= 2)
-    if (const double off = s.offPath(q); off > fc.max_path_deviation_rad) {
-      char why[160];
-      std::snprintf(why, sizeof why, "joints %.3f rad off the planned path (a jump)", off);
-      return refuse(FrameRefusal::kOffPath, why);
-    }
+  if (std::string why = s.offPath(q); !why.empty()) return refuse(FrameRefusal::kOffPath, why);
   Iso3 T_B_C_used = T_B_C;
   TrackResult track;
   if (s.options.tracking.enabled) {
@@ -996,8 +1008,12 @@ FrameReport ScanSession::addFrame(const DepthImage& input, const JointVector& q,
                                                   : Iso3(T_C_palm * s.correction);
     if (std::string why = followSlip(depth, q, T_B_C, T_C_held); !why.empty())
       return refuse(FrameRefusal::kObjectMovingInHand, why);
-    if (!tracked) return refuse(FrameRefusal::kTracking, track.reason, &track);
-    if (!jump.empty()) return refuse(FrameRefusal::kTracking, jump, &track);
+    if (!tracked || !jump.empty()) {
+      // A frame tracking cannot align may still show that the object left the hand.
+      if (std::string why = s.notHeldUnaligned(depth, T_C_held, q, T_B_C); !why.empty())
+        return refuse(FrameRefusal::kObjectNotInHand, why);
+      return refuse(FrameRefusal::kTracking, tracked ? jump : track.reason, &track);
+    }
     T_B_C_used = *tracked;
     s.correction = correction;
     s.correctionQ = q;
@@ -1005,11 +1021,8 @@ FrameReport ScanSession::addFrame(const DepthImage& input, const JointVector& q,
   // The object must be where the hand holds it.
   if (std::string why =
           s.notHeldIn(depth, T_B_C_used.inverse() * s.model->tipPose(q), q, T_B_C_used);
-      !why.empty()) {
-    if (++s.unsupportedStreak >= fc.lost_after)
-      finish(Termination::kObjectLost, "in-hand frames stopped showing the object");
+      !why.empty())
     return refuse(FrameRefusal::kObjectNotInHand, why);
-  }
   s.lastHeldQ = q;
   // With tracking, the robot as the frame shows it: the joint offsets that put the palm where the
   // frame says (armOffsetsFromPalmError) place the other links too (robot pixels, the space inside

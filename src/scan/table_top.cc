@@ -346,7 +346,9 @@ GraspGeneration firstGrasps(const ScanSession& session, const TableTopObject& ob
       go.hold.enabled && !first.candidates.empty() && !seen.mesh.empty()
           ? modelPiecesAboveTable(seen.mesh, T_B_O_rest, m, &holdRegion, go.hold.decomposition)
           : std::vector<ConvexPiece>();
-  double holdS = rankByHold(m, pieces, T_B_O_rest, go.friction, go.hold, &first.candidates);
+  // A lift that shows the hand first, among those that held alike: else the lift's frame may
+  // not tell whether the object is held.
+  double holdS = rankByHold(m, pieces, T_B_O_rest, go.friction, go.hold, &first.candidates, true);
   if (holdS > 0)
     holdS = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   session.log(holdLine(first.candidates, holdS));

@@ -71,7 +71,8 @@ struct FrameChecks {
   // The object must be where the hand holds it: of the model's measured surface points in view
   // (at least min_points of them), the fraction the frame bears out (within 2 cm; against: seen
   // more than 3 cm behind) must reach min_support, or the frame is not fused; lost_after such
-  // frames in a row end the grasp's views with object_lost (0: no check).
+  // frames in a row end the grasp's views with object_lost (0: no check). A frame tracking
+  // cannot align is checked where the last aligned frame held the object.
   double min_support = 0.2;
   int min_points = 100;
   int lost_after = 3;
