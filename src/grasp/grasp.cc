@@ -34,22 +34,31 @@ std::string GraspOptions::validate() const {
   return {};
 }
 
-bool heldInView(const RobotModel& robot, const JointVector& q) {
+bool clearLineFromCamera(const RobotModel& robot, const JointVector& q, const Vec3& target_B,
+                         double short_m, bool past_hand) {
   std::vector<Iso3> L_inv = robot.linkPoses(q);  // base to each link
   for (Iso3& T : L_inv) T = T.inverse();
-  const Vec3 target = robot.tipPose(q) * Vec3(0, 0, robot.graspOffset());
+  std::vector<char> skip(L_inv.size(), 0);
+  if (past_hand)
+    for (const int i : robot.handLinks()) skip[size_t(i)] = 1;
   const Vec3 cam = robot.camera().panTilt_B;
-  const double len = (target - cam).norm();
-  const Vec3 dir = (target - cam) / std::max(len, 1e-9);
-  for (double t = 0.05; t < len - 0.15; t += 0.01) {
+  const double len = (target_B - cam).norm();
+  const Vec3 dir = (target_B - cam) / std::max(len, 1e-9);
+  for (double t = 0.05; t < len - short_m; t += 0.01) {
     const Vec3 p = cam + t * dir;
     for (size_t i = 0; i < L_inv.size(); ++i) {
+      if (skip[i]) continue;
       const Vec3 p_link = L_inv[i] * p;
       for (const Primitive& prim : robot.links()[i].collision)
         if (prim.contains(p_link)) return false;
     }
   }
   return true;
+}
+
+bool heldInView(const RobotModel& robot, const JointVector& q) {
+  return clearLineFromCamera(robot, q, robot.tipPose(q) * Vec3(0, 0, robot.graspOffset()), 0.15,
+                             false);
 }
 
 double liftPathDeviation(const RobotModel& robot, const JointVector& q, const JointVector& q_lift) {

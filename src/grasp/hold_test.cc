@@ -211,23 +211,8 @@ double rankByHold(const RobotModel& robot, const TriangleMesh& model_O, const Is
 }
 
 bool liftShowsHand(const RobotModel& robot, const JointVector& q) {
-  if (!heldInView(robot, q)) return false;
-  std::vector<Iso3> L_inv = robot.linkPoses(q);  // base to each link
-  for (Iso3& T : L_inv) T = T.inverse();
-  const std::vector<int>& hand = robot.handLinks();
-  const Vec3 cam = robot.camera().panTilt_B;
-  const Vec3 palm = robot.tipPose(q).translation();
-  const double len = (palm - cam).norm();
-  const Vec3 dir = (palm - cam) / std::max(len, 1e-9);
-  for (double t = 0.05; t < len - 0.05; t += 0.01) {
-    const Vec3 p = cam + t * dir;
-    for (size_t i = 0; i < L_inv.size(); ++i) {
-      if (std::find(hand.begin(), hand.end(), int(i)) != hand.end()) continue;
-      for (const Primitive& prim : robot.links()[i].collision)
-        if (prim.contains(L_inv[i] * p)) return false;
-    }
-  }
-  return true;
+  return heldInView(robot, q) &&
+         clearLineFromCamera(robot, q, robot.tipPose(q).translation(), 0.05, true);
 }
 
 void liftInViewFirst(const RobotModel& robot, std::vector<GraspCandidate>::iterator first,

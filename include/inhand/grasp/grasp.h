@@ -226,6 +226,11 @@ struct GraspPoseRecord {
 // (graspOffset in front of the palm) at q, sampled every centimetre from 5 cm out to 15 cm short of
 // the object (the hand holding it is not counted) (GraspOptions::lift_in_view).
 bool heldInView(const RobotModel& robot, const JointVector& q);
+// Whether no link of the robot at q (none but the hand's with `past_hand`) lies on the line from
+// the camera's pan-tilt centre to target_B, sampled every centimetre from 5 cm out to short_m
+// short of it (heldInView: the grasp point, 15 cm short, every link).
+bool clearLineFromCamera(const RobotModel& robot, const JointVector& q, const Vec3& target_B,
+                         double short_m, bool past_hand);
 
 // How far the joint-space move from q to q_lift (straight in joint space, as the robot executes
 // it) strays from the straight line between its ends, at 20 steps: the held object's point
