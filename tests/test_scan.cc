@@ -168,6 +168,72 @@ TEST(Scan, DropsSeenInTheDepthFramesAreTheSimulatorsDrops) {
   }
 }
 
+// A camera that sees nothing above the table (no return there, as where the arm hides the hand
+// nearer than the sensor's range) in its first `hidden` frames taken while the object is held.
+class HandHiddenSensor : public SimSensor {
+ public:
+  HandHiddenSensor(SimWorld* w, int hidden)
+      : SimSensor(w, DepthCameraOptions{}), w_(w), left_(hidden) {}
+  DepthImage capture() override {
+    DepthImage d = SimSensor::capture();
+    if (!w_->held || left_ <= 0) return d;
+    --left_;
+    const CameraIntrinsics& K = camera().intrinsics;
+    for (int v = 0; v < d.height; ++v)
+      for (int u = 0; u < d.width; ++u) {
+        float& z = d.depth_m[size_t(v) * size_t(d.width) + size_t(u)];
+        if (z > 0 && (w_->T_B_C * (double(z) * K.rayZ1(u, v))).z() > wam().table().topZ() + 0.02)
+          z = 0;
+      }
+    return d;
+  }
+
+ private:
+  SimWorld* w_;
+  int left_;
+};
+
+// The lift's frame shows nothing of the hand or the object (tracking refuses it), and where the
+// box rested the camera sees the table through it: the box, which the fingers did not close on
+// nothing for, is held out of the camera's sight. The pick-up counts as made, and the grasp's
+// first frames in the hand confirm it by registration. With almost no friction (μ = 0.1), every
+// frame of the held box hidden so, most pick-ups let the box fall back where it rested: those
+// taken as dropped are the simulator's drops, and the scan goes on holding the box exactly when
+// the simulator does.
+TEST(Scan, AnObjectHeldOutOfTheCamerasSightIsTakenAsHeldWhereItRestedNoLonger) {
+  BoxOnTable b{SimOptions{}};
+  b.o.tracking.enabled = true;
+  b.o.tracking.in_hand = true;
+  SimRobot robot(&b.world);
+  HandHiddenSensor sensor(&b.world, 1);
+  std::vector<std::string> lines;
+  ScanProgress progress;
+  progress.log = [&](const std::string& line) { lines.push_back(line); };
+  const MultiGraspResult r =
+      scanFromTable(robot, sensor, b.world.restPose(), b.o, b.multi, NoiseModelOptions{}, progress);
+  std::string log;
+  for (const std::string& l : lines) log += l + "\n";
+  ASSERT_TRUE(r.table_top);
+  ASSERT_EQ(r.grasps.size(), 1u) << log;
+  EXPECT_EQ(r.table_top->attempts.back().outcome, PickOutcome::kPicked);
+  EXPECT_EQ(countOutcome(r.table_top->attempts, PickOutcome::kDropped), b.world.drops) << log;
+  EXPECT_NE(log.find("out of the camera's sight in the hand"), std::string::npos) << log;
+  EXPECT_NE(log.find("the grasp confirmed by registration"), std::string::npos) << log;
+  EXPECT_TRUE(b.world.held);
+
+  SimOptions slippery;
+  slippery.friction = 0.1;
+  BoxOnTable s(slippery);
+  SimRobot robot2(&s.world);
+  HandHiddenSensor hidden(&s.world, 1000);  // every held frame
+  const MultiGraspResult r2 =
+      scanFromTable(robot2, hidden, s.world.restPose(), s.o, s.multi, NoiseModelOptions{});
+  ASSERT_TRUE(r2.table_top);
+  const std::vector<PickAttempt>& attempts = r2.table_top->attempts;
+  EXPECT_EQ(countOutcome(attempts, PickOutcome::kDropped), s.world.drops);
+  EXPECT_EQ(attempts.back().outcome == PickOutcome::kPicked, s.world.held);
+}
+
 // The first `slides` pick-ups slide out of the hand: while it holds still after the lift the
 // object moves `by` in the hand (the kinematic simulator's grasp moved).
 class SlidingRobot : public SimRobot {
@@ -230,6 +296,46 @@ TEST(Scan, AnObjectThatSlidesAfterTheLiftIsPutDownAndTheNextCandidateTried) {
   EXPECT_EQ(pastTheLift(crept), std::vector<PickOutcome>{PickOutcome::kPicked});
   const SlideRun still = pickUpThatSlides(0, Vec3::Zero());
   EXPECT_EQ(pastTheLift(still), std::vector<PickOutcome>{PickOutcome::kPicked});
+}
+
+// A put-down object that rolls away: after the first put-down the object comes to rest 35 cm
+// along the table from where the hand set it down (farther than the search radius about where it
+// was believed to lie and beneath the hand). The scan looks over the rest of the table, finds it
+// there and picks it up again: every re-grasp pick-up reaches it (none meets nothing).
+class RollingRobot : public SimRobot {
+ public:
+  RollingRobot(SimWorld* w, const Vec3& by) : SimRobot(w), w_(w), by_(by) {}
+  bool putDown() override {
+    const bool ok = SimRobot::putDown();
+    if (putDowns++ == 0) w_->tablePose.translation() += by_;
+    return ok;
+  }
+  int putDowns = 0;
+
+ private:
+  SimWorld* w_;
+  Vec3 by_;
+};
+
+TEST(Scan, AnObjectThatRolledAwayAfterThePutDownIsFoundOnTheRestOfTheTable) {
+  BoxOnTable b{SimOptions{}};
+  RollingRobot robot(&b.world, Vec3(0, 0.35, 0));
+  SimSensor sensor(&b.world, DepthCameraOptions{});
+  b.multi.max_grasps = 2;
+  b.multi.grasp.max_failed_pick_ups = 6;
+  std::vector<std::string> lines;
+  ScanProgress progress;
+  progress.log = [&](const std::string& line) { lines.push_back(line); };
+  const MultiGraspResult r =
+      scanFromTable(robot, sensor, b.world.restPose(), b.o, b.multi, NoiseModelOptions{}, progress);
+  std::string log;
+  for (const std::string& l : lines) log += l + "\n";
+  ASSERT_EQ(r.grasps.size(), 2u) << log;
+  EXPECT_NE(log.find("looking over the rest of the table"), std::string::npos) << log;
+  ASSERT_EQ(r.refind_residuals_m.size(), 1u);
+  EXPECT_LT(r.refind_residuals_m[0], 0.003);
+  EXPECT_EQ(countOutcome(r.grasps[1].attempts, PickOutcome::kNoContact), 0) << log;
+  EXPECT_EQ(countOutcome(r.failed_regrasp_attempts, PickOutcome::kNoContact), 0) << log;
 }
 
 // A one-grasp scan reports every frame it did not fuse: a quarter of the frames dropped by the

@@ -134,7 +134,8 @@ std::optional<std::pair<Iso3, double>> refindInHand(
 // believed to lie (T_B_O_guess), the largest cluster above the table near there
 // (findObjectOnTable), and the model so far registered to the frame from the believed pose and
 // from each of the model's 6 most probable resting orientations at 12 headings over the
-// cluster; the registration whose pose the frame bears out most, if more than 60 %.
+// cluster; the registration whose pose the frame bears out most, if more than 60 %. Logged as
+// moved from T_B_O_believed where given (a place looked at other than the belief).
 struct Refound {
   std::optional<Iso3> T_B_O;
   double support = -1, rms_m = 0;
@@ -180,7 +181,8 @@ Refound nearestOfTheBest(const std::vector<Refound>& fits, const Iso3& T_B_O_gue
 
 Refound refindOnTable(ScanSession& session, RobotInterface& robot, DepthSensor& sensor,
                       const Iso3& T_B_O_guess, const ScanOptions& options,
-                      const std::function<void(const std::string&)>& log) {
+                      const std::function<void(const std::string&)>& log,
+                      const Iso3* T_B_O_believed = nullptr) {
   const RobotModel& m = robot.model();
   const CameraIntrinsics& K = sensor.camera().intrinsics;
   Refound out;
@@ -240,30 +242,73 @@ Refound refindOnTable(ScanSession& session, RobotInterface& robot, DepthSensor& 
     out.reason = "the model does not fit what the camera sees there";
     return out;
   }
+  const Iso3& believed = T_B_O_believed ? *T_B_O_believed : T_B_O_guess;
   char line[200];
   std::snprintf(line, sizeof line,
                 "the object found on the table %.1f mm and %.1f° from where it was believed to "
                 "lie (%d %% borne out, residual %.2f mm)",
-                1000 * (out.T_B_O->translation() - T_B_O_guess.translation()).norm(),
-                180 / M_PI * rotationBetween(T_B_O_guess, *out.T_B_O),
+                1000 * (out.T_B_O->translation() - believed.translation()).norm(),
+                180 / M_PI * rotationBetween(believed, *out.T_B_O),
                 int(std::lround(100 * out.support)), 1000 * out.rms_m);
   log(line);
   return out;
 }
 
+// The rest of the table top, looked over once the guesses missed: a grid of places whose search
+// circles (radius r, TableTopOptions::search_radius_m) cover the table's top, a cell's diagonal
+// the circle's diameter, nearest `guesses[0]` first; places within r/2 of a guess left out (the
+// guess looked there). An object that rolled or slid away after a put-down or a drop lies
+// somewhere on the table; off the table it is lost.
+std::vector<Iso3> tableSweep(const RobotModel& m, const std::vector<Iso3>& guesses, double r) {
+  std::vector<Iso3> out;
+  if (guesses.empty() || r <= 0) return out;
+  const TableInfo& t = m.table();
+  const double cell = r * std::sqrt(2.0);
+  const int nx = std::max(1, int(std::ceil(t.size.x() / cell)));
+  const int ny = std::max(1, int(std::ceil(t.size.y() / cell)));
+  const Vec3 from = guesses[0].translation();
+  for (int i = 0; i < nx; ++i)
+    for (int j = 0; j < ny; ++j) {
+      const Vec3 at(t.center_B.x() + t.size.x() * ((i + 0.5) / nx - 0.5),
+                    t.center_B.y() + t.size.y() * ((j + 0.5) / ny - 0.5), from.z());
+      bool looked = false;
+      for (const Iso3& g : guesses)
+        looked = looked || (g.translation() - at).head<2>().norm() < 0.5 * r;
+      if (looked) continue;
+      Iso3 T = guesses[0];
+      T.translation() = at;
+      out.push_back(T);
+    }
+  std::stable_sort(out.begin(), out.end(), [&](const Iso3& a, const Iso3& b) {
+    return (a.translation() - from).norm() < (b.translation() - from).norm();
+  });
+  return out;
+}
+
 // The object looked for where it is believed to lie, then at each further guess while not
 // found there (beneath where the hand held it: it may have fallen from the hand, or been knocked
-// there by a pick-up that failed), each miss logged.
+// there by a pick-up that failed), then over the rest of the table (tableSweep), each miss
+// logged.
 Refound refindAt(ScanSession& session, RobotInterface& robot, DepthSensor& sensor,
                  const std::vector<Iso3>& guesses, const ScanOptions& options,
                  const std::function<void(const std::string&)>& log) {
   Refound found;
   for (size_t k = 0; k < guesses.size() && !found.T_B_O; ++k) {
     found = refindOnTable(session, robot, sensor, guesses[k], options, log);
-    if (!found.T_B_O && k + 1 < guesses.size())
+    if (!found.T_B_O)
       log("the object not found " + std::string(k == 0 ? "there" : "at that guess") + ": " +
           found.reason + "; looking elsewhere");
   }
+  if (found.T_B_O || session.progress().stopRequested()) return found;
+  const std::vector<Iso3> sweep =
+      tableSweep(robot.model(), guesses, session.multiOptions().table_top.search_radius_m);
+  log("looking over the rest of the table (" + std::to_string(sweep.size()) + " places)");
+  for (const Iso3& at : sweep) {
+    const Refound f = refindOnTable(session, robot, sensor, at, options, log, &guesses[0]);
+    if (f.T_B_O) return f;
+  }
+  found.reason =
+      "not where it was believed to lie nor anywhere else the camera looked on the table";
   return found;
 }
 
@@ -448,7 +493,38 @@ struct LiftCheck {
   // achieved it is not: registering the model so far, which lacks the faces the camera sees in
   // the hand, pulls it towards them (the remote's grasp, right, moved 5.7 mm).
   bool toConfirm() const { return pushed && !registered; }
+  // Points where it rested that the camera saw through (against) and that bore it out, in the
+  // lift's frame or, where none of them was in view there, in a frame aimed at where it rested.
+  SupportCounts restCounts;
+  // None of the object's points in view where the hand holds it (the arm or the hand hides
+  // them, or tracking refused the frame), and where it rested at least kGoneFromRest of them seen
+  // through and under 10 % borne out: the fingers (which did not close on nothing) hold it out of
+  // the camera's sight. Its first in-hand frames confirm it (a hand found empty there ends the
+  // grasp as object_lost).
+  static constexpr int kGoneFromRest = 100;
+  bool heldOutOfSight() const {
+    return inHand < 0 && restCounts.against >= kGoneFromRest &&
+           restCounts.support < 0.1 * (restCounts.support + restCounts.against);
+  }
 };
+
+// Where the object rested (its points `rest_B`) seen with the arm where it is: the camera aimed
+// at them, the robot's pixels hidden. Nothing counted without a usable frame.
+SupportCounts restPlaceSeen(RobotInterface& robot, DepthSensor& sensor,
+                            const std::vector<Vec3>& rest_B, const ScanOptions& options,
+                            const RobotOccluders& scenes) {
+  Aabb box;
+  for (const Vec3& p : rest_B) box.extend(p);
+  const std::optional<Iso3> aim = robot.model().camera().aimAt(box.center());
+  if (rest_B.empty() || !aim) return {};
+  sensor.setPose(*aim);
+  const std::optional<DepthImage> d = captureUsable(sensor, options.checks);
+  if (!d) return {};
+  const std::vector<uint8_t> mask =
+      robotPixelMask(*d, *aim, robot.joints(), scenes, sensor.camera(), options.t_hand_m,
+                     options.carve_radius_px, /*with_table=*/false);
+  return depthSupportCounts(*d, *aim, sensor.camera().intrinsics, mask, rest_B);
+}
 LiftCheck checkAfterLift(ScanSession& session, RobotInterface& robot, DepthSensor& sensor,
                          const GraspCandidate& c, const Iso3& T_B_O_rest,
                          const std::vector<Vec3>& points_O, const ScanOptions& options,
@@ -490,7 +566,13 @@ LiftCheck checkAfterLift(ScanSession& session, RobotInterface& robot, DepthSenso
     for (size_t k = 0; k < points_O.size(); ++k) held_B[k] = T_B_O * points_O[k];
   }
   if (tracked) out.inHand = depthSupport(d, *tracked, K, f->mask, held_B);
-  out.onTable = depthSupport(d, f->aim, K, f->mask, rest_B_points);
+  // Where it rested, seen again with the camera aimed there where the lift's frame showed none
+  // of it nor of the object in the hand.
+  out.restCounts = depthSupportCounts(d, f->aim, K, f->mask, rest_B_points);
+  if (out.inHand < 0 && out.restCounts.support + out.restCounts.against == 0)
+    out.restCounts = restPlaceSeen(robot, sensor, rest_B_points, options, scenes);
+  if (const int n = out.restCounts.support + out.restCounts.against; n > 0)
+    out.onTable = double(out.restCounts.support) / n;
   // Not all where the grasp says, and not where it rested: closing the fingers may have
   // moved it in the hand. Registered from the grasp, kept where the frame bears out more.
   if (tracked && !(out.inHand > 0.9) && !(out.onTable > 0.5))
@@ -675,6 +757,17 @@ PickUp pickAndVerify(ScanSession& session, RobotInterface& robot, DepthSensor& s
     log("after the lift: the object's points borne out in the hand " + percent(inHand) +
         ", where it rested " + percent(onTable));
     if (inHand > 0.5) attempt.shift_m = (achieved->translation() - c.T_O_palm.translation()).norm();
+    if (lift.heldOutOfSight()) {
+      log("the object out of the camera's sight in the hand and gone from where it rested (" +
+          std::to_string(lift.restCounts.against) +
+          " of its points there seen through): held; its first frames in the hand confirm it");
+      record(PickOutcome::kPicked);
+      if (options.tracking.enabled && options.tracking.in_hand)
+        session.confirmGraspOnNextFrames(kConfirmFrames);
+      out.achieved = achieved;
+      out.picked = c;
+      break;
+    }
     const bool dropped = !(inHand > 0.5) || onTable > 0.5;
     if (dropped || (session.multiOptions().grasp.settle_s > 0 &&
                     !stayedInHand(session, robot, sensor, lift, options, log))) {
