@@ -14,6 +14,7 @@
 #include "inhand/geometry/stable_poses.h"
 #include "inhand/grasp/grasp.h"
 #include "inhand/mesh/extract.h"
+#include "inhand/physics/physics.h"
 #include "inhand/robot/robot_scenes.h"
 #include "inhand/scan/multi_grasp.h"
 #include "inhand/scan/registration.h"
@@ -314,14 +315,18 @@ Iso3 restingOnTable(const TriangleMesh& mesh, const StablePose& rest, double yaw
 }
 }  // namespace
 
-// After a put-down the object may tip: the session finds it on the table again from one frame.
-// The cracker box's model is fused from frames of it resting on two of its faces at four headings
-// each (as the views of a grasp see most of it); it is then put on a third face, 35° turned and
-// 4 cm off. The model registered from its resting orientations over the object (restingStarts)
-// and from where it was believed to be: the registration with the most inliers puts the box's
-// surface within 3 mm of the truth (mean) and is turned by less than 2° (up to the box's
-// symmetries).
-TEST(Session, AnObjectThatTippedIsFoundAgainOnTheTable) {
+// The cracker box's model fused from frames of it resting on two of its faces at four headings
+// each (as the views of a grasp see most of it), then the box found on the table again from one
+// frame of it resting at `truth`: the model registered from its resting orientations over the
+// object (restingStarts) and from where it was believed to be (`believed`); the registration with
+// the most inliers. The box is symmetric (a half turn about any of its axes gives it back): the
+// found pose is compared by where it puts the box's surface, against the true box (its distance
+// field: mean and worst over surface samples), and by its turn up to those half turns.
+namespace {
+struct Refound {
+  double mean_m = 1, worst_m = 1, turned_rad = M_PI;
+};
+Refound refoundBox(const std::function<Iso3(const Iso3& believed)>& truthOf) {
   const TriangleMesh box = loadObject("builtin:cracker_box");
   SimOptions so;
   SimWorld world(wam(), box, Iso3::Identity(), DepthCameraOptions{}, NoiseModelOptions{}, so);
@@ -329,7 +334,8 @@ TEST(Session, AnObjectThatTippedIsFoundAgainOnTheTable) {
   world.q = wam().home();
   SimSensor sensor(&world, DepthCameraOptions{});
   const std::vector<StablePose> rests = stablePoses(box);
-  ASSERT_GE(rests.size(), 3u);
+  EXPECT_GE(rests.size(), 3u);
+  if (rests.size() < 3) return {};
   auto resting = [&](int pose, double yaw, double x, double y) {
     return restingOnTable(box, rests[size_t(pose)], yaw, x, y);
   };
@@ -339,15 +345,17 @@ TEST(Session, AnObjectThatTippedIsFoundAgainOnTheTable) {
   for (int k = 0; k < 8; ++k) {
     world.tablePose = resting(k / 4, k * M_PI / 2, at.x(), at.y());
     const std::optional<Iso3> aim = wam().camera().aimAt(world.tablePose.translation());
-    ASSERT_TRUE(aim);
+    EXPECT_TRUE(aim);
+    if (!aim) return {};
     sensor.setPose(*aim);
     session.addFrameOfObjectAt(world.render(), world.q, *aim, world.tablePose);
   }
   const Iso3 believed = resting(0, 0, at.x(), at.y());
-  const Iso3 truth = resting(2, 35 * M_PI / 180, at.x() + 0.04, at.y() - 0.01);
+  const Iso3 truth = truthOf(believed);
   world.tablePose = truth;
   const std::optional<Iso3> aim = wam().camera().aimAt(truth.translation());
-  ASSERT_TRUE(aim);
+  EXPECT_TRUE(aim);
+  if (!aim) return {};
   sensor.setPose(*aim);
   const DepthImage d = world.render();
   // The table's pixels pair with nothing; the centroid of the points above it near the object.
@@ -367,42 +375,103 @@ TEST(Session, AnObjectThatTippedIsFoundAgainOnTheTable) {
         ++above;
       }
     }
-  ASSERT_GT(above, 500);
-  centre /= above;
+  EXPECT_GT(above, 500);
+  centre /= std::max(1, above);
   std::vector<Iso3> starts{believed};
   for (const Iso3& T : restingStarts(session.planningModel().mesh, centre, aim->translation(),
                                      wam().table().topZ()))
     starts.push_back(T);
-  ASSERT_GT(starts.size(), 12u);
+  EXPECT_GT(starts.size(), 12u);
   const auto results = session.registerObjectAt(d, hidden, *aim, starts);
-  ASSERT_EQ(results.size(), starts.size());
+  EXPECT_EQ(results.size(), starts.size());
   int best = -1;
   for (size_t k = 0; k < results.size(); ++k)
     if (results[k].first &&
         (best < 0 || results[k].second.inliers > results[size_t(best)].second.inliers))
       best = int(k);
-  ASSERT_GE(best, 0);
+  EXPECT_GE(best, 0);
+  if (best < 0) return {};
   const Iso3 found = *results[size_t(best)].first;
-  // The box is symmetric (a half turn about any of its axes gives it back): the found pose is
-  // compared by where it puts the box's surface, against the true box (its distance field), and
-  // by its turn up to those half turns. Measured: 2.1 mm mean, 7.3 mm at worst, 0.3°.
+  Refound out;
   const Vec3 half = 0.5 * box.bounds().size(), mid = box.bounds().center();
-  double worst = 0, sum = 0;
+  double sum = 0;
+  out.worst_m = 0;
   const std::vector<SurfacePoint> samples = surfaceSamples(box, 0.01);
   for (const SurfacePoint& sp : samples) {
     const Vec3 q = (truth.inverse() * (found * sp.p) - mid).cwiseAbs() - half;
     const double dist = std::abs(q.cwiseMax(0.0).norm() + std::min(q.maxCoeff(), 0.0));
-    worst = std::max(worst, dist);
+    out.worst_m = std::max(out.worst_m, dist);
     sum += dist;
   }
-  EXPECT_LT(sum / double(samples.size()), 0.003);
-  EXPECT_LT(worst, 0.01);
+  out.mean_m = sum / double(samples.size());
   const Mat3 R = truth.linear().transpose() * found.linear();
-  double turned = Eigen::AngleAxisd(R).angle();
+  out.turned_rad = Eigen::AngleAxisd(R).angle();
   for (int a = 0; a < 3; ++a)
-    turned =
-        std::min(turned, Eigen::AngleAxisd(Eigen::AngleAxisd(M_PI, Vec3::Unit(a)) * R).angle());
-  EXPECT_LT(turned, 2 * M_PI / 180);
+    out.turned_rad = std::min(
+        out.turned_rad, Eigen::AngleAxisd(Eigen::AngleAxisd(M_PI, Vec3::Unit(a)) * R).angle());
+  std::printf("found %.2f mm mean, %.2f mm at worst, %.2f deg from the truth\n", 1000 * out.mean_m,
+              1000 * out.worst_m, out.turned_rad * 180 / M_PI);
+  return out;
+}
+}  // namespace
+
+// After a put-down the object may tip: the session finds it on the table again from one frame.
+// The box put on a third face, 35° turned and 4 cm off, is found within 3 mm mean (measured
+// 0.69 mm, 1.44 mm at worst) and 2° (0.27°).
+TEST(Session, AnObjectThatTippedIsFoundAgainOnTheTable) {
+  const TriangleMesh box = loadObject("builtin:cracker_box");
+  const std::vector<StablePose> rests = stablePoses(box);
+  ASSERT_GE(rests.size(), 3u);
+  const Vec3 at = wam().camera().lookAt_B;
+  const Refound r = refoundBox([&](const Iso3&) {
+    return restingOnTable(box, rests[2], 35 * M_PI / 180, at.x() + 0.04, at.y() - 0.01);
+  });
+  EXPECT_LT(r.mean_m, 0.003);
+  EXPECT_LT(r.worst_m, 0.01);
+  EXPECT_LT(r.turned_rad, 2 * M_PI / 180);
+}
+
+// The same with MuJoCo deciding where it comes to rest: the box (0.41 kg) let go standing on its
+// end, tilted 25° and 5 mm above the table, tips over and settles (its long axis then within
+// 45° of level); found there within 3 mm mean and 2° (measured 0.98 mm, 2.13 mm at worst,
+// 0.14°).
+TEST(Session, AnObjectThatTipsInPhysicsIsFoundWhereItSettled) {
+  const TriangleMesh box = loadObject("builtin:cracker_box");
+  const Vec3 size = box.bounds().size();
+  int tall = 0, thin = 0;
+  size.maxCoeff(&tall);
+  size.minCoeff(&thin);
+  Iso3 settledPose = Iso3::Identity();
+  const Refound r = refoundBox([&](const Iso3& believed) {
+    PhysicsOptions po;
+    po.mass_kg = 0.41;
+    PhysicsWorld w(wam(), box, 0.5, po);
+    // Its long axis up, then tilted 25° about its middle axis: over the edge along it, towards
+    // its thin side, farther than that side's half.
+    const Mat3 up =
+        Eigen::Quaterniond::FromTwoVectors(Vec3::Unit(tall), Vec3::UnitZ()).toRotationMatrix();
+    Iso3 T = Iso3::Identity();
+    T.linear() =
+        Eigen::AngleAxisd(25 * M_PI / 180, up * Vec3::Unit(3 - tall - thin)).toRotationMatrix() *
+        up;
+    double lowest = 1e9;
+    for (const Vec3f& v : box.vertices)
+      lowest = std::min(lowest, (T.linear() * v.cast<double>()).z());
+    T.translation() = Vec3(believed.translation().x(), believed.translation().y(),
+                           wam().table().topZ() - lowest + 0.005);
+    Iso3 palm = Iso3::Identity();
+    palm.translation() = Vec3(0.75, -0.4, 1.0);  // well away
+    w.reset(T, palm, wam().openHand(0.0));
+    w.settle(3.0);
+    EXPECT_TRUE(w.objectTouchesTable());
+    settledPose = w.objectPose();
+    return settledPose;
+  });
+  // It tipped: its long axis no longer stands.
+  const double axisUp = std::abs((settledPose.linear() * Vec3::Unit(tall)).z());
+  EXPECT_LT(axisUp, std::cos(45 * M_PI / 180));
+  EXPECT_LT(r.mean_m, 0.003);
+  EXPECT_LT(r.turned_rad, 2 * M_PI / 180);
 }
 
 // Closing the fingers may push the object centimetres from where the grasp was planned: a
