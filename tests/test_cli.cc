@@ -372,6 +372,12 @@ TEST(Cli, ScanReportOpensInHeadlessChromium) {
     ASSERT_TRUE(t["charts"].contains(chart)) << chart;
     for (const Json& n : t["charts"][chart]) EXPECT_EQ(n.get<size_t>(), views) << chart;
   }
+  // The manipulation timeline: every pick-up attempt of the summary, and every slip found.
+  size_t attempts = s["failed_regrasp_attempts"].size();
+  for (const Json& g : s["grasps"]) attempts += g["pick_up_attempts"].size();
+  EXPECT_GT(attempts, 0u);
+  EXPECT_EQ(t["attempts"].get<size_t>(), attempts);
+  EXPECT_EQ(t["slips"].get<size_t>(), s["slips_found"].size());
   // The second grasp's candidates drawn, one thumbnail each.
   EXPECT_EQ(t["thumbnails"].get<size_t>(), s["grasps"][1]["ranked"].size());
   EXPECT_GT(t["thumbnails"].get<size_t>(), 0u);

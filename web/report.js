@@ -232,7 +232,23 @@ function chart(id, title, datasets, yTitle) {
   return ch;
 }
 const ds = (label, data, color) => ({ label, data, borderColor: color, backgroundColor: color, pointRadius: 3, tension: 0 });
-chart('entropy', 'Mean entropy of the model (paper Fig. 5)', [ds('mean entropy, nats', S.views.map((v) => v.mean_entropy), '#c0392b')], 'nats');
+// Marks on the entropy curve (one entry per view, null where nothing happened): the views in
+// which a slip of the object in the hand was found, and each grasp's last view where its views
+// ended because the object was lost from the hand (a drop noticed in the frames).
+const slips = S.slips_found || [];
+const lostAfter = new Set();
+S.grasps.forEach((g, gi) => {
+  if (g.termination !== 'object_lost') return;
+  let last = -1;
+  // Views number grasps from 1.
+  S.views.forEach((v, i) => { if (v.grasp === gi + 1) last = i; });
+  if (last >= 0) lostAfter.add(last);
+});
+const mark = (label, at, color, style) => ({ label, data: S.views.map((v, i) => (at(i) ? v.mean_entropy : null)),
+  borderColor: color, backgroundColor: color, pointRadius: 8, pointStyle: style, showLine: false });
+chart('entropy', 'Mean entropy of the model (paper Fig. 5)', [ds('mean entropy, nats', S.views.map((v) => v.mean_entropy), '#c0392b'),
+  mark('slip found in the hand', (i) => slips.some((e) => e.view === i), '#e67e22', 'triangle'),
+  mark('object lost from the hand', (i) => lostAfter.has(i), '#000000', 'crossRot')], 'nats');
 if (S.views.some((v) => v.coverage >= 0))
   chart('coverage', 'Coverage of the true surface (τ = 3 mm)', [ds('coverage %', S.views.map((v) => 100 * v.coverage), '#229954')], '%');
 chart('quality', 'View quality (eq. 9) of each chosen view', [ds('quality (initial views: none)', S.views.map((v) => (v.initial ? null : v.quality)), '#2471a3')], 'quality');
@@ -280,6 +296,47 @@ D.grasps.forEach((g, i) => {
       `#${j + 1} q ${fmt(m.quality, 4)}`, el('br'), `ε ${fmt(m.stability_epsilon, 4)}`));
   });
 });
+
+// ---- manipulation: what the hand did, in order ---------------------------------------------
+// Every pick-up attempt with its outcome, each grasp's views and the slips found in them, how
+// its views ended (a drop noticed), the object found again on the table after each put-down
+// (the registration's residual), and the re-grasp attempts that failed.
+const man = el('section', { id: 'manipulation' }, el('h2', {}, 'Manipulation'));
+main.append(man);
+const colours = { picked: '#1e8449', dropped: '#c0392b', slid: '#e67e22', no_contact: '#7f8c8d',
+                  empty_hand: '#7f8c8d', refused: '#7f8c8d' };
+const events = el('table', { id: 'timeline' });
+events.append(el('tr', {}, ...['#', 'grasp', 'event', 'details'].map((h) => el('th', {}, h))));
+let step = 0;
+function event(grasp, what, details, colour, cls) {
+  const badge = el('span', { class: 'event ' + cls, style: `background:${colour}` }, what);
+  events.append(el('tr', {}, el('td', {}, ++step), el('td', {}, grasp), el('td', {}, badge), el('td', {}, details)));
+}
+function attempts(list, grasp) {
+  (list || []).forEach((a, k) => event(grasp, `pick-up ${k + 1}: ${a.outcome}`,
+    `candidate #${a.rank + 1}, ${a.kind || 'grasp'}, ε ${fmt(a.epsilon, 3)}` +
+    (a.shift_in_hand_mm != null ? `, in the hand ${fmt(a.shift_in_hand_mm, 1)} mm from the plan` : ''),
+    colours[a.outcome] || '#7f8c8d', 'attempt'));
+}
+const residuals = S.refound_on_table_residual_mm || [];
+S.grasps.forEach((g, gi) => {
+  attempts(g.pick_up_attempts, gi + 1);
+  event(gi + 1, `${g.views} views`, `ended: ${g.termination}`, '#2471a3', 'views');
+  // Slips number grasps and views from 0.
+  slips.filter((e) => e.grasp === gi).forEach((e) => event(gi + 1, 'slip found',
+    `in view ${e.view + 1}: ${fmt(e.moved_mm, 1)} mm, ${fmt(e.turned_deg, 1)}°; ${e.frames_not_fused} frames not fused` +
+    (e.settled ? '' : ' (still moving when the views ended)'), '#e67e22', 'slip'));
+  if (g.termination === 'object_lost')
+    event(gi + 1, 'object lost from the hand', 'frames showed the hand empty; it was looked for on the table', '#000', 'drop');
+  if (gi < residuals.length)
+    event(gi + 1, 'found on the table', `registration residual ${fmt(residuals[gi], 2)} mm`, '#117a65', 'refound');
+});
+attempts(S.failed_regrasp_attempts, 'none made');
+const notFound = S.termination === 'object_lost' && residuals.length < S.grasps.length &&
+                 !(S.grasps.length && S.grasps[S.grasps.length - 1].termination === 'object_lost');
+event('–', `scan ended: ${S.termination}`,
+      notFound ? 'the object was not found on the table after the put-down' : '', '#555', 'end');
+man.append(events);
 
 // ---- figures and options --------------------------------------------------------------------
 const fig = el('section', {}, el('h2', {}, 'Summary'));
@@ -345,4 +402,6 @@ try {
   glbTest = { error: String(e) };
 }
 window.inhandSelfTest({ nonBackground: state.nonBackgroundFraction(), charts: state.charts, views: state.views,
-                        thumbnails: document.querySelectorAll('.thumb canvas').length, glb: glbTest });
+                        thumbnails: document.querySelectorAll('.thumb canvas').length, glb: glbTest,
+                        attempts: document.querySelectorAll('#timeline .event.attempt').length,
+                        slips: document.querySelectorAll('#timeline .event.slip').length });
