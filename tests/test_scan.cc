@@ -159,6 +159,28 @@ TEST(Scan, DropsSeenInTheDepthFramesAreTheSimulatorsDrops) {
   const int dropped = countOutcome(attempts, PickOutcome::kDropped);
   EXPECT_GT(dropped, 0) << "with μ = 0.1 some grasp should fail";
   EXPECT_EQ(dropped, world.drops);
+  // Each attempt records when it was decided (in order) and on what: a drop on the lift's frame,
+  // which bore out at most half of the object's points in the hand or more than half where it
+  // rested.
+  double before = 0;
+  for (const PickAttempt& a : attempts) {
+    EXPECT_FALSE(a.evidence.empty());
+    EXPECT_GE(a.at_s, before);
+    before = a.at_s;
+    if (a.outcome == PickOutcome::kDropped) {
+      EXPECT_TRUE(a.lift_in_hand <= 0.5 || a.lift_on_table > 0.5)
+          << a.lift_in_hand << " " << a.lift_on_table;
+      EXPECT_EQ(a.evidence.rfind("after the lift", 0), 0u) << a.evidence;
+    }
+  }
+  // … and they survive the record's JSON.
+  const std::vector<PickAttempt> back = attemptsFrom(attemptsJson(attempts));
+  ASSERT_EQ(back.size(), attempts.size());
+  for (size_t k = 0; k < back.size(); ++k) {
+    EXPECT_EQ(back[k].evidence, attempts[k].evidence);
+    EXPECT_NEAR(back[k].at_s, attempts[k].at_s, 1e-9);
+    EXPECT_NEAR(back[k].lift_on_table, attempts[k].lift_on_table, 1e-9);
+  }
   if (attempts.back().outcome == PickOutcome::kPicked) {
     EXPECT_TRUE(world.held);
     EXPECT_EQ(r.grasps.size(), 1u);

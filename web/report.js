@@ -314,14 +314,17 @@ function event(grasp, what, details, colour, cls) {
 }
 function attempts(list, grasp) {
   (list || []).forEach((a, k) => event(grasp, `pick-up ${k + 1}: ${a.outcome}`,
+    (a.at_s != null ? `at ${fmt(a.at_s, 1)} s: ` : '') +
     `candidate #${a.rank + 1}, ${a.kind || 'grasp'}, ε ${fmt(a.epsilon, 3)}` +
-    (a.shift_in_hand_mm != null ? `, in the hand ${fmt(a.shift_in_hand_mm, 1)} mm from the plan` : ''),
+    (a.shift_in_hand_mm != null ? `, in the hand ${fmt(a.shift_in_hand_mm, 1)} mm from the plan` : '') +
+    (a.evidence ? `; ${a.evidence}` : ''),
     colours[a.outcome] || '#7f8c8d', 'attempt'));
 }
 const residuals = S.refound_on_table_residual_mm || [];
 S.grasps.forEach((g, gi) => {
   attempts(g.pick_up_attempts, gi + 1);
-  event(gi + 1, `${g.views} views`, `ended: ${g.termination}`, '#2471a3', 'views');
+  event(gi + 1, `${g.views} views`, (g.views_ended_at_s != null ? `ended at ${fmt(g.views_ended_at_s, 1)} s: ` : 'ended: ') +
+        g.termination, '#2471a3', 'views');
   // Slips number grasps and views from 0.
   slips.filter((e) => e.grasp === gi).forEach((e) => event(gi + 1, 'slip found',
     `in view ${e.view + 1}: ${fmt(e.moved_mm, 1)} mm, ${fmt(e.turned_deg, 1)}°; ${e.frames_not_fused} frames not fused` +

@@ -732,19 +732,21 @@ PickUp pickAndVerify(ScanSession& session, RobotInterface& robot, DepthSensor& s
       break;
     }
     PickAttempt attempt = attemptOf(c, int(rank), m);
-    auto record = [&](PickOutcome outcome) {
+    auto record = [&](PickOutcome outcome, std::string evidence) {
       attempt.outcome = outcome;
+      attempt.at_s = session.elapsedSeconds();
+      attempt.evidence = std::move(evidence);
       out.attempts.push_back(attempt);
     };
     std::optional<Iso3> achieved = robot.pickUp(c.T_O_palm, c.q_open);
     if (!achieved) {
-      record(PickOutcome::kNoContact);
+      record(PickOutcome::kNoContact, "the robot's pick-up met nothing there");
       log("pick-up failed (the hand met nothing there); trying the next candidate");
       continue;
     }
     if (fingersClosedOnNothing(m, robot.joints())) {
       robot.putDown();
-      record(PickOutcome::kEmptyHand);
+      record(PickOutcome::kEmptyHand, "the fingers closed to their limits");
       log("the fingers closed on nothing; trying the next candidate");
       if (!stillThere(c.T_O_palm)) break;
       continue;
@@ -754,14 +756,19 @@ PickUp pickAndVerify(ScanSession& session, RobotInterface& robot, DepthSensor& s
     const LiftCheck lift = checkAfterLift(session, robot, sensor, c, T_B_O_rest, points_O, options,
                                           scenes, log, &achieved);
     const double inHand = lift.inHand, onTable = lift.onTable;
-    log("after the lift: the object's points borne out in the hand " + percent(inHand) +
-        ", where it rested " + percent(onTable));
+    attempt.lift_in_hand = inHand;
+    attempt.lift_on_table = onTable;
+    const std::string seen = "the object's points borne out in the hand " + percent(inHand) +
+                             ", where it rested " + percent(onTable);
+    log("after the lift: " + seen);
     if (inHand > 0.5) attempt.shift_m = (achieved->translation() - c.T_O_palm.translation()).norm();
     if (lift.heldOutOfSight()) {
       log("the object out of the camera's sight in the hand and gone from where it rested (" +
           std::to_string(lift.restCounts.against) +
           " of its points there seen through): held; its first frames in the hand confirm it");
-      record(PickOutcome::kPicked);
+      record(PickOutcome::kPicked, "after the lift: " + seen + " (" +
+                                       std::to_string(lift.restCounts.against) +
+                                       " seen through there): held out of the camera's sight");
       if (options.tracking.enabled && options.tracking.in_hand)
         session.confirmGraspOnNextFrames(kConfirmFrames);
       out.achieved = achieved;
@@ -772,7 +779,9 @@ PickUp pickAndVerify(ScanSession& session, RobotInterface& robot, DepthSensor& s
     if (dropped || (session.multiOptions().grasp.settle_s > 0 &&
                     !stayedInHand(session, robot, sensor, lift, options, log))) {
       robot.putDown();
-      record(dropped ? PickOutcome::kDropped : PickOutcome::kSlid);
+      record(dropped ? PickOutcome::kDropped : PickOutcome::kSlid,
+             dropped ? "after the lift: " + seen
+                     : "after holding still the object's pixels in the hand changed depth");
       log(std::string(dropped ? "the grasp did not hold"
                               : "the object is sliding out of the grasp") +
           "; trying the next candidate");
@@ -780,7 +789,7 @@ PickUp pickAndVerify(ScanSession& session, RobotInterface& robot, DepthSensor& s
       if (!(onTable > 0.5) && !stillThere(*achieved)) break;
       continue;
     }
-    record(PickOutcome::kPicked);
+    record(PickOutcome::kPicked, "after the lift: " + seen);
     if (lift.toConfirm() && options.tracking.enabled && options.tracking.in_hand)
       session.confirmGraspOnNextFrames(kConfirmFrames);
     out.achieved = achieved;
@@ -801,9 +810,11 @@ std::vector<Iso3> placesToLook(const ScanSession& session, const RobotInterface&
   return lost ? std::vector<Iso3>{beneath, T_B_O_rest} : std::vector<Iso3>{T_B_O_rest, beneath};
 }
 
-// A grasp's record once its views ended: the model then (at the planning stride: a quarter of
-// the triangles), its views, how they ended.
-GraspRecord graspEnded(GraspRecord rec, const ScanResult& all, int views, Termination ended) {
+// A grasp's record once its views ended (at `at_s`, seconds since the session began): the model
+// then (at the planning stride: a quarter of the triangles), its views, how they ended.
+GraspRecord graspEnded(GraspRecord rec, const ScanResult& all, int views, Termination ended,
+                       double at_s) {
+  rec.views_ended_at_s = at_s;
   rec.model = all.planning_model;
   rec.views = views;
   rec.termination = ended;
@@ -925,11 +936,9 @@ void runGrasps(RobotInterface& robot, DepthSensor& sensor, ScanSession& session,
       log("grasp " + std::to_string(g + 1) + ", resumed after " +
           std::to_string(session.views().size()) + " views");
     }
-    const size_t viewsBefore = [&] {
-      size_t n = 0;  // the views of earlier grasps
-      for (int vg : session.viewGrasps()) n += vg < session.graspIndex();
-      return n;
-    }();
+    const std::vector<int>& viewGrasps = session.viewGrasps();  // the views of earlier grasps
+    const auto viewsBefore = std::count_if(viewGrasps.begin(), viewGrasps.end(),
+                                           [&](int vg) { return vg < session.graspIndex(); });
     const Termination ended = runGraspViews(session, robot, sensor, checkpoint);
     all.model = session.model();
     all.planning_model = session.planningModel();
@@ -937,7 +946,8 @@ void runGrasps(RobotInterface& robot, DepthSensor& sensor, ScanSession& session,
       all.termination = ended;
       break;
     }
-    out.grasps.push_back(graspEnded(next, all, int(session.views().size() - viewsBefore), ended));
+    out.grasps.push_back(graspEnded(next, all, int(session.views().size() - viewsBefore), ended,
+                                    session.elapsedSeconds()));
     char line[200];
     const GraspRecord& rec = out.grasps.back();
     std::snprintf(line, sizeof(line),
@@ -1004,7 +1014,11 @@ Json attemptsJson(const std::vector<PickAttempt>& attempts) {
              {"kind", a.palm_contact ? "enveloping" : "fingertips"},
              {"pinch", a.pinch},
              {"epsilon", a.epsilon},
-             {"shift_in_hand_mm", a.shift_m < 0 ? Json() : Json(1000 * a.shift_m)}});
+             {"shift_in_hand_mm", a.shift_m < 0 ? Json() : Json(1000 * a.shift_m)},
+             {"at_s", a.at_s < 0 ? Json() : Json(a.at_s)},
+             {"lift_in_hand", a.lift_in_hand < 0 ? Json() : Json(a.lift_in_hand)},
+             {"lift_on_table", a.lift_on_table < 0 ? Json() : Json(a.lift_on_table)},
+             {"evidence", a.evidence}});
     if (a.T_O_palm) {
       e["T_O_palm"] = isoJson(*a.T_O_palm);
       e["preshape"] = jointsByName(a.preshape);
@@ -1047,6 +1061,15 @@ std::vector<PickAttempt> attemptsFrom(const Json& j) {
       a.epsilon = e.at("epsilon").get<double>();
       a.shift_m =
           e.at("shift_in_hand_mm").is_null() ? -1.0 : e.at("shift_in_hand_mm").get<double>() / 1000;
+      // Absent before they were recorded.
+      auto orNone = [&](const char* key) {
+        const Json v = e.value(key, Json());
+        return v.is_number() ? v.get<double>() : -1.0;
+      };
+      a.at_s = orNone("at_s");
+      a.lift_in_hand = orNone("lift_in_hand");
+      a.lift_on_table = orNone("lift_on_table");
+      a.evidence = e.value("evidence", std::string());
       if (e.contains("T_O_palm")) {  // absent before grasps were recorded with their poses
         a.T_O_palm = isoFrom(e.at("T_O_palm"));
         a.preshape = jointsFromJson(e.at("preshape"));

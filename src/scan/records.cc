@@ -74,6 +74,7 @@ Json graspRecordJson(const GraspRecord& g) {
           {"stability_epsilon", finiteOrNull(g.epsilon)},
           {"views", g.views},
           {"termination", terminationName(g.termination)},
+          {"views_ended_at_s", g.views_ended_at_s < 0 ? Json() : Json(g.views_ended_at_s)},
           {"unknown_area_m2", g.hole_area_m2},
           {"mean_entropy", g.mean_entropy},
           {"generation_s", g.generation_s},
@@ -97,6 +98,8 @@ GraspRecord graspRecordFrom(const Json& j) {
   if (!parseTermination(termination, &g.termination))
     throw Error("unknown termination " + termination);
   g.hole_area_m2 = field(j, "unknown_area_m2", "hole_area_m2").get<double>();
+  const Json ended = j.value("views_ended_at_s", Json());  // absent before it was recorded
+  g.views_ended_at_s = ended.is_number() ? ended.get<double>() : -1;
   g.mean_entropy = j.at("mean_entropy").get<double>();
   g.generation_s = j.at("generation_s").get<double>();
   g.ranking_s = j.at("ranking_s").get<double>();

@@ -103,6 +103,7 @@ struct TorqueReading {
 };
 
 struct ScanSession::State {
+  Clock::time_point born = Clock::now();
   State(const RobotModel& robot, const DepthCameraOptions& camera, const NoiseModelOptions& noise,
         const ScanOptions& options, const MultiGraspOptions& multi, const Vec3& centre_O)
       : model(&robot),
@@ -545,6 +546,7 @@ const NoiseModelOptions& ScanSession::noise() const { return s_->noise; }
 Iso3 ScanSession::cameraPose() const { return s_->planner.cameraPose(s_->options.planner.range_m); }
 void ScanSession::setProgress(const ScanProgress& progress) { s_->progress = progress; }
 const ScanProgress& ScanSession::progress() const { return s_->progress; }
+double ScanSession::elapsedSeconds() const { return secondsSince(s_->born); }
 bool ScanSession::holding() const { return s_->holding; }
 int ScanSession::graspIndex() const { return s_->grasp; }
 const Iso3& ScanSession::graspPose() const { return s_->T_O_palm; }

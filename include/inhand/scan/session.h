@@ -149,6 +149,8 @@ class ScanSession {
   // Log lines and ground-truth coverage (ScanProgress) for what follows.
   void setProgress(const ScanProgress& progress);
   const ScanProgress& progress() const;
+  // Seconds since this session was made (a resumed scan's session counts from its resumption).
+  double elapsedSeconds() const;
   void log(const std::string& line) const;  // a line to the progress log (if any)
 
   // The object is now in the hand: palm at T_O_palm in the object frame, the robot at q.

@@ -452,6 +452,12 @@ struct PickAttempt {
   bool pinch = false;         // a pinch pose (GraspCandidate::pinch)
   // After the lift: how far the object sat in the hand from the planned grasp (−1: not seen).
   double shift_m = -1;
+  // When the outcome was decided (seconds since the scan's session began), what the lift's frame
+  // bore out of the object's points where the hand holds it and where it rested (−1: none in
+  // view, or no lift), and what decided it (a sentence).
+  double at_s = -1;
+  double lift_in_hand = -1, lift_on_table = -1;
+  std::string evidence;
   // The grasp: the palm in the object's frame, and the hand's joints (by URDF name) as it came
   // in (the preshape) and as planned closed on the model. Absent from records of older scans.
   std::optional<Iso3> T_O_palm;
@@ -534,6 +540,7 @@ struct GraspRecord {
   double epsilon = 0;                               // its stability (Ferrari–Canny ε)
   int views = 0;                                    // views taken with it
   Termination termination = Termination::kRunning;  // why its views ended
+  double views_ended_at_s = -1;                     // when (seconds since the scan's session began)
   double hole_area_m2 = 0;  // σ = 5 cm (unknown) area of the model after its views
   double mean_entropy = 0;  // of the model after its views
   double generation_s = 0, ranking_s = 0;
