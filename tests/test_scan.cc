@@ -139,6 +139,20 @@ struct BoxOnTable {
   }
 };
 
+// The box scanned from the table by `robot` and `sensor`, with the scan's log.
+struct LoggedScan {
+  MultiGraspResult result;
+  std::string log;
+};
+LoggedScan scanLogged(RobotInterface& robot, DepthSensor& sensor, BoxOnTable& b) {
+  LoggedScan out;
+  ScanProgress progress;
+  progress.log = [&](const std::string& line) { out.log += line + "\n"; };
+  out.result =
+      scanFromTable(robot, sensor, b.world.restPose(), b.o, b.multi, NoiseModelOptions{}, progress);
+  return out;
+}
+
 // Grasps that must hold, checked against the simulator's own record: with almost no friction
 // (μ = 0.1) most grasps of the cracker box let it fall at the lift. The scan decides from the
 // fingers and a depth frame only; the attempts it calls "dropped" are exactly the drops the
@@ -228,13 +242,7 @@ TEST(Scan, AnObjectHeldOutOfTheCamerasSightIsTakenAsHeldWhereItRestedNoLonger) {
   b.o.tracking.in_hand = true;
   SimRobot robot(&b.world);
   HandHiddenSensor sensor(&b.world, 1);
-  std::vector<std::string> lines;
-  ScanProgress progress;
-  progress.log = [&](const std::string& line) { lines.push_back(line); };
-  const MultiGraspResult r =
-      scanFromTable(robot, sensor, b.world.restPose(), b.o, b.multi, NoiseModelOptions{}, progress);
-  std::string log;
-  for (const std::string& l : lines) log += l + "\n";
+  const auto [r, log] = scanLogged(robot, sensor, b);
   ASSERT_TRUE(r.table_top);
   ASSERT_EQ(r.grasps.size(), 1u) << log;
   EXPECT_EQ(r.table_top->attempts.back().outcome, PickOutcome::kPicked);
@@ -345,13 +353,7 @@ TEST(Scan, AnObjectThatRolledAwayAfterThePutDownIsFoundOnTheRestOfTheTable) {
   SimSensor sensor(&b.world, DepthCameraOptions{});
   b.multi.max_grasps = 2;
   b.multi.grasp.max_failed_pick_ups = 6;
-  std::vector<std::string> lines;
-  ScanProgress progress;
-  progress.log = [&](const std::string& line) { lines.push_back(line); };
-  const MultiGraspResult r =
-      scanFromTable(robot, sensor, b.world.restPose(), b.o, b.multi, NoiseModelOptions{}, progress);
-  std::string log;
-  for (const std::string& l : lines) log += l + "\n";
+  const auto [r, log] = scanLogged(robot, sensor, b);
   ASSERT_EQ(r.grasps.size(), 2u) << log;
   EXPECT_NE(log.find("looking over the rest of the table"), std::string::npos) << log;
   ASSERT_EQ(r.refind_residuals_m.size(), 1u);
