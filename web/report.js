@@ -323,7 +323,7 @@ function attempts(list, grasp) {
 const residuals = S.refound_on_table_residual_mm || [];
 S.grasps.forEach((g, gi) => {
   attempts(g.pick_up_attempts, gi + 1);
-  event(gi + 1, `${g.views} views`, (g.views_ended_at_s != null ? `ended at ${fmt(g.views_ended_at_s, 1)} s: ` : 'ended: ') +
+  event(gi + 1, `${g.views} view${g.views === 1 ? '' : 's'}`, (g.views_ended_at_s != null ? `ended at ${fmt(g.views_ended_at_s, 1)} s: ` : 'ended: ') +
         g.termination, '#2471a3', 'views');
   // Slips number grasps and views from 0.
   slips.filter((e) => e.grasp === gi).forEach((e) => event(gi + 1, 'slip found',
