@@ -513,10 +513,11 @@ struct LiftCheck {
 SupportCounts restPlaceSeen(RobotInterface& robot, DepthSensor& sensor,
                             const std::vector<Vec3>& rest_B, const ScanOptions& options,
                             const RobotOccluders& scenes) {
+  if (rest_B.empty()) return {};
   Aabb box;
   for (const Vec3& p : rest_B) box.extend(p);
   const std::optional<Iso3> aim = robot.model().camera().aimAt(box.center());
-  if (rest_B.empty() || !aim) return {};
+  if (!aim) return {};
   sensor.setPose(*aim);
   const std::optional<DepthImage> d = captureUsable(sensor, options.checks);
   if (!d) return {};
@@ -762,21 +763,14 @@ PickUp pickAndVerify(ScanSession& session, RobotInterface& robot, DepthSensor& s
                              ", where it rested " + percent(onTable);
     log("after the lift: " + seen);
     if (inHand > 0.5) attempt.shift_m = (achieved->translation() - c.T_O_palm.translation()).norm();
-    if (lift.heldOutOfSight()) {
-      log("the object out of the camera's sight in the hand and gone from where it rested (" +
-          std::to_string(lift.restCounts.against) +
-          " of its points there seen through): held; its first frames in the hand confirm it");
-      record(PickOutcome::kPicked, "after the lift: " + seen + " (" +
-                                       std::to_string(lift.restCounts.against) +
-                                       " seen through there): held out of the camera's sight");
-      if (options.tracking.enabled && options.tracking.in_hand)
-        session.confirmGraspOnNextFrames(kConfirmFrames);
-      out.achieved = achieved;
-      out.picked = c;
-      break;
-    }
-    const bool dropped = !(inHand > 0.5) || onTable > 0.5;
-    if (dropped || (session.multiOptions().grasp.settle_s > 0 &&
+    // Held out of the camera's sight: no second look (none of its pixels to compare).
+    const bool unseen = lift.heldOutOfSight();
+    const std::string unseenWhy = " (" + std::to_string(lift.restCounts.against) +
+                                  " of its points where it rested seen through): held out of "
+                                  "the camera's sight; its first frames in the hand confirm it";
+    if (unseen) log("after the lift: the object" + unseenWhy);
+    const bool dropped = !unseen && (!(inHand > 0.5) || onTable > 0.5);
+    if (dropped || (!unseen && session.multiOptions().grasp.settle_s > 0 &&
                     !stayedInHand(session, robot, sensor, lift, options, log))) {
       robot.putDown();
       record(dropped ? PickOutcome::kDropped : PickOutcome::kSlid,
@@ -789,8 +783,8 @@ PickUp pickAndVerify(ScanSession& session, RobotInterface& robot, DepthSensor& s
       if (!(onTable > 0.5) && !stillThere(*achieved)) break;
       continue;
     }
-    record(PickOutcome::kPicked, "after the lift: " + seen);
-    if (lift.toConfirm() && options.tracking.enabled && options.tracking.in_hand)
+    record(PickOutcome::kPicked, "after the lift: " + seen + (unseen ? unseenWhy : ""));
+    if ((unseen || lift.toConfirm()) && options.tracking.enabled && options.tracking.in_hand)
       session.confirmGraspOnNextFrames(kConfirmFrames);
     out.achieved = achieved;
     out.picked = c;
