@@ -662,6 +662,8 @@ TEST(Cli, ScanOfTheCrackerBoxMeetsItsOutcomeBounds) {
   // The kinematic simulator holds the object where the grasp put it: a creep followed is an
   // alignment that slid (tracking.creep_turn_deg).
   EXPECT_EQ(s["creeps_followed"].get<int>(), 0);
+  EXPECT_EQ(s["tracking"].at("creep_grasp_error_mm").size(),
+            size_t(s["creeps_followed"].get<int>()));
   const double voxel = 0.003;
   EXPECT_LE(s["accuracy_mm"]["mean"].get<double>(), 1000 * voxel / 3);
   EXPECT_LE(s["accuracy_mm"]["p95"].get<double>(), 1000 * voxel);

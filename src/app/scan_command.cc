@@ -318,6 +318,15 @@ Json trackingJson(const ScanConfig& o, const SimulatedScan& sim) {
       {"object_pose_error_mm",
        {{"median", 1000 * sim.object_error_median_m}, {"p95", 1000 * sim.object_error_p95_m}}},
       {"frames_rejected", r.frames_rejected},
+      // Each creep the grasp followed: how far the grasp put the object's centre from where the
+      // simulator holds it, in mm, in the frame before and after it (the scan never sees these).
+      {"creep_grasp_error_mm",
+       [&] {
+         Json list = Json::array();
+         for (const auto& [before, after] : sim.creep_grasp_error_m)
+           list.push_back({{"before", 1000 * before}, {"after", 1000 * after}});
+         return list;
+       }()},
       {"ms_per_frame", sim.frames_fused_in_hand + r.frames_rejected > 0
                            ? 1000 * r.tracking_s / (sim.frames_fused_in_hand + r.frames_rejected)
                            : 0.0}};
