@@ -13,7 +13,8 @@ namespace inhand {
 
 // The model's observed triangles (all three vertices observed): centroids and outward normals,
 // every k-th so that about `budget` remain (none for budget <= 0), moved by T.
-std::vector<SurfacePoint> observedSurface(const ObjectModel& m, int budget, const Iso3& T) {
+std::vector<SurfacePoint> observedSurface(const ObjectModel& m, int budget, const Iso3& T,
+                                          bool with_variance) {
   std::vector<size_t> observed;
   for (size_t t = 0; t < m.mesh.triangles.size(); ++t) {
     const Tri& f = m.mesh.triangles[t];
@@ -29,7 +30,12 @@ std::vector<SurfacePoint> observedSurface(const ObjectModel& m, int budget, cons
     const Vec3 c = m.mesh.vertices[size_t(f[2])].cast<double>();
     const Vec3 n = (b - a).cross(c - a);
     if (n.norm() < 1e-12) continue;
-    points.push_back({T * ((a + b + c) / 3), T.linear() * n.normalized()});
+    double var = 0;
+    if (with_variance && m.variance.size() == m.mesh.vertices.size())
+      var =
+          (double(m.variance[size_t(f[0])]) + m.variance[size_t(f[1])] + m.variance[size_t(f[2])]) /
+          3;
+    points.push_back({T * ((a + b + c) / 3), T.linear() * n.normalized(), var});
   }
   return points;
 }
@@ -44,7 +50,7 @@ std::vector<Vec3> modelOccluders(const ObjectModel& m, const Iso3& T) {
 }
 
 RegistrationModel registrationModel(const ObjectModel& m, const TrackingOptions& o) {
-  return {observedSurface(m, std::max(2000, o.max_object_points), Iso3::Identity()),
+  return {observedSurface(m, std::max(2000, o.max_object_points), Iso3::Identity(), true),
           modelOccluders(m, Iso3::Identity())};
 }
 

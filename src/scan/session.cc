@@ -644,9 +644,9 @@ void ScanSession::confirmGrasp(const DepthImage& depth, const JointVector& q, co
   const Iso3 moved = grasp->inverse() * s.T_O_palm;  // in the palm frame
   char line[160];
   std::snprintf(line, sizeof line,
-                "the grasp confirmed by registration: the object %.1f mm and %.1f° from where the "
-                "grasp had it",
-                1000 * moved.translation().norm(),
+                "the grasp confirmed by registration: the object's centre %.1f mm and the object "
+                "%.1f° from where the grasp had them",
+                1000 * centroidMotion(s.slipPoints, moved),
                 180 / M_PI * Eigen::AngleAxisd(moved.linear()).angle());
   log(line);
   s.confirmFrames = 0;

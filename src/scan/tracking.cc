@@ -61,6 +61,7 @@ struct Pairs {
   int pairs = 0, seeThrough = 0;
   int handPairs = 0, handSeeThrough = 0;  // of the first `handCount` points
   double sq = 0;
+  double var = 0;  // the paired points' own variances (SurfacePoint::var, at most (gate/2)²)
 };
 
 // Where the body may be seen in the frame (its depths, the pixels something else hides, and with
@@ -235,6 +236,7 @@ Pairs pairUp(const DepthImage& depth, const CameraIntrinsics& K,
       ++P.pairs;
       P.handPairs += hand;
       P.sq += e * e;
+      P.var += std::min(sp.var, 0.25 * gate * gate);  // at most a pair's reach
     }
   });
   Pairs P;
@@ -246,6 +248,7 @@ Pairs pairUp(const DepthImage& depth, const CameraIntrinsics& K,
     P.handPairs += q.handPairs;
     P.handSeeThrough += q.handSeeThrough;
     P.sq += q.sq;
+    P.var += q.var;
   }
   return P;
 }
@@ -392,6 +395,13 @@ void addUncovered(const std::vector<Uncovered>& uncovered, const CameraIntrinsic
   }
 }
 
+// The residual a right alignment leaves: the sensor's noise and the model's own uncertainty at
+// the paired points (a surface scanned from few frames or at grazing angles is known to
+// millimetres only: a thin object's first model).
+double expectedResidual(const Pairs& P, double sigma) {
+  return P.pairs > 0 ? std::sqrt(sigma * sigma + P.var / P.pairs) : sigma;
+}
+
 TrackResult alignFrom(const DepthImage& depth, const CameraIntrinsics& K,
                       const std::vector<SurfacePoint>& points, size_t handCount,
                       const std::vector<Vec3>& occluders, const Iso3& T_C_palm, const Iso3& initial,
@@ -460,7 +470,7 @@ TrackResult alignFrom(const DepthImage& depth, const CameraIntrinsics& K,
   } else if (r.see_through * 10 > r.inliers) {
     r.refusal = TrackRefusal::kSeesThrough;
     r.reason = "the camera sees through " + std::to_string(r.see_through) + " aligned points";
-  } else if (r.rms_m > o.max_rms_ratio * sigma) {
+  } else if (r.rms_m > o.max_rms_ratio * expectedResidual(last, sigma)) {
     r.refusal = TrackRefusal::kResidual;
     r.reason = "alignment residual " + std::to_string(r.rms_m * 1000) + " mm";
   } else if (moved > o.max_correction_m) {

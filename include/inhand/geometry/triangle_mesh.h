@@ -91,6 +91,7 @@ TriangleMesh withHolesClosed(const TriangleMesh& mesh, int* loops_closed = nullp
 // lattice of about `spacing_m` on triangles larger than that (so coarse meshes are covered too).
 struct SurfacePoint {
   Vec3 p, n;
+  double var = 0;  // the point's own surface variance, m² (a scanned model's; 0: exact)
 };
 std::vector<SurfacePoint> surfaceSamples(const TriangleMesh& mesh, double spacing_m);
 

@@ -19,14 +19,20 @@
 namespace inhand {
 
 // The model's observed triangles (all three vertices observed): centroids and outward normals,
-// every k-th so that about `budget` remain (none for budget <= 0), moved by T.
-std::vector<SurfacePoint> observedSurface(const ObjectModel& m, int budget, const Iso3& T);
+// every k-th so that about `budget` remain (none for budget <= 0), moved by T; with
+// `with_variance`, each point's variance (SurfacePoint::var) the mean of its corners', else 0.
+std::vector<SurfacePoint> observedSurface(const ObjectModel& m, int budget, const Iso3& T,
+                                          bool with_variance = false);
 
 // Every k-th vertex of the model (about 6000), moved by T: what hides the surface behind it.
 std::vector<Vec3> modelOccluders(const ObjectModel& m, const Iso3& T);
 
 // A model as registration aligns it, in its frame: its observed surface (about
-// max(2000, options.max_object_points) points) and the whole model as occluders.
+// max(2000, options.max_object_points) points, with their variances: a registration decides a
+// grasp or a pose once, from a model that may be known to millimetres only, and expects the
+// residual that leaves) and the whole model as occluders. Tracking and the slip check align the
+// model without its variances: a frame whose residual the sensor's noise does not explain is
+// not fused (one frame lost), and a slip is not judged on it.
 struct RegistrationModel {
   std::vector<SurfacePoint> points;
   std::vector<Vec3> occluders;
