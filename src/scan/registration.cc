@@ -12,7 +12,8 @@
 namespace inhand {
 
 // The model's observed triangles (all three vertices observed): centroids and outward normals,
-// every k-th so that about `budget` remain (none for budget <= 0), moved by T.
+// every k-th so that about `budget` remain (none for budget <= 0), moved by T; with
+// `with_variance`, each point's variance the mean of its corners' (registration.h).
 std::vector<SurfacePoint> observedSurface(const ObjectModel& m, int budget, const Iso3& T,
                                           bool with_variance) {
   std::vector<size_t> observed;
