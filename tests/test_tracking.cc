@@ -557,6 +557,13 @@ FingerFrame frameWithFinger(const TriangleMesh& body, const Iso3& T_C_body, cons
   for (size_t i = 0; i < geometry.size(); ++i) f.hidden[i] = geometry[i] == finger;
   return f;
 }
+// A body's pose in the camera frame: 60 cm ahead, turned 0.9 rad about the camera's x axis.
+Iso3 tiltedAtSixtyCentimetres() {
+  Iso3 T = Iso3::Identity();
+  T.linear() = Eigen::AngleAxisd(-0.9, Vec3::UnitX()).toRotationMatrix();
+  T.translation() = Vec3(0, 0, 0.6);
+  return T;
+}
 }  // namespace
 
 // A pen (12 × 140 mm) seen side on at 60 cm, its right end behind a finger (the robot's pixels,
@@ -611,9 +618,7 @@ TEST(Tracking, ABodyShortOfTheFramesOutlineIsPulledAlongIt) {
 // bar, nothing drawing it along; with it 3.8 mm (the pull stops within 1.5 point spacings).
 TEST(Tracking, AHeldBodyACentimetreOffIsFoundWithTheUncoveredPull) {
   const TriangleMesh bar = makeBox(Vec3(0.18, 0.04, 0.015));
-  Iso3 trueT_C_B = Iso3::Identity();
-  trueT_C_B.linear() = Eigen::AngleAxisd(-0.9, Vec3::UnitX()).toRotationMatrix();
-  trueT_C_B.translation() = Vec3(0, 0, 0.6);
+  const Iso3 trueT_C_B = tiltedAtSixtyCentimetres();
   const DepthCameraOptions camera;
   const auto [d, hidden] =
       frameWithFinger(bar, trueT_C_B, Vec3(0.04, 0.05, 0.012), Vec3(0.085, 0, 0.56));
@@ -682,9 +687,7 @@ TEST(Tracking, TheUncoveredPullIsNotKeptWhereTheFrameContradictsIt) {
 // the bar's, within what the scatter allows.
 TEST(Tracking, AModelKnownToMillimetresIsAlignedWithTheResidualItsVarianceExplains) {
   const TriangleMesh bar = makeBox(Vec3(0.18, 0.04, 0.015));
-  Iso3 trueT_C_B = Iso3::Identity();
-  trueT_C_B.linear() = Eigen::AngleAxisd(-0.9, Vec3::UnitX()).toRotationMatrix();
-  trueT_C_B.translation() = Vec3(0, 0, 0.6);
+  const Iso3 trueT_C_B = tiltedAtSixtyCentimetres();
   const DepthCameraOptions camera;
   const auto [d, hidden] =
       frameWithFinger(bar, trueT_C_B, Vec3(0.02, 0.02, 0.01), Vec3(0.2, 0.2, 0.5));
