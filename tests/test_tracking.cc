@@ -712,9 +712,12 @@ TEST(Tracking, AModelKnownToMillimetresIsAlignedWithTheResidualItsVarianceExplai
   const TrackResult r = alignBodyToDepth(d, hidden, camera.intrinsics, points, occluders, believed,
                                          sigma, o, UncoveredPull::kAfterConverging);
   ASSERT_TRUE(r.ok) << r.reason;
-  // The residual is the scatter's, give or take (the sensor renders without noise here).
+  // The residual is the scatter's, within a fifth (the frame is rendered without noise): an
+  // independent check of the kept alignment, whose gate (1.2 × √(σ² + scatter²), 2.16 mm) lies
+  // well above it.
+  std::printf("kept with the model's variance: residual %.2f mm\n", 1000 * r.rms_m);
   EXPECT_GT(r.rms_m, 0.8 * scatter);
-  EXPECT_LT(r.rms_m, 1.2 * std::hypot(sigma, scatter));
+  EXPECT_LT(r.rms_m, 1.2 * scatter);
   const Iso3 found = r.correction * believed;
   const double off = (found.translation() - trueT_C_B.translation()).norm();
   const double turn = Eigen::AngleAxisd(found.linear() * trueT_C_B.linear().transpose()).angle();
